@@ -1,0 +1,45 @@
+"""piezohyst: model and cancel hysteresis in piezoelectric actuators.
+
+Active Prandtl-Ishlinskii models identified from voltage-to-charge data
+(sensorless), their analytic inverse, and the tools around them.
+"""
+
+from __future__ import annotations
+
+__version__ = "0.1.0"
+
+from .errors import (
+    DataFileError,
+    InsufficientDataError,
+    ModelFileError,
+    NonFiniteError,
+    NotFittedError,
+    NotInvertibleError,
+    ParameterError,
+    PiezohystError,
+    ShapeError,
+    TimeAxisError,
+)
+from .hysteresis import PIHysteresis, Propagation
+from .identification import default_thresholds
+from .models import ActivePI, ClassicalPI, load_model
+
+__all__ = [
+    "ActivePI",
+    "ClassicalPI",
+    "DataFileError",
+    "InsufficientDataError",
+    "ModelFileError",
+    "NonFiniteError",
+    "NotFittedError",
+    "NotInvertibleError",
+    "PIHysteresis",
+    "ParameterError",
+    "PiezohystError",
+    "Propagation",
+    "ShapeError",
+    "TimeAxisError",
+    "__version__",
+    "default_thresholds",
+    "load_model",
+]

@@ -1,0 +1,61 @@
+"""Exception types raised by piezohyst.
+
+Every error subclasses :class:`PiezohystError` *and* a built-in (mostly
+:class:`ValueError`), so ``except ValueError`` keeps working in user code.
+Messages say what was expected and what came.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "DataFileError",
+    "InsufficientDataError",
+    "ModelFileError",
+    "NonFiniteError",
+    "NotFittedError",
+    "NotInvertibleError",
+    "ParameterError",
+    "PiezohystError",
+    "ShapeError",
+    "TimeAxisError",
+]
+
+
+class PiezohystError(Exception):
+    """Base class of every error raised on purpose by piezohyst."""
+
+
+class ParameterError(PiezohystError, ValueError):
+    """A constructor or function parameter has the wrong type or value."""
+
+
+class ShapeError(PiezohystError, ValueError):
+    """Arrays have the wrong dimension or mismatched lengths."""
+
+
+class NonFiniteError(PiezohystError, ValueError):
+    """An input array holds NaN or infinity."""
+
+
+class TimeAxisError(PiezohystError, ValueError):
+    """A time vector is missing, not strictly increasing, or inconsistent."""
+
+
+class InsufficientDataError(PiezohystError, ValueError):
+    """Too few samples to identify the requested parameters."""
+
+
+class NotFittedError(PiezohystError, ValueError, AttributeError):
+    """An estimator was used before :meth:`fit` was called."""
+
+
+class NotInvertibleError(PiezohystError, ValueError):
+    """A hysteresis model violates the conditions of the analytic inverse (eq. 18)."""
+
+
+class ModelFileError(PiezohystError, ValueError):
+    """A model file is malformed, of an unknown version, or was modified."""
+
+
+class DataFileError(PiezohystError, ValueError):
+    """A data file cannot be read: missing, empty, unknown column, bad value."""

@@ -1,0 +1,230 @@
+r"""Identification of Prandtl-Ishlinskii weights (paper eq. 16-17).
+
+The output is linear in the parameters, :math:`y = W^T X` (eq. 16), so the
+weights, the offset and (for the active model) the growth rate follow from one
+linear least-squares problem. Two things are added to the paper:
+
+*Invertibility is guaranteed, not hoped for.* The analytic inverse (eq. 18)
+needs the first weight and every partial sum of weights positive. We solve in
+the loading-curve slopes :math:`S_i = \sum_{j \le i} w_j` instead of the
+weights, with lower bounds :math:`S_i \ge \epsilon`: a box-constrained least
+squares (:func:`scipy.optimize.lsq_linear`). Forcing every :math:`w_i \ge 0`
+would also guarantee it, but cannot fit a saturating voltage-charge curve,
+whose later weights are negative.
+
+*Memory does not grow with the operator count times the samples.* The Gram
+matrix :math:`X^T X` and :math:`X^T y` are accumulated block by block (play
+states from the numba kernel, products by BLAS), so a fit on :math:`10^6`
+samples keeps one block of a few thousand rows plus :math:`O(p^2)`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy.optimize import lsq_linear
+
+from . import _kernels
+from ._validation import FloatArray, as_signal, check_int
+from .errors import InsufficientDataError, ParameterError
+
+__all__ = [
+    "LinearSolution",
+    "NormalEquations",
+    "default_thresholds",
+    "identify",
+    "solve_pi",
+    "time_steps",
+]
+
+_BLOCK = 4096
+
+
+def default_thresholds(x: ArrayLike, n_operators: int) -> FloatArray:
+    r"""Evenly spaced thresholds over half of the input's range.
+
+    :math:`r_i = i \cdot \Delta x / (2n)`, :math:`i = 0 \dots n-1`, where
+    :math:`\Delta x` is the input's span. The largest threshold stays below
+    :math:`\Delta x / 2`: a wider play never reverses inside the range and only
+    adds a column collinear with the input and the offset. The rule depends on
+    the span only, so it suits unipolar (0..Vmax) and bipolar drive alike.
+
+    Examples
+    --------
+    >>> default_thresholds([0.0, 140.0], 4).tolist()
+    [0.0, 17.5, 35.0, 52.5]
+    """
+    xs = as_signal(x, "x")
+    n = check_int(n_operators, "n_operators", "default_thresholds", 1, 1000)
+    span = float(xs.max() - xs.min())
+    if span <= 0.0:
+        return np.arange(n, dtype=np.float64)  # any increasing set: the input never moves
+    return np.arange(n, dtype=np.float64) * (span / (2.0 * n))
+
+
+def time_steps(t: FloatArray, t_previous: float | None = None) -> FloatArray:
+    """Sample intervals (s) for the backward-rectangle integral; first is 0 unless continuing."""
+    dt = np.empty_like(t)
+    dt[0] = 0.0 if t_previous is None else t[0] - t_previous
+    dt[1:] = np.diff(t)
+    return dt
+
+
+@dataclass(frozen=True)
+class NormalEquations:
+    """Accumulated :math:`X^T X`, :math:`X^T y`, :math:`y^T y` of eq. 16.
+
+    Columns: the n play operators, the constant (offset), then the integral
+    :math:`\\int x\\,dt` when ``dt`` is given (active model).
+    """
+
+    gram: FloatArray
+    rhs: FloatArray
+    yy: float
+    n_samples: int
+
+    @classmethod
+    def accumulate(
+        cls,
+        x: FloatArray,
+        y: FloatArray,
+        thresholds: FloatArray,
+        initial_state: FloatArray,
+        dt: FloatArray | None = None,
+    ) -> NormalEquations:
+        n = thresholds.size
+        p = n + 1 + (dt is not None)
+        gram = np.zeros((p, p))
+        rhs = np.zeros(p)
+        yy = 0.0
+        block = np.empty((min(_BLOCK, x.size), p))
+        block[:, n] = 1.0
+        z = initial_state.copy()
+        integral = np.empty(block.shape[0])
+        acc = 0.0
+        for start in range(0, x.size, block.shape[0]):
+            xs = x[start : start + block.shape[0]]
+            ys = y[start : start + block.shape[0]]
+            m = xs.size
+            _kernels.play_states(xs, thresholds, z, block)
+            if dt is not None:
+                acc = _kernels.running_integral(xs, dt[start : start + m], acc, integral)
+                block[:m, n + 1] = integral[:m]
+            b = block[:m]
+            gram += b.T @ b
+            rhs += b.T @ ys
+            yy += float(ys @ ys)
+        return cls(gram, rhs, yy, x.size)
+
+
+def _bounded_lstsq(gram: FloatArray, rhs: FloatArray, lower: FloatArray) -> FloatArray:
+    """Minimise ``q'Gq - 2b'q`` subject to ``q >= lower`` (``-inf`` = free).
+
+    Columns are scaled to unit norm; eigenvalues of the scaled Gram matrix are
+    floored at 1e-12 of the largest (a ridge in the directions the data do not
+    determine), so constant or collinear columns, and rounding that makes a
+    singular Gram matrix slightly indefinite, cannot break the solve.
+    """
+    p = rhs.size
+    d = np.sqrt(np.abs(np.diag(gram)))
+    d = np.where(d > 1e-300, d, 1.0)
+    g = gram / np.outer(d, d)
+    b = rhs / d
+    lo = lower * d
+    lam, vec = np.linalg.eigh(0.5 * (g + g.T))
+    lam = np.maximum(lam, 1e-12 * max(float(lam[-1]), 1e-300))
+    proj = vec.T @ b
+    q = vec @ (proj / lam)
+    if np.any(q < lo):
+        # ||diag(sqrt(lam)) V' q - proj / sqrt(lam)||^2 = q'Gq - 2b'q + const
+        root = np.sqrt(lam)
+        res = lsq_linear(
+            root[:, None] * vec.T,
+            proj / root,
+            bounds=(lo, np.full(p, np.inf)),
+            method="bvls",
+            tol=1e-13,
+        )
+        q = np.maximum(res.x, lo)
+    return np.asarray(q / d, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class LinearSolution:
+    """Weights, offset and growth rate from :func:`solve_pi`."""
+
+    weights: FloatArray
+    offset: float
+    growth_rate: float
+
+
+def solve_pi(equations: NormalEquations, *, min_slope: float, growth: bool) -> LinearSolution:
+    r"""Constrained least squares in the loading slopes (see module notes).
+
+    ``min_slope`` is the lower bound :math:`\epsilon` on every slope, in output
+    per input units. With :math:`w = M S` (:math:`M` the first-difference
+    matrix), the Gram matrix in slope coordinates is :math:`M^T X^T X M`.
+    """
+    p = equations.rhs.size
+    n = p - 1 - int(growth)
+    if equations.n_samples <= p:
+        msg = (
+            f"Identifying {p} parameters ({n} operator weights, the offset"
+            f"{', the growth rate' if growth else ''}) needs more than {p} samples. "
+            f"Got {equations.n_samples}."
+        )
+        raise InsufficientDataError(msg)
+    if not np.isfinite(min_slope) or min_slope <= 0:
+        msg = f"'min_slope' must be a positive float. Got {min_slope!r}."
+        raise ParameterError(msg)
+    m = np.eye(p)
+    m[np.arange(1, n), np.arange(0, n - 1)] = -1.0
+    gram_s = m.T @ equations.gram @ m
+    rhs_s = m.T @ equations.rhs
+    lower = np.full(p, -np.inf)
+    lower[:n] = min_slope
+    sol = m @ _bounded_lstsq(gram_s, rhs_s, lower)
+    return LinearSolution(
+        weights=sol[:n].copy(),
+        offset=float(sol[n]),
+        growth_rate=float(sol[n + 1]) if growth else 0.0,
+    )
+
+
+def _power_of_two_scale(values: FloatArray) -> float:
+    """A power of two near max|values| (exact to divide by), 1 for all zeros."""
+    peak = float(np.max(np.abs(values)))
+    if peak == 0.0:
+        return 1.0
+    return float(2.0 ** np.round(np.log2(peak)))
+
+
+def identify(
+    x: FloatArray,
+    y: FloatArray,
+    thresholds: FloatArray,
+    *,
+    dt: FloatArray | None = None,
+    min_slope: float = 1e-3,
+) -> LinearSolution:
+    """Weights, offset (and growth rate if ``dt`` is given) for checked inputs.
+
+    The operators start at rest at ``x[0]``. ``min_slope`` is relative to the
+    mean slope ``span(y) / span(x)``. Input and output are first divided by
+    powers of two near their peaks, so the solve is the same at any scale
+    (volts or kilovolts, coulombs or microcoulombs).
+    """
+    sx = _power_of_two_scale(x)
+    sy = _power_of_two_scale(y)
+    xs, ys, thr = x / sx, y / sy, thresholds / sx
+    span_x, span_y = float(np.ptp(xs)), float(np.ptp(ys))
+    mean_slope = span_y / span_x if span_x > 1e-12 and span_y > 1e-12 else 1.0
+    eqs = NormalEquations.accumulate(xs, ys, thr, np.full(thr.size, xs[0]), dt=dt)
+    sol = solve_pi(eqs, min_slope=min_slope * mean_slope, growth=dt is not None)
+    return LinearSolution(
+        weights=sol.weights * (sy / sx),
+        offset=sol.offset * sy,
+        growth_rate=sol.growth_rate * (sy / sx),
+    )
