@@ -23,6 +23,7 @@ from .errors import (
 from .hysteresis import PIHysteresis, Propagation
 from .identification import default_thresholds
 from .models import ActivePI, ClassicalPI, load_model
+from .simulation import simulate
 
 __all__ = [
     "ActivePI",
@@ -42,4 +43,5 @@ __all__ = [
     "__version__",
     "default_thresholds",
     "load_model",
+    "simulate",
 ]

@@ -1,0 +1,83 @@
+"""Figures of merit for hysteresis models and compensation."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._validation import as_signal, same_length
+
+__all__ = ["hysteresis_width", "nrmse", "rmse"]
+
+
+def rmse(measured: ArrayLike, predicted: ArrayLike) -> float:
+    """Root-mean-square error, in the units of the data."""
+    a = as_signal(measured, "measured")
+    b = as_signal(predicted, "predicted")
+    same_length(a, b, "measured", "predicted")
+    return float(np.sqrt(np.mean((a - b) ** 2)))
+
+
+def nrmse(measured: ArrayLike, predicted: ArrayLike) -> float:
+    """RMSE divided by the span (max - min) of ``measured``; 0.01 is 1 %.
+
+    Examples
+    --------
+    >>> nrmse([0.0, 1.0, 2.0], [0.0, 1.0, 2.2])
+    0.05773502691896263
+    """
+    a = as_signal(measured, "measured")
+    span = float(np.ptp(a))
+    return rmse(a, predicted) / span if span > 0 else float("inf")
+
+
+def hysteresis_width(x: ArrayLike, y: ArrayLike, *, levels: int = 200) -> float:
+    """Largest gap between the rising and falling branches, as a fraction of y's span.
+
+    The input range is cut into ``levels`` levels (2 % kept clear of each end,
+    where the branches meet). Every monotone run of ``x`` is interpolated at
+    the levels it crosses; the rising and falling branches are the means over
+    the runs of each direction. A straight line gives 0.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> x = np.concatenate([np.linspace(0, 1, 50), np.linspace(1, 0, 50)])
+    >>> y = x + np.where(np.arange(100) < 50, 0.0, 0.1)   # falling branch 0.1 above
+    >>> round(hysteresis_width(x, y), 3)
+    0.091
+    """
+    xs = as_signal(x, "x")
+    ys = as_signal(y, "y")
+    same_length(xs, ys, "x", "y")
+    lo, hi = float(xs.min()), float(xs.max())
+    span_y = float(np.ptp(ys))
+    if hi <= lo or span_y == 0:
+        return 0.0
+    grid = np.linspace(lo + 0.02 * (hi - lo), hi - 0.02 * (hi - lo), levels)
+    sums = np.zeros((2, levels))
+    counts = np.zeros((2, levels))
+    dx = np.diff(xs)
+    direction = np.sign(dx)
+    k = 0
+    while k < dx.size:
+        if direction[k] == 0:
+            k += 1
+            continue
+        end = k
+        while end + 1 < dx.size and direction[end + 1] in (direction[k], 0):
+            end += 1
+        seg_x = xs[k : end + 2]
+        seg_y = ys[k : end + 2]
+        if direction[k] < 0:
+            seg_x, seg_y = seg_x[::-1], seg_y[::-1]
+        inside = (grid >= seg_x[0]) & (grid <= seg_x[-1])
+        row = 0 if direction[k] > 0 else 1
+        sums[row, inside] += np.interp(grid[inside], seg_x, seg_y)
+        counts[row, inside] += 1
+        k = end + 1
+    both = (counts[0] > 0) & (counts[1] > 0)
+    if not both.any():
+        return 0.0
+    gap = np.abs(sums[1, both] / counts[1, both] - sums[0, both] / counts[0, both])
+    return float(gap.max() / span_y)

@@ -1,0 +1,119 @@
+"""Excitation signals for identification and validation (V over s).
+
+Every function returns ``(t, v)``: time stamps (s) from 0 at ``rate`` (Hz)
+and the voltage (V). Unipolar signals run 0..``amplitude`` like the paper's
+140 V drive; ``bipolar`` runs -amplitude..+amplitude.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._validation import FloatArray, check_float
+from ..errors import ParameterError
+
+__all__ = ["SIGNALS", "make_signal"]
+
+
+def _time(duration: float, rate: float) -> FloatArray:
+    n = round(duration * rate)
+    return np.arange(n, dtype=np.float64) / rate
+
+
+def fixed(amplitude: float, frequency: float, duration: float, rate: float) -> FloatArray:
+    """Quasi-static raised cosine 0..amplitude at one amplitude (paper Fig. 7 left)."""
+    t = _time(duration, rate)
+    return 0.5 * amplitude * (1.0 - np.cos(2 * np.pi * frequency * t))
+
+
+def multi(amplitude: float, frequency: float, duration: float, rate: float) -> FloatArray:
+    """Raised cosine whose amplitude steps down and up again: minor loops (Fig. 7 right)."""
+    t = _time(duration, rate)
+    cycle = np.floor(t * frequency).astype(int)
+    levels = np.array([1.0, 0.8, 0.6, 0.4, 0.6, 0.8])
+    envelope = levels[cycle % levels.size]
+    return np.asarray(0.5 * amplitude * envelope * (1.0 - np.cos(2 * np.pi * frequency * t)))
+
+
+def bipolar(amplitude: float, frequency: float, duration: float, rate: float) -> FloatArray:
+    """Sine -amplitude..+amplitude starting at 0 V."""
+    t = _time(duration, rate)
+    return amplitude * np.sin(2 * np.pi * frequency * t)
+
+
+def triangle(amplitude: float, frequency: float, duration: float, rate: float) -> FloatArray:
+    """Triangle 0..amplitude (constant |dV/dt|), the usual ferroelectric test wave."""
+    t = _time(duration, rate)
+    phase = (t * frequency) % 1.0
+    return amplitude * (1.0 - np.abs(2.0 * phase - 1.0))
+
+
+def two_rate(amplitude: float, frequency: float, duration: float, rate: float) -> FloatArray:
+    """Equal raised-cosine loops at ``frequency`` then at ``frequency / 4``.
+
+    Hysteresis is rate independent, leakage is not: the same loops run four
+    times slower carry four times the leaked charge, which pins R apart from
+    the hysteresis.
+    """
+    t = _time(duration, rate)
+    fast_end = duration / 5.0  # one fifth of the time fast, the rest four times slower
+    phase = np.where(
+        t < fast_end, frequency * t, frequency * fast_end + 0.25 * frequency * (t - fast_end)
+    )
+    return 0.5 * amplitude * (1.0 - np.cos(2 * np.pi * phase))
+
+
+def hold(amplitude: float, frequency: float, duration: float, rate: float) -> FloatArray:
+    """Raised-cosine loops with a hold at the top and bottom of every cycle.
+
+    During a hold the hysteresis output stands still while leakage keeps
+    integrating, so the growth is seen on its own.
+    """
+    t = _time(duration, rate)
+    period = 1.0 / frequency
+    ramp = 0.25 * period  # rising and falling parts take a quarter period each
+    phase = t % period
+    rise = np.clip(phase / ramp, 0, 1)
+    fall = np.clip((phase - 0.5 * period) / ramp, 0, 1)
+    shape = 0.5 * (1 - np.cos(np.pi * rise)) - 0.5 * (1 - np.cos(np.pi * fall))
+    return amplitude * shape
+
+
+SIGNALS = {
+    "fixed": fixed,
+    "multi": multi,
+    "bipolar": bipolar,
+    "triangle": triangle,
+    "two-rate": two_rate,
+    "hold": hold,
+}
+
+
+def make_signal(
+    name: str,
+    *,
+    amplitude: float = 140.0,
+    frequency: float = 0.5,
+    duration: float = 20.0,
+    rate: float = 1000.0,
+) -> tuple[FloatArray, FloatArray]:
+    """Time stamps (s) and voltage (V) of the named excitation.
+
+    Examples
+    --------
+    >>> t, v = make_signal("triangle", amplitude=100, frequency=1, duration=1, rate=4)
+    >>> t.tolist(), v.tolist()
+    ([0.0, 0.25, 0.5, 0.75], [0.0, 50.0, 100.0, 50.0])
+    """
+    if name not in SIGNALS:
+        msg = f"The 'signal' parameter must be one of {sorted(SIGNALS)}. Got {name!r} instead."
+        raise ParameterError(msg)
+    amplitude = check_float(amplitude, "amplitude", "make_signal", 0.0, 1e5, low_open=True)
+    frequency = check_float(frequency, "frequency", "make_signal", 0.0, 1e4, low_open=True)
+    duration = check_float(duration, "duration", "make_signal", 0.0, 1e6, low_open=True)
+    rate = check_float(rate, "rate", "make_signal", 0.0, 1e7, low_open=True)
+    if duration * rate < 2:
+        msg = f"duration x rate must give at least 2 samples. Got {duration * rate:g}."
+        raise ParameterError(msg)
+    t = _time(duration, rate)
+    return t, SIGNALS[name](amplitude, frequency, duration, rate)

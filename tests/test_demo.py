@@ -1,0 +1,66 @@
+"""`piezohyst demo`: the main job meets the issue's targets, run as a user runs it."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+from click.testing import CliRunner
+
+from piezohyst.cli import main
+
+
+@pytest.fixture(scope="module")
+def demo_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any], float]:
+    out = tmp_path_factory.mktemp("demo") / "report"
+    started = time.perf_counter()
+    result = CliRunner().invoke(main, ["demo", "--out", str(out)])
+    elapsed = time.perf_counter() - started
+    assert result.exit_code == 0, result.output
+    return out, json.loads((out / "metrics.json").read_text()), elapsed
+
+
+def test_demo_writes_report_and_figures(demo_run: tuple[Path, dict[str, Any], float]) -> None:
+    out, _, _ = demo_run
+    for name in (
+        "fig2_active_hysteresis.png",
+        "fig7_estimation.png",
+        "fig8_growth_removed.png",
+        "fig9_compensation_charge.png",
+        "fig10_compensation_displacement.png",
+        "metrics.json",
+        "report.md",
+    ):
+        path = out / name
+        assert path.stat().st_size > 1000 if name.endswith(".png") else path.stat().st_size > 0
+    report = (out / "report.md").read_text()
+    assert "| active PI NRMSE" in report and "hysteresis width" in report
+
+
+def test_demo_identification_targets(demo_run: tuple[Path, dict[str, Any], float]) -> None:
+    _, m, _ = demo_run
+    ident = m["identification"]
+    assert ident["active_nrmse_pct"] <= 1.0
+    assert ident["classical_nrmse_pct"] >= 3 * ident["active_nrmse_pct"]
+    assert abs(m["leakage"]["error_pct"]) <= 10.0
+
+
+def test_demo_compensation_targets(demo_run: tuple[Path, dict[str, Any], float]) -> None:
+    _, m, _ = demo_run
+    c = m["compensation_fixed"]
+    assert c["width_before_V_to_Q_pct"] >= 10.0
+    assert c["width_before_V_to_S_pct"] >= 10.0
+    assert c["width_after_Q_pct"] <= 1.5
+    assert c["width_after_S_pct"] <= 1.5
+    assert c["tracking_nrmse_after_S_pct"] < c["tracking_nrmse_before_S_pct"] / 3
+    lo, hi = c["command_range_V"]
+    assert 0.0 <= lo and hi <= 140.0
+
+
+def test_demo_is_quick(demo_run: tuple[Path, dict[str, Any], float]) -> None:
+    """The issue's 'under a minute' (generous: CI machines are shared)."""
+    _, m, elapsed = demo_run
+    assert m["runtime_s"] < 60.0 and elapsed < 90.0

@@ -1,0 +1,107 @@
+"""The simulated bench: physics checks, determinism, limits, and that it is not a PI model."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+import piezohyst as ph
+from piezohyst.metrics import hysteresis_width
+from piezohyst.simulation import PRESETS, SIGNALS, make_signal, simulate
+
+T226 = PRESETS["T226-H4-203X"]
+
+
+def test_deterministic_given_a_seed() -> None:
+    a = simulate(duration=3.0, seed=4)
+    b = simulate(duration=3.0, seed=4)
+    c = simulate(duration=3.0, seed=5)
+    np.testing.assert_array_equal(a.charge, b.charge)
+    np.testing.assert_array_equal(a.displacement, b.displacement)
+    assert not np.array_equal(a.charge, c.charge)
+    np.testing.assert_array_equal(a.capacitor_charge, c.capacitor_charge)  # noise only
+
+
+def test_bench_is_not_a_pi_model() -> None:
+    """Even 100 operators cannot fit the noise-free, leak-free capacitor charge."""
+    rec = simulate(signal="multi", duration=20.0)
+    fit = ph.ClassicalPI(100).fit(rec.voltage, rec.capacitor_charge)
+    assert fit.nrmse_ > 1e-3
+
+
+def test_capacitor_is_rate_independent_and_leakage_is_not() -> None:
+    t, v = make_signal("fixed", duration=4.0)
+    fast = simulate(v, t)
+    slow = simulate(v, 3.0 * t)
+    np.testing.assert_allclose(slow.capacitor_charge, fast.capacitor_charge, rtol=0, atol=1e-18)
+    np.testing.assert_allclose(slow.leak_charge, 3.0 * fast.leak_charge, rtol=1e-9)
+
+
+def test_leakage_at_constant_voltage_is_ohmic() -> None:
+    t = np.arange(2000) / 1000.0
+    v = np.full(t.size, 100.0)
+    rec = simulate(v, t)
+    conductance = T226.g_leak * (1 + T226.leak_voltage_coeff * 100.0 / T226.v_max)
+    np.testing.assert_allclose(rec.leak_charge, conductance * 100.0 * t, rtol=1e-12)
+    assert rec.true_growth_rate == pytest.approx(conductance, rel=1e-9)
+
+
+def test_ideal_charge_amplifier_measures_the_capacitor_charge() -> None:
+    ideal = dataclasses.replace(T226, g_leak=0.0, i_bias=0.0, r_ref=1e30, amp_noise=0.0,
+                                laser_noise=0.0)  # fmt: skip
+    rec = simulate(preset=ideal, signal="fixed", duration=4.0)
+    lsb = 2 * ideal.adc_range / 2**ideal.adc_bits * ideal.c_ref
+    np.testing.assert_allclose(rec.charge, rec.capacitor_charge - rec.capacitor_charge[0],
+                               rtol=0, atol=0.51 * lsb)  # fmt: skip
+    s = ideal.gain * (rec.capacitor_charge - rec.capacitor_charge[0])
+    np.testing.assert_allclose(rec.displacement, s, rtol=0, atol=0.51 * ideal.laser_resolution)
+
+
+def test_bias_current_integrates_on_the_reference_capacitor() -> None:
+    quiet = dataclasses.replace(T226, g_leak=0.0, i_bias=1e-9, r_ref=1e30, amp_noise=0.0)
+    t = np.arange(3000) / 1000.0
+    rec = simulate(np.zeros_like(t), t, preset=quiet)
+    lsb = 2 * quiet.adc_range / 2**quiet.adc_bits * quiet.c_ref
+    np.testing.assert_allclose(rec.charge, 1e-9 * t, rtol=0, atol=0.51 * lsb)
+
+
+def test_loops_are_pzt_like() -> None:
+    rec = simulate(signal="fixed", duration=10.0)
+    width = hysteresis_width(rec.voltage, rec.capacitor_charge)
+    assert 0.10 < width < 0.18  # the measured actuator in shared/data shows 14.6 %
+    grown = rec.leak_charge[-1] / np.ptp(rec.capacitor_charge)
+    assert grown > 0.1  # leakage visibly "active"
+
+
+def test_voltage_limits_are_enforced() -> None:
+    t = np.arange(10) / 1000.0
+    with pytest.raises(ph.ParameterError, match=r"limits \[-140.0, 140.0\] V. Got \[0, 150\]"):
+        simulate(np.linspace(0, 150, 10), t)
+    with pytest.raises(ph.ParameterError, match="preset"):
+        simulate(preset="nope")
+    with pytest.raises(ph.TimeAxisError):
+        simulate(np.zeros(10))
+
+
+@given(name=st.sampled_from(sorted(SIGNALS)), amp=st.floats(1.0, 140.0), f=st.floats(0.1, 5.0))
+def test_signals_stay_in_range(name: str, amp: float, f: float) -> None:
+    t, v = make_signal(name, amplitude=amp, frequency=f, duration=3.0, rate=500.0)
+    assert t.size == 1500 and v[0] == pytest.approx(0.0, abs=1e-9)
+    low = -amp if name == "bipolar" else 0.0
+    assert v.min() >= low - 1e-9 and v.max() <= amp + 1e-9
+
+
+def test_signal_errors() -> None:
+    with pytest.raises(ph.ParameterError, match="one of"):
+        make_signal("square")
+    with pytest.raises(ph.ParameterError, match="'amplitude'"):
+        make_signal("fixed", amplitude=-1.0)
+
+
+def test_hysteresis_width_of_a_line_is_zero() -> None:
+    x = np.concatenate([np.linspace(0, 1, 100), np.linspace(1, 0, 100)])
+    assert hysteresis_width(x, 3 * x + 1) == pytest.approx(0.0, abs=1e-12)
