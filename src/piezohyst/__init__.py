@@ -8,6 +8,7 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
+from .compensator import Compensator
 from .errors import (
     DataFileError,
     InsufficientDataError,
@@ -28,6 +29,7 @@ from .simulation import simulate
 __all__ = [
     "ActivePI",
     "ClassicalPI",
+    "Compensator",
     "DataFileError",
     "InsufficientDataError",
     "ModelFileError",

@@ -11,6 +11,8 @@ written here as ``min(max(z, x - r), x + r)``, which is the same for ``r >= 0``.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -75,3 +77,61 @@ def warm_up() -> None:
     pi_forward(x, r, np.ones(1), z, np.empty(2))
     play_states(x, r, z, np.empty((2, 1)))
     running_integral(x, np.zeros(2), 0.0, np.empty(2))
+    params = np.zeros((6, 1))
+    config = np.array([0.0, 0.0, -1.0, 1.0, np.inf, 1.0, 0.0, 1.0])
+    state = np.zeros(4)
+    compensator_step(0.0, params, config, state)
+    compensator_process(x, params, config, state, np.empty(2))
+
+
+# Compensator layout (see piezohyst.compensator):
+#   params (6, n): thresholds r, weights w, loading slopes S, inverse thresholds r',
+#                  inverse weights w', (unused row kept zero)
+#   config (8,):   offset c, inverse offset c', v_min, v_max, max step per sample (inf = none),
+#                  1/gain (1 for the charge domain), reference output q_ref, output bound B
+#                  (|y - c| <= B for every state and command within the limits)
+#   state (n + 3,): forward operator states z (V), last command (V), non-finite count,
+#                   saturated count
+@njit(cache=True)
+def compensator_step(desired, params, config, state):  # type: ignore[no-untyped-def]
+    """One feedforward command (V) for one desired value; updates ``state``."""
+    n = params.shape[1]
+    last = state[n]
+    if not math.isfinite(desired):  # NaN or +-inf: hold the last safe command
+        state[n + 1] += 1.0
+        return last
+    q = config[6] + desired * config[5]
+    # beyond +-B nothing is reachable: clamping keeps huge values from overflowing the
+    # inverse sums (inf - inf = NaN) while they still saturate on the correct side
+    q = min(max(q, config[0] - config[7]), config[0] + config[7])
+    # inverse states from the forward states (eq. 18): c + S_i z_i + sum_{j>i} w_j z_j
+    tail = 0.0
+    x = config[1]
+    for i in range(n - 1, -1, -1):
+        zeta = config[0] + params[2, i] * state[i] + tail
+        tail += params[1, i] * state[i]
+        zi = min(max(zeta, q - params[3, i]), q + params[3, i])
+        x += params[4, i] * zi
+    v = x
+    if not math.isfinite(v):  # belt and braces: never emit a non-finite command
+        state[n + 1] += 1.0
+        return last
+    if v < config[2] or v > config[3]:
+        v = min(max(v, config[2]), config[3])
+        state[n + 2] += 1.0
+    step = config[4]
+    if v > last + step:
+        v = last + step
+    elif v < last - step:
+        v = last - step
+    for i in range(n):
+        state[i] = min(max(state[i], v - params[0, i]), v + params[0, i])
+    state[n] = v
+    return v
+
+
+@njit(cache=True)
+def compensator_process(desired, params, config, state, out):  # type: ignore[no-untyped-def]
+    """``compensator_step`` over a block (same arithmetic, one call)."""
+    for k in range(desired.shape[0]):
+        out[k] = compensator_step(desired[k], params, config, state)

@@ -1,0 +1,436 @@
+"""Reading DAQ recordings and writing results.
+
+Readers: CSV/TSV/text (delimiter sniffing, header detection), NumPy ``.npz``,
+MATLAB ``.mat`` (v4-v7 through :mod:`scipy.io`, v7.3 through h5py), NI TDMS
+(npTDMS; group/channel selection, time from ``wf_increment``) and HDF5.
+Every problem with a file becomes one :class:`~piezohyst.errors.DataFileError`
+whose message names the file and, where it applies, the row and column.
+Writers (CSV, NPZ) write to a temporary file and rename it into place, so a
+failure never leaves a half-written file.
+"""
+
+from __future__ import annotations
+
+import csv
+import io as _io
+import os
+import tempfile
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._validation import FloatArray
+from .errors import DataFileError
+
+__all__ = ["Recording", "Table", "read_recording", "read_table", "write_table"]
+
+CSV_SUFFIXES = {".csv", ".tsv", ".txt", ".dat", ""}
+
+
+@dataclass(frozen=True)
+class Table:
+    """Named columns read from a file, converted to numbers only when asked for.
+
+    Attributes
+    ----------
+    path : Path
+    columns : list of str
+        Column names in file order (``col0``, ``col1``... when the file has no header).
+    time_step : float or None
+        Sample interval (s) stated by the file (TDMS ``wf_increment``), if any.
+    """
+
+    path: Path
+    columns: list[str]
+    _getters: Mapping[str, Callable[[], FloatArray]] = field(repr=False)
+    time_step: float | None = None
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._getters
+
+    def resolve(self, key: str) -> str:
+        """A column name from a name or a 0-based index given as digits."""
+        if key in self._getters:
+            return key
+        if key.strip().lstrip("-").isdigit():
+            i = int(key)
+            if 0 <= i < len(self.columns):
+                return self.columns[i]
+        msg = f"{self.path}: no column {key!r}; available: " + ", ".join(
+            repr(c) for c in self.columns
+        )
+        raise DataFileError(msg)
+
+    def get(self, key: str) -> FloatArray:
+        """The column as finite float64 values (raises naming the bad row and column)."""
+        name = self.resolve(key)
+        values = self._getters[name]()
+        if values.size == 0:
+            msg = f"{self.path}: column {name!r} is empty"
+            raise DataFileError(msg)
+        bad = ~np.isfinite(values)
+        if bad.any():
+            i = int(np.argmax(bad))
+            msg = (
+                f"{self.path}: {values[i]} at row {i + 1}, column {name!r} (values must be finite)"
+            )
+            raise DataFileError(msg)
+        return values
+
+
+@dataclass(frozen=True)
+class Recording:
+    """Input, output and time of one record, with the column names they came from."""
+
+    t: FloatArray
+    x: FloatArray
+    y: FloatArray | None
+    names: tuple[str, str | None, str | None]
+
+
+# ------------------------------------------------------------------ CSV / text
+def _decode(raw: bytes, path: Path) -> str:
+    bom16 = raw[:2] in (b"\xff\xfe", b"\xfe\xff")
+    for encoding in ("utf-16", "utf-8-sig") if bom16 else ("utf-8-sig",):
+        try:
+            return raw.decode(encoding)
+        except UnicodeDecodeError:
+            continue
+    try:
+        return raw.decode("latin-1")  # aixACCT and many DAQ exports
+    except UnicodeDecodeError:  # pragma: no cover - latin-1 decodes any byte
+        msg = f"{path}: not a text file"
+        raise DataFileError(msg) from None
+
+
+def _is_number(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
+
+
+def _sniff_delimiter(sample: str) -> str | None:
+    lines = [ln for ln in sample.splitlines() if ln.strip()][:20]
+    for delim in (",", "\t", ";", "|"):
+        counts = {ln.count(delim) for ln in lines}
+        if len(counts) == 1 and counts.pop() > 0:
+            return delim
+    try:
+        return csv.Sniffer().sniff("\n".join(lines), delimiters=",;\t|").delimiter
+    except csv.Error:
+        return None  # whitespace-separated
+
+
+def _read_text(path: Path) -> Table:
+    raw = path.read_bytes()
+    if b"\x00" in raw and raw[:2] not in (b"\xff\xfe", b"\xfe\xff"):
+        msg = f"{path}: not a text file (binary content); expected CSV or text columns"
+        raise DataFileError(msg)
+    text = _decode(raw, path)
+    lines = [(n + 1, ln) for n, ln in enumerate(text.splitlines()) if ln.strip()]
+    if not lines:
+        msg = f"{path}: the file is empty"
+        raise DataFileError(msg)
+    delim = _sniff_delimiter("\n".join(ln for _, ln in lines[:50]))
+    if delim is None:
+        rows = [(n, ln.split()) for n, ln in lines]
+    else:
+        parsed = csv.reader((ln for _, ln in lines), delimiter=delim)
+        rows = [
+            (n, [c.strip() for c in cells]) for (n, _), cells in zip(lines, parsed, strict=True)
+        ]
+    first = rows[0][1]
+    has_header = any(c and not _is_number(c) for c in first)
+    if has_header:
+        names = [c if c else f"col{i}" for i, c in enumerate(first)]
+        body = rows[1:]
+    else:
+        names = [f"col{i}" for i in range(len(first))]
+        body = rows
+    if len(set(names)) != len(names):
+        names = [f"{c}_{i}" if names.count(c) > 1 else c for i, c in enumerate(names)]
+    if not body:
+        msg = f"{path}: the file has a header but no data rows"
+        raise DataFileError(msg)
+    width = len(names)
+    for line_no, cells in body:
+        if len(cells) != width:
+            msg = (
+                f"{path}: row {line_no} has {len(cells)} fields, expected {width} "
+                f"({', '.join(names)})"
+            )
+            raise DataFileError(msg)
+    line_numbers = [n for n, _ in body]
+
+    def getter(j: int) -> Callable[[], FloatArray]:
+        def convert() -> FloatArray:
+            cells = [cells[j] for _, cells in body]
+            try:
+                return np.array(cells, dtype=np.float64)
+            except ValueError:
+                for k, cell in enumerate(cells):
+                    if not _is_number(cell):
+                        shown = repr(cell) if cell else "an empty value"
+                        msg = (
+                            f"{path}: {shown} at row {line_numbers[k]}, column {names[j]!r} "
+                            "is not a number"
+                        )
+                        raise DataFileError(msg) from None
+                raise  # pragma: no cover
+
+        return convert
+
+    return Table(path, names, {name: getter(j) for j, name in enumerate(names)})
+
+
+# ------------------------------------------------------------------ binary formats
+def _as_column(value: object) -> FloatArray | None:
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "biuf" or arr.size < 1:
+        return None
+    arr = np.squeeze(arr)
+    if arr.ndim != 1:
+        return None
+    return np.ascontiguousarray(arr, dtype=np.float64)
+
+
+def _table_from_arrays(path: Path, arrays: Mapping[str, object], kind: str) -> Table:
+    columns: dict[str, FloatArray] = {}
+    for name, value in arrays.items():
+        col = _as_column(value)
+        if col is not None:
+            columns[name] = col
+    if not columns:
+        msg = f"{path}: the {kind} file holds no 1-D numeric arrays"
+        raise DataFileError(msg)
+    return Table(path, list(columns), {k: _constant(v) for k, v in columns.items()})
+
+
+def _constant(values: FloatArray) -> Callable[[], FloatArray]:
+    return lambda: values
+
+
+def _read_npz(path: Path) -> Table:
+    with np.load(path, allow_pickle=False) as data:
+        arrays = {k: data[k] for k in data.files}
+    return _table_from_arrays(path, arrays, "NPZ")
+
+
+def _read_mat(path: Path) -> Table:
+    from scipy.io import loadmat
+
+    try:
+        data = loadmat(path, squeeze_me=False)
+    except NotImplementedError:  # MATLAB v7.3 is HDF5
+        return _read_hdf5(path)
+    arrays = {k: v for k, v in data.items() if not k.startswith("__")}
+    return _table_from_arrays(path, arrays, "MAT")
+
+
+def _read_hdf5(path: Path) -> Table:
+    import h5py
+
+    arrays: dict[str, object] = {}
+    with h5py.File(path, "r") as fh:
+
+        def visit(name: str, obj: object) -> None:
+            if isinstance(obj, h5py.Dataset) and obj.dtype.kind in "biuf" and obj.size >= 1:
+                arrays[name] = obj[()]
+
+        fh.visititems(visit)
+    return _table_from_arrays(path, arrays, "HDF5")
+
+
+def _read_tdms(path: Path, group: str | None) -> Table:
+    from nptdms import TdmsFile
+
+    tdms = TdmsFile.read(path)
+    groups = tdms.groups()
+    if not groups:
+        msg = f"{path}: the TDMS file has no groups"
+        raise DataFileError(msg)
+    if group is None:
+        chosen = next((g for g in groups if g.channels()), groups[0])
+    else:
+        names = [g.name for g in groups]
+        if group not in names:
+            msg = f"{path}: no TDMS group {group!r}; available: {', '.join(map(repr, names))}"
+            raise DataFileError(msg)
+        chosen = tdms[group]
+    arrays: dict[str, object] = {}
+    step: float | None = None
+    for channel in chosen.channels():
+        arrays[channel.name] = channel[:]
+        inc = channel.properties.get("wf_increment")
+        if step is None and inc is not None and float(inc) > 0:
+            step = float(inc)
+    table = _table_from_arrays(path, arrays, "TDMS")
+    return Table(table.path, table.columns, table._getters, time_step=step)
+
+
+def read_table(path: str | os.PathLike[str], *, group: str | None = None) -> Table:
+    """Read a data file into a :class:`Table` (format chosen by the file's suffix).
+
+    Parameters
+    ----------
+    path : path
+        ``.csv``, ``.tsv``, ``.txt``, ``.dat`` (text), ``.npz``, ``.mat``,
+        ``.tdms``, ``.h5``/``.hdf5``.
+    group : str, optional
+        TDMS group to read (default: the first with channels).
+
+    Raises
+    ------
+    DataFileError
+        Missing, empty or unreadable file, in one line.
+    """
+    p = Path(path)
+    if not p.exists():
+        msg = f"{p}: no such file"
+        raise DataFileError(msg)
+    if p.is_dir():
+        msg = f"{p}: is a folder, not a data file"
+        raise DataFileError(msg)
+    if p.stat().st_size == 0:
+        msg = f"{p}: the file is empty"
+        raise DataFileError(msg)
+    suffix = p.suffix.lower()
+    readers: dict[str, Callable[[], Table]] = {
+        ".npz": lambda: _read_npz(p),
+        ".mat": lambda: _read_mat(p),
+        ".tdms": lambda: _read_tdms(p, group),
+        ".h5": lambda: _read_hdf5(p),
+        ".hdf5": lambda: _read_hdf5(p),
+    }
+    reader = readers.get(suffix, lambda: _read_text(p))
+    kind = suffix.lstrip(".").upper() or "text"
+    try:
+        return reader()
+    except DataFileError:
+        raise
+    except Exception as exc:
+        detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        msg = f"{p}: cannot read as {kind} ({detail})"
+        raise DataFileError(msg) from None
+
+
+def read_recording(
+    path: str | os.PathLike[str],
+    *,
+    input_column: str = "voltage",
+    output_column: str | None = "charge",
+    time_column: str | None = "time",
+    rate: float | None = None,
+    group: str | None = None,
+    output_required: bool = True,
+) -> Recording:
+    """Input, output and time columns of a data file.
+
+    Time comes from ``time_column`` when the file has it, else from
+    ``rate`` (Hz), else from the file's own sample interval (TDMS); the time
+    must be strictly increasing. ``output=None`` reads no output.
+    """
+    table = read_table(path, group=group)
+    x_name = table.resolve(input_column)
+    x = table.get(x_name)
+    y_name: str | None = None
+    y: FloatArray | None = None
+    output = output_column
+    if output is not None:
+        if output_required or output in table or output.isdigit():
+            y_name = table.resolve(output)
+            y = table.get(y_name)
+    time = time_column
+    t_name: str | None = None
+    if rate is not None:
+        if not rate > 0:
+            msg = f"--rate must be positive. Got {rate}."
+            raise DataFileError(msg)
+        t = np.arange(x.size, dtype=np.float64) / float(rate)
+    elif time is not None and (time in table or (time != "time" and time.isdigit())):
+        t_name = table.resolve(time)
+        t = table.get(t_name)
+    elif time is not None and time != "time":
+        table.resolve(time)  # raises: names the available columns
+        raise AssertionError  # pragma: no cover
+    elif table.time_step is not None:
+        t = np.arange(x.size, dtype=np.float64) * table.time_step
+    else:
+        msg = (
+            f"{table.path}: no time column 'time' and no sample rate; name the time column "
+            f"or give the rate in Hz (columns: {', '.join(map(repr, table.columns))})"
+        )
+        raise DataFileError(msg)
+    for name, arr in ((t_name, t), (y_name, y)):
+        if arr is not None and arr.size != x.size:
+            msg = f"{table.path}: column {name!r} has {arr.size} values, {x_name!r} has {x.size}"
+            raise DataFileError(msg)
+    steps = np.diff(t)
+    if steps.size and np.any(steps <= 0):
+        i = int(np.argmax(steps <= 0)) + 1
+        msg = (
+            f"{table.path}: time is not increasing at row {i + 1}"
+            f"{'' if t_name is None else f', column {t_name!r}'} "
+            f"({float(t[i - 1])!r} then {float(t[i])!r})"
+        )
+        raise DataFileError(msg)
+    return Recording(t=t, x=x, y=y, names=(x_name, y_name, t_name))
+
+
+# ------------------------------------------------------------------ writers
+def _atomic(path: Path, write: Callable[[Path], None], suffix: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        write(Path(tmp))
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_table(path: str | os.PathLike[str], columns: Mapping[str, ArrayLike]) -> Path:
+    """Write equal-length columns as CSV (header row, full precision) or ``.npz``.
+
+    The file appears only when complete (temporary file, then rename).
+    """
+    p = Path(path)
+    arrays = {k: np.asarray(v, dtype=np.float64).reshape(-1) for k, v in columns.items()}
+    sizes = {a.size for a in arrays.values()}
+    if len(sizes) > 1:
+        msg = f"columns to write have different lengths: {sorted(sizes)}"
+        raise DataFileError(msg)
+    if p.suffix.lower() == ".npz":
+
+        def write_npz(tmp: Path) -> None:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **arrays)  # type: ignore[arg-type]
+
+        _atomic(p, write_npz, ".npz")
+        return p
+
+    def write_csv(tmp: Path) -> None:
+        buf = _io.StringIO()
+        writer = csv.writer(buf, lineterminator="\n")
+        writer.writerow(arrays)
+        for row in zip(*arrays.values(), strict=True):
+            writer.writerow([repr(float(v)) for v in row])
+        tmp.write_text(buf.getvalue(), encoding="utf-8")
+
+    _atomic(p, write_csv, ".csv")
+    return p
+
+
+def iter_columns(table: Table) -> Iterator[tuple[str, FloatArray]]:
+    """Every column that converts to finite numbers (others are skipped)."""
+    for name in table.columns:
+        try:
+            yield name, table.get(name)
+        except DataFileError:
+            continue
