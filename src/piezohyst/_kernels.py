@@ -79,7 +79,8 @@ def warm_up() -> None:
     running_integral(x, np.zeros(2), 0.0, np.empty(2))
     params = np.zeros((6, 1))
     config = np.array([0.0, 0.0, -1.0, 1.0, np.inf, 1.0, 0.0, 1.0])
-    state = np.zeros(4)
+    state = np.zeros(5)
+    inverse_states(params, config, state)
     compensator_step(0.0, params, config, state)
     compensator_process(x, params, config, state, np.empty(2))
 
@@ -90,47 +91,67 @@ def warm_up() -> None:
 #   config (8,):   offset c, inverse offset c', v_min, v_max, max step per sample (inf = none),
 #                  1/gain (1 for the charge domain), reference output q_ref, output bound B
 #                  (|y - c| <= B for every state and command within the limits)
-#   state (n + 3,): forward operator states z (V), last command (V), non-finite count,
-#                   saturated count
+#   state (2n + 3,): forward operator states z (V), inverse operator states zeta (output
+#                  units), last command (V), non-finite count, saturated count
 @njit(cache=True)
-def compensator_step(desired, params, config, state):  # type: ignore[no-untyped-def]
-    """One feedforward command (V) for one desired value; updates ``state``."""
+def inverse_states(params, config, state):  # type: ignore[no-untyped-def]
+    """zeta_i = c + S_i z_i + sum_{j>i} w_j z_j (eq. 18's state map), from the forward states."""
     n = params.shape[1]
-    last = state[n]
+    tail = 0.0
+    for i in range(n - 1, -1, -1):
+        state[n + i] = config[0] + params[2, i] * state[i] + tail
+        tail += params[1, i] * state[i]
+
+
+@njit(cache=True, fastmath=_FAST)
+def compensator_step(desired, params, config, state):  # type: ignore[no-untyped-def]
+    """One feedforward command (V) for one desired value; updates ``state``.
+
+    The inverse states run their own play recursion (the analytic inverse);
+    the forward states follow the command actually sent. Only when a limit
+    acts do the two part, and then the inverse states are rebuilt from the
+    forward ones, so the next inversion starts from the actuator's real state.
+    """
+    n = params.shape[1]
+    last = state[2 * n]
     if not math.isfinite(desired):  # NaN or +-inf: hold the last safe command
-        state[n + 1] += 1.0
+        state[2 * n + 1] += 1.0
         return last
     q = config[6] + desired * config[5]
     # beyond +-B nothing is reachable: clamping keeps huge values from overflowing the
     # inverse sums (inf - inf = NaN) while they still saturate on the correct side
     q = min(max(q, config[0] - config[7]), config[0] + config[7])
-    # inverse states from the forward states (eq. 18): c + S_i z_i + sum_{j>i} w_j z_j
-    tail = 0.0
     x = config[1]
-    for i in range(n - 1, -1, -1):
-        zeta = config[0] + params[2, i] * state[i] + tail
-        tail += params[1, i] * state[i]
-        zi = min(max(zeta, q - params[3, i]), q + params[3, i])
-        x += params[4, i] * zi
+    for i in range(n):
+        zeta = min(max(state[n + i], q - params[3, i]), q + params[3, i])
+        state[n + i] = zeta
+        x += params[4, i] * zeta
     v = x
+    limited = False
     if not math.isfinite(v):  # belt and braces: never emit a non-finite command
-        state[n + 1] += 1.0
+        state[2 * n + 1] += 1.0
+        inverse_states(params, config, state)
         return last
     if v < config[2] or v > config[3]:
         v = min(max(v, config[2]), config[3])
-        state[n + 2] += 1.0
+        state[2 * n + 2] += 1.0
+        limited = True
     step = config[4]
     if v > last + step:
         v = last + step
+        limited = True
     elif v < last - step:
         v = last - step
+        limited = True
     for i in range(n):
         state[i] = min(max(state[i], v - params[0, i]), v + params[0, i])
-    state[n] = v
+    if limited:
+        inverse_states(params, config, state)
+    state[2 * n] = v
     return v
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=_FAST)
 def compensator_process(desired, params, config, state, out):  # type: ignore[no-untyped-def]
     """``compensator_step`` over a block (same arithmetic, one call)."""
     for k in range(desired.shape[0]):

@@ -76,7 +76,7 @@ class Compensator:
     >>> desired = h.predict([0.0, 50.0, 100.0])
     >>> np.round(comp.process(desired), 9).tolist()
     [0.0, 50.0, 100.0]
-    >>> comp.step(float("nan")), comp.nonfinite_count   # holds the last command
+    >>> round(comp.step(float("nan")), 9), comp.nonfinite_count   # holds the last command
     (100.0, 1)
     >>> comp.step(1.0)          # far beyond what 140 V gives: saturates
     140.0
@@ -155,7 +155,7 @@ class Compensator:
         self._config = np.array(
             [op.offset, inv.offset, self.v_min, self.v_max, max_step, scale, reference, bound]
         )
-        self._state = np.zeros(n + 3)
+        self._state = np.zeros(2 * n + 3)
         self.reset()
 
     # ----------------------------------------------------------------- state
@@ -166,19 +166,20 @@ class Compensator:
     @property
     def state(self) -> FloatArray:
         """Forward operator states (V) followed by the last command (V); a read-only copy."""
-        out = self._state[: self.n_operators + 1].copy()
+        n = self.n_operators
+        out = np.concatenate([self._state[:n], self._state[2 * n : 2 * n + 1]])
         out.flags.writeable = False
         return out
 
     @property
     def nonfinite_count(self) -> int:
         """Desired values that were NaN or infinite (the last command was held)."""
-        return int(self._state[self.n_operators + 1])
+        return int(self._state[2 * self.n_operators + 1])
 
     @property
     def saturated_count(self) -> int:
         """Samples whose command was clipped to ``[v_min, v_max]``."""
-        return int(self._state[self.n_operators + 2])
+        return int(self._state[2 * self.n_operators + 2])
 
     def reset(self, state: ArrayLike | None = None, *, voltage: float | None = None) -> None:
         """Start again from a known actuator condition; counters go back to 0.
@@ -217,8 +218,9 @@ class Compensator:
             )
             raise ParameterError(msg)
         self._state[:n] = ops
-        self._state[n] = last
-        self._state[n + 1 :] = 0.0
+        self._state[2 * n] = last
+        self._state[2 * n + 1 :] = 0.0
+        _kernels.inverse_states(self._params, self._config, self._state)
 
     def precondition(self, samples: int = 1000) -> FloatArray:
         """The preconditioning cycle to send first: last command → v_max → v_min → back.
@@ -234,7 +236,7 @@ class Compensator:
             msg = f"'samples' must be an int >= 3. Got {samples!r}."
             raise ParameterError(msg)
         n = self.n_operators
-        start = float(self._state[n])
+        start = float(self._state[2 * n])
         knots = [start, self.v_max, self.v_min, start]
         legs = np.abs(np.diff(knots))
         step = self._config[4]
@@ -256,7 +258,8 @@ class Compensator:
             v = min(max(v_target, last - step), last + step)
             z[:] = np.clip(z, v - op.thresholds, v + op.thresholds)
             out[k] = last = v
-        self._state[n] = last
+        self._state[2 * n] = last
+        _kernels.inverse_states(self._params, self._config, self._state)
         return out
 
     # -------------------------------------------------------------- commands

@@ -1,0 +1,113 @@
+"""Generated C compensator: compiles cleanly and agrees with the Python compensator."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import piezohyst as ph
+from piezohyst.export import export_c, write_c
+
+CC = shutil.which("cc") or shutil.which("gcc")
+pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler on this machine")
+
+HARNESS = r"""
+#include <stdio.h>
+#include <stdlib.h>
+#include "NAME.h"
+int main(void)
+{
+    char line[128];
+    NAME_t s;
+    NAME_init(&s);
+    while (fgets(line, sizeof line, stdin)) {
+        NAME_real d = (NAME_real)strtod(line, NULL);
+        printf("%.17g\n", (double)NAME_step(&s, d));
+    }
+    printf("%lu %lu\n", s.nonfinite, s.saturated);
+    return 0;
+}
+"""
+
+
+def fitted_model() -> ph.ActivePI:
+    rec = ph.simulate(duration=8.0, seed=1)
+    return ph.ActivePI(12).fit(rec.voltage, rec.charge, t=rec.t)
+
+
+def desired_values(model: ph.ActivePI) -> np.ndarray:
+    rng = np.random.default_rng(0)
+    t = np.arange(3000) / 1000.0
+    v = 70 * (1 - np.cos(2 * np.pi * 0.7 * t)) * (0.6 + 0.4 * np.sin(2 * np.pi * 0.13 * t))
+    q = model.hysteresis_.predict(v)
+    q[::97] = np.nan
+    q[5::211] = np.inf
+    q[7::301] = -1e30  # unreachable: saturates (and representable in float)
+    q[9::401] = 1e-3
+    return np.concatenate([q, q[:500] + 1e-8 * rng.standard_normal(500)])
+
+
+def run_c(tmp_path: Path, comp: ph.Compensator, values: np.ndarray, precision: str) -> tuple:
+    c_path, h_path = write_c(comp, tmp_path / "ph_comp.c", precision=precision)  # type: ignore[arg-type]
+    (tmp_path / "main.c").write_text(HARNESS.replace("NAME", "ph_comp"))
+    exe = tmp_path / "comp"
+    subprocess.run(
+        [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2",
+         str(c_path), str(tmp_path / "main.c"), "-o", str(exe)],
+        check=True, capture_output=True, text=True,
+    )  # fmt: skip
+    text = "\n".join(repr(float(v)) for v in values) + "\n"
+    out = subprocess.run([str(exe)], input=text, check=True, capture_output=True, text=True)
+    lines = out.stdout.split("\n")
+    cmds = np.array([float(x) for x in lines[: values.size]])
+    counters = tuple(int(x) for x in lines[values.size].split())
+    assert h_path.exists()
+    return cmds, counters
+
+
+@pytest.mark.parametrize("slew", [None, 2000.0])
+def test_double_matches_python(tmp_path: Path, slew: float | None) -> None:
+    model = fitted_model()
+    kwargs = {} if slew is None else {"slew_rate": slew, "sample_rate": 1000.0}
+    comp = ph.Compensator(model, v_min=0.0, v_max=140.0, **kwargs)  # type: ignore[arg-type]
+    values = desired_values(model)
+    c_cmds, (nonfinite, saturated) = run_c(tmp_path, comp, values, "double")
+    py = comp.process(values)
+    np.testing.assert_allclose(c_cmds, py, rtol=0, atol=1e-9)
+    assert (nonfinite, saturated) == (comp.nonfinite_count, comp.saturated_count)
+    assert nonfinite > 0 and saturated > 0
+    assert np.all((c_cmds >= 0.0) & (c_cmds <= 140.0))
+
+
+def test_float_matches_python(tmp_path: Path) -> None:
+    model = fitted_model()
+    comp = ph.Compensator(model, v_min=0.0, v_max=140.0)
+    values = desired_values(model)
+    c_cmds, _ = run_c(tmp_path, comp, values, "float")
+    py = comp.process(values)
+    np.testing.assert_allclose(c_cmds, py, rtol=1e-4, atol=1e-4 * 140.0)
+    assert np.all((c_cmds >= 0.0) & (c_cmds <= 140.0))
+
+
+def test_displacement_domain_and_prefix(tmp_path: Path) -> None:
+    model = fitted_model()
+    comp = ph.Compensator(model, v_min=0.0, v_max=140.0, domain="displacement", gain=125.0)
+    code = export_c(comp, prefix="stage_x")
+    assert "stage_x_step" in code.source and "typedef double stage_x_real;" in code.header
+    d = 125.0 * (
+        model.hysteresis_.predict(np.linspace(0, 120, 50)) - model.hysteresis_.predict([0.0])[0]
+    )
+    c_cmds, _ = run_c(tmp_path, comp, d, "double")
+    np.testing.assert_allclose(c_cmds, comp.process(d), rtol=0, atol=1e-9)
+
+
+def test_bad_export_arguments() -> None:
+    comp = ph.Compensator(fitted_model(), v_min=0.0, v_max=140.0)
+    with pytest.raises(ph.ParameterError, match="precision"):
+        export_c(comp, precision="half")  # type: ignore[arg-type]
+    with pytest.raises(ph.ParameterError, match="C identifier"):
+        export_c(comp, prefix="3-bad")
