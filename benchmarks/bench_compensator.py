@@ -129,10 +129,14 @@ def main() -> None:
     numpy_block_reference(h, inv, big[:20_000])
     naive = (time.perf_counter() - start) / 20_000
     print("process() on 10^7 samples")
-    print(f"  piezohyst (numba)          {big.size / block / 1e6:8.1f} M samples/s "
-          f"({block / big.size * 1e9:.1f} ns/sample)")  # fmt: skip
-    print(f"  NumPy loop over time       {1 / naive / 1e6:8.3f} M samples/s "
-          "(measured on 2*10^4 samples)")  # fmt: skip
+    print(
+        f"  piezohyst (numba)          {big.size / block / 1e6:8.1f} M samples/s "
+        f"({block / big.size * 1e9:.1f} ns/sample)"
+    )
+    print(
+        f"  NumPy loop over time       {1 / naive / 1e6:8.3f} M samples/s "
+        "(measured on 2*10^4 samples)"
+    )
     print(f"  speed-up                   {naive / (block / big.size):8.0f} x")
 
     cc = shutil.which("cc") or shutil.which("gcc")
@@ -145,10 +149,13 @@ def main() -> None:
         write_c(comp, d / "ph_comp.c")
         (d / "bench.c").write_text(C_BENCH)
         exe = d / "bench"
-        subprocess.run([cc, "-std=c99", "-O2", str(d / "ph_comp.c"), str(d / "bench.c"), "-o",
-                        str(exe)], check=True)  # fmt: skip
-        ns = float(subprocess.run([str(exe)], capture_output=True, text=True, check=True)
-                   .stdout.split()[0])  # fmt: skip
+        subprocess.run(
+            [cc, "-std=c99", "-O2", str(d / "ph_comp.c"), str(d / "bench.c"), "-o", str(exe)],
+            check=True,
+        )
+        ns = float(
+            subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout.split()[0]
+        )
     print("exported C (double, gcc -O2, this machine)")
     print(f"  ph_comp_step               {ns:8.1f} ns/sample")
 

@@ -44,8 +44,11 @@ def test_inside_limits_equals_analytic_inverse(h: ph.PIHysteresis, x: np.ndarray
     np.testing.assert_allclose(cmd, x, rtol=0, atol=1e-9 * (V_MAX - V_MIN))
 
 
-@given(h=rest_model(), d=hnp.arrays(np.float64, st.integers(1, 200), elements=wild),
-       slew=st.one_of(st.none(), st.floats(10.0, 1e5)))  # fmt: skip
+@given(
+    h=rest_model(),
+    d=hnp.arrays(np.float64, st.integers(1, 200), elements=wild),
+    slew=st.one_of(st.none(), st.floats(10.0, 1e5)),
+)
 def test_always_safe_and_exact_where_no_limit_acts(
     h: ph.PIHysteresis, d: np.ndarray, slew: float | None
 ) -> None:
@@ -68,8 +71,11 @@ def test_always_safe_and_exact_where_no_limit_acts(
     assert comp.nonfinite_count == int(np.count_nonzero(~np.isfinite(d)))
 
 
-@given(h=rest_model(), d=hnp.arrays(np.float64, st.integers(2, 200), elements=wild),
-       cuts=st.lists(st.integers(0, 200), max_size=5))  # fmt: skip
+@given(
+    h=rest_model(),
+    d=hnp.arrays(np.float64, st.integers(2, 200), elements=wild),
+    cuts=st.lists(st.integers(0, 200), max_size=5),
+)
 def test_chunks_and_steps_equal_one_batch(
     h: ph.PIHysteresis, d: np.ndarray, cuts: list[int]
 ) -> None:
@@ -100,8 +106,9 @@ def test_nan_holds_and_saturation_counts() -> None:
 def test_active_model_drops_the_growth_and_displacement_domain() -> None:
     t = np.arange(4000) / 1000.0
     v = 70 * (1 - np.cos(2 * np.pi * 0.5 * t))
-    h = ph.PIHysteresis(ph.default_thresholds(v, 5), [1e-8, 2e-9, 1e-9, -1e-9, -5e-10], 0.0,
-                        np.zeros(5))  # fmt: skip
+    h = ph.PIHysteresis(
+        ph.default_thresholds(v, 5), [1e-8, 2e-9, 1e-9, -1e-9, -5e-10], 0.0, np.zeros(5)
+    )
     q = h.predict(v) + 1e-9 * np.cumsum(v) / 1000.0
     act = ph.ActivePI(thresholds=h.thresholds).fit(v, q, t=t)
     gain = 125.0  # m/C

@@ -56,10 +56,23 @@ def run_c(tmp_path: Path, comp: ph.Compensator, values: np.ndarray, precision: s
     (tmp_path / "main.c").write_text(HARNESS.replace("NAME", "ph_comp"))
     exe = tmp_path / "comp"
     subprocess.run(
-        [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2",
-         str(c_path), str(tmp_path / "main.c"), "-o", str(exe)],
-        check=True, capture_output=True, text=True,
-    )  # fmt: skip
+        [
+            CC,
+            "-std=c99",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+            "-pedantic",
+            "-O2",
+            str(c_path),
+            str(tmp_path / "main.c"),
+            "-o",
+            str(exe),
+        ],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
     text = "\n".join(repr(float(v)) for v in values) + "\n"
     out = subprocess.run([str(exe)], input=text, check=True, capture_output=True, text=True)
     lines = out.stdout.split("\n")

@@ -136,9 +136,14 @@ def test_non_uniform_time_stamps() -> None:
     model = ph.ActivePI(10).fit(v, q, t=t)
     assert abs(model.growth_rate_ / TRUE_R - 1.0) < 1e-6
     expected = reference.active_pi(
-        v.tolist(), t.tolist(), model.thresholds_.tolist(), model.weights_.tolist(),
-        model.initial_state_.tolist(), model.offset_, model.growth_rate_,
-    )  # fmt: skip
+        v.tolist(),
+        t.tolist(),
+        model.thresholds_.tolist(),
+        model.weights_.tolist(),
+        model.initial_state_.tolist(),
+        model.offset_,
+        model.growth_rate_,
+    )
     np.testing.assert_allclose(model.predict(v, t=t), expected, rtol=1e-10, atol=1e-18)
 
 
@@ -148,8 +153,9 @@ def test_hand_worked_active_growth() -> None:
     model._set_operator(ph.PIHysteresis([0.0], [0.0]))
     model.growth_rate_ = 2.0
     np.testing.assert_allclose(model.growth([1, 2, 3], t=[0, 0.5, 1.5]), [0, 2, 8])
-    np.testing.assert_allclose(model.remove_growth([1, 2, 3], [5, 5, 5], t=[0, 0.5, 1.5]),
-                               [5, 3, -3])  # fmt: skip
+    np.testing.assert_allclose(
+        model.remove_growth([1, 2, 3], [5, 5, 5], t=[0, 0.5, 1.5]), [5, 3, -3]
+    )
 
 
 @given(cuts=st.lists(st.integers(1, 1999), max_size=5, unique=True))
@@ -217,35 +223,61 @@ def test_default_constructors_work() -> None:
 @pytest.mark.parametrize(
     ("call", "error", "match"),
     [
-        (lambda: ph.ClassicalPI().fit([1, 2, 3], [1, 2]), ph.ShapeError,
-         "same length. Got 3 and 2"),
-        (lambda: ph.ClassicalPI().fit([1, np.nan, 3] * 20, [1] * 60), ph.NonFiniteError,
-         "index 1"),
+        (
+            lambda: ph.ClassicalPI().fit([1, 2, 3], [1, 2]),
+            ph.ShapeError,
+            "same length. Got 3 and 2",
+        ),
+        (lambda: ph.ClassicalPI().fit([1, np.nan, 3] * 20, [1] * 60), ph.NonFiniteError, "index 1"),
         (lambda: ph.ClassicalPI().fit([0, 1, np.inf] * 20, [1] * 60), ph.NonFiniteError, "inf"),
-        (lambda: ph.ClassicalPI(10).fit(np.arange(8.0), np.arange(8.0)),
-         ph.InsufficientDataError, "needs more than 11 samples. Got 8"),
-        (lambda: ph.ClassicalPI(0).fit([0, 1, 2], [0, 1, 2]), ph.ParameterError,
-         r"'n_operators' parameter of ClassicalPI must be an int in \[1, 1000\]. Got 0 instead"),
+        (
+            lambda: ph.ClassicalPI(10).fit(np.arange(8.0), np.arange(8.0)),
+            ph.InsufficientDataError,
+            "needs more than 11 samples. Got 8",
+        ),
+        (
+            lambda: ph.ClassicalPI(0).fit([0, 1, 2], [0, 1, 2]),
+            ph.ParameterError,
+            r"'n_operators' parameter of ClassicalPI must be an int in \[1, 1000\]. Got 0 instead",
+        ),
         (lambda: ph.ClassicalPI(1001).fit([0, 1, 2], [0, 1, 2]), ph.ParameterError, "Got 1001"),
         (lambda: ph.ClassicalPI(2.5).fit([0, 1, 2], [0, 1, 2]), ph.ParameterError, "Got 2.5"),
-        (lambda: ph.ClassicalPI(thresholds=[1, 2]).fit([0, 1, 2], [0, 1, 2]),
-         ph.ParameterError, "starting at 0"),
-        (lambda: ph.ClassicalPI(min_slope=0).fit([0, 1, 2], [0, 1, 2]), ph.ParameterError,
-         "min_slope"),
-        (lambda: ph.ActivePI().fit(np.arange(50.0), np.arange(50.0)), ph.TimeAxisError,
-         "needs the sample times: pass t="),
-        (lambda: ph.ActivePI().fit(np.arange(50.0), np.arange(50.0), t=np.r_[0:25, 24:49]),
-         ph.TimeAxisError, r"strictly increasing. Got t\[24\]=24.0 followed by t\[25\]=24.0"),
-        (lambda: ph.ActivePI().fit(np.arange(50.0), np.arange(50.0), t=np.arange(49.0)),
-         ph.ShapeError, "one time stamp per sample"),
+        (
+            lambda: ph.ClassicalPI(thresholds=[1, 2]).fit([0, 1, 2], [0, 1, 2]),
+            ph.ParameterError,
+            "starting at 0",
+        ),
+        (
+            lambda: ph.ClassicalPI(min_slope=0).fit([0, 1, 2], [0, 1, 2]),
+            ph.ParameterError,
+            "min_slope",
+        ),
+        (
+            lambda: ph.ActivePI().fit(np.arange(50.0), np.arange(50.0)),
+            ph.TimeAxisError,
+            "needs the sample times: pass t=",
+        ),
+        (
+            lambda: ph.ActivePI().fit(np.arange(50.0), np.arange(50.0), t=np.r_[0:25, 24:49]),
+            ph.TimeAxisError,
+            r"strictly increasing. Got t\[24\]=24.0 followed by t\[25\]=24.0",
+        ),
+        (
+            lambda: ph.ActivePI().fit(np.arange(50.0), np.arange(50.0), t=np.arange(49.0)),
+            ph.ShapeError,
+            "one time stamp per sample",
+        ),
         (lambda: ph.ClassicalPI().fit(np.zeros((3, 3)), np.zeros(9)), ph.ShapeError, "1-D"),
         (lambda: ph.ClassicalPI().fit([], []), ph.ShapeError, "empty"),
         (lambda: ph.ClassicalPI().fit(["a", "b"], [1, 2]), ph.ShapeError, "numbers"),
         (lambda: ph.ClassicalPI().predict([1.0]), ph.NotFittedError, "not fitted"),
-        (lambda: ph.ActivePI().remove_growth([1.0], [1.0], t=[0.0]), ph.NotFittedError,
-         "not fitted"),
+        (
+            lambda: ph.ActivePI().remove_growth([1.0], [1.0], t=[0.0]),
+            ph.NotFittedError,
+            "not fitted",
+        ),
     ],
-)  # fmt: skip
+)
 def test_bad_input_raises_typed_errors(call: object, error: type, match: str) -> None:
     with pytest.raises(error, match=match) as info:
         call()  # type: ignore[operator]
@@ -292,9 +324,10 @@ def _edit(path: Path, change: object) -> None:
         (lambda d: d.__setitem__("format", "other"), "not a piezohyst model"),
         (lambda d: (d.pop("checksum"), d["params"].__setitem__("bogus", 1)), "malformed"),
     ],
-)  # fmt: skip
-def test_tampered_files_are_refused(tmp_path: Path, bench: tuple, change: object,
-                                    match: str) -> None:  # fmt: skip
+)
+def test_tampered_files_are_refused(
+    tmp_path: Path, bench: tuple, change: object, match: str
+) -> None:
     t, v, q, _ = bench
     path = tmp_path / "m.json"
     ph.ActivePI(4).fit(v, q, t=t).save(path)

@@ -51,12 +51,14 @@ def test_leakage_at_constant_voltage_is_ohmic() -> None:
 
 
 def test_ideal_charge_amplifier_measures_the_capacitor_charge() -> None:
-    ideal = dataclasses.replace(T226, g_leak=0.0, i_bias=0.0, r_ref=1e30, amp_noise=0.0,
-                                laser_noise=0.0)  # fmt: skip
+    ideal = dataclasses.replace(
+        T226, g_leak=0.0, i_bias=0.0, r_ref=1e30, amp_noise=0.0, laser_noise=0.0
+    )
     rec = simulate(preset=ideal, signal="fixed", duration=4.0)
     lsb = 2 * ideal.adc_range / 2**ideal.adc_bits * ideal.c_ref
-    np.testing.assert_allclose(rec.charge, rec.capacitor_charge - rec.capacitor_charge[0],
-                               rtol=0, atol=0.51 * lsb)  # fmt: skip
+    np.testing.assert_allclose(
+        rec.charge, rec.capacitor_charge - rec.capacitor_charge[0], rtol=0, atol=0.51 * lsb
+    )
     s = ideal.gain * (rec.capacitor_charge - rec.capacitor_charge[0])
     np.testing.assert_allclose(rec.displacement, s, rtol=0, atol=0.51 * ideal.laser_resolution)
 

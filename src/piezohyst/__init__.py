@@ -8,6 +8,7 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
+from . import io, metrics
 from .compensator import Compensator
 from .errors import (
     DataFileError,
@@ -23,6 +24,7 @@ from .errors import (
 )
 from .hysteresis import PIHysteresis, Propagation
 from .identification import default_thresholds
+from .io import read_recording, read_table, write_table
 from .models import ActivePI, ClassicalPI, load_model
 from .simulation import simulate
 
@@ -44,6 +46,11 @@ __all__ = [
     "TimeAxisError",
     "__version__",
     "default_thresholds",
+    "io",
     "load_model",
+    "metrics",
+    "read_recording",
+    "read_table",
     "simulate",
+    "write_table",
 ]

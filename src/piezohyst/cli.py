@@ -11,11 +11,12 @@ import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import click
 
 from . import __version__
+from .compensator import Domain
 from .errors import PiezohystError
 
 
@@ -34,18 +35,13 @@ class Context:
 
 @contextmanager
 def progress_steps(ctx: Context, total: int) -> Iterator[Callable[[str], None]]:
-    """A progress display: a rich bar on a terminal, plain lines when piped, none if quiet."""
-    if ctx.quiet:
-        yield lambda _msg: None
-        return
-    if not sys.stderr.isatty():
-        count = [0]
-
-        def plain(msg: str) -> None:
-            count[0] += 1
-            click.echo(f"[{count[0]}/{total}] {msg}", err=True)
-
-        yield plain
+    """A rich progress bar on a terminal; silent when piped or quiet (steps still logged
+    with --verbose)."""
+    if ctx.quiet or not sys.stderr.isatty():
+        if ctx.verbose and not ctx.quiet:
+            yield lambda msg: click.echo(f"... {msg}", err=True)
+        else:
+            yield lambda _msg: None
         return
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
@@ -72,13 +68,22 @@ def progress_steps(ctx: Context, total: int) -> Iterator[Callable[[str], None]]:
 
 
 def _run(ctx: Context, fn: Callable[[], Any]) -> Any:
-    """Run a command body: known errors become one line on stderr and exit 1."""
+    """Run a command body: errors become one line on stderr and exit 1 (traceback: --debug)."""
     try:
         return fn()
     except (PiezohystError, OSError) as exc:
         if ctx.debug:
             raise
         click.echo(f"error: {exc}", err=True)
+        sys.exit(1)
+    except Exception as exc:  # a bug of ours: still one line, with the way to see more
+        if ctx.debug:
+            raise
+        click.echo(
+            f"error: unexpected {type(exc).__name__}: {exc} (rerun with --debug for the "
+            "traceback, and please report it)",
+            err=True,
+        )
         sys.exit(1)
 
 
@@ -98,6 +103,418 @@ def main(click_ctx: click.Context, quiet: bool, verbose: bool, debug: bool) -> N
     click_ctx.obj = Context(quiet=quiet, verbose=verbose, debug=debug)
 
 
+# ---------------------------------------------------------------- shared options
+def _data_options(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """--input/--output/--time/--rate/--group, as every data-reading command takes them."""
+    options = [
+        click.option(
+            "--input",
+            "input_column",
+            default="voltage",
+            show_default=True,
+            help="Input column (name or 0-based index).",
+        ),
+        click.option(
+            "--output",
+            "output_column",
+            default="charge",
+            show_default=True,
+            help="Output column (name or 0-based index).",
+        ),
+        click.option(
+            "--time",
+            "time_column",
+            default="time",
+            show_default=True,
+            help="Time column in s (used when present).",
+        ),
+        click.option(
+            "--rate",
+            type=float,
+            default=None,
+            help="Sample rate in Hz, when the file has no time column.",
+        ),
+        click.option(
+            "--group", default=None, help="TDMS group (default: the first with channels)."
+        ),
+    ]
+    for option in reversed(options):
+        fn = option(fn)
+    return fn
+
+
+def _limit_options(fn: Callable[..., Any]) -> Callable[..., Any]:
+    options = [
+        click.option(
+            "--v-min",
+            type=float,
+            default=None,
+            help="Lowest command in V (default: the model's training minimum).",
+        ),
+        click.option(
+            "--v-max",
+            type=float,
+            default=None,
+            help="Highest command in V (default: the model's training maximum).",
+        ),
+        click.option(
+            "--domain",
+            type=click.Choice(["charge", "displacement"]),
+            default="charge",
+            show_default=True,
+            help="Units of the desired values.",
+        ),
+        click.option(
+            "--gain",
+            type=float,
+            default=None,
+            help="Displacement per charge in m/C (for --domain displacement).",
+        ),
+        click.option("--slew-rate", type=float, default=None, help="Largest change in V/s."),
+        click.option(
+            "--sample-rate", type=float, default=None, help="Loop rate in Hz (for --slew-rate)."
+        ),
+    ]
+    for option in reversed(options):
+        fn = option(fn)
+    return fn
+
+
+OUT_FILE = click.option(
+    "-o",
+    "--out",
+    "out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="Output file (.csv or .npz).",
+)
+EXISTING = click.Path(exists=False, dir_okay=False, path_type=Path)
+
+
+# ---------------------------------------------------------------------- commands
+@main.command()
+@click.option("--preset", default="T226-H4-203X", show_default=True, help="Bench preset.")
+@click.option(
+    "--signal",
+    type=click.Choice(["fixed", "multi", "bipolar", "triangle", "two-rate", "hold"]),
+    default="hold",
+    show_default=True,
+    help="Excitation.",
+)
+@click.option("--amplitude", type=float, default=None, help="Amplitude in V (default: preset).")
+@click.option("--frequency", type=float, default=0.5, show_default=True, help="Frequency in Hz.")
+@click.option("--duration", type=float, default=20.0, show_default=True, help="Length in s.")
+@click.option("--rate", type=float, default=None, help="Sample rate in Hz (default: preset).")
+@click.option(
+    "--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True, help="Noise seed."
+)
+@OUT_FILE
+@click.pass_obj
+def simulate(
+    ctx: Context,
+    preset: str,
+    signal: str,
+    amplitude: float | None,
+    frequency: float,
+    duration: float,
+    rate: float | None,
+    seed: int,
+    out: Path,
+) -> None:
+    """Run the simulated bench; write time,voltage,charge,displacement (s, V, C, m).
+
+    \b
+    Example:
+      piezohyst simulate --signal multi --duration 12 -o run.csv
+    """
+    from .workflows import simulate_file
+
+    rec = _run(
+        ctx,
+        lambda: simulate_file(
+            out,
+            preset=preset,
+            signal=signal,
+            amplitude=amplitude,
+            frequency=frequency,
+            duration=duration,
+            rate=rate,
+            seed=seed,
+        ),
+    )
+    ctx.info(
+        f"{rec.t.size} samples at {rec.preset.rate:g} Hz, true leakage {rec.true_growth_rate:.4g} S"
+    )
+    click.echo(str(out))
+
+
+@main.command()
+@click.argument("data", type=EXISTING)
+@click.option(
+    "--model",
+    "model_name",
+    type=click.Choice(["active-pi", "classical-pi"]),
+    default="active-pi",
+    show_default=True,
+    help="Model to identify.",
+)
+@click.option(
+    "--operators",
+    type=click.IntRange(1, 1000),
+    default=10,
+    show_default=True,
+    help="Play operators, the linear one included.",
+)
+@click.option("--output-unit", default="C", show_default=True, help="Unit of the output column.")
+@_data_options
+@OUT_FILE
+@click.pass_obj
+def fit(
+    ctx: Context,
+    data: Path,
+    model_name: str,
+    operators: int,
+    output_unit: str,
+    input_column: str,
+    output_column: str,
+    time_column: str,
+    rate: float | None,
+    group: str | None,
+    out: Path,
+) -> None:
+    """Identify a model from DATA and save it as JSON.
+
+    \b
+    Example:
+      piezohyst fit run.csv --model active-pi --operators 20 -o model.json
+      piezohyst fit scan.tdms --group Scan --input Ch0 --output Ch1 -o m.json
+    """
+    from .workflows import describe, fit_file
+
+    with progress_steps(ctx, total=1) as step:
+        step(f"fitting {model_name} to {data.name}")
+        model = _run(
+            ctx,
+            lambda: fit_file(
+                data,
+                out,
+                model=model_name,
+                operators=operators,
+                input_column=input_column,
+                output_column=output_column,
+                time_column=time_column,
+                rate=rate,
+                group=group,
+                output_unit=output_unit,
+            ),
+        )
+    click.echo(describe(model))
+    if ctx.verbose:
+        click.echo(f"thresholds {model.thresholds_.tolist()}")
+        click.echo(f"weights {model.weights_.tolist()}")
+    ctx.info(f"saved {out}")
+
+
+@main.command()
+@click.argument("model", type=EXISTING)
+@click.argument("data", type=EXISTING)
+@_data_options
+@OUT_FILE
+@click.pass_obj
+def predict(
+    ctx: Context,
+    model: Path,
+    data: Path,
+    input_column: str,
+    output_column: str,
+    time_column: str,
+    rate: float | None,
+    group: str | None,
+    out: Path,
+) -> None:
+    """Predict the output of MODEL for the input in DATA; write time,predicted[,measured].
+
+    \b
+    Example:
+      piezohyst predict model.json run2.csv -o pred.csv
+    """
+    from .metrics import nrmse
+    from .workflows import predict_file
+
+    cols = _run(
+        ctx,
+        lambda: predict_file(
+            model,
+            data,
+            out,
+            input_column=input_column,
+            output_column=output_column,
+            time_column=time_column,
+            rate=rate,
+            group=group,
+        ),
+    )
+    if "measured" in cols:
+        click.echo(
+            f"NRMSE {100 * nrmse(cols['measured'], cols['predicted']):.4g} % "
+            f"over {cols['predicted'].size} samples"
+        )
+    ctx.info(f"saved {out}")
+
+
+@main.command()
+@click.argument("model", type=EXISTING)
+@click.argument("target", type=EXISTING)
+@click.option("--column", default=None, help="Desired column (default: 'desired' or the only one).")
+@_limit_options
+@OUT_FILE
+@click.pass_obj
+def compensate(
+    ctx: Context,
+    model: Path,
+    target: Path,
+    column: str | None,
+    v_min: float | None,
+    v_max: float | None,
+    domain: str,
+    gain: float | None,
+    slew_rate: float | None,
+    sample_rate: float | None,
+    out: Path,
+) -> None:
+    """Feedforward voltage for the desired trajectory in TARGET; write time,command,desired.
+
+    Commands never leave [--v-min, --v-max] (default: the model's training range).
+
+    \b
+    Example:
+      piezohyst compensate model.json target.csv --domain displacement \\
+          --gain 125 --v-min 0 --v-max 140 -o command.csv
+    """
+    from .workflows import compensate_file
+
+    comp = _run(
+        ctx,
+        lambda: compensate_file(
+            model,
+            target,
+            out,
+            column=column,
+            domain=cast(Domain, domain),
+            gain=gain,
+            v_min=v_min,
+            v_max=v_max,
+            slew_rate=slew_rate,
+            sample_rate=sample_rate,
+        ),
+    )
+    click.echo(
+        f"commands in [{comp.v_min:g}, {comp.v_max:g}] V; {comp.saturated_count} "
+        f"saturated, {comp.nonfinite_count} non-finite desired values held"
+    )
+    ctx.info(f"saved {out}")
+
+
+@main.command()
+@click.argument("model", type=EXISTING)
+@click.argument("data", type=EXISTING)
+@_data_options
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="Folder for the figures, metrics.json and report.md.",
+)
+@click.pass_obj
+def report(
+    ctx: Context,
+    model: Path,
+    data: Path,
+    input_column: str,
+    output_column: str,
+    time_column: str,
+    rate: float | None,
+    group: str | None,
+    out: Path,
+) -> None:
+    """Figures (loop, fit, residual, growth removal) and metrics of MODEL on DATA.
+
+    \b
+    Example:
+      piezohyst report model.json run2.csv --out model-report
+    """
+    from .workflows import model_report
+
+    with progress_steps(ctx, total=1) as step:
+        step("writing report")
+        res = _run(
+            ctx,
+            lambda: model_report(
+                model,
+                data,
+                out,
+                input_column=input_column,
+                output_column=output_column,
+                time_column=time_column,
+                rate=rate,
+                group=group,
+            ),
+        )
+    click.echo(f"NRMSE {res.metrics['nrmse_pct']:.4g} %; report in {out / 'report.md'}")
+
+
+@main.command("export-c")
+@click.argument("model", type=EXISTING)
+@_limit_options
+@click.option(
+    "--float", "use_float", is_flag=True, help="float arithmetic (MCUs without a double FPU)."
+)
+@click.option(
+    "-o",
+    "--out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=Path("ph_comp.c"),
+    show_default=True,
+    help="C file (the .h goes beside it).",
+)
+@click.pass_obj
+def export_c(
+    ctx: Context,
+    model: Path,
+    v_min: float | None,
+    v_max: float | None,
+    domain: str,
+    gain: float | None,
+    slew_rate: float | None,
+    sample_rate: float | None,
+    use_float: bool,
+    out: Path,
+) -> None:
+    """Write a dependency-free C99 compensator (NAME.c and NAME.h) for a microcontroller.
+
+    \b
+    Example:
+      piezohyst export-c model.json --v-min 0 --v-max 140 -o ph_comp.c
+    """
+    from .workflows import export_c_file
+
+    c_path, h_path = _run(
+        ctx,
+        lambda: export_c_file(
+            model,
+            out,
+            v_min=v_min,
+            v_max=v_max,
+            domain=cast(Domain, domain),
+            gain=gain,
+            slew_rate=slew_rate,
+            sample_rate=sample_rate,
+            precision="float" if use_float else "double",
+        ),
+    )
+    click.echo(f"{c_path}\n{h_path}")
+
+
 @main.command()
 @click.option(
     "--out",
@@ -113,8 +530,13 @@ def main(click_ctx: click.Context, quiet: bool, verbose: bool, debug: bool) -> N
     show_default=True,
     help="Play operators of both models.",
 )
-@click.option("--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True,
-              help="Seed of the bench's measurement noise.")  # fmt: skip
+@click.option(
+    "--seed",
+    type=click.IntRange(0, 2**32 - 1),
+    default=0,
+    show_default=True,
+    help="Seed of the bench's measurement noise.",
+)
 @click.pass_obj
 def demo(ctx: Context, out: Path, operators: int, seed: int) -> None:
     """Run the paper's experiment on the simulated bench and write a report.

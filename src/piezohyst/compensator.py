@@ -184,7 +184,9 @@ class Compensator:
     def reset(self, state: ArrayLike | None = None, *, voltage: float | None = None) -> None:
         """Start again from a known actuator condition; counters go back to 0.
 
-        * ``reset()``: the model's initial state (the training record's start).
+        * ``reset()``: the model's initial state (the training record's start);
+          if the limits exclude that voltage, the last command starts at the
+          nearest limit.
         * ``reset(voltage=v)``: the actuator now sits at ``v`` volts; the
           model's initial state is projected onto it (eq. 10: each operator
           clamped into ``[v - r_i, v + r_i]``). Use this after an unknown history
@@ -203,12 +205,12 @@ class Compensator:
             last = (
                 float(z[n]) if z.size == n + 1 else float(np.clip(ops[0], self.v_min, self.v_max))
             )
+        elif voltage is None:
+            # the model's own start; if the limits exclude it, the first command steps in
+            ops = np.array(op.initial_state)
+            last = float(np.clip(op.initial_state[0], self.v_min, self.v_max))
         else:
-            v = (
-                float(op.initial_state[0])
-                if voltage is None
-                else _finite_number(voltage, "voltage")
-            )
+            v = _finite_number(voltage, "voltage")
             ops = np.clip(op.initial_state, v - op.thresholds, v + op.thresholds)
             last = v
         if not self.v_min <= last <= self.v_max:

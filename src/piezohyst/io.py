@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import io as _io
+import logging
 import os
 import tempfile
 from collections.abc import Callable, Iterator, Mapping
@@ -115,15 +116,21 @@ def _is_number(cell: str) -> bool:
 
 
 def _sniff_delimiter(sample: str) -> str | None:
-    lines = [ln for ln in sample.splitlines() if ln.strip()][:20]
+    """The delimiter most lines agree on with the first line; None means whitespace.
+
+    Agreement, not unanimity: one ragged row must not hide the delimiter (it is
+    then reported as a ragged row).
+    """
+    lines = [ln for ln in sample.splitlines() if ln.strip()][:50]
+    best, best_score = None, 0.0
     for delim in (",", "\t", ";", "|"):
-        counts = {ln.count(delim) for ln in lines}
-        if len(counts) == 1 and counts.pop() > 0:
-            return delim
-    try:
-        return csv.Sniffer().sniff("\n".join(lines), delimiters=",;\t|").delimiter
-    except csv.Error:
-        return None  # whitespace-separated
+        first = lines[0].count(delim)
+        if first == 0:
+            continue
+        score = sum(ln.count(delim) == first for ln in lines) / len(lines)
+        if score > best_score:
+            best, best_score = delim, score
+    return best if best_score >= 0.5 else None
 
 
 def _read_text(path: Path) -> Table:
@@ -216,7 +223,8 @@ def _constant(values: FloatArray) -> Callable[[], FloatArray]:
 
 
 def _read_npz(path: Path) -> Table:
-    with np.load(path, allow_pickle=False) as data:
+    # open the file ourselves: np.load(path) leaks its handle when the zip is damaged
+    with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:
         arrays = {k: data[k] for k in data.files}
     return _table_from_arrays(path, arrays, "NPZ")
 
@@ -246,10 +254,33 @@ def _read_hdf5(path: Path) -> Table:
     return _table_from_arrays(path, arrays, "HDF5")
 
 
+class _Collect(logging.Handler):
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.messages: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.messages.append(record.getMessage())
+
+
 def _read_tdms(path: Path, group: str | None) -> Table:
     from nptdms import TdmsFile
 
-    tdms = TdmsFile.read(path)
+    # npTDMS reads what it can of a damaged file and logs a warning: for us that is
+    # a damaged file, said once, not partial data behind a few lines of log
+    logger = logging.getLogger("nptdms")
+    collect = _Collect()
+    propagate = logger.propagate
+    logger.addHandler(collect)
+    logger.propagate = False
+    try:
+        tdms = TdmsFile.read(path)
+    finally:
+        logger.removeHandler(collect)
+        logger.propagate = propagate
+    if collect.messages:
+        msg = f"{path}: the TDMS file is truncated or damaged ({collect.messages[0]})"
+        raise DataFileError(msg)
     groups = tdms.groups()
     if not groups:
         msg = f"{path}: the TDMS file has no groups"

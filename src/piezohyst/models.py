@@ -253,6 +253,9 @@ class ClassicalPI(HysteresisModel):
         The immutable identified operator.
     rmse_, nrmse_ : float
         Training fit quality: RMSE (output units) and RMSE / output span.
+    input_range_ : tuple of float
+        Smallest and largest training input (V): where the model was seen
+        working, and the default voltage limits of the compensator commands.
 
     Examples
     --------
@@ -331,6 +334,7 @@ class ClassicalPI(HysteresisModel):
         thr = self._check_params(xs)
         sol = identify(xs, ys, thr, min_slope=self.min_slope)
         self._set_operator(PIHysteresis(thr, sol.weights, sol.offset, np.full(thr.size, xs[0])))
+        self.input_range_ = (float(xs.min()), float(xs.max()))
         fitted = self.operator_.predict(xs)
         self.rmse_ = rmse(fitted, ys)
         self.nrmse_ = self.rmse_ / max(float(np.ptp(ys)), 1e-300)
@@ -375,6 +379,7 @@ class ClassicalPI(HysteresisModel):
         inv._set_operator(self.operator_.inverse())
         inv.rmse_ = float("nan")
         inv.nrmse_ = float("nan")
+        inv.input_range_ = (float("nan"), float("nan"))
         return inv
 
     @classmethod
@@ -384,6 +389,7 @@ class ClassicalPI(HysteresisModel):
         model._set_operator(op)
         model.rmse_ = float("nan")
         model.nrmse_ = float("nan")
+        model.input_range_ = (float("nan"), float("nan"))
         return model
 
     # ----------------------------------------------------------- persistence
@@ -391,6 +397,8 @@ class ClassicalPI(HysteresisModel):
         out = self.operator_.to_dict()
         out["rmse"] = None if math.isnan(self.rmse_) else self.rmse_
         out["nrmse"] = None if math.isnan(self.nrmse_) else self.nrmse_
+        lo, hi = self.input_range_
+        out["input_range"] = None if math.isnan(lo) else [lo, hi]
         return out
 
     def _set_fitted(self, data: dict[str, Any]) -> None:
@@ -405,6 +413,17 @@ class ClassicalPI(HysteresisModel):
         self._set_operator(op)
         self.rmse_ = float("nan") if data.get("rmse") is None else _float_field(data, "rmse")
         self.nrmse_ = float("nan") if data.get("nrmse") is None else _float_field(data, "nrmse")
+        rng = data.get("input_range")
+        if rng is None:
+            self.input_range_ = (float("nan"), float("nan"))
+        else:
+            if not isinstance(rng, list) or len(rng) != 2:
+                raise ModelFileError("field 'input_range' must be [min, max]")
+            lo = _float_field({"input_range": rng[0]}, "input_range")
+            hi = _float_field({"input_range": rng[1]}, "input_range")
+            if lo > hi:
+                raise ModelFileError("field 'input_range' must be [min, max] with min <= max")
+            self.input_range_ = (lo, hi)
 
 
 @_register
@@ -451,6 +470,7 @@ class ActivePI(ClassicalPI):
         thr = self._check_params(xs)
         sol = identify(xs, ys, thr, dt=time_steps(ts), min_slope=self.min_slope)
         self._set_operator(PIHysteresis(thr, sol.weights, sol.offset, np.full(thr.size, xs[0])))
+        self.input_range_ = (float(xs.min()), float(xs.max()))
         self.growth_rate_ = sol.growth_rate
         fitted = self.predict(xs, t=ts)
         self.rmse_ = rmse(fitted, ys)

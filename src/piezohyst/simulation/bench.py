@@ -221,8 +221,9 @@ def simulate(
     p = _preset(preset)
     if voltage is None:
         amp = p.v_max if amplitude is None else amplitude
-        ts, v = make_signal(signal, amplitude=amp, frequency=frequency, duration=duration,
-                            rate=p.rate)  # fmt: skip
+        ts, v = make_signal(
+            signal, amplitude=amp, frequency=frequency, duration=duration, rate=p.rate
+        )
     else:
         v = as_signal(voltage, "voltage")
         tt = as_time(t, v.size, required=True, owner="simulate")
@@ -240,8 +241,9 @@ def simulate(
     v_amp = np.empty_like(v)
     alpha, beta, mu = _preisach_plane(p)
     relays = np.where(0.5 * (alpha + beta) < v[0], 1.0, -1.0)  # demagnetised about V(0)
-    elec = np.array([p.c0, p.g_leak, p.leak_voltage_coeff, max(p.v_max, 1e-9),
-                     p.i_bias, p.c_ref, p.r_ref])  # fmt: skip
+    elec = np.array(
+        [p.c0, p.g_leak, p.leak_voltage_coeff, max(p.v_max, 1e-9), p.i_bias, p.c_ref, p.r_ref]
+    )
     _plant.bench_kernel(ts, v, alpha, beta, mu, relays, elec, q_c, q_r, v_amp)
 
     rng = np.random.default_rng(seed)

@@ -1,0 +1,402 @@
+"""File-to-file workflows: what each ``piezohyst`` command does, callable from Python.
+
+Each function reads its inputs, calls the library, and writes its outputs
+atomically (a failure leaves no output file). The CLI is a thin shell over
+these; from Python they are one call each too::
+
+    import piezohyst.workflows as wf
+    model = wf.fit_file("run.csv", "model.json", model="active-pi", operators=20)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ._validation import FloatArray, check_float, check_int
+from .compensator import Compensator, Domain
+from .errors import DataFileError, ParameterError
+from .export import Precision, write_c
+from .io import read_recording, read_table, write_table
+from .metrics import hysteresis_width, nrmse, rmse
+from .models import ActivePI, ClassicalPI, HysteresisModel, atomic_write_text, load_model
+from .plotting import save_panels
+from .simulation import DEFAULT_PRESET, PRESETS, BenchRecord, simulate
+
+__all__ = [
+    "MODELS",
+    "compensate_file",
+    "export_c_file",
+    "fit_file",
+    "model_report",
+    "predict_file",
+    "simulate_file",
+]
+
+#: CLI names of the model classes (``--model``).
+MODELS: dict[str, type[ClassicalPI]] = {"active-pi": ActivePI, "classical-pi": ClassicalPI}
+
+PathLike = str | os.PathLike[str]
+
+
+def _model_class(name: str) -> type[ClassicalPI]:
+    if name not in MODELS:
+        msg = f"unknown model {name!r}; choose one of: {', '.join(MODELS)}"
+        raise ParameterError(msg)
+    return MODELS[name]
+
+
+def simulate_file(
+    out: PathLike,
+    *,
+    preset: str = DEFAULT_PRESET,
+    signal: str = "hold",
+    amplitude: float | None = None,
+    frequency: float = 0.5,
+    duration: float = 20.0,
+    rate: float | None = None,
+    seed: int = 0,
+) -> BenchRecord:
+    """Run the simulated bench and write ``time,voltage,charge,displacement`` (s, V, C, m)."""
+    if preset not in PRESETS:
+        msg = f"unknown preset {preset!r}; available: {', '.join(PRESETS)}"
+        raise ParameterError(msg)
+    p = PRESETS[preset]
+    if rate is not None:
+        p = dataclasses.replace(
+            p, rate=check_float(rate, "rate", "simulate", 0.0, 1e7, low_open=True)
+        )
+    rec = simulate(
+        preset=p,
+        signal=signal,
+        amplitude=amplitude,
+        frequency=frequency,
+        duration=duration,
+        seed=check_int(seed, "seed", "simulate", 0, 2**32 - 1),
+    )
+    write_table(
+        out,
+        {
+            "time": rec.t,
+            "voltage": rec.voltage,
+            "charge": rec.charge,
+            "displacement": rec.displacement,
+        },
+    )
+    return rec
+
+
+def fit_file(
+    data: PathLike,
+    out: PathLike | None = None,
+    *,
+    model: str = "active-pi",
+    operators: int = 10,
+    input_column: str = "voltage",
+    output_column: str = "charge",
+    time_column: str | None = "time",
+    rate: float | None = None,
+    group: str | None = None,
+    output_unit: str = "C",
+) -> ClassicalPI:
+    """Fit a model to a data file and save it (JSON) to ``out`` if given."""
+    cls = _model_class(model)
+    rec = read_recording(
+        data,
+        input_column=input_column,
+        output_column=output_column,
+        time_column=time_column,
+        rate=rate,
+        group=group,
+        output_required=True,
+    )
+    assert rec.y is not None
+    fitted = cls(n_operators=operators, output_unit=output_unit).fit(rec.x, rec.y, t=rec.t)
+    if out is not None:
+        fitted.save(out)
+    return fitted
+
+
+def _load(model_path: PathLike) -> ClassicalPI:
+    model = load_model(model_path)
+    if not isinstance(model, ClassicalPI):  # pragma: no cover - every model so far is one
+        msg = f"{model_path}: {type(model).__name__} is not supported here"
+        raise ParameterError(msg)
+    return model
+
+
+def predict_file(
+    model_path: PathLike,
+    data: PathLike,
+    out: PathLike,
+    *,
+    input_column: str = "voltage",
+    output_column: str = "charge",
+    time_column: str | None = "time",
+    rate: float | None = None,
+    group: str | None = None,
+) -> dict[str, FloatArray]:
+    """Write ``time,predicted`` (plus ``measured`` when the data has the output column)."""
+    model = _load(model_path)
+    rec = read_recording(
+        data,
+        input_column=input_column,
+        output_column=output_column,
+        time_column=time_column,
+        rate=rate,
+        group=group,
+        output_required=False,
+    )
+    columns: dict[str, FloatArray] = {"time": rec.t, "predicted": model.predict(rec.x, t=rec.t)}
+    if rec.y is not None:
+        columns["measured"] = rec.y
+    write_table(out, columns)
+    return columns
+
+
+def _limits(model: ClassicalPI, v_min: float | None, v_max: float | None) -> tuple[float, float]:
+    lo, hi = model.input_range_
+    if v_min is None or v_max is None:
+        if math.isnan(lo):
+            msg = "the model does not record its training voltage range: give --v-min and --v-max"
+            raise ParameterError(msg)
+    return (lo if v_min is None else float(v_min)), (hi if v_max is None else float(v_max))
+
+
+def make_compensator(
+    model: ClassicalPI,
+    *,
+    v_min: float | None = None,
+    v_max: float | None = None,
+    domain: Domain = "charge",
+    gain: float | None = None,
+    slew_rate: float | None = None,
+    sample_rate: float | None = None,
+) -> Compensator:
+    """A compensator whose limits default to the model's training voltage range."""
+    lo, hi = _limits(model, v_min, v_max)
+    return Compensator(
+        model,
+        v_min=lo,
+        v_max=hi,
+        domain=domain,
+        gain=gain,
+        slew_rate=slew_rate,
+        sample_rate=sample_rate,
+    )
+
+
+def compensate_file(
+    model_path: PathLike,
+    target: PathLike,
+    out: PathLike,
+    *,
+    column: str | None = None,
+    domain: Domain = "charge",
+    gain: float | None = None,
+    v_min: float | None = None,
+    v_max: float | None = None,
+    slew_rate: float | None = None,
+    sample_rate: float | None = None,
+) -> Compensator:
+    """Feedforward voltage for a desired trajectory; writes ``time,command,desired``.
+
+    ``column`` is the desired column (default ``desired``, or the file's only
+    column besides ``time``). Commands never leave ``[v_min, v_max]``, which
+    default to the model's training voltage range.
+    """
+    model = _load(model_path)
+    table = read_table(target)
+    if column is None:
+        others = [c for c in table.columns if c != "time"]
+        column = "desired" if "desired" in table else (others[0] if len(others) == 1 else None)
+        if column is None:
+            msg = (
+                f"{target}: which column is the desired trajectory? Name it 'desired' or pass "
+                f"--column (columns: {', '.join(map(repr, table.columns))})"
+            )
+            raise DataFileError(msg)
+    desired = table.get(table.resolve(column))
+    comp = make_compensator(
+        model,
+        v_min=v_min,
+        v_max=v_max,
+        domain=domain,
+        gain=gain,
+        slew_rate=slew_rate,
+        sample_rate=sample_rate,
+    )
+    if "time" in table:
+        t = table.get("time")
+    elif sample_rate is not None:
+        t = np.arange(desired.size) / float(sample_rate)
+    else:
+        t = np.arange(desired.size, dtype=np.float64)
+    write_table(out, {"time": t, "command": comp.process(desired), "desired": desired})
+    return comp
+
+
+def export_c_file(
+    model_path: PathLike,
+    out: PathLike,
+    *,
+    v_min: float | None = None,
+    v_max: float | None = None,
+    domain: Domain = "charge",
+    gain: float | None = None,
+    slew_rate: float | None = None,
+    sample_rate: float | None = None,
+    precision: Precision = "double",
+) -> tuple[Path, Path]:
+    """Write ``NAME.c`` and ``NAME.h`` for the model's compensator (see :mod:`piezohyst.export`)."""
+    comp = make_compensator(
+        _load(model_path),
+        v_min=v_min,
+        v_max=v_max,
+        domain=domain,
+        gain=gain,
+        slew_rate=slew_rate,
+        sample_rate=sample_rate,
+    )
+    return write_c(comp, out, precision=precision)
+
+
+@dataclass(frozen=True)
+class ReportResult:
+    """Metrics and files written by :func:`model_report`."""
+
+    metrics: dict[str, Any]
+    files: list[Path]
+
+
+def model_report(
+    model_path: PathLike,
+    data: PathLike,
+    out: PathLike,
+    *,
+    input_column: str = "voltage",
+    output_column: str = "charge",
+    time_column: str | None = "time",
+    rate: float | None = None,
+    group: str | None = None,
+) -> ReportResult:
+    """Figures (loop, fit, residual, growth removal) and metrics of a model on a data file."""
+    model = _load(model_path)
+    rec = read_recording(
+        data,
+        input_column=input_column,
+        output_column=output_column,
+        time_column=time_column,
+        rate=rate,
+        group=group,
+    )
+    assert rec.y is not None
+    x, y, t = rec.x, rec.y, rec.t
+    pred = model.predict(x, t=t)
+    out_dir = Path(out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    in_u, out_u = model.input_unit, model.output_unit
+    metrics: dict[str, Any] = {
+        "model": type(model).__name__,
+        "model_file": str(model_path),
+        "data_file": str(data),
+        "samples": int(x.size),
+        "rmse": rmse(y, pred),
+        "nrmse_pct": 100 * nrmse(y, pred),
+        "max_abs_error": float(np.max(np.abs(y - pred))),
+        "output_unit": out_u,
+        "hysteresis_width_measured_pct": 100 * hysteresis_width(x, y),
+    }
+    lo, hi = model.input_range_
+    if not math.isnan(lo):
+        outside = int(np.count_nonzero((x < lo - 1e-9) | (x > hi + 1e-9)))
+        metrics["samples_outside_training_range"] = outside
+    files = [
+        save_panels(
+            out_dir / "loop.png",
+            [
+                {
+                    "curves": [
+                        (x, y, "measured", {"color": "0.6", "lw": 1.4}),
+                        (x, pred, "model", {"lw": 0.9}),
+                    ],
+                    "xlabel": f"input ({in_u})",
+                    "ylabel": f"output ({out_u})",
+                    "title": "input-output loop",
+                }
+            ],
+            suptitle=f"{type(model).__name__} on {Path(data).name}",
+        ),
+        save_panels(
+            out_dir / "fit.png",
+            [
+                {
+                    "curves": [
+                        (t, y, "measured", {"color": "0.6", "lw": 1.4}),
+                        (t, pred, "model", {"lw": 0.9}),
+                    ],
+                    "xlabel": "time (s)",
+                    "ylabel": f"output ({out_u})",
+                    "title": "output over time",
+                },
+                {
+                    "curves": [(t, y - pred, "measured - model", {"lw": 0.7})],
+                    "xlabel": "time (s)",
+                    "ylabel": f"residual ({out_u})",
+                    "title": f"residual (NRMSE {metrics['nrmse_pct']:.3f} %)",
+                },
+            ],
+            suptitle="fit and residual",
+        ),
+    ]
+    if isinstance(model, ActivePI):
+        pure = model.remove_growth(x, y, t=t)
+        metrics["growth_rate"] = model.growth_rate_
+        metrics["hysteresis_width_growth_removed_pct"] = 100 * hysteresis_width(x, pure)
+        files.append(
+            save_panels(
+                out_dir / "growth_removed.png",
+                [
+                    {
+                        "curves": [
+                            (x, y, "measured", {"lw": 0.7}),
+                            (x, pure, "growth removed (eq. 19)", {"lw": 1.1}),
+                        ],
+                        "xlabel": f"input ({in_u})",
+                        "ylabel": f"output ({out_u})",
+                        "title": f"R = {model.growth_rate_:.4g} {out_u}/({in_u}·s) removed",
+                    }
+                ],
+                suptitle="growth removal",
+            )
+        )
+    mpath = out_dir / "metrics.json"
+    atomic_write_text(mpath, json.dumps(metrics, indent=2) + "\n")
+    lines = [f"# {metrics['model']} on {Path(data).name}", "", "| quantity | value |", "|---|---|"]
+    lines += [
+        f"| {k} | {v:.6g} |" if isinstance(v, float) else f"| {k} | {v} |"
+        for k, v in metrics.items()
+    ]
+    lines += ["", *[f"![{f.stem}]({f.name})" for f in files], ""]
+    rpath = out_dir / "report.md"
+    atomic_write_text(rpath, "\n".join(lines))
+    return ReportResult(metrics, [*files, mpath, rpath])
+
+
+def describe(model: HysteresisModel) -> str:
+    """One line on a fitted model's quality, for the CLI."""
+    assert isinstance(model, ClassicalPI)
+    text = (
+        f"{type(model).__name__}: {model.operator_.n_operators} operators, "
+        f"NRMSE {100 * model.nrmse_:.4g} %, RMSE {model.rmse_:.4g} {model.output_unit}"
+    )
+    if isinstance(model, ActivePI):
+        text += f", growth rate {model.growth_rate_:.4g} {model.output_unit}/({model.input_unit}·s)"
+    return text

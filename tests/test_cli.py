@@ -1,0 +1,230 @@
+"""The command line, run as a user runs it, on files made in a temporary folder."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner, Result
+
+import piezohyst as ph
+from piezohyst.cli import main
+
+
+def run(*args: str | Path) -> Result:
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def assert_clean_error(res: Result, *fragments: str, code: int = 1) -> None:
+    assert res.exit_code == code, res.output
+    err = res.stderr.strip()
+    assert "Traceback" not in res.output and "Traceback" not in err
+    if code == 1:
+        assert len(err.splitlines()) == 1, err
+        for fragment in fragments:
+            assert fragment in err, err
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = tmp_path_factory.mktemp("cli")
+    assert run("simulate", "--duration", "12", "-o", d / "run.csv").exit_code == 0
+    assert run("simulate", "--signal", "multi", "--duration", "12", "--seed", "2",
+               "-o", d / "run2.csv").exit_code == 0  # fmt: skip
+    res = run("fit", d / "run.csv", "--operators", "12", "-o", d / "model.json")
+    assert res.exit_code == 0, res.output
+    return d
+
+
+def test_simulate_writes_the_documented_columns(workdir: Path) -> None:
+    text = (workdir / "run.csv").read_text().splitlines()
+    assert text[0] == "time,voltage,charge,displacement"
+    assert len(text) == 12001
+    table = ph.io.read_table(workdir / "run.csv")
+    np.testing.assert_allclose(np.diff(table.get("time")), 1e-3)
+    assert table.get("voltage").max() == pytest.approx(140.0)
+
+
+def test_fit_prints_quality_and_saves_a_model(workdir: Path) -> None:
+    res = run("fit", workdir / "run.csv", "--model", "classical-pi", "--operators", "8",
+              "-o", workdir / "classical.json")  # fmt: skip
+    assert res.exit_code == 0
+    assert res.stdout.startswith("ClassicalPI: 8 operators, NRMSE")
+    assert isinstance(ph.load_model(workdir / "classical.json"), ph.ClassicalPI)
+    model = ph.load_model(workdir / "model.json")
+    assert isinstance(model, ph.ActivePI) and model.input_range_ == (0.0, 140.0)
+
+
+def test_predict_and_report(workdir: Path) -> None:
+    res = run("predict", workdir / "model.json", workdir / "run2.csv", "-o", workdir / "pred.csv")
+    assert res.exit_code == 0 and "NRMSE" in res.stdout
+    pred = ph.io.read_table(workdir / "pred.csv")
+    assert pred.columns == ["time", "predicted", "measured"]
+    res = run("report", workdir / "model.json", workdir / "run2.csv", "--out", workdir / "rep")
+    assert res.exit_code == 0
+    metrics = json.loads((workdir / "rep" / "metrics.json").read_text())
+    assert metrics["model"] == "ActivePI" and metrics["nrmse_pct"] < 5.0
+    for name in ("loop.png", "fit.png", "growth_removed.png", "report.md"):
+        assert (workdir / "rep" / name).stat().st_size > 0
+
+
+def test_compensate_respects_limits_and_inverts(workdir: Path) -> None:
+    model = ph.load_model(workdir / "model.json")
+    assert isinstance(model, ph.ActivePI)
+    t = np.arange(3000) / 1000.0
+    v = 60 * (1 - np.cos(2 * np.pi * 0.5 * t))
+    target = workdir / "target.csv"
+    ph.io.write_table(target, {"time": t, "desired": model.hysteresis_.predict(v)})
+    res = run("compensate", workdir / "model.json", target, "-o", workdir / "cmd.csv")
+    assert res.exit_code == 0, res.output
+    cmd = ph.io.read_table(workdir / "cmd.csv")
+    np.testing.assert_allclose(cmd.get("command"), v, atol=1e-6)
+    res = run("compensate", workdir / "model.json", target, "--v-min", "10", "--v-max", "90",
+              "-o", workdir / "cmd2.csv")  # fmt: skip
+    c2 = ph.io.read_table(workdir / "cmd2.csv").get("command")
+    assert c2.min() >= 10.0 and c2.max() <= 90.0 and "saturated" in res.stdout
+
+
+def test_export_c(workdir: Path) -> None:
+    res = run("export-c", workdir / "model.json", "--float", "-o", workdir / "stage.c")
+    assert res.exit_code == 0
+    assert "typedef float stage_real;" in (workdir / "stage.h").read_text()
+
+
+def test_tdms_with_group_and_wf_increment(workdir: Path) -> None:
+    from nptdms import ChannelObject, GroupObject, TdmsWriter
+
+    rec = ph.simulate(duration=6.0, seed=1)
+    path = workdir / "scan.tdms"
+    props = {"wf_increment": 1e-3, "wf_start_offset": 0.0}
+    with TdmsWriter(path) as writer:
+        writer.write_segment([
+            GroupObject("Other"),
+            GroupObject("Scan"),
+            ChannelObject("Scan", "Ch0", rec.voltage, properties=props),
+            ChannelObject("Scan", "Ch1", rec.charge, properties=props),
+        ])  # fmt: skip
+    res = run("fit", path, "--group", "Scan", "--input", "Ch0", "--output", "Ch1",
+              "--operators", "8", "-o", workdir / "tdms.json")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    model = ph.load_model(workdir / "tdms.json")
+    assert isinstance(model, ph.ActivePI)
+    assert model.growth_rate_ == pytest.approx(rec.true_growth_rate, rel=0.1)
+    res = run("fit", path, "--group", "Nope", "-o", workdir / "x.json")
+    assert_clean_error(res, "no TDMS group 'Nope'", "'Other', 'Scan'")
+
+
+def test_mat_files_v5_and_v73(workdir: Path) -> None:
+    import h5py
+    from scipy.io import savemat
+
+    rec = ph.simulate(duration=4.0, seed=2)
+    savemat(workdir / "run.mat", {"time": rec.t[:, None], "voltage": rec.voltage[:, None],
+                                   "charge": rec.charge[:, None]})  # fmt: skip
+    assert (
+        run("fit", workdir / "run.mat", "--operators", "6", "-o", workdir / "m5.json").exit_code
+        == 0
+    )
+    # MATLAB v7.3: HDF5 behind a 512-byte header whose version bytes say 0x0200
+    path = workdir / "run73.mat"
+    with h5py.File(path, "w", userblock_size=512) as fh:
+        fh["voltage"] = rec.voltage[None, :]
+        fh["charge"] = rec.charge[None, :]
+    header = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: test HDF5 schema 1.00 ."
+    header = header.ljust(124, b" ") + b"\x00\x02IM"
+    with open(path, "r+b") as fh:
+        fh.write(header)
+    res = run("fit", path, "--rate", "1000", "--operators", "6", "-o", workdir / "m73.json")
+    assert res.exit_code == 0, res.output
+
+
+def test_npz_and_hdf5_inputs(workdir: Path) -> None:
+    import h5py
+
+    rec = ph.simulate(duration=4.0, seed=3)
+    ph.io.write_table(
+        workdir / "run.npz", {"time": rec.t, "voltage": rec.voltage, "charge": rec.charge}
+    )
+    assert run("fit", workdir / "run.npz", "-o", workdir / "n.json").exit_code == 0
+    with h5py.File(workdir / "run.h5", "w") as fh:
+        fh["bench/u"] = rec.voltage
+        fh["bench/y"] = rec.charge
+    res = run("fit", workdir / "run.h5", "--input", "bench/u", "--output", "bench/y",
+              "--rate", "1000", "-o", workdir / "h.json")  # fmt: skip
+    assert res.exit_code == 0, res.output
+
+
+# ------------------------------------------------------------------ bad input
+def write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("content", "fragments"),
+    [
+        ("", ["the file is empty"]),
+        ("time,voltage,charge\n", ["header but no data rows"]),
+        ("time,voltage,q\n0,1,2\n0.1,2,3\n", ["no column 'charge'", "'time', 'voltage', 'q'"]),
+        ("time,voltage,charge\n0,1,2\n0.1,x,3\n", ["'x' at row 3, column 'voltage'"]),
+        ("time,voltage,charge\n0,1,2\n0.1,nan,3\n", ["nan at row 2, column 'voltage'"]),
+        ("time,voltage,charge\n0,1,2\n0.1,,3\n", ["empty value at row 3, column 'voltage'"]),
+        ("time,voltage,charge\n0,1,2\n0.1,2\n", ["row 3 has 2 fields, expected 3"]),
+        ("time,voltage,charge\n0,1,2\n0.2,2,3\n0.1,3,4\n", ["time is not increasing at row 3"]),
+        ("voltage,charge\n1,2\n2,3\n", ["no time column 'time' and no sample rate"]),
+    ],
+)
+def test_bad_data_files(tmp_path: Path, content: str, fragments: list[str]) -> None:
+    data = write(tmp_path / "bad.csv", content)
+    out = tmp_path / "model.json"
+    res = run("fit", data, "-o", out)
+    assert_clean_error(res, *fragments)
+    assert not out.exists()
+    assert not list(tmp_path.glob(".model.json*"))
+
+
+def test_missing_files_and_bad_models(tmp_path: Path, workdir: Path) -> None:
+    res = run("fit", tmp_path / "nope.csv", "-o", tmp_path / "m.json")
+    assert_clean_error(res, "no such file")
+    notmodel = write(tmp_path / "m.json", '{"hello": 1}')
+    res = run("predict", notmodel, workdir / "run2.csv", "-o", tmp_path / "p.csv")
+    assert_clean_error(res, "not a piezohyst model")
+    assert not (tmp_path / "p.csv").exists()
+    res = run("predict", workdir / "run2.csv", workdir / "run2.csv", "-o", tmp_path / "p.csv")
+    assert_clean_error(res, "not a piezohyst model")
+
+
+def test_usage_errors_exit_2(workdir: Path) -> None:
+    res = run("fit", workdir / "run.csv", "--operators", "0", "-o", workdir / "x.json")
+    assert_clean_error(res, code=2)
+    res = run("fit", workdir / "run.csv")  # no -o
+    assert_clean_error(res, code=2)
+    assert_clean_error(run("frobnicate"), code=2)
+
+
+def test_debug_shows_the_traceback(tmp_path: Path) -> None:
+    res = run("--debug", "fit", tmp_path / "nope.csv", "-o", tmp_path / "m.json")
+    assert res.exit_code == 1 and isinstance(res.exception, ph.DataFileError)
+
+
+@pytest.mark.parametrize(
+    "command", ["simulate", "fit", "predict", "compensate", "report", "export-c", "demo"]
+)
+def test_every_command_has_help_with_an_example(command: str) -> None:
+    res = run(command, "--help")
+    assert res.exit_code == 0 and "Example" in res.output and "piezohyst " + command in res.output
+
+
+def test_console_script_runs_as_a_subprocess(tmp_path: Path) -> None:
+    """What a user types: quiet when piped (no progress), errors in one stderr line."""
+    exe = Path(sys.executable).with_name("piezohyst")
+    proc = subprocess.run([str(exe), "simulate", "--duration", "2", "-o", str(tmp_path / "r.csv")],
+                          capture_output=True, text=True, check=False)  # fmt: skip
+    assert proc.returncode == 0 and proc.stdout.strip() == str(tmp_path / "r.csv")
+    proc = subprocess.run([str(exe), "fit", str(tmp_path / "missing.csv"), "-o", "m.json"],
+                          capture_output=True, text=True, check=False)  # fmt: skip
+    assert proc.returncode == 1 and proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr

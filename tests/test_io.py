@@ -1,0 +1,155 @@
+"""Readers and writers: round trips, and fuzzing with garbled and truncated files."""
+
+from __future__ import annotations
+
+import io as stdio
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import piezohyst as ph
+from piezohyst.errors import DataFileError
+
+SUFFIXES = [".csv", ".txt", ".npz", ".mat", ".tdms", ".h5"]
+
+
+def _valid_files(folder: Path) -> dict[str, bytes]:
+    """One valid file of every format, as bytes."""
+    import h5py
+    from nptdms import ChannelObject, GroupObject, TdmsWriter
+    from scipy.io import savemat
+
+    v = np.linspace(0, 1, 50)
+    out = {}
+    ph.write_table(folder / "a.csv", {"time": v, "voltage": v})
+    ph.write_table(folder / "a.npz", {"time": v, "voltage": v})
+    savemat(folder / "a.mat", {"time": v, "voltage": v})
+    with TdmsWriter(folder / "a.tdms") as w:
+        w.write_segment([GroupObject("g"), ChannelObject("g", "voltage", v)])
+    with h5py.File(folder / "a.h5", "w") as fh:
+        fh["voltage"] = v
+    for suffix in (".csv", ".npz", ".mat", ".tdms", ".h5"):
+        out[suffix] = (folder / f"a{suffix}").read_bytes()
+    out[".txt"] = out[".csv"]
+    return out
+
+
+def read_or_clean_error(path: Path) -> None:
+    """The only outcomes allowed: data, or one DataFileError line naming the file."""
+    try:
+        table = ph.read_table(path)
+    except DataFileError as exc:
+        text = str(exc)
+        assert "\n" not in text and str(path) in text
+        return
+    for name in table.columns:
+        try:
+            values = table.get(name)
+        except DataFileError as exc:
+            assert "\n" not in str(exc)
+            continue
+        assert values.dtype == np.float64 and np.all(np.isfinite(values))
+
+
+@pytest.fixture(scope="module")
+def valid(tmp_path_factory: pytest.TempPathFactory) -> dict[str, bytes]:
+    return _valid_files(tmp_path_factory.mktemp("valid"))
+
+
+@settings(max_examples=150, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.binary(max_size=600), suffix=st.sampled_from(SUFFIXES))
+def test_random_bytes(tmp_path: Path, data: bytes, suffix: str) -> None:
+    path = tmp_path / f"f{suffix}"
+    path.write_bytes(data)
+    read_or_clean_error(path)
+
+
+@settings(max_examples=150, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    suffix=st.sampled_from(SUFFIXES),
+    cut=st.floats(0.0, 1.0),
+    flips=st.lists(st.tuples(st.floats(0.0, 1.0), st.integers(0, 255)), max_size=4),
+)
+def test_truncated_and_corrupted_valid_files(
+    tmp_path: Path, valid: dict[str, bytes], suffix: str, cut: float, flips: list
+) -> None:  # fmt: skip
+    raw = bytearray(valid[suffix][: max(1, int(len(valid[suffix]) * cut))])
+    for where, byte in flips:
+        raw[min(int(where * len(raw)), len(raw) - 1)] = byte
+    path = tmp_path / f"f{suffix}"
+    path.write_bytes(bytes(raw))
+    read_or_clean_error(path)
+
+
+@settings(max_examples=150, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    rows=st.lists(
+        st.lists(
+            st.one_of(st.floats(allow_nan=True), st.text(max_size=4), st.just("")), max_size=5
+        ),
+        max_size=8,
+    ),
+    delim=st.sampled_from([",", ";", "\t", " "]),
+    encoding=st.sampled_from(["utf-8", "utf-16", "latin-1", "cp1252"]),
+)
+def test_ragged_and_garbled_text(tmp_path: Path, rows: list, delim: str, encoding: str) -> None:
+    text = "\n".join(delim.join(str(c) for c in row) for row in rows)
+    path = tmp_path / "f.csv"
+    try:
+        path.write_bytes(text.encode(encoding))
+    except UnicodeEncodeError:
+        path.write_bytes(text.encode(encoding, errors="replace"))
+    read_or_clean_error(path)
+
+
+def test_csv_round_trip_and_header_detection(tmp_path: Path) -> None:
+    t = np.arange(5) / 10
+    ph.write_table(tmp_path / "a.csv", {"time": t, "voltage": t * 3})
+    table = ph.read_table(tmp_path / "a.csv")
+    assert table.columns == ["time", "voltage"]
+    np.testing.assert_array_equal(table.get("voltage"), t * 3)  # full precision
+    np.testing.assert_array_equal(table.get("1"), t * 3)  # by index
+    (tmp_path / "b.txt").write_text("0.0 1.5\n0.1 2.5\n0.2 3.5\n")
+    headless = ph.read_table(tmp_path / "b.txt")
+    assert headless.columns == ["col0", "col1"]
+    np.testing.assert_array_equal(headless.get("col1"), [1.5, 2.5, 3.5])
+    (tmp_path / "c.csv").write_text("Zeit;Spannung\n0;1,5\n")  # ';' with comma decimals
+    with pytest.raises(DataFileError, match="'1,5' at row 2, column 'Spannung' is not a number"):
+        ph.read_table(tmp_path / "c.csv").get("Spannung")
+
+
+def test_latin1_headers_are_read(tmp_path: Path) -> None:
+    (tmp_path / "a.dat").write_bytes("Time [s]\tP1 [µC/cm2]\n0\t1\n1\t2\n".encode("latin-1"))
+    table = ph.read_table(tmp_path / "a.dat")
+    assert table.columns == ["Time [s]", "P1 [µC/cm2]"]
+
+
+def test_writes_are_atomic(tmp_path: Path) -> None:
+    target = tmp_path / "out.csv"
+    target.write_text("old")
+    with pytest.raises(DataFileError):
+        ph.write_table(target, {"a": [1, 2], "b": [1]})
+    assert target.read_text() == "old"
+    assert [p.name for p in tmp_path.iterdir()] == ["out.csv"]
+
+
+def test_npz_round_trip(tmp_path: Path) -> None:
+    ph.write_table(tmp_path / "a.npz", {"x": [1.0, 2.0]})
+    np.testing.assert_array_equal(ph.read_table(tmp_path / "a.npz").get("x"), [1.0, 2.0])
+
+
+def test_unused_bad_columns_do_not_block_reading(tmp_path: Path) -> None:
+    """Like the measured actuator file: an empty leftover index column before the data."""
+    (tmp_path / "d.csv").write_text(",0.0,1.5,2\n,0.1,2.5,3\n")
+    table = ph.read_table(tmp_path / "d.csv")
+    np.testing.assert_array_equal(table.get("col2"), [1.5, 2.5])
+    with pytest.raises(DataFileError, match="an empty value at row 1, column 'col0'"):
+        table.get("col0")
+
+
+def test_stdlib_io_not_shadowed() -> None:
+    assert stdio.StringIO("x").read() == "x" and shutil.which("sh")
