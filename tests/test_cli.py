@@ -228,3 +228,26 @@ def test_console_script_runs_as_a_subprocess(tmp_path: Path) -> None:
     proc = subprocess.run([str(exe), "fit", str(tmp_path / "missing.csv"), "-o", "m.json"],
                           capture_output=True, text=True, check=False)  # fmt: skip
     assert proc.returncode == 1 and proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
+
+
+def test_time_windows_carry_the_input_history(workdir: Path) -> None:
+    """Fit on [4, 9) s and predict from 9 s: both start from the state the earlier input left."""
+    from piezohyst.identification import history_state
+
+    data = workdir / "run.csv"
+    res = run("fit", data, "--operators", "8", "--t-start", "4", "--t-stop", "9",
+              "-o", workdir / "win.json")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    model = ph.load_model(workdir / "win.json")
+    assert isinstance(model, ph.ActivePI)
+    table = ph.read_table(data)
+    t, v = table.get("time"), table.get("voltage")
+    i0 = int(np.searchsorted(t, 4.0))
+    np.testing.assert_allclose(model.initial_state_, history_state(v[:i0], model.thresholds_))
+    res = run("predict", workdir / "model.json", data, "--t-start", "9", "-o", workdir / "w.csv")
+    assert res.exit_code == 0
+    pred = ph.read_table(workdir / "w.csv")
+    full = ph.load_model(workdir / "model.json").predict(v, t=t)
+    np.testing.assert_allclose(pred.get("predicted"), full[t >= 9.0])
+    res = run("predict", workdir / "model.json", data, "--t-start", "99", "-o", workdir / "e.csv")
+    assert_clean_error(res, "no samples in the time window [99, inf) s")

@@ -137,6 +137,10 @@ def _data_options(fn: Callable[..., Any]) -> Callable[..., Any]:
         click.option(
             "--group", default=None, help="TDMS group (default: the first with channels)."
         ),
+        click.option("--t-start", type=float, default=None, help="Use samples from this time (s)."),
+        click.option(
+            "--t-stop", type=float, default=None, help="Use samples before this time (s)."
+        ),
     ]
     for option in reversed(options):
         fn = option(fn)
@@ -280,6 +284,8 @@ def fit(
     time_column: str,
     rate: float | None,
     group: str | None,
+    t_start: float | None,
+    t_stop: float | None,
     out: Path,
 ) -> None:
     """Identify a model from DATA and save it as JSON.
@@ -305,6 +311,8 @@ def fit(
                 time_column=time_column,
                 rate=rate,
                 group=group,
+                t_start=t_start,
+                t_stop=t_stop,
                 output_unit=output_unit,
             ),
         )
@@ -330,6 +338,8 @@ def predict(
     time_column: str,
     rate: float | None,
     group: str | None,
+    t_start: float | None,
+    t_stop: float | None,
     out: Path,
 ) -> None:
     """Predict the output of MODEL for the input in DATA; write time,predicted[,measured].
@@ -352,6 +362,8 @@ def predict(
             time_column=time_column,
             rate=rate,
             group=group,
+            t_start=t_start,
+            t_stop=t_stop,
         ),
     )
     if "measured" in cols:
@@ -435,6 +447,8 @@ def report(
     time_column: str,
     rate: float | None,
     group: str | None,
+    t_start: float | None,
+    t_stop: float | None,
     out: Path,
 ) -> None:
     """Figures (loop, fit, residual, growth removal) and metrics of MODEL on DATA.
@@ -458,6 +472,8 @@ def report(
                 time_column=time_column,
                 rate=rate,
                 group=group,
+                t_start=t_start,
+                t_stop=t_stop,
             ),
         )
     click.echo(f"NRMSE {res.metrics['nrmse_pct']:.4g} %; report in {out / 'report.md'}")

@@ -34,6 +34,7 @@ __all__ = [
     "LinearSolution",
     "NormalEquations",
     "default_thresholds",
+    "history_state",
     "identify",
     "solve_pi",
     "time_steps",
@@ -62,6 +63,24 @@ def default_thresholds(x: ArrayLike, n_operators: int) -> FloatArray:
     if span <= 0.0:
         return np.arange(n, dtype=np.float64)  # any increasing set: the input never moves
     return np.arange(n, dtype=np.float64) * (span / (2.0 * n))
+
+
+def history_state(history: ArrayLike, thresholds: ArrayLike) -> FloatArray:
+    """Play-operator states (input units) after ``history``, starting at rest at its first sample.
+
+    To fit or predict a later part of a record, the operators must start where
+    the earlier input left them, not at rest.
+
+    Examples
+    --------
+    >>> history_state([0.0, 10.0, 4.0], [0.0, 2.0, 5.0]).tolist()
+    [4.0, 6.0, 5.0]
+    """
+    h = as_signal(history, "history")
+    thr = as_signal(thresholds, "thresholds")
+    z = np.full(thr.size, h[0])
+    _kernels.pi_forward(h, thr, np.zeros(thr.size), z, np.empty_like(h))
+    return z
 
 
 def time_steps(t: FloatArray, t_previous: float | None = None) -> FloatArray:
@@ -208,10 +227,12 @@ def identify(
     *,
     dt: FloatArray | None = None,
     min_slope: float = 1e-3,
+    initial_state: FloatArray | None = None,
 ) -> LinearSolution:
     """Weights, offset (and growth rate if ``dt`` is given) for checked inputs.
 
-    The operators start at rest at ``x[0]``. ``min_slope`` is relative to the
+    The operators start from ``initial_state`` (input units), by default at
+    rest at ``x[0]``. ``min_slope`` is relative to the
     mean slope ``span(y) / span(x)``. Input and output are first divided by
     powers of two near their peaks, so the solve is the same at any scale
     (volts or kilovolts, coulombs or microcoulombs).
@@ -221,7 +242,8 @@ def identify(
     xs, ys, thr = x / sx, y / sy, thresholds / sx
     span_x, span_y = float(np.ptp(xs)), float(np.ptp(ys))
     mean_slope = span_y / span_x if span_x > 1e-12 and span_y > 1e-12 else 1.0
-    eqs = NormalEquations.accumulate(xs, ys, thr, np.full(thr.size, xs[0]), dt=dt)
+    z0 = np.full(thr.size, xs[0]) if initial_state is None else initial_state / sx
+    eqs = NormalEquations.accumulate(xs, ys, thr, z0, dt=dt)
     sol = solve_pi(eqs, min_slope=min_slope * mean_slope, growth=dt is not None)
     return LinearSolution(
         weights=sol.weights * (sy / sx),

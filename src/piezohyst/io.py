@@ -84,12 +84,18 @@ class Table:
 
 @dataclass(frozen=True)
 class Recording:
-    """Input, output and time of one record, with the column names they came from."""
+    """Input, output and time of one whole record, the column names they came from,
+    and the window of samples asked for (``t_start <= t < t_stop``; all by default).
+
+    The arrays hold the whole record because a hysteresis model needs the input
+    history before a window to know its state at the window's start.
+    """
 
     t: FloatArray
     x: FloatArray
     y: FloatArray | None
     names: tuple[str, str | None, str | None]
+    window: slice = field(default_factory=lambda: slice(None))
 
 
 # ------------------------------------------------------------------ CSV / text
@@ -359,6 +365,8 @@ def read_recording(
     rate: float | None = None,
     group: str | None = None,
     output_required: bool = True,
+    t_start: float | None = None,
+    t_stop: float | None = None,
 ) -> Recording:
     """Input, output and time columns of a data file.
 
@@ -410,7 +418,19 @@ def read_recording(
             f"({float(t[i - 1])!r} then {float(t[i])!r})"
         )
         raise DataFileError(msg)
-    return Recording(t=t, x=x, y=y, names=(x_name, y_name, t_name))
+    window = slice(None)
+    if t_start is not None or t_stop is not None:
+        lo = -np.inf if t_start is None else float(t_start)
+        hi = np.inf if t_stop is None else float(t_stop)
+        i0, i1 = int(np.searchsorted(t, lo, "left")), int(np.searchsorted(t, hi, "left"))
+        if i1 <= i0:
+            msg = (
+                f"{table.path}: no samples in the time window [{lo:g}, {hi:g}) s "
+                f"(the record spans {float(t[0]):g} to {float(t[-1]):g} s)"
+            )
+            raise DataFileError(msg)
+        window = slice(i0, i1)
+    return Recording(t=t, x=x, y=y, names=(x_name, y_name, t_name), window=window)
 
 
 # ------------------------------------------------------------------ writers

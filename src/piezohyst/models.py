@@ -324,16 +324,39 @@ class ClassicalPI(HysteresisModel):
         ts = as_time(t, xs.size, required=self.rate_dependent, owner=type(self).__name__)
         return xs, ys, ts
 
-    def fit(self, x: ArrayLike, y: ArrayLike, t: ArrayLike | None = None) -> ClassicalPI:
+    def _initial_state(
+        self, thr: FloatArray, xs: FloatArray, initial_state: ArrayLike | None
+    ) -> FloatArray:
+        if initial_state is None:
+            return np.full(thr.size, xs[0])
+        z0 = as_signal(initial_state, "initial_state")
+        if z0.size != thr.size:
+            msg = f"'initial_state' must hold one state per operator ({thr.size}). Got {z0.size}."
+            raise ShapeError(msg)
+        return z0
+
+    def fit(
+        self,
+        x: ArrayLike,
+        y: ArrayLike,
+        t: ArrayLike | None = None,
+        *,
+        initial_state: ArrayLike | None = None,
+    ) -> ClassicalPI:
         """Identify weights and offset from input ``x`` (V) and output ``y``.
 
         ``t`` (s) is accepted for a uniform interface and ignored: the model is
-        rate independent. Returns ``self``.
+        rate independent. ``initial_state`` gives the operator states (V) before
+        the first sample when the record continues a known history (see
+        :func:`~piezohyst.identification.history_state`); by default the
+        actuator rests at ``x[0]``.
+        Returns ``self``.
         """
         xs, ys, _ = self._inputs(x, y, t)
         thr = self._check_params(xs)
-        sol = identify(xs, ys, thr, min_slope=self.min_slope)
-        self._set_operator(PIHysteresis(thr, sol.weights, sol.offset, np.full(thr.size, xs[0])))
+        z0 = self._initial_state(thr, xs, initial_state)
+        sol = identify(xs, ys, thr, min_slope=self.min_slope, initial_state=z0)
+        self._set_operator(PIHysteresis(thr, sol.weights, sol.offset, z0))
         self.input_range_ = (float(xs.min()), float(xs.max()))
         fitted = self.operator_.predict(xs)
         self.rmse_ = rmse(fitted, ys)
@@ -463,13 +486,24 @@ class ActivePI(ClassicalPI):
 
     rate_dependent: ClassVar[bool] = True
 
-    def fit(self, x: ArrayLike, y: ArrayLike, t: ArrayLike | None = None) -> ActivePI:
-        """Identify weights, offset and growth rate jointly; ``t`` (s) is required."""
+    def fit(
+        self,
+        x: ArrayLike,
+        y: ArrayLike,
+        t: ArrayLike | None = None,
+        *,
+        initial_state: ArrayLike | None = None,
+    ) -> ActivePI:
+        """Identify weights, offset and growth rate jointly; ``t`` (s) is required.
+
+        ``initial_state`` as for :meth:`ClassicalPI.fit`.
+        """
         xs, ys, ts = self._inputs(x, y, t)
         assert ts is not None
         thr = self._check_params(xs)
-        sol = identify(xs, ys, thr, dt=time_steps(ts), min_slope=self.min_slope)
-        self._set_operator(PIHysteresis(thr, sol.weights, sol.offset, np.full(thr.size, xs[0])))
+        z0 = self._initial_state(thr, xs, initial_state)
+        sol = identify(xs, ys, thr, dt=time_steps(ts), min_slope=self.min_slope, initial_state=z0)
+        self._set_operator(PIHysteresis(thr, sol.weights, sol.offset, z0))
         self.input_range_ = (float(xs.min()), float(xs.max()))
         self.growth_rate_ = sol.growth_rate
         fitted = self.predict(xs, t=ts)

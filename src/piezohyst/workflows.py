@@ -24,6 +24,7 @@ from ._validation import FloatArray, check_float, check_int
 from .compensator import Compensator, Domain
 from .errors import DataFileError, ParameterError
 from .export import Precision, write_c
+from .identification import default_thresholds, history_state
 from .io import read_recording, read_table, write_table
 from .metrics import hysteresis_width, nrmse, rmse
 from .models import ActivePI, ClassicalPI, HysteresisModel, atomic_write_text, load_model
@@ -104,6 +105,8 @@ def fit_file(
     time_column: str | None = "time",
     rate: float | None = None,
     group: str | None = None,
+    t_start: float | None = None,
+    t_stop: float | None = None,
     output_unit: str = "C",
 ) -> ClassicalPI:
     """Fit a model to a data file and save it (JSON) to ``out`` if given."""
@@ -115,10 +118,22 @@ def fit_file(
         time_column=time_column,
         rate=rate,
         group=group,
+        t_start=t_start,
+        t_stop=t_stop,
         output_required=True,
     )
     assert rec.y is not None
-    fitted = cls(n_operators=operators, output_unit=output_unit).fit(rec.x, rec.y, t=rec.t)
+    w = rec.window
+    x, y, t = rec.x[w], rec.y[w], rec.t[w]
+    estimator = cls(n_operators=operators, output_unit=output_unit)
+    start = w.start or 0
+    if start > 0:  # the window continues a known input history: start from its state
+        thresholds = default_thresholds(x, check_int(operators, "operators", "fit", 1, 1000))
+        estimator = cls(thresholds=thresholds, output_unit=output_unit)
+        z0 = history_state(rec.x[:start], thresholds)
+        fitted = estimator.fit(x, y, t=t, initial_state=z0)
+    else:
+        fitted = estimator.fit(x, y, t=t)
     if out is not None:
         fitted.save(out)
     return fitted
@@ -142,6 +157,8 @@ def predict_file(
     time_column: str | None = "time",
     rate: float | None = None,
     group: str | None = None,
+    t_start: float | None = None,
+    t_stop: float | None = None,
 ) -> dict[str, FloatArray]:
     """Write ``time,predicted`` (plus ``measured`` when the data has the output column)."""
     model = _load(model_path)
@@ -152,11 +169,17 @@ def predict_file(
         time_column=time_column,
         rate=rate,
         group=group,
+        t_start=t_start,
+        t_stop=t_stop,
         output_required=False,
     )
-    columns: dict[str, FloatArray] = {"time": rec.t, "predicted": model.predict(rec.x, t=rec.t)}
+    w = rec.window  # the model runs over the whole record: the window's start has a history
+    columns: dict[str, FloatArray] = {
+        "time": rec.t[w],
+        "predicted": model.predict(rec.x, t=rec.t)[w],
+    }
     if rec.y is not None:
-        columns["measured"] = rec.y
+        columns["measured"] = rec.y[w]
     write_table(out, columns)
     return columns
 
@@ -286,6 +309,8 @@ def model_report(
     time_column: str | None = "time",
     rate: float | None = None,
     group: str | None = None,
+    t_start: float | None = None,
+    t_stop: float | None = None,
 ) -> ReportResult:
     """Figures (loop, fit, residual, growth removal) and metrics of a model on a data file."""
     model = _load(model_path)
@@ -296,10 +321,13 @@ def model_report(
         time_column=time_column,
         rate=rate,
         group=group,
+        t_start=t_start,
+        t_stop=t_stop,
     )
     assert rec.y is not None
-    x, y, t = rec.x, rec.y, rec.t
-    pred = model.predict(x, t=t)
+    w = rec.window  # the model runs over the whole record: the window's start has a history
+    pred = model.predict(rec.x, t=rec.t)[w]
+    x, y, t = rec.x[w], rec.y[w], rec.t[w]
     out_dir = Path(out)
     out_dir.mkdir(parents=True, exist_ok=True)
     in_u, out_u = model.input_unit, model.output_unit
@@ -357,7 +385,7 @@ def model_report(
         ),
     ]
     if isinstance(model, ActivePI):
-        pure = model.remove_growth(x, y, t=t)
+        pure = y - model.growth(rec.x, t=rec.t)[w]
         metrics["growth_rate"] = model.growth_rate_
         metrics["hysteresis_width_growth_removed_pct"] = 100 * hysteresis_width(x, pure)
         files.append(
