@@ -22,6 +22,7 @@ from .errors import (
     ShapeError,
     TimeAxisError,
 )
+from .generalized import GeneralizedPI
 from .hysteresis import PIHysteresis, Propagation
 from .identification import default_thresholds
 from .io import read_recording, read_table, write_table
@@ -33,6 +34,7 @@ __all__ = [
     "ClassicalPI",
     "Compensator",
     "DataFileError",
+    "GeneralizedPI",
     "InsufficientDataError",
     "ModelFileError",
     "NonFiniteError",

@@ -69,6 +69,22 @@ def running_integral(x, dt, start, out):  # type: ignore[no-untyped-def]
     return acc
 
 
+@njit(cache=True)
+def lag_filter(x, dt, tau, state, out):  # type: ignore[no-untyped-def]
+    """First-order lags of unit DC gain (creep operators), exact for piecewise-constant input.
+
+    ``c_k[n] = c_k[n-1] + (1 - exp(-dt[n] / tau_k)) (x[n] - c_k[n-1])`` for every
+    time constant ``tau_k``; ``state`` (m,) holds ``c_k`` and is updated;
+    ``out`` is (N, m).
+    """
+    m = tau.shape[0]
+    for k in range(x.shape[0]):
+        for j in range(m):
+            a = 1.0 - math.exp(-dt[k] / tau[j])
+            state[j] += a * (x[k] - state[j])
+            out[k, j] = state[j]
+
+
 def warm_up() -> None:
     """Compile every kernel once (numba caches the result on disk)."""
     x = np.zeros(2)
@@ -133,8 +149,11 @@ def compensator_step(desired, params, config, state):  # type: ignore[no-untyped
         inverse_states(params, config, state)
         return last
     if v < config[2] or v > config[3]:
+        # count real overshoots, not a limit reached exactly but for rounding
+        tol = 1e-12 * (config[3] - config[2])
+        if v < config[2] - tol or v > config[3] + tol:
+            state[2 * n + 2] += 1.0
         v = min(max(v, config[2]), config[3])
-        state[2 * n + 2] += 1.0
         limited = True
     step = config[4]
     if v > last + step:
@@ -156,3 +175,101 @@ def compensator_process(desired, params, config, state, out):  # type: ignore[no
     """``compensator_step`` over a block (same arithmetic, one call)."""
     for k in range(desired.shape[0]):
         out[k] = compensator_step(desired[k], params, config, state)
+
+
+# Generalized compensator (numerical inverse). Layout:
+#   pi (2, n): thresholds r, weights w        static (3, K): knots, up, down coefficients
+#   creep (3, m): time constant, gain, a = 1 - exp(-dt / tau) for the loop's dt
+#   config (8,): offset c, v_min, v_max, max step, 1/gain, reference, static scale, unused
+#   state (n + m + 3,): play states z, lag states, last command, non-finite, saturated
+@njit(cache=True)
+def _generalized_output(v, pi, static, creep, config, state):  # type: ignore[no-untyped-def]
+    """Hysteresis-part output for command v from the current state, and its slope in v."""
+    n = pi.shape[1]
+    y = config[0]
+    slope = 0.0
+    for i in range(n):
+        zi = state[i]
+        lo = v - pi[0, i]
+        hi = v + pi[0, i]
+        if zi < lo:
+            y += pi[1, i] * lo
+            slope += pi[1, i]
+        elif zi > hi:
+            y += pi[1, i] * hi
+            slope += pi[1, i]
+        else:
+            y += pi[1, i] * zi
+    s = config[6]
+    for j in range(static.shape[1]):
+        d = v - static[0, j]
+        if d > 0:
+            y += static[1, j] * d * d / s
+            slope += 2.0 * static[1, j] * d / s
+        else:
+            y -= static[2, j] * d * d / s
+            slope -= 2.0 * static[2, j] * d / s
+    for k in range(creep.shape[1]):
+        lag = state[n + k]
+        y += creep[1, k] * (lag + creep[2, k] * (v - lag))
+        slope += creep[1, k] * creep[2, k]
+    return y, slope
+
+
+@njit(cache=True)
+def generalized_step(desired, pi, static, creep, config, state):  # type: ignore[no-untyped-def]
+    """One command (V): solve output(v) = desired in [v_min, v_max] (output strictly increasing)."""
+    n = pi.shape[1]
+    m = creep.shape[1]
+    last = state[n + m]
+    if not math.isfinite(desired):
+        state[n + m + 1] += 1.0
+        # the held command is still applied for this sample: creep keeps evolving
+        for k in range(m):
+            state[n + k] += creep[2, k] * (last - state[n + k])
+        return last
+    q = config[5] + desired * config[4]
+    lo, hi = config[1], config[2]
+    y_lo, _ = _generalized_output(lo, pi, static, creep, config, state)
+    y_hi, _ = _generalized_output(hi, pi, static, creep, config, state)
+    tol = 1e-12 * (y_hi - y_lo)  # count real overshoots, not rounding at a limit
+    if q <= y_lo:
+        v = lo
+        if q < y_lo - tol:
+            state[n + m + 2] += 1.0
+    elif q >= y_hi:
+        v = hi
+        if q > y_hi + tol:
+            state[n + m + 2] += 1.0
+    else:  # safeguarded Newton: the bracket always holds the root
+        v = min(max(last, lo), hi)
+        for _ in range(200):
+            y, slope = _generalized_output(v, pi, static, creep, config, state)
+            err = y - q
+            if err == 0.0:
+                break
+            if err > 0:
+                hi = v
+            else:
+                lo = v
+            if hi - lo <= 1e-15 * (abs(lo) + abs(hi) + 1e-300):
+                break
+            step = v - err / slope if slope > 0 else 0.5 * (lo + hi)
+            v = step if lo < step < hi else 0.5 * (lo + hi)
+    mx = config[3]
+    if v > last + mx:
+        v = last + mx
+    elif v < last - mx:
+        v = last - mx
+    for i in range(n):
+        state[i] = min(max(state[i], v - pi[0, i]), v + pi[0, i])
+    for k in range(m):
+        state[n + k] += creep[2, k] * (v - state[n + k])
+    state[n + m] = v
+    return v
+
+
+@njit(cache=True)
+def generalized_process(desired, pi, static, creep, config, state, out):  # type: ignore[no-untyped-def]
+    for k in range(desired.shape[0]):
+        out[k] = generalized_step(desired[k], pi, static, creep, config, state)

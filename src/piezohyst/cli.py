@@ -200,7 +200,7 @@ EXISTING = click.Path(exists=False, dir_okay=False, path_type=Path)
 @click.option("--preset", default="T226-H4-203X", show_default=True, help="Bench preset.")
 @click.option(
     "--signal",
-    type=click.Choice(["fixed", "multi", "bipolar", "triangle", "two-rate", "hold"]),
+    type=click.Choice(["fixed", "multi", "bipolar", "triangle", "two-rate", "hold", "levels"]),
     default="hold",
     show_default=True,
     help="Excitation.",
@@ -257,7 +257,7 @@ def simulate(
 @click.option(
     "--model",
     "model_name",
-    type=click.Choice(["active-pi", "classical-pi"]),
+    type=click.Choice(["active-pi", "classical-pi", "generalized-pi"]),
     default="active-pi",
     show_default=True,
     help="Model to identify.",

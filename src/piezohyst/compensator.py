@@ -28,6 +28,7 @@ from numpy.typing import ArrayLike
 from . import _kernels
 from ._validation import FloatArray, as_signal
 from .errors import ParameterError, ShapeError
+from .generalized import GeneralizedPI
 from .hysteresis import PIHysteresis
 from .models import ClassicalPI
 
@@ -52,9 +53,12 @@ class Compensator:
 
     Parameters
     ----------
-    model : ClassicalPI or ActivePI
-        A fitted model; for :class:`~piezohyst.ActivePI` only the hysteresis
-        part is inverted (leaked charge moves nothing).
+    model : ClassicalPI, ActivePI or GeneralizedPI
+        A fitted model; growth terms are dropped (leaked charge moves nothing)
+        and the hysteresis part is inverted: analytically (eq. 18) for the
+        classical and active models, exactly by a safeguarded Newton solve per
+        sample for :class:`~piezohyst.GeneralizedPI` (whose creep operators
+        need ``sample_rate``).
     v_min, v_max : float
         The actuator's voltage limits (V). Every command lies inside them.
     slew_rate : float, optional
@@ -101,7 +105,9 @@ class Compensator:
             raise ParameterError(msg)
         model._check_fitted()
         op: PIHysteresis = model.operator_
-        inv = op.inverse()  # raises NotInvertibleError with the reason
+        self._numeric = isinstance(model, GeneralizedPI)
+        if not op.is_invertible:
+            op.inverse()  # raises NotInvertibleError with the reason
         self.v_min = _finite_number(v_min, "v_min")
         self.v_max = _finite_number(v_max, "v_max")
         if not self.v_min < self.v_max:
@@ -140,46 +146,77 @@ class Compensator:
         self.slew_rate = slew_rate
         self.sample_rate = sample_rate
         n = op.n_operators
-        self._params = np.zeros((6, n))
-        self._params[0] = op.thresholds
-        self._params[1] = op.weights
-        self._params[2] = op.loading_slopes
-        self._params[3] = inv.thresholds
-        self._params[4] = inv.weights
-        # displacement 0 = the model's output at rest in its initial state
-        reference = 0.0
-        if domain == "displacement":
-            reference = op.offset + float(op.weights @ op.initial_state)
         reach = max(abs(self.v_min), abs(self.v_max)) + float(op.thresholds[-1])
-        bound = 2.0 * float(np.abs(op.weights).sum()) * reach + 1.0
-        self._config = np.array(
-            [op.offset, inv.offset, self.v_min, self.v_max, max_step, scale, reference, bound]
-        )
-        self._state = np.zeros(2 * n + 3)
+        if self._numeric:
+            assert isinstance(model, GeneralizedPI)
+            taus = model.creep_taus_
+            if taus.size and sample_rate is None:
+                msg = "A GeneralizedPI with creep needs the loop's sample_rate (Hz). Got None."
+                raise ParameterError(msg)
+            dt = 0.0 if sample_rate is None else 1.0 / float(sample_rate)
+            self._pi = np.vstack([op.thresholds, op.weights])
+            self._static = np.vstack([model.knots_, model.static_up_, model.static_down_])
+            self._creep = np.vstack([taus, model.creep_gains_, 1.0 - np.exp(-dt / taus)])
+            self._config = np.array(
+                [op.offset, self.v_min, self.v_max, max_step, scale, 0.0, model.static_scale_, 0.0]
+            )
+            self._state = np.zeros(n + taus.size + 3)
+            self._last_index = n + taus.size
+            if domain == "displacement":  # displacement 0 = output at rest in the initial state
+                x0 = float(op.initial_state[0])
+                self._state[:n] = op.initial_state
+                self._state[n : n + taus.size] = x0
+                self._config[5] = _kernels._generalized_output(
+                    x0, self._pi, self._static, self._creep, self._config, self._state
+                )[0]
+        else:
+            inv = op.inverse()
+            self._params = np.zeros((6, n))
+            self._params[0] = op.thresholds
+            self._params[1] = op.weights
+            self._params[2] = op.loading_slopes
+            self._params[3] = inv.thresholds
+            self._params[4] = inv.weights
+            # displacement 0 = the model's output at rest in its initial state
+            reference = 0.0
+            if domain == "displacement":
+                reference = op.offset + float(op.weights @ op.initial_state)
+            bound = 2.0 * float(np.abs(op.weights).sum()) * reach + 1.0
+            self._config = np.array(
+                [op.offset, inv.offset, self.v_min, self.v_max, max_step, scale, reference, bound]
+            )
+            self._state = np.zeros(2 * n + 3)
+            self._last_index = 2 * n
         self.reset()
 
     # ----------------------------------------------------------------- state
     @property
     def n_operators(self) -> int:
-        return int(self._params.shape[1])
+        return int(self.model.operator_.n_operators)
+
+    def _refresh(self) -> None:
+        """Derived state after the forward states changed (inverse states, analytic path)."""
+        if not self._numeric:
+            _kernels.inverse_states(self._params, self._config, self._state)
 
     @property
     def state(self) -> FloatArray:
         """Forward operator states (V) followed by the last command (V); a read-only copy."""
         n = self.n_operators
-        out = np.concatenate([self._state[:n], self._state[2 * n : 2 * n + 1]])
+        extra = self._last_index - n if self._numeric else 0  # creep lag states
+        out = np.concatenate([self._state[: n + extra], self._state[self._last_index :][:1]])
         out.flags.writeable = False
         return out
 
     @property
     def nonfinite_count(self) -> int:
         """Desired values that were NaN or infinite (the last command was held)."""
-        return int(self._state[2 * self.n_operators + 1])
+        return int(self._state[self._last_index + 1])
 
     @property
     def saturated_count(self) -> int:
         """Samples whose command was clipped to ``[v_min, v_max]``."""
-        return int(self._state[2 * self.n_operators + 2])
+        return int(self._state[self._last_index + 2])
 
     def reset(self, state: ArrayLike | None = None, *, voltage: float | None = None) -> None:
         """Start again from a known actuator condition; counters go back to 0.
@@ -195,23 +232,32 @@ class Compensator:
           :attr:`state` saved earlier (its last element is the last command).
         """
         n = self.n_operators
+        lags = self._last_index - n if self._numeric else 0
         op = self.model.operator_
         if state is not None:
             z = as_signal(state, "state")
-            if z.size not in (n, n + 1):
-                msg = f"'state' must hold {n} operator states (and the last command). Got {z.size}."
+            if z.size not in (n + lags, n + lags + 1):
+                msg = (
+                    f"'state' must hold {n} operator states{f', {lags} lag states' if lags else ''}"
+                    f" (and the last command). Got {z.size}."
+                )
                 raise ShapeError(msg)
-            ops = z[:n]
+            ops = z[: n + lags]
             last = (
-                float(z[n]) if z.size == n + 1 else float(np.clip(ops[0], self.v_min, self.v_max))
+                float(z[-1])
+                if z.size == n + lags + 1
+                else float(np.clip(ops[0], self.v_min, self.v_max))
             )
         elif voltage is None:
             # the model's own start; if the limits exclude it, the first command steps in
-            ops = np.array(op.initial_state)
-            last = float(np.clip(op.initial_state[0], self.v_min, self.v_max))
+            x0 = float(op.initial_state[0])
+            ops = np.concatenate([op.initial_state, np.full(lags, x0)])
+            last = float(np.clip(x0, self.v_min, self.v_max))
         else:
             v = _finite_number(voltage, "voltage")
-            ops = np.clip(op.initial_state, v - op.thresholds, v + op.thresholds)
+            ops = np.concatenate(
+                [np.clip(op.initial_state, v - op.thresholds, v + op.thresholds), np.full(lags, v)]
+            )
             last = v
         if not self.v_min <= last <= self.v_max:
             msg = (
@@ -219,10 +265,14 @@ class Compensator:
                 f"[{self.v_min}, {self.v_max}] V."
             )
             raise ParameterError(msg)
-        self._state[:n] = ops
-        self._state[2 * n] = last
-        self._state[2 * n + 1 :] = 0.0
-        _kernels.inverse_states(self._params, self._config, self._state)
+        self._state[: n + lags] = ops
+        self._state[self._last_index] = last
+        self._state[self._last_index + 1 :] = 0.0
+        self._refresh()
+
+    @property
+    def _max_step(self) -> float:
+        return float(self._config[3] if self._numeric else self._config[4])
 
     def precondition(self, samples: int = 1000) -> FloatArray:
         """The preconditioning cycle to send first: last command → v_max → v_min → back.
@@ -238,10 +288,10 @@ class Compensator:
             msg = f"'samples' must be an int >= 3. Got {samples!r}."
             raise ParameterError(msg)
         n = self.n_operators
-        start = float(self._state[2 * n])
+        start = float(self._state[self._last_index])
         knots = [start, self.v_max, self.v_min, start]
         legs = np.abs(np.diff(knots))
-        step = self._config[4]
+        step = self._max_step
         # every leg ends exactly on its knot: reaching v_max and v_min is what wipes history
         share = legs / max(float(legs.sum()), 1e-300)
         counts = np.maximum(np.round(share * (samples - 1)).astype(int), 1)
@@ -254,19 +304,28 @@ class Compensator:
         cycle = np.concatenate(pieces)
         op = self.model.operator_
         z = self._state[:n]
+        lag = self._state[n : self._last_index] if self._numeric else np.empty(0)
+        alpha = self._creep[2] if self._numeric else np.empty(0)
         out = np.empty_like(cycle)
         last = start
         for k, v_target in enumerate(cycle):
             v = min(max(v_target, last - step), last + step)
             z[:] = np.clip(z, v - op.thresholds, v + op.thresholds)
+            lag += alpha * (v - lag)
             out[k] = last = v
-        self._state[2 * n] = last
-        _kernels.inverse_states(self._params, self._config, self._state)
+        self._state[self._last_index] = last
+        self._refresh()
         return out
 
     # -------------------------------------------------------------- commands
     def step(self, desired: float) -> float:
         """The command (V) for one desired value (model output units, or m)."""
+        if self._numeric:
+            return float(
+                _kernels.generalized_step(
+                    float(desired), self._pi, self._static, self._creep, self._config, self._state
+                )
+            )
         return float(
             _kernels.compensator_step(float(desired), self._params, self._config, self._state)
         )
@@ -281,5 +340,10 @@ class Compensator:
             msg = f"'desired' must be a 1-D array. Got shape {d.shape}."
             raise ShapeError(msg)
         out = np.empty_like(d)
-        _kernels.compensator_process(d, self._params, self._config, self._state, out)
+        if self._numeric:
+            _kernels.generalized_process(
+                d, self._pi, self._static, self._creep, self._config, self._state, out
+            )
+        else:
+            _kernels.compensator_process(d, self._params, self._config, self._state, out)
         return out

@@ -58,6 +58,12 @@ def export_c(
     ``ph_real ph_comp_step(ph_comp_t *s, ph_real desired)`` where ``ph_real``
     is ``double`` (default) or ``float``. ``prefix`` renames ``ph_comp``.
     """
+    if compensator._numeric:
+        msg = (
+            "C export covers the analytic inverse of ClassicalPI and ActivePI; a GeneralizedPI "
+            "compensator runs in Python (ph.Compensator) only."
+        )
+        raise ParameterError(msg)
     if precision not in ("double", "float"):
         msg = f"precision must be 'double' or 'float'. Got {precision!r}."
         raise ParameterError(msg)
@@ -128,6 +134,7 @@ static const {real} MAX_STEP = {_literal(step if has_slew else 0.0, p)};
 static const {real} SCALE = {_literal(config[5], p)};
 static const {real} REFERENCE = {_literal(config[6], p)};
 static const {real} BOUND = {_literal(config[7], p)};
+static const {real} SAT_TOL = {_literal(1e-12 * (config[3] - config[2]), p)};
 static const {real} LAST0 = {_literal(state[2 * n], p)};
 
 static {real} clamp({real} x, {real} lo, {real} hi)
@@ -180,8 +187,11 @@ void {prefix}_init({prefix}_t *s)
         return s->last;
     }}
     if (v < V_MIN || v > V_MAX) {{
+        /* count real overshoots, not a limit reached exactly but for rounding */
+        if (v < V_MIN - SAT_TOL || v > V_MAX + SAT_TOL) {{
+            s->saturated++;
+        }}
         v = clamp(v, V_MIN, V_MAX);
-        s->saturated++;
         limited = 1;
     }}
 #if HAS_SLEW

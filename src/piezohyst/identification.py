@@ -37,6 +37,7 @@ __all__ = [
     "history_state",
     "identify",
     "solve_pi",
+    "solve_slopes",
     "time_steps",
 ]
 
@@ -179,13 +180,35 @@ class LinearSolution:
     growth_rate: float
 
 
-def solve_pi(equations: NormalEquations, *, min_slope: float, growth: bool) -> LinearSolution:
-    r"""Constrained least squares in the loading slopes (see module notes).
+def solve_slopes(
+    gram: FloatArray,
+    rhs: FloatArray,
+    n_operators: int,
+    *,
+    min_slope: float,
+    lower: FloatArray,
+) -> FloatArray:
+    r"""Bounded least squares with the first ``n_operators`` columns solved in slopes.
 
-    ``min_slope`` is the lower bound :math:`\epsilon` on every slope, in output
-    per input units. With :math:`w = M S` (:math:`M` the first-difference
-    matrix), the Gram matrix in slope coordinates is :math:`M^T X^T X M`.
+    The first ``n_operators`` parameters are play weights, found through the
+    loading slopes :math:`S_i \ge` ``min_slope``; ``lower`` bounds the other
+    parameters (``-inf`` for free ones). With :math:`w = M S` (:math:`M` the
+    first-difference matrix), the Gram matrix in slope coordinates is
+    :math:`M^T X^T X M`. Returns the parameters with weights (not slopes) first.
     """
+    p = rhs.size
+    n = n_operators
+    if not np.isfinite(min_slope) or min_slope <= 0:
+        msg = f"'min_slope' must be a positive float. Got {min_slope!r}."
+        raise ParameterError(msg)
+    m = np.eye(p)
+    m[np.arange(1, n), np.arange(0, n - 1)] = -1.0
+    bounds = np.concatenate([np.full(n, min_slope), lower])
+    return np.asarray(m @ _bounded_lstsq(m.T @ gram @ m, m.T @ rhs, bounds))
+
+
+def solve_pi(equations: NormalEquations, *, min_slope: float, growth: bool) -> LinearSolution:
+    """The classical/active model's solve: weights, then offset, then growth rate."""
     p = equations.rhs.size
     n = p - 1 - int(growth)
     if equations.n_samples <= p:
@@ -195,16 +218,9 @@ def solve_pi(equations: NormalEquations, *, min_slope: float, growth: bool) -> L
             f"Got {equations.n_samples}."
         )
         raise InsufficientDataError(msg)
-    if not np.isfinite(min_slope) or min_slope <= 0:
-        msg = f"'min_slope' must be a positive float. Got {min_slope!r}."
-        raise ParameterError(msg)
-    m = np.eye(p)
-    m[np.arange(1, n), np.arange(0, n - 1)] = -1.0
-    gram_s = m.T @ equations.gram @ m
-    rhs_s = m.T @ equations.rhs
-    lower = np.full(p, -np.inf)
-    lower[:n] = min_slope
-    sol = m @ _bounded_lstsq(gram_s, rhs_s, lower)
+    sol = solve_slopes(
+        equations.gram, equations.rhs, n, min_slope=min_slope, lower=np.full(p - n, -np.inf)
+    )
     return LinearSolution(
         weights=sol[:n].copy(),
         offset=float(sol[n]),

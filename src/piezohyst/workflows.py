@@ -24,6 +24,7 @@ from ._validation import FloatArray, check_float, check_int
 from .compensator import Compensator, Domain
 from .errors import DataFileError, ParameterError
 from .export import Precision, write_c
+from .generalized import GeneralizedPI
 from .identification import default_thresholds, history_state
 from .io import read_recording, read_table, write_table
 from .metrics import hysteresis_width, nrmse, rmse
@@ -42,7 +43,11 @@ __all__ = [
 ]
 
 #: CLI names of the model classes (``--model``).
-MODELS: dict[str, type[ClassicalPI]] = {"active-pi": ActivePI, "classical-pi": ClassicalPI}
+MODELS: dict[str, type[ClassicalPI]] = {
+    "active-pi": ActivePI,
+    "classical-pi": ClassicalPI,
+    "generalized-pi": GeneralizedPI,
+}
 
 PathLike = str | os.PathLike[str]
 
@@ -384,9 +389,14 @@ def model_report(
             suptitle="fit and residual",
         ),
     ]
-    if isinstance(model, ActivePI):
+    if isinstance(model, ActivePI | GeneralizedPI):
         pure = y - model.growth(rec.x, t=rec.t)[w]
-        metrics["growth_rate"] = model.growth_rate_
+        if isinstance(model, ActivePI):
+            metrics["growth_rate"] = model.growth_rate_
+        else:
+            metrics["growth_terms"] = dict(
+                zip(model.growth_terms_, model.growth_coefs_.tolist(), strict=True)
+            )
         metrics["hysteresis_width_growth_removed_pct"] = 100 * hysteresis_width(x, pure)
         files.append(
             save_panels(
@@ -399,7 +409,7 @@ def model_report(
                         ],
                         "xlabel": f"input ({in_u})",
                         "ylabel": f"output ({out_u})",
-                        "title": f"R = {model.growth_rate_:.4g} {out_u}/({in_u}·s) removed",
+                        "title": "identified growth removed",
                     }
                 ],
                 suptitle="growth removal",
@@ -427,4 +437,10 @@ def describe(model: HysteresisModel) -> str:
     )
     if isinstance(model, ActivePI):
         text += f", growth rate {model.growth_rate_:.4g} {model.output_unit}/({model.input_unit}·s)"
+    if isinstance(model, GeneralizedPI):
+        terms = ", ".join(
+            f"{name} {c:.4g}"
+            for name, c in zip(model.growth_terms_, model.growth_coefs_, strict=True)
+        )
+        text += f", growth terms: {terms or 'none'}"
     return text

@@ -79,6 +79,28 @@ def hold(amplitude: float, frequency: float, duration: float, rate: float) -> Fl
     return amplitude * shape
 
 
+_LEVELS = np.array([1.0, 0.0, 0.5, 1.0, 0.25, 0.75, 0.0, 1.0, 0.5, 0.0, 0.75, 0.25, 1.0, 0.0])
+
+
+def levels(amplitude: float, frequency: float, duration: float, rate: float) -> FloatArray:
+    """Moves between several levels (fractions of amplitude), each followed by a hold.
+
+    Every move takes half a period (raised cosine), every hold the other half.
+    Holds at several voltages tell leakage that grows with voltage (or a
+    constant bias current) apart from ohmic leakage, which holds at 0 V and the
+    top alone cannot (see ``docs/bench.md``).
+    """
+    t = _time(duration, rate)
+    period = 1.0 / frequency
+    seg = np.floor(t / period).astype(int)
+    phase = (t % period) / (0.5 * period)
+    frm = _LEVELS[(seg - 1) % _LEVELS.size]
+    frm[seg == 0] = 0.0
+    to = _LEVELS[seg % _LEVELS.size]
+    move = 0.5 * (1 - np.cos(np.pi * np.clip(phase, 0.0, 1.0)))
+    return np.asarray(amplitude * (frm + (to - frm) * move))
+
+
 SIGNALS = {
     "fixed": fixed,
     "multi": multi,
@@ -86,6 +108,7 @@ SIGNALS = {
     "triangle": triangle,
     "two-rate": two_rate,
     "hold": hold,
+    "levels": levels,
 }
 
 

@@ -1,0 +1,196 @@
+"""GeneralizedPI: recovery of known models, term selection, exact numerical inverse."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+import piezohyst as ph
+from piezohyst.simulation import make_signal
+
+FS = 1000.0
+
+
+def known_model(
+    v: np.ndarray, terms: tuple[str, ...], creep: tuple[float, ...] = (0.2, 2.0)
+) -> ph.GeneralizedPI:
+    """A GeneralizedPI with hand-set parameters (every term active)."""
+    m = ph.GeneralizedPI(thresholds=ph.default_thresholds(v, 6), growth_terms=terms, asymmetry=3,
+                         creep=creep)  # fmt: skip
+    r = ph.default_thresholds(v, 6)
+    w = np.array([1e-8, 3e-9, -1e-9, -2e-9, 1e-9, -5e-10])
+    m._set_operator(ph.PIHysteresis(r, w, 2e-8, np.full(6, v[0])))
+    lo, hi = float(v.min()), float(v.max())
+    m.knots_ = lo + (hi - lo) * np.arange(1, 4) / 4
+    m.static_scale_ = hi - lo
+    m.static_up_ = np.array([2e-9, 0.0, 1e-9])
+    m.static_down_ = np.array([0.0, 1.5e-9, 0.0])
+    m.creep_taus_ = np.asarray(creep, dtype=float)
+    m.creep_gains_ = np.full(len(creep), 1e-9)
+    m.growth_terms_ = terms
+    coefs = {"integral": 5e-10, "time": 3e-9, "abs_integral": 2.5e-10}
+    m.growth_coefs_ = np.array([coefs[k] for k in terms])
+    m.input_range_ = (lo, hi)
+    m.rmse_ = m.nrmse_ = float("nan")
+    return m
+
+
+@pytest.fixture(scope="module")
+def levels() -> tuple[np.ndarray, np.ndarray]:
+    return make_signal("levels", duration=30.0, rate=FS)
+
+
+def test_recovers_a_known_generalized_model(levels: tuple) -> None:
+    t, v = levels
+    true = known_model(v, ("integral", "abs_integral"))
+    y = true.predict(v, t=t)
+    fit = ph.GeneralizedPI(thresholds=true.thresholds_, growth_terms=("integral", "abs_integral"),
+                           asymmetry=3, creep=(0.2, 2.0)).fit(v, y, t=t)  # fmt: skip
+    assert fit.nrmse_ < 1e-6
+    np.testing.assert_allclose(fit.growth_coefs_, true.growth_coefs_, rtol=1e-4)
+    np.testing.assert_allclose(fit.static_up_, true.static_up_, atol=1e-4 * 2e-9)
+    np.testing.assert_allclose(fit.creep_gains_, true.creep_gains_, rtol=1e-3)
+
+
+def test_auto_selection_finds_the_leakage_terms(levels: tuple) -> None:
+    t, v = levels
+    true = known_model(v, ("integral", "abs_integral"), creep=())
+    y = true.predict(v, t=t)
+    rng = np.random.default_rng(1)
+    noisy = y + 0.002 * np.ptp(y) * rng.standard_normal(y.size)
+    fit = ph.GeneralizedPI(6, asymmetry=3).fit(v, noisy, t=t)
+    assert "integral" in fit.growth_terms_ and "abs_integral" in fit.growth_terms_
+    assert set(fit.selection_) == {"none", "integral", "time", "abs_integral", "integral+time",
+                                   "integral+abs_integral", "time+abs_integral",
+                                   "integral+time+abs_integral"}  # fmt: skip
+    # without any growth in the data, 'auto' keeps the growth terms out (or nearly zero)
+    clean = known_model(v, (), creep=()).predict(v, t=t)
+    fit0 = ph.GeneralizedPI(6).fit(v, clean + 1e-3 * np.ptp(clean) * rng.standard_normal(t.size),
+                                   t=t)  # fmt: skip
+    if fit0.growth_terms_:
+        assert np.max(np.abs(fit0.growth(v, t=t))) < 0.01 * np.ptp(clean)
+
+
+def test_generalized_beats_active_on_the_bench() -> None:
+    rec = ph.simulate(signal="levels", duration=30.0)
+    val = ph.simulate(signal="multi", duration=12.0, seed=100)
+    act = ph.ActivePI(20).fit(rec.voltage, rec.charge, t=rec.t)
+    gen = ph.GeneralizedPI(20).fit(rec.voltage, rec.charge, t=rec.t)
+    err_a = ph.metrics.nrmse(val.charge, act.predict(val.voltage, t=val.t))
+    err_g = ph.metrics.nrmse(val.charge, gen.predict(val.voltage, t=val.t))
+    assert err_g < 0.6 * err_a
+
+
+@given(cut=st.integers(1, 2999))
+def test_propagate_in_chunks(cut: int) -> None:
+    t, v = make_signal("multi", duration=3.0, rate=FS)
+    m = known_model(v, ("integral", "time", "abs_integral"))
+    whole = m.propagate(v, t=t)
+    a = m.propagate(v[:cut], t=t[:cut])
+    b = m.propagate(v[cut:], t=t[cut:], state=a.state)
+    np.testing.assert_allclose(np.concatenate([a.output, b.output]), whole.output,
+                               rtol=1e-12, atol=1e-20)  # fmt: skip
+    np.testing.assert_allclose(b.state, whole.state, rtol=1e-12)
+
+
+def hysteresis_part(m: ph.GeneralizedPI, v: np.ndarray, t: np.ndarray) -> np.ndarray:
+    return m.predict(v, t=t) - m.growth(v, t=t)
+
+
+def test_compensator_inverts_exactly(levels: tuple) -> None:
+    t, v = levels
+    m = known_model(v, ("integral",))
+    desired = hysteresis_part(m, v, t)
+    comp = ph.Compensator(m, v_min=0.0, v_max=140.0, sample_rate=FS)
+    cmd = comp.process(desired)
+    np.testing.assert_allclose(cmd, v, rtol=0, atol=1e-9 * 140)
+    assert comp.saturated_count == 0
+
+
+@given(
+    d=hnp.arrays(
+        np.float64,
+        st.integers(1, 150),
+        elements=st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.floats(-1e-5, 1e-5)),
+    ),
+    cuts=st.lists(st.integers(0, 150), max_size=3),
+)
+def test_compensator_safe_exact_and_chunkable(d: np.ndarray, cuts: list[int]) -> None:  # fmt: skip
+    _, v = make_signal("fixed", duration=2.0, rate=FS)
+    m = known_model(v, (), creep=(0.1,))
+    comp = ph.Compensator(m, v_min=0.0, v_max=140.0, sample_rate=FS, slew_rate=5e4)
+    cmd = comp.process(d)
+    assert np.all(np.isfinite(cmd)) and cmd.min() >= 0.0 and cmd.max() <= 140.0
+    other = ph.Compensator(m, v_min=0.0, v_max=140.0, sample_rate=FS, slew_rate=5e4)
+    parts = [other.process(c) for c in np.split(d, sorted(c % d.size for c in cuts))]
+    np.testing.assert_array_equal(np.concatenate(parts), cmd)
+    # where no limit acted, driving the model with the commands gives the desired values
+    tt = np.arange(d.size) / FS
+    start = m.initial_state_[0]
+    # the compensator starts the lags at the model's initial voltage, one loop period
+    # before its first command: propagate from that state
+    state = np.concatenate([m.initial_state_, [start], [0.0, 0.0, 0.0, -1.0 / FS]])
+    achieved = m.propagate(cmd, t=tt, state=state).output
+    steps = np.abs(np.diff(np.concatenate([[start], cmd])))
+    free = np.isfinite(d) & (cmd > 0.0) & (cmd < 140.0) & (steps < 50.0 * (1 - 1e-9))
+    np.testing.assert_allclose(achieved[free], d[free], rtol=0, atol=1e-12)
+
+
+def test_persistence_and_cli_name(tmp_path: Path, levels: tuple) -> None:
+    t, v = levels
+    y = known_model(v, ("integral",)).predict(v, t=t)
+    m = ph.GeneralizedPI(6, creep=(0.5,)).fit(v, y, t=t)
+    m.save(tmp_path / "g.json")
+    loaded = ph.load_model(tmp_path / "g.json")
+    assert isinstance(loaded, ph.GeneralizedPI)
+    np.testing.assert_array_equal(loaded.predict(v, t=t), m.predict(v, t=t))
+    data = json.loads((tmp_path / "g.json").read_text())
+    data.pop("checksum")
+    data["fitted"]["static_up"][0] = -1.0
+    (tmp_path / "bad.json").write_text(json.dumps(data))
+    with pytest.raises(ph.ModelFileError, match="signs"):
+        ph.load_model(tmp_path / "bad.json")
+    from piezohyst.workflows import MODELS
+
+    assert MODELS["generalized-pi"] is ph.GeneralizedPI
+
+
+def test_defaults_and_errors() -> None:
+    t, v = make_signal("hold", duration=4.0, rate=FS)
+    rec = ph.simulate(v, t)
+    assert ph.GeneralizedPI().fit(rec.voltage, rec.charge, t=rec.t).nrmse_ < 0.01
+    with pytest.raises(ph.TimeAxisError):
+        ph.GeneralizedPI().fit(v, v)
+    for kwargs, match in [
+        ({"growth_terms": "all"}, "'growth_terms'"),
+        ({"growth_terms": ("integral", "integral")}, "distinct"),
+        ({"creep": (-1.0,)}, "'creep'"),
+        ({"asymmetry": 99}, "'asymmetry'"),
+        ({"optimize_thresholds": "yes"}, "optimize_thresholds"),
+    ]:
+        with pytest.raises(ph.ParameterError, match=match):
+            ph.GeneralizedPI(**kwargs).fit(v, rec.charge, t=t)  # type: ignore[arg-type]
+    m = ph.GeneralizedPI(4).fit(rec.voltage, rec.charge, t=rec.t)
+    with pytest.raises(ph.ParameterError, match="Compensator"):
+        m.inverse()
+    with pytest.raises(ph.ParameterError, match="C export"):
+        from piezohyst.export import export_c
+
+        export_c(ph.Compensator(m, v_min=0.0, v_max=140.0))
+
+
+def test_threshold_optimisation_does_not_get_worse() -> None:
+    rec = ph.simulate(signal="multi", duration=8.0)
+    base = ph.GeneralizedPI(8, growth_terms=("integral",)).fit(rec.voltage, rec.charge, t=rec.t)
+    opt = ph.GeneralizedPI(8, growth_terms=("integral",), optimize_thresholds=True).fit(
+        rec.voltage, rec.charge, t=rec.t
+    )
+    assert opt.rmse_ <= base.rmse_ * (1 + 1e-9)
+    assert np.all(np.diff(opt.thresholds_) > 0) and opt.thresholds_[0] == 0.0
+    assert opt.operator_.is_invertible
