@@ -1,0 +1,274 @@
+"""Validate every model on measured data, held out, and write docs/validation.md.
+
+Run: ``python benchmarks/validate_real.py DATA_DIR [--out docs/validation.md]``
+where DATA_DIR is the workplace's ``shared/data`` folder. The data are read in
+place and never copied. Every model is fitted on one part of a record and
+scored on another part it never saw (later cycles, or another amplitude); the
+models run over the whole input so that the held-out part starts from the
+state its history left, and NRMSE = RMSE / span of the measured held-out output.
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+import piezohyst as ph
+from piezohyst.identification import default_thresholds, history_state
+
+Factory = Callable[[], ph.ClassicalPI]
+
+
+@dataclass
+class Row:
+    model: str
+    train_nrmse: float
+    test_nrmse: float
+    seconds: float
+    detail: str = ""
+
+
+def describe(model: ph.ClassicalPI) -> str:
+    if isinstance(model, ph.GeneralizedPI):
+        terms = "+".join(model.growth_terms_) or "none"
+        parts = [f"growth: {terms}"]
+        if model.creep_taus_.size:
+            parts.append(f"creep τ = {', '.join(f'{x:g}' for x in model.creep_taus_)} s")
+        if model.optimize_thresholds:
+            parts.append("thresholds optimised")
+        return "; ".join(parts)
+    if isinstance(model, ph.ActivePI):
+        return f"R = {model.growth_rate_:.3g}"
+    return ""
+
+
+def evaluate(
+    factory: Factory,
+    x: np.ndarray,
+    y: np.ndarray,
+    t: np.ndarray,
+    train: slice,
+    test: slice,
+    n_operators: int,
+) -> tuple[ph.ClassicalPI, float, float, float]:
+    """Fit on ``train`` (starting from the state the earlier input left), score on ``test``."""
+    model = factory()
+    start = train.start or 0
+    thr = default_thresholds(x[train], n_operators)
+    model.thresholds = thr
+    z0 = history_state(x[: start + 1], thr) if start > 0 else None
+    began = time.perf_counter()
+    model.fit(x[train], y[train], t=t[train], initial_state=z0)
+    seconds = time.perf_counter() - began
+    # run over the whole record from the training start, score the test part
+    lo = start
+    pred = model.predict(x[lo:], t=t[lo:])
+    full = np.full(x.size, np.nan)
+    full[lo:] = pred
+    test_err = ph.metrics.nrmse(y[test], full[test])
+    return model, model.nrmse_, test_err, seconds
+
+
+def table(title: str, rows: list[Row], note: str) -> str:
+    out = [f"### {title}", "", note, ""]
+    out += [
+        "| model | training NRMSE | held-out NRMSE | fit time | notes |",
+        "|---|---|---|---|---|",
+    ]
+    for r in rows:
+        out.append(
+            f"| {r.model} | {100 * r.train_nrmse:.3f} % | **{100 * r.test_nrmse:.3f} %** | "
+            f"{r.seconds:.2f} s | {r.detail} |"
+        )
+    return "\n".join(out) + "\n"
+
+
+def run_models(
+    models: list[tuple[str, Factory]], x: np.ndarray, y: np.ndarray, t: np.ndarray,
+    train: slice, test: slice, n: int,
+) -> list[Row]:  # fmt: skip
+    rows = []
+    for name, factory in models:
+        model, tr, te, sec = evaluate(factory, x, y, t, train, test, n)
+        rows.append(Row(name, tr, te, sec, describe(model)))
+        print(f"  {name:45s} train {100 * tr:7.3f} %  held-out {100 * te:7.3f} %  ({sec:.2f} s)")
+    return rows
+
+
+def actuator(data: Path) -> str:
+    path = data / "piezo_actuator_smarthysteresis" / "hysteresis_v_150_1hz.csv"
+    table_ = ph.read_table(path)
+    t, d, v = table_.get("col1"), table_.get("col2"), table_.get("col3")
+    train = slice(int(np.searchsorted(t, 3.3)), int(np.searchsorted(t, 7.0)))
+    test = slice(int(np.searchsorted(t, 7.0)), t.size)
+    n = 20
+    print(f"actuator: {path.name}")
+    models: list[tuple[str, Factory]] = [
+        ("classical PI", lambda: ph.ClassicalPI(n, output_unit="um")),
+        ("active PI (paper)", lambda: ph.ActivePI(n, output_unit="um")),
+        ("generalized PI (auto growth, asymmetry)", lambda: ph.GeneralizedPI(n, output_unit="um")),
+        ("generalized PI + creep", lambda: ph.GeneralizedPI(n, output_unit="um",
+                                                            creep=(0.02, 0.2, 2.0))),
+        ("generalized PI + creep, thresholds optimised",
+         lambda: ph.GeneralizedPI(n, output_unit="um", creep=(0.02, 0.2, 2.0),
+                                  optimize_thresholds=True)),
+    ]  # fmt: skip
+    rows = run_models(models, v, d, t, train, test, n)
+    return table(
+        "Piezo actuator, voltage → displacement (SmartHysteresis; 1 Hz, ±150 V, 5 kHz)",
+        rows,
+        "Fitted on 3.3–7 s (the cycles after the drive starts), scored on 7–10 s. "
+        "Output span 39.5 µm. Sensor noise floor ≈ 0.12 % of the span; the published "
+        "sparse-ODE model reaches 0.23 % on its own training window (NOTES.txt).",
+    )
+
+
+def pzt_creep(data: Path) -> str:
+    folder = data / "pnzt_ceramic_aixacct" / "derived_csv"
+    out = []
+    n = 20
+    for name in ("CREEP_T04_CREEP_1400V_1000V_1400S", "CREEP_T03_CREEP_1400V_1000V_105S"):
+        tb = ph.read_table(folder / f"{name}.csv")
+        t, v, p = tb.get("time_s"), tb.get("voltage_V"), tb.get("polarization_uC_per_cm2")
+        half = int(np.searchsorted(t, 0.5 * t[-1]))
+        print(f"PZT {name}")
+        models: list[tuple[str, Factory]] = [
+            ("classical PI", lambda: ph.ClassicalPI(n, output_unit="uC/cm2")),
+            ("active PI (paper)", lambda: ph.ActivePI(n, output_unit="uC/cm2")),
+            ("generalized PI (auto growth, asymmetry)",
+             lambda: ph.GeneralizedPI(n, output_unit="uC/cm2")),
+            ("generalized PI + creep τ = 1, 10, 100, 1000 s",
+             lambda: ph.GeneralizedPI(n, output_unit="uC/cm2", creep=(1.0, 10.0, 100.0, 1000.0))),
+        ]  # fmt: skip
+        rows = run_models(models, v, p, t, slice(0, half), slice(half, t.size), n)
+        for row, (_, factory) in zip(rows, models, strict=True):
+            whole = factory().fit(v, p, t=t)
+            row.detail = f"whole record: {100 * whole.nrmse_:.3f} %; {row.detail}"
+        out.append(table(
+            f"PZT ceramic, voltage → polarisation, {name} ({t[-1]:.0f} s, {t.size} samples)",
+            rows,
+            "Fitted on the first half of the record, scored on the second half (the hold, "
+            "where leakage drift dominates); 'whole record' is the NRMSE of a fit on the whole "
+            "record. No licence on this data: numbers only.",
+        ))  # fmt: skip
+    return "\n".join(out)
+
+
+def _chained(folder: Path, names: list[str]) -> tuple[np.ndarray, ...]:
+    """Records measured one after another, joined into one history.
+
+    Time continues (one sample step between records) and each record's
+    polarisation, integrated from its own zero, is shifted to continue from the
+    previous record's last value (the voltage is back at 0 V between records).
+    """
+    ts, vs, ps, idx = [], [], [], []
+    t_end, p_end, start = 0.0, 0.0, 0
+    for name in names:
+        tb = ph.read_table(folder / f"{name}.csv")
+        t, v, p = tb.get("time_s"), tb.get("voltage_V"), tb.get("polarization_uC_per_cm2")
+        step = float(np.median(np.diff(t)))
+        ts.append(t - t[0] + t_end + (step if ts else 0.0))
+        vs.append(v)
+        ps.append(p - p[0] + p_end)
+        idx.append(slice(start, start + t.size))
+        t_end, p_end, start = float(ts[-1][-1]), float(ps[-1][-1]), start + t.size
+    return np.concatenate(ts), np.concatenate(vs), np.concatenate(ps), idx
+
+
+def pzt_amplitudes(data: Path) -> str:
+    folder = data / "pnzt_ceramic_aixacct" / "derived_csv"
+    n = 20
+    names = ["SLOW_T03_TEST_800V", "SLOW_T04_TEST_1000V", "SLOW_T05_TEST_1200V",
+             "SLOW_T06_TEST_1400V"]  # fmt: skip
+    t, v, p, parts = _chained(folder, names)
+    print("PZT amplitudes: fit 1400 V, predict 1200 V and 1000 V")
+    factories: list[tuple[str, Factory]] = [
+        ("classical PI", lambda: ph.ClassicalPI(n, output_unit="uC/cm2")),
+        ("active PI (paper)", lambda: ph.ActivePI(n, output_unit="uC/cm2")),
+        ("generalized PI (auto growth, asymmetry)",
+         lambda: ph.GeneralizedPI(n, output_unit="uC/cm2")),
+    ]  # fmt: skip
+    train = parts[3]
+    lines = [
+        "### PZT ceramic, one amplitude → smaller ones (SLOW set, 1 Hz bipolar triangles)",
+        "",
+        "The 800, 1000, 1200 and 1400 V periods (T03-T06) were measured one after another; "
+        "they are joined into one history (see `_chained`). Fitted on the 1400 V period with "
+        "the operators started from the state the earlier periods left, then run from the "
+        "start of the history and scored on the 1200 V and 1000 V periods. Each period's "
+        "polarisation zero is arbitrary (the instrument integrates from zero per record), so "
+        "each held-out period is compared after removing its mean offset. 1000 V is below "
+        "the coercive voltage (≈ 1.1 kV).",
+        "",
+        "| model | training NRMSE (1400 V) | 1200 V | 1000 V | fit time | notes |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, factory in factories:
+        model = factory()
+        thr = default_thresholds(v[train], n)
+        model.thresholds = thr
+        z0 = history_state(v[: train.start + 1], thr)
+        began = time.perf_counter()
+        model.fit(v[train], p[train], t=t[train], initial_state=z0)
+        sec = time.perf_counter() - began
+        pred = model.predict(v, t=t)
+        errs = []
+        for part in (parts[2], parts[1]):
+            diff = pred[part] - p[part]
+            errs.append(float(np.std(diff)) / float(np.ptp(p[part])))
+        print(f"  {name:45s} train {100 * model.nrmse_:7.3f} %  1200 V {100 * errs[0]:7.3f} %  "
+              f"1000 V {100 * errs[1]:7.3f} %")  # fmt: skip
+        lines.append(f"| {name} | {100 * model.nrmse_:.3f} % | **{100 * errs[0]:.2f} %** | "
+                     f"**{100 * errs[1]:.2f} %** | {sec:.2f} s | {describe(model)} |")  # fmt: skip
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("data", type=Path, help="the shared/data folder")
+    parser.add_argument("--out", type=Path, default=Path("docs/validation.md"))
+    args = parser.parse_args()
+    sections = [actuator(args.data), pzt_creep(args.data), pzt_amplitudes(args.data)]
+    header = (
+        "# Validation on measured data\n\n"
+        "Written by `benchmarks/validate_real.py DATA_DIR` (DATA_DIR = the workplace's "
+        "`shared/data`, read in place; no data is copied here). piezohyst "
+        f"{ph.__version__}, Python {platform.python_version()}, NumPy {np.__version__}. "
+        "Every number below is held out unless marked training: the model never saw it.\n\n"
+    )
+    reading = """
+### Reading the tables
+
+- **Actuator.** Every extension helps on cycles the model never saw, and the best model sits
+  just above the sensor's noise floor. The paper's single growth term already captures most of
+  the slow drift of this displacement record; the generalized model adds the asymmetric centre
+  line and creep.
+- **Long holds (1400 s).** Classical PI cannot follow the drift at all. The extra terms fit the
+  first half far better than the paper's one-term model but extrapolate 700 s of drift worse:
+  the drift slows during the hold, which no constant-rate term describes, and the automatic
+  choice is made on the last 30 % of the training part, a shorter horizon than the test. Creep
+  operators with long time constants (relaxation) recover part of it. For long extrapolation in
+  time the simplest growth model was the safest here.
+- **Short hold (105 s).** Polarisation relaxes after the excursion; only the creep operators
+  follow it, and still with a large held-out error.
+- **Smaller amplitudes.** All PI variants predict the sub-coercive 1000 V loop poorly from the
+  switching 1400 V loop: a PI model's minor loops are fixed by its major loop, and ferroelectric
+  switching makes the major loop a poor guide. Extra growth terms make it worse across records.
+  Identify at the amplitudes you will use.
+
+Not covered: the Bouc-Wen benchmark in `shared/data` is a dynamic (mass-spring) hysteresis
+that needs PI combined with second-order dynamics, which piezohyst does not offer yet.
+"""
+    text = header + "\n".join(sections) + reading
+    args.out.write_text(text)
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
