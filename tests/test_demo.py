@@ -64,3 +64,23 @@ def test_demo_is_quick(demo_run: tuple[Path, dict[str, Any], float]) -> None:
     """The issue's 'under a minute' (generous: CI machines are shared)."""
     _, m, elapsed = demo_run
     assert m["runtime_s"] < 60.0 and elapsed < 90.0
+
+
+def test_demo_compares_the_models(demo_run: tuple[Path, dict[str, Any], float]) -> None:
+    out, m, _ = demo_run
+    rows = m["model_comparison"]
+    assert {(r["model"], r["excitation"]) for r in rows} == {
+        (model, exc)
+        for model in ("classical PI", "active PI (paper)", "generalized PI")
+        for exc in ("hold", "levels")
+    }
+    by = {(r["model"], r["excitation"]): r for r in rows}
+    # the active family beats the classical model, and every active-family model compensates
+    for exc in ("hold", "levels"):
+        for model in ("active PI (paper)", "generalized PI"):
+            assert (
+                by[(model, exc)]["heldout_nrmse_pct"]
+                < by[("classical PI", exc)]["heldout_nrmse_pct"] / 3
+            )
+            assert by[(model, exc)]["width_after_S_pct"] <= 1.5
+    assert "## Model comparison" in (out / "report.md").read_text()
