@@ -251,3 +251,23 @@ def test_time_windows_carry_the_input_history(workdir: Path) -> None:
     np.testing.assert_allclose(pred.get("predicted"), full[t >= 9.0])
     res = run("predict", workdir / "model.json", data, "--t-start", "99", "-o", workdir / "e.csv")
     assert_clean_error(res, "no samples in the time window [99, inf) s")
+
+
+def test_fit_generalized_with_options(workdir: Path) -> None:
+    args = ["--model", "generalized-pi", "--operators", "8", "--growth", "integral,abs_integral"]
+    res = run("fit", workdir / "run.csv", *args, "--creep", "0.5,5", "-o", workdir / "g.json")
+    assert res.exit_code == 0, res.output
+    assert "growth terms: integral" in res.stdout
+    model = ph.load_model(workdir / "g.json")
+    assert isinstance(model, ph.GeneralizedPI)
+    assert model.growth_terms_ == ("integral", "abs_integral")
+    assert model.creep_taus_.tolist() == [0.5, 5.0]
+    res = run("fit", workdir / "run.csv", "--model", "generalized-pi", "--growth", "bogus",
+              "-o", workdir / "x.json")  # fmt: skip
+    assert_clean_error(res, "'growth_terms'")
+    assert_clean_error(
+        run("fit", workdir / "run.csv", "--creep", "a,b", "-o", workdir / "x.json"), code=2
+    )
+    res = run("fit", workdir / "run.csv", "--model", "active-pi", "--creep", "1", "-o",
+              workdir / "x.json")  # fmt: skip
+    assert_clean_error(res, "apply to generalized-pi only")

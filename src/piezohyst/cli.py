@@ -270,6 +270,16 @@ def simulate(
     help="Play operators, the linear one included.",
 )
 @click.option("--output-unit", default="C", show_default=True, help="Unit of the output column.")
+@click.option(
+    "--growth",
+    default="auto",
+    show_default=True,
+    help="generalized-pi: growth terms, 'auto', 'none' or a comma list of "
+    "integral,time,abs_integral.",
+)
+@click.option(
+    "--creep", default="", help="generalized-pi: creep time constants in s, e.g. 0.1,1,10."
+)
 @_data_options
 @OUT_FILE
 @click.pass_obj
@@ -279,6 +289,8 @@ def fit(
     model_name: str,
     operators: int,
     output_unit: str,
+    growth: str,
+    creep: str,
     input_column: str,
     output_column: str,
     time_column: str,
@@ -294,8 +306,18 @@ def fit(
     Example:
       piezohyst fit run.csv --model active-pi --operators 20 -o model.json
       piezohyst fit scan.tdms --group Scan --input Ch0 --output Ch1 -o m.json
+      piezohyst fit run.csv --model generalized-pi --creep 0.1,1,10 -o g.json
     """
     from .workflows import describe, fit_file
+
+    try:
+        taus = tuple(float(c) for c in creep.split(",") if c.strip())
+    except ValueError:
+        raise click.BadParameter(f"expected numbers separated by commas, got {creep!r}",
+                                 param_hint="--creep") from None  # fmt: skip
+    terms: str | tuple[str, ...] = growth
+    if growth != "auto":
+        terms = () if growth == "none" else tuple(g.strip() for g in growth.split(",") if g.strip())
 
     with progress_steps(ctx, total=1) as step:
         step(f"fitting {model_name} to {data.name}")
@@ -314,6 +336,8 @@ def fit(
                 t_start=t_start,
                 t_stop=t_stop,
                 output_unit=output_unit,
+                growth_terms=terms,
+                creep=taus,
             ),
         )
     click.echo(describe(model))

@@ -14,6 +14,7 @@ import dataclasses
 import json
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -113,9 +114,20 @@ def fit_file(
     t_start: float | None = None,
     t_stop: float | None = None,
     output_unit: str = "C",
+    growth_terms: str | Sequence[str] = "auto",
+    creep: Sequence[float] = (),
 ) -> ClassicalPI:
-    """Fit a model to a data file and save it (JSON) to ``out`` if given."""
+    """Fit a model to a data file and save it (JSON) to ``out`` if given.
+
+    ``growth_terms`` and ``creep`` apply to ``model="generalized-pi"`` only.
+    """
     cls = _model_class(model)
+    extra: dict[str, Any] = {}
+    if cls is GeneralizedPI:
+        extra = {"growth_terms": growth_terms, "creep": tuple(creep)}
+    elif growth_terms != "auto" or tuple(creep):
+        msg = f"--growth and --creep apply to generalized-pi only, not {model}"
+        raise ParameterError(msg)
     rec = read_recording(
         data,
         input_column=input_column,
@@ -130,11 +142,11 @@ def fit_file(
     assert rec.y is not None
     w = rec.window
     x, y, t = rec.x[w], rec.y[w], rec.t[w]
-    estimator = cls(n_operators=operators, output_unit=output_unit)
+    estimator = cls(n_operators=operators, output_unit=output_unit, **extra)
     start = w.start or 0
     if start > 0:  # the window continues a known input history: start from its state
         thresholds = default_thresholds(x, check_int(operators, "operators", "fit", 1, 1000))
-        estimator = cls(thresholds=thresholds, output_unit=output_unit)
+        estimator = cls(thresholds=thresholds, output_unit=output_unit, **extra)
         z0 = history_state(rec.x[:start], thresholds)
         fitted = estimator.fit(x, y, t=t, initial_state=z0)
     else:
