@@ -7,6 +7,7 @@ traceback only under ``--debug``.
 
 from __future__ import annotations
 
+import functools
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -18,6 +19,7 @@ import click
 from . import __version__
 from .compensator import Domain
 from .errors import PiezohystError
+from .io import DataSpec
 
 
 class Context:
@@ -105,7 +107,7 @@ def main(click_ctx: click.Context, quiet: bool, verbose: bool, debug: bool) -> N
 
 # ---------------------------------------------------------------- shared options
 def _data_options(fn: Callable[..., Any]) -> Callable[..., Any]:
-    """--input/--output/--time/--rate/--group, as every data-reading command takes them."""
+    """--input/--output/--time/--rate/--group/--t-start/--t-stop, gathered into one DataSpec."""
     options = [
         click.option(
             "--input",
@@ -142,9 +144,26 @@ def _data_options(fn: Callable[..., Any]) -> Callable[..., Any]:
             "--t-stop", type=float, default=None, help="Use samples before this time (s)."
         ),
     ]
+
+    @functools.wraps(fn)
+    def with_spec(
+        *args: Any,
+        input_column: str,
+        output_column: str,
+        time_column: str,
+        rate: float | None,
+        group: str | None,
+        t_start: float | None,
+        t_stop: float | None,
+        **kwargs: Any,
+    ) -> Any:
+        spec = DataSpec(input_column, output_column, time_column, rate, group, t_start, t_stop)
+        return fn(*args, data_spec=spec, **kwargs)
+
+    wrapped: Callable[..., Any] = with_spec
     for option in reversed(options):
-        fn = option(fn)
-    return fn
+        wrapped = option(wrapped)
+    return wrapped
 
 
 def _limit_options(fn: Callable[..., Any]) -> Callable[..., Any]:
@@ -291,13 +310,7 @@ def fit(
     output_unit: str,
     growth: str,
     creep: str,
-    input_column: str,
-    output_column: str,
-    time_column: str,
-    rate: float | None,
-    group: str | None,
-    t_start: float | None,
-    t_stop: float | None,
+    data_spec: DataSpec,
     out: Path,
 ) -> None:
     """Identify a model from DATA and save it as JSON.
@@ -328,13 +341,7 @@ def fit(
                 out,
                 model=model_name,
                 operators=operators,
-                input_column=input_column,
-                output_column=output_column,
-                time_column=time_column,
-                rate=rate,
-                group=group,
-                t_start=t_start,
-                t_stop=t_stop,
+                data_spec=data_spec,
                 output_unit=output_unit,
                 growth_terms=terms,
                 creep=taus,
@@ -357,13 +364,7 @@ def predict(
     ctx: Context,
     model: Path,
     data: Path,
-    input_column: str,
-    output_column: str,
-    time_column: str,
-    rate: float | None,
-    group: str | None,
-    t_start: float | None,
-    t_stop: float | None,
+    data_spec: DataSpec,
     out: Path,
 ) -> None:
     """Predict the output of MODEL for the input in DATA; write time,predicted[,measured].
@@ -381,13 +382,7 @@ def predict(
             model,
             data,
             out,
-            input_column=input_column,
-            output_column=output_column,
-            time_column=time_column,
-            rate=rate,
-            group=group,
-            t_start=t_start,
-            t_stop=t_stop,
+            data_spec=data_spec,
         ),
     )
     if "measured" in cols:
@@ -466,13 +461,7 @@ def report(
     ctx: Context,
     model: Path,
     data: Path,
-    input_column: str,
-    output_column: str,
-    time_column: str,
-    rate: float | None,
-    group: str | None,
-    t_start: float | None,
-    t_stop: float | None,
+    data_spec: DataSpec,
     out: Path,
 ) -> None:
     """Figures (loop, fit, residual, growth removal) and metrics of MODEL on DATA.
@@ -491,13 +480,7 @@ def report(
                 model,
                 data,
                 out,
-                input_column=input_column,
-                output_column=output_column,
-                time_column=time_column,
-                rate=rate,
-                group=group,
-                t_start=t_start,
-                t_stop=t_stop,
+                data_spec=data_spec,
             ),
         )
     click.echo(f"NRMSE {res.metrics['nrmse_pct']:.4g} %; report in {out / 'report.md'}")

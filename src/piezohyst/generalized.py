@@ -283,10 +283,7 @@ class GeneralizedPI(ClassicalPI):
         self._solve(xs, ys, ts, thr, z0, knots, scale, taus, candidates[0])
         if self.optimize_thresholds and thr.size > 1:
             self._refine_thresholds(xs, ys, ts, initial_state, knots, scale, taus, candidates[0])
-        self.input_range_ = (lo, hi)
-        fitted = self.predict(xs, t=ts)
-        self.rmse_ = rmse(fitted, ys)
-        self.nrmse_ = self.rmse_ / max(float(np.ptp(ys)), 1e-300)
+        self._record_fit(xs, ys, ts)
         return self
 
     def _solve(

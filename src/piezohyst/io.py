@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike
 from ._validation import FloatArray
 from .errors import DataFileError
 
-__all__ = ["Recording", "Table", "read_recording", "read_table", "write_table"]
+__all__ = ["DataSpec", "Recording", "Table", "read_recording", "read_table", "write_table"]
 
 CSV_SUFFIXES = {".csv", ".tsv", ".txt", ".dat", ""}
 
@@ -431,6 +431,33 @@ def read_recording(
             raise DataFileError(msg)
         window = slice(i0, i1)
     return Recording(t=t, x=x, y=y, names=(x_name, y_name, t_name), window=window)
+
+
+@dataclass(frozen=True)
+class DataSpec:
+    """Which columns and which samples of a data file to use (see :func:`read_recording`)."""
+
+    input_column: str = "voltage"
+    output_column: str | None = "charge"
+    time_column: str | None = "time"
+    rate: float | None = None
+    group: str | None = None
+    t_start: float | None = None
+    t_stop: float | None = None
+
+    def read(self, path: str | os.PathLike[str], *, output_required: bool = True) -> Recording:
+        """:func:`read_recording` with these settings."""
+        return read_recording(
+            path,
+            input_column=self.input_column,
+            output_column=self.output_column,
+            time_column=self.time_column,
+            rate=self.rate,
+            group=self.group,
+            output_required=output_required,
+            t_start=self.t_start,
+            t_stop=self.t_stop,
+        )
 
 
 # ------------------------------------------------------------------ writers

@@ -357,11 +357,14 @@ class ClassicalPI(HysteresisModel):
         z0 = self._initial_state(thr, xs, initial_state)
         sol = identify(xs, ys, thr, min_slope=self.min_slope, initial_state=z0)
         self._set_operator(PIHysteresis(thr, sol.weights, sol.offset, z0))
-        self.input_range_ = (float(xs.min()), float(xs.max()))
-        fitted = self.operator_.predict(xs)
-        self.rmse_ = rmse(fitted, ys)
-        self.nrmse_ = self.rmse_ / max(float(np.ptp(ys)), 1e-300)
+        self._record_fit(xs, ys, None)
         return self
+
+    def _record_fit(self, x: FloatArray, y: FloatArray, t: FloatArray | None) -> None:
+        """Training range and fit quality of the model just identified."""
+        self.input_range_ = (float(x.min()), float(x.max()))
+        self.rmse_ = rmse(self.predict(x, t=t), y)
+        self.nrmse_ = self.rmse_ / max(float(np.ptp(y)), 1e-300)
 
     def _set_operator(self, op: PIHysteresis) -> None:
         self.operator_ = op
@@ -504,11 +507,8 @@ class ActivePI(ClassicalPI):
         z0 = self._initial_state(thr, xs, initial_state)
         sol = identify(xs, ys, thr, dt=time_steps(ts), min_slope=self.min_slope, initial_state=z0)
         self._set_operator(PIHysteresis(thr, sol.weights, sol.offset, z0))
-        self.input_range_ = (float(xs.min()), float(xs.max()))
         self.growth_rate_ = sol.growth_rate
-        fitted = self.predict(xs, t=ts)
-        self.rmse_ = rmse(fitted, ys)
-        self.nrmse_ = self.rmse_ / max(float(np.ptp(ys)), 1e-300)
+        self._record_fit(xs, ys, ts)
         return self
 
     def _set_operator(self, op: PIHysteresis) -> None:

@@ -27,7 +27,7 @@ from .errors import DataFileError, ParameterError
 from .export import Precision, write_c
 from .generalized import GeneralizedPI
 from .identification import default_thresholds, history_state
-from .io import read_recording, read_table, write_table
+from .io import DataSpec, read_table, write_table
 from .metrics import hysteresis_width, nrmse, rmse
 from .models import ActivePI, ClassicalPI, HysteresisModel, atomic_write_text, load_model
 from .plotting import save_panels
@@ -106,19 +106,14 @@ def fit_file(
     *,
     model: str = "active-pi",
     operators: int = 10,
-    input_column: str = "voltage",
-    output_column: str = "charge",
-    time_column: str | None = "time",
-    rate: float | None = None,
-    group: str | None = None,
-    t_start: float | None = None,
-    t_stop: float | None = None,
+    data_spec: DataSpec | None = None,
     output_unit: str = "C",
     growth_terms: str | Sequence[str] = "auto",
     creep: Sequence[float] = (),
 ) -> ClassicalPI:
     """Fit a model to a data file and save it (JSON) to ``out`` if given.
 
+    ``data_spec`` picks columns and samples (default: voltage, charge, time);
     ``growth_terms`` and ``creep`` apply to ``model="generalized-pi"`` only.
     """
     cls = _model_class(model)
@@ -128,17 +123,7 @@ def fit_file(
     elif growth_terms != "auto" or tuple(creep):
         msg = f"--growth and --creep apply to generalized-pi only, not {model}"
         raise ParameterError(msg)
-    rec = read_recording(
-        data,
-        input_column=input_column,
-        output_column=output_column,
-        time_column=time_column,
-        rate=rate,
-        group=group,
-        t_start=t_start,
-        t_stop=t_stop,
-        output_required=True,
-    )
+    rec = (data_spec or DataSpec()).read(data)
     assert rec.y is not None
     w = rec.window
     x, y, t = rec.x[w], rec.y[w], rec.t[w]
@@ -169,27 +154,11 @@ def predict_file(
     data: PathLike,
     out: PathLike,
     *,
-    input_column: str = "voltage",
-    output_column: str = "charge",
-    time_column: str | None = "time",
-    rate: float | None = None,
-    group: str | None = None,
-    t_start: float | None = None,
-    t_stop: float | None = None,
+    data_spec: DataSpec | None = None,
 ) -> dict[str, FloatArray]:
     """Write ``time,predicted`` (plus ``measured`` when the data has the output column)."""
     model = _load(model_path)
-    rec = read_recording(
-        data,
-        input_column=input_column,
-        output_column=output_column,
-        time_column=time_column,
-        rate=rate,
-        group=group,
-        t_start=t_start,
-        t_stop=t_stop,
-        output_required=False,
-    )
+    rec = (data_spec or DataSpec()).read(data, output_required=False)
     w = rec.window  # the model runs over the whole record: the window's start has a history
     columns: dict[str, FloatArray] = {
         "time": rec.t[w],
@@ -321,26 +290,11 @@ def model_report(
     data: PathLike,
     out: PathLike,
     *,
-    input_column: str = "voltage",
-    output_column: str = "charge",
-    time_column: str | None = "time",
-    rate: float | None = None,
-    group: str | None = None,
-    t_start: float | None = None,
-    t_stop: float | None = None,
+    data_spec: DataSpec | None = None,
 ) -> ReportResult:
     """Figures (loop, fit, residual, growth removal) and metrics of a model on a data file."""
     model = _load(model_path)
-    rec = read_recording(
-        data,
-        input_column=input_column,
-        output_column=output_column,
-        time_column=time_column,
-        rate=rate,
-        group=group,
-        t_start=t_start,
-        t_stop=t_stop,
-    )
+    rec = (data_spec or DataSpec()).read(data)
     assert rec.y is not None
     w = rec.window  # the model runs over the whole record: the window's start has a history
     pred = model.predict(rec.x, t=rec.t)[w]
