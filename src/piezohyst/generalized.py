@@ -47,13 +47,13 @@ from . import _kernels
 from ._validation import FloatArray, as_signal, as_time, check_int, same_length
 from .errors import InsufficientDataError, ModelFileError, ParameterError, ShapeError
 from .hysteresis import PIHysteresis, Propagation
-from .identification import solve_slopes, time_steps
-from .models import ClassicalPI, _float_field, _register, rmse
+from .identification import BLOCK, NormalEquations, solve_slopes, time_steps
+from .metrics import rmse
+from .models import ClassicalPI, _float_field, _register
 
 __all__ = ["GROWTH_TERMS", "GeneralizedPI"]
 
 GROWTH_TERMS = ("integral", "time", "abs_integral")
-_BLOCK = 4096
 
 
 def _floats(data: dict[str, Any], key: str) -> FloatArray:
@@ -304,26 +304,23 @@ class GeneralizedPI(ClassicalPI):
         if x.size <= p:
             msg = f"Identifying {p} parameters needs more than {p} samples. Got {x.size}."
             raise InsufficientDataError(msg)
-        gram = np.zeros((p, p))
-        rhs = np.zeros(p)
-        block = np.empty((min(_BLOCK, x.size), p))
-        block[:, n] = 1.0
-        z = z0.copy()
-        for start in range(0, x.size, block.shape[0]):
-            xs = x[start : start + block.shape[0]]
-            m = xs.size
-            _kernels.play_states(xs, thr, z, block)
-            block[:m, n + 1 :] = feats.block(xs, t[start : start + m])
-            b = block[:m]
-            gram += b.T @ b
-            rhs += b.T @ y[start : start + m]
+        eqs = NormalEquations.accumulate(
+            x,
+            y,
+            thr,
+            z0,
+            extra=lambda start, stop: feats.block(x[start:stop], t[start:stop]),
+            extra_width=feats.width,
+        )
         span_x, span_y = float(np.ptp(x)), float(np.ptp(y))
         mean_slope = span_y / span_x if span_x > 0 and span_y > 0 else 1.0
         k, c = knots.size, taus.size
         lower = np.concatenate(
             [[-np.inf], np.zeros(2 * k + c), np.full(len(terms), -np.inf)]
         )  # offset free; asymmetry and creep non-negative; growth free
-        sol = solve_slopes(gram, rhs, n, min_slope=float(self.min_slope) * mean_slope, lower=lower)
+        sol = solve_slopes(
+            eqs.gram, eqs.rhs, n, min_slope=float(self.min_slope) * mean_slope, lower=lower
+        )
         self._set_operator(PIHysteresis(thr, sol[:n], float(sol[n]), z0))
         rest = sol[n + 1 :]
         self.knots_ = knots
@@ -391,8 +388,8 @@ class GeneralizedPI(ClassicalPI):
         hyst = self.operator_.propagate(xs, None if st is None else st[:n])
         out = hyst.output.copy()
         coef = self._coefficients()
-        for start in range(0, xs.size, _BLOCK):
-            sl = slice(start, start + _BLOCK)
+        for start in range(0, xs.size, BLOCK):
+            sl = slice(start, start + BLOCK)
             out[sl] += feats.block(xs[sl], ts[sl]) @ coef
         return Propagation(out, np.concatenate([hyst.state, feats.state()]))
 

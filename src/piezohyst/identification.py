@@ -20,6 +20,7 @@ samples keeps one block of a few thousand rows plus :math:`O(p^2)`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,7 +42,7 @@ __all__ = [
     "time_steps",
 ]
 
-_BLOCK = 4096
+BLOCK = 4096  # samples per block when accumulating or streaming
 
 
 def default_thresholds(x: ArrayLike, n_operators: int) -> FloatArray:
@@ -113,25 +114,40 @@ class NormalEquations:
         thresholds: FloatArray,
         initial_state: FloatArray,
         dt: FloatArray | None = None,
+        *,
+        extra: Callable[[int, int], FloatArray] | None = None,
+        extra_width: int = 0,
     ) -> NormalEquations:
+        """Accumulate over blocks of samples; memory O(block x p + p^2).
+
+        ``dt`` adds the active model's integral column. ``extra(start, stop)``
+        returns ``extra_width`` further columns for samples ``start:stop``; it is
+        called once per block, in order, so it may carry state.
+        """
+        if dt is not None:
+            acc = [0.0]
+
+            def integral(start: int, stop: int) -> FloatArray:
+                out = np.empty(stop - start)
+                acc[0] = _kernels.running_integral(x[start:stop], dt[start:stop], acc[0], out)
+                return out[:, None]
+
+            extra, extra_width = integral, 1
         n = thresholds.size
-        p = n + 1 + (dt is not None)
+        p = n + 1 + (extra_width if extra is not None else 0)
         gram = np.zeros((p, p))
         rhs = np.zeros(p)
         yy = 0.0
-        block = np.empty((min(_BLOCK, x.size), p))
+        block = np.empty((min(BLOCK, x.size), p))
         block[:, n] = 1.0
         z = initial_state.copy()
-        integral = np.empty(block.shape[0])
-        acc = 0.0
         for start in range(0, x.size, block.shape[0]):
             xs = x[start : start + block.shape[0]]
             ys = y[start : start + block.shape[0]]
             m = xs.size
             _kernels.play_states(xs, thresholds, z, block)
-            if dt is not None:
-                acc = _kernels.running_integral(xs, dt[start : start + m], acc, integral)
-                block[:m, n + 1] = integral[:m]
+            if extra is not None:
+                block[:m, n + 1 :] = extra(start, start + m)
             b = block[:m]
             gram += b.T @ b
             rhs += b.T @ ys

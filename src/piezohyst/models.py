@@ -41,6 +41,7 @@ from .errors import (
 )
 from .hysteresis import PIHysteresis, Propagation
 from .identification import default_thresholds, identify, time_steps
+from .metrics import rmse
 
 __all__ = ["ActivePI", "ClassicalPI", "load_model"]
 
@@ -52,11 +53,6 @@ _REGISTRY: dict[str, type[HysteresisModel]] = {}
 def _register(cls: type[HysteresisModel]) -> type[HysteresisModel]:
     _REGISTRY[cls.__name__] = cls
     return cls
-
-
-def rmse(a: FloatArray, b: FloatArray) -> float:
-    """Root-mean-square difference."""
-    return float(np.sqrt(np.mean((a - b) ** 2)))
 
 
 class HysteresisModel:
