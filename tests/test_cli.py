@@ -270,4 +270,4 @@ def test_fit_generalized_with_options(workdir: Path) -> None:
     )
     res = run("fit", workdir / "run.csv", "--model", "active-pi", "--creep", "1", "-o",
               workdir / "x.json")  # fmt: skip
-    assert_clean_error(res, "apply to generalized-pi only")
+    assert_clean_error(res, "does not apply to active-pi")

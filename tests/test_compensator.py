@@ -54,7 +54,7 @@ def test_always_safe_and_exact_where_no_limit_acts(
 ) -> None:
     kwargs = {} if slew is None else {"slew_rate": slew, "sample_rate": 1000.0}
     comp = compensator(h, **kwargs)
-    start = comp.state[-1]
+    start = comp.state.command
     cmd = comp.process(d)
     assert np.all(np.isfinite(cmd)) and cmd.min() >= V_MIN and cmd.max() <= V_MAX
     if slew is not None:
@@ -88,7 +88,8 @@ def test_chunks_and_steps_equal_one_batch(
     stepped = np.array([stepper.step(v) for v in d])
     np.testing.assert_allclose(parts, whole, rtol=0, atol=1e-12)
     np.testing.assert_allclose(stepped, whole, rtol=0, atol=1e-12)
-    np.testing.assert_array_equal(chunked.state, stepper.state)
+    np.testing.assert_array_equal(chunked.state.operators, stepper.state.operators)
+    assert chunked.state.command == stepper.state.command
 
 
 def test_nan_holds_and_saturation_counts() -> None:
@@ -127,7 +128,8 @@ def test_reset_projects_onto_a_voltage_and_restores_a_state() -> None:
     np.testing.assert_array_equal(comp.process(h.predict(np.array([60.0]))), after)
     comp.reset(voltage=50.0)
     # eq. 10: the initial state 0 clamped into [50 - r, 50 + r] for r = 0, 10, 30
-    np.testing.assert_allclose(comp.state, [50.0, 40.0, 20.0, 50.0])
+    np.testing.assert_allclose(comp.state.operators, [50.0, 40.0, 20.0])
+    assert comp.state.command == 50.0
     with pytest.raises(ph.ParameterError, match="outside the limits"):
         comp.reset(voltage=500.0)
     with pytest.raises(ph.ShapeError):
@@ -143,10 +145,10 @@ def test_precondition_wipes_history() -> None:
     b.precondition(500)
     assert cycle_a.max() == V_MAX and cycle_a.min() == V_MIN
     # different histories, same final voltage: same state after the cycle
-    a.reset(np.concatenate([a.state[:-1], [30.0]]))
+    a.reset(np.concatenate([a.state.operators, [30.0]]))
     b.reset(voltage=30.0)
     b.precondition(500)
-    np.testing.assert_allclose(a.precondition(500)[-1], b.state[-1])
+    np.testing.assert_allclose(a.precondition(500)[-1], b.state.command)
     slow = compensator(h, slew_rate=100.0, sample_rate=1000.0)
     cyc = slow.precondition(10)
     assert cyc.max() == V_MAX and cyc.min() == V_MIN

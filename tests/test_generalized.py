@@ -20,24 +20,31 @@ FS = 1000.0
 def known_model(
     v: np.ndarray, terms: tuple[str, ...], creep: tuple[float, ...] = (0.2, 2.0)
 ) -> ph.GeneralizedPI:
-    """A GeneralizedPI with hand-set parameters (every term active)."""
-    m = ph.GeneralizedPI(thresholds=ph.default_thresholds(v, 6), growth_terms=terms, asymmetry=3,
-                         creep=creep)  # fmt: skip
+    """A GeneralizedPI with hand-set parameters (every term active), built from public parts."""
     r = ph.default_thresholds(v, 6)
     w = np.array([1e-8, 3e-9, -1e-9, -2e-9, 1e-9, -5e-10])
-    m._set_operator(ph.PIHysteresis(r, w, 2e-8, np.full(6, v[0])))
     lo, hi = float(v.min()), float(v.max())
-    m.knots_ = lo + (hi - lo) * np.arange(1, 4) / 4
-    m.static_scale_ = hi - lo
-    m.static_up_ = np.array([2e-9, 0.0, 1e-9])
-    m.static_down_ = np.array([0.0, 1.5e-9, 0.0])
-    m.creep_taus_ = np.asarray(creep, dtype=float)
-    m.creep_gains_ = np.full(len(creep), 1e-9)
-    m.growth_terms_ = terms
-    coefs = {"integral": 5e-10, "time": 3e-9, "abs_integral": 2.5e-10}
-    m.growth_coefs_ = np.array([coefs[k] for k in terms])
+    parts: list[tuple[ph.Term, list[float]]] = [
+        (
+            ph.terms.Asymmetry(3, (lo + (hi - lo) * np.arange(1, 4) / 4).tolist(), hi - lo),
+            [2e-9, 0.0, 1e-9, 0.0, 1.5e-9, 0.0],
+        )
+    ]
+    if creep:
+        parts.append((ph.terms.Creep(creep), [1e-9] * len(creep)))
+    growth = {
+        "integral": (ph.terms.Integral(), 5e-10),
+        "time": (ph.terms.TimeTerm(), 3e-9),
+        "abs_integral": (ph.terms.AbsIntegral(hi - lo), 2.5e-10),
+    }
+    parts += [(growth[k][0], [growth[k][1]]) for k in ph.models.GROWTH_TERMS if k in terms]
+    m = ph.GeneralizedPI.from_operator(
+        ph.PIHysteresis(r, w, 2e-8, np.full(6, v[0])),
+        terms=[p[0] for p in parts],
+        coefficients=[p[1] for p in parts],
+    )
+    assert isinstance(m, ph.GeneralizedPI)
     m.input_range_ = (lo, hi)
-    m.rmse_ = m.nrmse_ = float("nan")
     return m
 
 
@@ -54,8 +61,13 @@ def test_recovers_a_known_generalized_model(levels: tuple) -> None:
                            asymmetry=3, creep=(0.2, 2.0)).fit(v, y, t=t)  # fmt: skip
     assert fit.nrmse_ < 1e-6
     np.testing.assert_allclose(fit.growth_coefs_, true.growth_coefs_, rtol=1e-4)
-    np.testing.assert_allclose(fit.static_up_, true.static_up_, atol=1e-4 * 2e-9)
     np.testing.assert_allclose(fit.creep_gains_, true.creep_gains_, rtol=1e-3)
+    # The asymmetry coefficients themselves are not identifiable: raising up[j] and down[j]
+    # together adds (x - k_j)^2, and differences of those are linear in x, which the play
+    # operators absorb. What is identified is the model's response, on input it never saw.
+    t2, v2 = make_signal("multi", duration=5.0, rate=FS)
+    np.testing.assert_allclose(fit.predict(v2, t=t2), true.predict(v2, t=t2),
+                               rtol=0, atol=1e-6 * np.ptp(y))  # fmt: skip
 
 
 def test_auto_selection_finds_the_leakage_terms(levels: tuple) -> None:
@@ -73,8 +85,9 @@ def test_auto_selection_finds_the_leakage_terms(levels: tuple) -> None:
     clean = known_model(v, (), creep=()).predict(v, t=t)
     fit0 = ph.GeneralizedPI(6).fit(v, clean + 1e-3 * np.ptp(clean) * rng.standard_normal(t.size),
                                    t=t)  # fmt: skip
-    if fit0.growth_terms_:
-        assert np.max(np.abs(fit0.growth(v, t=t))) < 0.01 * np.ptp(clean)
+    # whatever it picked (growth() is all zeros when it picked none), the growth is negligible
+    assert np.max(np.abs(fit0.growth(v, t=t))) < 0.01 * np.ptp(clean)
+    assert fit0.selection_["none"] <= 1.01 * min(fit0.selection_.values())
 
 
 def test_generalized_beats_active_on_the_bench() -> None:
@@ -96,7 +109,10 @@ def test_propagate_in_chunks(cut: int) -> None:
     b = m.propagate(v[cut:], t=t[cut:], state=a.state)
     np.testing.assert_allclose(np.concatenate([a.output, b.output]), whole.output,
                                rtol=1e-12, atol=1e-20)  # fmt: skip
-    np.testing.assert_allclose(b.state, whole.state, rtol=1e-12)
+    np.testing.assert_allclose(b.state.operators, whole.state.operators, rtol=1e-12)
+    for got, want in zip(b.state.terms, whole.state.terms, strict=True):
+        np.testing.assert_allclose(got, want, rtol=1e-12)
+    assert b.state.t_last == whole.state.t_last == t[-1]
 
 
 def hysteresis_part(m: ph.GeneralizedPI, v: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -135,7 +151,8 @@ def test_compensator_safe_exact_and_chunkable(d: np.ndarray, cuts: list[int]) ->
     start = m.initial_state_[0]
     # the compensator starts the lags at the model's initial voltage, one loop period
     # before its first command: propagate from that state
-    state = np.concatenate([m.initial_state_, [start], [0.0, 0.0, 0.0, -1.0 / FS]])
+    rest = m.rest_state(start)  # lags settled at the start voltage, integrals 0
+    state = ph.ModelState(m.initial_state_.copy(), rest.terms, -1.0 / FS)
     achieved = m.propagate(cmd, t=tt, state=state).output
     steps = np.abs(np.diff(np.concatenate([[start], cmd])))
     free = np.isfinite(d) & (cmd > 0.0) & (cmd < 140.0) & (steps < 50.0 * (1 - 1e-9))
@@ -152,13 +169,11 @@ def test_persistence_and_cli_name(tmp_path: Path, levels: tuple) -> None:
     np.testing.assert_array_equal(loaded.predict(v, t=t), m.predict(v, t=t))
     data = json.loads((tmp_path / "g.json").read_text())
     data.pop("checksum")
-    data["fitted"]["static_up"][0] = -1.0
+    data["fitted"]["terms"][0]["coefficients"][0] = -1.0  # the asymmetry must stay monotone
     (tmp_path / "bad.json").write_text(json.dumps(data))
-    with pytest.raises(ph.ModelFileError, match="signs"):
+    with pytest.raises(ph.ModelFileError, match=r"fitted.terms\[0\].coefficients.*signs"):
         ph.load_model(tmp_path / "bad.json")
-    from piezohyst.workflows import MODELS
-
-    assert MODELS["generalized-pi"] is ph.GeneralizedPI
+    assert ph.models.model_class("generalized-pi") is ph.GeneralizedPI
 
 
 def test_defaults_and_errors() -> None:
@@ -177,7 +192,7 @@ def test_defaults_and_errors() -> None:
         with pytest.raises(ph.ParameterError, match=match):
             ph.GeneralizedPI(**kwargs).fit(v, rec.charge, t=t)  # type: ignore[arg-type]
     m = ph.GeneralizedPI(4).fit(rec.voltage, rec.charge, t=rec.t)
-    with pytest.raises(ph.ParameterError, match="Compensator"):
+    with pytest.raises(ph.NotInvertibleError, match="Compensator"):
         m.inverse()
     with pytest.raises(ph.ParameterError, match="C export"):
         from piezohyst.export import export_c

@@ -149,9 +149,9 @@ def test_non_uniform_time_stamps() -> None:
 
 def test_hand_worked_active_growth() -> None:
     # y2 = 0, 0 + 2*0.5 = 1, 1 + 3*1 = 4; R = 2 -> growth 0, 2, 8
-    model = ph.ActivePI(thresholds=[0.0])
-    model._set_operator(ph.PIHysteresis([0.0], [0.0]))
-    model.growth_rate_ = 2.0
+    model = ph.ActivePI.from_operator(
+        ph.PIHysteresis([0.0], [0.0]), terms=(ph.terms.Integral(),), coefficients=([2.0],)
+    )
     np.testing.assert_allclose(model.growth([1, 2, 3], t=[0, 0.5, 1.5]), [0, 2, 8])
     np.testing.assert_allclose(
         model.remove_growth([1, 2, 3], [5, 5, 5], t=[0, 0.5, 1.5]), [5, 3, -3]
@@ -162,9 +162,7 @@ def test_hand_worked_active_growth() -> None:
 def test_active_pi_chunks_equal_one_call(cuts: list[int]) -> None:
     t, v = excitation(2.0)
     h = known_active(v)
-    model = ph.ActivePI(thresholds=h.thresholds)
-    model._set_operator(h)
-    model.growth_rate_ = TRUE_R
+    model = ph.ActivePI.from_operator(h, terms=(ph.terms.Integral(),), coefficients=([TRUE_R],))
     whole = model.propagate(v, t=t)
     state = None
     parts = []
@@ -173,10 +171,14 @@ def test_active_pi_chunks_equal_one_call(cuts: list[int]) -> None:
         parts.append(res.output)
         state = res.state
     np.testing.assert_allclose(np.concatenate(parts), whole.output, rtol=0, atol=1e-12 * 1e-6)
-    np.testing.assert_allclose(state, whole.state, rtol=1e-12)
+    assert state is not None
+    np.testing.assert_allclose(state.operators, whole.state.operators, rtol=1e-12)
+    np.testing.assert_allclose(state.terms[0], whole.state.terms[0], rtol=1e-12)
+    assert state.t_last == whole.state.t_last == t[-1]
     empty = model.propagate(v[:0], t=t[:0], state=state)
     assert empty.output.size == 0
-    np.testing.assert_array_equal(empty.state, state)
+    np.testing.assert_array_equal(empty.state.operators, state.operators)
+    assert empty.state.terms[0] == state.terms[0] and empty.state.t_last == state.t_last
 
 
 def test_collinear_and_constant_columns_do_not_crash() -> None:
@@ -291,7 +293,8 @@ def test_save_and_load_round_trip(tmp_path: Path, bench: tuple) -> None:
     path = tmp_path / "model.json"
     model.save(path)
     data = json.loads(path.read_text())
-    assert data["schema_version"] == 1 and data["model"] == "ActivePI"
+    assert data["schema_version"] == 2 and data["model"] == "ActivePI"
+    assert data["fitted"]["terms"][0]["kind"] == "integral"
     assert data["params"]["input_unit"] == "V" and data["params"]["output_unit"] == "C"
     loaded = ph.load_model(path)
     assert isinstance(loaded, ph.ActivePI)
@@ -314,15 +317,33 @@ def _edit(path: Path, change: object) -> None:
 @pytest.mark.parametrize(
     ("change", "match"),
     [
-        (lambda d: d["fitted"].__setitem__("growth_rate", 1.0), "checksum mismatch"),
-        (lambda d: (d.pop("checksum"), d["fitted"]["weights"].pop()), "same length"),
-        (lambda d: (d.pop("checksum"), d["fitted"].pop("offset")), "missing field 'offset'"),
-        (lambda d: (d.pop("checksum"), d["fitted"].__setitem__("offset", "x")), "finite number"),
-        (lambda d: (d.pop("checksum"), d["fitted"]["thresholds"].reverse()), "start at 0"),
+        (lambda d: d["fitted"]["terms"][0].__setitem__("coefficients", [1.0]), "checksum"),
+        (lambda d: (d.pop("checksum"), d["fitted"]["core"]["weights"].pop()), "same length"),
+        (
+            lambda d: (d.pop("checksum"), d["fitted"]["core"].pop("offset")),
+            "missing field 'fitted.core.offset'",
+        ),
+        (
+            lambda d: (d.pop("checksum"), d["fitted"]["core"].__setitem__("offset", "x")),
+            "'fitted.core.offset' must be a finite number",
+        ),
+        (lambda d: (d.pop("checksum"), d["fitted"]["core"]["thresholds"].reverse()), "start at 0"),
         (lambda d: d.__setitem__("schema_version", 99), "schema version 99"),
-        (lambda d: (d.pop("checksum"), d.__setitem__("model", "Nope")), "unknown model type"),
+        (lambda d: (d.pop("checksum"), d.__setitem__("model", "Nope")), "field 'model'.*Nope"),
         (lambda d: d.__setitem__("format", "other"), "not a piezohyst model"),
-        (lambda d: (d.pop("checksum"), d["params"].__setitem__("bogus", 1)), "malformed"),
+        (lambda d: (d.pop("checksum"), d["params"].__setitem__("bogus", 1)), "'params'.*bogus"),
+        (
+            lambda d: (d.pop("checksum"), d["params"].__setitem__("min_slope", "x")),
+            "'params'.*min_slope",
+        ),
+        (
+            lambda d: (d.pop("checksum"), d["fitted"]["terms"][0].__setitem__("kind", "nope")),
+            r"fitted.terms\[0\].*unknown term 'nope'",
+        ),
+        (
+            lambda d: (d.pop("checksum"), d["fitted"]["terms"][0]["coefficients"].append(1.0)),
+            r"'fitted.terms\[0\].coefficients' must hold 1",
+        ),
     ],
 )
 def test_tampered_files_are_refused(
@@ -332,15 +353,19 @@ def test_tampered_files_are_refused(
     path = tmp_path / "m.json"
     ph.ActivePI(4).fit(v, q, t=t).save(path)
     _edit(path, change)
-    with pytest.raises(ph.ModelFileError, match=match):
+    with pytest.raises(ph.ModelFileError, match=match) as info:
         ph.load_model(path)
+    assert str(path) in str(info.value)  # every error names the file
 
 
 def test_deliberate_edit_without_checksum_loads(tmp_path: Path, bench: tuple) -> None:
     t, v, q, _ = bench
     path = tmp_path / "m.json"
     ph.ActivePI(4).fit(v, q, t=t).save(path)
-    _edit(path, lambda d: (d.pop("checksum"), d["fitted"].__setitem__("growth_rate", 0.0)))
+    _edit(
+        path,
+        lambda d: (d.pop("checksum"), d["fitted"]["terms"][0].__setitem__("coefficients", [0.0])),
+    )
     assert ph.load_model(path).growth_rate_ == 0.0  # type: ignore[attr-defined]
 
 

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
-from . import io, metrics
-from .compensator import Compensator
+from . import io, metrics, terms
+from .compensator import Compensator, CompensatorState
 from .errors import (
     DataFileError,
     InsufficientDataError,
@@ -22,29 +22,44 @@ from .errors import (
     ShapeError,
     TimeAxisError,
 )
-from .generalized import GeneralizedPI
 from .hysteresis import PIHysteresis, Propagation
 from .identification import default_thresholds
 from .io import read_recording, read_table, write_table
-from .models import ActivePI, ClassicalPI, load_model
+from .models import (
+    ActivePI,
+    ClassicalPI,
+    GeneralizedPI,
+    HysteresisModel,
+    InverseSpec,
+    ModelState,
+    PIModel,
+)
+from .persistence import load_model
 from .simulation import simulate
+from .terms import Term
 
 __all__ = [
     "ActivePI",
     "ClassicalPI",
     "Compensator",
+    "CompensatorState",
     "DataFileError",
     "GeneralizedPI",
+    "HysteresisModel",
     "InsufficientDataError",
+    "InverseSpec",
     "ModelFileError",
+    "ModelState",
     "NonFiniteError",
     "NotFittedError",
     "NotInvertibleError",
     "PIHysteresis",
+    "PIModel",
     "ParameterError",
     "PiezohystError",
     "Propagation",
     "ShapeError",
+    "Term",
     "TimeAxisError",
     "__version__",
     "default_thresholds",
@@ -54,5 +69,6 @@ __all__ = [
     "read_recording",
     "read_table",
     "simulate",
+    "terms",
     "write_table",
 ]

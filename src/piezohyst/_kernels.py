@@ -16,13 +16,14 @@ import math
 import numpy as np
 from numba import njit
 
-# Reassociation lets LLVM vectorise the weighted sum over operators; the play
-# recursion itself is exact (min/max), so results differ from a sequential sum by
-# rounding only. No 'nnan'/'ninf': inputs are checked finite before they get here.
-_FAST = {"reassoc", "contract", "nsz"}
+# The one fastmath policy of every kernel: reassociation lets LLVM vectorise the
+# weighted sums over operators; min/max and comparisons stay exact, so results
+# differ from a sequential sum by rounding only. Never 'nnan'/'ninf': the
+# compensators test for NaN and infinity, and those tests must survive.
+FASTMATH = {"reassoc", "contract", "nsz"}
 
 
-@njit(cache=True, fastmath=_FAST)
+@njit(cache=True, fastmath=FASTMATH)
 def pi_forward(x, r, w, z, y):  # type: ignore[no-untyped-def]
     """Weighted sum of play operators, sample by sample.
 
@@ -41,7 +42,7 @@ def pi_forward(x, r, w, z, y):  # type: ignore[no-untyped-def]
         y[k] = acc
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH)
 def play_states(x, r, z, out):  # type: ignore[no-untyped-def]
     """Every operator's output: ``out[k, i] = z_i[k]``; ``z`` updated in place.
 
@@ -56,7 +57,7 @@ def play_states(x, r, z, out):  # type: ignore[no-untyped-def]
             out[k, i] = zi
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH)
 def running_integral(x, dt, start, out):  # type: ignore[no-untyped-def]
     """Backward-rectangle integral of the paper (eq. 13): ``y2[k] = y2[k-1] + x[k]*dt[k]``.
 
@@ -69,7 +70,7 @@ def running_integral(x, dt, start, out):  # type: ignore[no-untyped-def]
     return acc
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH)
 def lag_filter(x, dt, tau, state, out):  # type: ignore[no-untyped-def]
     """First-order lags of unit DC gain (creep operators), exact for piecewise-constant input.
 
@@ -85,122 +86,136 @@ def lag_filter(x, dt, tau, state, out):  # type: ignore[no-untyped-def]
             out[k, j] = state[j]
 
 
-def warm_up() -> None:
-    """Compile every kernel once (numba caches the result on disk)."""
-    x = np.zeros(2)
-    r = np.zeros(1)
-    z = np.zeros(1)
-    pi_forward(x, r, np.ones(1), z, np.empty(2))
-    play_states(x, r, z, np.empty((2, 1)))
-    running_integral(x, np.zeros(2), 0.0, np.empty(2))
-    params = np.zeros((6, 1))
-    config = np.array([0.0, 0.0, -1.0, 1.0, np.inf, 1.0, 0.0, 1.0])
-    state = np.zeros(5)
-    inverse_states(params, config, state)
-    compensator_step(0.0, params, config, state)
-    compensator_process(x, params, config, state, np.empty(2))
+# ---------------------------------------------------------------------------
+# Compensator kernels. One layout for both inversion paths, named here and
+# built by piezohyst.compensator; nothing else reads these arrays.
+#
+# tables (5, n), one row per operator quantity:
+TAB_R = 0  # thresholds r_i (V)
+TAB_W = 1  # weights w_i (output/V)
+TAB_S = 2  # loading slopes S_i = sum_{j<=i} w_j (analytic path)
+TAB_RI = 3  # inverse thresholds r'_i (output units, analytic path)
+TAB_WI = 4  # inverse weights w'_i (V/output, analytic path)
+# config (9,), scalars:
+CFG_OFFSET = 0  # output offset c
+CFG_INV_OFFSET = 1  # inverse offset c' (analytic path)
+CFG_V_MIN = 2  # command limits (V)
+CFG_V_MAX = 3
+CFG_MAX_STEP = 4  # largest change per sample (V; inf = no slew limit)
+CFG_INV_GAIN = 5  # model output units per desired unit (1/gain; 1 for charge)
+CFG_REFERENCE = 6  # model output meaning desired 0 (displacement domain)
+CFG_BOUND = 7  # |y - c| <= bound for every state and command within the limits (analytic)
+CFG_STATIC_SCALE = 8  # scale s of the static shape (numeric path)
+CONFIG_SIZE = 9
+# state (n + k + 3,): forward operator states z (V, n), then k auxiliary states
+# (analytic: inverse operator states zeta, k = n; numeric: creep lag states, V),
+# then the status slots, addressed from the end:
+ST_LAST = -3  # last command sent (V)
+ST_NONFINITE = -2  # non-finite desired values (the last command was held)
+ST_SATURATED = -1  # commands clipped to the limits
+# static (3, K): knots, rising and falling coefficients. lags (3, m): time
+# constants (s), gains, a = 1 - exp(-dt / tau) for the loop's dt.
 
 
-# Compensator layout (see piezohyst.compensator):
-#   params (6, n): thresholds r, weights w, loading slopes S, inverse thresholds r',
-#                  inverse weights w', (unused row kept zero)
-#   config (8,):   offset c, inverse offset c', v_min, v_max, max step per sample (inf = none),
-#                  1/gain (1 for the charge domain), reference output q_ref, output bound B
-#                  (|y - c| <= B for every state and command within the limits)
-#   state (2n + 3,): forward operator states z (V), inverse operator states zeta (output
-#                  units), last command (V), non-finite count, saturated count
-@njit(cache=True)
-def inverse_states(params, config, state):  # type: ignore[no-untyped-def]
+@njit(cache=True, fastmath=FASTMATH)
+def inverse_states(tables, config, state):  # type: ignore[no-untyped-def]
     """zeta_i = c + S_i z_i + sum_{j>i} w_j z_j (eq. 18's state map), from the forward states."""
-    n = params.shape[1]
+    n = tables.shape[1]
     tail = 0.0
     for i in range(n - 1, -1, -1):
-        state[n + i] = config[0] + params[2, i] * state[i] + tail
-        tail += params[1, i] * state[i]
+        state[n + i] = config[CFG_OFFSET] + tables[TAB_S, i] * state[i] + tail
+        tail += tables[TAB_W, i] * state[i]
 
 
-@njit(cache=True, fastmath=_FAST)
-def compensator_step(desired, params, config, state):  # type: ignore[no-untyped-def]
-    """One feedforward command (V) for one desired value; updates ``state``.
-
-    The inverse states run their own play recursion (the analytic inverse);
-    the forward states follow the command actually sent. Only when a limit
-    acts do the two part, and then the inverse states are rebuilt from the
-    forward ones, so the next inversion starts from the actuator's real state.
-    """
-    n = params.shape[1]
-    last = state[2 * n]
-    if not math.isfinite(desired):  # NaN or +-inf: hold the last safe command
-        state[2 * n + 1] += 1.0
-        return last
-    q = config[6] + desired * config[5]
-    # beyond +-B nothing is reachable: clamping keeps huge values from overflowing the
-    # inverse sums (inf - inf = NaN) while they still saturate on the correct side
-    q = min(max(q, config[0] - config[7]), config[0] + config[7])
-    x = config[1]
-    for i in range(n):
-        zeta = min(max(state[n + i], q - params[3, i]), q + params[3, i])
-        state[n + i] = zeta
-        x += params[4, i] * zeta
-    v = x
+@njit(cache=True, fastmath=FASTMATH)
+def _limit(v, config, state):  # type: ignore[no-untyped-def]
+    """Clip a finite command to the limits and the slew step; count overshoots."""
     limited = False
-    if not math.isfinite(v):  # belt and braces: never emit a non-finite command
-        state[2 * n + 1] += 1.0
-        inverse_states(params, config, state)
-        return last
-    if v < config[2] or v > config[3]:
+    lo = config[CFG_V_MIN]
+    hi = config[CFG_V_MAX]
+    if v < lo or v > hi:
         # count real overshoots, not a limit reached exactly but for rounding
-        tol = 1e-12 * (config[3] - config[2])
-        if v < config[2] - tol or v > config[3] + tol:
-            state[2 * n + 2] += 1.0
-        v = min(max(v, config[2]), config[3])
+        tol = 1e-12 * (hi - lo)
+        if v < lo - tol or v > hi + tol:
+            state[state.shape[0] + ST_SATURATED] += 1.0
+        v = min(max(v, lo), hi)
         limited = True
-    step = config[4]
+    last = state[state.shape[0] + ST_LAST]
+    step = config[CFG_MAX_STEP]
     if v > last + step:
         v = last + step
         limited = True
     elif v < last - step:
         v = last - step
         limited = True
+    return v, limited
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def compensator_step(desired, tables, config, state):  # type: ignore[no-untyped-def]
+    """One feedforward command (V) for one desired value, analytic inverse; updates ``state``.
+
+    The inverse states run their own play recursion (eq. 18); the forward
+    states follow the command actually sent. Only when a limit acts do the two
+    part, and then the inverse states are rebuilt from the forward ones, so the
+    next inversion starts from the actuator's real state.
+    """
+    n = tables.shape[1]
+    end = state.shape[0]
+    last = state[end + ST_LAST]
+    if not math.isfinite(desired):  # NaN or +-inf: hold the last safe command
+        state[end + ST_NONFINITE] += 1.0
+        return last
+    q = config[CFG_REFERENCE] + desired * config[CFG_INV_GAIN]
+    # beyond +-bound nothing is reachable: clamping keeps huge values from overflowing the
+    # inverse sums (inf - inf = NaN) while they still saturate on the correct side
+    c = config[CFG_OFFSET]
+    q = min(max(q, c - config[CFG_BOUND]), c + config[CFG_BOUND])
+    x = config[CFG_INV_OFFSET]
     for i in range(n):
-        state[i] = min(max(state[i], v - params[0, i]), v + params[0, i])
+        zeta = min(max(state[n + i], q - tables[TAB_RI, i]), q + tables[TAB_RI, i])
+        state[n + i] = zeta
+        x += tables[TAB_WI, i] * zeta
+    if not math.isfinite(x):  # belt and braces: never emit a non-finite command
+        state[end + ST_NONFINITE] += 1.0
+        inverse_states(tables, config, state)
+        return last
+    v, limited = _limit(x, config, state)
+    for i in range(n):
+        state[i] = min(max(state[i], v - tables[TAB_R, i]), v + tables[TAB_R, i])
     if limited:
-        inverse_states(params, config, state)
-    state[2 * n] = v
+        inverse_states(tables, config, state)
+    state[end + ST_LAST] = v
     return v
 
 
-@njit(cache=True, fastmath=_FAST)
-def compensator_process(desired, params, config, state, out):  # type: ignore[no-untyped-def]
+@njit(cache=True, fastmath=FASTMATH)
+def compensator_process(desired, tables, config, state, out):  # type: ignore[no-untyped-def]
     """``compensator_step`` over a block (same arithmetic, one call)."""
     for k in range(desired.shape[0]):
-        out[k] = compensator_step(desired[k], params, config, state)
+        out[k] = compensator_step(desired[k], tables, config, state)
 
 
-# Generalized compensator (numerical inverse). Layout:
-#   pi (2, n): thresholds r, weights w        static (3, K): knots, up, down coefficients
-#   creep (3, m): time constant, gain, a = 1 - exp(-dt / tau) for the loop's dt
-#   config (8,): offset c, v_min, v_max, max step, 1/gain, reference, static scale, unused
-#   state (n + m + 3,): play states z, lag states, last command, non-finite, saturated
-@njit(cache=True)
-def _generalized_output(v, pi, static, creep, config, state):  # type: ignore[no-untyped-def]
+@njit(cache=True, fastmath=FASTMATH)
+def hysteresis_output(v, tables, static, lags, config, state):  # type: ignore[no-untyped-def]
     """Hysteresis-part output for command v from the current state, and its slope in v."""
-    n = pi.shape[1]
-    y = config[0]
+    n = tables.shape[1]
+    y = config[CFG_OFFSET]
     slope = 0.0
     for i in range(n):
         zi = state[i]
-        lo = v - pi[0, i]
-        hi = v + pi[0, i]
+        lo = v - tables[TAB_R, i]
+        hi = v + tables[TAB_R, i]
+        w = tables[TAB_W, i]
         if zi < lo:
-            y += pi[1, i] * lo
-            slope += pi[1, i]
+            y += w * lo
+            slope += w
         elif zi > hi:
-            y += pi[1, i] * hi
-            slope += pi[1, i]
+            y += w * hi
+            slope += w
         else:
-            y += pi[1, i] * zi
-    s = config[6]
+            y += w * zi
+    s = config[CFG_STATIC_SCALE]
     for j in range(static.shape[1]):
         d = v - static[0, j]
         if d > 0:
@@ -209,42 +224,42 @@ def _generalized_output(v, pi, static, creep, config, state):  # type: ignore[no
         else:
             y -= static[2, j] * d * d / s
             slope -= 2.0 * static[2, j] * d / s
-    for k in range(creep.shape[1]):
+    for k in range(lags.shape[1]):
         lag = state[n + k]
-        y += creep[1, k] * (lag + creep[2, k] * (v - lag))
-        slope += creep[1, k] * creep[2, k]
+        y += lags[1, k] * (lag + lags[2, k] * (v - lag))
+        slope += lags[1, k] * lags[2, k]
     return y, slope
 
 
-@njit(cache=True)
-def generalized_step(desired, pi, static, creep, config, state):  # type: ignore[no-untyped-def]
-    """One command (V): solve output(v) = desired in [v_min, v_max] (output strictly increasing)."""
-    n = pi.shape[1]
-    m = creep.shape[1]
-    last = state[n + m]
+@njit(cache=True, fastmath=FASTMATH)
+def numeric_step(desired, tables, static, lags, config, state):  # type: ignore[no-untyped-def]
+    """One command (V): solve output(v) = desired in [v_min, v_max] (output strictly increasing).
+
+    A safeguarded Newton iteration keeps the root bracketed; creep lags advance
+    with the command sent (also when a NaN holds the last one).
+    """
+    n = tables.shape[1]
+    m = lags.shape[1]
+    end = state.shape[0]
+    last = state[end + ST_LAST]
     if not math.isfinite(desired):
-        state[n + m + 1] += 1.0
-        # the held command is still applied for this sample: creep keeps evolving
+        state[end + ST_NONFINITE] += 1.0
         for k in range(m):
-            state[n + k] += creep[2, k] * (last - state[n + k])
+            state[n + k] += lags[2, k] * (last - state[n + k])
         return last
-    q = config[5] + desired * config[4]
-    lo, hi = config[1], config[2]
-    y_lo, _ = _generalized_output(lo, pi, static, creep, config, state)
-    y_hi, _ = _generalized_output(hi, pi, static, creep, config, state)
-    tol = 1e-12 * (y_hi - y_lo)  # count real overshoots, not rounding at a limit
+    q = config[CFG_REFERENCE] + desired * config[CFG_INV_GAIN]
+    lo = config[CFG_V_MIN]
+    hi = config[CFG_V_MAX]
+    y_lo, _ = hysteresis_output(lo, tables, static, lags, config, state)
+    y_hi, _ = hysteresis_output(hi, tables, static, lags, config, state)
     if q <= y_lo:
         v = lo
-        if q < y_lo - tol:
-            state[n + m + 2] += 1.0
     elif q >= y_hi:
         v = hi
-        if q > y_hi + tol:
-            state[n + m + 2] += 1.0
     else:  # safeguarded Newton: the bracket always holds the root
         v = min(max(last, lo), hi)
         for _ in range(200):
-            y, slope = _generalized_output(v, pi, static, creep, config, state)
+            y, slope = hysteresis_output(v, tables, static, lags, config, state)
             err = y - q
             if err == 0.0:
                 break
@@ -254,22 +269,48 @@ def generalized_step(desired, pi, static, creep, config, state):  # type: ignore
                 lo = v
             if hi - lo <= 1e-15 * (abs(lo) + abs(hi) + 1e-300):
                 break
-            step = v - err / slope if slope > 0 else 0.5 * (lo + hi)
-            v = step if lo < step < hi else 0.5 * (lo + hi)
-    mx = config[3]
-    if v > last + mx:
-        v = last + mx
-    elif v < last - mx:
-        v = last - mx
+            trial = v - err / slope if slope > 0 else 0.5 * (lo + hi)
+            v = trial if lo < trial < hi else 0.5 * (lo + hi)
+    # the limits are inside the bracket; _limit counts only unreachable targets
+    tol = 1e-12 * (y_hi - y_lo)
+    if q < y_lo - tol or q > y_hi + tol:
+        state[end + ST_SATURATED] += 1.0
+    step = config[CFG_MAX_STEP]
+    if v > last + step:
+        v = last + step
+    elif v < last - step:
+        v = last - step
     for i in range(n):
-        state[i] = min(max(state[i], v - pi[0, i]), v + pi[0, i])
+        state[i] = min(max(state[i], v - tables[TAB_R, i]), v + tables[TAB_R, i])
     for k in range(m):
-        state[n + k] += creep[2, k] * (v - state[n + k])
-    state[n + m] = v
+        state[n + k] += lags[2, k] * (v - state[n + k])
+    state[end + ST_LAST] = v
     return v
 
 
-@njit(cache=True)
-def generalized_process(desired, pi, static, creep, config, state, out):  # type: ignore[no-untyped-def]
+@njit(cache=True, fastmath=FASTMATH)
+def numeric_process(desired, tables, static, lags, config, state, out):  # type: ignore[no-untyped-def]
+    """``numeric_step`` over a block."""
     for k in range(desired.shape[0]):
-        out[k] = generalized_step(desired[k], pi, static, creep, config, state)
+        out[k] = numeric_step(desired[k], tables, static, lags, config, state)
+
+
+def warm_up() -> None:
+    """Compile every kernel once (numba caches the result on disk)."""
+    x = np.zeros(2)
+    r = np.zeros(1)
+    z = np.zeros(1)
+    pi_forward(x, r, np.ones(1), z, np.empty(2))
+    play_states(x, r, z, np.empty((2, 1)))
+    running_integral(x, np.zeros(2), 0.0, np.empty(2))
+    lag_filter(x, np.zeros(2), np.ones(1), np.zeros(1), np.empty((2, 1)))
+    tables = np.zeros((5, 1))
+    tables[TAB_W] = tables[TAB_S] = tables[TAB_WI] = 1.0
+    config = np.zeros(CONFIG_SIZE)
+    config[CFG_V_MAX] = config[CFG_INV_GAIN] = config[CFG_BOUND] = config[CFG_STATIC_SCALE] = 1.0
+    config[CFG_MAX_STEP] = np.inf
+    state = np.zeros(5)
+    inverse_states(tables, config, state)
+    compensator_step(0.0, tables, config, state)
+    compensator_process(x, tables, config, state, np.empty(2))
+    numeric_process(x, tables, np.zeros((3, 0)), np.zeros((3, 0)), config, np.zeros(4), np.empty(2))

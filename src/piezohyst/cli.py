@@ -20,6 +20,7 @@ from . import __version__
 from .compensator import Domain
 from .errors import PiezohystError
 from .io import DataSpec
+from .models import HysteresisModel, model_names
 
 
 class Context:
@@ -271,12 +272,29 @@ def simulate(
     click.echo(str(out))
 
 
+def describe(model: HysteresisModel) -> str:
+    """One line on a fitted model's quality and terms, from its public attributes."""
+    text = (
+        f"{type(model).__name__}: {model.operator_.n_operators} operators, "
+        f"NRMSE {100 * model.nrmse_:.4g} %, RMSE {model.rmse_:.4g} {model.output_unit}"
+    )
+    growth = model.growth_coefficients()
+    if growth:
+        text += ", growth terms: " + ", ".join(f"{k} {v:.4g} {u}" for k, (v, u) in growth.items())
+    elif "growth_terms" in model.get_params():
+        text += ", growth terms: none"
+    shape = [term for term in model.terms_ if not term.removed]
+    if shape:
+        text += "; shape terms: " + ", ".join(f"{t.kind} ({t.width} coefficients)" for t in shape)
+    return text
+
+
 @main.command()
 @click.argument("data", type=EXISTING)
 @click.option(
     "--model",
     "model_name",
-    type=click.Choice(["active-pi", "classical-pi", "generalized-pi"]),
+    type=click.Choice(model_names()),
     default="active-pi",
     show_default=True,
     help="Model to identify.",
@@ -321,7 +339,7 @@ def fit(
       piezohyst fit scan.tdms --group Scan --input Ch0 --output Ch1 -o m.json
       piezohyst fit run.csv --model generalized-pi --creep 0.1,1,10 -o g.json
     """
-    from .workflows import describe, fit_file
+    from .workflows import fit_file
 
     try:
         taus = tuple(float(c) for c in creep.split(",") if c.strip())

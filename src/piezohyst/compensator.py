@@ -20,19 +20,18 @@ Safety, always:
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from . import _kernels
+from . import _kernels as K
 from ._validation import FloatArray, as_signal
 from .errors import ParameterError, ShapeError
-from .generalized import GeneralizedPI
-from .hysteresis import PIHysteresis
-from .models import ClassicalPI
+from .models import HysteresisModel, InverseSpec
 
-__all__ = ["Compensator"]
+__all__ = ["Compensator", "CompensatorState"]
 
 Domain = Literal["charge", "displacement"]
 
@@ -48,23 +47,46 @@ def _finite_number(value: object, name: str) -> float:
     return v
 
 
+@dataclass(frozen=True)
+class CompensatorState:
+    """The actuator's condition as a compensator sees it (forward states only).
+
+    Attributes
+    ----------
+    operators : ndarray, shape (n,)
+        Play-operator states (V) after the commands sent so far.
+    lags : ndarray, shape (m,)
+        Creep lag states (V); empty without creep.
+    command : float
+        The last command sent (V).
+    """
+
+    operators: FloatArray
+    lags: FloatArray
+    command: float
+
+
 class Compensator:
-    r"""Feedforward hysteresis compensator for a fitted ClassicalPI or ActivePI.
+    r"""Feedforward hysteresis compensator for any fitted model.
+
+    The model's growth terms are dropped (leaked charge moves nothing) and its
+    hysteresis part is inverted: analytically (eq. 18) when it is play
+    operators alone, otherwise exactly by a safeguarded Newton solve per
+    sample. The method follows from the terms the model holds
+    (:meth:`~piezohyst.models.HysteresisModel.inversion`), not from its class.
 
     Parameters
     ----------
-    model : ClassicalPI, ActivePI or GeneralizedPI
-        A fitted model; growth terms are dropped (leaked charge moves nothing)
-        and the hysteresis part is inverted: analytically (eq. 18) for the
-        classical and active models, exactly by a safeguarded Newton solve per
-        sample for :class:`~piezohyst.GeneralizedPI` (whose creep operators
-        need ``sample_rate``).
+    model : HysteresisModel
+        A fitted model (or any object with an ``inversion()`` method returning
+        an :class:`~piezohyst.models.InverseSpec`).
     v_min, v_max : float
         The actuator's voltage limits (V). Every command lies inside them.
     slew_rate : float, optional
         Largest command change in V/s; needs ``sample_rate``.
     sample_rate : float, optional
-        Samples per second (Hz) of the control loop, for ``slew_rate``.
+        Samples per second (Hz) of the control loop, for ``slew_rate`` and for
+        models with creep.
     domain : {"charge", "displacement"}
         Units of the desired values: the model's output units, or metres.
     gain : float, optional
@@ -88,7 +110,7 @@ class Compensator:
 
     def __init__(
         self,
-        model: ClassicalPI,
+        model: HysteresisModel,
         *,
         v_min: float,
         v_max: float,
@@ -97,15 +119,15 @@ class Compensator:
         domain: Domain = "charge",
         gain: float | None = None,
     ) -> None:
-        if not isinstance(model, ClassicalPI):
+        inversion = getattr(model, "inversion", None)
+        if not callable(inversion):
             msg = (
-                "The 'model' parameter of Compensator must be a fitted ClassicalPI or ActivePI. "
+                "The 'model' parameter of Compensator must be a fitted piezohyst model. "
                 f"Got {type(model).__name__} instead."
             )
             raise ParameterError(msg)
-        model._check_fitted()
-        op: PIHysteresis = model.operator_
-        self._numeric = isinstance(model, GeneralizedPI)
+        spec: InverseSpec = inversion()
+        op = spec.operator
         if not op.is_invertible:
             op.inverse()  # raises NotInvertibleError with the reason
         self.v_min = _finite_number(v_min, "v_min")
@@ -130,7 +152,7 @@ class Compensator:
                 f"Got {domain!r} instead."
             )
             raise ParameterError(msg)
-        scale = 1.0
+        inv_gain = 1.0
         if domain == "displacement":
             if gain is None:
                 msg = "domain='displacement' needs the gain (m per model output unit). Got None."
@@ -139,125 +161,163 @@ class Compensator:
             if g == 0.0:
                 msg = "The 'gain' parameter of Compensator must be non-zero. Got 0."
                 raise ParameterError(msg)
-            scale = 1.0 / g
+            inv_gain = 1.0 / g
+        if spec.lags is not None and sample_rate is None:
+            msg = "A model with creep needs the loop's sample_rate (Hz). Got sample_rate=None."
+            raise ParameterError(msg)
         self.model = model
+        self.spec = spec
         self.domain: Domain = domain
         self.gain = gain
         self.slew_rate = slew_rate
         self.sample_rate = sample_rate
         n = op.n_operators
-        reach = max(abs(self.v_min), abs(self.v_max)) + float(op.thresholds[-1])
-        if self._numeric:
-            assert isinstance(model, GeneralizedPI)
-            taus = model.creep_taus_
-            if taus.size and sample_rate is None:
-                msg = "A GeneralizedPI with creep needs the loop's sample_rate (Hz). Got None."
-                raise ParameterError(msg)
-            dt = 0.0 if sample_rate is None else 1.0 / float(sample_rate)
-            self._pi = np.vstack([op.thresholds, op.weights])
-            self._static = np.vstack([model.knots_, model.static_up_, model.static_down_])
-            self._creep = np.vstack([taus, model.creep_gains_, 1.0 - np.exp(-dt / taus)])
-            self._config = np.array(
-                [op.offset, self.v_min, self.v_max, max_step, scale, 0.0, model.static_scale_, 0.0]
-            )
-            self._state = np.zeros(n + taus.size + 3)
-            self._last_index = n + taus.size
-            if domain == "displacement":  # displacement 0 = output at rest in the initial state
-                x0 = float(op.initial_state[0])
-                self._state[:n] = op.initial_state
-                self._state[n : n + taus.size] = x0
-                self._config[5] = _kernels._generalized_output(
-                    x0, self._pi, self._static, self._creep, self._config, self._state
-                )[0]
-        else:
+        self.tables = np.zeros((5, n))
+        self.tables[K.TAB_R] = op.thresholds
+        self.tables[K.TAB_W] = op.weights
+        self.config = np.zeros(K.CONFIG_SIZE)
+        self.config[K.CFG_OFFSET] = op.offset
+        self.config[K.CFG_V_MIN] = self.v_min
+        self.config[K.CFG_V_MAX] = self.v_max
+        self.config[K.CFG_MAX_STEP] = max_step
+        self.config[K.CFG_INV_GAIN] = inv_gain
+        self.config[K.CFG_STATIC_SCALE] = 1.0
+        if spec.analytic:
             inv = op.inverse()
-            self._params = np.zeros((6, n))
-            self._params[0] = op.thresholds
-            self._params[1] = op.weights
-            self._params[2] = op.loading_slopes
-            self._params[3] = inv.thresholds
-            self._params[4] = inv.weights
-            # displacement 0 = the model's output at rest in its initial state
-            reference = 0.0
-            if domain == "displacement":
-                reference = op.offset + float(op.weights @ op.initial_state)
-            bound = 2.0 * float(np.abs(op.weights).sum()) * reach + 1.0
-            self._config = np.array(
-                [op.offset, inv.offset, self.v_min, self.v_max, max_step, scale, reference, bound]
-            )
-            self._state = np.zeros(2 * n + 3)
-            self._last_index = 2 * n
+            self.tables[K.TAB_S] = op.loading_slopes
+            self.tables[K.TAB_RI] = inv.thresholds
+            self.tables[K.TAB_WI] = inv.weights
+            self.config[K.CFG_INV_OFFSET] = inv.offset
+            reach = max(abs(self.v_min), abs(self.v_max)) + float(op.thresholds[-1])
+            self.config[K.CFG_BOUND] = 2.0 * float(np.abs(op.weights).sum()) * reach + 1.0
+            self.static = np.zeros((3, 0))
+            self.lags = np.zeros((3, 0))
+            n_aux = n
+        else:
+            st = spec.static
+            self.static = np.zeros((3, 0)) if st is None else np.vstack([st.knots, st.up, st.down])
+            if st is not None:
+                self.config[K.CFG_STATIC_SCALE] = st.scale
+            lg = spec.lags
+            if lg is None:
+                self.lags = np.zeros((3, 0))
+            else:
+                dt = 1.0 / float(sample_rate)  # type: ignore[arg-type]
+                self.lags = np.vstack([lg.taus, lg.gains, 1.0 - np.exp(-dt / lg.taus)])
+            n_aux = self.lags.shape[1]
+        self._state = np.zeros(n + n_aux + 3)
+        self._n_aux = n_aux
+        if domain == "displacement":  # displacement 0 = output at rest in the initial state
+            if spec.analytic:
+                self.config[K.CFG_REFERENCE] = op.offset + float(op.weights @ op.initial_state)
+            else:
+                self._set_forward(self._initial_forward())
+                self.config[K.CFG_REFERENCE] = self._output_now(float(op.initial_state[0]))
         self.reset()
 
     # ----------------------------------------------------------------- state
     @property
-    def n_operators(self) -> int:
-        return int(self.model.operator_.n_operators)
-
-    def _refresh(self) -> None:
-        """Derived state after the forward states changed (inverse states, analytic path)."""
-        if not self._numeric:
-            _kernels.inverse_states(self._params, self._config, self._state)
+    def analytic(self) -> bool:
+        """True when the compensator runs eq. 18's analytic inverse (no Newton solve)."""
+        return self.spec.analytic
 
     @property
-    def state(self) -> FloatArray:
-        """Forward operator states (V) followed by the last command (V); a read-only copy."""
+    def n_operators(self) -> int:
+        """Number of play operators of the inverted model."""
+        return int(self.tables.shape[1])
+
+    def _initial_forward(self) -> tuple[FloatArray, FloatArray]:
+        op = self.spec.operator
+        x0 = float(op.initial_state[0])
+        return op.initial_state.copy(), np.full(self.lags.shape[1], x0)
+
+    def _set_forward(self, forward: tuple[FloatArray, FloatArray]) -> None:
         n = self.n_operators
-        extra = self._last_index - n if self._numeric else 0  # creep lag states
-        out = np.concatenate([self._state[: n + extra], self._state[self._last_index :][:1]])
-        out.flags.writeable = False
-        return out
+        self._state[:n] = forward[0]
+        if not self.analytic:
+            self._state[n : n + self._n_aux] = forward[1]
+        else:
+            K.inverse_states(self.tables, self.config, self._state)
+
+    def _output_now(self, v: float) -> float:
+        """The hysteresis part's output (model units) if ``v`` were sent from the current state."""
+        y, _ = K.hysteresis_output(v, self.tables, self.static, self.lags, self.config, self._state)
+        return float(y)
+
+    @property
+    def state(self) -> CompensatorState:
+        """The forward states and the last command (copies; see :meth:`reset`)."""
+        n = self.n_operators
+        lags = self._state[n : n + self._n_aux] if not self.analytic else np.zeros(0)
+        return CompensatorState(self._state[:n].copy(), lags.copy(), float(self._state[K.ST_LAST]))
 
     @property
     def nonfinite_count(self) -> int:
         """Desired values that were NaN or infinite (the last command was held)."""
-        return int(self._state[self._last_index + 1])
+        return int(self._state[K.ST_NONFINITE])
 
     @property
     def saturated_count(self) -> int:
         """Samples whose command was clipped to ``[v_min, v_max]``."""
-        return int(self._state[self._last_index + 2])
+        return int(self._state[K.ST_SATURATED])
 
-    def reset(self, state: ArrayLike | None = None, *, voltage: float | None = None) -> None:
+    def reset(
+        self, state: CompensatorState | ArrayLike | None = None, *, voltage: float | None = None
+    ) -> None:
         """Start again from a known actuator condition; counters go back to 0.
 
-        * ``reset()``: the model's initial state (the training record's start);
-          if the limits exclude that voltage, the last command starts at the
-          nearest limit.
-        * ``reset(voltage=v)``: the actuator now sits at ``v`` volts; the
-          model's initial state is projected onto it (eq. 10: each operator
-          clamped into ``[v - r_i, v + r_i]``). Use this after an unknown history
-          only with :meth:`precondition`, which erases that history.
-        * ``reset(state)``: explicit forward operator states (V), e.g. a
-          :attr:`state` saved earlier (its last element is the last command).
+        Parameters
+        ----------
+        state : CompensatorState or array_like, optional
+            Explicit forward states, e.g. a :attr:`state` saved earlier; or an
+            array of the operator states (V), optionally followed by the last
+            command.
+        voltage : float, optional
+            The actuator now sits at ``voltage`` (V): the model's initial state
+            is projected onto it (eq. 10: each operator clamped into
+            ``[v - r_i, v + r_i]``), lags settled there. Use this after an
+            unknown history only with :meth:`precondition`, which erases it.
+
+        Notes
+        -----
+        Without arguments: the model's initial state (the training record's
+        start); if the limits exclude that voltage, the first command steps in.
+
+        Raises
+        ------
+        ParameterError
+            If the last command would lie outside the limits.
         """
         n = self.n_operators
-        lags = self._last_index - n if self._numeric else 0
-        op = self.model.operator_
-        if state is not None:
-            z = as_signal(state, "state")
-            if z.size not in (n + lags, n + lags + 1):
+        m = self.lags.shape[1]
+        op = self.spec.operator
+        if isinstance(state, CompensatorState):
+            ops = as_signal(state.operators, "state.operators")
+            lags = as_signal(state.lags, "state.lags", allow_empty=True)
+            if ops.size != n or lags.size != m:
                 msg = (
-                    f"'state' must hold {n} operator states{f', {lags} lag states' if lags else ''}"
-                    f" (and the last command). Got {z.size}."
+                    f"'state' must hold {n} operator and {m} lag states. "
+                    f"Got {ops.size}, {lags.size}."
                 )
                 raise ShapeError(msg)
-            ops = z[: n + lags]
+            last = float(state.command)
+        elif state is not None:
+            z = as_signal(state, "state")
+            if z.size not in (n, n + 1):
+                msg = f"'state' must hold {n} operator states (and the last command). Got {z.size}."
+                raise ShapeError(msg)
+            ops = z[:n]
+            lags = np.full(m, float(ops[0]))
             last = (
-                float(z[-1])
-                if z.size == n + lags + 1
-                else float(np.clip(ops[0], self.v_min, self.v_max))
+                float(z[-1]) if z.size == n + 1 else float(np.clip(ops[0], self.v_min, self.v_max))
             )
         elif voltage is None:
-            # the model's own start; if the limits exclude it, the first command steps in
-            x0 = float(op.initial_state[0])
-            ops = np.concatenate([op.initial_state, np.full(lags, x0)])
-            last = float(np.clip(x0, self.v_min, self.v_max))
+            ops, lags = self._initial_forward()
+            last = float(np.clip(ops[0], self.v_min, self.v_max))
         else:
             v = _finite_number(voltage, "voltage")
-            ops = np.concatenate(
-                [np.clip(op.initial_state, v - op.thresholds, v + op.thresholds), np.full(lags, v)]
-            )
+            ops = np.clip(op.initial_state, v - op.thresholds, v + op.thresholds)
+            lags = np.full(m, v)
             last = v
         if not self.v_min <= last <= self.v_max:
             msg = (
@@ -265,33 +325,39 @@ class Compensator:
                 f"[{self.v_min}, {self.v_max}] V."
             )
             raise ParameterError(msg)
-        self._state[: n + lags] = ops
-        self._state[self._last_index] = last
-        self._state[self._last_index + 1 :] = 0.0
-        self._refresh()
-
-    @property
-    def _max_step(self) -> float:
-        return float(self._config[3] if self._numeric else self._config[4])
+        self._set_forward((np.array(ops, dtype=np.float64), np.array(lags, dtype=np.float64)))
+        self._state[K.ST_LAST] = last
+        self._state[K.ST_NONFINITE] = 0.0
+        self._state[K.ST_SATURATED] = 0.0
 
     def precondition(self, samples: int = 1000) -> FloatArray:
         """The preconditioning cycle to send first: last command → v_max → v_min → back.
 
         A full-amplitude cycle wipes out the actuator's unknown history (the
         remanence problem: a fresh model assumes a known state). The returned
-        voltages (V, ``samples`` in all) must be sent to the amplifier before
-        the first :meth:`step`; the compensator's state is advanced as if they
-        had been. With a slew-rate limit the cycle gets as many samples as it
-        needs to reach both limits.
+        voltages must be sent to the amplifier before the first :meth:`step`;
+        the compensator's state is advanced as if they had been. With a
+        slew-rate limit the cycle gets as many samples as it needs to reach
+        both limits.
+
+        Parameters
+        ----------
+        samples : int, default 1000
+            Samples in the cycle (at least 3).
+
+        Returns
+        -------
+        ndarray
+            The voltages (V) to send.
         """
         if isinstance(samples, bool) or not isinstance(samples, int) or samples < 3:
             msg = f"'samples' must be an int >= 3. Got {samples!r}."
             raise ParameterError(msg)
         n = self.n_operators
-        start = float(self._state[self._last_index])
+        start = float(self._state[K.ST_LAST])
         knots = [start, self.v_max, self.v_min, start]
         legs = np.abs(np.diff(knots))
-        step = self._max_step
+        step = float(self.config[K.CFG_MAX_STEP])
         # every leg ends exactly on its knot: reaching v_max and v_min is what wipes history
         share = legs / max(float(legs.sum()), 1e-300)
         counts = np.maximum(np.round(share * (samples - 1)).astype(int), 1)
@@ -302,48 +368,65 @@ class Compensator:
             for a, b, m in zip(knots[:-1], knots[1:], counts, strict=True)
         ]
         cycle = np.concatenate(pieces)
-        op = self.model.operator_
+        r = self.tables[K.TAB_R]
         z = self._state[:n]
-        lag = self._state[n : self._last_index] if self._numeric else np.empty(0)
-        alpha = self._creep[2] if self._numeric else np.empty(0)
+        lag = self._state[n : n + self._n_aux] if not self.analytic else np.empty(0)
+        alpha = self.lags[2]
         out = np.empty_like(cycle)
         last = start
         for k, v_target in enumerate(cycle):
             v = min(max(v_target, last - step), last + step)
-            z[:] = np.clip(z, v - op.thresholds, v + op.thresholds)
+            z[:] = np.clip(z, v - r, v + r)
             lag += alpha * (v - lag)
             out[k] = last = v
-        self._state[self._last_index] = last
-        self._refresh()
+        self._state[K.ST_LAST] = last
+        if self.analytic:
+            K.inverse_states(self.tables, self.config, self._state)
         return out
 
     # -------------------------------------------------------------- commands
     def step(self, desired: float) -> float:
-        """The command (V) for one desired value (model output units, or m)."""
-        if self._numeric:
-            return float(
-                _kernels.generalized_step(
-                    float(desired), self._pi, self._static, self._creep, self._config, self._state
-                )
-            )
+        """The command for one desired value.
+
+        Parameters
+        ----------
+        desired : float
+            Desired output (model output units, or m for ``domain="displacement"``).
+            NaN or infinity holds the last command and is counted.
+
+        Returns
+        -------
+        float
+            The command (V), finite and inside ``[v_min, v_max]``.
+        """
+        if self.analytic:
+            return float(K.compensator_step(float(desired), self.tables, self.config, self._state))
         return float(
-            _kernels.compensator_step(float(desired), self._params, self._config, self._state)
+            K.numeric_step(
+                float(desired), self.tables, self.static, self.lags, self.config, self._state
+            )
         )
 
     def process(self, desired: ArrayLike) -> FloatArray:
-        """Commands (V) for a block of desired values; equal to calling :meth:`step` on each.
+        """Commands for a block of desired values; equal to calling :meth:`step` on each.
 
-        NaN and infinite values are allowed here (they hold the last command).
+        Parameters
+        ----------
+        desired : array_like, shape (N,)
+            Desired outputs; NaN and infinite values hold the last command.
+
+        Returns
+        -------
+        ndarray, shape (N,)
+            Commands (V).
         """
         d = np.ascontiguousarray(desired, dtype=np.float64)
         if d.ndim != 1:
             msg = f"'desired' must be a 1-D array. Got shape {d.shape}."
             raise ShapeError(msg)
         out = np.empty_like(d)
-        if self._numeric:
-            _kernels.generalized_process(
-                d, self._pi, self._static, self._creep, self._config, self._state, out
-            )
+        if self.analytic:
+            K.compensator_process(d, self.tables, self.config, self._state, out)
         else:
-            _kernels.compensator_process(d, self._params, self._config, self._state, out)
+            K.numeric_process(d, self.tables, self.static, self.lags, self.config, self._state, out)
         return out

@@ -23,9 +23,9 @@ import numpy as np
 from . import __version__
 from ._validation import FloatArray, check_int
 from .compensator import Compensator
-from .generalized import GeneralizedPI
+from .io import atomic_write_text
 from .metrics import hysteresis_width, nrmse
-from .models import ActivePI, ClassicalPI, atomic_write_text
+from .models import ActivePI, ClassicalPI, GeneralizedPI, HysteresisModel
 from .plotting import save_panels
 from .simulation import DEFAULT_PRESET, PRESETS, BenchRecord, make_signal, simulate
 
@@ -131,7 +131,7 @@ def _model_comparison(
         "hold": simulate(preset=preset, signal="hold", duration=20.0, seed=seed),
         "levels": simulate(preset=preset, signal="levels", duration=30.0, seed=seed + 50),
     }
-    makers: list[tuple[str, Callable[[], ClassicalPI]]] = [
+    makers: list[tuple[str, Callable[[], HysteresisModel]]] = [
         ("classical PI", lambda: ClassicalPI(n_operators)),
         ("active PI (paper)", lambda: ActivePI(n_operators)),
         ("generalized PI", lambda: GeneralizedPI(n_operators)),
@@ -159,12 +159,9 @@ def _model_comparison(
     return rows
 
 
-def _growth_text(model: ClassicalPI) -> str:
-    if isinstance(model, GeneralizedPI):
-        return "+".join(model.growth_terms_) or "none"
-    if isinstance(model, ActivePI):
-        return f"R = {model.growth_rate_:.3g} S"
-    return "none"
+def _growth_text(model: HysteresisModel) -> str:
+    growth = model.growth_coefficients()
+    return ", ".join(f"{k} {v:.3g} {u}" for k, (v, u) in growth.items()) or "none"
 
 
 def _excitation_study(preset: str, n_operators: int) -> list[dict[str, Any]]:

@@ -9,7 +9,7 @@ estimators in :mod:`piezohyst.models` produce these.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import Any, Generic, NamedTuple, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -21,19 +21,24 @@ from .errors import NotInvertibleError, ParameterError, ShapeError
 __all__ = ["PIHysteresis", "Propagation"]
 
 
-class Propagation(NamedTuple):
-    """Result of running a stateful operator over a block of samples.
+S = TypeVar("S")
+
+
+class Propagation(NamedTuple, Generic[S]):
+    """Result of running a stateful operator or model over a block of samples.
 
     Attributes
     ----------
     output : ndarray
         One output sample per input sample.
-    state : ndarray
-        Operator states after the last sample; pass it back to continue.
+    state : ndarray or ModelState
+        The state after the last sample (operator states for
+        :class:`PIHysteresis`, a :class:`~piezohyst.models.ModelState` for a
+        model); pass it back to continue.
     """
 
     output: FloatArray
-    state: FloatArray
+    state: S
 
 
 def _frozen(values: ArrayLike, name: str) -> FloatArray:
@@ -139,7 +144,7 @@ class PIHysteresis:
         return np.asarray(np.maximum(s_arr[..., None] - self.thresholds, 0.0) @ self.weights)
 
     # ------------------------------------------------------------- evaluation
-    def propagate(self, x: ArrayLike, state: ArrayLike | None = None) -> Propagation:
+    def propagate(self, x: ArrayLike, state: ArrayLike | None = None) -> Propagation[FloatArray]:
         """Run the operator over ``x`` from ``state`` (default :attr:`initial_state`).
 
         Parameters
@@ -164,7 +169,20 @@ class PIHysteresis:
         return Propagation(y, z)
 
     def predict(self, x: ArrayLike, state: ArrayLike | None = None) -> FloatArray:
-        """Output for input ``x`` (see :meth:`propagate`)."""
+        """Output for input ``x`` (see :meth:`propagate`).
+
+        Parameters
+        ----------
+        x : array_like, shape (N,)
+            Input samples (V).
+        state : array_like, shape (n,), optional
+            Operator states before the first sample.
+
+        Returns
+        -------
+        ndarray, shape (N,)
+            Output (output units).
+        """
         return self.propagate(x, state).output
 
     def _state(self, state: ArrayLike | None) -> FloatArray:

@@ -1,8 +1,9 @@
-r"""Identification of Prandtl-Ishlinskii weights (paper eq. 16-17).
+r"""Identification: one bounded least-squares solve for a core plus terms (eq. 16-17).
 
-The output is linear in the parameters, :math:`y = W^T X` (eq. 16), so the
-weights, the offset and (for the active model) the growth rate follow from one
-linear least-squares problem. Two things are added to the paper:
+The output is linear in every parameter, :math:`y = W^T X` (eq. 16): the play
+weights and offset of the core and the coefficients of every term. So one
+linear least-squares problem identifies a model, whatever terms it holds.
+Three things are added to the paper:
 
 *Invertibility is guaranteed, not hoped for.* The analytic inverse (eq. 18)
 needs the first weight and every partial sum of weights positive. We solve in
@@ -16,11 +17,20 @@ whose later weights are negative.
 matrix :math:`X^T X` and :math:`X^T y` are accumulated block by block (play
 states from the numba kernel, products by BLAS), so a fit on :math:`10^6`
 samples keeps one block of a few thousand rows plus :math:`O(p^2)`.
+
+*Scale does not matter.* Input and output are divided by powers of two near
+their peaks (exact), each column by the matching power of the input scale,
+so volts or kilovolts, coulombs or microcoulombs give the same solve.
+
+Term selection reuses the matrices: they are accumulated per segment of the
+record (the model running through all of it), so fitting a subset of terms on
+the early segments and scoring it on a later one needs no second pass.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import itertools
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,17 +39,19 @@ from scipy.optimize import lsq_linear
 
 from . import _kernels
 from ._validation import FloatArray, as_signal, check_int
-from .errors import InsufficientDataError, ParameterError
+from .cores import PlayCore
+from .errors import InsufficientDataError
+from .terms import Term
 
 __all__ = [
-    "LinearSolution",
+    "BLOCK",
+    "Identification",
     "NormalEquations",
+    "block_dt",
     "default_thresholds",
     "history_state",
     "identify",
-    "solve_pi",
-    "solve_slopes",
-    "time_steps",
+    "term_columns",
 ]
 
 BLOCK = 4096  # samples per block when accumulating or streaming
@@ -85,20 +97,70 @@ def history_state(history: ArrayLike, thresholds: ArrayLike) -> FloatArray:
     return z
 
 
-def time_steps(t: FloatArray, t_previous: float | None = None) -> FloatArray:
-    """Sample intervals (s) for the backward-rectangle integral; first is 0 unless continuing."""
-    dt = np.empty_like(t)
-    dt[0] = 0.0 if t_previous is None else t[0] - t_previous
-    dt[1:] = np.diff(t)
+def block_dt(
+    t: FloatArray | None, start: int, stop: int, t_previous: float | None
+) -> FloatArray | None:
+    """Sample intervals (s) of ``t[start:stop]``; the record's first is 0 unless it continues.
+
+    Parameters
+    ----------
+    t : ndarray or None
+        The whole record's times (s); None for a rate-independent model.
+    start, stop : int
+        The block.
+    t_previous : float or None
+        Time of the sample before ``t[0]`` when continuing a saved state.
+
+    Returns
+    -------
+    ndarray or None
+    """
+    if t is None:
+        return None
+    dt = np.empty(stop - start)
+    if start > 0:
+        dt[0] = t[start] - t[start - 1]
+    else:
+        dt[0] = 0.0 if t_previous is None else t[0] - t_previous
+    dt[1:] = np.diff(t[start:stop])
     return dt
+
+
+def term_columns(
+    terms: Sequence[Term],
+    x: FloatArray,
+    t: FloatArray | None,
+    dt: FloatArray | None,
+    states: Sequence[FloatArray],
+    out: FloatArray,
+) -> None:
+    """Every term's columns for one block, side by side in ``out`` (states updated).
+
+    Parameters
+    ----------
+    terms : sequence of Term
+    x, t, dt : ndarray
+        The block's input, times and intervals (see :meth:`Term.columns`).
+    states : sequence of ndarray
+        One state per term, updated in place.
+    out : ndarray, shape (len(x), total width)
+    """
+    col = 0
+    for term, state in zip(terms, states, strict=True):
+        out[:, col : col + term.width] = term.columns(x, t, dt, state)
+        col += term.width
 
 
 @dataclass(frozen=True)
 class NormalEquations:
-    """Accumulated :math:`X^T X`, :math:`X^T y`, :math:`y^T y` of eq. 16.
+    """Accumulated :math:`X^T X`, :math:`X^T y`, :math:`y^T y` over some samples.
 
-    Columns: the n play operators, the constant (offset), then the integral
-    :math:`\\int x\\,dt` when ``dt`` is given (active model).
+    Attributes
+    ----------
+    gram : ndarray, shape (p, p)
+    rhs : ndarray, shape (p,)
+    yy : float
+    n_samples : int
     """
 
     gram: FloatArray
@@ -106,53 +168,81 @@ class NormalEquations:
     yy: float
     n_samples: int
 
-    @classmethod
-    def accumulate(
-        cls,
-        x: FloatArray,
-        y: FloatArray,
-        thresholds: FloatArray,
-        initial_state: FloatArray,
-        dt: FloatArray | None = None,
-        *,
-        extra: Callable[[int, int], FloatArray] | None = None,
-        extra_width: int = 0,
-    ) -> NormalEquations:
-        """Accumulate over blocks of samples; memory O(block x p + p^2).
+    def __add__(self, other: NormalEquations) -> NormalEquations:
+        return NormalEquations(
+            self.gram + other.gram,
+            self.rhs + other.rhs,
+            self.yy + other.yy,
+            self.n_samples + other.n_samples,
+        )
 
-        ``dt`` adds the active model's integral column. ``extra(start, stop)``
-        returns ``extra_width`` further columns for samples ``start:stop``; it is
-        called once per block, in order, so it may carry state.
+    def sse(self, beta: FloatArray, columns: FloatArray) -> float:
+        """Sum of squared residuals of parameters ``beta`` on ``columns``, from the matrices.
+
+        Parameters
+        ----------
+        beta : ndarray
+            Parameters of the chosen columns.
+        columns : ndarray of int
+            Indices of the columns ``beta`` belongs to.
+
+        Returns
+        -------
+        float
+            :math:`y^T y - 2 \\beta^T b + \\beta^T G \\beta`, never below 0.
         """
-        if dt is not None:
-            acc = [0.0]
+        g = self.gram[np.ix_(columns, columns)]
+        b = self.rhs[columns]
+        return max(self.yy - 2.0 * float(beta @ b) + float(beta @ g @ beta), 0.0)
 
-            def integral(start: int, stop: int) -> FloatArray:
-                out = np.empty(stop - start)
-                acc[0] = _kernels.running_integral(x[start:stop], dt[start:stop], acc[0], out)
-                return out[:, None]
 
-            extra, extra_width = integral, 1
-        n = thresholds.size
-        p = n + 1 + (extra_width if extra is not None else 0)
+def _power_of_two(values: FloatArray) -> float:
+    """A power of two near max|values| (exact to divide by), 1 for all zeros."""
+    peak = float(np.max(np.abs(values)))
+    if peak == 0.0:
+        return 1.0
+    return float(2.0 ** np.round(np.log2(peak)))
+
+
+def _accumulate(
+    core: PlayCore,
+    terms: Sequence[Term],
+    x: FloatArray,
+    y: FloatArray,
+    t: FloatArray | None,
+    z0: FloatArray,
+    col_scale: FloatArray,
+    edges: Sequence[int],
+) -> list[NormalEquations]:
+    """Normal equations of every segment ``edges[k]:edges[k+1]`` (model run through all)."""
+    n = core.n_operators
+    p = col_scale.size
+    block = np.empty((min(BLOCK, x.size), p))
+    block[:, n] = 1.0
+    z = z0.copy()
+    states = [term.rest_state(float(x[0])) for term in terms]
+    out = []
+    for lo, hi in itertools.pairwise(edges):
         gram = np.zeros((p, p))
         rhs = np.zeros(p)
         yy = 0.0
-        block = np.empty((min(BLOCK, x.size), p))
-        block[:, n] = 1.0
-        z = initial_state.copy()
-        for start in range(0, x.size, block.shape[0]):
-            xs = x[start : start + block.shape[0]]
-            ys = y[start : start + block.shape[0]]
-            m = xs.size
-            _kernels.play_states(xs, thresholds, z, block)
-            if extra is not None:
-                block[:m, n + 1 :] = extra(start, start + m)
+        for start in range(lo, hi, block.shape[0]):
+            stop = min(start + block.shape[0], hi)
+            m = stop - start
+            xs = x[start:stop]
+            core.fill(xs, z, block, col_scale[0])
+            if terms:
+                dt = block_dt(t, start, stop, None)
+                ts = None if t is None else t[start:stop]
+                term_columns(terms, xs, ts, dt, states, block[:m, n + 1 :])
+                block[:m, n + 1 :] /= col_scale[n + 1 :]
             b = block[:m]
+            ys = y[start:stop]
             gram += b.T @ b
             rhs += b.T @ ys
             yy += float(ys @ ys)
-        return cls(gram, rhs, yy, x.size)
+        out.append(NormalEquations(gram, rhs, yy, hi - lo))
+    return out
 
 
 def _bounded_lstsq(gram: FloatArray, rhs: FloatArray, lower: FloatArray) -> FloatArray:
@@ -188,97 +278,132 @@ def _bounded_lstsq(gram: FloatArray, rhs: FloatArray, lower: FloatArray) -> Floa
 
 
 @dataclass(frozen=True)
-class LinearSolution:
-    """Weights, offset and growth rate from :func:`solve_pi`."""
+class Identification:
+    """What :func:`identify` found, in the data's own units.
 
-    weights: FloatArray
-    offset: float
-    growth_rate: float
-
-
-def solve_slopes(
-    gram: FloatArray,
-    rhs: FloatArray,
-    n_operators: int,
-    *,
-    min_slope: float,
-    lower: FloatArray,
-) -> FloatArray:
-    r"""Bounded least squares with the first ``n_operators`` columns solved in slopes.
-
-    The first ``n_operators`` parameters are play weights, found through the
-    loading slopes :math:`S_i \ge` ``min_slope``; ``lower`` bounds the other
-    parameters (``-inf`` for free ones). With :math:`w = M S` (:math:`M` the
-    first-difference matrix), the Gram matrix in slope coordinates is
-    :math:`M^T X^T X M`. Returns the parameters with weights (not slopes) first.
+    Attributes
+    ----------
+    core : ndarray, shape (n + 1,)
+        Play weights (output per input unit), then the offset (output units).
+    coefficients : tuple of (ndarray or None)
+        Each term's coefficients; None for a term the selection left out.
+    scores : dict
+        Held-out RMSE (output units) of every subset tried, keyed by the tuple
+        of term indices (empty without selection).
     """
-    p = rhs.size
-    n = n_operators
-    if not np.isfinite(min_slope) or min_slope <= 0:
-        msg = f"'min_slope' must be a positive float. Got {min_slope!r}."
-        raise ParameterError(msg)
-    m = np.eye(p)
-    m[np.arange(1, n), np.arange(0, n - 1)] = -1.0
-    bounds = np.concatenate([np.full(n, min_slope), lower])
-    return np.asarray(m @ _bounded_lstsq(m.T @ gram @ m, m.T @ rhs, bounds))
 
-
-def solve_pi(equations: NormalEquations, *, min_slope: float, growth: bool) -> LinearSolution:
-    """The classical/active model's solve: weights, then offset, then growth rate."""
-    p = equations.rhs.size
-    n = p - 1 - int(growth)
-    if equations.n_samples <= p:
-        msg = (
-            f"Identifying {p} parameters ({n} operator weights, the offset"
-            f"{', the growth rate' if growth else ''}) needs more than {p} samples. "
-            f"Got {equations.n_samples}."
-        )
-        raise InsufficientDataError(msg)
-    sol = solve_slopes(
-        equations.gram, equations.rhs, n, min_slope=min_slope, lower=np.full(p - n, -np.inf)
-    )
-    return LinearSolution(
-        weights=sol[:n].copy(),
-        offset=float(sol[n]),
-        growth_rate=float(sol[n + 1]) if growth else 0.0,
-    )
-
-
-def _power_of_two_scale(values: FloatArray) -> float:
-    """A power of two near max|values| (exact to divide by), 1 for all zeros."""
-    peak = float(np.max(np.abs(values)))
-    if peak == 0.0:
-        return 1.0
-    return float(2.0 ** np.round(np.log2(peak)))
+    core: FloatArray
+    coefficients: tuple[FloatArray | None, ...]
+    scores: dict[tuple[int, ...], float]
 
 
 def identify(
+    core: PlayCore,
+    terms: Sequence[Term],
     x: FloatArray,
     y: FloatArray,
-    thresholds: FloatArray,
+    t: FloatArray | None,
+    initial_state: FloatArray,
     *,
-    dt: FloatArray | None = None,
-    min_slope: float = 1e-3,
-    initial_state: FloatArray | None = None,
-) -> LinearSolution:
-    """Weights, offset (and growth rate if ``dt`` is given) for checked inputs.
+    min_slope: float,
+    subsets: Sequence[tuple[int, ...]] | None = None,
+    holdout: float = 0.3,
+) -> Identification:
+    """Identify a core and terms jointly from checked inputs (the one fit path).
 
-    The operators start from ``initial_state`` (input units), by default at
-    rest at ``x[0]``. ``min_slope`` is relative to the
-    mean slope ``span(y) / span(x)``. Input and output are first divided by
-    powers of two near their peaks, so the solve is the same at any scale
-    (volts or kilovolts, coulombs or microcoulombs).
+    Parameters
+    ----------
+    core : PlayCore
+        The hysteresis core.
+    terms : sequence of Term
+        Bound terms (see :meth:`Term.bind`); with ``subsets``, every candidate.
+    x, y : ndarray, shape (N,)
+        Input (V) and output.
+    t : ndarray, shape (N,) or None
+        Sample times (s); needed by rate-dependent terms.
+    initial_state : ndarray, shape (n,)
+        Operator states before the first sample (input units).
+    min_slope : float
+        Lower bound of every loading-curve slope, relative to the mean slope
+        ``span(y) / span(x)``.
+    subsets : sequence of tuple of int, optional
+        Term subsets (indices into ``terms``) to choose from: each is fitted
+        on the first ``1 - holdout`` of the record and scored on the rest (the
+        model running through the whole record); the best, where a larger
+        subset must beat a smaller one by 0.1 %, is refitted on everything.
+        Default: all terms, no selection.
+    holdout : float, default 0.3
+        Fraction of the record held out for the selection.
+
+    Returns
+    -------
+    Identification
+
+    Raises
+    ------
+    InsufficientDataError
+        If the record has no more samples than parameters.
     """
-    sx = _power_of_two_scale(x)
-    sy = _power_of_two_scale(y)
-    xs, ys, thr = x / sx, y / sy, thresholds / sx
-    span_x, span_y = float(np.ptp(xs)), float(np.ptp(ys))
-    mean_slope = span_y / span_x if span_x > 1e-12 and span_y > 1e-12 else 1.0
-    z0 = np.full(thr.size, xs[0]) if initial_state is None else initial_state / sx
-    eqs = NormalEquations.accumulate(xs, ys, thr, z0, dt=dt)
-    sol = solve_pi(eqs, min_slope=min_slope * mean_slope, growth=dt is not None)
-    return LinearSolution(
-        weights=sol.weights * (sy / sx),
-        offset=sol.offset * sy,
-        growth_rate=sol.growth_rate * (sy / sx),
+    n = core.n_operators
+    sx, sy = _power_of_two(x), _power_of_two(y)
+    ys = y / sy
+    y_ref = float(ys[0])  # centred: keeps y'y, and the selection's residuals, well conditioned
+    col_scale = np.concatenate(
+        [np.full(n, sx), [1.0], *[np.full(term.width, sx**term.input_degree) for term in terms]]
     )
+    span_x, span_y = float(np.ptp(x)) / sx, float(np.ptp(y)) / sy
+    mean_slope = span_y / span_x if span_x > 1e-12 and span_y > 1e-12 else 1.0
+    offsets = np.cumsum([n + 1, *[term.width for term in terms]])
+    term_cols = [
+        np.arange(a - w, a) for a, w in zip(offsets[1:], [t.width for t in terms], strict=True)
+    ]
+    lowers = [
+        term.lower_bounds() * col_scale[c] / sy for term, c in zip(terms, term_cols, strict=True)
+    ]
+    candidates = [tuple(range(len(terms)))] if subsets is None else list(subsets)
+    split = int((1.0 - holdout) * x.size) if len(candidates) > 1 else x.size
+    edges = [0, split, x.size] if 0 < split < x.size else [0, x.size]
+    parts = _accumulate(core, terms, x, ys - y_ref, t, initial_state, col_scale, edges)
+    whole = parts[0] if len(parts) == 1 else parts[0] + parts[1]
+
+    def columns_of(subset: tuple[int, ...]) -> FloatArray:
+        return np.concatenate([np.arange(n + 1), *[term_cols[j] for j in subset]]).astype(int)
+
+    def solve(eqs: NormalEquations, subset: tuple[int, ...]) -> FloatArray:
+        cols = columns_of(subset)
+        p = cols.size
+        if eqs.n_samples <= p:
+            msg = (
+                f"Identifying {p} parameters ({n} operator weights, the offset"
+                f"{', ' + ', '.join(terms[j].kind for j in subset) if subset else ''}) needs "
+                f"more than {p} samples. Got {eqs.n_samples}."
+            )
+            raise InsufficientDataError(msg)
+        lower = np.concatenate(
+            [np.full(n, min_slope * mean_slope), [-np.inf], *[lowers[j] for j in subset]]
+        )
+        m = core.slope_map(p)
+        g = eqs.gram[np.ix_(cols, cols)]
+        return np.asarray(m @ _bounded_lstsq(m.T @ g @ m, m.T @ eqs.rhs[cols], lower))
+
+    scores: dict[tuple[int, ...], float] = {}
+    best = candidates[0]
+    if len(candidates) > 1 and len(parts) == 2:
+        best_err = np.inf
+        for subset in candidates:
+            try:
+                beta = solve(parts[0], subset)
+            except InsufficientDataError:
+                continue
+            err = float(np.sqrt(parts[1].sse(beta, columns_of(subset)) / parts[1].n_samples)) * sy
+            scores[subset] = err
+            if err < best_err * (1 - 1e-3):  # a term must earn its place
+                best, best_err = subset, err
+    beta = solve(whole, best) / col_scale[columns_of(best)] * sy
+    beta[n] += y_ref * sy
+    coefficients: list[FloatArray | None] = [None] * len(terms)
+    pos = n + 1
+    for j in best:
+        coefficients[j] = beta[pos : pos + terms[j].width].copy()
+        pos += terms[j].width
+    return Identification(beta[: n + 1].copy(), tuple(coefficients), scores)

@@ -26,7 +26,16 @@ from numpy.typing import ArrayLike
 from ._validation import FloatArray
 from .errors import DataFileError
 
-__all__ = ["DataSpec", "Recording", "Table", "read_recording", "read_table", "write_table"]
+__all__ = [
+    "DataSpec",
+    "Recording",
+    "Table",
+    "atomic_write",
+    "atomic_write_text",
+    "read_recording",
+    "read_table",
+    "write_table",
+]
 
 CSV_SUFFIXES = {".csv", ".tsv", ".txt", ".dat", ""}
 
@@ -461,16 +470,70 @@ class DataSpec:
 
 
 # ------------------------------------------------------------------ writers
-def _atomic(path: Path, write: Callable[[Path], None], suffix: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
+def _umask() -> int:
+    """The process umask (read without changing it where the OS tells it)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)  # elsewhere: read it by setting it, and put it back at once
+    os.umask(mask)
+    return mask
+
+
+def atomic_write(path: str | os.PathLike[str], write: Callable[[Path], None]) -> Path:
+    """Write a file through ``write(tmp)`` on a temporary beside it, then rename it into place.
+
+    A failure leaves no partial file. The file gets the permissions any new
+    file would get (0666 less the umask), not the temporary file's 0600, so
+    colleagues on a shared drive can read it.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The destination.
+    write : callable
+        Writes the content to the temporary path it is given.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=p.suffix, dir=p.parent)
     os.close(fd)
     try:
         write(Path(tmp))
-        os.replace(tmp, path)
+        os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, p)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+    return p
+
+
+def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
+    """Write ``text`` (UTF-8) atomically; see :func:`atomic_write`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    text : str
+
+    Returns
+    -------
+    Path
+    """
+
+    def write(tmp: Path) -> None:
+        tmp.write_text(text, encoding="utf-8")
+
+    return atomic_write(path, write)
 
 
 def write_table(path: str | os.PathLike[str], columns: Mapping[str, ArrayLike]) -> Path:
@@ -490,7 +553,7 @@ def write_table(path: str | os.PathLike[str], columns: Mapping[str, ArrayLike]) 
             with open(tmp, "wb") as fh:
                 np.savez(fh, **arrays)  # type: ignore[arg-type]
 
-        _atomic(p, write_npz, ".npz")
+        atomic_write(p, write_npz)
         return p
 
     def write_csv(tmp: Path) -> None:
@@ -501,7 +564,7 @@ def write_table(path: str | os.PathLike[str], columns: Mapping[str, ArrayLike]) 
             writer.writerow([repr(float(v)) for v in row])
         tmp.write_text(buf.getvalue(), encoding="utf-8")
 
-    _atomic(p, write_csv, ".csv")
+    atomic_write(p, write_csv)
     return p
 
 

@@ -1,223 +1,1057 @@
-r"""Estimators: the classical and the active Prandtl-Ishlinskii models.
+r"""Models: a hysteresis core plus terms, identified by one fit path.
 
-Both follow the scikit-learn estimator contract without inheriting from it:
-``__init__`` only stores its arguments, :meth:`fit` checks them, identifies the
-parameters and returns ``self``; learned values end in ``_``; using a model
-before :meth:`fit` raises :class:`~piezohyst.errors.NotFittedError`.
+Every model is a :class:`HysteresisModel`: the Prandtl-Ishlinskii play
+operators (the core, :mod:`piezohyst.cores`) plus terms
+(:mod:`piezohyst.terms`) — growth terms that model charge which moves nothing
+and are removed before compensating (the paper's :math:`R\int x\,dt`, eq.
+13-19), and shape terms that stay (asymmetry, creep). The presets are thin
+constructors over the same fit, propagate, inverse and file code:
+
+==================  ======================================================
+:class:`ClassicalPI`  the core alone (eq. 11-12)
+:class:`ActivePI`     the core plus the paper's integral (eq. 13-16)
+:class:`GeneralizedPI` the core plus asymmetry, creep and chosen growth terms
+:class:`PIModel`      the core plus any terms, custom ones included
+==================  ======================================================
+
+They follow the scikit-learn estimator contract without inheriting from it:
+``__init__`` only stores its arguments (all but the first keyword-only);
+``get_params(deep=True)``/``set_params`` are read from ``__init__``, so
+``sklearn.base.clone`` works; :meth:`~HysteresisModel.fit` checks the
+parameters, identifies and returns ``self``; learned values end in ``_``;
+using a model before ``fit`` raises :class:`~piezohyst.errors.NotFittedError`;
+:meth:`~HysteresisModel.score` is scikit-learn's R².
 
 Initial state
 -------------
-A fitted model stores the operator states it started the training record from:
-each play operator *at rest at the record's first input* (``z_i = x[0]``), i.e.
-the actuator sat at its first voltage with its memory wiped. On another record
-the paper's eq. 10 applies: the stored state is clamped into
-``[x0 - r_i, x0 + r_i]`` at the first sample. For a unipolar drive starting at
-0 V this is the paper's :math:`y_0 = 0`. Pass ``state=`` to
-:meth:`~ClassicalPI.propagate` to start from anything else.
+A fitted model starts each operator *at rest at the training record's first
+input* (``z_i = x[0]``) unless told otherwise; growth integrals start at 0 and
+creep lags settled at the first input. :class:`ModelState` is the named state
+between blocks; :meth:`~HysteresisModel.rest_state` and
+:meth:`~HysteresisModel.state_after` build one.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
+import inspect
+import itertools
 import math
-import os
-import tempfile
-from pathlib import Path
-from typing import Any, ClassVar
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar, Self
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from . import _kernels
 from ._validation import FloatArray, as_signal, as_time, check_float, check_int, same_length
-from .errors import (
-    ModelFileError,
-    NotFittedError,
-    ParameterError,
-    PiezohystError,
-    ShapeError,
-    TimeAxisError,
-)
+from .cores import PlayCore
+from .errors import NotFittedError, NotInvertibleError, ParameterError, ShapeError, TimeAxisError
 from .hysteresis import PIHysteresis, Propagation
-from .identification import default_thresholds, identify, time_steps
+from .identification import BLOCK, block_dt, default_thresholds, identify, term_columns
 from .metrics import rmse
+from .terms import (
+    AbsIntegral,
+    Asymmetry,
+    Creep,
+    Integral,
+    LagShape,
+    StaticShape,
+    Term,
+    TimeTerm,
+    make_term,
+)
 
-__all__ = ["ActivePI", "ClassicalPI", "load_model"]
+__all__ = [
+    "GROWTH_TERMS",
+    "ActivePI",
+    "ClassicalPI",
+    "GeneralizedPI",
+    "HysteresisModel",
+    "InverseSpec",
+    "ModelState",
+    "PIModel",
+    "model_class",
+    "model_names",
+]
 
-SCHEMA = "piezohyst-model"
-SCHEMA_VERSION = 1
+GROWTH_TERMS = ("integral", "time", "abs_integral")
 _REGISTRY: dict[str, type[HysteresisModel]] = {}
 
 
-def _register(cls: type[HysteresisModel]) -> type[HysteresisModel]:
-    _REGISTRY[cls.__name__] = cls
-    return cls
+def model_class(name: str) -> type[HysteresisModel]:
+    """The model class of a CLI name (``"active-pi"``) or class name (``"ActivePI"``).
+
+    Parameters
+    ----------
+    name : str
+
+    Returns
+    -------
+    type
+
+    Raises
+    ------
+    ParameterError
+        For an unknown name; the message lists the known ones.
+    """
+    for cls in _REGISTRY.values():
+        if name in (cls.__name__, cls.cli_name):
+            return cls
+    msg = f"unknown model {name!r}; choose one of: {', '.join(model_names())}"
+    raise ParameterError(msg)
+
+
+def model_names() -> tuple[str, ...]:
+    """CLI names of every model that can be fitted from a file (``--model``).
+
+    Returns
+    -------
+    tuple of str
+    """
+    return tuple(cls.cli_name for cls in _REGISTRY.values() if cls.cli_name)
+
+
+@dataclass(frozen=True)
+class ModelState:
+    """The state of a model between two blocks of samples.
+
+    Attributes
+    ----------
+    operators : ndarray, shape (n,)
+        Play-operator states (input units, e.g. V).
+    terms : tuple of ndarray
+        One state per term of the fitted model (see the model's
+        :meth:`~HysteresisModel.state_names`): integrals in input unit x s,
+        elapsed time in s, creep lags in input units.
+    t_last : float or None
+        Time (s) of the last sample run, None before any (or for a
+        rate-independent model run without times).
+    """
+
+    operators: FloatArray
+    terms: tuple[FloatArray, ...] = ()
+    t_last: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON data.
+
+        Returns
+        -------
+        dict
+        """
+        return {
+            "operators": self.operators.tolist(),
+            "terms": [s.tolist() for s in self.terms],
+            "t_last": self.t_last,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> ModelState:
+        """Inverse of :meth:`to_dict`.
+
+        Parameters
+        ----------
+        data : dict
+
+        Returns
+        -------
+        ModelState
+        """
+        t_last = data.get("t_last")
+        return cls(
+            as_signal(data["operators"], "operators").copy(),
+            tuple(as_signal(s, "terms", allow_empty=True).copy() for s in data.get("terms", [])),
+            None if t_last is None else float(t_last),
+        )
+
+
+@dataclass(frozen=True)
+class InverseSpec:
+    """What a compensator must invert: the public description of a model's hysteresis part.
+
+    Attributes
+    ----------
+    operator : PIHysteresis
+        Play operators, weights, offset and initial state.
+    static : StaticShape or None
+        A kept memoryless monotone term (asymmetry).
+    lags : LagShape or None
+        Kept first-order lags (creep).
+    input_range : tuple of float
+        The training input range (V); NaN when unknown.
+    input_unit, output_unit : str
+        The model's units.
+    """
+
+    operator: PIHysteresis
+    static: StaticShape | None
+    lags: LagShape | None
+    input_range: tuple[float, float]
+    input_unit: str
+    output_unit: str
+
+    @property
+    def analytic(self) -> bool:
+        """True when eq. 18 inverts it exactly (no kept term beside the play operators)."""
+        return self.static is None and self.lags is None
+
+
+def _check_unit(value: object, name: str, owner: str) -> str:
+    if not isinstance(value, str) or not value:
+        msg = f"The '{name}' parameter of {owner} must be a non-empty str. Got {value!r} instead."
+        raise ParameterError(msg)
+    return value
 
 
 class HysteresisModel:
-    """Common contract of every piezohyst model (fit, predict, save, load)."""
+    """Base of every model: the fit, run, inverse and file contract (see the module doc).
 
-    rate_dependent: ClassVar[bool] = False
-    _fitted_attribute: ClassVar[str] = "operator_"
+    Subclasses set ``cli_name``, store their settings in ``__init__`` and
+    return the terms to fit from :meth:`_terms_to_fit`; everything else is here.
+    """
 
+    cli_name: ClassVar[str] = ""
+    selection_: dict[str, float]
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        _REGISTRY[cls.__name__] = cls
+
+    # Settings every model has; subclasses add their own.
+    n_operators: int
+    thresholds: ArrayLike | None
+    min_slope: float
+    input_unit: str
+    output_unit: str
+
+    # ------------------------------------------------------ sklearn contract
+    @classmethod
+    def _param_names(cls) -> list[str]:
+        sig = inspect.signature(cls.__init__)
+        return [p.name for p in sig.parameters.values() if p.name != "self"]
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """The constructor arguments, as given (scikit-learn's contract).
+
+        Parameters
+        ----------
+        deep : bool, default True
+            Accepted for scikit-learn; a model holds no sub-estimators.
+
+        Returns
+        -------
+        dict
+            Name to value, read from ``__init__``'s signature.
+        """
+        return {name: getattr(self, name) for name in self._param_names()}
+
+    def set_params(self, **params: Any) -> Self:
+        """Set constructor arguments (scikit-learn's contract); checked at the next ``fit``.
+
+        Parameters
+        ----------
+        **params
+            Names from :meth:`get_params`; any other name raises.
+
+        Returns
+        -------
+        HysteresisModel
+            ``self``.
+        """
+        valid = self._param_names()
+        for name, value in params.items():
+            if name not in valid:
+                msg = (
+                    f"Invalid parameter {name!r} for {type(self).__name__}. "
+                    f"Valid parameters are: {valid}."
+                )
+                raise ParameterError(msg)
+            setattr(self, name, value)
+        return self
+
+    def __repr__(self) -> str:
+        sig = inspect.signature(type(self).__init__)
+        shown = [
+            f"{k}={v!r}"
+            for k, v in self.get_params().items()
+            if not _same(v, sig.parameters[k].default)
+        ]
+        return f"{type(self).__name__}({', '.join(shown)})"
+
+    # ---------------------------------------------------------- parameters
+    def _terms_to_fit(self, x: FloatArray) -> tuple[list[Term], list[tuple[int, ...]] | None]:
+        """Bound terms to fit and, for a selection, the subsets to choose from."""
+        raise NotImplementedError
+
+    def _thresholds(self, x: FloatArray) -> FloatArray:
+        owner = type(self).__name__
+        if self.thresholds is None:
+            n = check_int(self.n_operators, "n_operators", owner, 1, 1000)
+            return default_thresholds(x, n)
+        try:
+            thr = as_signal(self.thresholds, "thresholds")
+        except ValueError:
+            thr = np.array([np.nan])
+        if (
+            thr.size > 1000
+            or not np.all(np.isfinite(thr))
+            or thr[0] != 0.0
+            or (thr.size > 1 and np.any(np.diff(thr) <= 0))
+        ):
+            msg = (
+                f"The 'thresholds' parameter of {owner} must be 1 to 1000 strictly increasing "
+                f"values starting at 0. Got {thr.tolist()[:8]}{'...' if thr.size > 8 else ''}."
+            )
+            raise ParameterError(msg)
+        return thr
+
+    def _check_common(self) -> None:
+        owner = type(self).__name__
+        _check_unit(self.input_unit, "input_unit", owner)
+        _check_unit(self.output_unit, "output_unit", owner)
+        check_float(self.min_slope, "min_slope", owner, 0.0, 1.0, low_open=True)
+
+    # ------------------------------------------------------------------ fit
+    def fit(
+        self,
+        x: ArrayLike,
+        y: ArrayLike,
+        t: ArrayLike | None = None,
+        *,
+        initial_state: ArrayLike | None = None,
+    ) -> Self:
+        """Identify the core and every term jointly from input ``x`` and output ``y``.
+
+        Parameters
+        ----------
+        x : array_like, shape (N,)
+            Input (V).
+        y : array_like, shape (N,)
+            Output (C, or m for displacement data).
+        t : array_like, shape (N,), optional
+            Sample times (s), strictly increasing, may be non-uniform. Required
+            when a term is rate dependent; checked and otherwise unused.
+        initial_state : array_like, shape (n,), optional
+            Operator states (V) before the first sample when the record
+            continues a known history (:func:`~piezohyst.identification.history_state`);
+            default: at rest at ``x[0]``.
+
+        Returns
+        -------
+        HysteresisModel
+            ``self``, fitted.
+
+        Raises
+        ------
+        ParameterError
+            A setting is out of its documented range.
+        InsufficientDataError
+            Fewer samples than parameters.
+        """
+        self._check_common()
+        xs = as_signal(x, "x")
+        ys = as_signal(y, "y")
+        same_length(xs, ys, "x", "y")
+        thr = self._thresholds(xs)
+        terms, subsets = self._terms_to_fit(xs)
+        rate = any(term.rate_dependent for term in terms)
+        ts = as_time(t, xs.size, required=rate, owner=type(self).__name__)
+        z0 = self._initial_operators(thr, xs, initial_state)
+        self._solve(PlayCore(thr), terms, subsets, xs, ys, ts if rate else None, z0)
+        self._refine(xs, ys, ts if rate else None, initial_state)
+        self.input_range_ = (float(xs.min()), float(xs.max()))
+        self.rmse_ = rmse(self.predict(xs, t=ts), ys)
+        self.nrmse_ = self.rmse_ / max(float(np.ptp(ys)), 1e-300)
+        return self
+
+    def _initial_operators(
+        self, thr: FloatArray, xs: FloatArray, initial_state: ArrayLike | None
+    ) -> FloatArray:
+        if initial_state is None:
+            return np.full(thr.size, xs[0])
+        z0 = as_signal(initial_state, "initial_state")
+        if z0.size != thr.size:
+            msg = f"'initial_state' must hold one state per operator ({thr.size}). Got {z0.size}."
+            raise ShapeError(msg)
+        return z0
+
+    def _solve(
+        self,
+        core: PlayCore,
+        terms: list[Term],
+        subsets: list[tuple[int, ...]] | None,
+        x: FloatArray,
+        y: FloatArray,
+        t: FloatArray | None,
+        z0: FloatArray,
+    ) -> None:
+        sol = identify(core, terms, x, y, t, z0, min_slope=float(self.min_slope), subsets=subsets)
+        kept = [j for j, c in enumerate(sol.coefficients) if c is not None]
+        self._set_fitted(
+            core.build(sol.core, z0),
+            tuple(terms[j] for j in kept),
+            tuple(np.asarray(sol.coefficients[j]) for j in kept),
+        )
+        self.selection_ = {self._subset_label(terms, s): e for s, e in sol.scores.items()}
+
+    @staticmethod
+    def _subset_label(terms: Sequence[Term], subset: tuple[int, ...]) -> str:
+        removed = [terms[j].kind for j in subset if terms[j].removed]
+        return "+".join(removed) or "none"
+
+    def _refine(
+        self, x: FloatArray, y: FloatArray, t: FloatArray | None, initial_state: ArrayLike | None
+    ) -> None:
+        """Optional nonlinear refinement after the linear solve (none by default)."""
+
+    def _set_fitted(
+        self, core: PIHysteresis, terms: tuple[Term, ...], coefs: tuple[FloatArray, ...]
+    ) -> None:
+        self.operator_ = core
+        self.terms_ = terms
+        self.coefs_ = coefs
+        self.selection_ = {}
+        self.rmse_ = self.nrmse_ = math.nan  # set by fit; unknown for a model built by hand
+        self.input_range_ = (math.nan, math.nan)
+
+    # ---------------------------------------------------- fitted attributes
     def _check_fitted(self) -> None:
-        if not hasattr(self, self._fitted_attribute):
+        if not hasattr(self, "operator_"):
             msg = (
                 f"This {type(self).__name__} instance is not fitted yet. Call 'fit' with "
                 "input and output data first, or load a saved model with ph.load_model."
             )
             raise NotFittedError(msg)
 
-    # The subclasses fill these in.
-    def get_params(self) -> dict[str, Any]:
-        raise NotImplementedError
+    @property
+    def is_fitted(self) -> bool:
+        """True once :meth:`fit` ran (or the model was loaded)."""
+        return hasattr(self, "operator_")
 
-    def _fitted_dict(self) -> dict[str, Any]:
-        raise NotImplementedError
-
-    def _set_fitted(self, data: dict[str, Any]) -> None:
-        raise NotImplementedError
-
-    def __repr__(self) -> str:
-        args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
-        return f"{type(self).__name__}({args})"
-
-    # ------------------------------------------------------------ persistence
-    def to_dict(self) -> dict[str, Any]:
-        """The fitted model as plain JSON data, with schema version and checksum."""
+    @property
+    def thresholds_(self) -> FloatArray:
+        """Play thresholds (input units)."""
         self._check_fitted()
-        from . import __version__
+        return self.operator_.thresholds
 
-        body: dict[str, Any] = {
-            "format": SCHEMA,
-            "schema_version": SCHEMA_VERSION,
-            "model": type(self).__name__,
-            "piezohyst_version": __version__,
-            "params": self.get_params(),
-            "fitted": self._fitted_dict(),
+    @property
+    def weights_(self) -> FloatArray:
+        """Play weights (output per input unit)."""
+        self._check_fitted()
+        return self.operator_.weights
+
+    @property
+    def offset_(self) -> float:
+        """Output offset (output units)."""
+        self._check_fitted()
+        return self.operator_.offset
+
+    @property
+    def initial_state_(self) -> FloatArray:
+        """Operator states (input units) before the first training sample."""
+        self._check_fitted()
+        return self.operator_.initial_state
+
+    @property
+    def rate_dependent_(self) -> bool:
+        """True when a fitted term needs the sample times."""
+        self._check_fitted()
+        return any(term.rate_dependent for term in self.terms_)
+
+    def coefficients(self) -> dict[str, tuple[float, str]]:
+        """Every term coefficient with its unit, by label (``"integral"``, ``"creep[1 s]"``).
+
+        Returns
+        -------
+        dict
+            Label to (value, unit).
+        """
+        self._check_fitted()
+        out: dict[str, tuple[float, str]] = {}
+        for term, coef in zip(self.terms_, self.coefs_, strict=True):
+            units = term.coefficient_units(self.input_unit, self.output_unit)
+            for label, c, u in zip(term.labels(), coef, units, strict=True):
+                out[label] = (float(c), u)
+        return out
+
+    def growth_coefficients(self) -> dict[str, tuple[float, str]]:
+        """Coefficients of the growth terms only (what compensation removes).
+
+        Returns
+        -------
+        dict
+            Label to (value, unit).
+        """
+        self._check_fitted()
+        labels = {lab for term in self.terms_ if term.removed for lab in term.labels()}
+        return {k: v for k, v in self.coefficients().items() if k in labels}
+
+    def state_names(self) -> tuple[tuple[str, ...], ...]:
+        """Names of each fitted term's state slots, in :attr:`ModelState.terms` order.
+
+        Returns
+        -------
+        tuple of tuple of str
+        """
+        self._check_fitted()
+        return tuple(term.state_names for term in self.terms_)
+
+    # --------------------------------------------------------------- state
+    def rest_state(self, x0: float) -> ModelState:
+        """An actuator resting at input ``x0`` with its memory wiped, no time run yet.
+
+        Parameters
+        ----------
+        x0 : float
+            Input (V).
+
+        Returns
+        -------
+        ModelState
+        """
+        self._check_fitted()
+        return ModelState(
+            np.full(self.operator_.n_operators, float(x0)),
+            tuple(term.rest_state(float(x0)) for term in self.terms_),
+            None,
+        )
+
+    def state_after(self, history: ArrayLike, t: ArrayLike | None = None) -> ModelState:
+        """The state after running ``history`` from the model's initial state.
+
+        Parameters
+        ----------
+        history : array_like
+            Earlier input samples (V).
+        t : array_like, optional
+            Their times (s), for rate-dependent models.
+
+        Returns
+        -------
+        ModelState
+        """
+        return self.propagate(history, t).state
+
+    def _start(self, state: ModelState | ArrayLike | None, x0: float) -> ModelState:
+        n = self.operator_.n_operators
+        if state is None:
+            return ModelState(
+                self.operator_.initial_state.copy(),
+                tuple(term.rest_state(x0) for term in self.terms_),
+                None,
+            )
+        if not isinstance(state, ModelState):  # operator states only
+            z = as_signal(state, "state").copy()
+            if z.size != n:
+                msg = (
+                    f"'state' must be a ModelState or {n} operator states (V). Got {z.size} values."
+                )
+                raise ShapeError(msg)
+            return ModelState(z, tuple(term.rest_state(x0) for term in self.terms_), None)
+        z = as_signal(state.operators, "state.operators").copy()
+        if z.size != n or len(state.terms) != len(self.terms_):
+            msg = (
+                f"'state' does not match this model: {n} operators and {len(self.terms_)} "
+                f"term states expected, got {z.size} and {len(state.terms)}."
+            )
+            raise ShapeError(msg)
+        terms = []
+        for term, s in zip(self.terms_, state.terms, strict=True):
+            arr = as_signal(s, "state.terms", allow_empty=True).copy()
+            if arr.size != len(term.state_names):
+                msg = f"the state of term {term.kind!r} needs {len(term.state_names)} values."
+                raise ShapeError(msg)
+            terms.append(arr)
+        return ModelState(z, tuple(terms), state.t_last)
+
+    # ------------------------------------------------------------- running
+    def propagate(
+        self,
+        x: ArrayLike,
+        t: ArrayLike | None = None,
+        state: ModelState | ArrayLike | None = None,
+    ) -> Propagation[ModelState]:
+        """Output and final state; chunks, each passed the last state, equal one call.
+
+        Parameters
+        ----------
+        x : array_like, shape (N,)
+            Input (V).
+        t : array_like, shape (N,), optional
+            Times (s); required by rate-dependent models, continuing after
+            ``state.t_last``.
+        state : ModelState or array_like, optional
+            Where to start: a :class:`ModelState`, or the operator states alone
+            (V; terms at rest). Default: the model's initial state.
+
+        Returns
+        -------
+        Propagation
+            ``output`` (N,) in output units and the final :class:`ModelState`.
+        """
+        return self._run(x, t, state, removed_only=False)
+
+    def _run(
+        self,
+        x: ArrayLike,
+        t: ArrayLike | None,
+        state: ModelState | ArrayLike | None,
+        *,
+        removed_only: bool,
+    ) -> Propagation[ModelState]:
+        self._check_fitted()
+        xs = as_signal(x, "x", allow_empty=True)
+        rate = self.rate_dependent_
+        ts = as_time(t, xs.size, required=rate and xs.size > 0, owner=type(self).__name__)
+        st = self._start(state, float(xs[0]) if xs.size else 0.0)
+        if xs.size == 0:
+            return Propagation(xs.copy(), st)
+        if rate and ts is not None and st.t_last is not None and ts[0] <= st.t_last:
+            msg = (
+                f"'t' must continue after the state's last time {st.t_last!r}. "
+                f"Got t[0]={float(ts[0])!r}."
+            )
+            raise TimeAxisError(msg)
+        if removed_only:
+            out = np.zeros_like(xs)
+            z = st.operators
+        else:
+            out, z = self.operator_.propagate(xs, st.operators)
+        use = [j for j, term in enumerate(self.terms_) if term.removed or not removed_only]
+        terms = [self.terms_[j] for j in use]
+        states = [st.terms[j] for j in use]
+        if terms:
+            coef = np.concatenate([self.coefs_[j] for j in use])
+            t_run = ts if rate else None
+            cols = np.empty((min(BLOCK, xs.size), coef.size))
+            for start in range(0, xs.size, BLOCK):
+                stop = min(start + BLOCK, xs.size)
+                block = cols[: stop - start]
+                dt = block_dt(t_run, start, stop, st.t_last)
+                ts_b = None if t_run is None else t_run[start:stop]
+                term_columns(terms, xs[start:stop], ts_b, dt, states, block)
+                out[start:stop] += block @ coef
+        t_last = float(ts[-1]) if (rate and ts is not None) else st.t_last
+        return Propagation(out, ModelState(z, st.terms, t_last))
+
+    def predict(
+        self, x: ArrayLike, t: ArrayLike | None = None, state: ModelState | ArrayLike | None = None
+    ) -> FloatArray:
+        """Modelled output for input ``x`` (see :meth:`propagate`).
+
+        Parameters
+        ----------
+        x : array_like, shape (N,)
+            Input (V).
+        t : array_like, shape (N,), optional
+            Times (s), required by rate-dependent models.
+        state : ModelState or array_like, optional
+            Start state; default the model's initial state.
+
+        Returns
+        -------
+        ndarray, shape (N,)
+            Output (output units).
+        """
+        return self.propagate(x, t, state).output
+
+    def growth(
+        self, x: ArrayLike, t: ArrayLike | None = None, state: ModelState | ArrayLike | None = None
+    ) -> FloatArray:
+        r"""The growth terms alone (output units): what :meth:`remove_growth` subtracts.
+
+        For :class:`ActivePI` this is :math:`R\,y_2` (eq. 19).
+
+        Parameters
+        ----------
+        x : array_like, shape (N,)
+            Input (V).
+        t : array_like, shape (N,), optional
+            Times (s).
+        state : ModelState or array_like, optional
+            Start state.
+
+        Returns
+        -------
+        ndarray, shape (N,)
+            Zeros for a model without growth terms.
+        """
+        return self._run(x, t, state, removed_only=True).output
+
+    def remove_growth(self, x: ArrayLike, y: ArrayLike, t: ArrayLike | None = None) -> FloatArray:
+        r"""Eq. 19: the measured output minus the identified growth, :math:`y - R y_2`.
+
+        For a charge record this is the pure capacitor charge (Fig. 8).
+
+        Parameters
+        ----------
+        x : array_like, shape (N,)
+            Input (V).
+        y : array_like, shape (N,)
+            Measured output.
+        t : array_like, shape (N,), optional
+            Times (s).
+
+        Returns
+        -------
+        ndarray, shape (N,)
+        """
+        ys = as_signal(y, "y")
+        g = self.growth(x, t)
+        same_length(g, ys, "x", "y")
+        return np.asarray(ys - g)
+
+    def score(self, x: ArrayLike, y: ArrayLike, t: ArrayLike | None = None) -> float:
+        """Coefficient of determination R² of the prediction (scikit-learn's ``score``).
+
+        Parameters
+        ----------
+        x, y : array_like, shape (N,)
+            Input (V) and measured output.
+        t : array_like, shape (N,), optional
+            Times (s).
+
+        Returns
+        -------
+        float
+            ``1 - SS_res / SS_tot``: 1 is perfect, 0 is predicting the mean.
+        """
+        ys = as_signal(y, "y")
+        pred = self.predict(x, t)
+        same_length(pred, ys, "x", "y")
+        ss_tot = float(np.sum((ys - ys.mean()) ** 2))
+        ss_res = float(np.sum((ys - pred) ** 2))
+        return 1.0 - ss_res / ss_tot if ss_tot > 0 else (1.0 if ss_res == 0 else -math.inf)
+
+    # -------------------------------------------------------------- inverse
+    def inversion(self) -> InverseSpec:
+        """What a compensator must invert: the hysteresis part, growth terms dropped.
+
+        Returns
+        -------
+        InverseSpec
+
+        Raises
+        ------
+        ParameterError
+            If a kept term is neither a static shape nor lags (nothing can invert it).
+        """
+        self._check_fitted()
+        static: StaticShape | None = None
+        lags: LagShape | None = None
+        for term, coef in zip(self.terms_, self.coefs_, strict=True):
+            if term.removed:
+                continue
+            s, lag = term.static_shape(coef), term.lag_shape(coef)
+            if s is not None and static is None:
+                static = s
+            elif lag is not None and lags is None:
+                lags = lag
+            else:
+                msg = (
+                    f"the {term.kind!r} term shapes the hysteresis but cannot be inverted: the "
+                    "compensator inverts play operators plus at most one static shape and one "
+                    "set of lags"
+                )
+                raise ParameterError(msg)
+        return InverseSpec(
+            self.operator_, static, lags, self.input_range_, self.input_unit, self.output_unit
+        )
+
+    @property
+    def hysteresis_(self) -> HysteresisModel:
+        """The model without its growth terms (eq. 19's pure hysteresis), as a fitted model."""
+        self._check_fitted()
+        kept = [(tm, c) for tm, c in zip(self.terms_, self.coefs_, strict=True) if not tm.removed]
+        model: HysteresisModel
+        if kept:
+            model = PIModel(
+                self.operator_.n_operators,
+                terms=tuple(tm for tm, _ in kept),
+                min_slope=self.min_slope,
+                input_unit=self.input_unit,
+                output_unit=self.output_unit,
+            )
+        else:
+            model = ClassicalPI(
+                self.operator_.n_operators,
+                min_slope=self.min_slope,
+                input_unit=self.input_unit,
+                output_unit=self.output_unit,
+            )
+        model._set_fitted(self.operator_, tuple(tm for tm, _ in kept), tuple(c for _, c in kept))
+        model.input_range_ = self.input_range_
+        return model
+
+    def inverse(self) -> ClassicalPI:
+        """The analytic inverse (eq. 18) of the hysteresis part, as a fitted :class:`ClassicalPI`.
+
+        Its ``predict(desired_output)`` returns the input (V) that produces it
+        (growth terms dropped: leaked charge moves nothing).
+
+        Returns
+        -------
+        ClassicalPI
+
+        Raises
+        ------
+        NotInvertibleError
+            If the model keeps a term beside the play operators (asymmetry,
+            creep): use :class:`~piezohyst.Compensator`, which inverts it
+            exactly sample by sample; or if the weights violate eq. 18's
+            conditions.
+        """
+        spec = self.inversion()
+        if not spec.analytic:
+            msg = (
+                f"this {type(self).__name__} keeps asymmetry or creep terms, which have no "
+                "closed-form inverse; use ph.Compensator, which inverts them exactly sample by "
+                "sample"
+            )
+            raise NotInvertibleError(msg)
+        inv = ClassicalPI(
+            self.operator_.n_operators,
+            min_slope=self.min_slope,
+            input_unit=self.output_unit,
+            output_unit=self.input_unit,
+        )
+        inv._set_fitted(self.operator_.inverse(), (), ())
+        return inv
+
+    @classmethod
+    def from_operator(
+        cls,
+        op: PIHysteresis,
+        *,
+        terms: Sequence[Term] = (),
+        coefficients: Sequence[ArrayLike] = (),
+        input_unit: str = "V",
+        output_unit: str = "C",
+    ) -> HysteresisModel:
+        """A fitted model around given parameters (a known actuator, a test).
+
+        Parameters
+        ----------
+        op : PIHysteresis
+            The play operators, weights, offset and initial state.
+        terms : sequence of Term
+            Bound terms (settings fixed), e.g. ``(ph.terms.Integral(),)``.
+        coefficients : sequence of array_like
+            One array of coefficients per term.
+        input_unit, output_unit : str
+            Units recorded with the model.
+
+        Returns
+        -------
+        HysteresisModel
+            An instance of ``cls`` (``ClassicalPI.from_operator`` takes no terms).
+        """
+        if len(terms) != len(coefficients):
+            msg = f"one coefficient array per term: got {len(terms)} terms, {len(coefficients)}."
+            raise ShapeError(msg)
+        coefs = tuple(np.array(c, dtype=np.float64).reshape(-1) for c in coefficients)
+        for term, c in zip(terms, coefs, strict=True):
+            if c.size != term.width:
+                msg = f"the {term.kind!r} term takes {term.width} coefficients. Got {c.size}."
+                raise ShapeError(msg)
+        model = cls._bare(op.n_operators, input_unit, output_unit)
+        model._set_fitted(op, tuple(terms), coefs)
+        return model
+
+    @classmethod
+    def _bare(cls, n: int, input_unit: str, output_unit: str) -> HysteresisModel:
+        model = cls.__new__(cls)
+        defaults = {
+            p.name: p.default
+            for p in inspect.signature(cls.__init__).parameters.values()
+            if p.name != "self"
         }
-        body["checksum"] = _checksum(body)
-        return body
+        for name, value in defaults.items():
+            setattr(model, name, value)
+        model.n_operators = n
+        model.input_unit = input_unit
+        model.output_unit = output_unit
+        return model
+
+    # ---------------------------------------------------------- persistence
+    def params_to_json(self) -> dict[str, Any]:
+        """The constructor arguments as plain JSON data (separate from :meth:`get_params`).
+
+        Returns
+        -------
+        dict
+        """
+        return {name: _to_json(value) for name, value in self.get_params().items()}
+
+    @classmethod
+    def params_from_json(cls, data: dict[str, Any]) -> dict[str, Any]:
+        """Constructor arguments from :meth:`params_to_json` data.
+
+        Parameters
+        ----------
+        data : dict
+
+        Returns
+        -------
+        dict
+        """
+        return dict(data)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The fitted model as plain JSON data, with schema version and checksum.
+
+        Returns
+        -------
+        dict
+        """
+        from .persistence import model_to_dict
+
+        return model_to_dict(self)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> HysteresisModel:
-        """Rebuild a fitted model from :meth:`to_dict` output (checked)."""
-        return _model_from_dict(data, expected=cls)
+        """Rebuild a fitted model from :meth:`to_dict` data (checked).
 
-    def save(self, path: str | os.PathLike[str]) -> None:
-        """Write the model as JSON (never pickle); written atomically."""
-        text = json.dumps(self.to_dict(), indent=2, allow_nan=False)
-        atomic_write_text(Path(path), text + "\n")
+        Parameters
+        ----------
+        data : dict
+
+        Returns
+        -------
+        HysteresisModel
+        """
+        from .persistence import model_from_dict
+
+        return model_from_dict(data, expected=cls)
+
+    def save(self, path: str | Any) -> None:
+        """Write the model as JSON (never pickle), atomically.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+        """
+        from .persistence import save_model
+
+        save_model(self, path)
 
 
-def atomic_write_text(path: Path, text: str) -> None:
-    """Write to a temporary file beside ``path`` and rename it into place."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+def _same(a: object, b: object) -> bool:
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        return bool(a == b) if not isinstance(a, np.ndarray) else False
+    except (ValueError, TypeError):
+        return False
 
 
-def _checksum(body: dict[str, Any]) -> str:
-    content = {k: v for k, v in body.items() if k != "checksum"}
-    canon = json.dumps(content, sort_keys=True, separators=(",", ":"), allow_nan=False)
-    return "sha256:" + hashlib.sha256(canon.encode()).hexdigest()
+def _to_json(value: object) -> Any:
+    if isinstance(value, Term):
+        return {"kind": value.kind, "params": value.get_params()}
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, tuple | list):
+        return [_to_json(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
 
 
-def _reject_constant(name: str) -> float:
-    msg = f"the model file holds the non-number {name}"
-    raise ModelFileError(msg)
+def _term_from_json(value: object) -> str | Term:
+    if isinstance(value, dict):
+        return make_term(str(value.get("kind")), value.get("params") or {})
+    if isinstance(value, str):
+        return value
+    msg = f"a term must be a kind name or {{'kind', 'params'}}, got {value!r}"
+    raise ParameterError(msg)
 
 
-def load_model(path: str | os.PathLike[str]) -> HysteresisModel:
-    """Load a model written by ``save``.
+class PIModel(HysteresisModel):
+    """Prandtl-Ishlinskii play operators plus any terms, custom ones included.
 
-    Raises
-    ------
-    ModelFileError
-        If the file is missing, not JSON, of another schema or version, fails its
-        checksum (edited after saving: delete the ``checksum`` field to accept
-        a deliberate edit), or holds inconsistent parameters.
+    Parameters
+    ----------
+    n_operators : int, default 10
+        Play operators including the linear one, in [1, 1000]. Ignored when
+        ``thresholds`` is given.
+    terms : sequence of str or Term, default ()
+        Term kinds (``"integral"``, ``"time"``, ``"abs_integral"``,
+        ``"asymmetry"``, ``"creep"``) or :class:`~piezohyst.terms.Term`
+        instances, custom ones included.
+    thresholds : array_like, optional
+        Explicit thresholds (input units), strictly increasing from 0.
+        Default: :func:`~piezohyst.identification.default_thresholds`.
+    min_slope : float, default 1e-3
+        Lower bound of every loading-curve slope, as a fraction of the mean
+        slope ``span(y) / span(x)``; it guarantees the analytic inverse.
+    input_unit, output_unit : str, default "V", "C"
+        Units recorded with the model.
+
+    Attributes
+    ----------
+    operator_ : PIHysteresis
+        The identified play operators (thresholds, weights, offset, initial state).
+    thresholds_, weights_, offset_, initial_state_
+        Its parameters.
+    terms_ : tuple of Term
+        The fitted terms (data-dependent settings fixed).
+    coefs_ : tuple of ndarray
+        Their coefficients (see :meth:`coefficients` for labels and units).
+    rmse_, nrmse_ : float
+        Training fit: RMSE (output units) and RMSE / output span.
+    input_range_ : tuple of float
+        Smallest and largest training input (V).
+    selection_ : dict
+        Held-out RMSE of every term subset tried (models that select terms).
+
+    Examples
+    --------
+    >>> import numpy as np, piezohyst as ph
+    >>> rec = ph.simulate(duration=4.0)
+    >>> m = ph.PIModel(8, terms=("integral", "time")).fit(rec.voltage, rec.charge, t=rec.t)
+    >>> sorted(m.coefficients())
+    ['integral', 'time']
     """
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        msg = f"model file not found: {p}"
-        raise ModelFileError(msg) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        msg = f"cannot read model file {p}: {exc}"
-        raise ModelFileError(msg) from None
-    try:
-        data = json.loads(text, parse_constant=_reject_constant)
-    except json.JSONDecodeError as exc:
-        msg = f"{p} is not a piezohyst model (not valid JSON: {exc.msg} at line {exc.lineno})"
-        raise ModelFileError(msg) from None
-    try:
-        return _model_from_dict(data, expected=None)
-    except ModelFileError as exc:
-        msg = f"{p}: {exc}"
-        raise ModelFileError(msg) from None
+
+    cli_name = ""
+
+    def __init__(
+        self,
+        n_operators: int = 10,
+        *,
+        terms: Sequence[str | Term] = (),
+        thresholds: ArrayLike | None = None,
+        min_slope: float = 1e-3,
+        input_unit: str = "V",
+        output_unit: str = "C",
+    ) -> None:
+        self.n_operators = n_operators
+        self.terms = terms
+        self.thresholds = thresholds
+        self.min_slope = min_slope
+        self.input_unit = input_unit
+        self.output_unit = output_unit
+
+    def _terms_to_fit(self, x: FloatArray) -> tuple[list[Term], list[tuple[int, ...]] | None]:
+        if isinstance(self.terms, str | Term):
+            msg = (
+                "The 'terms' parameter of PIModel must be a sequence of term kinds or Term "
+                f"instances. Got {self.terms!r} instead."
+            )
+            raise ParameterError(msg)
+        terms = [make_term(spec).bind(x) for spec in self.terms]
+        kinds = [term.kind for term in terms]
+        if len(set(kinds)) != len(kinds):
+            msg = f"The 'terms' parameter of PIModel must not repeat a kind. Got {kinds!r}."
+            raise ParameterError(msg)
+        return [term for term in terms if term.width > 0], None
+
+    @classmethod
+    def params_from_json(cls, data: dict[str, Any]) -> dict[str, Any]:
+        """See :meth:`HysteresisModel.params_from_json` (terms rebuilt from their kinds)."""
+        out = dict(data)
+        out["terms"] = tuple(_term_from_json(v) for v in data.get("terms", ()))
+        return out
 
 
-def _model_from_dict(data: Any, expected: type[HysteresisModel] | None) -> HysteresisModel:
-    if not isinstance(data, dict) or data.get("format") != SCHEMA:
-        msg = f'not a piezohyst model (expected "format": "{SCHEMA}")'
-        raise ModelFileError(msg)
-    version = data.get("schema_version")
-    if version != SCHEMA_VERSION:
-        msg = (
-            f"unsupported model schema version {version!r}; this piezohyst reads "
-            f"version {SCHEMA_VERSION}"
-        )
-        raise ModelFileError(msg)
-    if "checksum" in data and data["checksum"] != _checksum(data):
-        msg = (
-            "checksum mismatch: the file was modified after it was saved "
-            '(delete the "checksum" field to accept a deliberate edit)'
-        )
-        raise ModelFileError(msg)
-    name = data.get("model")
-    cls = _REGISTRY.get(name) if isinstance(name, str) else None
-    if cls is None:
-        msg = f"unknown model type {name!r}; known: {sorted(_REGISTRY)}"
-        raise ModelFileError(msg)
-    if expected is not None and not issubclass(cls, expected):
-        msg = f"the data holds a {name}, not a {expected.__name__}"
-        raise ModelFileError(msg)
-    try:
-        params = data["params"]
-        if not isinstance(params, dict):
-            raise TypeError("'params' is not an object")
-        model = cls(**params)
-        model._set_fitted(data["fitted"])
-    except (KeyError, TypeError, ValueError, IndexError) as exc:
-        if isinstance(exc, PiezohystError):
-            detail = str(exc)
-        elif isinstance(exc, KeyError):
-            detail = f"missing field {exc}"
-        else:
-            detail = str(exc)
-        msg = f"malformed {name} model: {detail}"
-        raise ModelFileError(msg) from None
-    return model
-
-
-def _float_field(data: dict[str, Any], key: str) -> float:
-    value = data[key]
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        msg = f"field '{key}' must be a finite number, got {value!r}"
-        raise ModelFileError(msg)
-    return float(value)
-
-
-@_register
 class ClassicalPI(HysteresisModel):
     r"""Classical (passive, rate-independent) Prandtl-Ishlinskii model, eq. 11-12.
 
@@ -226,27 +1060,27 @@ class ClassicalPI(HysteresisModel):
     Parameters
     ----------
     n_operators : int, default 10
-        Number of play operators including the linear one (:math:`r_0 = 0`), in
-        [1, 1000]. Ignored when ``thresholds`` is given.
+        Play operators including the linear one (:math:`r_0 = 0`), in [1, 1000].
+        Ignored when ``thresholds`` is given.
     thresholds : array_like, optional
         Explicit thresholds (input units), strictly increasing from 0. Default:
         :func:`~piezohyst.identification.default_thresholds` of the training input.
     min_slope : float, default 1e-3
         Lower bound of every loading-curve slope, as a fraction of the mean
         slope ``span(y) / span(x)``. It guarantees the analytic inverse.
-    input_unit, output_unit : str
-        Units recorded with the model (default ``"V"`` and ``"C"``).
+    input_unit, output_unit : str, default "V", "C"
+        Units recorded with the model.
 
     Attributes
     ----------
+    operator_ : PIHysteresis
+        The immutable identified operator.
     thresholds_, weights_ : ndarray
         Identified thresholds (input units) and weights (output/input units).
     offset_ : float
         Output offset (output units).
     initial_state_ : ndarray
         Operator states before the first training sample (input units).
-    operator_ : PIHysteresis
-        The immutable identified operator.
     rmse_, nrmse_ : float
         Training fit quality: RMSE (output units) and RMSE / output span.
     input_range_ : tuple of float
@@ -263,9 +1097,12 @@ class ClassicalPI(HysteresisModel):
     True
     """
 
+    cli_name = "classical-pi"
+
     def __init__(
         self,
         n_operators: int = 10,
+        *,
         thresholds: ArrayLike | None = None,
         min_slope: float = 1e-3,
         input_unit: str = "V",
@@ -277,179 +1114,11 @@ class ClassicalPI(HysteresisModel):
         self.input_unit = input_unit
         self.output_unit = output_unit
 
-    def get_params(self) -> dict[str, Any]:
-        """Constructor arguments (JSON-ready)."""
-        thr = self.thresholds
-        return {
-            "n_operators": self.n_operators,
-            "thresholds": None if thr is None else np.asarray(thr, dtype=float).tolist(),
-            "min_slope": self.min_slope,
-            "input_unit": self.input_unit,
-            "output_unit": self.output_unit,
-        }
-
-    # ------------------------------------------------------------------- fit
-    def _check_params(self, x: FloatArray) -> FloatArray:
-        owner = type(self).__name__
-        for name in ("input_unit", "output_unit"):
-            if not isinstance(getattr(self, name), str):
-                msg = (
-                    f"The '{name}' parameter of {owner} must be a str. "
-                    f"Got {getattr(self, name)!r} instead."
-                )
-                raise ParameterError(msg)
-        check_float(self.min_slope, "min_slope", owner, 0.0, 1.0, low_open=True)
-        if self.thresholds is None:
-            n = check_int(self.n_operators, "n_operators", owner, 1, 1000)
-            return default_thresholds(x, n)
-        thr = as_signal(self.thresholds, "thresholds")
-        if thr.size > 1000 or thr[0] != 0.0 or (thr.size > 1 and np.any(np.diff(thr) <= 0)):
-            msg = (
-                f"The 'thresholds' parameter of {owner} must be 1 to 1000 strictly increasing "
-                f"values starting at 0. Got {thr.tolist()[:8]}{'...' if thr.size > 8 else ''}."
-            )
-            raise ParameterError(msg)
-        return thr
-
-    def _inputs(
-        self, x: ArrayLike, y: ArrayLike, t: ArrayLike | None
-    ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
-        xs = as_signal(x, "x")
-        ys = as_signal(y, "y")
-        same_length(xs, ys, "x", "y")
-        ts = as_time(t, xs.size, required=self.rate_dependent, owner=type(self).__name__)
-        return xs, ys, ts
-
-    def _initial_state(
-        self, thr: FloatArray, xs: FloatArray, initial_state: ArrayLike | None
-    ) -> FloatArray:
-        if initial_state is None:
-            return np.full(thr.size, xs[0])
-        z0 = as_signal(initial_state, "initial_state")
-        if z0.size != thr.size:
-            msg = f"'initial_state' must hold one state per operator ({thr.size}). Got {z0.size}."
-            raise ShapeError(msg)
-        return z0
-
-    def fit(
-        self,
-        x: ArrayLike,
-        y: ArrayLike,
-        t: ArrayLike | None = None,
-        *,
-        initial_state: ArrayLike | None = None,
-    ) -> ClassicalPI:
-        """Identify weights and offset from input ``x`` (V) and output ``y``.
-
-        ``t`` (s) is accepted for a uniform interface and ignored: the model is
-        rate independent. ``initial_state`` gives the operator states (V) before
-        the first sample when the record continues a known history (see
-        :func:`~piezohyst.identification.history_state`); by default the
-        actuator rests at ``x[0]``.
-        Returns ``self``.
-        """
-        xs, ys, _ = self._inputs(x, y, t)
-        thr = self._check_params(xs)
-        z0 = self._initial_state(thr, xs, initial_state)
-        sol = identify(xs, ys, thr, min_slope=self.min_slope, initial_state=z0)
-        self._set_operator(PIHysteresis(thr, sol.weights, sol.offset, z0))
-        self._record_fit(xs, ys, None)
-        return self
-
-    def _record_fit(self, x: FloatArray, y: FloatArray, t: FloatArray | None) -> None:
-        """Training range and fit quality of the model just identified."""
-        self.input_range_ = (float(x.min()), float(x.max()))
-        self.rmse_ = rmse(self.predict(x, t=t), y)
-        self.nrmse_ = self.rmse_ / max(float(np.ptp(y)), 1e-300)
-
-    def _set_operator(self, op: PIHysteresis) -> None:
-        self.operator_ = op
-        self.thresholds_ = op.thresholds
-        self.weights_ = op.weights
-        self.offset_ = op.offset
-        self.initial_state_ = op.initial_state
-
-    # --------------------------------------------------------------- predict
-    def predict(self, x: ArrayLike, t: ArrayLike | None = None) -> FloatArray:
-        """Modelled output for input ``x`` (V) from the stored initial state."""
-        return self.propagate(x, t).output
-
-    def propagate(
-        self, x: ArrayLike, t: ArrayLike | None = None, state: ArrayLike | None = None
-    ) -> Propagation:
-        """Output and final operator state; chunked calls equal one call.
-
-        ``state`` (input units, one per operator) defaults to ``initial_state_``.
-        """
-        self._check_fitted()
-        xs = as_signal(x, "x", allow_empty=True)
-        as_time(t, xs.size, required=False, owner=type(self).__name__)
-        return self.operator_.propagate(xs, state)
-
-    def inverse(self) -> ClassicalPI:
-        """The analytic inverse (eq. 18) as a fitted :class:`ClassicalPI`.
-
-        Its ``predict(desired_output)`` returns the input (V) that produces it.
-        """
-        self._check_fitted()
-        inv = ClassicalPI(
-            n_operators=self.operator_.n_operators,
-            min_slope=self.min_slope,
-            input_unit=self.output_unit,
-            output_unit=self.input_unit,
-        )
-        inv._set_operator(self.operator_.inverse())
-        inv.rmse_ = float("nan")
-        inv.nrmse_ = float("nan")
-        inv.input_range_ = (float("nan"), float("nan"))
-        return inv
-
-    @classmethod
-    def from_operator(cls, op: PIHysteresis, **params: Any) -> ClassicalPI:
-        """A fitted model around given parameters (e.g. a known actuator)."""
-        model = cls(n_operators=op.n_operators, **params)
-        model._set_operator(op)
-        model.rmse_ = float("nan")
-        model.nrmse_ = float("nan")
-        model.input_range_ = (float("nan"), float("nan"))
-        return model
-
-    # ----------------------------------------------------------- persistence
-    def _fitted_dict(self) -> dict[str, Any]:
-        out = self.operator_.to_dict()
-        out["rmse"] = None if math.isnan(self.rmse_) else self.rmse_
-        out["nrmse"] = None if math.isnan(self.nrmse_) else self.nrmse_
-        lo, hi = self.input_range_
-        out["input_range"] = None if math.isnan(lo) else [lo, hi]
-        return out
-
-    def _set_fitted(self, data: dict[str, Any]) -> None:
-        if not isinstance(data, dict):
-            raise ModelFileError("'fitted' is not an object")
-        op = PIHysteresis(
-            thresholds=data["thresholds"],
-            weights=data["weights"],
-            offset=_float_field(data, "offset"),
-            initial_state=data["initial_state"],
-        )
-        self._set_operator(op)
-        self.rmse_ = float("nan") if data.get("rmse") is None else _float_field(data, "rmse")
-        self.nrmse_ = float("nan") if data.get("nrmse") is None else _float_field(data, "nrmse")
-        rng = data.get("input_range")
-        if rng is None:
-            self.input_range_ = (float("nan"), float("nan"))
-        else:
-            if not isinstance(rng, list) or len(rng) != 2:
-                raise ModelFileError("field 'input_range' must be [min, max]")
-            lo = _float_field({"input_range": rng[0]}, "input_range")
-            hi = _float_field({"input_range": rng[1]}, "input_range")
-            if lo > hi:
-                raise ModelFileError("field 'input_range' must be [min, max] with min <= max")
-            self.input_range_ = (lo, hi)
+    def _terms_to_fit(self, x: FloatArray) -> tuple[list[Term], list[tuple[int, ...]] | None]:
+        return [], None
 
 
-@_register
-class ActivePI(ClassicalPI):
+class ActivePI(HysteresisModel):
     r"""Active (time-dependent) Prandtl-Ishlinskii model, eq. 13-16.
 
     A classical PI model plus one integrator with growth rate :math:`R`:
@@ -464,7 +1133,7 @@ class ActivePI(ClassicalPI):
     identified jointly (eq. 16-17) with the slope constraints that guarantee
     the inverse of the hysteresis part. The time stamps may be non-uniform.
 
-    Parameters are those of :class:`ClassicalPI`.
+    Parameters are those of :class:`ClassicalPI`; ``fit`` needs ``t``.
 
     Attributes
     ----------
@@ -476,123 +1145,260 @@ class ActivePI(ClassicalPI):
 
     Notes
     -----
-    The fitted model's ``propagate`` state is a flat array: the operator
-    states, then the integral :math:`y_2` (input unit x s), then the last
-    time stamp (s; NaN before any sample has run). ``inverse()`` inverts the
-    hysteresis part only (the same as ``hysteresis_.inverse()``): leaked charge
-    moves nothing, so the compensator drops the growth term.
+    The state (:class:`ModelState`) holds the operator states, the integral
+    :math:`y_2` (V s) and the last time stamp. ``inverse()`` inverts the
+    hysteresis part only: leaked charge moves nothing.
     """
 
-    rate_dependent: ClassVar[bool] = True
+    cli_name = "active-pi"
 
-    def fit(
+    def __init__(
         self,
-        x: ArrayLike,
-        y: ArrayLike,
-        t: ArrayLike | None = None,
+        n_operators: int = 10,
         *,
-        initial_state: ArrayLike | None = None,
-    ) -> ActivePI:
-        """Identify weights, offset and growth rate jointly; ``t`` (s) is required.
+        thresholds: ArrayLike | None = None,
+        min_slope: float = 1e-3,
+        input_unit: str = "V",
+        output_unit: str = "C",
+    ) -> None:
+        self.n_operators = n_operators
+        self.thresholds = thresholds
+        self.min_slope = min_slope
+        self.input_unit = input_unit
+        self.output_unit = output_unit
 
-        ``initial_state`` as for :meth:`ClassicalPI.fit`.
-        """
-        xs, ys, ts = self._inputs(x, y, t)
-        assert ts is not None
-        thr = self._check_params(xs)
-        z0 = self._initial_state(thr, xs, initial_state)
-        sol = identify(xs, ys, thr, dt=time_steps(ts), min_slope=self.min_slope, initial_state=z0)
-        self._set_operator(PIHysteresis(thr, sol.weights, sol.offset, z0))
-        self.growth_rate_ = sol.growth_rate
-        self._record_fit(xs, ys, ts)
-        return self
+    def _terms_to_fit(self, x: FloatArray) -> tuple[list[Term], list[tuple[int, ...]] | None]:
+        return [Integral()], None
 
-    def _set_operator(self, op: PIHysteresis) -> None:
-        super()._set_operator(op)
-        self.hysteresis_ = ClassicalPI.from_operator(
-            op,
-            min_slope=self.min_slope,
-            input_unit=self.input_unit,
-            output_unit=self.output_unit,
-        )
-
-    def growth(
-        self, x: ArrayLike, t: ArrayLike | None = None, state: ArrayLike | None = None
-    ) -> FloatArray:
-        r"""The leakage term :math:`R\,y_2(t)` alone (output units), eq. 19."""
+    @property
+    def growth_rate_(self) -> float:
+        """:math:`R` (output per input unit and s; S for V to C)."""
         self._check_fitted()
-        xs = as_signal(x, "x")
-        ts = as_time(t, xs.size, required=True, owner="ActivePI")
-        assert ts is not None
-        integral = np.empty_like(xs)
-        start, t_prev = self._integral_state(state)
-        _kernels.running_integral(xs, time_steps(ts, t_prev), start, integral)
-        return np.asarray(self.growth_rate_ * integral)
+        return float(self.coefs_[0][0])
 
-    def _integral_state(self, state: ArrayLike | None) -> tuple[float, float | None]:
-        """Integral and last time stamp of a state; NaN time means nothing ran yet."""
-        if state is None:
-            return 0.0, None
-        s = np.asarray(state, dtype=np.float64)
-        n = self.operator_.n_operators
-        if s.shape != (n + 2,):
+
+class GeneralizedPI(HysteresisModel):
+    r"""Generalized PI model: PI + asymmetry + creep + selectable growth terms.
+
+    .. math::
+
+        y = c + \sum_i w_i H_{r_i}[x]
+            + \underbrace{\sum_j \frac{u_j (x - k_j)_+^2 - d_j (k_j - x)_+^2}{s}}_{\text{asymmetry}}
+            + \underbrace{\sum_k g_k L_{\tau_k}[x]}_{\text{creep}}
+            + \underbrace{\sum_m R_m G_m[x]}_{\text{growth}}
+
+    Every term is linear in its coefficient, so all are identified jointly by
+    the one bounded least-squares solve; the hysteresis part stays strictly
+    increasing in the current input and is inverted exactly, sample by
+    sample, by :class:`~piezohyst.Compensator`.
+
+    Parameters
+    ----------
+    n_operators, thresholds, min_slope, input_unit, output_unit
+        As for :class:`ClassicalPI`.
+    growth_terms : "auto" or sequence of str, default "auto"
+        Growth terms among ``"integral"`` (ohmic leakage), ``"time"`` (a
+        constant bias current), ``"abs_integral"`` (leakage rising with the
+        voltage); ``()`` for none. ``"auto"`` fits every subset on the first
+        70 % of the record, scores it on the last 30 % (the model running
+        through the whole record; one accumulation, subsets solved on
+        sub-matrices) and keeps the best.
+    asymmetry : int, default 3
+        Knots of the static monotone term (0 turns it off).
+    creep : sequence of float, default ()
+        Time constants (s) of the creep operators, e.g. ``(0.1, 1, 10)``.
+    optimize_thresholds : bool, default False
+        Refine the thresholds by bounded nonlinear least squares around the
+        linear solve (L-BFGS-B over threshold increments; slower).
+
+    Attributes
+    ----------
+    growth_terms_ : tuple of str
+        Growth terms used; ``growth_coefs_`` their coefficients.
+    knots_, static_up_, static_down_, static_scale_
+        Asymmetry term (V, output/V, output/V, V); empty when off.
+    creep_taus_, creep_gains_ : ndarray
+        Creep time constants (s) and gains (output/V).
+    selection_ : dict
+        Held-out RMSE of every growth subset tried (``growth_terms="auto"``).
+
+    Examples
+    --------
+    >>> import numpy as np, piezohyst as ph
+    >>> rec = ph.simulate(duration=10.0)
+    >>> model = ph.GeneralizedPI(10).fit(rec.voltage, rec.charge, t=rec.t)
+    >>> bool(model.nrmse_ < 0.005), "integral" in model.growth_terms_
+    (True, True)
+    """
+
+    cli_name = "generalized-pi"
+
+    def __init__(
+        self,
+        n_operators: int = 10,
+        *,
+        thresholds: ArrayLike | None = None,
+        min_slope: float = 1e-3,
+        input_unit: str = "V",
+        output_unit: str = "C",
+        growth_terms: str | Sequence[str] = "auto",
+        asymmetry: int = 3,
+        creep: Sequence[float] = (),
+        optimize_thresholds: bool = False,
+    ) -> None:
+        self.n_operators = n_operators
+        self.thresholds = thresholds
+        self.min_slope = min_slope
+        self.input_unit = input_unit
+        self.output_unit = output_unit
+        self.growth_terms = growth_terms
+        self.asymmetry = asymmetry
+        self.creep = creep
+        self.optimize_thresholds = optimize_thresholds
+
+    def _growth_names(self) -> tuple[tuple[str, ...], bool]:
+        if isinstance(self.growth_terms, str):
+            if self.growth_terms != "auto":
+                msg = (
+                    "The 'growth_terms' parameter of GeneralizedPI must be 'auto' or a sequence "
+                    f"of {list(GROWTH_TERMS)}. Got {self.growth_terms!r} instead."
+                )
+                raise ParameterError(msg)
+            return GROWTH_TERMS, True
+        terms = tuple(self.growth_terms)
+        if any(term not in GROWTH_TERMS for term in terms) or len(set(terms)) != len(terms):
             msg = (
-                f"'state' of ActivePI must hold {n} operator states, the integral and the "
-                f"last time stamp ({n + 2} values). Got shape {s.shape}."
+                f"The 'growth_terms' parameter of GeneralizedPI must hold distinct terms from "
+                f"{list(GROWTH_TERMS)}. Got {list(terms)!r} instead."
             )
-            raise ShapeError(msg)
-        as_signal(s[:-1], "state")
-        t_last = None if np.isnan(s[-1]) else float(as_signal(s[-1:], "state")[0])
-        return float(s[-2]), t_last
+            raise ParameterError(msg)
+        return tuple(t for t in GROWTH_TERMS if t in terms), False
 
-    def propagate(
-        self, x: ArrayLike, t: ArrayLike | None = None, state: ArrayLike | None = None
-    ) -> Propagation:
-        """Output and final state ``[operator states..., integral, last t]``."""
+    def _terms_to_fit(self, x: FloatArray) -> tuple[list[Term], list[tuple[int, ...]] | None]:
+        k = check_int(self.asymmetry, "asymmetry", "GeneralizedPI", 0, 50)
+        if isinstance(self.creep, str):
+            msg = (
+                "The 'creep' parameter of GeneralizedPI must be a sequence of floats. "
+                f"Got {self.creep!r}."
+            )
+            raise ParameterError(msg)
+        creep = tuple(self.creep)
+        if not isinstance(self.optimize_thresholds, bool):
+            msg = f"'optimize_thresholds' must be True or False. Got {self.optimize_thresholds!r}."
+            raise ParameterError(msg)
+        names, auto = self._growth_names()
+        fixed: list[Term] = []
+        if k:
+            fixed.append(Asymmetry(k).bind(x))
+        if creep:
+            try:
+                fixed.append(Creep(creep))
+            except ParameterError:
+                msg = (
+                    "The 'creep' parameter of GeneralizedPI must be up to 20 positive time "
+                    f"constants in s. Got {self.creep!r} instead."
+                )
+                raise ParameterError(msg) from None
+        makers: dict[str, Term] = {
+            "integral": Integral(),
+            "time": TimeTerm(),
+            "abs_integral": AbsIntegral().bind(x),
+        }
+        terms = fixed + [makers[name] for name in names]
+        if not auto:
+            return terms, None
+        base = tuple(range(len(fixed)))
+        growth = range(len(fixed), len(terms))
+        subsets = [
+            base + combo
+            for size in range(len(names) + 1)
+            for combo in itertools.combinations(growth, size)
+        ]
+        return terms, subsets
+
+    def _refine(
+        self, x: FloatArray, y: FloatArray, t: FloatArray | None, initial_state: ArrayLike | None
+    ) -> None:
+        """Nonlinear least squares over the thresholds, the linear solve inside."""
+        if not self.optimize_thresholds or self.operator_.n_operators < 2:
+            return
+        from scipy.optimize import minimize
+
+        terms = list(self.terms_)
+        selection = self.selection_
+        span = max(float(np.ptp(x)), 1e-300)
+        start = np.log(np.diff(self.thresholds_) / span)
+
+        def objective(logs: FloatArray) -> float:
+            thr = np.concatenate([[0.0], np.cumsum(np.exp(logs) * span)])
+            if thr[-1] >= span:  # a play wider than the range never reverses
+                return 1e300
+            z0 = self._initial_operators(thr, x, initial_state)
+            self._solve(PlayCore(thr), terms, None, x, y, t, z0)
+            return rmse(self.predict(x, t=t), y) / span
+
+        before = objective(start)
+        res = minimize(objective, start, method="L-BFGS-B", options={"maxiter": 30})
+        objective(res.x if res.fun < before else start)
+        self.selection_ = selection
+
+    # derived views of the fitted terms, named as in 0.1
+    def _term(self, kind: str) -> tuple[Term, FloatArray] | None:
         self._check_fitted()
-        xs = as_signal(x, "x", allow_empty=True)
-        ts = as_time(t, xs.size, required=True, owner="ActivePI")
-        assert ts is not None
-        start, t_prev = self._integral_state(state)
-        if xs.size == 0:
-            return Propagation(xs, self._full_state(state))
-        if t_prev is not None and ts[0] <= t_prev:
-            msg = (
-                f"'t' must continue after the state's last time {t_prev!r}. "
-                f"Got t[0]={float(ts[0])!r}."
-            )
-            raise TimeAxisError(msg)
-        integral = np.empty_like(xs)
-        end = _kernels.running_integral(xs, time_steps(ts, t_prev), start, integral)
-        ops = None if state is None else np.asarray(state, dtype=np.float64)[:-2]
-        hyst = self.operator_.propagate(xs, ops)
-        out = hyst.output + self.growth_rate_ * integral
-        return Propagation(out, np.concatenate([hyst.state, [end, ts[-1]]]))
+        for term, coef in zip(self.terms_, self.coefs_, strict=True):
+            if term.kind == kind:
+                return term, coef
+        return None
 
-    def _full_state(self, state: ArrayLike | None) -> FloatArray:
-        if state is None:  # nothing ran yet: no last time stamp
-            return np.concatenate([self.operator_.initial_state, [0.0, np.nan]])
-        return np.array(state, dtype=np.float64)
+    @property
+    def growth_terms_(self) -> tuple[str, ...]:
+        """Growth terms used."""
+        self._check_fitted()
+        return tuple(term.kind for term in self.terms_ if term.removed)
 
-    def predict(self, x: ArrayLike, t: ArrayLike | None = None) -> FloatArray:
-        """Modelled output (hysteresis plus growth) for input ``x`` (V) at times ``t`` (s)."""
-        return self.propagate(x, t).output
+    @property
+    def growth_coefs_(self) -> FloatArray:
+        """Coefficients of ``growth_terms_`` (output per V·s, per s, per V·s)."""
+        self._check_fitted()
+        coefs = [c for term, c in zip(self.terms_, self.coefs_, strict=True) if term.removed]
+        return np.concatenate(coefs) if coefs else np.zeros(0)
 
-    def remove_growth(self, x: ArrayLike, y: ArrayLike, t: ArrayLike | None = None) -> FloatArray:
-        r"""Eq. 19: the measured output minus the identified growth, :math:`y - R y_2`.
+    def _static(self) -> StaticShape:
+        found = self._term("asymmetry")
+        if found is None:
+            return StaticShape(np.zeros(0), np.zeros(0), np.zeros(0), 1.0)
+        shape = found[0].static_shape(found[1])
+        assert shape is not None
+        return shape
 
-        For a charge record this is the pure capacitor charge (Fig. 8).
-        """
-        ys = as_signal(y, "y")
-        g = self.growth(x, t)
-        same_length(g, ys, "x", "y")
-        return np.asarray(ys - g)
+    @property
+    def knots_(self) -> FloatArray:
+        """Asymmetry knots (V)."""
+        return self._static().knots
 
-    def _fitted_dict(self) -> dict[str, Any]:
-        out = super()._fitted_dict()
-        out["growth_rate"] = self.growth_rate_
-        return out
+    @property
+    def static_up_(self) -> FloatArray:
+        """Asymmetry coefficients above each knot (output/V)."""
+        return self._static().up
 
-    def _set_fitted(self, data: dict[str, Any]) -> None:
-        super()._set_fitted(data)
-        self.growth_rate_ = _float_field(data, "growth_rate")
+    @property
+    def static_down_(self) -> FloatArray:
+        """Asymmetry coefficients below each knot (output/V)."""
+        return self._static().down
+
+    @property
+    def static_scale_(self) -> float:
+        """Asymmetry scale (V)."""
+        return self._static().scale
+
+    @property
+    def creep_taus_(self) -> FloatArray:
+        """Creep time constants (s)."""
+        found = self._term("creep")
+        return np.zeros(0) if found is None else np.asarray(found[0].get_params()["taus"])
+
+    @property
+    def creep_gains_(self) -> FloatArray:
+        """Creep gains (output/V)."""
+        found = self._term("creep")
+        return np.zeros(0) if found is None else found[1]

@@ -25,16 +25,15 @@ from ._validation import FloatArray, check_float, check_int
 from .compensator import Compensator, Domain
 from .errors import DataFileError, ParameterError
 from .export import Precision, write_c
-from .generalized import GeneralizedPI
 from .identification import default_thresholds, history_state
-from .io import DataSpec, read_table, write_table
+from .io import DataSpec, atomic_write_text, read_table, write_table
 from .metrics import hysteresis_width, nrmse, rmse
-from .models import ActivePI, ClassicalPI, HysteresisModel, atomic_write_text, load_model
+from .models import HysteresisModel, model_class
+from .persistence import load_model
 from .plotting import save_panels
 from .simulation import DEFAULT_PRESET, PRESETS, BenchRecord, simulate
 
 __all__ = [
-    "MODELS",
     "compensate_file",
     "export_c_file",
     "fit_file",
@@ -43,21 +42,7 @@ __all__ = [
     "simulate_file",
 ]
 
-#: CLI names of the model classes (``--model``).
-MODELS: dict[str, type[ClassicalPI]] = {
-    "active-pi": ActivePI,
-    "classical-pi": ClassicalPI,
-    "generalized-pi": GeneralizedPI,
-}
-
 PathLike = str | os.PathLike[str]
-
-
-def _model_class(name: str) -> type[ClassicalPI]:
-    if name not in MODELS:
-        msg = f"unknown model {name!r}; choose one of: {', '.join(MODELS)}"
-        raise ParameterError(msg)
-    return MODELS[name]
 
 
 def simulate_file(
@@ -110,28 +95,50 @@ def fit_file(
     output_unit: str = "C",
     growth_terms: str | Sequence[str] = "auto",
     creep: Sequence[float] = (),
-) -> ClassicalPI:
+) -> HysteresisModel:
     """Fit a model to a data file and save it (JSON) to ``out`` if given.
 
-    ``data_spec`` picks columns and samples (default: voltage, charge, time);
-    ``growth_terms`` and ``creep`` apply to ``model="generalized-pi"`` only.
+    Parameters
+    ----------
+    data : str or os.PathLike
+        The recording.
+    out : str or os.PathLike, optional
+        Where to save the model.
+    model : str
+        A name from :func:`~piezohyst.models.model_names`.
+    operators : int
+        Play operators.
+    data_spec : DataSpec, optional
+        Columns and samples (default: voltage, charge, time).
+    output_unit : str
+        Unit recorded with the model.
+    growth_terms, creep
+        Settings of models that have them (``generalized-pi``).
+
+    Returns
+    -------
+    HysteresisModel
+        The fitted model.
     """
-    cls = _model_class(model)
+    cls = model_class(model)
+    accepted = cls._param_names()
     extra: dict[str, Any] = {}
-    if cls is GeneralizedPI:
-        extra = {"growth_terms": growth_terms, "creep": tuple(creep)}
-    elif growth_terms != "auto" or tuple(creep):
-        msg = f"--growth and --creep apply to generalized-pi only, not {model}"
-        raise ParameterError(msg)
+    for name, value, default in (("growth_terms", growth_terms, "auto"), ("creep", creep, ())):
+        if name in accepted:
+            extra[name] = tuple(value) if name == "creep" else value
+        elif (value if isinstance(value, str) else tuple(value)) != default:
+            msg = f"the {name!r} setting does not apply to {model}"
+            raise ParameterError(msg)
     rec = (data_spec or DataSpec()).read(data)
     assert rec.y is not None
     w = rec.window
     x, y, t = rec.x[w], rec.y[w], rec.t[w]
-    estimator = cls(n_operators=operators, output_unit=output_unit, **extra)
+    settings: dict[str, Any] = {"n_operators": operators, "output_unit": output_unit, **extra}
+    estimator = cls(**settings)
     start = w.start or 0
     if start > 0:  # the window continues a known input history: start from its state
         thresholds = default_thresholds(x, check_int(operators, "operators", "fit", 1, 1000))
-        estimator = cls(thresholds=thresholds, output_unit=output_unit, **extra)
+        estimator = cls(**{**settings, "thresholds": thresholds})
         z0 = history_state(rec.x[:start], thresholds)
         fitted = estimator.fit(x, y, t=t, initial_state=z0)
     else:
@@ -141,12 +148,8 @@ def fit_file(
     return fitted
 
 
-def _load(model_path: PathLike) -> ClassicalPI:
-    model = load_model(model_path)
-    if not isinstance(model, ClassicalPI):  # pragma: no cover - every model so far is one
-        msg = f"{model_path}: {type(model).__name__} is not supported here"
-        raise ParameterError(msg)
-    return model
+def _load(model_path: PathLike) -> HysteresisModel:
+    return load_model(model_path)
 
 
 def predict_file(
@@ -170,17 +173,19 @@ def predict_file(
     return columns
 
 
-def _limits(model: ClassicalPI, v_min: float | None, v_max: float | None) -> tuple[float, float]:
+def _limits(
+    model: HysteresisModel, v_min: float | None, v_max: float | None
+) -> tuple[float, float]:
     lo, hi = model.input_range_
     if v_min is None or v_max is None:
         if math.isnan(lo):
-            msg = "the model does not record its training voltage range: give --v-min and --v-max"
+            msg = "the model does not record its training voltage range: give v_min and v_max"
             raise ParameterError(msg)
     return (lo if v_min is None else float(v_min)), (hi if v_max is None else float(v_max))
 
 
 def make_compensator(
-    model: ClassicalPI,
+    model: HysteresisModel,
     *,
     v_min: float | None = None,
     v_max: float | None = None,
@@ -189,7 +194,21 @@ def make_compensator(
     slew_rate: float | None = None,
     sample_rate: float | None = None,
 ) -> Compensator:
-    """A compensator whose limits default to the model's training voltage range."""
+    """A compensator whose limits default to the model's training voltage range.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        A fitted model.
+    v_min, v_max : float, optional
+        Voltage limits (V); default the training range.
+    domain, gain, slew_rate, sample_rate
+        As for :class:`~piezohyst.Compensator`.
+
+    Returns
+    -------
+    Compensator
+    """
     lo, hi = _limits(model, v_min, v_max)
     return Compensator(
         model,
@@ -355,14 +374,10 @@ def model_report(
             suptitle="fit and residual",
         ),
     ]
-    if isinstance(model, ActivePI | GeneralizedPI):
+    growth = model.growth_coefficients()
+    if growth:
         pure = y - model.growth(rec.x, t=rec.t)[w]
-        if isinstance(model, ActivePI):
-            metrics["growth_rate"] = model.growth_rate_
-        else:
-            metrics["growth_terms"] = dict(
-                zip(model.growth_terms_, model.growth_coefs_.tolist(), strict=True)
-            )
+        metrics["growth_terms"] = {k: {"value": v, "unit": u} for k, (v, u) in growth.items()}
         metrics["hysteresis_width_growth_removed_pct"] = 100 * hysteresis_width(x, pure)
         files.append(
             save_panels(
@@ -387,26 +402,10 @@ def model_report(
     lines += [
         f"| {k} | {v:.6g} |" if isinstance(v, float) else f"| {k} | {v} |"
         for k, v in metrics.items()
+        if k != "growth_terms"
     ]
+    lines += [f"| growth: {k} | {v:.6g} {u} |" for k, (v, u) in growth.items()]
     lines += ["", *[f"![{f.stem}]({f.name})" for f in files], ""]
     rpath = out_dir / "report.md"
     atomic_write_text(rpath, "\n".join(lines))
     return ReportResult(metrics, [*files, mpath, rpath])
-
-
-def describe(model: HysteresisModel) -> str:
-    """One line on a fitted model's quality, for the CLI."""
-    assert isinstance(model, ClassicalPI)
-    text = (
-        f"{type(model).__name__}: {model.operator_.n_operators} operators, "
-        f"NRMSE {100 * model.nrmse_:.4g} %, RMSE {model.rmse_:.4g} {model.output_unit}"
-    )
-    if isinstance(model, ActivePI):
-        text += f", growth rate {model.growth_rate_:.4g} {model.output_unit}/({model.input_unit}·s)"
-    if isinstance(model, GeneralizedPI):
-        terms = ", ".join(
-            f"{name} {c:.4g}"
-            for name, c in zip(model.growth_terms_, model.growth_coefs_, strict=True)
-        )
-        text += f", growth terms: {terms or 'none'}"
-    return text

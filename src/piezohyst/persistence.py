@@ -1,0 +1,352 @@
+"""Model files: JSON (never pickle), schema version and checksum, read back checked.
+
+Schema 2 (written since 0.2) stores the core and a list of terms, each with
+its kind, settings and coefficients, so a model holding a custom term loads
+wherever that term's class is defined. Schema 1 files (0.1.0: ClassicalPI,
+ActivePI, GeneralizedPI with fixed fields) are converted on reading and
+predict identically. Every error names the file and the field.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import ModelFileError, PiezohystError
+from .hysteresis import PIHysteresis
+from .io import atomic_write_text
+from .models import HysteresisModel, model_class
+from .terms import Term, make_term
+
+__all__ = [
+    "SCHEMA",
+    "SCHEMA_VERSION",
+    "load_model",
+    "model_from_dict",
+    "model_to_dict",
+    "save_model",
+]
+
+SCHEMA = "piezohyst-model"
+SCHEMA_VERSION = 2
+
+
+def _checksum(body: dict[str, Any]) -> str:
+    content = {k: v for k, v in body.items() if k != "checksum"}
+    canon = json.dumps(content, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return "sha256:" + hashlib.sha256(canon.encode()).hexdigest()
+
+
+def _nullable(value: float) -> float | None:
+    return None if math.isnan(value) else value
+
+
+def model_to_dict(model: HysteresisModel) -> dict[str, Any]:
+    """A fitted model as schema-2 JSON data with a checksum.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        A fitted model.
+
+    Returns
+    -------
+    dict
+    """
+    model._check_fitted()
+    from . import __version__
+
+    lo, hi = model.input_range_
+    body: dict[str, Any] = {
+        "format": SCHEMA,
+        "schema_version": SCHEMA_VERSION,
+        "model": type(model).__name__,
+        "piezohyst_version": __version__,
+        "params": model.params_to_json(),
+        "fitted": {
+            "core": {"kind": "play", **model.operator_.to_dict()},
+            "terms": [
+                {"kind": term.kind, "params": term.get_params(), "coefficients": coef.tolist()}
+                for term, coef in zip(model.terms_, model.coefs_, strict=True)
+            ],
+            "selection": model.selection_,
+            "rmse": _nullable(model.rmse_),
+            "nrmse": _nullable(model.nrmse_),
+            "input_range": None if math.isnan(lo) else [lo, hi],
+        },
+    }
+    body["checksum"] = _checksum(body)
+    return body
+
+
+def save_model(model: HysteresisModel, path: str | os.PathLike[str]) -> Path:
+    """Write ``model`` as JSON, atomically, with the umask's permissions.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+    path : str or os.PathLike
+
+    Returns
+    -------
+    Path
+    """
+    text = json.dumps(model_to_dict(model), indent=2, allow_nan=False)
+    return atomic_write_text(path, text + "\n")
+
+
+class _Reader:
+    """Typed field access that names the field in every error."""
+
+    def __init__(self, data: Any, where: str) -> None:
+        if not isinstance(data, dict):
+            msg = f"field '{where}' must be an object, got {type(data).__name__}"
+            raise ModelFileError(msg)
+        self.data = data
+        self.where = where
+
+    def _name(self, key: str) -> str:
+        return f"{self.where}.{key}" if self.where else key
+
+    def get(self, key: str) -> Any:
+        if key not in self.data:
+            msg = f"missing field '{self._name(key)}'"
+            raise ModelFileError(msg)
+        return self.data[key]
+
+    def number(self, key: str, *, optional: bool = False) -> float:
+        value = self.data.get(key) if optional else self.get(key)
+        if optional and value is None:
+            return math.nan
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, int | float)
+            or not math.isfinite(value)
+        ):
+            msg = f"field '{self._name(key)}' must be a finite number, got {value!r}"
+            raise ModelFileError(msg)
+        return float(value)
+
+    def numbers(self, key: str) -> np.ndarray:
+        value = self.get(key)
+        if not isinstance(value, list) or not all(
+            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+            for v in value
+        ):
+            msg = f"field '{self._name(key)}' must be a list of finite numbers"
+            raise ModelFileError(msg)
+        return np.asarray(value, dtype=np.float64)
+
+    def child(self, key: str) -> _Reader:
+        return _Reader(self.get(key), self._name(key))
+
+
+def _range(fitted: _Reader) -> tuple[float, float]:
+    rng = fitted.data.get("input_range")
+    if rng is None:
+        return (math.nan, math.nan)
+    if not isinstance(rng, list) or len(rng) != 2:
+        msg = f"field '{fitted._name('input_range')}' must be [min, max]"
+        raise ModelFileError(msg)
+    pair = _Reader({"min": rng[0], "max": rng[1]}, fitted._name("input_range"))
+    lo, hi = pair.number("min"), pair.number("max")
+    if lo > hi:
+        msg = f"field '{fitted._name('input_range')}' must be [min, max] with min <= max"
+        raise ModelFileError(msg)
+    return lo, hi
+
+
+def _core(reader: _Reader) -> PIHysteresis:
+    try:
+        return PIHysteresis(
+            thresholds=reader.numbers("thresholds"),
+            weights=reader.numbers("weights"),
+            offset=reader.number("offset"),
+            initial_state=reader.numbers("initial_state"),
+        )
+    except ModelFileError:
+        raise
+    except PiezohystError as exc:
+        msg = f"field '{reader.where or 'fitted'}': {exc}"
+        raise ModelFileError(msg) from None
+
+
+def _schema1_terms(name: str, fitted: _Reader) -> list[dict[str, Any]]:
+    """The terms of a 0.1.0 file, in the order its columns were fitted."""
+    if name == "ActivePI":
+        return [{"kind": "integral", "params": {}, "coefficients": [fitted.number("growth_rate")]}]
+    if name != "GeneralizedPI":
+        return []
+    knots = fitted.numbers("knots")
+    scale = fitted.number("static_scale")
+    up, down = fitted.numbers("static_up"), fitted.numbers("static_down")
+    taus, gains = fitted.numbers("creep_taus"), fitted.numbers("creep_gains")
+    growth = fitted.get("growth_terms")
+    coefs = fitted.numbers("growth_coefs")
+    if not isinstance(growth, list) or len(growth) != coefs.size or up.size != knots.size:
+        msg = "inconsistent GeneralizedPI terms (sizes)"
+        raise ModelFileError(msg)
+    terms: list[dict[str, Any]] = []
+    if knots.size:
+        terms.append(
+            {
+                "kind": "asymmetry",
+                "params": {"n_knots": int(knots.size), "knots": knots.tolist(), "scale": scale},
+                "coefficients": [*up.tolist(), *down.tolist()],
+            }
+        )
+    if taus.size:
+        terms.append(
+            {"kind": "creep", "params": {"taus": taus.tolist()}, "coefficients": gains.tolist()}
+        )
+    for kind, c in zip(growth, coefs.tolist(), strict=True):
+        params = {"scale": scale} if kind == "abs_integral" else {}
+        terms.append({"kind": kind, "params": params, "coefficients": [c]})
+    return terms
+
+
+def _terms(entries: Any) -> tuple[tuple[Term, ...], tuple[np.ndarray, ...]]:
+    if not isinstance(entries, list):
+        raise ModelFileError("field 'fitted.terms' must be a list")
+    terms, coefs = [], []
+    for j, entry in enumerate(entries):
+        reader = _Reader(entry, f"fitted.terms[{j}]")
+        kind = reader.get("kind")
+        params = reader.data.get("params") or {}
+        try:
+            term = make_term(str(kind), params)
+        except PiezohystError as exc:
+            msg = f"field '{reader.where}': {exc}"
+            raise ModelFileError(msg) from None
+        coef = reader.numbers("coefficients")
+        if coef.size != term.width:
+            msg = f"field '{reader.where}.coefficients' must hold {term.width} values"
+            raise ModelFileError(msg)
+        if np.any(coef < term.lower_bounds()):
+            msg = f"field '{reader.where}.coefficients' violates the term's bounds (signs)"
+            raise ModelFileError(msg)
+        terms.append(term)
+        coefs.append(coef)
+    return tuple(terms), tuple(coefs)
+
+
+def model_from_dict(data: Any, expected: type[HysteresisModel] | None = None) -> HysteresisModel:
+    """Rebuild a fitted model from file data (schema 1 or 2), checked.
+
+    Parameters
+    ----------
+    data : dict
+        Parsed JSON.
+    expected : type, optional
+        Raise unless the data holds this class (or a subclass).
+
+    Returns
+    -------
+    HysteresisModel
+
+    Raises
+    ------
+    ModelFileError
+        Naming the field that is missing, malformed or inconsistent.
+    """
+    if not isinstance(data, dict) or data.get("format") != SCHEMA:
+        msg = f'not a piezohyst model (expected "format": "{SCHEMA}")'
+        raise ModelFileError(msg)
+    version = data.get("schema_version")
+    if version not in (1, 2):
+        msg = (
+            f"unsupported model schema version {version!r}; this piezohyst reads versions 1 "
+            f"and {SCHEMA_VERSION}"
+        )
+        raise ModelFileError(msg)
+    if "checksum" in data and data["checksum"] != _checksum(data):
+        msg = (
+            "checksum mismatch: the file was modified after it was saved "
+            '(delete the "checksum" field to accept a deliberate edit)'
+        )
+        raise ModelFileError(msg)
+    top = _Reader(data, "")
+    name = top.get("model")
+    try:
+        cls = model_class(str(name))
+    except PiezohystError as exc:
+        raise ModelFileError(f"field 'model': {exc}") from None
+    if expected is not None and not issubclass(cls, expected):
+        msg = f"the data holds a {name}, not a {expected.__name__}"
+        raise ModelFileError(msg)
+    params = top.child("params").data
+    fitted = top.child("fitted")
+    if version == 1:
+        core = _core(fitted)
+        entries: Any = _schema1_terms(str(name), fitted)
+    else:
+        core = _core(fitted.child("core"))
+        entries = fitted.get("terms")
+    terms, coefs = _terms(entries)
+    try:
+        model = cls(**cls.params_from_json(params))
+        model._check_common()
+    except (TypeError, ValueError) as exc:
+        msg = f"field 'params': {exc}"
+        raise ModelFileError(msg) from None
+    model._set_fitted(core, terms, coefs)
+    selection = fitted.data.get("selection") or {}
+    if isinstance(selection, dict):
+        model.selection_ = {str(k): float(v) for k, v in selection.items()}
+    model.rmse_ = fitted.number("rmse", optional=True)
+    model.nrmse_ = fitted.number("nrmse", optional=True)
+    model.input_range_ = _range(fitted)
+    return model
+
+
+def _reject_constant(name: str) -> float:
+    msg = f"the model file holds the non-number {name}"
+    raise ModelFileError(msg)
+
+
+def load_model(path: str | os.PathLike[str]) -> HysteresisModel:
+    """Load a model written by ``save`` (this version or 0.1.0).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    HysteresisModel
+
+    Raises
+    ------
+    ModelFileError
+        If the file is missing, not JSON, of another schema or version, fails its
+        checksum (edited after saving: delete the ``checksum`` field to accept
+        a deliberate edit), or holds inconsistent parameters; the message names
+        the file and the field.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        msg = f"model file not found: {p}"
+        raise ModelFileError(msg) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        msg = f"cannot read model file {p}: {exc}"
+        raise ModelFileError(msg) from None
+    try:
+        data = json.loads(text, parse_constant=_reject_constant)
+    except json.JSONDecodeError as exc:
+        msg = f"{p} is not a piezohyst model (not valid JSON: {exc.msg} at line {exc.lineno})"
+        raise ModelFileError(msg) from None
+    except ModelFileError as exc:
+        raise ModelFileError(f"{p}: {exc}") from None
+    try:
+        return model_from_dict(data, expected=None)
+    except ModelFileError as exc:
+        msg = f"{p}: {exc}"
+        raise ModelFileError(msg) from None
