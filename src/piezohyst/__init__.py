@@ -6,9 +6,8 @@ Active Prandtl-Ishlinskii models identified from voltage-to-charge data
 
 from __future__ import annotations
 
-__version__ = "0.1.0"
-
 from . import io, metrics, terms
+from ._version import __version__
 from .compensator import Compensator, CompensatorState
 from .errors import (
     DataFileError,

@@ -16,7 +16,7 @@ from typing import Any, cast
 
 import click
 
-from . import __version__
+from ._version import __version__
 from .compensator import Domain
 from .errors import PiezohystError
 from .io import DataSpec

@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from . import __version__
 from ._validation import FloatArray, check_int
+from ._version import __version__
 from .compensator import Compensator
 from .io import atomic_write_text
 from .metrics import hysteresis_width, nrmse

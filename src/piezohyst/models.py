@@ -36,6 +36,7 @@ from __future__ import annotations
 import inspect
 import itertools
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, Self
@@ -49,6 +50,14 @@ from .errors import NotFittedError, NotInvertibleError, ParameterError, ShapeErr
 from .hysteresis import PIHysteresis, Propagation
 from .identification import BLOCK, block_dt, default_thresholds, identify, term_columns
 from .metrics import rmse
+from .persistence import (
+    model_class,
+    model_from_dict,
+    model_names,
+    model_to_dict,
+    register,
+    save_model,
+)
 from .terms import (
     AbsIntegral,
     Asymmetry,
@@ -74,41 +83,9 @@ __all__ = [
     "model_names",
 ]
 
+_ = (model_class, model_names)  # re-exported: the registry lives in persistence
+
 GROWTH_TERMS = ("integral", "time", "abs_integral")
-_REGISTRY: dict[str, type[HysteresisModel]] = {}
-
-
-def model_class(name: str) -> type[HysteresisModel]:
-    """The model class of a CLI name (``"active-pi"``) or class name (``"ActivePI"``).
-
-    Parameters
-    ----------
-    name : str
-
-    Returns
-    -------
-    type
-
-    Raises
-    ------
-    ParameterError
-        For an unknown name; the message lists the known ones.
-    """
-    for cls in _REGISTRY.values():
-        if name in (cls.__name__, cls.cli_name):
-            return cls
-    msg = f"unknown model {name!r}; choose one of: {', '.join(model_names())}"
-    raise ParameterError(msg)
-
-
-def model_names() -> tuple[str, ...]:
-    """CLI names of every model that can be fitted from a file (``--model``).
-
-    Returns
-    -------
-    tuple of str
-    """
-    return tuple(cls.cli_name for cls in _REGISTRY.values() if cls.cli_name)
 
 
 @dataclass(frozen=True)
@@ -215,7 +192,7 @@ class HysteresisModel:
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
-        _REGISTRY[cls.__name__] = cls
+        register(cls)
 
     # Settings every model has; subclasses add their own.
     n_operators: int
@@ -904,8 +881,6 @@ class HysteresisModel:
         -------
         dict
         """
-        from .persistence import model_to_dict
-
         return model_to_dict(self)
 
     @classmethod
@@ -920,19 +895,16 @@ class HysteresisModel:
         -------
         HysteresisModel
         """
-        from .persistence import model_from_dict
+        model: HysteresisModel = model_from_dict(data, expected=cls)
+        return model
 
-        return model_from_dict(data, expected=cls)
-
-    def save(self, path: str | Any) -> None:
-        """Write the model as JSON (never pickle), atomically.
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Write the model as JSON (never pickle), atomically, with the umask's permissions.
 
         Parameters
         ----------
         path : str or os.PathLike
         """
-        from .persistence import save_model
-
         save_model(self, path)
 
 

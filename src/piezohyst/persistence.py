@@ -1,4 +1,9 @@
-"""Model files: JSON (never pickle), schema version and checksum, read back checked.
+"""Model files and the model registry: JSON (never pickle), schema version, checksum.
+
+The registry maps class names (in files) and CLI names (``--model``) to model
+classes; every :class:`~piezohyst.models.HysteresisModel` subclass registers
+itself. This module works on models through their public methods only and
+sits below :mod:`piezohyst.models`, which calls it for ``save``/``to_dict``.
 
 Schema 2 (written since 0.2) stores the core and a list of terms, each with
 its kind, settings and coefficients, so a model holding a custom term loads
@@ -18,20 +23,82 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ModelFileError, PiezohystError
+from ._version import __version__
+from .errors import ModelFileError, ParameterError, PiezohystError
 from .hysteresis import PIHysteresis
 from .io import atomic_write_text
-from .models import HysteresisModel, model_class
 from .terms import Term, make_term
 
 __all__ = [
     "SCHEMA",
     "SCHEMA_VERSION",
     "load_model",
+    "model_class",
     "model_from_dict",
+    "model_names",
     "model_to_dict",
+    "register",
     "save_model",
 ]
+
+# A model is any registered class with the HysteresisModel methods used below;
+# typed loosely here because this module sits beneath the models.
+Model = Any
+
+_REGISTRY: dict[str, type] = {}
+
+
+def register(cls: type) -> type:
+    """Make a model class loadable by its class name and usable by its ``cli_name``.
+
+    Parameters
+    ----------
+    cls : type
+        A :class:`~piezohyst.models.HysteresisModel` subclass.
+
+    Returns
+    -------
+    type
+        ``cls``.
+    """
+    _REGISTRY[cls.__name__] = cls
+    return cls
+
+
+def model_class(name: str) -> Any:
+    """The model class of a CLI name (``"active-pi"``) or class name (``"ActivePI"``).
+
+    Parameters
+    ----------
+    name : str
+
+    Returns
+    -------
+    type
+
+    Raises
+    ------
+    ParameterError
+        For an unknown name; the message lists the known ones.
+    """
+    for cls in _REGISTRY.values():
+        if name in (cls.__name__, getattr(cls, "cli_name", "")):
+            return cls
+    msg = f"unknown model {name!r}; choose one of: {', '.join(model_names())}"
+    raise ParameterError(msg)
+
+
+def model_names() -> tuple[str, ...]:
+    """CLI names of every model that can be fitted from a file (``--model``).
+
+    Returns
+    -------
+    tuple of str
+    """
+    return tuple(
+        str(getattr(c, "cli_name", "")) for c in _REGISTRY.values() if getattr(c, "cli_name", "")
+    )
+
 
 SCHEMA = "piezohyst-model"
 SCHEMA_VERSION = 2
@@ -47,7 +114,7 @@ def _nullable(value: float) -> float | None:
     return None if math.isnan(value) else value
 
 
-def model_to_dict(model: HysteresisModel) -> dict[str, Any]:
+def model_to_dict(model: Model) -> dict[str, Any]:
     """A fitted model as schema-2 JSON data with a checksum.
 
     Parameters
@@ -60,8 +127,6 @@ def model_to_dict(model: HysteresisModel) -> dict[str, Any]:
     dict
     """
     model._check_fitted()
-    from . import __version__
-
     lo, hi = model.input_range_
     body: dict[str, Any] = {
         "format": SCHEMA,
@@ -85,7 +150,7 @@ def model_to_dict(model: HysteresisModel) -> dict[str, Any]:
     return body
 
 
-def save_model(model: HysteresisModel, path: str | os.PathLike[str]) -> Path:
+def save_model(model: Model, path: str | os.PathLike[str]) -> Path:
     """Write ``model`` as JSON, atomically, with the umask's permissions.
 
     Parameters
@@ -236,7 +301,7 @@ def _terms(entries: Any) -> tuple[tuple[Term, ...], tuple[np.ndarray, ...]]:
     return tuple(terms), tuple(coefs)
 
 
-def model_from_dict(data: Any, expected: type[HysteresisModel] | None = None) -> HysteresisModel:
+def model_from_dict(data: Any, expected: type | None = None) -> Model:
     """Rebuild a fitted model from file data (schema 1 or 2), checked.
 
     Parameters
@@ -310,7 +375,7 @@ def _reject_constant(name: str) -> float:
     raise ModelFileError(msg)
 
 
-def load_model(path: str | os.PathLike[str]) -> HysteresisModel:
+def load_model(path: str | os.PathLike[str]) -> Model:
     """Load a model written by ``save`` (this version or 0.1.0).
 
     Parameters

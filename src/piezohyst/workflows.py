@@ -133,6 +133,7 @@ def fit_file(
     assert rec.y is not None
     w = rec.window
     x, y, t = rec.x[w], rec.y[w], rec.t[w]
+    fitted: HysteresisModel
     settings: dict[str, Any] = {"n_operators": operators, "output_unit": output_unit, **extra}
     estimator = cls(**settings)
     start = w.start or 0
@@ -149,7 +150,8 @@ def fit_file(
 
 
 def _load(model_path: PathLike) -> HysteresisModel:
-    return load_model(model_path)
+    model: HysteresisModel = load_model(model_path)
+    return model
 
 
 def predict_file(
