@@ -1,0 +1,139 @@
+"""Every shell and Python block of README.md and docs/*.md runs, as a user would run it.
+
+Blocks of one file run in order, in one fresh folder, Python blocks sharing a
+namespace. In a ``console`` block, lines starting with ``$ `` are commands and
+the lines after them the output they must print: every documented output line
+must appear in what the command printed, so the docs cannot drift from the
+code. A block preceded by ``<!-- docs-test: skip REASON -->`` is not run (the
+reason must say why: hardware, measured data not shipped, or a command that
+would run this test suite itself).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+FILES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+FENCE = re.compile(r"^```(\w*)\s*$")
+SKIP = re.compile(r"<!--\s*docs-test:\s*skip\s+(.+?)\s*-->")
+RUNNABLE = {"python", "sh", "bash", "console"}
+
+
+@dataclass(frozen=True)
+class Block:
+    lang: str
+    text: str
+    line: int
+    skip: str | None
+
+
+def blocks(path: Path) -> list[Block]:
+    out = []
+    lines = path.read_text(encoding="utf-8").splitlines()
+    i = 0
+    while i < len(lines):
+        m = FENCE.match(lines[i])
+        if m and m.group(1):
+            start = i
+            j = i + 1
+            while j < len(lines) and not lines[j].startswith("```"):
+                j += 1
+            prev = next((lines[k] for k in range(start - 1, -1, -1) if lines[k].strip()), "")
+            skip = SKIP.search(prev)
+            out.append(
+                Block(
+                    m.group(1),
+                    "\n".join(lines[start + 1 : j]),
+                    start + 1,
+                    skip.group(1) if skip else None,
+                )  # fmt: skip
+            )
+            i = j + 1
+        else:
+            i += 1
+    return out
+
+
+def _env(tmp: Path) -> dict[str, str]:
+    env = dict(os.environ)
+    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
+    env["MPLBACKEND"] = "Agg"
+    env.pop("CI", None)
+    return env
+
+
+def _run_console(block: Block, cwd: Path, where: str) -> None:
+    commands: list[tuple[str, list[str]]] = []
+    for line in block.text.splitlines():
+        if line.startswith("$ "):
+            commands.append((line[2:], []))
+        elif commands:
+            commands[-1][1].append(line)
+    last_status = 0
+    for command, expected in commands:
+        if command.strip() == "echo $?":
+            got = f"{last_status}"
+        else:
+            res = subprocess.run(
+                ["bash", "-c", command], cwd=cwd, env=_env(cwd), capture_output=True, text=True
+            )
+            last_status = res.returncode
+            got = res.stdout + res.stderr
+            if not any(e.startswith("error:") for e in expected):
+                assert res.returncode == 0, f"{where}: `{command}` failed:\n{got}"
+        for line in expected:
+            if line.strip():
+                assert line.strip() in got, f"{where}: `{command}` did not print {line!r}:\n{got}"
+
+
+def _run_shell(block: Block, cwd: Path, where: str) -> None:
+    res = subprocess.run(
+        ["bash", "-euo", "pipefail", "-c", block.text],
+        cwd=cwd,
+        env=_env(cwd),
+        capture_output=True,
+        text=True,
+    )
+    assert res.returncode == 0, f"{where} failed:\n{res.stdout}{res.stderr}"
+
+
+@pytest.mark.parametrize("path", FILES, ids=[p.name for p in FILES])
+def test_every_block_runs(path: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+    namespace: dict[str, object] = {"__name__": "__docs__"}
+    ran = 0
+    for block in blocks(path):
+        if block.lang not in RUNNABLE:
+            continue
+        where = f"{path.name}:{block.line}"
+        if block.skip:
+            assert len(block.skip) > 8, f"{where}: say why the block is skipped"
+            continue
+        if block.lang == "python":
+            exec(compile(block.text, where, "exec"), namespace)  # noqa: S102
+        elif block.lang == "console":
+            _run_console(block, tmp_path, where)
+        else:
+            _run_shell(block, tmp_path, where)
+        ran += 1
+    runnable = [b for b in blocks(path) if b.lang in RUNNABLE]
+    assert ran == len([b for b in runnable if not b.skip])
+
+
+def test_the_parser_sees_blocks_and_skips(tmp_path: Path) -> None:
+    text = (
+        "intro\n<!-- docs-test: skip needs a DAQ card -->\n```python\nx = 1\n```\n```sh\nls\n```\n"
+    )
+    path = tmp_path / "probe.md"
+    path.write_text(text)
+    found = blocks(path)
+    assert [(b.lang, b.skip) for b in found] == [("python", "needs a DAQ card"), ("sh", None)]
