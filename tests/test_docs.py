@@ -54,7 +54,7 @@ def blocks(path: Path) -> list[Block]:
                     "\n".join(lines[start + 1 : j]),
                     start + 1,
                     skip.group(1) if skip else None,
-                )  # fmt: skip
+                )
             )
             i = j + 1
         else:
@@ -119,7 +119,7 @@ def test_every_block_runs(path: Path, tmp_path: Path, monkeypatch: pytest.Monkey
             assert len(block.skip) > 8, f"{where}: say why the block is skipped"
             continue
         if block.lang == "python":
-            exec(compile(block.text, where, "exec"), namespace)  # noqa: S102
+            exec(compile(block.text, where, "exec"), namespace)
         elif block.lang == "console":
             _run_console(block, tmp_path, where)
         else:
