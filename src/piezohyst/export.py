@@ -29,7 +29,15 @@ Precision = Literal["double", "float"]
 
 @dataclass(frozen=True)
 class CCode:
-    """Generated header and source text, and the header's file name."""
+    """Generated header and source text, and the header's file name.
+
+    Attributes
+    ----------
+    header, source : str
+        The ``.h`` and ``.c`` texts.
+    header_name : str
+        The file name the source includes.
+    """
 
     header: str
     source: str
@@ -58,6 +66,19 @@ def export_c(
     The API: ``ph_comp_t`` (state), ``void ph_comp_init(ph_comp_t *s)``, and
     ``ph_real ph_comp_step(ph_comp_t *s, ph_real desired)`` where ``ph_real``
     is ``double`` (default) or ``float``. ``prefix`` renames ``ph_comp``.
+
+    Parameters
+    ----------
+    compensator : Compensator
+        An analytic compensator (play operators and growth terms only).
+    precision : {"double", "float"}
+        The C type of every real.
+    prefix : str
+        A C identifier for the generated names.
+
+    Returns
+    -------
+    CCode
     """
     if not compensator.analytic:
         msg = (
@@ -223,7 +244,22 @@ def write_c(
     *,
     precision: Precision = "double",
 ) -> tuple[Path, Path]:
-    """Write ``NAME.c`` and ``NAME.h`` (NAME from ``path``) atomically; returns both paths."""
+    """Write ``NAME.c`` and ``NAME.h`` (NAME from ``path``) atomically.
+
+    Parameters
+    ----------
+    compensator : Compensator
+        An analytic compensator.
+    path : str or os.PathLike
+        The ``.c`` file; the header goes beside it.
+    precision : {"double", "float"}
+        The C type of every real.
+
+    Returns
+    -------
+    tuple of Path
+        The source and the header.
+    """
     c_path = Path(path)
     if c_path.suffix != ".c":
         c_path = c_path.with_suffix(".c")

@@ -135,11 +135,32 @@ class PIHysteresis:
         return bool(np.all(self.loading_slopes > 0.0))
 
     def rest_state(self, x0: float) -> FloatArray:
-        """Operator states of an actuator resting at input ``x0`` with its memory wiped."""
+        """Operator states of an actuator resting at input ``x0`` with its memory wiped.
+
+        Parameters
+        ----------
+        x0 : float
+            Input (V).
+
+        Returns
+        -------
+        ndarray, shape (n,)
+        """
         return np.full(self.n_operators, float(x0))
 
     def loading_curve(self, s: ArrayLike) -> FloatArray:
-        r"""Initial loading curve :math:`\varphi(s) = \sum_i w_i \max(s - r_i, 0)`, s >= 0."""
+        r"""Initial loading curve :math:`\varphi(s) = \sum_i w_i \max(s - r_i, 0)`, s >= 0.
+
+        Parameters
+        ----------
+        s : array_like
+            Input excursions from rest (input units), >= 0.
+
+        Returns
+        -------
+        ndarray
+            Output change along the first loading (output units).
+        """
         s_arr = np.asarray(s, dtype=np.float64)
         return np.asarray(np.maximum(s_arr[..., None] - self.thresholds, 0.0) @ self.weights)
 
@@ -210,6 +231,11 @@ class PIHysteresis:
         :math:`z'_i = c + \sum_{j \le i} w_j z_i + \sum_{j > i} w_j z_j`
         (:meth:`inverse_state`). The inverse of the inverse is the original.
 
+        Returns
+        -------
+        PIHysteresis
+            Output units in, input units out.
+
         Raises
         ------
         NotInvertibleError
@@ -239,6 +265,16 @@ class PIHysteresis:
         r"""States of the inverse operators matching forward states ``state`` (eq. 18).
 
         :math:`z'_i = c + z_i \sum_{j \le i} w_j + \sum_{j > i} w_j z_j`.
+
+        Parameters
+        ----------
+        state : array_like, shape (n,)
+            Forward operator states (input units).
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            Inverse operator states (output units).
         """
         z = self._state(state)
         w = self.weights
@@ -247,7 +283,13 @@ class PIHysteresis:
 
     # ------------------------------------------------------------ persistence
     def to_dict(self) -> dict[str, Any]:
-        """Plain-JSON parameters (lists of floats)."""
+        """Plain-JSON parameters (lists of floats).
+
+        Returns
+        -------
+        dict
+            ``thresholds``, ``weights``, ``offset``, ``initial_state``.
+        """
         return {
             "thresholds": self.thresholds.tolist(),
             "weights": self.weights.tolist(),
@@ -257,7 +299,16 @@ class PIHysteresis:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> PIHysteresis:
-        """Inverse of :meth:`to_dict`; raises on missing or malformed fields."""
+        """Inverse of :meth:`to_dict`; raises on missing or malformed fields.
+
+        Parameters
+        ----------
+        data : dict
+
+        Returns
+        -------
+        PIHysteresis
+        """
         return cls(
             thresholds=data["thresholds"],
             weights=data["weights"],

@@ -66,6 +66,17 @@ def default_thresholds(x: ArrayLike, n_operators: int) -> FloatArray:
     adds a column collinear with the input and the offset. The rule depends on
     the span only, so it suits unipolar (0..Vmax) and bipolar drive alike.
 
+    Parameters
+    ----------
+    x : array_like
+        The training input (V).
+    n_operators : int
+        Number of thresholds, 0 included, in [1, 1000].
+
+    Returns
+    -------
+    ndarray, shape (n_operators,)
+
     Examples
     --------
     >>> default_thresholds([0.0, 140.0], 4).tolist()
@@ -84,6 +95,18 @@ def history_state(history: ArrayLike, thresholds: ArrayLike) -> FloatArray:
 
     To fit or predict a later part of a record, the operators must start where
     the earlier input left them, not at rest.
+
+    Parameters
+    ----------
+    history : array_like
+        The earlier input (V).
+    thresholds : array_like
+        The play thresholds (V).
+
+    Returns
+    -------
+    ndarray
+        One state per threshold (V).
 
     Examples
     --------

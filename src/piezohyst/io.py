@@ -62,7 +62,16 @@ class Table:
         return name in self._getters
 
     def resolve(self, key: str) -> str:
-        """A column name from a name or a 0-based index given as digits."""
+        """A column name from a name or a 0-based index given as digits.
+
+        Parameters
+        ----------
+        key : str
+
+        Returns
+        -------
+        str
+        """
         if key in self._getters:
             return key
         if key.strip().lstrip("-").isdigit():
@@ -75,7 +84,17 @@ class Table:
         raise DataFileError(msg)
 
     def get(self, key: str) -> FloatArray:
-        """The column as finite float64 values (raises naming the bad row and column)."""
+        """The column as finite float64 values (raises naming the bad row and column).
+
+        Parameters
+        ----------
+        key : str
+            Name or 0-based index as digits.
+
+        Returns
+        -------
+        ndarray
+        """
         name = self.resolve(key)
         values = self._getters[name]()
         if values.size == 0:
@@ -98,6 +117,17 @@ class Recording:
 
     The arrays hold the whole record because a hysteresis model needs the input
     history before a window to know its state at the window's start.
+
+    Attributes
+    ----------
+    t, x : ndarray
+        Time (s) and input.
+    y : ndarray or None
+        Output, if read.
+    names : tuple
+        Column names of input, output and time (None where not from a column).
+    window : slice
+        The samples asked for.
     """
 
     t: FloatArray
@@ -330,6 +360,10 @@ def read_table(path: str | os.PathLike[str], *, group: str | None = None) -> Tab
     group : str, optional
         TDMS group to read (default: the first with channels).
 
+    Returns
+    -------
+    Table
+
     Raises
     ------
     DataFileError
@@ -381,7 +415,26 @@ def read_recording(
 
     Time comes from ``time_column`` when the file has it, else from
     ``rate`` (Hz), else from the file's own sample interval (TDMS); the time
-    must be strictly increasing. ``output=None`` reads no output.
+    must be strictly increasing. ``output_column=None`` reads no output.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The data file (see :func:`read_table` for the formats).
+    input_column, output_column, time_column : str or None
+        Column names, or 0-based indices as digits.
+    rate : float, optional
+        Sample rate (Hz) when the file has no time column.
+    group : str, optional
+        TDMS group.
+    output_required : bool, default True
+        Raise if the output column is missing.
+    t_start, t_stop : float, optional
+        The window of samples asked for (s).
+
+    Returns
+    -------
+    Recording
     """
     table = read_table(path, group=group)
     x_name = table.resolve(input_column)
@@ -444,7 +497,19 @@ def read_recording(
 
 @dataclass(frozen=True)
 class DataSpec:
-    """Which columns and which samples of a data file to use (see :func:`read_recording`)."""
+    """Which columns and which samples of a data file to use (see :func:`read_recording`).
+
+    Attributes
+    ----------
+    input_column, output_column, time_column : str or None
+        Column names or 0-based indices as digits.
+    rate : float or None
+        Sample rate (Hz) when the file has no time column.
+    group : str or None
+        TDMS group.
+    t_start, t_stop : float or None
+        The window (s): ``t_start <= t < t_stop``.
+    """
 
     input_column: str = "voltage"
     output_column: str | None = "charge"
@@ -455,7 +520,19 @@ class DataSpec:
     t_stop: float | None = None
 
     def read(self, path: str | os.PathLike[str], *, output_required: bool = True) -> Recording:
-        """:func:`read_recording` with these settings."""
+        """:func:`read_recording` with these settings.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The data file.
+        output_required : bool, default True
+            Raise if the output column is missing (else read no output).
+
+        Returns
+        -------
+        Recording
+        """
         return read_recording(
             path,
             input_column=self.input_column,
@@ -540,6 +617,17 @@ def write_table(path: str | os.PathLike[str], columns: Mapping[str, ArrayLike]) 
     """Write equal-length columns as CSV (header row, full precision) or ``.npz``.
 
     The file appears only when complete (temporary file, then rename).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.npz`` or a text file (CSV).
+    columns : mapping
+        Column name to values, all of one length.
+
+    Returns
+    -------
+    Path
     """
     p = Path(path)
     arrays = {k: np.asarray(v, dtype=np.float64).reshape(-1) for k, v in columns.items()}

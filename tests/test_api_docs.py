@@ -1,0 +1,64 @@
+"""Every public callable documents its parameters and what it returns (numpydoc)."""
+
+from __future__ import annotations
+
+import inspect
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import piezohyst as ph
+from piezohyst import compensator, export, identification, io, models, persistence, terms
+
+MODULES = [ph, models, terms, identification, compensator, export, persistence, io]
+
+
+def _documented_objects() -> Iterator[tuple[str, Any]]:
+    seen: set[int] = set()
+    for module in MODULES:
+        for name in getattr(module, "__all__", []):
+            obj = getattr(module, name)
+            if id(obj) in seen or inspect.ismodule(obj) or not callable(obj):
+                continue
+            seen.add(id(obj))
+            yield f"{module.__name__}.{name}", obj
+            if inspect.isclass(obj) and obj.__module__.startswith("piezohyst"):
+                for attr, member in vars(obj).items():
+                    if attr.startswith("_") or not inspect.isfunction(member):
+                        continue
+                    yield f"{module.__name__}.{name}.{attr}", member
+
+
+def _needs(func: Callable[..., Any]) -> tuple[bool, bool]:
+    sig = inspect.signature(func)
+    params = [p for p in sig.parameters.values() if p.name not in ("self", "cls")]
+    returns = sig.return_annotation not in (None, "None", inspect.Signature.empty)
+    return bool(params), returns
+
+
+def test_public_callables_have_numpydoc_sections() -> None:
+    missing = []
+    for name, obj in _documented_objects():
+        doc = inspect.getdoc(obj) or ""
+        if not doc:
+            missing.append(f"{name}: no docstring")
+            continue
+        if doc.startswith("See :meth:") or ("See :meth:" in doc.splitlines()[0]):
+            continue  # an override documented where it is declared
+        if inspect.isclass(obj):
+            if issubclass(obj, BaseException):
+                continue  # constructed with a message, as every exception
+            # a record type (dataclass, named tuple) documents its fields as Attributes
+            record = hasattr(obj, "__dataclass_fields__") or hasattr(obj, "_fields")
+            sections = ("Attributes", "Parameters") if record else ("Parameters",)
+            init = obj.__init__
+            if init is object.__init__ or not _needs(init)[0]:
+                continue
+            if not any(sec in doc for sec in sections):
+                missing.append(f"{name}: no {' or '.join(sections)} section")
+            continue
+        needs_params, needs_returns = _needs(obj)
+        if needs_params and "Parameters" not in doc:
+            missing.append(f"{name}: no Parameters section")
+        if needs_returns and "Returns" not in doc:
+            missing.append(f"{name}: no Returns section")
+    assert not missing, "\n".join(missing)
