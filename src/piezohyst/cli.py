@@ -17,7 +17,7 @@ from typing import Any, cast
 import click
 
 from ._version import __version__
-from .compensator import Domain
+from .compensator import CompensatorSettings, Domain
 from .errors import PiezohystError
 from .io import DataSpec
 from .models import HysteresisModel, model_names
@@ -168,6 +168,7 @@ def _data_options(fn: Callable[..., Any]) -> Callable[..., Any]:
 
 
 def _limit_options(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """--v-min/--v-max/--domain/--gain/--slew-rate/--sample-rate, gathered into one settings."""
     options = [
         click.option(
             "--v-min",
@@ -199,9 +200,27 @@ def _limit_options(fn: Callable[..., Any]) -> Callable[..., Any]:
             "--sample-rate", type=float, default=None, help="Loop rate in Hz (for --slew-rate)."
         ),
     ]
+
+    @functools.wraps(fn)
+    def with_settings(
+        *args: Any,
+        v_min: float | None,
+        v_max: float | None,
+        domain: str,
+        gain: float | None,
+        slew_rate: float | None,
+        sample_rate: float | None,
+        **kwargs: Any,
+    ) -> Any:
+        settings = CompensatorSettings(
+            v_min, v_max, cast(Domain, domain), gain, slew_rate, sample_rate
+        )
+        return fn(*args, settings=settings, **kwargs)
+
+    wrapped: Callable[..., Any] = with_settings
     for option in reversed(options):
-        fn = option(fn)
-    return fn
+        wrapped = option(wrapped)
+    return wrapped
 
 
 OUT_FILE = click.option(
@@ -423,12 +442,7 @@ def compensate(
     model: Path,
     target: Path,
     column: str | None,
-    v_min: float | None,
-    v_max: float | None,
-    domain: str,
-    gain: float | None,
-    slew_rate: float | None,
-    sample_rate: float | None,
+    settings: CompensatorSettings,
     out: Path,
 ) -> None:
     """Feedforward voltage for the desired trajectory in TARGET; write time,command,desired.
@@ -444,18 +458,7 @@ def compensate(
 
     comp = _run(
         ctx,
-        lambda: compensate_file(
-            model,
-            target,
-            out,
-            column=column,
-            domain=cast(Domain, domain),
-            gain=gain,
-            v_min=v_min,
-            v_max=v_max,
-            slew_rate=slew_rate,
-            sample_rate=sample_rate,
-        ),
+        lambda: compensate_file(model, target, out, column=column, settings=settings),
     )
     click.echo(
         f"commands in [{comp.v_min:g}, {comp.v_max:g}] V; {comp.saturated_count} "
@@ -475,13 +478,7 @@ def compensate(
     help="Folder for the figures, metrics.json and report.md.",
 )
 @click.pass_obj
-def report(
-    ctx: Context,
-    model: Path,
-    data: Path,
-    data_spec: DataSpec,
-    out: Path,
-) -> None:
+def report(ctx: Context, model: Path, data: Path, data_spec: DataSpec, out: Path) -> None:
     """Figures (loop, fit, residual, growth removal) and metrics of MODEL on DATA.
 
     \b
@@ -522,12 +519,7 @@ def report(
 def export_c(
     ctx: Context,
     model: Path,
-    v_min: float | None,
-    v_max: float | None,
-    domain: str,
-    gain: float | None,
-    slew_rate: float | None,
-    sample_rate: float | None,
+    settings: CompensatorSettings,
     use_float: bool,
     out: Path,
 ) -> None:
@@ -542,15 +534,7 @@ def export_c(
     c_path, h_path = _run(
         ctx,
         lambda: export_c_file(
-            model,
-            out,
-            v_min=v_min,
-            v_max=v_max,
-            domain=cast(Domain, domain),
-            gain=gain,
-            slew_rate=slew_rate,
-            sample_rate=sample_rate,
-            precision="float" if use_float else "double",
+            model, out, settings=settings, precision="float" if use_float else "double"
         ),
     )
     click.echo(f"{c_path}\n{h_path}")

@@ -430,3 +430,60 @@ class Compensator:
         else:
             K.numeric_process(d, self.tables, self.static, self.lags, self.config, self._state, out)
         return out
+
+
+@dataclass(frozen=True)
+class CompensatorSettings:
+    """How to build a :class:`~piezohyst.Compensator` from a model file.
+
+    Attributes
+    ----------
+    v_min, v_max : float or None
+        Voltage limits (V); None: the model's training range.
+    domain : {"charge", "displacement"}
+        Units of the desired values.
+    gain : float or None
+        m per model output unit, for ``domain="displacement"``.
+    slew_rate : float or None
+        Largest change in V/s (needs ``sample_rate``).
+    sample_rate : float or None
+        Loop rate (Hz).
+    """
+
+    v_min: float | None = None
+    v_max: float | None = None
+    domain: Domain = "charge"
+    gain: float | None = None
+    slew_rate: float | None = None
+    sample_rate: float | None = None
+
+    def build(self, model: HysteresisModel) -> Compensator:
+        """A compensator for ``model`` whose limits default to its training voltage range.
+
+        Parameters
+        ----------
+        model : HysteresisModel
+            A fitted model.
+
+        Returns
+        -------
+        Compensator
+
+        Raises
+        ------
+        ParameterError
+            A limit is missing and the model does not record its training range.
+        """
+        lo, hi = model.input_range_
+        if (self.v_min is None or self.v_max is None) and (math.isnan(lo) or math.isnan(hi)):
+            msg = "the model does not record its training voltage range: give v_min and v_max"
+            raise ParameterError(msg)
+        return Compensator(
+            model,
+            v_min=lo if self.v_min is None else float(self.v_min),
+            v_max=hi if self.v_max is None else float(self.v_max),
+            domain=self.domain,
+            gain=self.gain,
+            slew_rate=self.slew_rate,
+            sample_rate=self.sample_rate,
+        )

@@ -190,20 +190,7 @@ class PIHysteresis:
         return Propagation(y, z)
 
     def predict(self, x: ArrayLike, state: ArrayLike | None = None) -> FloatArray:
-        """Output for input ``x`` (see :meth:`propagate`).
-
-        Parameters
-        ----------
-        x : array_like, shape (N,)
-            Input samples (V).
-        state : array_like, shape (n,), optional
-            Operator states before the first sample.
-
-        Returns
-        -------
-        ndarray, shape (N,)
-            Output (output units).
-        """
+        """See :meth:`propagate`, which this calls: the output alone."""
         return self.propagate(x, state).output
 
     def _state(self, state: ArrayLike | None) -> FloatArray:

@@ -183,8 +183,23 @@ def _check_unit(value: object, name: str, owner: str) -> str:
 class HysteresisModel:
     """Base of every model: the fit, run, inverse and file contract (see the module doc).
 
-    Subclasses set ``cli_name``, store their settings in ``__init__`` and
-    return the terms to fit from :meth:`_terms_to_fit`; everything else is here.
+    Subclasses set ``cli_name``, add their settings after the common ones in
+    ``__init__`` and return the terms to fit from :meth:`_terms_to_fit`;
+    everything else is here.
+
+    Parameters
+    ----------
+    n_operators : int, default 10
+        Play operators including the linear one (:math:`r_0 = 0`), in [1, 1000].
+        Ignored when ``thresholds`` is given.
+    thresholds : array_like, optional
+        Explicit thresholds (input units), strictly increasing from 0. Default:
+        :func:`~piezohyst.identification.default_thresholds` of the training input.
+    min_slope : float, default 1e-3
+        Lower bound of every loading-curve slope, as a fraction of the mean
+        slope ``span(y) / span(x)``. It guarantees the analytic inverse.
+    input_unit, output_unit : str, default "V", "C"
+        Units recorded with the model.
     """
 
     cli_name: ClassVar[str] = ""
@@ -194,12 +209,21 @@ class HysteresisModel:
         super().__init_subclass__(**kwargs)
         register(cls)
 
-    # Settings every model has; subclasses add their own.
-    n_operators: int
-    thresholds: ArrayLike | None
-    min_slope: float
-    input_unit: str
-    output_unit: str
+    def __init__(
+        self,
+        n_operators: int = 10,
+        *,
+        thresholds: ArrayLike | None = None,
+        min_slope: float = 1e-3,
+        input_unit: str = "V",
+        output_unit: str = "C",
+    ) -> None:
+        # the settings every model has; subclasses add theirs after the first
+        self.n_operators = n_operators
+        self.thresholds = thresholds
+        self.min_slope = min_slope
+        self.input_unit = input_unit
+        self.output_unit = output_unit
 
     # ------------------------------------------------------ sklearn contract
     @classmethod
@@ -385,6 +409,10 @@ class HysteresisModel:
         self, core: PIHysteresis, terms: tuple[Term, ...], coefs: tuple[FloatArray, ...]
     ) -> None:
         self.operator_ = core
+        self.thresholds_ = core.thresholds
+        self.weights_ = core.weights
+        self.offset_ = core.offset
+        self.initial_state_ = core.initial_state
         self.terms_ = terms
         self.coefs_ = coefs
         self.selection_ = {}
@@ -404,30 +432,6 @@ class HysteresisModel:
     def is_fitted(self) -> bool:
         """True once :meth:`fit` ran (or the model was loaded)."""
         return hasattr(self, "operator_")
-
-    @property
-    def thresholds_(self) -> FloatArray:
-        """Play thresholds (input units)."""
-        self._check_fitted()
-        return self.operator_.thresholds
-
-    @property
-    def weights_(self) -> FloatArray:
-        """Play weights (output per input unit)."""
-        self._check_fitted()
-        return self.operator_.weights
-
-    @property
-    def offset_(self) -> float:
-        """Output offset (output units)."""
-        self._check_fitted()
-        return self.operator_.offset
-
-    @property
-    def initial_state_(self) -> FloatArray:
-        """Operator states (input units) before the first training sample."""
-        self._check_fitted()
-        return self.operator_.initial_state
 
     @property
     def rate_dependent_(self) -> bool:
@@ -480,11 +484,12 @@ class HysteresisModel:
         Parameters
         ----------
         x0 : float
-            Input (V).
+            The voltage it rests at (V): every operator, and every creep lag, sits there.
 
         Returns
         -------
         ModelState
+            Growth integrals at 0, ``t_last`` None.
         """
         self._check_fitted()
         return ModelState(
@@ -942,20 +947,13 @@ class PIModel(HysteresisModel):
     Parameters
     ----------
     n_operators : int, default 10
-        Play operators including the linear one, in [1, 1000]. Ignored when
-        ``thresholds`` is given.
+        Play operators including the linear one.
     terms : sequence of str or Term, default ()
         Term kinds (``"integral"``, ``"time"``, ``"abs_integral"``,
         ``"asymmetry"``, ``"creep"``) or :class:`~piezohyst.terms.Term`
         instances, custom ones included.
-    thresholds : array_like, optional
-        Explicit thresholds (input units), strictly increasing from 0.
-        Default: :func:`~piezohyst.identification.default_thresholds`.
-    min_slope : float, default 1e-3
-        Lower bound of every loading-curve slope, as a fraction of the mean
-        slope ``span(y) / span(x)``; it guarantees the analytic inverse.
-    input_unit, output_unit : str, default "V", "C"
-        Units recorded with the model.
+    thresholds, min_slope, input_unit, output_unit
+        As for :class:`ClassicalPI`.
 
     Attributes
     ----------
@@ -995,12 +993,14 @@ class PIModel(HysteresisModel):
         input_unit: str = "V",
         output_unit: str = "C",
     ) -> None:
-        self.n_operators = n_operators
+        super().__init__(
+            n_operators,
+            thresholds=thresholds,
+            min_slope=min_slope,
+            input_unit=input_unit,
+            output_unit=output_unit,
+        )
         self.terms = terms
-        self.thresholds = thresholds
-        self.min_slope = min_slope
-        self.input_unit = input_unit
-        self.output_unit = output_unit
 
     def _terms_to_fit(self, x: FloatArray) -> tuple[list[Term], list[tuple[int, ...]] | None]:
         if isinstance(self.terms, str | Term):
@@ -1031,22 +1031,13 @@ class ClassicalPI(HysteresisModel):
 
     Parameters
     ----------
-    n_operators : int, default 10
-        Play operators including the linear one (:math:`r_0 = 0`), in [1, 1000].
-        Ignored when ``thresholds`` is given.
-    thresholds : array_like, optional
-        Explicit thresholds (input units), strictly increasing from 0. Default:
-        :func:`~piezohyst.identification.default_thresholds` of the training input.
-    min_slope : float, default 1e-3
-        Lower bound of every loading-curve slope, as a fraction of the mean
-        slope ``span(y) / span(x)``. It guarantees the analytic inverse.
-    input_unit, output_unit : str, default "V", "C"
-        Units recorded with the model.
+    n_operators, thresholds, min_slope, input_unit, output_unit
+        As for :class:`HysteresisModel`.
 
     Attributes
     ----------
     operator_ : PIHysteresis
-        The immutable identified operator.
+        The immutable identified operator (thresholds, weights, offset, initial state).
     thresholds_, weights_ : ndarray
         Identified thresholds (input units) and weights (output/input units).
     offset_ : float
@@ -1070,21 +1061,6 @@ class ClassicalPI(HysteresisModel):
     """
 
     cli_name = "classical-pi"
-
-    def __init__(
-        self,
-        n_operators: int = 10,
-        *,
-        thresholds: ArrayLike | None = None,
-        min_slope: float = 1e-3,
-        input_unit: str = "V",
-        output_unit: str = "C",
-    ) -> None:
-        self.n_operators = n_operators
-        self.thresholds = thresholds
-        self.min_slope = min_slope
-        self.input_unit = input_unit
-        self.output_unit = output_unit
 
     def _terms_to_fit(self, x: FloatArray) -> tuple[list[Term], list[tuple[int, ...]] | None]:
         return [], None
@@ -1123,21 +1099,6 @@ class ActivePI(HysteresisModel):
     """
 
     cli_name = "active-pi"
-
-    def __init__(
-        self,
-        n_operators: int = 10,
-        *,
-        thresholds: ArrayLike | None = None,
-        min_slope: float = 1e-3,
-        input_unit: str = "V",
-        output_unit: str = "C",
-    ) -> None:
-        self.n_operators = n_operators
-        self.thresholds = thresholds
-        self.min_slope = min_slope
-        self.input_unit = input_unit
-        self.output_unit = output_unit
 
     def _terms_to_fit(self, x: FloatArray) -> tuple[list[Term], list[tuple[int, ...]] | None]:
         return [Integral()], None
@@ -1209,20 +1170,22 @@ class GeneralizedPI(HysteresisModel):
         self,
         n_operators: int = 10,
         *,
-        thresholds: ArrayLike | None = None,
-        min_slope: float = 1e-3,
-        input_unit: str = "V",
-        output_unit: str = "C",
         growth_terms: str | Sequence[str] = "auto",
         asymmetry: int = 3,
         creep: Sequence[float] = (),
         optimize_thresholds: bool = False,
+        thresholds: ArrayLike | None = None,
+        min_slope: float = 1e-3,
+        input_unit: str = "V",
+        output_unit: str = "C",
     ) -> None:
-        self.n_operators = n_operators
-        self.thresholds = thresholds
-        self.min_slope = min_slope
-        self.input_unit = input_unit
-        self.output_unit = output_unit
+        super().__init__(
+            n_operators,
+            thresholds=thresholds,
+            min_slope=min_slope,
+            input_unit=input_unit,
+            output_unit=output_unit,
+        )
         self.growth_terms = growth_terms
         self.asymmetry = asymmetry
         self.creep = creep
@@ -1314,63 +1277,21 @@ class GeneralizedPI(HysteresisModel):
         objective(res.x if res.fun < before else start)
         self.selection_ = selection
 
-    # derived views of the fitted terms, named as in 0.1
-    def _term(self, kind: str) -> tuple[Term, FloatArray] | None:
-        self._check_fitted()
-        for term, coef in zip(self.terms_, self.coefs_, strict=True):
-            if term.kind == kind:
-                return term, coef
-        return None
-
-    @property
-    def growth_terms_(self) -> tuple[str, ...]:
-        """Growth terms used."""
-        self._check_fitted()
-        return tuple(term.kind for term in self.terms_ if term.removed)
-
-    @property
-    def growth_coefs_(self) -> FloatArray:
-        """Coefficients of ``growth_terms_`` (output per V·s, per s, per V·s)."""
-        self._check_fitted()
-        coefs = [c for term, c in zip(self.terms_, self.coefs_, strict=True) if term.removed]
-        return np.concatenate(coefs) if coefs else np.zeros(0)
-
-    def _static(self) -> StaticShape:
-        found = self._term("asymmetry")
-        if found is None:
-            return StaticShape(np.zeros(0), np.zeros(0), np.zeros(0), 1.0)
-        shape = found[0].static_shape(found[1])
-        assert shape is not None
-        return shape
-
-    @property
-    def knots_(self) -> FloatArray:
-        """Asymmetry knots (V)."""
-        return self._static().knots
-
-    @property
-    def static_up_(self) -> FloatArray:
-        """Asymmetry coefficients above each knot (output/V)."""
-        return self._static().up
-
-    @property
-    def static_down_(self) -> FloatArray:
-        """Asymmetry coefficients below each knot (output/V)."""
-        return self._static().down
-
-    @property
-    def static_scale_(self) -> float:
-        """Asymmetry scale (V)."""
-        return self._static().scale
-
-    @property
-    def creep_taus_(self) -> FloatArray:
-        """Creep time constants (s)."""
-        found = self._term("creep")
-        return np.zeros(0) if found is None else np.asarray(found[0].get_params()["taus"])
-
-    @property
-    def creep_gains_(self) -> FloatArray:
-        """Creep gains (output/V)."""
-        found = self._term("creep")
-        return np.zeros(0) if found is None else found[1]
+    def _set_fitted(
+        self, core: PIHysteresis, terms: tuple[Term, ...], coefs: tuple[FloatArray, ...]
+    ) -> None:
+        """Also set the 0.1 names of the fitted terms (views of ``terms_``/``coefs_``)."""
+        super()._set_fitted(core, terms, coefs)
+        static = StaticShape(np.zeros(0), np.zeros(0), np.zeros(0), 1.0)
+        lags = LagShape(np.zeros(0), np.zeros(0))
+        growth: list[tuple[str, FloatArray]] = []
+        for term, coef in zip(terms, coefs, strict=True):
+            static = term.static_shape(coef) or static
+            lags = term.lag_shape(coef) or lags
+            if term.removed:
+                growth.append((term.kind, coef))
+        self.knots_, self.static_scale_ = static.knots, static.scale
+        self.static_up_, self.static_down_ = static.up, static.down
+        self.creep_taus_, self.creep_gains_ = lags.taus, lags.gains
+        self.growth_terms_ = tuple(kind for kind, _ in growth)
+        self.growth_coefs_ = np.concatenate([c for _, c in growth]) if growth else np.zeros(0)

@@ -71,10 +71,12 @@ def model_class(name: str) -> Any:
     Parameters
     ----------
     name : str
+        As in a file's ``model`` field or the CLI's ``--model``.
 
     Returns
     -------
     type
+        A :class:`~piezohyst.models.HysteresisModel` subclass.
 
     Raises
     ------
@@ -120,7 +122,7 @@ def model_to_dict(model: Model) -> dict[str, Any]:
     Parameters
     ----------
     model : HysteresisModel
-        A fitted model.
+        Fitted (raises NotFittedError otherwise).
 
     Returns
     -------
@@ -314,6 +316,7 @@ def model_from_dict(data: Any, expected: type | None = None) -> Model:
     Returns
     -------
     HysteresisModel
+        Fitted, ready to predict and compensate.
 
     Raises
     ------
@@ -381,10 +384,12 @@ def load_model(path: str | os.PathLike[str]) -> Model:
     Parameters
     ----------
     path : str or os.PathLike
+        A ``.json`` file written by ``save``.
 
     Returns
     -------
     HysteresisModel
+        An instance of the class the file names.
 
     Raises
     ------

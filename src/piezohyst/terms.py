@@ -64,6 +64,7 @@ __all__ = [
     "Creep",
     "Integral",
     "LagShape",
+    "RunningIntegral",
     "StaticShape",
     "Term",
     "TimeTerm",
@@ -252,17 +253,7 @@ class Term:
         return None
 
     def lag_shape(self, coefficients: FloatArray) -> LagShape | None:
-        """The term as first-order lags, if it is one (kept terms).
-
-        Parameters
-        ----------
-        coefficients : ndarray
-            The term's fitted coefficients.
-
-        Returns
-        -------
-        LagShape or None
-        """
+        """See :meth:`static_shape`: the term as first-order lags, if it is one."""
         return None
 
     # ------------------------------------------------------------ python
@@ -288,25 +279,39 @@ def _needs_time(term: Term, dt: FloatArray | None) -> FloatArray:
     return dt
 
 
-class Integral(Term):
-    r"""The paper's growth term :math:`\int x\,dt` (eq. 13): ohmic leakage.
+class RunningIntegral(Term):
+    r"""Base of the growth terms that integrate something: :math:`\int f(x)\,dt`.
 
-    Backward rectangles, :math:`y_2[k] = y_2[k-1] + x[k]\,\Delta t_k`. Its
-    coefficient :math:`R` is the leakage conductance for V to C (S).
+    Backward rectangles, :math:`y[k] = y[k-1] + f(x[k])\,\Delta t_k`, the
+    paper's discretisation (eq. 13). Subclasses give :meth:`integrand`.
     """
 
-    kind = "integral"
     removed = True
     rate_dependent = True
-    input_degree = 1
-    state_names = ("integral",)
+    state_names: ClassVar[tuple[str, ...]] = ("integral",)
+
+    def integrand(self, x: FloatArray) -> FloatArray:
+        """What is integrated over time, sample by sample.
+
+        Parameters
+        ----------
+        x : ndarray
+            Input samples.
+
+        Returns
+        -------
+        ndarray
+        """
+        raise NotImplementedError
 
     def columns(
         self, x: FloatArray, t: FloatArray | None, dt: FloatArray | None, state: FloatArray
     ) -> FloatArray:
-        """See :meth:`Term.columns`: the running integral (input unit x s)."""
+        """See :meth:`Term.columns`: the running integral."""
         out = np.empty((x.size, 1))
-        state[0] = _kernels.running_integral(x, _needs_time(self, dt), state[0], out[:, 0])
+        state[0] = _kernels.running_integral(
+            self.integrand(x), _needs_time(self, dt), state[0], out[:, 0]
+        )
         return out
 
     def coefficient_units(self, input_unit: str, output_unit: str) -> tuple[str, ...]:
@@ -314,24 +319,30 @@ class Integral(Term):
         return (f"{output_unit}/({input_unit}*s)",)
 
 
-class TimeTerm(Term):
+class Integral(RunningIntegral):
+    r"""The paper's growth term :math:`\int x\,dt` (eq. 13): ohmic leakage.
+
+    Its coefficient :math:`R` is the leakage conductance for V to C (S).
+    """
+
+    kind = "integral"
+    input_degree = 1
+
+    def integrand(self, x: FloatArray) -> FloatArray:
+        """See :meth:`RunningIntegral.integrand`: the input itself."""
+        return x
+
+
+class TimeTerm(RunningIntegral):
     """Elapsed time :math:`t - t_0`: a constant current (op-amp bias, integrator offset)."""
 
     kind = "time"
-    removed = True
-    rate_dependent = True
     input_degree = 0
     state_names = ("elapsed",)
 
-    def columns(
-        self, x: FloatArray, t: FloatArray | None, dt: FloatArray | None, state: FloatArray
-    ) -> FloatArray:
-        """See :meth:`Term.columns`: elapsed time (s)."""
-        out = np.empty((x.size, 1))
-        state[0] = _kernels.running_integral(
-            np.ones_like(x), _needs_time(self, dt), state[0], out[:, 0]
-        )
-        return out
+    def integrand(self, x: FloatArray) -> FloatArray:
+        """See :meth:`RunningIntegral.integrand`: one, so the integral is the elapsed time."""
+        return np.ones_like(x)
 
     def coefficient_units(self, input_unit: str, output_unit: str) -> tuple[str, ...]:
         """See :meth:`Term.coefficient_units`: output per s (A for C)."""
@@ -354,7 +365,7 @@ def _span_scale(x: FloatArray) -> float:
     return max(float(np.ptp(x)), 1e-300)
 
 
-class AbsIntegral(Term):
+class AbsIntegral(RunningIntegral):
     r"""Leakage rising with the voltage: :math:`\int x\,|x| / s\,dt`.
 
     Parameters
@@ -364,8 +375,6 @@ class AbsIntegral(Term):
     """
 
     kind = "abs_integral"
-    removed = True
-    rate_dependent = True
     input_degree = 1
     state_names = ("abs_integral",)
 
@@ -380,20 +389,10 @@ class AbsIntegral(Term):
         """See :meth:`Term.bind`: the scale defaults to the input's span."""
         return self if self.scale is not None else AbsIntegral(_span_scale(x))
 
-    def columns(
-        self, x: FloatArray, t: FloatArray | None, dt: FloatArray | None, state: FloatArray
-    ) -> FloatArray:
-        """See :meth:`Term.columns`: the running integral of x|x|/s (input unit x s)."""
+    def integrand(self, x: FloatArray) -> FloatArray:
+        """See :meth:`RunningIntegral.integrand`: x|x|/s."""
         s = self.scale if self.scale is not None else _span_scale(x)
-        out = np.empty((x.size, 1))
-        state[0] = _kernels.running_integral(
-            x * np.abs(x) / s, _needs_time(self, dt), state[0], out[:, 0]
-        )
-        return out
-
-    def coefficient_units(self, input_unit: str, output_unit: str) -> tuple[str, ...]:
-        """See :meth:`Term.coefficient_units`."""
-        return (f"{output_unit}/({input_unit}*s)",)
+        return x * np.abs(x) / s
 
 
 class Asymmetry(Term):
@@ -564,11 +563,12 @@ def term_class(kind: str) -> type[Term]:
     Parameters
     ----------
     kind : str
-        A term's ``kind`` (e.g. ``"integral"``).
+        A term's ``kind`` (e.g. ``"integral"``), as stored in model files.
 
     Returns
     -------
     type
+        A :class:`Term` subclass.
 
     Raises
     ------

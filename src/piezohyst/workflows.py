@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from ._validation import FloatArray, check_float, check_int
-from .compensator import Compensator, Domain
+from .compensator import Compensator, CompensatorSettings
 from .errors import DataFileError, ParameterError
 from .export import Precision, write_c
 from .identification import default_thresholds, history_state
@@ -43,6 +43,7 @@ __all__ = [
 ]
 
 PathLike = str | os.PathLike[str]
+_DEFAULT_SETTINGS = CompensatorSettings()  # frozen: safe as a shared default
 
 
 def simulate_file(
@@ -175,72 +176,33 @@ def predict_file(
     return columns
 
 
-def _limits(
-    model: HysteresisModel, v_min: float | None, v_max: float | None
-) -> tuple[float, float]:
-    lo, hi = model.input_range_
-    if v_min is None or v_max is None:
-        if math.isnan(lo):
-            msg = "the model does not record its training voltage range: give v_min and v_max"
-            raise ParameterError(msg)
-    return (lo if v_min is None else float(v_min)), (hi if v_max is None else float(v_max))
-
-
-def make_compensator(
-    model: HysteresisModel,
-    *,
-    v_min: float | None = None,
-    v_max: float | None = None,
-    domain: Domain = "charge",
-    gain: float | None = None,
-    slew_rate: float | None = None,
-    sample_rate: float | None = None,
-) -> Compensator:
-    """A compensator whose limits default to the model's training voltage range.
-
-    Parameters
-    ----------
-    model : HysteresisModel
-        A fitted model.
-    v_min, v_max : float, optional
-        Voltage limits (V); default the training range.
-    domain, gain, slew_rate, sample_rate
-        As for :class:`~piezohyst.Compensator`.
-
-    Returns
-    -------
-    Compensator
-    """
-    lo, hi = _limits(model, v_min, v_max)
-    return Compensator(
-        model,
-        v_min=lo,
-        v_max=hi,
-        domain=domain,
-        gain=gain,
-        slew_rate=slew_rate,
-        sample_rate=sample_rate,
-    )
-
-
 def compensate_file(
     model_path: PathLike,
     target: PathLike,
     out: PathLike,
     *,
     column: str | None = None,
-    domain: Domain = "charge",
-    gain: float | None = None,
-    v_min: float | None = None,
-    v_max: float | None = None,
-    slew_rate: float | None = None,
-    sample_rate: float | None = None,
+    settings: CompensatorSettings = _DEFAULT_SETTINGS,
 ) -> Compensator:
     """Feedforward voltage for a desired trajectory; writes ``time,command,desired``.
 
-    ``column`` is the desired column (default ``desired``, or the file's only
-    column besides ``time``). Commands never leave ``[v_min, v_max]``, which
-    default to the model's training voltage range.
+    Parameters
+    ----------
+    model_path : str or os.PathLike
+        A saved model.
+    target : str or os.PathLike
+        The desired trajectory (a ``desired`` column, or the only one besides ``time``).
+    out : str or os.PathLike
+        Where to write the commands.
+    column : str, optional
+        The desired column's name.
+    settings : CompensatorSettings
+        Limits, domain, gain, slew rate.
+
+    Returns
+    -------
+    Compensator
+        After the run (its counters tell saturated and non-finite samples).
     """
     model = _load(model_path)
     table = read_table(target)
@@ -254,19 +216,11 @@ def compensate_file(
             )
             raise DataFileError(msg)
     desired = table.get(table.resolve(column))
-    comp = make_compensator(
-        model,
-        v_min=v_min,
-        v_max=v_max,
-        domain=domain,
-        gain=gain,
-        slew_rate=slew_rate,
-        sample_rate=sample_rate,
-    )
+    comp = settings.build(model)
     if "time" in table:
         t = table.get("time")
-    elif sample_rate is not None:
-        t = np.arange(desired.size) / float(sample_rate)
+    elif settings.sample_rate is not None:
+        t = np.arange(desired.size) / float(settings.sample_rate)
     else:
         t = np.arange(desired.size, dtype=np.float64)
     write_table(out, {"time": t, "command": comp.process(desired), "desired": desired})
@@ -277,25 +231,27 @@ def export_c_file(
     model_path: PathLike,
     out: PathLike,
     *,
-    v_min: float | None = None,
-    v_max: float | None = None,
-    domain: Domain = "charge",
-    gain: float | None = None,
-    slew_rate: float | None = None,
-    sample_rate: float | None = None,
+    settings: CompensatorSettings = _DEFAULT_SETTINGS,
     precision: Precision = "double",
 ) -> tuple[Path, Path]:
-    """Write ``NAME.c`` and ``NAME.h`` for the model's compensator (see :mod:`piezohyst.export`)."""
-    comp = make_compensator(
-        _load(model_path),
-        v_min=v_min,
-        v_max=v_max,
-        domain=domain,
-        gain=gain,
-        slew_rate=slew_rate,
-        sample_rate=sample_rate,
-    )
-    return write_c(comp, out, precision=precision)
+    """Write ``NAME.c`` and ``NAME.h`` for the model's compensator (see :mod:`piezohyst.export`).
+
+    Parameters
+    ----------
+    model_path : str or os.PathLike
+        A saved model.
+    out : str or os.PathLike
+        The ``.c`` file.
+    settings : CompensatorSettings
+        Limits, domain, gain, slew rate.
+    precision : {"double", "float"}
+        The C type of every real.
+
+    Returns
+    -------
+    tuple of Path
+    """
+    return write_c(settings.build(_load(model_path)), out, precision=precision)
 
 
 @dataclass(frozen=True)
