@@ -320,3 +320,23 @@ def test_no_import_runs_upward() -> None:
                 for name in names:
                     if name in LAYERS:
                         assert LAYERS[name] <= rank, f"{rel} imports {name} (upward)"
+
+
+def test_every_setting_has_one_declared_rule() -> None:
+    for cls in (ph.ClassicalPI, ph.ActivePI, ph.GeneralizedPI, ph.PIModel):
+        rules = cls.parameter_rules()
+        assert set(rules) == set(cls()._param_names()), cls.__name__
+        for name, value in cls().get_params().items():
+            rules[name](value, name, cls.__name__)  # the defaults pass their own rules
+    bad = [
+        (ph.ActivePI(0), "'n_operators' parameter of ActivePI must be an int in \\[1, 1000\\]"),
+        (ph.ActivePI(min_slope=0.0), "'min_slope'"),
+        (ph.ActivePI(output_unit=""), "'output_unit'"),
+        (ph.GeneralizedPI(creep="1"), "'creep'"),  # type: ignore[arg-type]
+        (ph.GeneralizedPI(growth_terms=("leak",)), "'growth_terms'"),
+        (ph.PIModel(terms=("time", "time")), "must not repeat"),
+    ]
+    v = np.linspace(0.0, 100.0, 200)
+    for model, match in bad:
+        with pytest.raises(ph.ParameterError, match=match):
+            model.fit(v, v, t=v)

@@ -450,7 +450,7 @@ def read_recording(
     t_name: str | None = None
     if rate is not None:
         if not rate > 0:
-            msg = f"--rate must be positive. Got {rate}."
+            msg = f"the sample rate must be positive (Hz). Got {rate}."
             raise DataFileError(msg)
         t = np.arange(x.size, dtype=np.float64) / float(rate)
     elif time is not None and (time in table or (time != "time" and time.isdigit())):

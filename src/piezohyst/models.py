@@ -37,7 +37,7 @@ import inspect
 import itertools
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, Self
 
@@ -173,11 +173,108 @@ class InverseSpec:
         return self.static is None and self.lags is None
 
 
-def _check_unit(value: object, name: str, owner: str) -> str:
+# ------------------------------------------------------------ parameter rules
+# A rule checks one constructor argument and returns the value to use; every
+# model declares its rules once (``_rules``), merged along the class hierarchy,
+# and ``fit`` applies all of them before any work. A test requires a rule for
+# every constructor argument.
+Rule = Callable[[Any, str, str], Any]
+
+
+def _unit(value: object, name: str, owner: str) -> str:
     if not isinstance(value, str) or not value:
         msg = f"The '{name}' parameter of {owner} must be a non-empty str. Got {value!r} instead."
         raise ParameterError(msg)
     return value
+
+
+def _int_in(low: int, high: int) -> Rule:
+    def rule(value: object, name: str, owner: str) -> int:
+        return check_int(value, name, owner, low, high)
+
+    return rule
+
+
+def _min_slope(value: object, name: str, owner: str) -> float:
+    return check_float(value, name, owner, 0.0, 1.0, low_open=True)
+
+
+def _bool(value: object, name: str, owner: str) -> bool:
+    if not isinstance(value, bool):
+        msg = f"The '{name}' parameter of {owner} must be True or False. Got {value!r} instead."
+        raise ParameterError(msg)
+    return value
+
+
+def _thresholds(value: object, name: str, owner: str) -> FloatArray | None:
+    if value is None:
+        return None
+    try:
+        thr = as_signal(value, name)  # type: ignore[arg-type]
+    except ValueError:
+        thr = np.array([np.nan])
+    if (
+        thr.size > 1000
+        or not np.all(np.isfinite(thr))
+        or thr[0] != 0.0
+        or (thr.size > 1 and np.any(np.diff(thr) <= 0))
+    ):
+        msg = (
+            f"The '{name}' parameter of {owner} must be 1 to 1000 strictly increasing "
+            f"values starting at 0. Got {thr.tolist()[:8]}{'...' if thr.size > 8 else ''}."
+        )
+        raise ParameterError(msg)
+    return thr
+
+
+def _growth_terms(value: object, name: str, owner: str) -> tuple[str, ...] | None:
+    """None for 'auto' (choose), else the distinct terms in GROWTH_TERMS order."""
+    if isinstance(value, str):
+        if value != "auto":
+            msg = (
+                f"The '{name}' parameter of {owner} must be 'auto' or a sequence "
+                f"of {list(GROWTH_TERMS)}. Got {value!r} instead."
+            )
+            raise ParameterError(msg)
+        return None
+    terms = tuple(value) if isinstance(value, Sequence) else (value,)
+    if any(term not in GROWTH_TERMS for term in terms) or len(set(terms)) != len(terms):
+        msg = (
+            f"The '{name}' parameter of {owner} must hold distinct terms from "
+            f"{list(GROWTH_TERMS)}. Got {list(terms)!r} instead."
+        )
+        raise ParameterError(msg)
+    return tuple(t for t in GROWTH_TERMS if t in terms)
+
+
+def _creep(value: object, name: str, owner: str) -> Creep | None:
+    if isinstance(value, Sequence) and not isinstance(value, str):
+        if len(value) == 0:
+            return None
+        try:
+            return Creep(value)
+        except ParameterError:
+            pass
+    msg = (
+        f"The '{name}' parameter of {owner} must be up to 20 positive time "
+        f"constants in s. Got {value!r} instead."
+    )
+    raise ParameterError(msg)
+
+
+def _terms(value: object, name: str, owner: str) -> tuple[Term, ...]:
+    if isinstance(value, str | Term) or not isinstance(value, Sequence):
+        msg = (
+            f"The '{name}' parameter of {owner} must be a sequence of term kinds or Term "
+            f"instances. Got {value!r} instead."
+        )
+        raise ParameterError(msg)
+    terms = tuple(make_term(spec) for spec in value)
+    kinds = [term.kind for term in terms]
+    if len(set(kinds)) != len(kinds):
+        msg = f"The '{name}' parameter of {owner} must not repeat a kind. Got {kinds!r}."
+        raise ParameterError(msg)
+    return terms
 
 
 class HysteresisModel:
@@ -203,6 +300,13 @@ class HysteresisModel:
     """
 
     cli_name: ClassVar[str] = ""
+    _rules: ClassVar[dict[str, Rule]] = {
+        "n_operators": _int_in(1, 1000),
+        "thresholds": _thresholds,
+        "min_slope": _min_slope,
+        "input_unit": _unit,
+        "output_unit": _unit,
+    }
     selection_: dict[str, float]
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
@@ -280,37 +384,32 @@ class HysteresisModel:
         return f"{type(self).__name__}({', '.join(shown)})"
 
     # ---------------------------------------------------------- parameters
-    def _terms_to_fit(self, x: FloatArray) -> tuple[list[Term], list[tuple[int, ...]] | None]:
+    @classmethod
+    def parameter_rules(cls) -> dict[str, Rule]:
+        """Every constructor argument's rule, declared once per class along its hierarchy.
+
+        Returns
+        -------
+        dict
+            Argument name to a function ``rule(value, name, owner)`` that
+            returns the checked value or raises :class:`ParameterError`.
+        """
+        rules: dict[str, Rule] = {}
+        for klass in reversed(cls.__mro__):
+            rules.update(vars(klass).get("_rules", {}))
+        return rules
+
+    def _validate_params(self) -> dict[str, Any]:
+        """Apply every rule (in ``__init__`` order); the checked values by name."""
+        rules = self.parameter_rules()
+        owner = type(self).__name__
+        return {name: rules[name](value, name, owner) for name, value in self.get_params().items()}
+
+    def _terms_to_fit(
+        self, x: FloatArray, params: dict[str, Any]
+    ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
         """Bound terms to fit and, for a selection, the subsets to choose from."""
         raise NotImplementedError
-
-    def _thresholds(self, x: FloatArray) -> FloatArray:
-        owner = type(self).__name__
-        if self.thresholds is None:
-            n = check_int(self.n_operators, "n_operators", owner, 1, 1000)
-            return default_thresholds(x, n)
-        try:
-            thr = as_signal(self.thresholds, "thresholds")
-        except ValueError:
-            thr = np.array([np.nan])
-        if (
-            thr.size > 1000
-            or not np.all(np.isfinite(thr))
-            or thr[0] != 0.0
-            or (thr.size > 1 and np.any(np.diff(thr) <= 0))
-        ):
-            msg = (
-                f"The 'thresholds' parameter of {owner} must be 1 to 1000 strictly increasing "
-                f"values starting at 0. Got {thr.tolist()[:8]}{'...' if thr.size > 8 else ''}."
-            )
-            raise ParameterError(msg)
-        return thr
-
-    def _check_common(self) -> None:
-        owner = type(self).__name__
-        _check_unit(self.input_unit, "input_unit", owner)
-        _check_unit(self.output_unit, "output_unit", owner)
-        check_float(self.min_slope, "min_slope", owner, 0.0, 1.0, low_open=True)
 
     # ------------------------------------------------------------------ fit
     def fit(
@@ -349,12 +448,14 @@ class HysteresisModel:
         InsufficientDataError
             Fewer samples than parameters.
         """
-        self._check_common()
+        params = self._validate_params()
         xs = as_signal(x, "x")
         ys = as_signal(y, "y")
         same_length(xs, ys, "x", "y")
-        thr = self._thresholds(xs)
-        terms, subsets = self._terms_to_fit(xs)
+        thr = params["thresholds"]
+        if thr is None:
+            thr = default_thresholds(xs, params["n_operators"])
+        terms, subsets = self._terms_to_fit(xs, params)
         rate = any(term.rate_dependent for term in terms)
         ts = as_time(t, xs.size, required=rate, owner=type(self).__name__)
         z0 = self._initial_operators(thr, xs, initial_state)
@@ -1002,18 +1103,12 @@ class PIModel(HysteresisModel):
         )
         self.terms = terms
 
-    def _terms_to_fit(self, x: FloatArray) -> tuple[list[Term], list[tuple[int, ...]] | None]:
-        if isinstance(self.terms, str | Term):
-            msg = (
-                "The 'terms' parameter of PIModel must be a sequence of term kinds or Term "
-                f"instances. Got {self.terms!r} instead."
-            )
-            raise ParameterError(msg)
-        terms = [make_term(spec).bind(x) for spec in self.terms]
-        kinds = [term.kind for term in terms]
-        if len(set(kinds)) != len(kinds):
-            msg = f"The 'terms' parameter of PIModel must not repeat a kind. Got {kinds!r}."
-            raise ParameterError(msg)
+    _rules: ClassVar[dict[str, Rule]] = {"terms": _terms}
+
+    def _terms_to_fit(
+        self, x: FloatArray, params: dict[str, Any]
+    ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
+        terms = [term.bind(x) for term in params["terms"]]
         return [term for term in terms if term.width > 0], None
 
     @classmethod
@@ -1062,7 +1157,9 @@ class ClassicalPI(HysteresisModel):
 
     cli_name = "classical-pi"
 
-    def _terms_to_fit(self, x: FloatArray) -> tuple[list[Term], list[tuple[int, ...]] | None]:
+    def _terms_to_fit(
+        self, x: FloatArray, params: dict[str, Any]
+    ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
         return [], None
 
 
@@ -1100,7 +1197,9 @@ class ActivePI(HysteresisModel):
 
     cli_name = "active-pi"
 
-    def _terms_to_fit(self, x: FloatArray) -> tuple[list[Term], list[tuple[int, ...]] | None]:
+    def _terms_to_fit(
+        self, x: FloatArray, params: dict[str, Any]
+    ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
         return [Integral()], None
 
     @property
@@ -1191,49 +1290,24 @@ class GeneralizedPI(HysteresisModel):
         self.creep = creep
         self.optimize_thresholds = optimize_thresholds
 
-    def _growth_names(self) -> tuple[tuple[str, ...], bool]:
-        if isinstance(self.growth_terms, str):
-            if self.growth_terms != "auto":
-                msg = (
-                    "The 'growth_terms' parameter of GeneralizedPI must be 'auto' or a sequence "
-                    f"of {list(GROWTH_TERMS)}. Got {self.growth_terms!r} instead."
-                )
-                raise ParameterError(msg)
-            return GROWTH_TERMS, True
-        terms = tuple(self.growth_terms)
-        if any(term not in GROWTH_TERMS for term in terms) or len(set(terms)) != len(terms):
-            msg = (
-                f"The 'growth_terms' parameter of GeneralizedPI must hold distinct terms from "
-                f"{list(GROWTH_TERMS)}. Got {list(terms)!r} instead."
-            )
-            raise ParameterError(msg)
-        return tuple(t for t in GROWTH_TERMS if t in terms), False
+    _rules: ClassVar[dict[str, Rule]] = {
+        "growth_terms": _growth_terms,
+        "asymmetry": _int_in(0, 50),
+        "creep": _creep,
+        "optimize_thresholds": _bool,
+    }
 
-    def _terms_to_fit(self, x: FloatArray) -> tuple[list[Term], list[tuple[int, ...]] | None]:
-        k = check_int(self.asymmetry, "asymmetry", "GeneralizedPI", 0, 50)
-        if isinstance(self.creep, str):
-            msg = (
-                "The 'creep' parameter of GeneralizedPI must be a sequence of floats. "
-                f"Got {self.creep!r}."
-            )
-            raise ParameterError(msg)
-        creep = tuple(self.creep)
-        if not isinstance(self.optimize_thresholds, bool):
-            msg = f"'optimize_thresholds' must be True or False. Got {self.optimize_thresholds!r}."
-            raise ParameterError(msg)
-        names, auto = self._growth_names()
+    def _terms_to_fit(
+        self, x: FloatArray, params: dict[str, Any]
+    ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
+        k, creep = params["asymmetry"], params["creep"]
+        auto = params["growth_terms"] is None
+        names = GROWTH_TERMS if auto else params["growth_terms"]
         fixed: list[Term] = []
         if k:
             fixed.append(Asymmetry(k).bind(x))
-        if creep:
-            try:
-                fixed.append(Creep(creep))
-            except ParameterError:
-                msg = (
-                    "The 'creep' parameter of GeneralizedPI must be up to 20 positive time "
-                    f"constants in s. Got {self.creep!r} instead."
-                )
-                raise ParameterError(msg) from None
+        if creep is not None:
+            fixed.append(creep)
         makers: dict[str, Term] = {
             "integral": Integral(),
             "time": TimeTerm(),

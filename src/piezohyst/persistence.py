@@ -359,7 +359,7 @@ def model_from_dict(data: Any, expected: type | None = None) -> Model:
     terms, coefs = _terms(entries)
     try:
         model = cls(**cls.params_from_json(params))
-        model._check_common()
+        model._validate_params()
     except (TypeError, ValueError) as exc:
         msg = f"field 'params': {exc}"
         raise ModelFileError(msg) from None

@@ -211,8 +211,8 @@ def compensate_file(
         column = "desired" if "desired" in table else (others[0] if len(others) == 1 else None)
         if column is None:
             msg = (
-                f"{target}: which column is the desired trajectory? Name it 'desired' or pass "
-                f"--column (columns: {', '.join(map(repr, table.columns))})"
+                f"{target}: which column is the desired trajectory? Name it 'desired' or name "
+                f"the column (columns: {', '.join(map(repr, table.columns))})"
             )
             raise DataFileError(msg)
     desired = table.get(table.resolve(column))
