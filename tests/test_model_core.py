@@ -325,7 +325,7 @@ def test_no_import_runs_upward() -> None:
 def test_every_setting_has_one_declared_rule() -> None:
     for cls in (ph.ClassicalPI, ph.ActivePI, ph.GeneralizedPI, ph.PIModel):
         rules = cls.parameter_rules()
-        assert set(rules) == set(cls()._param_names()), cls.__name__
+        assert set(rules) == set(cls().get_params()), cls.__name__
         for name, value in cls().get_params().items():
             rules[name](value, name, cls.__name__)  # the defaults pass their own rules
     bad = [
@@ -340,3 +340,23 @@ def test_every_setting_has_one_declared_rule() -> None:
     for model, match in bad:
         with pytest.raises(ph.ParameterError, match=match):
             model.fit(v, v, t=v)
+
+
+CONSUMERS = ["compensator", "export", "workflows", "demo", "cli", "persistence", "plotting"]
+MODEL_CLASSES = {"HysteresisModel", "ClassicalPI", "ActivePI", "GeneralizedPI", "PIModel"}
+
+
+def test_consumers_use_public_methods_and_never_branch_on_model_class() -> None:
+    src = Path(ph.__file__).parent
+    for module in CONSUMERS:
+        tree = ast.parse((src / f"{module}.py").read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Attribute) and node.attr.startswith("_"):
+                owner = node.value.id if isinstance(node.value, ast.Name) else ""
+                private = not node.attr.startswith("__")
+                assert not private or owner in {"self", "cls", "K"}, (
+                    f"{module}.py:{node.lineno} reads {owner or '...'}.{node.attr}"
+                )
+            if isinstance(node, ast.Call) and getattr(node.func, "id", "") == "isinstance":
+                names = {n.id for n in ast.walk(node.args[1]) if isinstance(n, ast.Name)}
+                assert not names & MODEL_CLASSES, f"{module}.py:{node.lineno} branches on a class"

@@ -399,8 +399,19 @@ class HysteresisModel:
             rules.update(vars(klass).get("_rules", {}))
         return rules
 
-    def _validate_params(self) -> dict[str, Any]:
-        """Apply every rule (in ``__init__`` order); the checked values by name."""
+    def check_params(self) -> dict[str, Any]:
+        """Apply every parameter rule (in ``__init__`` order), as ``fit`` does first.
+
+        Returns
+        -------
+        dict
+            The checked values by name.
+
+        Raises
+        ------
+        ParameterError
+            Naming the first argument that breaks its rule.
+        """
         rules = self.parameter_rules()
         owner = type(self).__name__
         return {name: rules[name](value, name, owner) for name, value in self.get_params().items()}
@@ -448,7 +459,7 @@ class HysteresisModel:
         InsufficientDataError
             Fewer samples than parameters.
         """
-        params = self._validate_params()
+        params = self.check_params()
         xs = as_signal(x, "x")
         ys = as_signal(y, "y")
         same_length(xs, ys, "x", "y")
@@ -489,7 +500,7 @@ class HysteresisModel:
     ) -> None:
         sol = identify(core, terms, x, y, t, z0, min_slope=float(self.min_slope), subsets=subsets)
         kept = [j for j, c in enumerate(sol.coefficients) if c is not None]
-        self._set_fitted(
+        self.set_fitted(
             core.build(sol.core, z0),
             tuple(terms[j] for j in kept),
             tuple(np.asarray(sol.coefficients[j]) for j in kept),
@@ -506,9 +517,22 @@ class HysteresisModel:
     ) -> None:
         """Optional nonlinear refinement after the linear solve (none by default)."""
 
-    def _set_fitted(
+    def set_fitted(
         self, core: PIHysteresis, terms: tuple[Term, ...], coefs: tuple[FloatArray, ...]
     ) -> None:
+        """Make this a fitted model with the given parameters (files, known actuators).
+
+        Fit quality and training range become unknown (NaN) until set.
+
+        Parameters
+        ----------
+        core : PIHysteresis
+            Play operators, weights, offset and initial state.
+        terms : tuple of Term
+            Bound terms.
+        coefs : tuple of ndarray
+            One coefficient array per term.
+        """
         self.operator_ = core
         self.thresholds_ = core.thresholds
         self.weights_ = core.weights
@@ -862,7 +886,7 @@ class HysteresisModel:
                 input_unit=self.input_unit,
                 output_unit=self.output_unit,
             )
-        model._set_fitted(self.operator_, tuple(tm for tm, _ in kept), tuple(c for _, c in kept))
+        model.set_fitted(self.operator_, tuple(tm for tm, _ in kept), tuple(c for _, c in kept))
         model.input_range_ = self.input_range_
         return model
 
@@ -898,7 +922,7 @@ class HysteresisModel:
             input_unit=self.output_unit,
             output_unit=self.input_unit,
         )
-        inv._set_fitted(self.operator_.inverse(), (), ())
+        inv.set_fitted(self.operator_.inverse(), (), ())
         return inv
 
     @classmethod
@@ -938,7 +962,7 @@ class HysteresisModel:
                 msg = f"the {term.kind!r} term takes {term.width} coefficients. Got {c.size}."
                 raise ShapeError(msg)
         model = cls._bare(op.n_operators, input_unit, output_unit)
-        model._set_fitted(op, tuple(terms), coefs)
+        model.set_fitted(op, tuple(terms), coefs)
         return model
 
     @classmethod
@@ -1351,11 +1375,11 @@ class GeneralizedPI(HysteresisModel):
         objective(res.x if res.fun < before else start)
         self.selection_ = selection
 
-    def _set_fitted(
+    def set_fitted(
         self, core: PIHysteresis, terms: tuple[Term, ...], coefs: tuple[FloatArray, ...]
     ) -> None:
         """Also set the 0.1 names of the fitted terms (views of ``terms_``/``coefs_``)."""
-        super()._set_fitted(core, terms, coefs)
+        super().set_fitted(core, terms, coefs)
         static = StaticShape(np.zeros(0), np.zeros(0), np.zeros(0), 1.0)
         lags = LagShape(np.zeros(0), np.zeros(0))
         growth: list[tuple[str, FloatArray]] = []

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from ._version import __version__
-from .errors import ModelFileError, ParameterError, PiezohystError
+from .errors import ModelFileError, NotFittedError, ParameterError, PiezohystError
 from .hysteresis import PIHysteresis
 from .io import atomic_write_text
 from .terms import Term, make_term
@@ -128,7 +128,9 @@ def model_to_dict(model: Model) -> dict[str, Any]:
     -------
     dict
     """
-    model._check_fitted()
+    if not model.is_fitted:
+        msg = f"This {type(model).__name__} instance is not fitted yet: nothing to save."
+        raise NotFittedError(msg)
     lo, hi = model.input_range_
     body: dict[str, Any] = {
         "format": SCHEMA,
@@ -178,12 +180,12 @@ class _Reader:
         self.data = data
         self.where = where
 
-    def _name(self, key: str) -> str:
+    def name(self, key: str) -> str:
         return f"{self.where}.{key}" if self.where else key
 
     def get(self, key: str) -> Any:
         if key not in self.data:
-            msg = f"missing field '{self._name(key)}'"
+            msg = f"missing field '{self.name(key)}'"
             raise ModelFileError(msg)
         return self.data[key]
 
@@ -196,7 +198,7 @@ class _Reader:
             or not isinstance(value, int | float)
             or not math.isfinite(value)
         ):
-            msg = f"field '{self._name(key)}' must be a finite number, got {value!r}"
+            msg = f"field '{self.name(key)}' must be a finite number, got {value!r}"
             raise ModelFileError(msg)
         return float(value)
 
@@ -206,12 +208,12 @@ class _Reader:
             isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
             for v in value
         ):
-            msg = f"field '{self._name(key)}' must be a list of finite numbers"
+            msg = f"field '{self.name(key)}' must be a list of finite numbers"
             raise ModelFileError(msg)
         return np.asarray(value, dtype=np.float64)
 
     def child(self, key: str) -> _Reader:
-        return _Reader(self.get(key), self._name(key))
+        return _Reader(self.get(key), self.name(key))
 
 
 def _range(fitted: _Reader) -> tuple[float, float]:
@@ -219,12 +221,12 @@ def _range(fitted: _Reader) -> tuple[float, float]:
     if rng is None:
         return (math.nan, math.nan)
     if not isinstance(rng, list) or len(rng) != 2:
-        msg = f"field '{fitted._name('input_range')}' must be [min, max]"
+        msg = f"field '{fitted.name('input_range')}' must be [min, max]"
         raise ModelFileError(msg)
-    pair = _Reader({"min": rng[0], "max": rng[1]}, fitted._name("input_range"))
+    pair = _Reader({"min": rng[0], "max": rng[1]}, fitted.name("input_range"))
     lo, hi = pair.number("min"), pair.number("max")
     if lo > hi:
-        msg = f"field '{fitted._name('input_range')}' must be [min, max] with min <= max"
+        msg = f"field '{fitted.name('input_range')}' must be [min, max] with min <= max"
         raise ModelFileError(msg)
     return lo, hi
 
@@ -359,11 +361,11 @@ def model_from_dict(data: Any, expected: type | None = None) -> Model:
     terms, coefs = _terms(entries)
     try:
         model = cls(**cls.params_from_json(params))
-        model._validate_params()
+        model.check_params()
     except (TypeError, ValueError) as exc:
         msg = f"field 'params': {exc}"
         raise ModelFileError(msg) from None
-    model._set_fitted(core, terms, coefs)
+    model.set_fitted(core, terms, coefs)
     selection = fitted.data.get("selection") or {}
     if isinstance(selection, dict):
         model.selection_ = {str(k): float(v) for k, v in selection.items()}

@@ -122,7 +122,7 @@ def fit_file(
         The fitted model.
     """
     cls = model_class(model)
-    accepted = cls._param_names()
+    accepted = cls().get_params()
     extra: dict[str, Any] = {}
     for name, value, default in (("growth_terms", growth_terms, "auto"), ("creep", creep, ())):
         if name in accepted:
