@@ -1378,7 +1378,7 @@ class GeneralizedPI(HysteresisModel):
     def set_fitted(
         self, core: PIHysteresis, terms: tuple[Term, ...], coefs: tuple[FloatArray, ...]
     ) -> None:
-        """Also set the 0.1 names of the fitted terms (views of ``terms_``/``coefs_``)."""
+        """See :meth:`HysteresisModel.set_fitted`; also sets the 0.1 names of the terms."""
         super().set_fitted(core, terms, coefs)
         static = StaticShape(np.zeros(0), np.zeros(0), np.zeros(0), 1.0)
         lags = LagShape(np.zeros(0), np.zeros(0))
