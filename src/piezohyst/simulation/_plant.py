@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 
@@ -38,19 +39,46 @@ def bench_kernel(  # type: ignore[no-untyped-def]
         elec[6],
     )
     m = alpha.shape[0]
+    # Relays sorted by switching voltage: after a sample at v, every relay with
+    # alpha <= v is up and every one with beta >= v is down, so when the input
+    # rises from v_prev to v only relays with alpha in (v_prev, v] can flip (and
+    # falling, only beta in [v, v_prev)). Each sample visits those alone.
+    by_alpha = np.argsort(alpha)
+    by_beta = np.argsort(beta)
+    alpha_sorted = alpha[by_alpha]
+    beta_sorted = beta[by_beta]
     q_r = 0.0
     v_amp = 0.0
     q_c_prev = 0.0
     i_prev = 0.0
+    q_irr = 0.0
+    v_prev = 0.0
     for k in range(v.shape[0]):
         vk = v[k]
-        q_irr = 0.0
-        for j in range(m):
-            if vk >= alpha[j]:
-                relays[j] = 1.0
-            elif vk <= beta[j]:
-                relays[j] = -1.0
-            q_irr += mu[j] * relays[j]
+        if k == 0:  # the first sample settles every relay
+            for j in range(m):
+                if vk >= alpha[j]:
+                    relays[j] = 1.0
+                elif vk <= beta[j]:
+                    relays[j] = -1.0
+                q_irr += mu[j] * relays[j]
+        elif vk > v_prev:
+            lo = np.searchsorted(alpha_sorted, v_prev, side="right")
+            hi = np.searchsorted(alpha_sorted, vk, side="right")
+            for i in range(lo, hi):
+                j = by_alpha[i]
+                if relays[j] < 0.0:
+                    relays[j] = 1.0
+                    q_irr += 2.0 * mu[j]
+        elif vk < v_prev:
+            lo = np.searchsorted(beta_sorted, vk, side="left")
+            hi = np.searchsorted(beta_sorted, v_prev, side="left")
+            for i in range(lo, hi):
+                j = by_beta[i]
+                if relays[j] > 0.0:
+                    relays[j] = -1.0
+                    q_irr -= 2.0 * mu[j]
+        v_prev = vk
         q_c = c0 * vk + q_irr
         i_r = g0 * (1.0 + a_leak * abs(vk) / v_ref) * vk
         if k > 0:
