@@ -34,18 +34,21 @@ class Row:
     detail: str = ""
 
 
-def describe(model: ph.ClassicalPI) -> str:
-    if isinstance(model, ph.GeneralizedPI):
-        terms = "+".join(model.growth_terms_) or "none"
-        parts = [f"growth: {terms}"]
-        if model.creep_taus_.size:
-            parts.append(f"creep τ = {', '.join(f'{x:g}' for x in model.creep_taus_)} s")
-        if model.optimize_thresholds:
-            parts.append("thresholds optimised")
-        return "; ".join(parts)
-    if isinstance(model, ph.ActivePI):
-        return f"R = {model.growth_rate_:.3g}"
-    return ""
+def describe(model: ph.HysteresisModel) -> str:
+    """The model's growth and shape terms, from its public description."""
+    parts = []
+    growth = model.growth_coefficients()
+    if "growth_terms" in model.get_params():  # a model that chooses its growth terms
+        parts.append("growth: " + ("+".join(growth) or "none"))
+    elif growth:
+        parts.append(", ".join(f"R = {v:.3g}" for v, _ in growth.values()))
+    for term in model.terms_:
+        if term.kind == "creep":
+            taus = term.get_params()["taus"]
+            parts.append(f"creep τ = {', '.join(f'{x:g}' for x in taus)} s")
+    if model.get_params().get("optimize_thresholds"):
+        parts.append("thresholds optimised")
+    return "; ".join(parts)
 
 
 def evaluate(
