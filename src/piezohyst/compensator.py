@@ -167,6 +167,8 @@ class Compensator:
             raise ParameterError(msg)
         self.model = model
         self.spec = spec
+        #: True when eq. 18's analytic inverse runs (no Newton solve); fixed by the model
+        self.analytic = spec.analytic
         self.domain: Domain = domain
         self.gain = gain
         self.slew_rate = slew_rate
@@ -216,11 +218,6 @@ class Compensator:
         self.reset()
 
     # ----------------------------------------------------------------- state
-    @property
-    def analytic(self) -> bool:
-        """True when the compensator runs eq. 18's analytic inverse (no Newton solve)."""
-        return self.spec.analytic
-
     @property
     def n_operators(self) -> int:
         """Number of play operators of the inverted model."""

@@ -62,8 +62,21 @@ class PlayCore:
         """
         return np.full(self.n_operators, float(x0))
 
-    def fill(self, x: FloatArray, state: FloatArray, block: FloatArray, scale: float) -> None:
-        """Write the core's columns for ``x`` into ``block[:len(x), :width]``.
+    def scaled(self, scale: float) -> PlayCore:
+        """The same core for an input divided by ``scale`` (a power of two: exact).
+
+        Parameters
+        ----------
+        scale : float
+
+        Returns
+        -------
+        PlayCore
+        """
+        return PlayCore(self.thresholds / scale)
+
+    def fill(self, x: FloatArray, state: FloatArray, block: FloatArray) -> None:
+        """Write the core's operator columns for ``x`` into ``block[:len(x), :n]``.
 
         Parameters
         ----------
@@ -72,14 +85,9 @@ class PlayCore:
         state : ndarray, shape (n,)
             Operator states, updated in place.
         block : ndarray, shape (M, p), M >= N
-            Destination; its offset column must already hold 1.
-        scale : float
-            A power of two the operator columns are divided by (exact).
+            Destination; its offset column (``n``) must already hold 1.
         """
-        n = self.n_operators
         _kernels.play_states(x, self.thresholds, state, block)
-        if scale != 1.0:
-            block[: x.size, :n] /= scale
 
     def slope_map(self, p: int) -> FloatArray:
         """Matrix M with ``parameters = M @ (slopes, other parameters)``.

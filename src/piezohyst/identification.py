@@ -237,12 +237,18 @@ def _accumulate(
     col_scale: FloatArray,
     edges: Sequence[int],
 ) -> list[NormalEquations]:
-    """Normal equations of every segment ``edges[k]:edges[k+1]`` (model run through all)."""
+    """Normal equations of every segment ``edges[k]:edges[k+1]`` (model run through all).
+
+    The core runs on the scaled input ``x / col_scale[0]`` (a power of two:
+    exact), the terms on ``x`` with their columns divided by their scale.
+    """
     n = core.n_operators
     p = col_scale.size
     block = np.empty((min(BLOCK, x.size), p))
     block[:, n] = 1.0
-    z = z0.copy()
+    sx = col_scale[0]
+    scaled_core = core.scaled(sx)
+    z = z0 / sx
     states = [term.rest_state(float(x[0])) for term in terms]
     out = []
     for lo, hi in itertools.pairwise(edges):
@@ -253,7 +259,7 @@ def _accumulate(
             stop = min(start + block.shape[0], hi)
             m = stop - start
             xs = x[start:stop]
-            core.fill(xs, z, block, col_scale[0])
+            scaled_core.fill(xs / sx, z, block)
             if terms:
                 dt = block_dt(t, start, stop, None)
                 ts = None if t is None else t[start:stop]
@@ -371,6 +377,7 @@ def identify(
     sx, sy = _power_of_two(x), _power_of_two(y)
     ys = y / sy
     y_ref = float(ys[0])  # centred: keeps y'y, and the selection's residuals, well conditioned
+    ys -= y_ref
     col_scale = np.concatenate(
         [np.full(n, sx), [1.0], *[np.full(term.width, sx**term.input_degree) for term in terms]]
     )
@@ -386,7 +393,7 @@ def identify(
     candidates = [tuple(range(len(terms)))] if subsets is None else list(subsets)
     split = int((1.0 - holdout) * x.size) if len(candidates) > 1 else x.size
     edges = [0, split, x.size] if 0 < split < x.size else [0, x.size]
-    parts = _accumulate(core, terms, x, ys - y_ref, t, initial_state, col_scale, edges)
+    parts = _accumulate(core, terms, x, ys, t, initial_state, col_scale, edges)
     whole = parts[0] if len(parts) == 1 else parts[0] + parts[1]
 
     def columns_of(subset: tuple[int, ...]) -> FloatArray:
