@@ -77,7 +77,8 @@ def _run(ctx: Context, fn: Callable[[], Any]) -> Any:
     except (PiezohystError, OSError) as exc:
         if ctx.debug:
             raise
-        click.echo(f"error: {exc}", err=True)
+        hint = " (--force replaces it)" if getattr(exc, "replaceable", False) else ""
+        click.echo(f"error: {exc}{hint}", err=True)
         sys.exit(1)
     except Exception as exc:  # a bug of ours: still one line, with the way to see more
         if ctx.debug:
@@ -199,6 +200,11 @@ def _limit_options(fn: Callable[..., Any]) -> Callable[..., Any]:
         click.option(
             "--sample-rate", type=float, default=None, help="Loop rate in Hz (for --slew-rate)."
         ),
+        click.option(
+            "--allow-extrapolation",
+            is_flag=True,
+            help="Allow limits beyond the voltages the model was identified on.",
+        ),
     ]
 
     @functools.wraps(fn)
@@ -210,10 +216,11 @@ def _limit_options(fn: Callable[..., Any]) -> Callable[..., Any]:
         gain: float | None,
         slew_rate: float | None,
         sample_rate: float | None,
+        allow_extrapolation: bool,
         **kwargs: Any,
     ) -> Any:
         settings = CompensatorSettings(
-            v_min, v_max, cast(Domain, domain), gain, slew_rate, sample_rate
+            v_min, v_max, cast(Domain, domain), gain, slew_rate, sample_rate, allow_extrapolation
         )
         return fn(*args, settings=settings, **kwargs)
 
@@ -223,6 +230,9 @@ def _limit_options(fn: Callable[..., Any]) -> Callable[..., Any]:
     return wrapped
 
 
+FORCE = click.option(
+    "--force", is_flag=True, help="Replace an existing output that piezohyst did not write."
+)
 OUT_FILE = click.option(
     "-o",
     "--out",
@@ -252,6 +262,7 @@ EXISTING = click.Path(exists=False, dir_okay=False, path_type=Path)
     "--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True, help="Noise seed."
 )
 @OUT_FILE
+@FORCE
 @click.pass_obj
 def simulate(
     ctx: Context,
@@ -263,6 +274,7 @@ def simulate(
     rate: float | None,
     seed: int,
     out: Path,
+    force: bool,
 ) -> None:
     """Run the simulated bench; write time,voltage,charge,displacement (s, V, C, m).
 
@@ -283,6 +295,7 @@ def simulate(
             duration=duration,
             rate=rate,
             seed=seed,
+            force=force,
         ),
     )
     ctx.info(
@@ -338,6 +351,7 @@ def describe(model: HysteresisModel) -> str:
 )
 @_data_options
 @OUT_FILE
+@FORCE
 @click.pass_obj
 def fit(
     ctx: Context,
@@ -349,6 +363,7 @@ def fit(
     creep: str,
     data_spec: DataSpec,
     out: Path,
+    force: bool,
 ) -> None:
     """Identify a model from DATA and save it as JSON.
 
@@ -382,6 +397,7 @@ def fit(
                 output_unit=output_unit,
                 growth_terms=terms,
                 creep=taus,
+                force=force,
             ),
         )
     click.echo(describe(model))
@@ -396,13 +412,10 @@ def fit(
 @click.argument("data", type=EXISTING)
 @_data_options
 @OUT_FILE
+@FORCE
 @click.pass_obj
 def predict(
-    ctx: Context,
-    model: Path,
-    data: Path,
-    data_spec: DataSpec,
-    out: Path,
+    ctx: Context, model: Path, data: Path, data_spec: DataSpec, out: Path, force: bool
 ) -> None:
     """Predict the output of MODEL for the input in DATA; write time,predicted[,measured].
 
@@ -420,6 +433,7 @@ def predict(
             data,
             out,
             data_spec=data_spec,
+            force=force,
         ),
     )
     if "measured" in cols:
@@ -435,7 +449,19 @@ def predict(
 @click.argument("target", type=EXISTING)
 @click.option("--column", default=None, help="Desired column (default: 'desired' or the only one).")
 @_limit_options
+@click.option(
+    "--present-voltage",
+    type=float,
+    default=None,
+    help="The actuator's voltage now, V (default: where the training record started).",
+)
+@click.option(
+    "--no-precondition",
+    is_flag=True,
+    help="Skip the precondition cycle (the ramp-in from the present voltage stays).",
+)
 @OUT_FILE
+@FORCE
 @click.pass_obj
 def compensate(
     ctx: Context,
@@ -443,11 +469,20 @@ def compensate(
     target: Path,
     column: str | None,
     settings: CompensatorSettings,
+    present_voltage: float | None,
+    no_precondition: bool,
     out: Path,
+    force: bool,
 ) -> None:
     """Feedforward voltage for the desired trajectory in TARGET; write time,command,desired.
 
-    Commands never leave [--v-min, --v-max] (default: the model's training range).
+    Safe by default: commands stay in [--v-min, --v-max], which default to the
+    voltages the model was identified on (wider limits need
+    --allow-extrapolation); the slew limit defaults to the training record's
+    fastest change; the file starts with a ramp from the present voltage and a
+    full-range precondition cycle (rows with an empty 'desired'); NaN targets
+    hold the last command; a trajectory that saturates most samples is an
+    error. TARGET needs a time column (s), or give --sample-rate.
 
     \b
     Example:
@@ -456,14 +491,29 @@ def compensate(
     """
     from .workflows import compensate_file
 
-    comp = _run(
+    result = _run(
         ctx,
-        lambda: compensate_file(model, target, out, column=column, settings=settings),
+        lambda: compensate_file(
+            model,
+            target,
+            out,
+            column=column,
+            settings=settings,
+            precondition=not no_precondition,
+            present_voltage=present_voltage,
+            force=force,
+        ),
     )
+    comp = result.compensator
     click.echo(
         f"commands in [{comp.v_min:g}, {comp.v_max:g}] V; {comp.saturated_count} "
         f"saturated, {comp.nonfinite_count} non-finite desired values held"
     )
+    if result.preamble:
+        ctx.info(
+            f"{result.preamble} samples ({result.preamble / result.sample_rate:.3g} s) of "
+            "ramp-in and preconditioning come first"
+        )
     ctx.info(f"saved {out}")
 
 
@@ -477,8 +527,11 @@ def compensate(
     required=True,
     help="Folder for the figures, metrics.json and report.md.",
 )
+@FORCE
 @click.pass_obj
-def report(ctx: Context, model: Path, data: Path, data_spec: DataSpec, out: Path) -> None:
+def report(
+    ctx: Context, model: Path, data: Path, data_spec: DataSpec, out: Path, force: bool
+) -> None:
     """Figures (loop, fit, residual, growth removal) and metrics of MODEL on DATA.
 
     \b
@@ -491,12 +544,7 @@ def report(ctx: Context, model: Path, data: Path, data_spec: DataSpec, out: Path
         step("writing report")
         res = _run(
             ctx,
-            lambda: model_report(
-                model,
-                data,
-                out,
-                data_spec=data_spec,
-            ),
+            lambda: model_report(model, data, out, data_spec=data_spec, force=force),
         )
     click.echo(f"NRMSE {res.metrics['nrmse_pct']:.4g} %; report in {out / 'report.md'}")
 
@@ -515,6 +563,7 @@ def report(ctx: Context, model: Path, data: Path, data_spec: DataSpec, out: Path
     show_default=True,
     help="C file (the .h goes beside it).",
 )
+@FORCE
 @click.pass_obj
 def export_c(
     ctx: Context,
@@ -522,6 +571,7 @@ def export_c(
     settings: CompensatorSettings,
     use_float: bool,
     out: Path,
+    force: bool,
 ) -> None:
     """Write a dependency-free C99 compensator (NAME.c and NAME.h) for a microcontroller.
 
@@ -534,7 +584,11 @@ def export_c(
     c_path, h_path = _run(
         ctx,
         lambda: export_c_file(
-            model, out, settings=settings, precision="float" if use_float else "double"
+            model,
+            out,
+            settings=settings,
+            precision="float" if use_float else "double",
+            force=force,
         ),
     )
     click.echo(f"{c_path}\n{h_path}")

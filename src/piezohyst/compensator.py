@@ -20,6 +20,7 @@ Safety, always:
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from typing import Literal
 
@@ -93,6 +94,12 @@ class Compensator:
         Displacement per model output unit (m/C), required for
         ``domain="displacement"`` (eq. 6-7: S = g·Q). Displacement 0 is the
         actuator at rest in the model's initial state.
+    allow_extrapolation : bool, default False
+        By default, limits wider than the voltage range the model was
+        identified on (``model.input_range_``) are narrowed to it, with one
+        ``UserWarning`` (the asked limits stay in :attr:`requested_limits`):
+        a model is not trusted where it never saw the actuator. True keeps
+        the limits as given.
 
     Examples
     --------
@@ -118,6 +125,7 @@ class Compensator:
         sample_rate: float | None = None,
         domain: Domain = "charge",
         gain: float | None = None,
+        allow_extrapolation: bool = False,
     ) -> None:
         inversion = getattr(model, "inversion", None)
         if not callable(inversion):
@@ -135,6 +143,13 @@ class Compensator:
         if not self.v_min < self.v_max:
             msg = f"Compensator needs v_min < v_max. Got v_min={v_min!r}, v_max={v_max!r}."
             raise ParameterError(msg)
+        if not isinstance(allow_extrapolation, bool):
+            msg = f"'allow_extrapolation' must be True or False. Got {allow_extrapolation!r}."
+            raise ParameterError(msg)
+        self.allow_extrapolation = allow_extrapolation
+        #: The limits asked for, when they were narrowed to the training range (else None).
+        self.requested_limits: tuple[float, float] | None = None
+        self._narrow_to(spec.input_range)
         max_step = math.inf
         if slew_rate is not None:
             rate = _finite_number(slew_rate, "slew_rate")
@@ -216,6 +231,31 @@ class Compensator:
                 self._set_forward(self._initial_forward())
                 self.config[K.CFG_REFERENCE] = self._output_now(float(op.initial_state[0]))
         self.reset()
+
+    def _narrow_to(self, trained: tuple[float, float]) -> None:
+        """Keep every command inside the voltages the model was identified on."""
+        lo, hi = trained
+        if self.allow_extrapolation or math.isnan(lo) or math.isnan(hi):
+            return
+        if self.v_min >= lo and self.v_max <= hi:
+            return
+        new_lo, new_hi = max(self.v_min, lo), min(self.v_max, hi)
+        if not new_lo < new_hi:
+            msg = (
+                f"The limits [{self.v_min:g}, {self.v_max:g}] V do not overlap the voltages the "
+                f"model was identified on, [{lo:g}, {hi:g}] V; pass allow_extrapolation=True "
+                "to use the model outside them."
+            )
+            raise ParameterError(msg)
+        self.requested_limits = (self.v_min, self.v_max)
+        warnings.warn(
+            f"Compensator limits [{self.v_min:g}, {self.v_max:g}] V narrowed to "
+            f"[{new_lo:g}, {new_hi:g}] V, the voltages the model was identified on: a model "
+            "is not trusted outside them (pass allow_extrapolation=True to keep the limits).",
+            UserWarning,
+            stacklevel=3,
+        )
+        self.v_min, self.v_max = new_lo, new_hi
 
     # ----------------------------------------------------------------- state
     @property
@@ -445,6 +485,9 @@ class CompensatorSettings:
         Largest change in V/s (needs ``sample_rate``).
     sample_rate : float or None
         Loop rate (Hz).
+    allow_extrapolation : bool
+        Allow limits beyond the voltages the model was identified on (refused
+        otherwise, not narrowed: a file workflow states what it will do).
     """
 
     v_min: float | None = None
@@ -453,6 +496,7 @@ class CompensatorSettings:
     gain: float | None = None
     slew_rate: float | None = None
     sample_rate: float | None = None
+    allow_extrapolation: bool = False
 
     def build(self, model: HysteresisModel) -> Compensator:
         """A compensator for ``model`` whose limits default to its training voltage range.
@@ -472,8 +516,20 @@ class CompensatorSettings:
             A limit is missing and the model does not record its training range.
         """
         lo, hi = model.input_range_
-        if (self.v_min is None or self.v_max is None) and (math.isnan(lo) or math.isnan(hi)):
+        known = not (math.isnan(lo) or math.isnan(hi))
+        if (self.v_min is None or self.v_max is None) and not known:
             msg = "the model does not record its training voltage range: give v_min and v_max"
+            raise ParameterError(msg)
+        wide = (self.v_min is not None and self.v_min < lo) or (
+            self.v_max is not None and self.v_max > hi
+        )
+        if known and wide and not self.allow_extrapolation:
+            msg = (
+                f"the limits [{self.v_min if self.v_min is not None else lo:g}, "
+                f"{self.v_max if self.v_max is not None else hi:g}] V go beyond the voltages "
+                f"the model was identified on, [{lo:g}, {hi:g}] V; allow extrapolation "
+                "explicitly to command them"
+            )
             raise ParameterError(msg)
         return Compensator(
             model,
@@ -483,4 +539,5 @@ class CompensatorSettings:
             gain=self.gain,
             slew_rate=self.slew_rate,
             sample_rate=self.sample_rate,
+            allow_extrapolation=self.allow_extrapolation,
         )

@@ -14,6 +14,7 @@ __all__ = [
     "NonFiniteError",
     "NotFittedError",
     "NotInvertibleError",
+    "OverwriteError",
     "ParameterError",
     "PiezohystError",
     "ShapeError",
@@ -59,3 +60,14 @@ class ModelFileError(PiezohystError, ValueError):
 
 class DataFileError(PiezohystError, ValueError):
     """A data file cannot be read: missing, empty, unknown column, bad value."""
+
+
+class OverwriteError(DataFileError):
+    """An output would replace an input, or a file piezohyst did not write.
+
+    ``replaceable`` is True when forcing would be allowed (never for an input).
+    """
+
+    def __init__(self, message: str, *, replaceable: bool) -> None:
+        super().__init__(message)
+        self.replaceable = replaceable

@@ -22,7 +22,7 @@ from .compensator import Compensator
 from .errors import ParameterError
 from .io import atomic_write_text
 
-__all__ = ["CCode", "export_c", "write_c"]
+__all__ = ["CCode", "c_paths", "export_c", "write_c"]
 
 Precision = Literal["double", "float"]
 
@@ -238,6 +238,28 @@ void {prefix}_init({prefix}_t *s)
     return CCode(header=header, source=source, header_name=f"{prefix}.h")
 
 
+def c_paths(path: str | os.PathLike[str]) -> tuple[Path, Path, str]:
+    """The ``.c`` and ``.h`` files :func:`write_c` writes for ``path``, and their C prefix.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The requested ``.c`` file (another suffix is replaced).
+
+    Returns
+    -------
+    tuple
+        Source path, header path, prefix (a C identifier from the file name).
+    """
+    c_path = Path(path)
+    if c_path.suffix != ".c":
+        c_path = c_path.with_suffix(".c")
+    prefix = re.sub(r"\W", "_", c_path.stem)
+    if prefix[:1].isdigit():
+        prefix = "_" + prefix
+    return c_path, c_path.with_name(f"{prefix}.h"), prefix
+
+
 def write_c(
     compensator: Compensator,
     path: str | os.PathLike[str],
@@ -260,14 +282,8 @@ def write_c(
     tuple of Path
         The source and the header.
     """
-    c_path = Path(path)
-    if c_path.suffix != ".c":
-        c_path = c_path.with_suffix(".c")
-    prefix = re.sub(r"\W", "_", c_path.stem)
-    if prefix[:1].isdigit():
-        prefix = "_" + prefix
+    c_path, h_path, prefix = c_paths(path)
     code = export_c(compensator, precision=precision, prefix=prefix)
-    h_path = c_path.with_name(code.header_name)
     atomic_write_text(h_path, code.header)
     atomic_write_text(c_path, code.source)
     return c_path, h_path

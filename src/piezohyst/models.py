@@ -473,6 +473,9 @@ class HysteresisModel:
         self._solve(PlayCore(thr), terms, subsets, xs, ys, ts if rate else None, z0)
         self._refine(xs, ys, ts if rate else None, initial_state)
         self.input_range_ = (float(xs.min()), float(xs.max()))
+        self.max_slew_rate_ = math.nan
+        if ts is not None and xs.size > 1:
+            self.max_slew_rate_ = float(np.max(np.abs(np.diff(xs)) / np.diff(ts)))
         self.rmse_ = rmse(self.predict(xs, t=ts), ys)
         self.nrmse_ = self.rmse_ / max(float(np.ptp(ys)), 1e-300)
         return self
@@ -543,6 +546,7 @@ class HysteresisModel:
         self.selection_ = {}
         self.rmse_ = self.nrmse_ = math.nan  # set by fit; unknown for a model built by hand
         self.input_range_ = (math.nan, math.nan)
+        self.max_slew_rate_ = math.nan
 
     # ---------------------------------------------------- fitted attributes
     def _check_fitted(self) -> None:
@@ -888,6 +892,7 @@ class HysteresisModel:
             )
         model.set_fitted(self.operator_, tuple(tm for tm, _ in kept), tuple(c for _, c in kept))
         model.input_range_ = self.input_range_
+        model.max_slew_rate_ = self.max_slew_rate_
         return model
 
     def inverse(self) -> ClassicalPI:
@@ -1168,6 +1173,9 @@ class ClassicalPI(HysteresisModel):
     input_range_ : tuple of float
         Smallest and largest training input (V): where the model was seen
         working, and the default voltage limits of the compensator commands.
+    max_slew_rate_ : float
+        Fastest input change in the training record (V/s; NaN without times):
+        the default slew limit of ``piezohyst compensate``.
 
     Examples
     --------

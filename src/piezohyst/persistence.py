@@ -148,6 +148,7 @@ def model_to_dict(model: Model) -> dict[str, Any]:
             "rmse": _nullable(model.rmse_),
             "nrmse": _nullable(model.nrmse_),
             "input_range": None if math.isnan(lo) else [lo, hi],
+            "max_slew_rate": _nullable(model.max_slew_rate_),
         },
     }
     body["checksum"] = _checksum(body)
@@ -372,6 +373,7 @@ def model_from_dict(data: Any, expected: type | None = None) -> Model:
     model.rmse_ = fitted.number("rmse", optional=True)
     model.nrmse_ = fitted.number("nrmse", optional=True)
     model.input_range_ = _range(fitted)
+    model.max_slew_rate_ = fitted.number("max_slew_rate", optional=True)
     return model
 
 

@@ -23,10 +23,10 @@ import numpy as np
 
 from ._validation import FloatArray, check_float, check_int
 from .compensator import Compensator, CompensatorSettings
-from .errors import DataFileError, ParameterError
-from .export import Precision, write_c
+from .errors import DataFileError, OverwriteError, ParameterError
+from .export import Precision, c_paths, write_c
 from .identification import default_thresholds, history_state
-from .io import DataSpec, atomic_write_text, read_table, write_table
+from .io import DataSpec, atomic_write_text, is_piezohyst_output, read_table, write_table
 from .metrics import hysteresis_width, nrmse, rmse
 from .models import HysteresisModel, model_class
 from .persistence import load_model
@@ -34,15 +34,56 @@ from .plotting import save_panels
 from .simulation import DEFAULT_PRESET, PRESETS, BenchRecord, simulate
 
 __all__ = [
+    "Compensation",
     "compensate_file",
     "export_c_file",
     "fit_file",
+    "guard_outputs",
     "model_report",
     "predict_file",
     "simulate_file",
 ]
 
 PathLike = str | os.PathLike[str]
+
+
+def guard_outputs(
+    outputs: Sequence[PathLike], inputs: Sequence[PathLike], *, force: bool = False
+) -> None:
+    """Refuse to write where data would be lost, before any work is done.
+
+    An output that is one of the inputs is always refused; an existing file
+    (or report folder) that piezohyst did not write is refused unless
+    ``force`` (see :func:`~piezohyst.io.is_piezohyst_output`).
+
+    Parameters
+    ----------
+    outputs, inputs : sequence of path
+    force : bool, default False
+        Replace existing files piezohyst did not write.
+
+    Raises
+    ------
+    OverwriteError
+    """
+    ins = [Path(p) for p in inputs]
+    for out in map(Path, outputs):
+        for src in ins:
+            same = out.resolve() == src.resolve()
+            if not same and out.exists() and src.exists():
+                same = os.path.samefile(out, src)
+            if same:
+                msg = (
+                    f"{out}: that is an input of this command ({src}); piezohyst never writes "
+                    "over its input: choose another output name"
+                )
+                raise OverwriteError(msg, replaceable=False)
+        if out.exists() and not force and not is_piezohyst_output(out):
+            kind = "folder" if out.is_dir() else "file"
+            msg = f"{out}: an existing {kind} that piezohyst did not write; not replacing it"
+            raise OverwriteError(msg, replaceable=True)
+
+
 _DEFAULT_SETTINGS = CompensatorSettings()  # frozen: safe as a shared default
 
 
@@ -56,8 +97,13 @@ def simulate_file(
     duration: float = 20.0,
     rate: float | None = None,
     seed: int = 0,
+    force: bool = False,
 ) -> BenchRecord:
-    """Run the simulated bench and write ``time,voltage,charge,displacement`` (s, V, C, m)."""
+    """Run the simulated bench and write ``time,voltage,charge,displacement`` (s, V, C, m).
+
+    ``force`` replaces an existing file piezohyst did not write (see :func:`guard_outputs`).
+    """
+    guard_outputs([out], [], force=force)
     if preset not in PRESETS:
         msg = f"unknown preset {preset!r}; available: {', '.join(PRESETS)}"
         raise ParameterError(msg)
@@ -96,6 +142,7 @@ def fit_file(
     output_unit: str = "C",
     growth_terms: str | Sequence[str] = "auto",
     creep: Sequence[float] = (),
+    force: bool = False,
 ) -> HysteresisModel:
     """Fit a model to a data file and save it (JSON) to ``out`` if given.
 
@@ -115,12 +162,16 @@ def fit_file(
         Unit recorded with the model.
     growth_terms, creep
         Settings of models that have them (``generalized-pi``).
+    force : bool
+        Replace an existing ``out`` that piezohyst did not write.
 
     Returns
     -------
     HysteresisModel
         The fitted model.
     """
+    if out is not None:
+        guard_outputs([out], [data], force=force)
     cls = model_class(model)
     accepted = cls().get_params()
     extra: dict[str, Any] = {}
@@ -161,8 +212,13 @@ def predict_file(
     out: PathLike,
     *,
     data_spec: DataSpec | None = None,
+    force: bool = False,
 ) -> dict[str, FloatArray]:
-    """Write ``time,predicted`` (plus ``measured`` when the data has the output column)."""
+    """Write ``time,predicted`` (plus ``measured`` when the data has the output column).
+
+    ``force`` replaces an existing file piezohyst did not write (see :func:`guard_outputs`).
+    """
+    guard_outputs([out], [model_path, data], force=force)
     model = _load(model_path)
     rec = (data_spec or DataSpec()).read(data, output_required=False)
     w = rec.window  # the model runs over the whole record: the window's start has a history
@@ -176,6 +232,25 @@ def predict_file(
     return columns
 
 
+@dataclass(frozen=True)
+class Compensation:
+    """What :func:`compensate_file` did.
+
+    Attributes
+    ----------
+    compensator : Compensator
+        After the run: limits used, counters of saturated and non-finite samples.
+    preamble : int
+        Samples of ramp-in and preconditioning written before the trajectory.
+    sample_rate : float
+        Samples per second of the written commands (Hz).
+    """
+
+    compensator: Compensator
+    preamble: int
+    sample_rate: float
+
+
 def compensate_file(
     model_path: PathLike,
     target: PathLike,
@@ -183,27 +258,52 @@ def compensate_file(
     *,
     column: str | None = None,
     settings: CompensatorSettings = _DEFAULT_SETTINGS,
-) -> Compensator:
+    precondition: bool = True,
+    present_voltage: float | None = None,
+    force: bool = False,
+) -> Compensation:
     """Feedforward voltage for a desired trajectory; writes ``time,command,desired``.
+
+    Safe by default, as a lab running an amplifier needs:
+
+    * commands stay inside the limits, which default to the voltages the model
+      was identified on; limits beyond them are refused unless
+      ``settings.allow_extrapolation``;
+    * the slew limit defaults to the fastest change of the training record
+      (``model.max_slew_rate_``);
+    * the file starts with a ramp from the actuator's present voltage
+      (default: where the training record started) and a full-range
+      precondition cycle that wipes out the unknown history (rows with an
+      empty ``desired``); ``precondition=False`` keeps only the ramp;
+    * NaN or infinite desired values hold the last command and are counted;
+    * a trajectory that saturates most samples (out of reach: units, or the
+      sign of the gain) is an error, and nothing is written.
 
     Parameters
     ----------
     model_path : str or os.PathLike
         A saved model.
     target : str or os.PathLike
-        The desired trajectory (a ``desired`` column, or the only one besides ``time``).
+        The desired trajectory with its ``time`` column (s), or give
+        ``settings.sample_rate``.
     out : str or os.PathLike
         Where to write the commands.
     column : str, optional
-        The desired column's name.
+        The desired column (default ``desired``, or the only one besides ``time``).
     settings : CompensatorSettings
-        Limits, domain, gain, slew rate.
+        Limits, domain, gain, slew rate, sample rate, extrapolation.
+    precondition : bool, default True
+        Write the precondition cycle before the trajectory.
+    present_voltage : float, optional
+        The actuator's voltage now (V).
+    force : bool, default False
+        Replace an existing ``out`` that piezohyst did not write.
 
     Returns
     -------
-    Compensator
-        After the run (its counters tell saturated and non-finite samples).
+    Compensation
     """
+    guard_outputs([out], [model_path, target], force=force)
     model = _load(model_path)
     table = read_table(target)
     if column is None:
@@ -215,16 +315,68 @@ def compensate_file(
                 f"the column (columns: {', '.join(map(repr, table.columns))})"
             )
             raise DataFileError(msg)
-    desired = table.get(table.resolve(column))
-    comp = settings.build(model)
+    desired = table.get(table.resolve(column), finite=False)
     if "time" in table:
         t = table.get("time")
+        steps = np.diff(t)
+        if steps.size and not np.all(steps > 0):
+            msg = f"{target}: the time column is not increasing"
+            raise DataFileError(msg)
+        fs = settings.sample_rate or (1.0 / float(np.median(steps)) if steps.size else 1.0)
     elif settings.sample_rate is not None:
-        t = np.arange(desired.size) / float(settings.sample_rate)
+        fs = float(settings.sample_rate)
+        t = np.arange(desired.size) / fs
     else:
-        t = np.arange(desired.size, dtype=np.float64)
-    write_table(out, {"time": t, "command": comp.process(desired), "desired": desired})
-    return comp
+        msg = (
+            f"{target}: no time column; the commands need their sample times: add a 'time' "
+            "column (s) or give the sample rate"
+        )
+        raise DataFileError(msg)
+    slew = settings.slew_rate
+    if slew is None and math.isfinite(model.max_slew_rate_) and model.max_slew_rate_ > 0:
+        slew = model.max_slew_rate_
+    comp = dataclasses.replace(settings, slew_rate=slew, sample_rate=fs).build(model)
+    start = present_voltage
+    if start is None:
+        start = float(np.clip(model.initial_state_[0], comp.v_min, comp.v_max))
+    comp.reset(voltage=start)
+    preamble = comp.precondition(max(3, round(fs))) if precondition else np.empty(0)
+    commands = comp.process(desired)
+    finite = int(np.count_nonzero(np.isfinite(desired)))
+    if finite and comp.saturated_count > 0.5 * finite:
+        lo, hi = _reachable(model, comp, settings)
+        unit = "m" if settings.domain == "displacement" else model.output_unit
+        msg = (
+            f"{target}: {comp.saturated_count} of {finite} desired values "
+            f"({100 * comp.saturated_count / finite:.0f} %) are out of reach of "
+            f"[{comp.v_min:g}, {comp.v_max:g}] V, which reaches about [{lo:.4g}, {hi:.4g}] {unit}; "
+            "check the units and the sign of the gain"
+        )
+        raise ParameterError(msg)
+    n = preamble.size
+    times = np.concatenate([t[0] - np.arange(n, 0, -1) / fs, t]) if n else t
+    write_table(
+        out,
+        {
+            "time": times,
+            "command": np.concatenate([preamble, commands]),
+            "desired": np.concatenate([np.full(n, np.nan), desired]),
+        },
+    )
+    return Compensation(comp, n, fs)
+
+
+def _reachable(
+    model: HysteresisModel, comp: Compensator, settings: CompensatorSettings
+) -> tuple[float, float]:
+    """Roughly the desired values the limits reach: the outputs at v_min and v_max from rest."""
+    h = model.hysteresis_
+    x0 = float(model.initial_state_[0])
+    rest, low, high = h.predict(np.array([x0, comp.v_min, comp.v_max]))
+    values = np.array([low, high])
+    if settings.domain == "displacement" and settings.gain is not None:
+        values = settings.gain * (values - rest)
+    return float(values.min()), float(values.max())
 
 
 def export_c_file(
@@ -233,6 +385,7 @@ def export_c_file(
     *,
     settings: CompensatorSettings = _DEFAULT_SETTINGS,
     precision: Precision = "double",
+    force: bool = False,
 ) -> tuple[Path, Path]:
     """Write ``NAME.c`` and ``NAME.h`` for the model's compensator (see :mod:`piezohyst.export`).
 
@@ -246,11 +399,15 @@ def export_c_file(
         Limits, domain, gain, slew rate.
     precision : {"double", "float"}
         The C type of every real.
+    force : bool, default False
+        Replace existing files piezohyst did not write.
 
     Returns
     -------
     tuple of Path
     """
+    c_path, h_path, _ = c_paths(out)
+    guard_outputs([c_path, h_path], [model_path], force=force)
     return write_c(settings.build(_load(model_path)), out, precision=precision)
 
 
@@ -268,8 +425,14 @@ def model_report(
     out: PathLike,
     *,
     data_spec: DataSpec | None = None,
+    force: bool = False,
 ) -> ReportResult:
-    """Figures (loop, fit, residual, growth removal) and metrics of a model on a data file."""
+    """Figures (loop, fit, residual, growth removal) and metrics of a model on a data file.
+
+    ``out`` is a folder; an existing one that does not hold a piezohyst report
+    is refused unless ``force`` (see :func:`guard_outputs`).
+    """
+    guard_outputs([out], [model_path, data], force=force)
     model = _load(model_path)
     rec = (data_spec or DataSpec()).read(data)
     assert rec.y is not None

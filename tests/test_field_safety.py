@@ -1,0 +1,172 @@
+"""Field safety: no data loss, commands inside the trusted range, a safe start."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner, Result
+
+import piezohyst as ph
+from piezohyst.cli import main
+
+
+def run(*args: str | Path) -> Result:
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = tmp_path_factory.mktemp("lab")
+    assert run("simulate", "--duration", "8", "-o", d / "run.csv").exit_code == 0
+    assert run("fit", d / "run.csv", "--operators", "10", "-o", d / "model.json").exit_code == 0
+    model = ph.load_model(d / "model.json")
+    t = np.arange(2000) / 1000.0
+    v = 20 + 50 * (1 - np.cos(2 * np.pi * 0.5 * t))
+    ph.write_table(d / "target.csv", {"time": t, "desired": model.hysteresis_.predict(v)})
+    return d
+
+
+def one_line_error(res: Result, *fragments: str) -> str:
+    assert res.exit_code == 1, res.output
+    err = res.stderr.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in res.output, err
+    for fragment in fragments:
+        assert fragment in err, err
+    return err
+
+
+# ------------------------------------------------------------------ no data loss
+def test_an_output_that_is_an_input_is_refused(lab: Path) -> None:
+    before = (lab / "run.csv").read_bytes()
+    one_line_error(run("fit", lab / "run.csv", "-o", lab / "run.csv"), "is an input")
+    one_line_error(run("fit", lab / "run.csv", "-o", lab / "run.csv", "--force"), "is an input")
+    assert (lab / "run.csv").read_bytes() == before
+    model = (lab / "model.json").read_bytes()
+    one_line_error(
+        run("predict", lab / "model.json", lab / "run.csv", "-o", lab / "model.json"), "is an input"
+    )
+    assert (lab / "model.json").read_bytes() == model
+
+
+def test_files_piezohyst_did_not_write_need_force(lab: Path) -> None:
+    mine = lab / "measurement.csv"
+    mine.write_text("time,voltage,charge\n0,0,0\n0.001,1,1e-9\n")
+    err = one_line_error(
+        run("predict", lab / "model.json", lab / "run.csv", "-o", mine), "did not write"
+    )
+    assert "--force" in err
+    assert mine.read_text().startswith("time,voltage")
+    assert run("predict", lab / "model.json", lab / "run.csv", "-o", mine, "--force").exit_code == 0
+    assert ph.io.is_piezohyst_output(mine)
+    # its own output is replaced without asking
+    assert run("predict", lab / "model.json", lab / "run.csv", "-o", mine).exit_code == 0
+    folder = lab / "notes"
+    folder.mkdir()
+    (folder / "lab-book.txt").write_text("do not lose me")
+    one_line_error(run("report", lab / "model.json", lab / "run.csv", "--out", folder),
+                   "did not write")  # fmt: skip
+    assert (folder / "lab-book.txt").read_text() == "do not lose me"
+
+
+# ----------------------------------------------------------- safe compensation
+def test_limits_beyond_the_training_range_are_refused(lab: Path) -> None:
+    model = ph.load_model(lab / "model.json")
+    _lo, hi = model.input_range_
+    args = ["compensate", lab / "model.json", lab / "target.csv", "--v-min", "-88",
+            "--v-max", "233"]  # fmt: skip
+    one_line_error(run(*args, "-o", lab / "wide.csv"), "beyond the voltages", f"{hi:g}")
+    assert not (lab / "wide.csv").exists()
+    res = run(*args, "--allow-extrapolation", "-o", lab / "wide.csv")
+    assert res.exit_code == 0, res.output
+    cmd = ph.io.read_table(lab / "wide.csv").get("command")
+    assert cmd.min() >= -88 and cmd.max() <= 233
+
+
+def test_the_cli_starts_with_a_slew_limited_ramp_and_precondition(lab: Path) -> None:
+    model = ph.load_model(lab / "model.json")
+    lo, hi = model.input_range_
+    res = run("compensate", lab / "model.json", lab / "target.csv", "--present-voltage", "30",
+              "-o", lab / "cmd.csv")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    table = ph.io.read_table(lab / "cmd.csv")
+    t, cmd = table.get("time"), table.get("command")
+    desired = table.get("desired", finite=False)
+    pre = ~np.isfinite(desired)
+    n = int(pre.sum())
+    assert n > 0 and pre[:n].all() and not pre[n:].any()  # the preamble comes first
+    assert np.all(np.diff(t) > 0) and t[n] == 0.0
+    assert cmd[:n].max() == pytest.approx(hi) and cmd[:n].min() == pytest.approx(lo)
+    steps = np.abs(np.diff(np.concatenate([[30.0], cmd])))
+    assert steps[0] <= model.max_slew_rate_ / 1000.0 * (1 + 1e-9)  # no jump from 30 V
+    assert steps.max() <= model.max_slew_rate_ / 1000.0 * (1 + 1e-9)
+    assert cmd.min() >= lo and cmd.max() <= hi
+
+
+def test_nan_targets_are_held_and_counted(lab: Path) -> None:
+    table = ph.io.read_table(lab / "target.csv")
+    t, d = table.get("time"), table.get("desired").copy()
+    d[500:510] = np.nan
+    ph.write_table(lab / "gappy.csv", {"time": t, "desired": d})
+    res = run("compensate", lab / "model.json", lab / "gappy.csv", "--no-precondition",
+              "-o", lab / "gappy-cmd.csv")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "10 non-finite desired values held" in res.stdout
+    cmd = ph.io.read_table(lab / "gappy-cmd.csv").get("command")
+    assert np.all(cmd[500:510] == cmd[499])
+
+
+def test_a_trajectory_out_of_reach_is_an_error(lab: Path) -> None:
+    model = ph.load_model(lab / "model.json")
+    t = np.arange(2000) / 1000.0
+    d = 2e-6 + 7e-6 * (1 - np.cos(2 * np.pi * 0.5 * t))  # metres: 2..16 um of a 20 um stroke
+    ph.write_table(lab / "disp.csv", {"time": t, "desired": d})
+    gain = 20e-6 / float(np.ptp(model.hysteresis_.predict(np.array([0.0, 140.0]))))
+    ok = run("compensate", lab / "model.json", lab / "disp.csv", "--domain", "displacement",
+             "--gain", f"{gain:.6g}", "--no-precondition", "-o", lab / "disp-cmd.csv")  # fmt: skip
+    assert ok.exit_code == 0, ok.output
+    bad = run("compensate", lab / "model.json", lab / "disp.csv", "--domain", "displacement",
+              "--gain", f"{-gain:.6g}", "-o", lab / "disp-bad.csv")  # fmt: skip
+    one_line_error(bad, "out of reach", "sign of the gain")
+    assert not (lab / "disp-bad.csv").exists()
+
+
+def test_a_target_without_times_needs_a_sample_rate(lab: Path) -> None:
+    ph.write_table(
+        lab / "no-time.csv", {"desired": ph.io.read_table(lab / "target.csv").get("desired")}
+    )
+    one_line_error(
+        run("compensate", lab / "model.json", lab / "no-time.csv", "-o", lab / "nt.csv"),
+        "no time column",
+    )
+    res = run("compensate", lab / "model.json", lab / "no-time.csv", "--sample-rate", "1000",
+              "-o", lab / "nt.csv")  # fmt: skip
+    assert res.exit_code == 0, res.output
+
+
+# ------------------------------------------------------------------- Python
+def test_the_compensator_narrows_wide_limits_with_one_warning(lab: Path) -> None:
+    model = ph.load_model(lab / "model.json")
+    lo, hi = model.input_range_
+    with pytest.warns(UserWarning, match="narrowed") as record:
+        comp = ph.Compensator(model, v_min=-88.0, v_max=233.0)
+    assert len(record) == 1
+    assert (comp.v_min, comp.v_max) == (lo, hi) and comp.requested_limits == (-88.0, 233.0)
+    cmd = comp.process(np.linspace(-1e-5, 1e-5, 500))
+    assert cmd.min() >= lo and cmd.max() <= hi
+    wide = ph.Compensator(model, v_min=-88.0, v_max=233.0, allow_extrapolation=True)
+    assert (wide.v_min, wide.v_max) == (-88.0, 233.0) and wide.requested_limits is None
+    with pytest.raises(ph.ParameterError, match="do not overlap"):
+        ph.Compensator(model, v_min=500.0, v_max=600.0)
+    hand = ph.ClassicalPI.from_operator(ph.PIHysteresis([0.0], [1.0]))
+    assert math.isnan(hand.input_range_[0])  # no training range known: limits kept as given
+    assert ph.Compensator(hand, v_min=-1.0, v_max=1.0).v_min == -1.0
+
+
+def test_the_training_slew_rate_is_recorded_and_saved(lab: Path) -> None:
+    model = ph.load_model(lab / "model.json")
+    rec = ph.io.read_table(lab / "run.csv")
+    v, t = rec.get("voltage"), rec.get("time")
+    assert model.max_slew_rate_ == pytest.approx(np.max(np.abs(np.diff(v)) / np.diff(t)))
