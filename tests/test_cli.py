@@ -43,7 +43,7 @@ def workdir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_simulate_writes_the_documented_columns(workdir: Path) -> None:
     text = (workdir / "run.csv").read_text().splitlines()
     assert text[0] == f"# written by piezohyst {ph.__version__}"  # marks files it may replace
-    assert text[1] == "time,voltage,charge,displacement"
+    assert text[1] == "time [s],voltage [V],charge [C],displacement [m]"  # units in the header
     assert len(text) == 12002
     table = ph.io.read_table(workdir / "run.csv")
     np.testing.assert_allclose(np.diff(table.get("time")), 1e-3)

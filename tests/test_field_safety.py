@@ -170,3 +170,82 @@ def test_the_training_slew_rate_is_recorded_and_saved(lab: Path) -> None:
     rec = ph.io.read_table(lab / "run.csv")
     v, t = rec.get("voltage"), rec.get("time")
     assert model.max_slew_rate_ == pytest.approx(np.max(np.abs(np.diff(v)) / np.diff(t)))
+
+
+# -------------------------------------------------------------- time and units
+def bench_columns(lab: Path) -> dict[str, np.ndarray]:
+    table = ph.io.read_table(lab / "run.csv")
+    return {c: table.get(c) for c in ("time", "voltage", "charge")}
+
+
+def test_time_in_ms_gives_the_same_leakage(lab: Path) -> None:
+    cols = bench_columns(lab)
+    ref = ph.load_model(lab / "model.json")
+    ms = dict(cols, time=cols["time"] * 1000.0)
+    ph.write_table(lab / "ms-header.csv", ms, units={"time": "ms"})  # 'time [ms]' header
+    ph.write_table(lab / "ms-bare.csv", ms)  # no unit anywhere: must be declared
+    ph.write_table(lab / "uc.csv", dict(cols, charge=cols["charge"] * 1e6), units={"charge": "uC"})
+    for args in (
+        [lab / "ms-header.csv"],
+        [lab / "ms-bare.csv", "--time-unit", "ms"],
+        [lab / "uc.csv"],
+    ):
+        out = lab / "unit-model.json"
+        res = run("fit", *args, "--operators", "10", "-o", out)
+        assert res.exit_code == 0, res.output
+        model = ph.load_model(out)
+        assert isinstance(model, ph.ActivePI) and model.output_unit == "C"
+        assert model.growth_rate_ == pytest.approx(ref.growth_rate_, rel=1e-9)
+    # undeclared milliseconds at 1 kHz look like 1 s steps: only the unit can say; undeclared
+    # microseconds (1000 "s" per sample) are called out
+    ph.write_table(lab / "us-bare.csv", dict(cols, time=cols["time"] * 1e6))
+    res = run("fit", lab / "us-bare.csv", "-o", lab / "unit-model.json")
+    assert "warning:" in res.stderr and "not in seconds" in res.stderr
+    one_line_error(
+        run("fit", lab / "ms-header.csv", "--time-unit", "s", "-o", lab / "x.json"),
+        "marked 'ms' in the file",
+    )
+
+
+def test_names_rates_and_units_that_contradict_the_file_are_errors(lab: Path) -> None:
+    one_line_error(run("fit", lab / "run.csv", "--rate", "1000", "-o", lab / "x.json"),
+                   "time column 'time' and a sample rate")  # fmt: skip
+    one_line_error(run("predict", lab / "model.json", lab / "run.csv", "--output", "chrage",
+                       "-o", lab / "p.csv"), "no column 'chrage'")  # fmt: skip
+    one_line_error(run("fit", lab / "run.csv", "--time-unit", "V", "-o", lab / "x.json"),
+                   "marked 's' in the file")  # fmt: skip
+    ramp = np.arange(3.0)
+    ph.write_table(lab / "volt-time.csv", {"time": ramp, "voltage": ramp, "charge": ramp},
+                   units={"time": "V"})  # fmt: skip
+    one_line_error(run("fit", lab / "volt-time.csv", "-o", lab / "x.json"), "not a unit of time")
+
+
+def test_a_record_without_excitation_is_refused(lab: Path) -> None:
+    t = np.arange(1000) / 1000.0
+    ph.write_table(lab / "flat.csv", {"time": t, "voltage": np.full(t.size, 50.0),
+                                      "charge": 1e-9 * t})  # fmt: skip
+    one_line_error(run("fit", lab / "flat.csv", "-o", lab / "flat.json"), "never moves")
+    assert not (lab / "flat.json").exists()
+
+
+def test_displacement_data_is_not_labelled_coulomb(lab: Path) -> None:
+    table = ph.io.read_table(lab / "run.csv")
+    cols = {c: table.get(c) for c in ("time", "voltage", "displacement")}
+    ph.write_table(lab / "disp-data.csv", {**cols, "displacement": cols["displacement"] * 1e6},
+                   units={"displacement": "um"})  # fmt: skip
+    res = run("fit", lab / "disp-data.csv", "--output", "displacement", "-o", lab / "d.json")
+    assert res.exit_code == 0, res.output
+    model = ph.load_model(lab / "d.json")
+    assert model.output_unit == "m"  # converted from um
+    pred = run("predict", lab / "d.json", lab / "disp-data.csv", "--output", "displacement",
+               "-o", lab / "d-pred.csv")  # fmt: skip
+    assert pred.exit_code == 0, pred.output
+    out = ph.io.read_table(lab / "d-pred.csv")
+    assert out.units["predicted"] == "m" and out.get("predicted").max() < 1e-3
+
+
+def test_a_report_folder_is_replaced_by_the_next_report(lab: Path) -> None:
+    args = ("report", lab / "model.json", lab / "run.csv", "--out", lab / "rep")
+    assert run(*args).exit_code == 0
+    assert run(*args).exit_code == 0  # its own report: replaced without --force
+    assert ph.io.is_piezohyst_output(lab / "rep")

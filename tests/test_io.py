@@ -125,7 +125,9 @@ def test_csv_round_trip_and_header_detection(tmp_path: Path) -> None:
 def test_latin1_headers_are_read(tmp_path: Path) -> None:
     (tmp_path / "a.dat").write_bytes("Time [s]\tP1 [µC/cm2]\n0\t1\n1\t2\n".encode("latin-1"))
     table = ph.read_table(tmp_path / "a.dat")
-    assert table.columns == ["Time [s]", "P1 [µC/cm2]"]
+    assert table.columns == ["Time", "P1"]  # units read from the headers
+    assert table.units == {"Time": "s", "P1": "µC/cm2"}
+    assert table.resolve("P1 [µC/cm2]") == "P1"  # the full header names the column too
 
 
 def test_writes_are_atomic(tmp_path: Path) -> None:

@@ -282,6 +282,7 @@ LAYERS = {
     "_kernels": 1,
     "metrics": 1,
     "io": 1,
+    "units": 1,
     "hysteresis": 2,
     "cores": 3,
     "terms": 3,

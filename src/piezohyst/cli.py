@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import sys
+import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -71,9 +72,18 @@ def progress_steps(ctx: Context, total: int) -> Iterator[Callable[[str], None]]:
 
 
 def _run(ctx: Context, fn: Callable[[], Any]) -> Any:
-    """Run a command body: errors become one line on stderr and exit 1 (traceback: --debug)."""
+    """Run a command body: errors become one line on stderr and exit 1 (traceback: --debug).
+
+    Warnings (an implausible sample interval, narrowed limits...) become one
+    ``warning:`` line each on stderr.
+    """
     try:
-        return fn()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            result = fn()
+        for w in caught:
+            click.echo(f"warning: {w.message}", err=True)
+        return result
     except (PiezohystError, OSError) as exc:
         if ctx.debug:
             raise
@@ -145,6 +155,21 @@ def _data_options(fn: Callable[..., Any]) -> Callable[..., Any]:
         click.option(
             "--t-stop", type=float, default=None, help="Use samples before this time (s)."
         ),
+        click.option(
+            "--input-unit",
+            default=None,
+            help="Unit of the input column (default: its header's, or V).",
+        ),
+        click.option(
+            "--output-unit",
+            default=None,
+            help="Unit of the output column, e.g. C, uC, um (default: its header's).",
+        ),
+        click.option(
+            "--time-unit",
+            default=None,
+            help="Unit of the time column (default: its header's, or s).",
+        ),
     ]
 
     @functools.wraps(fn)
@@ -157,9 +182,23 @@ def _data_options(fn: Callable[..., Any]) -> Callable[..., Any]:
         group: str | None,
         t_start: float | None,
         t_stop: float | None,
+        input_unit: str | None,
+        output_unit: str | None,
+        time_unit: str | None,
         **kwargs: Any,
     ) -> Any:
-        spec = DataSpec(input_column, output_column, time_column, rate, group, t_start, t_stop)
+        spec = DataSpec(
+            input_column,
+            output_column,
+            time_column,
+            rate,
+            group,
+            t_start,
+            t_stop,
+            input_unit,
+            output_unit,
+            time_unit,
+        )
         return fn(*args, data_spec=spec, **kwargs)
 
     wrapped: Callable[..., Any] = with_spec
@@ -338,7 +377,6 @@ def describe(model: HysteresisModel) -> str:
     show_default=True,
     help="Play operators, the linear one included.",
 )
-@click.option("--output-unit", default="C", show_default=True, help="Unit of the output column.")
 @click.option(
     "--growth",
     default="auto",
@@ -358,7 +396,6 @@ def fit(
     data: Path,
     model_name: str,
     operators: int,
-    output_unit: str,
     growth: str,
     creep: str,
     data_spec: DataSpec,
@@ -394,7 +431,6 @@ def fit(
                 model=model_name,
                 operators=operators,
                 data_spec=data_spec,
-                output_unit=output_unit,
                 growth_terms=terms,
                 creep=taus,
                 force=force,

@@ -16,6 +16,7 @@ import io as _io
 import logging
 import os
 import tempfile
+import warnings
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,6 +27,7 @@ from numpy.typing import ArrayLike
 from ._validation import FloatArray
 from ._version import __version__
 from .errors import DataFileError
+from .units import split_unit, to_standard
 
 __all__ = [
     "DataSpec",
@@ -54,15 +56,32 @@ class Table:
         Column names in file order (``col0``, ``col1``... when the file has no header).
     time_step : float or None
         Sample interval (s) stated by the file (TDMS ``wf_increment``), if any.
+    units : mapping
+        Unit of each column whose header named one (``time [ms]`` -> ``ms``).
     """
 
     path: Path
     columns: list[str]
     _getters: Mapping[str, Callable[[], FloatArray]] = field(repr=False)
     time_step: float | None = None
+    units: Mapping[str, str] = field(default_factory=dict)
 
     def __contains__(self, name: object) -> bool:
         return name in self._getters
+
+    def unit(self, name: str) -> str | None:
+        """The unit the file gives a column (None when it gives none).
+
+        Parameters
+        ----------
+        name : str
+            A column name (see :meth:`resolve`).
+
+        Returns
+        -------
+        str or None
+        """
+        return self.units.get(name)
 
     def resolve(self, key: str) -> str:
         """A column name from a name or a 0-based index given as digits.
@@ -77,6 +96,9 @@ class Table:
         """
         if key in self._getters:
             return key
+        bare, unit = split_unit(key)
+        if unit is not None and bare in self._getters and self.units.get(bare) == unit:
+            return bare
         if key.strip().lstrip("-").isdigit():
             i = int(key)
             if 0 <= i < len(self.columns):
@@ -133,6 +155,9 @@ class Recording:
         Column names of input, output and time (None where not from a column).
     window : slice
         The samples asked for.
+    units : tuple
+        Units of input and output after conversion (V, C, m, or the file's
+        own label; None when unknown). Time is always in s.
     """
 
     t: FloatArray
@@ -140,6 +165,7 @@ class Recording:
     y: FloatArray | None
     names: tuple[str, str | None, str | None]
     window: slice = field(default_factory=lambda: slice(None))
+    units: tuple[str | None, str | None] = (None, None)
 
 
 # ------------------------------------------------------------------ CSV / text
@@ -208,8 +234,16 @@ def _read_text(path: Path) -> Table:
         ]
     first = rows[0][1]
     has_header = any(c and not _is_number(c) for c in first)
+    units: dict[str, str] = {}
     if has_header:
-        names = [c if c else f"col{i}" for i, c in enumerate(first)]
+        split = [split_unit(c) if c else (f"col{i}", None) for i, c in enumerate(first)]
+        bare = [name for name, _ in split]
+        # 'time [ms]' is the column 'time' in ms, unless that would make two columns one name
+        names = [
+            name if bare.count(name) == 1 else (first[i] or f"col{i}")
+            for i, name in enumerate(bare)
+        ]
+        units = {n: u for n, (_, u) in zip(names, split, strict=True) if u is not None}
         body = rows[1:]
     else:
         names = [f"col{i}" for i in range(len(first))]
@@ -247,7 +281,7 @@ def _read_text(path: Path) -> Table:
 
         return convert
 
-    return Table(path, names, {name: getter(j) for j, name in enumerate(names)})
+    return Table(path, names, {name: getter(j) for j, name in enumerate(names)}, units=units)
 
 
 # ------------------------------------------------------------------ binary formats
@@ -356,7 +390,7 @@ def _read_tdms(path: Path, group: str | None) -> Table:
         if step is None and inc is not None and float(inc) > 0:
             step = float(inc)
     table = _table_from_arrays(path, arrays, "TDMS")
-    return Table(table.path, table.columns, table._getters, time_step=step)
+    return Table(table.path, table.columns, table._getters, time_step=step, units=table.units)
 
 
 def read_table(path: str | os.PathLike[str], *, group: str | None = None) -> Table:
@@ -420,8 +454,11 @@ def read_recording(
     output_required: bool = True,
     t_start: float | None = None,
     t_stop: float | None = None,
+    input_unit: str | None = None,
+    output_unit: str | None = None,
+    time_unit: str | None = None,
 ) -> Recording:
-    """Input, output and time columns of a data file.
+    """Input, output and time columns of a data file, in seconds and (where known) V, C or m.
 
     Time comes from ``time_column`` when the file has it, else from
     ``rate`` (Hz), else from the file's own sample interval (TDMS); the time
@@ -441,10 +478,20 @@ def read_recording(
         Raise if the output column is missing.
     t_start, t_stop : float, optional
         The window of samples asked for (s).
+    input_unit, output_unit, time_unit : str, optional
+        Units of the columns, for files whose headers name none (a header's
+        ``name [unit]`` or ``name (unit)`` counts; naming both differently
+        is an error). Converted by :func:`piezohyst.units.to_standard`.
 
     Returns
     -------
     Recording
+
+    Raises
+    ------
+    DataFileError
+        A missing or misnamed column, a time column together with a sample
+        rate, a bad or non-increasing time, or units that contradict the file.
     """
     table = read_table(path, group=group)
     x_name = table.resolve(input_column)
@@ -453,7 +500,8 @@ def read_recording(
     y: FloatArray | None = None
     output = output_column
     if output is not None:
-        if output_required or output in table or output.isdigit():
+        # the default output may be absent (predicting needs no output); a named one may not
+        if output_required or output in table or output != "charge":
             y_name = table.resolve(output)
             y = table.get(y_name)
     time = time_column
@@ -461,6 +509,12 @@ def read_recording(
     if rate is not None:
         if not rate > 0:
             msg = f"the sample rate must be positive (Hz). Got {rate}."
+            raise DataFileError(msg)
+        if time is not None and (time in table or time != "time"):
+            msg = (
+                f"{table.path}: the file has a time column {time!r} and a sample rate was "
+                "given too; use one of them"
+            )
             raise DataFileError(msg)
         t = np.arange(x.size, dtype=np.float64) / float(rate)
     elif time is not None and (time in table or (time != "time" and time.isdigit())):
@@ -490,6 +544,23 @@ def read_recording(
             f"({float(t[i - 1])!r} then {float(t[i])!r})"
         )
         raise DataFileError(msg)
+    where = f"{table.path}: column"
+    t, _ = to_standard(t, _unit(table, t_name, time_unit), "time", f"{where} {t_name!r}")
+    x, x_unit = to_standard(x, _unit(table, x_name, input_unit), "input", f"{where} {x_name!r}")
+    y_unit = None
+    if y is not None and y_name is not None:
+        y, y_unit = to_standard(
+            y, _unit(table, y_name, output_unit), "output", f"{where} {y_name!r}"
+        )
+    if t.size > 1:
+        dt = float(np.median(np.diff(t)))
+        if not 1e-8 <= dt <= 60.0:
+            warnings.warn(
+                f"{table.path}: the median sample interval is {dt:.3g} s; if the time column is "
+                "not in seconds, give its unit (a header such as 'time [ms]', or the time unit)",
+                UserWarning,
+                stacklevel=2,
+            )
     window = slice(None)
     if t_start is not None or t_stop is not None:
         lo = -np.inf if t_start is None else float(t_start)
@@ -502,7 +573,21 @@ def read_recording(
             )
             raise DataFileError(msg)
         window = slice(i0, i1)
-    return Recording(t=t, x=x, y=y, names=(x_name, y_name, t_name), window=window)
+    return Recording(
+        t=t, x=x, y=y, names=(x_name, y_name, t_name), window=window, units=(x_unit, y_unit)
+    )
+
+
+def _unit(table: Table, column: str | None, declared: str | None) -> str | None:
+    """The unit of a column: the file's, or the one declared; both and different: an error."""
+    found = None if column is None else table.unit(column)
+    if found is not None and declared is not None and found != declared:
+        msg = (
+            f"{table.path}: column {column!r} is marked {found!r} in the file, but its unit "
+            f"was given as {declared!r}"
+        )
+        raise DataFileError(msg)
+    return found or declared
 
 
 @dataclass(frozen=True)
@@ -519,6 +604,8 @@ class DataSpec:
         TDMS group.
     t_start, t_stop : float or None
         The window (s): ``t_start <= t < t_stop``.
+    input_unit, output_unit, time_unit : str or None
+        Units of the columns when the file's headers name none.
     """
 
     input_column: str = "voltage"
@@ -528,6 +615,9 @@ class DataSpec:
     group: str | None = None
     t_start: float | None = None
     t_stop: float | None = None
+    input_unit: str | None = None
+    output_unit: str | None = None
+    time_unit: str | None = None
 
     def read(self, path: str | os.PathLike[str], *, output_required: bool = True) -> Recording:
         """:func:`read_recording` with these settings.
@@ -553,6 +643,9 @@ class DataSpec:
             output_required=output_required,
             t_start=self.t_start,
             t_stop=self.t_stop,
+            input_unit=self.input_unit,
+            output_unit=self.output_unit,
+            time_unit=self.time_unit,
         )
 
 
@@ -623,7 +716,11 @@ def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
     return atomic_write(path, write)
 
 
-def write_table(path: str | os.PathLike[str], columns: Mapping[str, ArrayLike]) -> Path:
+def write_table(
+    path: str | os.PathLike[str],
+    columns: Mapping[str, ArrayLike],
+    units: Mapping[str, str | None] | None = None,
+) -> Path:
     """Write equal-length columns as CSV (header row, full precision) or ``.npz``.
 
     The file appears only when complete (temporary file, then rename).
@@ -634,6 +731,9 @@ def write_table(path: str | os.PathLike[str], columns: Mapping[str, ArrayLike]) 
         ``.npz`` or a text file (CSV).
     columns : mapping
         Column name to values, all of one length.
+    units : mapping, optional
+        Column name to unit: a CSV header then reads ``name [unit]``, which
+        :func:`read_table` reads back.
 
     Returns
     -------
@@ -658,7 +758,8 @@ def write_table(path: str | os.PathLike[str], columns: Mapping[str, ArrayLike]) 
         buf = _io.StringIO()
         buf.write(f"{MARKER} {__version__}\n")
         writer = csv.writer(buf, lineterminator="\n")
-        writer.writerow(arrays)
+        named = units or {}
+        writer.writerow([f"{k} [{named[k]}]" if named.get(k) else k for k in arrays])
         for row in zip(*arrays.values(), strict=True):
             writer.writerow([repr(float(v)) for v in row])
         tmp.write_text(buf.getvalue(), encoding="utf-8")

@@ -37,6 +37,7 @@ import inspect
 import itertools
 import math
 import os
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, Self
@@ -46,7 +47,14 @@ from numpy.typing import ArrayLike
 
 from ._validation import FloatArray, as_signal, as_time, check_float, check_int, same_length
 from .cores import PlayCore
-from .errors import NotFittedError, NotInvertibleError, ParameterError, ShapeError, TimeAxisError
+from .errors import (
+    InsufficientDataError,
+    NotFittedError,
+    NotInvertibleError,
+    ParameterError,
+    ShapeError,
+    TimeAxisError,
+)
 from .hysteresis import PIHysteresis, Propagation
 from .identification import BLOCK, block_dt, default_thresholds, identify, term_columns
 from .metrics import rmse
@@ -463,6 +471,12 @@ class HysteresisModel:
         xs = as_signal(x, "x")
         ys = as_signal(y, "y")
         same_length(xs, ys, "x", "y")
+        if not np.ptp(xs) > 1e-12 * max(float(np.max(np.abs(xs))), 1e-300):
+            msg = (
+                f"the input never moves (constant at {float(xs[0]):g} {self.input_unit}): "
+                "a record without excitation holds no hysteresis to identify"
+            )
+            raise InsufficientDataError(msg)
         thr = params["thresholds"]
         if thr is None:
             thr = default_thresholds(xs, params["n_operators"])
@@ -478,7 +492,26 @@ class HysteresisModel:
             self.max_slew_rate_ = float(np.max(np.abs(np.diff(xs)) / np.diff(ts)))
         self.rmse_ = rmse(self.predict(xs, t=ts), ys)
         self.nrmse_ = self.rmse_ / max(float(np.ptp(ys)), 1e-300)
+        self._check_leakage(xs, ys, ts)
         return self
+
+    def _check_leakage(self, x: FloatArray, y: FloatArray, t: FloatArray | None) -> None:
+        """Warn when the identified leakage drains the capacitance faster than one sample."""
+        growth = self.growth_coefficients()
+        if t is None or t.size < 2 or "integral" not in growth:
+            return
+        conductance = growth["integral"][0]
+        capacitance = float(np.ptp(y)) / float(np.ptp(x))  # mean slope, output per input unit
+        dt = float(np.median(np.diff(t)))
+        if conductance > 0 and capacitance / conductance < dt:
+            warnings.warn(
+                f"the identified leakage {conductance:.3g} {self.output_unit}/"
+                f"({self.input_unit}*s) would discharge the actuator in "
+                f"{capacitance / conductance:.3g} s, less than one sample ({dt:.3g} s): check "
+                "the time unit",
+                UserWarning,
+                stacklevel=3,
+            )
 
     def _initial_operators(
         self, thr: FloatArray, xs: FloatArray, initial_state: ArrayLike | None

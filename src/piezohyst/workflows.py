@@ -14,24 +14,28 @@ import dataclasses
 import json
 import math
 import os
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ._validation import FloatArray, check_float, check_int
+from ._version import __version__
 from .compensator import Compensator, CompensatorSettings
 from .errors import DataFileError, OverwriteError, ParameterError
 from .export import Precision, c_paths, write_c
 from .identification import default_thresholds, history_state
-from .io import DataSpec, atomic_write_text, is_piezohyst_output, read_table, write_table
+from .io import DataSpec, Recording, atomic_write_text, is_piezohyst_output, read_table, write_table
 from .metrics import hysteresis_width, nrmse, rmse
 from .models import HysteresisModel, model_class
 from .persistence import load_model
 from .plotting import save_panels
 from .simulation import DEFAULT_PRESET, PRESETS, BenchRecord, simulate
+from .units import to_standard
 
 __all__ = [
     "Compensation",
@@ -128,6 +132,7 @@ def simulate_file(
             "charge": rec.charge,
             "displacement": rec.displacement,
         },
+        units={"time": "s", "voltage": "V", "charge": "C", "displacement": "m"},
     )
     return rec
 
@@ -139,7 +144,6 @@ def fit_file(
     model: str = "active-pi",
     operators: int = 10,
     data_spec: DataSpec | None = None,
-    output_unit: str = "C",
     growth_terms: str | Sequence[str] = "auto",
     creep: Sequence[float] = (),
     force: bool = False,
@@ -158,8 +162,6 @@ def fit_file(
         Play operators.
     data_spec : DataSpec, optional
         Columns and samples (default: voltage, charge, time).
-    output_unit : str
-        Unit recorded with the model.
     growth_terms, creep
         Settings of models that have them (``generalized-pi``).
     force : bool
@@ -186,7 +188,13 @@ def fit_file(
     w = rec.window
     x, y, t = rec.x[w], rec.y[w], rec.t[w]
     fitted: HysteresisModel
-    settings: dict[str, Any] = {"n_operators": operators, "output_unit": output_unit, **extra}
+    x_unit, y_unit = rec.units
+    settings: dict[str, Any] = {
+        "n_operators": operators,
+        "input_unit": x_unit or "V",
+        "output_unit": y_unit or _default_unit(rec.names[1]),
+        **extra,
+    }
     estimator = cls(**settings)
     start = w.start or 0
     if start > 0:  # the window continues a known input history: start from its state
@@ -199,6 +207,28 @@ def fit_file(
     if out is not None:
         fitted.save(out)
     return fitted
+
+
+def _default_unit(column: str | None) -> str:
+    """The unit of an output column that names none: piezohyst's own names, else arbitrary."""
+    return {"charge": "C", "displacement": "m"}.get(column or "", "a.u.")
+
+
+def _measured(rec: Recording, model: HysteresisModel, data: PathLike) -> FloatArray:
+    """The recorded output in the model's unit; a unit the file does not state is assumed."""
+    assert rec.y is not None
+    unit = rec.units[1]
+    if unit is None:
+        warnings.warn(
+            f"{data}: the output column states no unit; taken to be in the model's unit "
+            f"{model.output_unit!r} (give the output unit if it is not)",
+            UserWarning,
+            stacklevel=3,
+        )
+    elif unit != model.output_unit:
+        msg = f"{data}: the output column is in {unit!r}, the model predicts {model.output_unit!r}"
+        raise DataFileError(msg)
+    return rec.y
 
 
 def _load(model_path: PathLike) -> HysteresisModel:
@@ -227,8 +257,9 @@ def predict_file(
         "predicted": model.predict(rec.x, t=rec.t)[w],
     }
     if rec.y is not None:
-        columns["measured"] = rec.y[w]
-    write_table(out, columns)
+        columns["measured"] = _measured(rec, model, data)[w]
+    unit = model.output_unit
+    write_table(out, columns, units={"time": "s", "predicted": unit, "measured": unit})
     return columns
 
 
@@ -315,7 +346,14 @@ def compensate_file(
                 f"the column (columns: {', '.join(map(repr, table.columns))})"
             )
             raise DataFileError(msg)
-    desired = table.get(table.resolve(column), finite=False)
+    name = table.resolve(column)
+    expected = "m" if settings.domain == "displacement" else model.output_unit
+    desired, unit = to_standard(
+        table.get(name, finite=False), table.unit(name), "output", f"{target}: column {name!r}"
+    )
+    if unit is not None and unit != expected:
+        msg = f"{target}: the desired column is in {unit!r}, the compensator expects {expected!r}"
+        raise DataFileError(msg)
     if "time" in table:
         t = table.get("time")
         steps = np.diff(t)
@@ -362,6 +400,7 @@ def compensate_file(
             "command": np.concatenate([preamble, commands]),
             "desired": np.concatenate([np.full(n, np.nan), desired]),
         },
+        units={"time": "s", "command": "V", "desired": expected},
     )
     return Compensation(comp, n, fs)
 
@@ -438,11 +477,13 @@ def model_report(
     assert rec.y is not None
     w = rec.window  # the model runs over the whole record: the window's start has a history
     pred = model.predict(rec.x, t=rec.t)[w]
-    x, y, t = rec.x[w], rec.y[w], rec.t[w]
+    x, y, t = rec.x[w], _measured(rec, model, data)[w], rec.t[w]
     out_dir = Path(out)
     out_dir.mkdir(parents=True, exist_ok=True)
     in_u, out_u = model.input_unit, model.output_unit
     metrics: dict[str, Any] = {
+        "piezohyst_version": __version__,
+        "written": datetime.now(UTC).isoformat(timespec="seconds"),
         "model": type(model).__name__,
         "model_file": str(model_path),
         "data_file": str(data),

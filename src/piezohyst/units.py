@@ -1,0 +1,109 @@
+"""Units of data columns: read from headers (``time [ms]``, ``Field (mT)``) or declared,
+converted with pint so that models always see seconds.
+
+Time is converted to s (a time column in any other dimension is an error),
+an input in a voltage unit to V, an output in a charge unit to C or in a
+length unit to m. Anything else (a field in mT, a polarisation in µC/cm²) is
+kept as given, with its unit as the label. pint is imported only when a unit
+needs converting.
+"""
+
+from __future__ import annotations
+
+import re
+from functools import cache
+from typing import Any, Literal
+
+import numpy as np
+
+from ._validation import FloatArray
+from .errors import DataFileError
+
+__all__ = ["Role", "split_unit", "to_standard"]
+
+Role = Literal["time", "input", "output"]
+
+_IN_HEADER = re.compile(r"^\s*(?P<name>.*?\S)\s*(?:\[(?P<u1>[^\]]+)\]|\((?P<u2>[^)]+)\))\s*$")
+_TARGETS: dict[str, tuple[str, ...]] = {"time": ("s",), "input": ("V",), "output": ("C", "m")}
+_SAME = {"s", "V", "C", "m"}
+
+
+def split_unit(header: str) -> tuple[str, str | None]:
+    """A column header's name and unit: ``"time [ms]"`` -> ``("time", "ms")``.
+
+    Parameters
+    ----------
+    header : str
+        ``name [unit]`` or ``name (unit)``; anything else has no unit.
+
+    Returns
+    -------
+    tuple
+        The name and the unit (None when the header names none).
+
+    Examples
+    --------
+    >>> split_unit("Field (mT)"), split_unit("voltage")
+    (('Field', 'mT'), ('voltage', None))
+    """
+    m = _IN_HEADER.match(header)
+    if m is None:
+        return header, None
+    unit = (m.group("u1") or m.group("u2")).strip()
+    return m.group("name"), unit or None
+
+
+@cache
+def _registry() -> Any:
+    import pint
+
+    return pint.UnitRegistry()
+
+
+def to_standard(
+    values: FloatArray, unit: str | None, role: Role, where: str
+) -> tuple[FloatArray, str | None]:
+    """Values in the unit piezohyst works in, and that unit's label.
+
+    Parameters
+    ----------
+    values : ndarray
+        The column.
+    unit : str or None
+        Its unit (None: unknown, returned as they are).
+    role : {"time", "input", "output"}
+        What the column is.
+    where : str
+        File and column, for messages.
+
+    Returns
+    -------
+    tuple
+        Converted values and their unit: s for time; V for a voltage input;
+        C or m for a charge or length output; otherwise the values unchanged
+        and ``unit`` as the label.
+
+    Raises
+    ------
+    DataFileError
+        A time column whose unit is not a unit of time, or is not understood.
+    """
+    if unit is None or (unit in _SAME and unit in _TARGETS[role]):
+        return values, unit
+    ureg = _registry()
+    try:
+        quantity = ureg.Quantity(1.0, unit)
+    except Exception:  # pint raises several kinds for text it cannot read
+        if role == "time":
+            msg = f"{where}: unknown time unit {unit!r} (use s, ms, us, min...)"
+            raise DataFileError(msg) from None
+        return values, unit
+    for target in _TARGETS[role]:
+        reference = ureg.Quantity(1.0, target)
+        if quantity.dimensionality == reference.dimensionality:
+            factor = float(quantity.to(target).magnitude)
+            return np.asarray(values * factor, dtype=np.float64), target
+    if role == "time":
+        msg = f"{where} is in {unit!r}, which is not a unit of time"
+        raise DataFileError(msg)
+    return values, unit
