@@ -249,3 +249,83 @@ def test_a_report_folder_is_replaced_by_the_next_report(lab: Path) -> None:
     assert run(*args).exit_code == 0
     assert run(*args).exit_code == 0  # its own report: replaced without --force
     assert ph.io.is_piezohyst_output(lab / "rep")
+
+
+# ------------------------------------------------------------ real lab files
+def test_tdms_picks_the_group_holding_the_channels(tmp_path: Path) -> None:
+    from nptdms import ChannelObject, GroupObject, TdmsWriter
+
+    rec = ph.simulate(duration=4.0, seed=1)
+    props = {"wf_increment": 1e-3}
+    with TdmsWriter(tmp_path / "scan.tdms") as writer:
+        writer.write_segment([
+            GroupObject("Meta"),
+            ChannelObject("Meta", "Operator", np.array([1.0, 2.0])),
+            GroupObject("Scan"),
+            ChannelObject("Scan", "Ch0", rec.voltage, properties=props),
+            ChannelObject("Scan", "Ch1", rec.charge, properties=props),
+        ])  # fmt: skip
+    res = run("fit", tmp_path / "scan.tdms", "--input", "Ch0", "--output", "Ch1",
+              "-o", tmp_path / "m.json")  # fmt: skip
+    assert res.exit_code == 0, res.output  # no --group needed: 'Meta' lacks the channels
+    err = one_line_error(run("fit", tmp_path / "scan.tdms", "--input", "Ch9", "--output", "Ch1",
+                             "-o", tmp_path / "x.json"), "no column 'Ch9'")  # fmt: skip
+    assert "groups: 'Meta', 'Scan'" in err
+
+
+def aixacct_like(path: Path, rec: object) -> None:
+    """A file laid out as aixACCT TF Analyzer exports are (Latin-1, 'Table N' blocks)."""
+    t, v, q = rec.t[:400], rec.voltage[:400], rec.charge[:400] * 1e6  # type: ignore[attr-defined]
+    lines = ["PiezoResult", "", "Table 1",
+             "Table No [#]\tVc+ [V]\tPr+ [uC/cm2]\t", "1.000000e+000\t1.1e+003\t1.3e+001\t",
+             "", "ProgramMode: 0", "", "Table 1", "Timestamp: 08/23/2019 14:17:12",
+             "SampleName: TEST", "Area [mm2]: 60",
+             "Time [s]\tV+ [V]\tV- [V]\tP1 [µC]\t"]  # fmt: skip
+    lines += [
+        f"{a:.6e}\t{b:.6e}\t0.000000e+000\t{c:.6e}\t" for a, b, c in zip(t, v, q, strict=True)
+    ]
+    lines += ["", "Table 2", "SampleName: TEST2", "Time [s]\tV+ [V]\tV- [V]\tP1 [µC]\t"]
+    lines += [
+        f"{a:.6e}\t{b:.6e}\t0.000000e+000\t{c:.6e}\t"
+        for a, b, c in zip(t, v / 2, q / 2, strict=True)
+    ]
+    path.write_bytes("\r\n".join(lines).encode("latin-1"))
+
+
+def test_aixacct_exports_are_read_by_table(tmp_path: Path) -> None:
+    rec = ph.simulate(duration=2.0, seed=3)
+    aixacct_like(tmp_path / "loops.dat", rec)
+    first = ph.io.read_recording(tmp_path / "loops.dat", input_column="V+", output_column="P1",
+                                 time_column="Time")  # fmt: skip
+    np.testing.assert_allclose(first.x, rec.voltage[:400], rtol=1e-6)
+    np.testing.assert_allclose(first.y, rec.charge[:400], rtol=1e-6)  # µC -> C
+    assert first.units == ("V", "C")
+    second = ph.io.read_recording(tmp_path / "loops.dat", input_column="V+", output_column="P1",
+                                  time_column="Time", group="2")  # fmt: skip
+    np.testing.assert_allclose(second.x, rec.voltage[:400] / 2, rtol=1e-6)
+    table = ph.io.read_table(tmp_path / "loops.dat", group="Summary")
+    assert table.columns[:2] == ["Table No", "Vc+"] and table.groups[0] == "Summary"
+    err = one_line_error(run("fit", tmp_path / "loops.dat", "--group", "7", "--input", "V+",
+                             "--output", "P1", "--time", "Time", "-o", tmp_path / "m.json"),
+                         "no aixACCT table '7'")  # fmt: skip
+    assert "'Table 1', 'Table 2'" in err
+
+
+def test_comment_lines_decimal_commas_and_parquet(tmp_path: Path) -> None:
+    (tmp_path / "daq.csv").write_text(
+        "% exported by a DAQ\n# operator: A. N. Other\nt (ms);U (V);Q (nC)\n"
+        "0,0;0,0;0,0\n1,0;10,0;5,5\n2,0;20,0;11,0\n"
+    )
+    rec = ph.io.read_recording(tmp_path / "daq.csv", input_column="U", output_column="Q",
+                               time_column="t")  # fmt: skip
+    np.testing.assert_allclose(rec.t, [0.0, 1e-3, 2e-3])
+    np.testing.assert_allclose(rec.y, [0.0, 5.5e-9, 11e-9])
+    cols = {"time": rec.t, "voltage": rec.x, "charge": rec.y}
+    ph.write_table(tmp_path / "r.parquet", cols, units={"time": "s", "charge": "C"})
+    back = ph.io.read_table(tmp_path / "r.parquet")
+    assert back.columns == ["time", "voltage", "charge"] and back.units == {
+        "time": "s",
+        "charge": "C",
+    }
+    np.testing.assert_array_equal(back.get("charge"), rec.y)
+    assert ph.io.is_piezohyst_output(tmp_path / "r.parquet")

@@ -117,9 +117,12 @@ def test_csv_round_trip_and_header_detection(tmp_path: Path) -> None:
     headless = ph.read_table(tmp_path / "b.txt")
     assert headless.columns == ["col0", "col1"]
     np.testing.assert_array_equal(headless.get("col1"), [1.5, 2.5, 3.5])
-    (tmp_path / "c.csv").write_text("Zeit;Spannung\n0;1,5\n")  # ';' with comma decimals
-    with pytest.raises(DataFileError, match="'1,5' at row 2, column 'Spannung' is not a number"):
-        ph.read_table(tmp_path / "c.csv").get("Spannung")
+    (tmp_path / "c.csv").write_text("Zeit;Spannung\n0;1,5\n0,1;-2,25e1\n")  # decimal commas
+    np.testing.assert_array_equal(ph.read_table(tmp_path / "c.csv").get("Spannung"), [1.5, -22.5])
+    np.testing.assert_array_equal(ph.read_table(tmp_path / "c.csv").get("Zeit"), [0.0, 0.1])
+    (tmp_path / "d.csv").write_text("Zeit;Spannung\n0;1.5\n0.1;x\n")  # a point: no commas
+    with pytest.raises(DataFileError, match="'x' at row 3, column 'Spannung' is not a number"):
+        ph.read_table(tmp_path / "d.csv").get("Spannung")
 
 
 def test_latin1_headers_are_read(tmp_path: Path) -> None:

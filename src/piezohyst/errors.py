@@ -14,6 +14,7 @@ __all__ = [
     "NonFiniteError",
     "NotFittedError",
     "NotInvertibleError",
+    "NumericRangeError",
     "OverwriteError",
     "ParameterError",
     "PiezohystError",
@@ -44,6 +45,10 @@ class TimeAxisError(PiezohystError, ValueError):
 
 class InsufficientDataError(PiezohystError, ValueError):
     """Too few samples to identify the requested parameters."""
+
+
+class NumericRangeError(PiezohystError, ValueError):
+    """Data so large or small that the model's parameters leave double precision."""
 
 
 class NotFittedError(PiezohystError, ValueError, AttributeError):

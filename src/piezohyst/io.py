@@ -12,12 +12,14 @@ failure never leaves a half-written file.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io as _io
 import logging
 import os
+import re
 import tempfile
 import warnings
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -58,6 +60,10 @@ class Table:
         Sample interval (s) stated by the file (TDMS ``wf_increment``), if any.
     units : mapping
         Unit of each column whose header named one (``time [ms]`` -> ``ms``).
+    group : str or None
+        The group (TDMS) or table (aixACCT) read, in files that hold several.
+    groups : tuple of str
+        All groups of such a file.
     """
 
     path: Path
@@ -65,6 +71,8 @@ class Table:
     _getters: Mapping[str, Callable[[], FloatArray]] = field(repr=False)
     time_step: float | None = None
     units: Mapping[str, str] = field(default_factory=dict)
+    group: str | None = None
+    groups: tuple[str, ...] = ()
 
     def __contains__(self, name: object) -> bool:
         return name in self._getters
@@ -106,6 +114,8 @@ class Table:
         msg = f"{self.path}: no column {key!r}; available: " + ", ".join(
             repr(c) for c in self.columns
         )
+        if self.groups:
+            msg += f" (in group {self.group!r}; groups: {', '.join(map(repr, self.groups))})"
         raise DataFileError(msg)
 
     def get(self, key: str, *, finite: bool = True) -> FloatArray:
@@ -209,18 +219,38 @@ def _sniff_delimiter(sample: str) -> str | None:
     return best if best_score >= 0.5 else None
 
 
-def _read_text(path: Path) -> Table:
+def _read_text(path: Path, group: str | None = None, channels: Sequence[str] = ()) -> Table:
     raw = path.read_bytes()
     if b"\x00" in raw and raw[:2] not in (b"\xff\xfe", b"\xfe\xff"):
         msg = f"{path}: not a text file (binary content); expected CSV or text columns"
         raise DataFileError(msg)
     text = _decode(raw, path)
+    if _AIXACCT_TABLE.match(text.split("\n", 3)[2] if text.count("\n") >= 3 else "") or (
+        text.lstrip().startswith("PiezoResult")
+    ):
+        return _read_aixacct(path, text, group, channels)
     # '#' and '%' lines are comments (piezohyst's own first line, MATLAB and DAQ notes)
     lines = [
         (n + 1, ln)
         for n, ln in enumerate(text.splitlines())
         if ln.strip() and not ln.lstrip().startswith(("#", "%"))
     ]
+    return _table_from_lines(path, lines)
+
+
+_DECIMAL_COMMA = re.compile(r"^[+-]?\d*,\d+(?:[eE][+-]?\d+)?$")
+
+
+def _decimal_commas(rows: list[tuple[int, list[str]]]) -> bool:
+    """True when numbers are written with a decimal comma (1,5): European DAQ exports."""
+    cells = [c for _, row in rows[1:50] for c in row if c]
+    commas = sum(bool(_DECIMAL_COMMA.match(c)) for c in cells)
+    points = sum("." in c and _is_number(c) for c in cells)
+    return commas > 0 and points == 0
+
+
+def _table_from_lines(path: Path, lines: list[tuple[int, str]]) -> Table:
+    """A table from numbered text lines: delimiter, header and decimal commas detected."""
     if not lines:
         msg = f"{path}: the file is empty"
         raise DataFileError(msg)
@@ -232,6 +262,8 @@ def _read_text(path: Path) -> Table:
         rows = [
             (n, [c.strip() for c in cells]) for (n, _), cells in zip(lines, parsed, strict=True)
         ]
+    if delim != "," and _decimal_commas(rows):
+        rows = [(n, [c.replace(",", ".") for c in cells]) for n, cells in rows]
     first = rows[0][1]
     has_header = any(c and not _is_number(c) for c in first)
     units: dict[str, str] = {}
@@ -318,6 +350,20 @@ def _read_npz(path: Path) -> Table:
     return _table_from_arrays(path, arrays, "NPZ")
 
 
+def _read_parquet(path: Path) -> Table:
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(path)
+    arrays: dict[str, object] = {}
+    units: dict[str, str] = {}
+    for name in table.column_names:
+        bare, unit = split_unit(name)
+        arrays[bare] = table.column(name).to_numpy(zero_copy_only=False)
+        if unit is not None:
+            units[bare] = unit
+    return dataclasses.replace(_table_from_arrays(path, arrays, "Parquet"), units=units)
+
+
 def _read_mat(path: Path) -> Table:
     from scipy.io import loadmat
 
@@ -352,7 +398,70 @@ class _Collect(logging.Handler):
         self.messages.append(record.getMessage())
 
 
-def _read_tdms(path: Path, group: str | None) -> Table:
+_AIXACCT_TABLE = re.compile(r"^\s*Table\s+\d+\s*$")
+
+
+def _read_aixacct(path: Path, text: str, group: str | None, channels: Sequence[str]) -> Table:
+    """aixACCT TF Analyzer ``.dat``: ``Table N`` blocks of ``Key: value`` lines, then a
+    tab-separated table whose header cells carry units (``Time [s]``, ``P1 [uC/cm2]``).
+
+    The leading results table (header ``Table No ...``) is the group ``Summary``.
+    """
+    all_lines = text.splitlines()
+    starts = [i for i, ln in enumerate(all_lines) if _AIXACCT_TABLE.match(ln)]
+    blocks: dict[str, list[tuple[int, str]]] = {}
+    for k, start in enumerate(starts):
+        stop = starts[k + 1] if k + 1 < len(starts) else len(all_lines)
+        rows = [
+            (i + 1, ln)
+            for i, ln in enumerate(all_lines[start + 1 : stop], start=start + 1)
+            if "\t" in ln and ln.strip()
+        ]
+        if not rows:
+            continue
+        name = all_lines[start].strip()
+        if rows[0][1].lstrip().startswith("Table No"):
+            name = "Summary"
+        while name in blocks:
+            name += "'"
+        blocks[name] = [(n, ln.rstrip("\t ")) for n, ln in rows]
+    if not blocks:
+        msg = f"{path}: an aixACCT file without data tables"
+        raise DataFileError(msg)
+    headers = {name: rows[0][1].split("\t") for name, rows in blocks.items()}
+    chosen = _choose_group(path, headers, group, channels, "aixACCT table")
+    table = _table_from_lines(path, blocks[chosen])
+    return dataclasses.replace(table, group=chosen, groups=tuple(blocks))
+
+
+def _choose_group(
+    path: Path,
+    groups: Mapping[str, Sequence[str]],
+    group: str | None,
+    channels: Sequence[str],
+    kind: str,
+) -> str:
+    """The group to read: the one named, else the first holding every named channel."""
+    names = list(groups)
+    listing = ", ".join(map(repr, names))
+    if group is not None:
+        if group in groups:
+            return group
+        numbered = f"Table {group.strip()}"
+        if group.strip().isdigit() and numbered in groups:
+            return numbered
+        msg = f"{path}: no {kind} {group!r}; available: {listing}"
+        raise DataFileError(msg)
+    wanted = [c for c in channels if not c.strip().isdigit()]
+    for need in (wanted, wanted[:1]):  # every named channel, else at least the first
+        for name, columns in groups.items():
+            bare = {split_unit(c)[0] for c in columns} | set(columns)
+            if columns and need and all(c in bare or split_unit(c)[0] in bare for c in need):
+                return name
+    return next((n for n, cols in groups.items() if cols), names[0])
+
+
+def _read_tdms(path: Path, group: str | None, channels: Sequence[str] = ()) -> Table:
     from nptdms import TdmsFile
 
     # npTDMS reads what it can of a damaged file and logs a warning: for us that is
@@ -374,14 +483,16 @@ def _read_tdms(path: Path, group: str | None) -> Table:
     if not groups:
         msg = f"{path}: the TDMS file has no groups"
         raise DataFileError(msg)
-    if group is None:
-        chosen = next((g for g in groups if g.channels()), groups[0])
-    else:
-        names = [g.name for g in groups]
-        if group not in names:
-            msg = f"{path}: no TDMS group {group!r}; available: {', '.join(map(repr, names))}"
-            raise DataFileError(msg)
-        chosen = tdms[group]
+    names = [g.name for g in groups]
+    chosen = tdms[
+        _choose_group(
+            path,
+            {g.name: [c.name for c in g.channels()] for g in groups},
+            group,
+            channels,
+            "TDMS group",
+        )
+    ]
     arrays: dict[str, object] = {}
     step: float | None = None
     for channel in chosen.channels():
@@ -390,19 +501,25 @@ def _read_tdms(path: Path, group: str | None) -> Table:
         if step is None and inc is not None and float(inc) > 0:
             step = float(inc)
     table = _table_from_arrays(path, arrays, "TDMS")
-    return Table(table.path, table.columns, table._getters, time_step=step, units=table.units)
+    return dataclasses.replace(table, time_step=step, group=chosen.name, groups=tuple(names))
 
 
-def read_table(path: str | os.PathLike[str], *, group: str | None = None) -> Table:
+def read_table(
+    path: str | os.PathLike[str], *, group: str | None = None, channels: Sequence[str] = ()
+) -> Table:
     """Read a data file into a :class:`Table` (format chosen by the file's suffix).
 
     Parameters
     ----------
     path : path
         ``.csv``, ``.tsv``, ``.txt``, ``.dat`` (text), ``.npz``, ``.mat``,
-        ``.tdms``, ``.h5``/``.hdf5``.
+        ``.tdms``, ``.h5``/``.hdf5``, ``.parquet``; aixACCT ``.dat`` exports.
     group : str, optional
-        TDMS group to read (default: the first with channels).
+        In files with several groups or tables (TDMS, aixACCT ``.dat``): the
+        one to read, by name (or by number for aixACCT's ``Table N``).
+    channels : sequence of str, optional
+        Columns the caller needs: without ``group``, the first group holding
+        all of them is read (else the first with data).
 
     Returns
     -------
@@ -427,11 +544,12 @@ def read_table(path: str | os.PathLike[str], *, group: str | None = None) -> Tab
     readers: dict[str, Callable[[], Table]] = {
         ".npz": lambda: _read_npz(p),
         ".mat": lambda: _read_mat(p),
-        ".tdms": lambda: _read_tdms(p, group),
+        ".tdms": lambda: _read_tdms(p, group, channels),
+        ".parquet": lambda: _read_parquet(p),
         ".h5": lambda: _read_hdf5(p),
         ".hdf5": lambda: _read_hdf5(p),
     }
-    reader = readers.get(suffix, lambda: _read_text(p))
+    reader = readers.get(suffix, lambda: _read_text(p, group, channels))
     kind = suffix.lstrip(".").upper() or "text"
     try:
         return reader()
@@ -493,7 +611,11 @@ def read_recording(
         A missing or misnamed column, a time column together with a sample
         rate, a bad or non-increasing time, or units that contradict the file.
     """
-    table = read_table(path, group=group)
+    # the default time name may be absent (TDMS states its sample interval instead)
+    wanted = [c for c in (input_column, output_column) if c is not None]
+    if time_column is not None and time_column != "time":
+        wanted.append(time_column)
+    table = read_table(path, group=group, channels=wanted)
     x_name = table.resolve(input_column)
     x = table.get(x_name)
     y_name: str | None = None
@@ -728,7 +850,7 @@ def write_table(
     Parameters
     ----------
     path : str or os.PathLike
-        ``.npz`` or a text file (CSV).
+        ``.npz``, ``.parquet``, or a text file (CSV).
     columns : mapping
         Column name to values, all of one length.
     units : mapping, optional
@@ -752,6 +874,20 @@ def write_table(
                 np.savez(fh, **arrays, __piezohyst__=np.array(__version__))  # type: ignore[arg-type]
 
         atomic_write(p, write_npz)
+        return p
+    if p.suffix.lower() == ".parquet":
+
+        def write_parquet(tmp: Path) -> None:
+            import pyarrow as pa
+            import pyarrow.parquet as pq
+
+            named = units or {}
+            schema_names = [f"{k} [{named[k]}]" if named.get(k) else k for k in arrays]
+            table = pa.table(dict(zip(schema_names, arrays.values(), strict=True)))
+            table = table.replace_schema_metadata({"written_by": f"piezohyst {__version__}"})
+            pq.write_table(table, tmp)
+
+        atomic_write(p, write_parquet)
         return p
 
     def write_csv(tmp: Path) -> None:
@@ -781,8 +917,9 @@ def is_piezohyst_output(path: str | os.PathLike[str]) -> bool:
     """True for a file (or report folder) piezohyst wrote, which it may overwrite.
 
     Recognised: CSV whose first line is :data:`MARKER`, ``.npz`` with a
-    ``__piezohyst__`` entry, model JSON (``"format": "piezohyst-model"``), C
-    sources generated by piezohyst, and report folders holding a
+    ``__piezohyst__`` entry, Parquet with ``written_by`` metadata, model JSON
+    (``"format": "piezohyst-model"``), C sources generated by piezohyst, and
+    report folders holding a
     ``metrics.json`` that names a piezohyst version.
 
     Parameters
@@ -803,6 +940,11 @@ def is_piezohyst_output(path: str | os.PathLike[str]) -> bool:
         if suffix == ".npz":
             with np.load(p, allow_pickle=False) as data:
                 return "__piezohyst__" in data.files
+        if suffix == ".parquet":
+            import pyarrow.parquet as pq
+
+            meta = pq.read_schema(p).metadata or {}
+            return bool(meta.get(b"written_by", b"").startswith(b"piezohyst"))
         with open(p, "rb") as fh:
             head = fh.read(4096).decode("utf-8", errors="replace")
         if suffix == ".json":

@@ -11,20 +11,51 @@ __all__ = ["hysteresis_width", "nrmse", "rmse"]
 
 
 def rmse(measured: ArrayLike, predicted: ArrayLike) -> float:
-    """Root-mean-square error, in the units of the data."""
+    """Root-mean-square error, in the units of the data.
+
+    The errors are divided by their largest magnitude before squaring, so data
+    near 1e300 do not overflow and data near 1e-300 do not underflow to a
+    perfect score.
+
+    Parameters
+    ----------
+    measured, predicted : array_like, shape (N,)
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    >>> rmse([1e300, 2e300], [1e300, 3e300]) / 1e300
+    0.7071067811865476
+    """
     a = as_signal(measured, "measured")
     b = as_signal(predicted, "predicted")
     same_length(a, b, "measured", "predicted")
-    return float(np.sqrt(np.mean((a - b) ** 2)))
+    err = a - b
+    peak = float(np.max(np.abs(err))) if err.size else 0.0
+    if peak == 0.0 or not np.isfinite(peak):
+        return peak
+    return peak * float(np.sqrt(np.mean((err / peak) ** 2)))
 
 
 def nrmse(measured: ArrayLike, predicted: ArrayLike) -> float:
     """RMSE divided by the span (max - min) of ``measured``; 0.01 is 1 %.
 
+    Parameters
+    ----------
+    measured, predicted : array_like, shape (N,)
+
+    Returns
+    -------
+    float
+        ``inf`` for a constant ``measured``.
+
     Examples
     --------
-    >>> nrmse([0.0, 1.0, 2.0], [0.0, 1.0, 2.2])
-    0.05773502691896263
+    >>> round(nrmse([0.0, 1.0, 2.0], [0.0, 1.0, 2.2]), 12)
+    0.057735026919
     """
     a = as_signal(measured, "measured")
     span = float(np.ptp(a))

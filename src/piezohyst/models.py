@@ -51,6 +51,7 @@ from .errors import (
     InsufficientDataError,
     NotFittedError,
     NotInvertibleError,
+    NumericRangeError,
     ParameterError,
     ShapeError,
     TimeAxisError,
@@ -535,6 +536,16 @@ class HysteresisModel:
         z0: FloatArray,
     ) -> None:
         sol = identify(core, terms, x, y, t, z0, min_slope=float(self.min_slope), subsets=subsets)
+        params = np.concatenate([sol.core, *[c for c in sol.coefficients if c is not None]])
+        tiny = np.finfo(np.float64).tiny * 2**20  # below this, parameters lose digits
+        lost = (params != 0) & (np.abs(params) < tiny)
+        if lost.any() or not np.all(np.isfinite(params)):
+            msg = (
+                f"the model's parameters (e.g. {params[lost][0] if lost.any() else params[0]:.3g}"
+                f" {self.output_unit}/{self.input_unit}) leave the range of double precision: "
+                "express the data in other units (e.g. uC instead of C, or kV instead of V)"
+            )
+            raise NumericRangeError(msg)
         kept = [j for j, c in enumerate(sol.coefficients) if c is not None]
         self.set_fitted(
             core.build(sol.core, z0),
