@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import subprocess
 import sys
@@ -67,10 +68,25 @@ def test_predict_and_report(workdir: Path) -> None:
     assert pred.columns == ["time", "predicted", "measured"]
     res = run("report", workdir / "model.json", workdir / "run2.csv", "--out", workdir / "rep")
     assert res.exit_code == 0
-    metrics = json.loads((workdir / "rep" / "metrics.json").read_text())
-    assert metrics["model"] == "ActivePI" and metrics["nrmse_pct"] < 5.0
-    for name in ("loop.png", "fit.png", "growth_removed.png", "report.md"):
+    report = json.loads((workdir / "rep" / "metrics.json").read_text())
+    assert report["tables"]["Model"]["class"] == "ActivePI"
+    assert report["metrics"]["nrmse_pct"] == {"value": pytest.approx(report["metrics"]["nrmse_pct"]
+                                              ["value"]), "unit": "%"}  # fmt: skip
+    assert report["metrics"]["nrmse_pct"]["value"] < 5.0
+    assert report["metrics"]["rmse"]["unit"] == "C"
+    data = report["data_file"]
+    assert data["name"] == "run2.csv" and data["bytes"] == (workdir / "run2.csv").stat().st_size
+    assert data["sha256"] == hashlib.sha256((workdir / "run2.csv").read_bytes()).hexdigest()
+    assert (
+        report["command"].startswith("piezohyst report")
+        and report["piezohyst_version"] == ph.__version__
+    )
+    assert report["units"] == {"input": "V", "output": "C", "time": "s"}
+    for name in ("loop.png", "fit.png", "growth_removed.png", "report.md", "report.html"):
         assert (workdir / "rep" / name).stat().st_size > 0
+    page = (workdir / "rep" / "report.html").read_text()
+    assert page.count("data:image/png;base64,") == 3  # self-contained
+    assert " nC</td>" in page  # SI prefixes, not 1e-9
 
 
 def test_compensate_respects_limits_and_inverts(workdir: Path) -> None:

@@ -292,6 +292,7 @@ LAYERS = {
     "compensator": 7,
     "export": 8,
     "plotting": 8,
+    "report": 8,
     "simulation": 8,
     "workflows": 9,
     "demo": 9,
@@ -343,7 +344,9 @@ def test_every_setting_has_one_declared_rule() -> None:
             model.fit(v, v, t=v)
 
 
-CONSUMERS = ["compensator", "export", "workflows", "demo", "cli", "persistence", "plotting"]
+CONSUMERS = [
+    "compensator", "export", "workflows", "demo", "cli", "persistence", "plotting", "report"
+]  # fmt: skip
 MODEL_CLASSES = {"HysteresisModel", "ClassicalPI", "ActivePI", "GeneralizedPI", "PIModel"}
 
 

@@ -8,6 +8,7 @@ traceback only under ``--debug``.
 from __future__ import annotations
 
 import functools
+import shlex
 import sys
 import warnings
 from collections.abc import Callable, Iterator
@@ -69,6 +70,15 @@ def progress_steps(ctx: Context, total: int) -> Iterator[Callable[[str], None]]:
 
         yield rich_step
         bar.update(task, completed=total, description="done")
+
+
+def _command_line() -> str:
+    """The command as typed (recorded in reports), or the parsed command when embedded."""
+    if Path(sys.argv[0]).name == "piezohyst":
+        return shlex.join(["piezohyst", *sys.argv[1:]])
+    ctx = click.get_current_context()
+    words = ["piezohyst", *ctx.command_path.split()[1:]]  # the root's name is the program's
+    return " ".join(words + [f"--{k}={v}" for k, v in ctx.params.items() if v not in (None, False)])
 
 
 def _run(ctx: Context, fn: Callable[[], Any]) -> Any:
@@ -580,9 +590,11 @@ def report(
         step("writing report")
         res = _run(
             ctx,
-            lambda: model_report(model, data, out, data_spec=data_spec, force=force),
+            lambda: model_report(
+                model, data, out, data_spec=data_spec, command=_command_line(), force=force
+            ),
         )
-    click.echo(f"NRMSE {res.metrics['nrmse_pct']:.4g} %; report in {out / 'report.md'}")
+    click.echo(f"NRMSE {res.metrics['nrmse_pct']:.4g} %; report in {out / 'report.html'}")
 
 
 @main.command("export-c")

@@ -26,12 +26,13 @@ from .compensator import Compensator
 from .io import atomic_write_text
 from .metrics import hysteresis_width, nrmse
 from .models import ActivePI, ClassicalPI, GeneralizedPI, HysteresisModel
-from .plotting import save_panels
+from .plotting import save_grid, save_panels
 from .simulation import DEFAULT_PRESET, PRESETS, BenchRecord, make_signal, simulate
 
 __all__ = ["DemoResult", "run_demo"]
 
 UC = 1e6  # C -> uC for plots
+UN = 1e9  # C -> nC for residuals
 UM = 1e6  # m -> um
 
 Step = Callable[[str], None]
@@ -316,8 +317,9 @@ def _figures(
     multi: dict[str, Any],
 ) -> list[Path]:
     v, vv = ident.voltage, valid.voltage
-    meas = {"color": "0.6", "lw": 1.6}
-    line = {"lw": 0.9}
+    meas = {"color": "0.6", "lw": 2.2}
+    dashed = {"lw": 1.0, "ls": "--", "color": "C1"}
+    dotted = {"lw": 1.1, "ls": ":", "color": "C0"}
     files = [
         save_panels(
             out / "fig2_active_hysteresis.png",
@@ -337,31 +339,74 @@ def _figures(
             ],
             suptitle="Fig. 2 — active hysteresis in the electrical domain (simulated T226-H4-203X)",
         ),
-        save_panels(
+        save_grid(
             out / "fig7_estimation.png",
             [
-                {
-                    "curves": [
-                        (v, ident.charge * UC, "measured", meas),
-                        (v, classical.predict(v) * UC, "classical PI", {**line, "ls": "--"}),
-                        (v, active.predict(v, t=ident.t) * UC, "active PI", line),
-                    ],
-                    "xlabel": "voltage (V)",
-                    "ylabel": "charge (µC)",
-                    "title": "fixed amplitude 140 V (training record)",
-                },
-                {
-                    "curves": [
-                        (vv, valid.charge * UC, "measured", meas),
-                        (vv, pred_c * UC, "classical PI", {**line, "ls": "--"}),
-                        (vv, pred_a * UC, "active PI", line),
-                    ],
-                    "xlabel": "voltage (V)",
-                    "ylabel": "charge (µC)",
-                    "title": "multi-amplitude (held-out record)",
-                },
+                [
+                    {
+                        "curves": [
+                            (v, ident.charge * UC, "measured", meas),
+                            (v, classical.predict(v) * UC, "classical PI", dotted),
+                            (v, active.predict(v, t=ident.t) * UC, "active PI", dashed),
+                        ],
+                        "xlabel": "voltage (V)",
+                        "ylabel": "charge (µC)",
+                        "title": "fixed amplitude 140 V (training record)",
+                    },
+                    {
+                        "curves": [
+                            (vv, valid.charge * UC, "measured", meas),
+                            (vv, pred_c * UC, "classical PI", dotted),
+                            (vv, pred_a * UC, "active PI", dashed),
+                        ],
+                        "xlabel": "voltage (V)",
+                        "ylabel": "charge (µC)",
+                        "title": "multi-amplitude (held-out record)",
+                    },
+                ],
+                [
+                    {
+                        "curves": [
+                            (
+                                ident.t,
+                                (ident.charge - classical.predict(v)) * UN,
+                                "classical PI",
+                                {**dotted, "lw": 0.8},
+                            ),
+                            (
+                                ident.t,
+                                (ident.charge - active.predict(v, t=ident.t)) * UN,
+                                "active PI",
+                                {**dashed, "ls": "-", "lw": 0.6},
+                            ),
+                        ],
+                        "xlabel": "time (s)",
+                        "ylabel": "measured - model (nC)",
+                        "title": "residuals, training record",
+                    },
+                    {
+                        "curves": [
+                            (
+                                valid.t,
+                                (valid.charge - pred_c) * UN,
+                                "classical PI",
+                                {**dotted, "lw": 0.8},
+                            ),
+                            (
+                                valid.t,
+                                (valid.charge - pred_a) * UN,
+                                "active PI",
+                                {**dashed, "ls": "-", "lw": 0.6},
+                            ),
+                        ],
+                        "xlabel": "time (s)",
+                        "ylabel": "measured - model (nC)",
+                        "title": "residuals, held-out record",
+                    },
+                ],
             ],
-            suptitle="Fig. 7 — active hysteresis estimation",
+            suptitle="Fig. 7 — active hysteresis estimation (measured grey, models over it)",
+            height_ratios=[2.0, 1.2],
         ),
         save_panels(
             out / "fig8_growth_removed.png",

@@ -24,16 +24,14 @@ from typing import Any
 import numpy as np
 
 from ._validation import FloatArray, check_float, check_int
-from ._version import __version__
 from .compensator import Compensator, CompensatorSettings
 from .errors import DataFileError, OverwriteError, ParameterError
 from .export import Precision, c_paths, write_c
 from .identification import default_thresholds, history_state
-from .io import DataSpec, Recording, atomic_write_text, is_piezohyst_output, read_table, write_table
+from .io import DataSpec, Recording, is_piezohyst_output, read_table, write_table
 from .metrics import hysteresis_width, nrmse, rmse
 from .models import HysteresisModel, model_class
 from .persistence import load_model
-from .plotting import save_panels
 from .simulation import DEFAULT_PRESET, PRESETS, BenchRecord, simulate
 from .units import to_standard
 
@@ -452,7 +450,15 @@ def export_c_file(
 
 @dataclass(frozen=True)
 class ReportResult:
-    """Metrics and files written by :func:`model_report`."""
+    """Metrics and files written by :func:`model_report`.
+
+    Attributes
+    ----------
+    metrics : dict
+        Metric key to value (units in ``metrics.json``).
+    files : list of Path
+        Figures, ``metrics.json``, ``report.md`` and ``report.html``.
+    """
 
     metrics: dict[str, Any]
     files: list[Path]
@@ -464,110 +470,103 @@ def model_report(
     out: PathLike,
     *,
     data_spec: DataSpec | None = None,
+    command: str | None = None,
     force: bool = False,
 ) -> ReportResult:
-    """Figures (loop, fit, residual, growth removal) and metrics of a model on a data file.
+    """A report a lab can file on a model and a data file (HTML, Markdown, JSON, figures).
 
-    ``out`` is a folder; an existing one that does not hold a piezohyst report
-    is refused unless ``force`` (see :func:`guard_outputs`).
+    Parameters
+    ----------
+    model_path : str or os.PathLike
+        A saved model.
+    data : str or os.PathLike
+        The recording to check it on.
+    out : str or os.PathLike
+        The report folder; an existing one that does not hold a piezohyst
+        report is refused unless ``force`` (see :func:`guard_outputs`).
+    data_spec : DataSpec, optional
+        Columns, units and time window.
+    command : str, optional
+        The command line that made the report, recorded in it.
+    force : bool, default False
+        Replace an existing folder piezohyst did not write.
+
+    Returns
+    -------
+    ReportResult
     """
+    from .report import Report, file_facts
+
     guard_outputs([out], [model_path, data], force=force)
+    spec = data_spec or DataSpec()
     model = _load(model_path)
-    rec = (data_spec or DataSpec()).read(data)
-    assert rec.y is not None
+    rec = spec.read(data)
     w = rec.window  # the model runs over the whole record: the window's start has a history
     pred = model.predict(rec.x, t=rec.t)[w]
     x, y, t = rec.x[w], _measured(rec, model, data)[w], rec.t[w]
     out_dir = Path(out)
     out_dir.mkdir(parents=True, exist_ok=True)
     in_u, out_u = model.input_unit, model.output_unit
-    metrics: dict[str, Any] = {
-        "piezohyst_version": __version__,
+    rep = Report(f"{type(model).__name__} on {Path(data).name}", out_dir)
+    rep.metadata = {
         "written": datetime.now(UTC).isoformat(timespec="seconds"),
-        "model": type(model).__name__,
-        "model_file": str(model_path),
-        "data_file": str(data),
-        "samples": int(x.size),
-        "rmse": rmse(y, pred),
-        "nrmse_pct": 100 * nrmse(y, pred),
-        "max_abs_error": float(np.max(np.abs(y - pred))),
-        "output_unit": out_u,
-        "hysteresis_width_measured_pct": 100 * hysteresis_width(x, y),
+        "command": command or "(called from Python)",
+        "data_file": file_facts(data),
+        "model_file": file_facts(model_path),
+        "columns": dict(zip(("input", "output", "time"), rec.names, strict=True)),
+        "time_window_s": [float(t[0]), float(t[-1])],
+        "units": {"input": in_u, "output": out_u, "time": "s"},
     }
+    rep.tables["Model"] = [
+        ("class", type(model).__name__),
+        *[(f"setting {k}", json.dumps(v)) for k, v in model.params_to_json().items()],
+        ("fitted thresholds", f"{_fmt(model.thresholds_)} {in_u}"),
+        ("fitted weights", f"{_fmt(model.weights_)} {out_u}/{in_u}"),
+        (
+            "training input range",
+            f"{model.input_range_[0]:.6g} to {model.input_range_[1]:.6g} {in_u}",
+        ),
+        *[(k, f"{v:.6g} {u}") for k, (v, u) in model.coefficients().items()],
+    ]
+    err = y - pred
+    rep.add("samples", "samples", int(x.size))
+    rep.add("nrmse_pct", "NRMSE (RMSE / output span)", 100 * nrmse(y, pred), "%")
+    rep.add("rmse", "RMSE", rmse(y, pred), out_u)
+    rep.add("max_abs_error", "largest error", float(np.max(np.abs(err))), out_u)
+    rep.add("hysteresis_width_measured_pct", "hysteresis width, measured",
+            100 * hysteresis_width(x, y), "%")  # fmt: skip
     lo, hi = model.input_range_
     if not math.isnan(lo):
         outside = int(np.count_nonzero((x < lo - 1e-9) | (x > hi + 1e-9)))
-        metrics["samples_outside_training_range"] = outside
-    files = [
-        save_panels(
-            out_dir / "loop.png",
-            [
-                {
-                    "curves": [
-                        (x, y, "measured", {"color": "0.6", "lw": 1.4}),
-                        (x, pred, "model", {"lw": 0.9}),
-                    ],
-                    "xlabel": f"input ({in_u})",
-                    "ylabel": f"output ({out_u})",
-                    "title": "input-output loop",
-                }
-            ],
-            suptitle=f"{type(model).__name__} on {Path(data).name}",
-        ),
-        save_panels(
-            out_dir / "fit.png",
-            [
-                {
-                    "curves": [
-                        (t, y, "measured", {"color": "0.6", "lw": 1.4}),
-                        (t, pred, "model", {"lw": 0.9}),
-                    ],
-                    "xlabel": "time (s)",
-                    "ylabel": f"output ({out_u})",
-                    "title": "output over time",
-                },
-                {
-                    "curves": [(t, y - pred, "measured - model", {"lw": 0.7})],
-                    "xlabel": "time (s)",
-                    "ylabel": f"residual ({out_u})",
-                    "title": f"residual (NRMSE {metrics['nrmse_pct']:.3f} %)",
-                },
-            ],
-            suptitle="fit and residual",
-        ),
-    ]
+        rep.add("samples_outside_training_range", "samples outside the training range", outside)
+    measured = {"color": "0.55", "lw": 1.6}
+    model_line = {"color": "C0", "lw": 1.0, "ls": "--"}
+    rep.figure("loop.png", "input-output loop: data (grey) and model (dashed)", [
+        {"curves": [(x, y, "measured", measured), (x, pred, "model", model_line)],
+         "xlabel": "input", "xunit": in_u, "ylabel": "output", "yunit": out_u, "title": ""},
+    ])  # fmt: skip
+    caption = f"output over time, and the residual (NRMSE {100 * nrmse(y, pred):.3g} %)"
+    rep.figure("fit.png", caption, [
+        {"curves": [(t, y, "measured", measured), (t, pred, "model", model_line)],
+         "xlabel": "time", "xunit": "s", "ylabel": "output", "yunit": out_u},
+        {"curves": [(t, err, "measured - model", {"lw": 0.7, "color": "C3"})],
+         "xlabel": "time", "xunit": "s", "ylabel": "residual", "yunit": out_u},
+    ], stacked=True)  # fmt: skip
     growth = model.growth_coefficients()
     if growth:
         pure = y - model.growth(rec.x, t=rec.t)[w]
-        metrics["growth_terms"] = {k: {"value": v, "unit": u} for k, (v, u) in growth.items()}
-        metrics["hysteresis_width_growth_removed_pct"] = 100 * hysteresis_width(x, pure)
-        files.append(
-            save_panels(
-                out_dir / "growth_removed.png",
-                [
-                    {
-                        "curves": [
-                            (x, y, "measured", {"lw": 0.7}),
-                            (x, pure, "growth removed (eq. 19)", {"lw": 1.1}),
-                        ],
-                        "xlabel": f"input ({in_u})",
-                        "ylabel": f"output ({out_u})",
-                        "title": "identified growth removed",
-                    }
-                ],
-                suptitle="growth removal",
-            )
-        )
-    mpath = out_dir / "metrics.json"
-    atomic_write_text(mpath, json.dumps(metrics, indent=2) + "\n")
-    lines = [f"# {metrics['model']} on {Path(data).name}", "", "| quantity | value |", "|---|---|"]
-    lines += [
-        f"| {k} | {v:.6g} |" if isinstance(v, float) else f"| {k} | {v} |"
-        for k, v in metrics.items()
-        if k != "growth_terms"
-    ]
-    lines += [f"| growth: {k} | {v:.6g} {u} |" for k, (v, u) in growth.items()]
-    lines += ["", *[f"![{f.stem}]({f.name})" for f in files], ""]
-    rpath = out_dir / "report.md"
-    atomic_write_text(rpath, "\n".join(lines))
-    return ReportResult(metrics, [*files, mpath, rpath])
+        for k, (v, u) in growth.items():
+            rep.add(f"growth_{k}", f"growth term {k}", v, u)
+        rep.add("hysteresis_width_growth_removed_pct", "hysteresis width, growth removed",
+                100 * hysteresis_width(x, pure), "%")  # fmt: skip
+        rep.figure("growth_removed.png", "identified growth removed (eq. 19)", [
+            {"curves": [(x, y, "measured", {"lw": 0.7, "color": "0.55"}),
+                        (x, pure, "growth removed", {"lw": 1.1, "color": "C1"})],
+             "xlabel": "input", "xunit": in_u, "ylabel": "output", "yunit": out_u},
+        ])  # fmt: skip
+    files = rep.write()
+    return ReportResult({m.key: m.value for m in rep.metrics}, files)
+
+
+def _fmt(values: FloatArray) -> str:
+    return ", ".join(f"{v:.6g}" for v in values)
