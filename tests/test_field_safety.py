@@ -329,3 +329,16 @@ def test_comment_lines_decimal_commas_and_parquet(tmp_path: Path) -> None:
     }
     np.testing.assert_array_equal(back.get("charge"), rec.y)
     assert ph.io.is_piezohyst_output(tmp_path / "r.parquet")
+
+
+def test_large_csv_streams_with_progress(tmp_path: Path) -> None:
+    n = 300_000
+    t = np.arange(n) / 1000.0
+    v = 70 * (1 - np.cos(2 * np.pi * 0.5 * t))
+    ph.write_table(tmp_path / "big.csv", {"time": t, "voltage": v, "charge": 1e-8 * v},
+                   units={"time": "s", "voltage": "V", "charge": "C"})  # fmt: skip
+    seen: list[int] = []
+    table = ph.io.read_table(tmp_path / "big.csv", progress=seen.append)
+    assert seen and seen == sorted(seen) and seen[-1] == n and len(seen) > 1  # in batches
+    np.testing.assert_array_equal(table.get("voltage"), v)  # exact round trip
+    assert table.units == {"time": "s", "voltage": "V", "charge": "C"}

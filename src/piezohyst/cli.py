@@ -72,6 +72,27 @@ def progress_steps(ctx: Context, total: int) -> Iterator[Callable[[str], None]]:
         bar.update(task, completed=total, description="done")
 
 
+@contextmanager
+def rows_progress(ctx: Context, label: str) -> Iterator[Callable[[int], None]]:
+    """A live count of the rows read, on a terminal only (silent when piped or quiet)."""
+    if ctx.quiet or not sys.stderr.isatty():
+        yield lambda _rows: None
+        return
+    from rich.console import Console
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    with Progress(
+        SpinnerColumn(),
+        TextColumn("{task.description}"),
+        TextColumn("{task.completed:,} rows"),
+        TimeElapsedColumn(),
+        console=Console(stderr=True),
+        transient=True,
+    ) as bar:
+        task = bar.add_task(label, total=None)
+        yield lambda rows: bar.update(task, completed=rows)
+
+
 def _command_line() -> str:
     """The command as typed (recorded in reports), or the parsed command when embedded."""
     if Path(sys.argv[0]).name == "piezohyst":
@@ -431,8 +452,7 @@ def fit(
     if growth != "auto":
         terms = () if growth == "none" else tuple(g.strip() for g in growth.split(",") if g.strip())
 
-    with progress_steps(ctx, total=1) as step:
-        step(f"fitting {model_name} to {data.name}")
+    with rows_progress(ctx, f"reading {data.name}, then fitting {model_name}") as progress:
         model = _run(
             ctx,
             lambda: fit_file(
@@ -444,6 +464,7 @@ def fit(
                 growth_terms=terms,
                 creep=taus,
                 force=force,
+                progress=progress,
             ),
         )
     click.echo(describe(model))
@@ -472,16 +493,13 @@ def predict(
     from .metrics import nrmse
     from .workflows import predict_file
 
-    cols = _run(
-        ctx,
-        lambda: predict_file(
-            model,
-            data,
-            out,
-            data_spec=data_spec,
-            force=force,
-        ),
-    )
+    with rows_progress(ctx, f"reading {data.name}") as progress:
+        cols = _run(
+            ctx,
+            lambda: predict_file(
+                model, data, out, data_spec=data_spec, force=force, progress=progress
+            ),
+        )
     if "measured" in cols:
         click.echo(
             f"NRMSE {100 * nrmse(cols['measured'], cols['predicted']):.4g} % "
@@ -537,19 +555,21 @@ def compensate(
     """
     from .workflows import compensate_file
 
-    result = _run(
-        ctx,
-        lambda: compensate_file(
-            model,
-            target,
-            out,
-            column=column,
-            settings=settings,
-            precondition=not no_precondition,
-            present_voltage=present_voltage,
-            force=force,
-        ),
-    )
+    with rows_progress(ctx, f"reading {target.name}") as progress:
+        result = _run(
+            ctx,
+            lambda: compensate_file(
+                model,
+                target,
+                out,
+                column=column,
+                settings=settings,
+                precondition=not no_precondition,
+                present_voltage=present_voltage,
+                force=force,
+                progress=progress,
+            ),
+        )
     comp = result.compensator
     click.echo(
         f"commands in [{comp.v_min:g}, {comp.v_max:g}] V; {comp.saturated_count} "
@@ -586,12 +606,18 @@ def report(
     """
     from .workflows import model_report
 
-    with progress_steps(ctx, total=1) as step:
-        step("writing report")
+    command = _command_line()
+    with rows_progress(ctx, f"reading {data.name}, then drawing the report") as progress:
         res = _run(
             ctx,
             lambda: model_report(
-                model, data, out, data_spec=data_spec, command=_command_line(), force=force
+                model,
+                data,
+                out,
+                data_spec=data_spec,
+                command=command,
+                force=force,
+                progress=progress,
             ),
         )
     click.echo(f"NRMSE {res.metrics['nrmse_pct']:.4g} %; report in {out / 'report.html'}")

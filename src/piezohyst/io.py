@@ -219,11 +219,21 @@ def _sniff_delimiter(sample: str) -> str | None:
     return best if best_score >= 0.5 else None
 
 
-def _read_text(path: Path, group: str | None = None, channels: Sequence[str] = ()) -> Table:
-    raw = path.read_bytes()
-    if b"\x00" in raw and raw[:2] not in (b"\xff\xfe", b"\xfe\xff"):
+def _read_text(
+    path: Path,
+    group: str | None = None,
+    channels: Sequence[str] = (),
+    progress: Callable[[int], None] | None = None,
+) -> Table:
+    head = _read_head(path)
+    if b"\x00" in head and head[:2] not in (b"\xff\xfe", b"\xfe\xff"):
         msg = f"{path}: not a text file (binary content); expected CSV or text columns"
         raise DataFileError(msg)
+    fast = _read_csv_arrow(path, head, progress)
+    if fast is not None:
+        return fast
+    # the careful path: every file pyarrow does not read cleanly, with exact messages
+    raw = path.read_bytes()
     text = _decode(raw, path)
     if _AIXACCT_TABLE.match(text.split("\n", 3)[2] if text.count("\n") >= 3 else "") or (
         text.lstrip().startswith("PiezoResult")
@@ -236,6 +246,91 @@ def _read_text(path: Path, group: str | None = None, channels: Sequence[str] = (
         if ln.strip() and not ln.lstrip().startswith(("#", "%"))
     ]
     return _table_from_lines(path, lines)
+
+
+def _read_head(path: Path, size: int = 1 << 16) -> bytes:
+    with open(path, "rb") as fh:
+        return fh.read(size)
+
+
+def _read_csv_arrow(
+    path: Path, head: bytes, progress: Callable[[int], None] | None
+) -> Table | None:
+    """Delimited numeric columns read by pyarrow in batches; None where the careful path must read.
+
+    The head of the file decides delimiter, leading comment lines, header,
+    units and decimal commas exactly as the careful reader does; the body is
+    streamed (``progress`` is called with the rows read so far). Anything
+    unusual (whitespace columns, aixACCT tables, UTF-16, a value that is not a
+    number, comments further down) is left to the careful reader.
+    """
+    if head[:2] in (b"\xff\xfe", b"\xfe\xff") or b"PiezoResult" in head[:64]:
+        return None
+    try:
+        text = head.decode("utf-8")
+        encoding = "utf8"
+    except UnicodeDecodeError:
+        text, encoding = head.decode("latin-1"), "latin1"
+    lines = text.splitlines()
+    if len(head) == 1 << 16:
+        lines = lines[:-1]  # the last line of the head may be cut
+    skip = 0
+    while skip < len(lines) and (
+        not lines[skip].strip() or lines[skip].lstrip().startswith(("#", "%"))
+    ):
+        skip += 1
+    body = [(n + 1, ln) for n, ln in enumerate(lines[skip:], start=skip) if ln.strip()]
+    if len(body) < 2 or any(_AIXACCT_TABLE.match(ln) for _, ln in body[:50]):
+        return None
+    delim = _sniff_delimiter("\n".join(ln for _, ln in body[:50]))
+    if delim is None:
+        return None
+    try:
+        sample = _table_from_lines(path, body[:50])
+    except DataFileError:
+        return None
+    first = next(csv.reader([body[0][1]], delimiter=delim))
+    has_header = any(c.strip() and not _is_number(c.strip()) for c in first)
+    decimal_comma = delim != "," and _decimal_commas(
+        [(n, next(csv.reader([ln], delimiter=delim))) for n, ln in body[:50]]
+    )
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
+    names = sample.columns
+    try:
+        reader = pacsv.open_csv(
+            path,
+            read_options=pacsv.ReadOptions(
+                skip_rows=skip + int(has_header),
+                column_names=names,
+                encoding=encoding,
+                block_size=1 << 22,
+            ),
+            parse_options=pacsv.ParseOptions(delimiter=delim),
+            convert_options=pacsv.ConvertOptions(
+                column_types=dict.fromkeys(names, pa.float64()),
+                decimal_point="," if decimal_comma else ".",
+                strings_can_be_null=False,
+            ),
+        )
+        batches = []
+        rows = 0
+        for batch in reader:
+            batches.append(batch)
+            rows += batch.num_rows
+            if progress is not None:
+                progress(rows)
+        table = pa.Table.from_batches(batches, schema=reader.schema)
+    except (pa.ArrowInvalid, pa.ArrowTypeError, pa.ArrowNotImplementedError, ValueError):
+        return None
+    if table.num_rows == 0 or any(col.null_count for col in table.columns):
+        return None  # empty cells: the careful reader names their rows
+    columns = {
+        name: np.ascontiguousarray(table.column(i).to_numpy(zero_copy_only=False), np.float64)
+        for i, name in enumerate(names)
+    }
+    return Table(path, names, {k: _constant(v) for k, v in columns.items()}, units=sample.units)
 
 
 _DECIMAL_COMMA = re.compile(r"^[+-]?\d*,\d+(?:[eE][+-]?\d+)?$")
@@ -505,7 +600,11 @@ def _read_tdms(path: Path, group: str | None, channels: Sequence[str] = ()) -> T
 
 
 def read_table(
-    path: str | os.PathLike[str], *, group: str | None = None, channels: Sequence[str] = ()
+    path: str | os.PathLike[str],
+    *,
+    group: str | None = None,
+    channels: Sequence[str] = (),
+    progress: Callable[[int], None] | None = None,
 ) -> Table:
     """Read a data file into a :class:`Table` (format chosen by the file's suffix).
 
@@ -520,6 +619,8 @@ def read_table(
     channels : sequence of str, optional
         Columns the caller needs: without ``group``, the first group holding
         all of them is read (else the first with data).
+    progress : callable, optional
+        Called with the number of rows read so far, as a large CSV streams in.
 
     Returns
     -------
@@ -549,7 +650,7 @@ def read_table(
         ".h5": lambda: _read_hdf5(p),
         ".hdf5": lambda: _read_hdf5(p),
     }
-    reader = readers.get(suffix, lambda: _read_text(p, group, channels))
+    reader = readers.get(suffix, lambda: _read_text(p, group, channels, progress))
     kind = suffix.lstrip(".").upper() or "text"
     try:
         return reader()
@@ -575,6 +676,7 @@ def read_recording(
     input_unit: str | None = None,
     output_unit: str | None = None,
     time_unit: str | None = None,
+    progress: Callable[[int], None] | None = None,
 ) -> Recording:
     """Input, output and time columns of a data file, in seconds and (where known) V, C or m.
 
@@ -600,6 +702,8 @@ def read_recording(
         Units of the columns, for files whose headers name none (a header's
         ``name [unit]`` or ``name (unit)`` counts; naming both differently
         is an error). Converted by :func:`piezohyst.units.to_standard`.
+    progress : callable, optional
+        Called with the rows read so far (see :func:`read_table`).
 
     Returns
     -------
@@ -615,7 +719,7 @@ def read_recording(
     wanted = [c for c in (input_column, output_column) if c is not None]
     if time_column is not None and time_column != "time":
         wanted.append(time_column)
-    table = read_table(path, group=group, channels=wanted)
+    table = read_table(path, group=group, channels=wanted, progress=progress)
     x_name = table.resolve(input_column)
     x = table.get(x_name)
     y_name: str | None = None
@@ -741,7 +845,13 @@ class DataSpec:
     output_unit: str | None = None
     time_unit: str | None = None
 
-    def read(self, path: str | os.PathLike[str], *, output_required: bool = True) -> Recording:
+    def read(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        output_required: bool = True,
+        progress: Callable[[int], None] | None = None,
+    ) -> Recording:
         """:func:`read_recording` with these settings.
 
         Parameters
@@ -750,6 +860,8 @@ class DataSpec:
             The data file.
         output_required : bool, default True
             Raise if the output column is missing (else read no output).
+        progress : callable, optional
+            Called with the rows read so far.
 
         Returns
         -------
@@ -768,6 +880,7 @@ class DataSpec:
             input_unit=self.input_unit,
             output_unit=self.output_unit,
             time_unit=self.time_unit,
+            progress=progress,
         )
 
 
@@ -891,14 +1004,16 @@ def write_table(
         return p
 
     def write_csv(tmp: Path) -> None:
-        buf = _io.StringIO()
-        buf.write(f"{MARKER} {__version__}\n")
-        writer = csv.writer(buf, lineterminator="\n")
+        import pyarrow as pa
+        import pyarrow.csv as pacsv
+
         named = units or {}
-        writer.writerow([f"{k} [{named[k]}]" if named.get(k) else k for k in arrays])
-        for row in zip(*arrays.values(), strict=True):
-            writer.writerow([repr(float(v)) for v in row])
-        tmp.write_text(buf.getvalue(), encoding="utf-8")
+        header = io_csv_line([f"{k} [{named[k]}]" if named.get(k) else k for k in arrays])
+        with open(tmp, "wb") as fh:
+            fh.write(f"{MARKER} {__version__}\n{header}".encode())
+            table = pa.table({f"c{i}": v for i, v in enumerate(arrays.values())})
+            # shortest round-trip decimal text, written in batches by pyarrow
+            pacsv.write_csv(table, fh, pacsv.WriteOptions(include_header=False, batch_size=1 << 16))
 
     atomic_write(p, write_csv)
     return p
@@ -911,6 +1026,13 @@ def iter_columns(table: Table) -> Iterator[tuple[str, FloatArray]]:
             yield name, table.get(name)
         except DataFileError:
             continue
+
+
+def io_csv_line(cells: Sequence[str]) -> str:
+    """One CSV line (quoted where needed), newline included."""
+    buf = _io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerow(cells)
+    return buf.getvalue()
 
 
 def is_piezohyst_output(path: str | os.PathLike[str]) -> bool:

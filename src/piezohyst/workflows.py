@@ -15,7 +15,7 @@ import json
 import math
 import os
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -47,6 +47,7 @@ __all__ = [
 ]
 
 PathLike = str | os.PathLike[str]
+Progress = Callable[[int], None] | None  # told the rows read so far
 
 
 def guard_outputs(
@@ -145,6 +146,7 @@ def fit_file(
     growth_terms: str | Sequence[str] = "auto",
     creep: Sequence[float] = (),
     force: bool = False,
+    progress: Progress = None,
 ) -> HysteresisModel:
     """Fit a model to a data file and save it (JSON) to ``out`` if given.
 
@@ -164,6 +166,8 @@ def fit_file(
         Settings of models that have them (``generalized-pi``).
     force : bool
         Replace an existing ``out`` that piezohyst did not write.
+    progress : callable, optional
+        Called with the rows read so far.
 
     Returns
     -------
@@ -181,7 +185,7 @@ def fit_file(
         elif (value if isinstance(value, str) else tuple(value)) != default:
             msg = f"the {name!r} setting does not apply to {model}"
             raise ParameterError(msg)
-    rec = (data_spec or DataSpec()).read(data)
+    rec = (data_spec or DataSpec()).read(data, progress=progress)
     assert rec.y is not None
     w = rec.window
     x, y, t = rec.x[w], rec.y[w], rec.t[w]
@@ -241,14 +245,16 @@ def predict_file(
     *,
     data_spec: DataSpec | None = None,
     force: bool = False,
+    progress: Progress = None,
 ) -> dict[str, FloatArray]:
     """Write ``time,predicted`` (plus ``measured`` when the data has the output column).
 
-    ``force`` replaces an existing file piezohyst did not write (see :func:`guard_outputs`).
+    ``force`` replaces an existing file piezohyst did not write (see :func:`guard_outputs`);
+    ``progress`` is called with the rows read so far.
     """
     guard_outputs([out], [model_path, data], force=force)
     model = _load(model_path)
-    rec = (data_spec or DataSpec()).read(data, output_required=False)
+    rec = (data_spec or DataSpec()).read(data, output_required=False, progress=progress)
     w = rec.window  # the model runs over the whole record: the window's start has a history
     columns: dict[str, FloatArray] = {
         "time": rec.t[w],
@@ -290,6 +296,7 @@ def compensate_file(
     precondition: bool = True,
     present_voltage: float | None = None,
     force: bool = False,
+    progress: Progress = None,
 ) -> Compensation:
     """Feedforward voltage for a desired trajectory; writes ``time,command,desired``.
 
@@ -327,6 +334,8 @@ def compensate_file(
         The actuator's voltage now (V).
     force : bool, default False
         Replace an existing ``out`` that piezohyst did not write.
+    progress : callable, optional
+        Called with the rows of the target read so far.
 
     Returns
     -------
@@ -334,7 +343,7 @@ def compensate_file(
     """
     guard_outputs([out], [model_path, target], force=force)
     model = _load(model_path)
-    table = read_table(target)
+    table = read_table(target, progress=progress)
     if column is None:
         others = [c for c in table.columns if c != "time"]
         column = "desired" if "desired" in table else (others[0] if len(others) == 1 else None)
@@ -472,6 +481,7 @@ def model_report(
     data_spec: DataSpec | None = None,
     command: str | None = None,
     force: bool = False,
+    progress: Progress = None,
 ) -> ReportResult:
     """A report a lab can file on a model and a data file (HTML, Markdown, JSON, figures).
 
@@ -490,6 +500,8 @@ def model_report(
         The command line that made the report, recorded in it.
     force : bool, default False
         Replace an existing folder piezohyst did not write.
+    progress : callable, optional
+        Called with the rows read so far.
 
     Returns
     -------
@@ -500,7 +512,7 @@ def model_report(
     guard_outputs([out], [model_path, data], force=force)
     spec = data_spec or DataSpec()
     model = _load(model_path)
-    rec = spec.read(data)
+    rec = spec.read(data, progress=progress)
     w = rec.window  # the model runs over the whole record: the window's start has a history
     pred = model.predict(rec.x, t=rec.t)[w]
     x, y, t = rec.x[w], _measured(rec, model, data)[w], rec.t[w]
