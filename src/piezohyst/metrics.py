@@ -45,7 +45,10 @@ def nrmse(measured: ArrayLike, predicted: ArrayLike) -> float:
 
     Parameters
     ----------
-    measured, predicted : array_like, shape (N,)
+    measured : array_like, shape (N,)
+        The data, whose span normalises the error.
+    predicted : array_like, shape (N,)
+        The model's output.
 
     Returns
     -------
