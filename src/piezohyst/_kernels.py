@@ -128,30 +128,6 @@ def inverse_states(tables, config, state):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def _limit(v, config, state):  # type: ignore[no-untyped-def]
-    """Clip a finite command to the limits and the slew step; count overshoots."""
-    limited = False
-    lo = config[CFG_V_MIN]
-    hi = config[CFG_V_MAX]
-    if v < lo or v > hi:
-        # count real overshoots, not a limit reached exactly but for rounding
-        tol = 1e-12 * (hi - lo)
-        if v < lo - tol or v > hi + tol:
-            state[state.shape[0] + ST_SATURATED] += 1.0
-        v = min(max(v, lo), hi)
-        limited = True
-    last = state[state.shape[0] + ST_LAST]
-    step = config[CFG_MAX_STEP]
-    if v > last + step:
-        v = last + step
-        limited = True
-    elif v < last - step:
-        v = last - step
-        limited = True
-    return v, limited
-
-
-@njit(cache=True, fastmath=FASTMATH)
 def compensator_step(desired, tables, config, state):  # type: ignore[no-untyped-def]
     """One feedforward command (V) for one desired value, analytic inverse; updates ``state``.
 
@@ -180,7 +156,24 @@ def compensator_step(desired, tables, config, state):  # type: ignore[no-untyped
         state[end + ST_NONFINITE] += 1.0
         inverse_states(tables, config, state)
         return last
-    v, limited = _limit(x, config, state)
+    v = x
+    limited = False
+    lo = config[CFG_V_MIN]
+    hi = config[CFG_V_MAX]
+    if v < lo or v > hi:
+        # count real overshoots, not a limit reached exactly but for rounding
+        tol = 1e-12 * (hi - lo)
+        if v < lo - tol or v > hi + tol:
+            state[end + ST_SATURATED] += 1.0
+        v = min(max(v, lo), hi)
+        limited = True
+    step = config[CFG_MAX_STEP]
+    if v > last + step:
+        v = last + step
+        limited = True
+    elif v < last - step:
+        v = last - step
+        limited = True
     for i in range(n):
         state[i] = min(max(state[i], v - tables[TAB_R, i]), v + tables[TAB_R, i])
     if limited:

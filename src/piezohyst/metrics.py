@@ -33,11 +33,12 @@ def rmse(measured: ArrayLike, predicted: ArrayLike) -> float:
     a = as_signal(measured, "measured")
     b = as_signal(predicted, "predicted")
     same_length(a, b, "measured", "predicted")
-    err = a - b
-    peak = float(np.max(np.abs(err))) if err.size else 0.0
+    err = a - b  # the one record-length temporary
+    peak = max(float(err.max()), -float(err.min())) if err.size else 0.0
     if peak == 0.0 or not np.isfinite(peak):
         return peak
-    return peak * float(np.sqrt(np.mean((err / peak) ** 2)))
+    err /= peak
+    return peak * float(np.sqrt(np.dot(err, err) / err.size))
 
 
 def nrmse(measured: ArrayLike, predicted: ArrayLike) -> float:

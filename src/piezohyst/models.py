@@ -472,7 +472,8 @@ class HysteresisModel:
         xs = as_signal(x, "x")
         ys = as_signal(y, "y")
         same_length(xs, ys, "x", "y")
-        if not np.ptp(xs) > 1e-12 * max(float(np.max(np.abs(xs))), 1e-300):
+        x_lo, x_hi = float(xs.min()), float(xs.max())
+        if not x_hi - x_lo > 1e-12 * max(abs(x_lo), abs(x_hi), 1e-300):
             msg = (
                 f"the input never moves (constant at {float(xs[0]):g} {self.input_unit}): "
                 "a record without excitation holds no hysteresis to identify"
@@ -487,10 +488,15 @@ class HysteresisModel:
         z0 = self._initial_operators(thr, xs, initial_state)
         self._solve(PlayCore(thr), terms, subsets, xs, ys, ts if rate else None, z0)
         self._refine(xs, ys, ts if rate else None, initial_state)
-        self.input_range_ = (float(xs.min()), float(xs.max()))
+        self.input_range_ = (x_lo, x_hi)
         self.max_slew_rate_ = math.nan
-        if ts is not None and xs.size > 1:
-            self.max_slew_rate_ = float(np.max(np.abs(np.diff(xs)) / np.diff(ts)))
+        if ts is not None and xs.size > 1:  # in blocks: no record-length temporaries
+            self.max_slew_rate_ = max(
+                float(
+                    np.max(np.abs(np.diff(xs[k : k + BLOCK + 1])) / np.diff(ts[k : k + BLOCK + 1]))
+                )
+                for k in range(0, xs.size - 1, BLOCK)
+            )
         self.rmse_ = rmse(self.predict(xs, t=ts), ys)
         self.nrmse_ = self.rmse_ / max(float(np.ptp(ys)), 1e-300)
         self._check_leakage(xs, ys, ts)
@@ -503,7 +509,7 @@ class HysteresisModel:
             return
         conductance = growth["integral"][0]
         capacitance = float(np.ptp(y)) / float(np.ptp(x))  # mean slope, output per input unit
-        dt = float(np.median(np.diff(t)))
+        dt = float(t[-1] - t[0]) / (t.size - 1)  # mean interval: no record-length temporaries
         if conductance > 0 and capacitance / conductance < dt:
             warnings.warn(
                 f"the identified leakage {conductance:.3g} {self.output_unit}/"
