@@ -342,3 +342,8 @@ def test_large_csv_streams_with_progress(tmp_path: Path) -> None:
     assert seen and seen == sorted(seen) and seen[-1] == n and len(seen) > 1  # in batches
     np.testing.assert_array_equal(table.get("voltage"), v)  # exact round trip
     assert table.units == {"time": "s", "voltage": "V", "charge": "C"}
+    ph.write_table(tmp_path / "big.parquet", {"time": t, "voltage": v}, units={"time": "s"})
+    seen.clear()
+    back = ph.io.read_table(tmp_path / "big.parquet", progress=seen.append)
+    assert len(seen) > 1 and seen[-1] == n  # Parquet in batches too
+    np.testing.assert_array_equal(back.get("voltage"), v)

@@ -445,15 +445,25 @@ def _read_npz(path: Path) -> Table:
     return _table_from_arrays(path, arrays, "NPZ")
 
 
-def _read_parquet(path: Path) -> Table:
+def _read_parquet(path: Path, progress: Callable[[int], None] | None = None) -> Table:
+    """Numeric columns of a Parquet file, read batch by batch (``progress``: rows so far)."""
     import pyarrow.parquet as pq
 
-    table = pq.read_table(path)
+    source = pq.ParquetFile(path)
+    names = source.schema_arrow.names
+    parts: dict[str, list[np.ndarray]] = {name: [] for name in names}
+    rows = 0
+    for batch in source.iter_batches(batch_size=1 << 18):
+        for name, column in zip(names, batch.columns, strict=True):
+            parts[name].append(column.to_numpy(zero_copy_only=False))
+        rows += batch.num_rows
+        if progress is not None:
+            progress(rows)
     arrays: dict[str, object] = {}
     units: dict[str, str] = {}
-    for name in table.column_names:
+    for name in names:
         bare, unit = split_unit(name)
-        arrays[bare] = table.column(name).to_numpy(zero_copy_only=False)
+        arrays[bare] = np.concatenate(parts[name]) if parts[name] else np.empty(0)
         if unit is not None:
             units[bare] = unit
     return dataclasses.replace(_table_from_arrays(path, arrays, "Parquet"), units=units)
@@ -646,7 +656,7 @@ def read_table(
         ".npz": lambda: _read_npz(p),
         ".mat": lambda: _read_mat(p),
         ".tdms": lambda: _read_tdms(p, group, channels),
-        ".parquet": lambda: _read_parquet(p),
+        ".parquet": lambda: _read_parquet(p, progress),
         ".h5": lambda: _read_hdf5(p),
         ".hdf5": lambda: _read_hdf5(p),
     }
