@@ -51,7 +51,13 @@ def desired_values(model: ph.ActivePI) -> np.ndarray:
     return np.concatenate([q, q[:500] + 1e-8 * rng.standard_normal(500)])
 
 
-def run_c(tmp_path: Path, comp: ph.Compensator, values: np.ndarray, precision: str) -> tuple:
+def run_c(
+    tmp_path: Path,
+    comp: ph.Compensator,
+    values: np.ndarray,
+    precision: str,
+    flags: tuple[str, ...] = ("-O2",),
+) -> tuple:
     c_path, h_path = write_c(comp, tmp_path / "ph_comp.c", precision=precision)  # type: ignore[arg-type]
     (tmp_path / "main.c").write_text(HARNESS.replace("NAME", "ph_comp"))
     exe = tmp_path / "comp"
@@ -63,7 +69,7 @@ def run_c(tmp_path: Path, comp: ph.Compensator, values: np.ndarray, precision: s
             "-Wextra",
             "-Werror",
             "-pedantic",
-            "-O2",
+            *flags,
             str(c_path),
             str(tmp_path / "main.c"),
             "-o",
@@ -94,6 +100,22 @@ def test_double_matches_python(tmp_path: Path, slew: float | None) -> None:
     assert (nonfinite, saturated) == (comp.nonfinite_count, comp.saturated_count)
     assert nonfinite > 0 and saturated > 0
     assert np.all((c_cmds >= 0.0) & (c_cmds <= 140.0))
+
+
+@pytest.mark.parametrize("precision", ["double", "float"])
+def test_nan_guard_survives_fast_math(tmp_path: Path, precision: str) -> None:
+    """-ffast-math lets a compiler drop isfinite(): the guard must not depend on it."""
+    model = fitted_model()
+    comp = ph.Compensator(model, v_min=0.0, v_max=140.0)
+    values = desired_values(model)
+    cmds, (nonfinite, _) = run_c(tmp_path, comp, values, precision, ("-O2", "-ffast-math"))
+    bad = ~np.isfinite(values)
+    assert nonfinite == int(bad.sum()) > 0
+    held = np.flatnonzero(bad)
+    held = held[held > 0]
+    np.testing.assert_array_equal(cmds[held], cmds[held - 1])  # the last command, not 140 V
+    assert np.all(np.isfinite(cmds)) and cmds.min() >= 0.0 and cmds.max() <= 140.0
+    np.testing.assert_allclose(cmds, comp.process(values), rtol=0, atol=1e-3)
 
 
 def test_float_matches_python(tmp_path: Path) -> None:
