@@ -364,3 +364,9 @@ def test_consumers_use_public_methods_and_never_branch_on_model_class() -> None:
             if isinstance(node, ast.Call) and getattr(node.func, "id", "") == "isinstance":
                 names = {n.id for n in ast.walk(node.args[1]) if isinstance(n, ast.Name)}
                 assert not names & MODEL_CLASSES, f"{module}.py:{node.lineno} branches on a class"
+
+
+def test_an_active_model_built_without_its_integral_has_no_leakage() -> None:
+    model = ph.ActivePI.from_operator(ph.PIHysteresis([0.0, 10.0], [1.0, 0.5]))
+    assert model.growth_rate_ == 0.0
+    np.testing.assert_array_equal(model.growth([1.0, 2.0], t=[0.0, 1.0]), [0.0, 0.0])

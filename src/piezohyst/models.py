@@ -1288,7 +1288,8 @@ class ActivePI(HysteresisModel):
     def growth_rate_(self) -> float:
         """:math:`R` (output per input unit and s; S for V to C)."""
         self._check_fitted()
-        return float(self.coefs_[0][0])
+        growth = self.growth_coefficients()  # built without the integral: no leakage
+        return float(growth["integral"][0]) if "integral" in growth else 0.0
 
 
 class GeneralizedPI(HysteresisModel):
