@@ -35,7 +35,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.optimize import lsq_linear
 
 from . import _kernels
 from ._validation import FloatArray, as_signal, check_int
@@ -293,6 +292,8 @@ def _bounded_lstsq(gram: FloatArray, rhs: FloatArray, lower: FloatArray) -> Floa
     proj = vec.T @ b
     q = vec @ (proj / lam)
     if np.any(q < lo):
+        from scipy.optimize import lsq_linear  # only here: keeps the command line's start fast
+
         # ||diag(sqrt(lam)) V' q - proj / sqrt(lam)||^2 = q'Gq - 2b'q + const
         root = np.sqrt(lam)
         res = lsq_linear(
