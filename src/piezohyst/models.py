@@ -92,8 +92,6 @@ __all__ = [
     "model_names",
 ]
 
-_ = (model_class, model_names)  # re-exported: the registry lives in persistence
-
 GROWTH_TERMS = ("integral", "time", "abs_integral")
 
 

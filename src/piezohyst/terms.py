@@ -615,8 +615,3 @@ def make_term(spec: str | Term, params: Mapping[str, Any] | None = None) -> Term
     except TypeError as exc:
         msg = f"bad settings {settings!r} for the {spec!r} term: {exc}"
         raise ParameterError(msg) from None
-
-
-def kinds() -> tuple[str, ...]:
-    """Every registered term kind, sorted."""
-    return tuple(sorted(_TERMS))
