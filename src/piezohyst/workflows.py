@@ -542,7 +542,8 @@ def model_report(
     ]
     err = y - pred
     rep.add("samples", "samples", int(x.size))
-    rep.add("nrmse_pct", "NRMSE (RMSE / output span)", 100 * nrmse(y, pred), "%")
+    nrmse_pct = 100 * nrmse(y, pred)
+    rep.add("nrmse_pct", "NRMSE (RMSE / output span)", nrmse_pct, "%")
     rep.add("rmse", "RMSE", rmse(y, pred), out_u)
     rep.add("max_abs_error", "largest error", float(np.max(np.abs(err))), out_u)
     rep.add("hysteresis_width_measured_pct", "hysteresis width, measured",
@@ -557,7 +558,7 @@ def model_report(
         {"curves": [(x, y, "measured", measured), (x, pred, "model", model_line)],
          "xlabel": "input", "xunit": in_u, "ylabel": "output", "yunit": out_u, "title": ""},
     ])  # fmt: skip
-    caption = f"output over time, and the residual (NRMSE {100 * nrmse(y, pred):.3g} %)"
+    caption = f"output over time, and the residual (NRMSE {nrmse_pct:.3g} %)"
     rep.figure("fit.png", caption, [
         {"curves": [(t, y, "measured", measured), (t, pred, "model", model_line)],
          "xlabel": "time", "xunit": "s", "ylabel": "output", "yunit": out_u},
