@@ -8,6 +8,7 @@ traceback only under ``--debug``.
 from __future__ import annotations
 
 import functools
+import math
 import shlex
 import sys
 import warnings
@@ -490,20 +491,19 @@ def predict(
     Example:
       piezohyst predict model.json run2.csv -o pred.csv
     """
-    from .metrics import nrmse
-    from .workflows import predict_file
+    from .workflows import Prediction, predict_file
 
     with rows_progress(ctx, f"reading {data.name}") as progress:
-        cols = _run(
+        cols: Prediction = _run(
             ctx,
             lambda: predict_file(
                 model, data, out, data_spec=data_spec, force=force, progress=progress
             ),
         )
-    if "measured" in cols:
+    if math.isfinite(cols.rmse):
         click.echo(
-            f"NRMSE {100 * nrmse(cols['measured'], cols['predicted']):.4g} % "
-            f"over {cols['predicted'].size} samples"
+            f"NRMSE {100 * cols.nrmse:.4g} % (RMSE {cols.rmse:.4g} {cols.unit}) "
+            f"over {cols.samples} samples"
         )
     ctx.info(f"saved {out}")
 

@@ -29,8 +29,7 @@ the early segments and scoring it on a later one needs no second pass.
 
 from __future__ import annotations
 
-import itertools
-from collections.abc import Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,14 +45,134 @@ __all__ = [
     "BLOCK",
     "Identification",
     "NormalEquations",
+    "Summary",
+    "array_blocks",
     "block_dt",
     "default_thresholds",
     "history_state",
     "identify",
     "term_columns",
+    "without_time",
 ]
 
 BLOCK = 4096  # samples per block when accumulating or streaming
+
+Triple = tuple[FloatArray, FloatArray, FloatArray | None]
+Blocks = Callable[[], Iterable[Triple]]
+"""A record that can be read again from its start: each call yields ``(x, y, t)`` blocks."""
+
+
+def array_blocks(x: FloatArray, y: FloatArray, t: FloatArray | None) -> Blocks:
+    """Arrays in memory as a :data:`Blocks` source (views, no copies).
+
+    Parameters
+    ----------
+    x, y : ndarray
+    t : ndarray or None
+
+    Returns
+    -------
+    callable
+    """
+
+    def blocks() -> Iterator[Triple]:
+        for lo in range(0, x.size, 1 << 18):
+            hi = lo + (1 << 18)
+            yield x[lo:hi], y[lo:hi], None if t is None else t[lo:hi]
+
+    return blocks
+
+
+def without_time(blocks: Blocks) -> Blocks:
+    """The same record with its times dropped (for models without rate-dependent terms).
+
+    Parameters
+    ----------
+    blocks : Blocks
+
+    Returns
+    -------
+    Blocks
+    """
+    return lambda: ((x, y, None) for x, y, _ in blocks())
+
+
+@dataclass(frozen=True)
+class Summary:
+    """What a fit needs to know of a whole record before it reads it again.
+
+    Attributes
+    ----------
+    n : int
+        Samples.
+    x_first, x_min, x_max, y_first, y_min, y_max : float
+        First value and extremes of input and output.
+    t_first, t_last : float
+        First and last time (s); NaN without times.
+    max_slew_rate : float
+        Fastest input change (input units per s); NaN without times.
+    """
+
+    n: int
+    x_first: float
+    x_min: float
+    x_max: float
+    y_first: float
+    y_min: float
+    y_max: float
+    t_first: float = float("nan")
+    t_last: float = float("nan")
+    max_slew_rate: float = float("nan")
+
+    @classmethod
+    def of(cls, blocks: Blocks) -> Summary:
+        """One pass over a record.
+
+        Parameters
+        ----------
+        blocks : Blocks
+
+        Returns
+        -------
+        Summary
+
+        Raises
+        ------
+        InsufficientDataError
+            The record is empty.
+        """
+        n = 0
+        x0 = y0 = t0 = t1 = x_last = np.nan
+        x_lo = y_lo = np.inf
+        x_hi = y_hi = -np.inf
+        slew = np.nan
+        for x, y, t in blocks():
+            if x.size == 0:
+                continue
+            if n == 0:
+                x0, y0 = float(x[0]), float(y[0])
+                t0 = np.nan if t is None else float(t[0])
+            x_lo, x_hi = min(x_lo, float(x.min())), max(x_hi, float(x.max()))
+            y_lo, y_hi = min(y_lo, float(y.min())), max(y_hi, float(y.max()))
+            if t is not None:
+                steps = [np.abs(np.diff(x)) / np.diff(t)] if x.size > 1 else []
+                if n > 0:  # the step from the previous block
+                    steps.append(np.array([abs(x[0] - x_last) / (t[0] - t1)]))
+                if steps:
+                    fastest = max(float(np.max(s)) for s in steps)
+                    slew = fastest if np.isnan(slew) else max(slew, fastest)
+                t1 = float(t[-1])
+            x_last = float(x[-1])
+            n += x.size
+        if n == 0:
+            msg = "the record holds no samples"
+            raise InsufficientDataError(msg)
+        return cls(n, x0, x_lo, x_hi, y0, y_lo, y_hi, t0, t1, slew)
+
+    @property
+    def x_range(self) -> FloatArray:
+        """``[x_min, x_max]``: what :meth:`~piezohyst.terms.Term.bind` and thresholds need."""
+        return np.array([self.x_min, self.x_max])
 
 
 def default_thresholds(x: ArrayLike, n_operators: int) -> FloatArray:
@@ -89,7 +208,9 @@ def default_thresholds(x: ArrayLike, n_operators: int) -> FloatArray:
     return np.arange(n, dtype=np.float64) * (span / (2.0 * n))
 
 
-def history_state(history: ArrayLike, thresholds: ArrayLike) -> FloatArray:
+def history_state(
+    history: ArrayLike, thresholds: ArrayLike, state: ArrayLike | None = None
+) -> FloatArray:
     """Play-operator states (input units) after ``history``, starting at rest at its first sample.
 
     To fit or predict a later part of a record, the operators must start where
@@ -101,6 +222,8 @@ def history_state(history: ArrayLike, thresholds: ArrayLike) -> FloatArray:
         The earlier input (V).
     thresholds : array_like
         The play thresholds (V).
+    state : array_like, optional
+        The states before ``history`` when it continues earlier blocks.
 
     Returns
     -------
@@ -114,7 +237,7 @@ def history_state(history: ArrayLike, thresholds: ArrayLike) -> FloatArray:
     """
     h = as_signal(history, "history")
     thr = as_signal(thresholds, "thresholds")
-    z = np.full(thr.size, h[0])
+    z = np.full(thr.size, h[0]) if state is None else np.array(state, dtype=np.float64)
     _kernels.pi_forward(h, thr, np.zeros(thr.size), z, np.empty_like(h))
     return z
 
@@ -229,48 +352,66 @@ def _power_of_two(values: FloatArray) -> float:
 def _accumulate(
     core: PlayCore,
     terms: Sequence[Term],
-    x: FloatArray,
-    y: FloatArray,
-    t: FloatArray | None,
+    blocks: Blocks,
+    x_first: float,
+    y_ref: float,
+    scales: tuple[float, float],
     z0: FloatArray,
     col_scale: FloatArray,
     edges: Sequence[int],
 ) -> list[NormalEquations]:
     """Normal equations of every segment ``edges[k]:edges[k+1]`` (model run through all).
 
-    The core runs on the scaled input ``x / col_scale[0]`` (a power of two:
-    exact), the terms on ``x`` with their columns divided by their scale.
+    One pass over the record. The core runs on the scaled input ``x / sx``
+    (a power of two: exact), the terms on ``x`` with their columns divided by
+    their scale; the output is taken as ``y / sy - y_ref``.
     """
     n = core.n_operators
     p = col_scale.size
-    block = np.empty((min(BLOCK, x.size), p))
-    block[:, n] = 1.0
-    sx = col_scale[0]
+    sx, sy = scales
+    work = np.empty((BLOCK, p))
+    work[:, n] = 1.0
     scaled_core = core.scaled(sx)
     z = z0 / sx
-    states = [term.rest_state(float(x[0])) for term in terms]
-    out = []
-    for lo, hi in itertools.pairwise(edges):
-        gram = np.zeros((p, p))
-        rhs = np.zeros(p)
-        yy = 0.0
-        for start in range(lo, hi, block.shape[0]):
-            stop = min(start + block.shape[0], hi)
-            m = stop - start
-            xs = x[start:stop]
-            scaled_core.fill(xs / sx, z, block)
+    states = [term.rest_state(x_first) for term in terms]
+    parts = [(np.zeros((p, p)), np.zeros(p), [0.0]) for _ in edges[1:]]
+    pos = 0  # index of the next sample in the record
+    seg = 0
+    t_prev: float | None = None
+    for x_blk, y_blk, t_blk in blocks():
+        size = x_blk.size
+        k = 0
+        while k < size and seg < len(parts):
+            while seg < len(parts) and pos + k >= edges[seg + 1]:
+                seg += 1
+            if seg == len(parts):
+                break
+            stop = min(size, k + BLOCK, edges[seg + 1] - pos)
+            m = stop - k
+            xs = x_blk[k:stop]
+            scaled_core.fill(xs / sx, z, work)
             if terms:
-                dt = block_dt(t, start, stop, None)
-                ts = None if t is None else t[start:stop]
-                term_columns(terms, xs, ts, dt, states, block[:m, n + 1 :])
-                block[:m, n + 1 :] /= col_scale[n + 1 :]
-            b = block[:m]
-            ys = y[start:stop]
+                ts = None if t_blk is None else t_blk[k:stop]
+                dt = None
+                if ts is not None:
+                    dt = np.empty(m)
+                    dt[0] = 0.0 if t_prev is None else ts[0] - t_prev
+                    dt[1:] = np.diff(ts)
+                    t_prev = float(ts[-1])
+                term_columns(terms, xs, ts, dt, states, work[:m, n + 1 :])
+                work[:m, n + 1 :] /= col_scale[n + 1 :]
+            b = work[:m]
+            ys = y_blk[k:stop] / sy - y_ref
+            gram, rhs, yy = parts[seg]
             gram += b.T @ b
             rhs += b.T @ ys
-            yy += float(ys @ ys)
-        out.append(NormalEquations(gram, rhs, yy, hi - lo))
-    return out
+            yy[0] += float(ys @ ys)
+            k = stop
+        pos += size
+    return [
+        NormalEquations(gram, rhs, yy[0], hi - lo)
+        for (gram, rhs, yy), lo, hi in zip(parts, edges[:-1], edges[1:], strict=True)
+    ]
 
 
 def _bounded_lstsq(gram: FloatArray, rhs: FloatArray, lower: FloatArray) -> FloatArray:
@@ -330,9 +471,8 @@ class Identification:
 def identify(
     core: PlayCore,
     terms: Sequence[Term],
-    x: FloatArray,
-    y: FloatArray,
-    t: FloatArray | None,
+    blocks: Blocks,
+    summary: Summary,
     initial_state: FloatArray,
     *,
     min_slope: float,
@@ -347,10 +487,11 @@ def identify(
         The hysteresis core.
     terms : sequence of Term
         Bound terms (see :meth:`Term.bind`); with ``subsets``, every candidate.
-    x, y : ndarray, shape (N,)
-        Input (V) and output.
-    t : ndarray, shape (N,) or None
-        Sample times (s); needed by rate-dependent terms.
+    blocks : Blocks
+        The record: input (V), output, and times (s) where a term is rate
+        dependent. Read once (see :func:`array_blocks` for arrays).
+    summary : Summary
+        The record's extremes and length (:meth:`Summary.of`).
     initial_state : ndarray, shape (n,)
         Operator states before the first sample (input units).
     min_slope : float
@@ -375,14 +516,14 @@ def identify(
         If the record has no more samples than parameters.
     """
     n = core.n_operators
-    sx, sy = _power_of_two(x), _power_of_two(y)
-    ys = y / sy
-    y_ref = float(ys[0])  # centred: keeps y'y, and the selection's residuals, well conditioned
-    ys -= y_ref
+    sm = summary
+    sx = _power_of_two(np.array([sm.x_min, sm.x_max]))
+    sy = _power_of_two(np.array([sm.y_min, sm.y_max]))
+    y_ref = sm.y_first / sy  # centred: keeps y'y, and the selection's residuals, well conditioned
     col_scale = np.concatenate(
         [np.full(n, sx), [1.0], *[np.full(term.width, sx**term.input_degree) for term in terms]]
     )
-    span_x, span_y = float(np.ptp(x)) / sx, float(np.ptp(y)) / sy
+    span_x, span_y = (sm.x_max - sm.x_min) / sx, (sm.y_max - sm.y_min) / sy
     mean_slope = span_y / span_x if span_x > 1e-12 and span_y > 1e-12 else 1.0
     offsets = np.cumsum([n + 1, *[term.width for term in terms]])
     term_cols = [
@@ -392,9 +533,11 @@ def identify(
         term.lower_bounds() * col_scale[c] / sy for term, c in zip(terms, term_cols, strict=True)
     ]
     candidates = [tuple(range(len(terms)))] if subsets is None else list(subsets)
-    split = int((1.0 - holdout) * x.size) if len(candidates) > 1 else x.size
-    edges = [0, split, x.size] if 0 < split < x.size else [0, x.size]
-    parts = _accumulate(core, terms, x, ys, t, initial_state, col_scale, edges)
+    split = int((1.0 - holdout) * sm.n) if len(candidates) > 1 else sm.n
+    edges = [0, split, sm.n] if 0 < split < sm.n else [0, sm.n]
+    parts = _accumulate(
+        core, terms, blocks, sm.x_first, y_ref, (sx, sy), initial_state, col_scale, edges
+    )
     whole = parts[0] if len(parts) == 1 else parts[0] + parts[1]
 
     def columns_of(subset: tuple[int, ...]) -> FloatArray:

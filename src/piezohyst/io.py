@@ -14,12 +14,13 @@ from __future__ import annotations
 import csv
 import dataclasses
 import io as _io
+import itertools
 import logging
 import os
 import re
 import tempfile
 import warnings
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -32,19 +33,29 @@ from .errors import DataFileError
 from .units import split_unit, to_standard
 
 __all__ = [
+    "BATCH_ROWS",
+    "Block",
     "DataSpec",
     "Recording",
+    "RecordingStream",
     "Table",
     "atomic_write",
     "atomic_write_text",
+    "check_finite",
+    "check_increasing",
     "is_piezohyst_output",
+    "open_recording",
+    "open_table",
     "read_recording",
     "read_table",
+    "write_blocks",
     "write_table",
 ]
 
 CSV_SUFFIXES = {".csv", ".tsv", ".txt", ".dat", ""}
 MARKER = "# written by piezohyst"  # first line of every CSV piezohyst writes
+BATCH_ROWS = 1 << 18  # rows per batch when streaming a file
+CSV_BLOCK_BYTES = 1 << 22  # bytes pyarrow parses per CSV batch
 
 
 @dataclass(frozen=True)
@@ -73,6 +84,9 @@ class Table:
     units: Mapping[str, str] = field(default_factory=dict)
     group: str | None = None
     groups: tuple[str, ...] = ()
+    _stream: Callable[[Sequence[str]], Iterator[dict[str, FloatArray]]] | None = field(
+        default=None, repr=False
+    )
 
     def __contains__(self, name: object) -> bool:
         return name in self._getters
@@ -145,6 +159,38 @@ class Table:
             )
             raise DataFileError(msg)
         return values
+
+    def batches(self, keys: Sequence[str]) -> Iterator[dict[str, FloatArray]]:
+        """Columns in batches of rows, in file order, as stored (not yet checked).
+
+        Streamed from the file where the format allows it (CSV, Parquet, see
+        :func:`open_table`), so memory does not grow with the record; slices
+        of the columns otherwise.
+
+        Parameters
+        ----------
+        keys : sequence of str
+            Names or 0-based indices as digits.
+
+        Yields
+        ------
+        dict
+            Column name to the batch's values.
+        """
+        names = [self.resolve(k) for k in keys]
+        if self._stream is not None:
+            yield from self._stream(names)
+            return
+        arrays = [self._getters[name]() for name in names]
+        for name, arr in zip(names, arrays, strict=True):
+            if arr.size != arrays[0].size:
+                msg = (
+                    f"{self.path}: column {name!r} has {arr.size} values, "
+                    f"{names[0]!r} has {arrays[0].size}"
+                )
+                raise DataFileError(msg)
+        for lo in range(0, arrays[0].size, BATCH_ROWS):
+            yield {name: arr[lo : lo + BATCH_ROWS] for name, arr in zip(names, arrays, strict=True)}
 
 
 @dataclass(frozen=True)
@@ -232,7 +278,11 @@ def _read_text(
     fast = _read_csv_arrow(path, head, progress)
     if fast is not None:
         return fast
-    # the careful path: every file pyarrow does not read cleanly, with exact messages
+    return _read_text_careful(path, group, channels)
+
+
+def _read_text_careful(path: Path, group: str | None, channels: Sequence[str]) -> Table:
+    """Every text file pyarrow does not read cleanly, in memory, with exact messages."""
     raw = path.read_bytes()
     text = _decode(raw, path)
     if _AIXACCT_TABLE.match(text.split("\n", 3)[2] if text.count("\n") >= 3 else "") or (
@@ -253,16 +303,27 @@ def _read_head(path: Path, size: int = 1 << 16) -> bytes:
         return fh.read(size)
 
 
-def _read_csv_arrow(
-    path: Path, head: bytes, progress: Callable[[int], None] | None
-) -> Table | None:
-    """Delimited numeric columns read by pyarrow in batches; None where the careful path must read.
+@dataclass(frozen=True)
+class _CsvPlan:
+    """How pyarrow reads a delimited file, decided from its head as the careful reader would."""
 
-    The head of the file decides delimiter, leading comment lines, header,
-    units and decimal commas exactly as the careful reader does; the body is
-    streamed (``progress`` is called with the rows read so far). Anything
-    unusual (whitespace columns, aixACCT tables, UTF-16, a value that is not a
-    number, comments further down) is left to the careful reader.
+    skip: int  # lines before the data (comments, header)
+    names: list[str]
+    units: Mapping[str, str]
+    delimiter: str
+    decimal_comma: bool
+    encoding: str
+
+
+class _Fallback(Exception):
+    """pyarrow cannot read this file cleanly: the careful reader must (and names the row)."""
+
+
+def _csv_plan(path: Path, head: bytes) -> _CsvPlan | None:
+    """Delimiter, leading comment lines, header, units and decimal commas from the head of a file.
+
+    None where the careful reader must read: whitespace columns, aixACCT
+    tables, UTF-16, a head that is not a clean numeric table.
     """
     if head[:2] in (b"\xff\xfe", b"\xfe\xff") or b"PiezoResult" in head[:64]:
         return None
@@ -294,43 +355,71 @@ def _read_csv_arrow(
     decimal_comma = delim != "," and _decimal_commas(
         [(n, next(csv.reader([ln], delimiter=delim))) for n, ln in body[:50]]
     )
+    return _CsvPlan(
+        skip + int(has_header), sample.columns, sample.units, delim, decimal_comma, encoding
+    )
+
+
+def _csv_batches(
+    path: Path, plan: _CsvPlan, columns: Sequence[str]
+) -> Iterator[dict[str, FloatArray]]:
+    """The named columns in batches of rows, parsed by pyarrow (raises :class:`_Fallback`)."""
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
-    names = sample.columns
     try:
         reader = pacsv.open_csv(
             path,
             read_options=pacsv.ReadOptions(
-                skip_rows=skip + int(has_header),
-                column_names=names,
-                encoding=encoding,
-                block_size=1 << 22,
+                skip_rows=plan.skip,
+                column_names=plan.names,
+                encoding=plan.encoding,
+                block_size=CSV_BLOCK_BYTES,
             ),
-            parse_options=pacsv.ParseOptions(delimiter=delim),
+            parse_options=pacsv.ParseOptions(delimiter=plan.delimiter),
             convert_options=pacsv.ConvertOptions(
-                column_types=dict.fromkeys(names, pa.float64()),
-                decimal_point="," if decimal_comma else ".",
+                column_types=dict.fromkeys(plan.names, pa.float64()),
+                include_columns=list(columns),
+                decimal_point="," if plan.decimal_comma else ".",
                 strings_can_be_null=False,
             ),
         )
-        batches = []
-        rows = 0
         for batch in reader:
-            batches.append(batch)
-            rows += batch.num_rows
+            if any(col.null_count for col in batch.columns):
+                raise _Fallback  # empty cells: the careful reader names their rows
+            yield {
+                name: np.ascontiguousarray(col.to_numpy(zero_copy_only=False), np.float64)
+                for name, col in zip(columns, batch.columns, strict=True)
+            }
+    except (pa.ArrowInvalid, pa.ArrowTypeError, pa.ArrowNotImplementedError, ValueError):
+        raise _Fallback from None
+
+
+def _read_csv_arrow(
+    path: Path, head: bytes, progress: Callable[[int], None] | None
+) -> Table | None:
+    """Delimited numeric columns read by pyarrow in batches; None where the careful path must read.
+
+    ``progress`` is called with the rows read so far.
+    """
+    plan = _csv_plan(path, head)
+    if plan is None:
+        return None
+    parts: dict[str, list[FloatArray]] = {name: [] for name in plan.names}
+    rows = 0
+    try:
+        for batch in _csv_batches(path, plan, plan.names):
+            for name, values in batch.items():
+                parts[name].append(values)
+            rows += len(batch[plan.names[0]])
             if progress is not None:
                 progress(rows)
-        table = pa.Table.from_batches(batches, schema=reader.schema)
-    except (pa.ArrowInvalid, pa.ArrowTypeError, pa.ArrowNotImplementedError, ValueError):
+    except _Fallback:
         return None
-    if table.num_rows == 0 or any(col.null_count for col in table.columns):
-        return None  # empty cells: the careful reader names their rows
-    columns = {
-        name: np.ascontiguousarray(table.column(i).to_numpy(zero_copy_only=False), np.float64)
-        for i, name in enumerate(names)
-    }
-    return Table(path, names, {k: _constant(v) for k, v in columns.items()}, units=sample.units)
+    if rows == 0:
+        return None
+    columns = {name: np.concatenate(v) for name, v in parts.items()}
+    return Table(path, plan.names, {k: _constant(v) for k, v in columns.items()}, units=plan.units)
 
 
 _DECIMAL_COMMA = re.compile(r"^[+-]?\d*,\d+(?:[eE][+-]?\d+)?$")
@@ -641,6 +730,20 @@ def read_table(
     DataFileError
         Missing, empty or unreadable file, in one line.
     """
+    p = _existing(path)
+    suffix = p.suffix.lower()
+    readers: dict[str, Callable[[], Table]] = {
+        ".npz": lambda: _read_npz(p),
+        ".mat": lambda: _read_mat(p),
+        ".tdms": lambda: _read_tdms(p, group, channels),
+        ".parquet": lambda: _read_parquet(p, progress),
+        ".h5": lambda: _read_hdf5(p),
+        ".hdf5": lambda: _read_hdf5(p),
+    }
+    return _reading(p, readers.get(suffix, lambda: _read_text(p, group, channels, progress)))
+
+
+def _existing(path: str | os.PathLike[str]) -> Path:
     p = Path(path)
     if not p.exists():
         msg = f"{p}: no such file"
@@ -651,17 +754,12 @@ def read_table(
     if p.stat().st_size == 0:
         msg = f"{p}: the file is empty"
         raise DataFileError(msg)
-    suffix = p.suffix.lower()
-    readers: dict[str, Callable[[], Table]] = {
-        ".npz": lambda: _read_npz(p),
-        ".mat": lambda: _read_mat(p),
-        ".tdms": lambda: _read_tdms(p, group, channels),
-        ".parquet": lambda: _read_parquet(p, progress),
-        ".h5": lambda: _read_hdf5(p),
-        ".hdf5": lambda: _read_hdf5(p),
-    }
-    reader = readers.get(suffix, lambda: _read_text(p, group, channels, progress))
-    kind = suffix.lstrip(".").upper() or "text"
+    return p
+
+
+def _reading(p: Path, reader: Callable[[], Table]) -> Table:
+    """Run a reader; anything but a DataFileError becomes one naming the file and format."""
+    kind = p.suffix.lstrip(".").upper() or "text"
     try:
         return reader()
     except DataFileError:
@@ -670,6 +768,392 @@ def read_table(
         detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         msg = f"{p}: cannot read as {kind} ({detail})"
         raise DataFileError(msg) from None
+
+
+def open_table(
+    path: str | os.PathLike[str], *, group: str | None = None, channels: Sequence[str] = ()
+) -> Table:
+    """A :class:`Table` whose columns are read from the file only when asked for.
+
+    CSV and Parquet files are not loaded: :meth:`Table.batches` streams them
+    in batches of rows, so memory does not grow with the record. Other
+    formats are read as by :func:`read_table`.
+
+    Parameters
+    ----------
+    path : path
+        The data file (formats as :func:`read_table`).
+    group, channels
+        As for :func:`read_table`.
+
+    Returns
+    -------
+    Table
+    """
+    p = _existing(path)
+    suffix = p.suffix.lower()
+    if suffix == ".parquet":
+        return _reading(p, lambda: _lazy_parquet(p))
+    if suffix in CSV_SUFFIXES:
+        head = _read_head(p)
+        plan = None if b"\x00" in head else _csv_plan(p, head)
+        if plan is not None:
+            return _lazy_csv(p, plan, group, channels)
+    return read_table(p, group=group, channels=channels)
+
+
+def _lazy_csv(path: Path, plan: _CsvPlan, group: str | None, channels: Sequence[str]) -> Table:
+    def stream(names: Sequence[str]) -> Iterator[dict[str, FloatArray]]:
+        done = 0
+        try:
+            for batch in _csv_batches(path, plan, names):
+                done += len(batch[names[0]])
+                yield batch
+        except _Fallback:
+            # the careful reader raises naming the row, or reads what pyarrow could not
+            careful = _read_text_careful(path, group, channels)
+            arrays = [careful.get(n, finite=False) for n in names]
+            for lo in range(done, arrays[0].size, BATCH_ROWS):
+                yield {n: a[lo : lo + BATCH_ROWS] for n, a in zip(names, arrays, strict=True)}
+
+    def getter(name: str) -> Callable[[], FloatArray]:
+        return lambda: np.concatenate([b[name] for b in stream([name])])
+
+    return Table(
+        path, plan.names, {n: getter(n) for n in plan.names}, units=plan.units, _stream=stream
+    )
+
+
+def _lazy_parquet(path: Path) -> Table:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    schema = pq.ParquetFile(path).schema_arrow
+    raw: dict[str, str] = {}
+    units: dict[str, str] = {}
+    for fld in schema:
+        if not (pa.types.is_integer(fld.type) or pa.types.is_floating(fld.type)):
+            continue
+        bare, unit = split_unit(fld.name)
+        raw[bare] = fld.name
+        if unit is not None:
+            units[bare] = unit
+    if not raw:
+        msg = f"{path}: the Parquet file holds no numeric columns"
+        raise DataFileError(msg)
+
+    def stream(names: Sequence[str]) -> Iterator[dict[str, FloatArray]]:
+        source = pq.ParquetFile(path)
+        for batch in source.iter_batches(batch_size=BATCH_ROWS, columns=[raw[n] for n in names]):
+            yield {
+                n: np.asarray(col.to_numpy(zero_copy_only=False), dtype=np.float64)
+                for n, col in zip(names, batch.columns, strict=True)
+            }
+
+    def getter(name: str) -> Callable[[], FloatArray]:
+        return lambda: np.concatenate([b[name] for b in stream([name])] or [np.empty(0)])
+
+    return Table(path, list(raw), {n: getter(n) for n in raw}, units=units, _stream=stream)
+
+
+@dataclass(frozen=True)
+class Block:
+    """Consecutive samples of a recording: time in s, input and output converted.
+
+    Attributes
+    ----------
+    start : int
+        Index of the block's first sample in the record.
+    t, x : ndarray
+    y : ndarray or None
+    """
+
+    start: int
+    t: FloatArray
+    x: FloatArray
+    y: FloatArray | None
+
+
+@dataclass(frozen=True)
+class RecordingStream:
+    """A recording read block by block: memory does not grow with its length.
+
+    Made by :func:`open_recording`. Each call of :meth:`blocks` reads the file
+    again from its start, so several passes (statistics, then a fit) need no
+    copy in memory. The checks and conversions are those of
+    :func:`read_recording`, which collects this stream.
+
+    Attributes
+    ----------
+    path : Path
+    names : tuple
+        Column names of input, output and time (None where not from a column).
+    units : tuple
+        Units of input and output after conversion (see :class:`Recording`).
+    t_start, t_stop : float
+        The window asked for (s): ``t_start <= t < t_stop`` (infinite: open).
+    """
+
+    path: Path
+    names: tuple[str, str | None, str | None]
+    units: tuple[str | None, str | None]
+    t_start: float
+    t_stop: float
+    _table: Table = field(repr=False)
+    _source_units: tuple[str | None, str | None, str | None] = field(repr=False)
+    _rate: float | None = field(default=None, repr=False)
+    _step: float | None = field(default=None, repr=False)
+    _warned: set[str] = field(default_factory=set, repr=False, compare=False)  # once per stream
+
+    def in_window(self, t: FloatArray) -> FloatArray:
+        """Which of the times ``t`` (s) lie in the window (a boolean array).
+
+        Parameters
+        ----------
+        t : ndarray
+
+        Returns
+        -------
+        ndarray of bool
+        """
+        return np.asarray((t >= self.t_start) & (t < self.t_stop))
+
+    def empty_window(self, first: float, last: float) -> DataFileError:
+        """The error for a window holding no sample of a record from ``first`` to ``last`` (s).
+
+        Parameters
+        ----------
+        first, last : float
+
+        Returns
+        -------
+        DataFileError
+        """
+        return DataFileError(
+            f"{self.path}: no samples in the time window [{self.t_start:g}, {self.t_stop:g}) s "
+            f"(the record spans {first:g} to {last:g} s)"
+        )
+
+    def blocks(self, progress: Callable[[int], None] | None = None) -> Iterator[Block]:
+        """The record from its first sample, block by block, checked and converted.
+
+        Parameters
+        ----------
+        progress : callable, optional
+            Called with the rows read so far.
+
+        Yields
+        ------
+        Block
+
+        Raises
+        ------
+        DataFileError
+            A value that is not finite, or a time that does not increase (naming
+            the row and column), or an empty record.
+        """
+        x_name, y_name, t_name = self.names
+        keys = [k for k in (x_name, y_name, t_name) if k is not None]
+        t_unit, x_unit, y_unit = self._source_units
+        where = f"{self.path}: column"
+        start = 0
+        t_last: float | None = None
+        for batch in self._table.batches(keys):
+            for name in keys:
+                check_finite(batch[name], start, f"{self.path}", name)
+            x = batch[x_name]
+            m = x.size
+            if t_name is not None:
+                t = batch[t_name]
+            elif self._rate is not None:
+                t = (start + np.arange(m, dtype=np.float64)) / self._rate
+            else:
+                assert self._step is not None
+                t = (start + np.arange(m, dtype=np.float64)) * self._step
+            check_increasing(t, t_last, start, f"{self.path}", t_name)
+            if m:
+                t_last = float(t[-1])
+            t_s, _ = to_standard(t, t_unit, "time", f"{where} {t_name!r}")
+            if start == 0 and m > 1:
+                self._check_interval(t_s)
+            x, _ = to_standard(x, x_unit, "input", f"{where} {x_name!r}")
+            y = None
+            if y_name is not None:
+                y, _ = to_standard(batch[y_name], y_unit, "output", f"{where} {y_name!r}")
+            yield Block(start, t_s, x, y)
+            start += m
+            if progress is not None:
+                progress(start)
+        if start == 0:
+            msg = f"{self.path}: column {x_name!r} is empty"
+            raise DataFileError(msg)
+
+    def _check_interval(self, t: FloatArray) -> None:
+        dt = float(np.median(np.diff(t)))
+        if not 1e-8 <= dt <= 60.0 and "interval" not in self._warned:
+            self._warned.add("interval")
+            warnings.warn(
+                f"{self.path}: the median sample interval is {dt:.3g} s; if the time column is "
+                "not in seconds, give its unit (a header such as 'time [ms]', or the time unit)",
+                UserWarning,
+                stacklevel=3,
+            )
+
+
+def check_finite(values: FloatArray, start: int, where: str, column: str) -> None:
+    """Raise naming the first NaN or infinite value of a block, by its row in the file.
+
+    Parameters
+    ----------
+    values : ndarray
+    start : int
+        Row of the block's first value (0-based).
+    where : str
+        The file, for the message.
+    column : str
+
+    Raises
+    ------
+    DataFileError
+    """
+    bad = ~np.isfinite(values)
+    if bad.any():
+        i = int(np.argmax(bad))
+        msg = (
+            f"{where}: {values[i]} at row {start + i + 1}, column {column!r} "
+            "(values must be finite)"
+        )
+        raise DataFileError(msg)
+
+
+def check_increasing(
+    t: FloatArray, t_last: float | None, start: int, where: str, column: str | None
+) -> None:
+    """Raise unless a block of times increases strictly, from the previous block's last time on.
+
+    Parameters
+    ----------
+    t : ndarray
+        The block's times (any unit).
+    t_last : float or None
+        The previous block's last time (None for the first block).
+    start : int
+        Row of the block's first sample in the file (0-based).
+    where : str
+        The file, for the message.
+    column : str or None
+        The time column's name (None when the times were made from a rate).
+
+    Raises
+    ------
+    DataFileError
+        Naming the row, column and the two times.
+    """
+    if t_last is not None and t.size:
+        t = np.concatenate([[t_last], t])
+        start -= 1
+    steps = np.diff(t)
+    if steps.size and np.any(steps <= 0):
+        i = int(np.argmax(steps <= 0)) + 1
+        msg = (
+            f"{where}: time is not increasing at row {start + i + 1}"
+            f"{'' if column is None else f', column {column!r}'} "
+            f"({float(t[i - 1])!r} then {float(t[i])!r})"
+        )
+        raise DataFileError(msg)
+
+
+def open_recording(
+    path: str | os.PathLike[str],
+    *,
+    input_column: str = "voltage",
+    output_column: str | None = "charge",
+    time_column: str | None = "time",
+    rate: float | None = None,
+    group: str | None = None,
+    output_required: bool = True,
+    t_start: float | None = None,
+    t_stop: float | None = None,
+    input_unit: str | None = None,
+    output_unit: str | None = None,
+    time_unit: str | None = None,
+) -> RecordingStream:
+    """A recording to read block by block (arguments as :func:`read_recording`).
+
+    The columns, time source and units are settled here (a misnamed column
+    fails at once); the values are read by :meth:`RecordingStream.blocks`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    input_column, output_column, time_column, rate, group, output_required
+    t_start, t_stop, input_unit, output_unit, time_unit
+        See :func:`read_recording`.
+
+    Returns
+    -------
+    RecordingStream
+    """
+    # the default time name may be absent (TDMS states its sample interval instead)
+    wanted = [c for c in (input_column, output_column) if c is not None]
+    if time_column is not None and time_column != "time":
+        wanted.append(time_column)
+    table = open_table(path, group=group, channels=wanted)
+    x_name = table.resolve(input_column)
+    y_name: str | None = None
+    output = output_column
+    # the default output may be absent (predicting needs no output); a named one may not
+    if output is not None and (output_required or output in table or output != "charge"):
+        y_name = table.resolve(output)
+    time = time_column
+    t_name: str | None = None
+    step: float | None = None
+    if rate is not None:
+        if not rate > 0:
+            msg = f"the sample rate must be positive (Hz). Got {rate}."
+            raise DataFileError(msg)
+        if time is not None and (time in table or time != "time"):
+            msg = (
+                f"{table.path}: the file has a time column {time!r} and a sample rate was "
+                "given too; use one of them"
+            )
+            raise DataFileError(msg)
+    elif time is not None and (time in table or (time != "time" and time.isdigit())):
+        t_name = table.resolve(time)
+    elif time is not None and time != "time":
+        table.resolve(time)  # raises: names the available columns
+        raise AssertionError  # pragma: no cover
+    elif table.time_step is not None:
+        step = table.time_step
+    else:
+        msg = (
+            f"{table.path}: no time column 'time' and no sample rate; name the time column "
+            f"or give the rate in Hz (columns: {', '.join(map(repr, table.columns))})"
+        )
+        raise DataFileError(msg)
+    source = (
+        _unit(table, t_name, time_unit),
+        _unit(table, x_name, input_unit),
+        None if y_name is None else _unit(table, y_name, output_unit),
+    )
+    where = f"{table.path}: column"
+    empty = np.empty(0)
+    to_standard(empty, source[0], "time", f"{where} {t_name!r}")  # an unknown time unit fails now
+    x_unit = to_standard(empty, source[1], "input", f"{where} {x_name!r}")[1]
+    y_unit = None
+    if y_name is not None:
+        y_unit = to_standard(empty, source[2], "output", f"{where} {y_name!r}")[1]
+    return RecordingStream(
+        table.path,
+        (x_name, y_name, t_name),
+        (x_unit, y_unit),
+        -np.inf if t_start is None else float(t_start),
+        np.inf if t_stop is None else float(t_stop),
+        table,
+        source,
+        None if rate is None else float(rate),
+        step,
+    )
 
 
 def read_recording(
@@ -693,6 +1177,7 @@ def read_recording(
     Time comes from ``time_column`` when the file has it, else from
     ``rate`` (Hz), else from the file's own sample interval (TDMS); the time
     must be strictly increasing. ``output_column=None`` reads no output.
+    :func:`open_recording` reads the same block by block.
 
     Parameters
     ----------
@@ -725,93 +1210,33 @@ def read_recording(
         A missing or misnamed column, a time column together with a sample
         rate, a bad or non-increasing time, or units that contradict the file.
     """
-    # the default time name may be absent (TDMS states its sample interval instead)
-    wanted = [c for c in (input_column, output_column) if c is not None]
-    if time_column is not None and time_column != "time":
-        wanted.append(time_column)
-    table = read_table(path, group=group, channels=wanted, progress=progress)
-    x_name = table.resolve(input_column)
-    x = table.get(x_name)
-    y_name: str | None = None
-    y: FloatArray | None = None
-    output = output_column
-    if output is not None:
-        # the default output may be absent (predicting needs no output); a named one may not
-        if output_required or output in table or output != "charge":
-            y_name = table.resolve(output)
-            y = table.get(y_name)
-    time = time_column
-    t_name: str | None = None
-    if rate is not None:
-        if not rate > 0:
-            msg = f"the sample rate must be positive (Hz). Got {rate}."
-            raise DataFileError(msg)
-        if time is not None and (time in table or time != "time"):
-            msg = (
-                f"{table.path}: the file has a time column {time!r} and a sample rate was "
-                "given too; use one of them"
-            )
-            raise DataFileError(msg)
-        t = np.arange(x.size, dtype=np.float64) / float(rate)
-    elif time is not None and (time in table or (time != "time" and time.isdigit())):
-        t_name = table.resolve(time)
-        t = table.get(t_name)
-    elif time is not None and time != "time":
-        table.resolve(time)  # raises: names the available columns
-        raise AssertionError  # pragma: no cover
-    elif table.time_step is not None:
-        t = np.arange(x.size, dtype=np.float64) * table.time_step
-    else:
-        msg = (
-            f"{table.path}: no time column 'time' and no sample rate; name the time column "
-            f"or give the rate in Hz (columns: {', '.join(map(repr, table.columns))})"
-        )
-        raise DataFileError(msg)
-    for name, arr in ((t_name, t), (y_name, y)):
-        if arr is not None and arr.size != x.size:
-            msg = f"{table.path}: column {name!r} has {arr.size} values, {x_name!r} has {x.size}"
-            raise DataFileError(msg)
-    steps = np.diff(t)
-    if steps.size and np.any(steps <= 0):
-        i = int(np.argmax(steps <= 0)) + 1
-        msg = (
-            f"{table.path}: time is not increasing at row {i + 1}"
-            f"{'' if t_name is None else f', column {t_name!r}'} "
-            f"({float(t[i - 1])!r} then {float(t[i])!r})"
-        )
-        raise DataFileError(msg)
-    where = f"{table.path}: column"
-    t, _ = to_standard(t, _unit(table, t_name, time_unit), "time", f"{where} {t_name!r}")
-    x, x_unit = to_standard(x, _unit(table, x_name, input_unit), "input", f"{where} {x_name!r}")
-    y_unit = None
-    if y is not None and y_name is not None:
-        y, y_unit = to_standard(
-            y, _unit(table, y_name, output_unit), "output", f"{where} {y_name!r}"
-        )
-    if t.size > 1:
-        dt = float(np.median(np.diff(t)))
-        if not 1e-8 <= dt <= 60.0:
-            warnings.warn(
-                f"{table.path}: the median sample interval is {dt:.3g} s; if the time column is "
-                "not in seconds, give its unit (a header such as 'time [ms]', or the time unit)",
-                UserWarning,
-                stacklevel=2,
-            )
+    stream = open_recording(
+        path,
+        input_column=input_column,
+        output_column=output_column,
+        time_column=time_column,
+        rate=rate,
+        group=group,
+        output_required=output_required,
+        t_start=t_start,
+        t_stop=t_stop,
+        input_unit=input_unit,
+        output_unit=output_unit,
+        time_unit=time_unit,
+    )
+    blocks = list(stream.blocks(progress))
+    t = np.concatenate([b.t for b in blocks])
+    x = np.concatenate([b.x for b in blocks])
+    ys = [b.y for b in blocks if b.y is not None]
+    y = np.concatenate(ys) if ys else None
     window = slice(None)
     if t_start is not None or t_stop is not None:
-        lo = -np.inf if t_start is None else float(t_start)
-        hi = np.inf if t_stop is None else float(t_stop)
-        i0, i1 = int(np.searchsorted(t, lo, "left")), int(np.searchsorted(t, hi, "left"))
+        i0 = int(np.searchsorted(t, stream.t_start, "left"))
+        i1 = int(np.searchsorted(t, stream.t_stop, "left"))
         if i1 <= i0:
-            msg = (
-                f"{table.path}: no samples in the time window [{lo:g}, {hi:g}) s "
-                f"(the record spans {float(t[0]):g} to {float(t[-1]):g} s)"
-            )
-            raise DataFileError(msg)
+            raise stream.empty_window(float(t[0]), float(t[-1]))
         window = slice(i0, i1)
-    return Recording(
-        t=t, x=x, y=y, names=(x_name, y_name, t_name), window=window, units=(x_unit, y_unit)
-    )
+    return Recording(t=t, x=x, y=y, names=stream.names, window=window, units=stream.units)
 
 
 def _unit(table: Table, column: str | None, declared: str | None) -> str | None:
@@ -854,6 +1279,37 @@ class DataSpec:
     input_unit: str | None = None
     output_unit: str | None = None
     time_unit: str | None = None
+
+    def open(
+        self, path: str | os.PathLike[str], *, output_required: bool = True
+    ) -> RecordingStream:
+        """:func:`open_recording` with these settings: the record block by block.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The data file.
+        output_required : bool, default True
+            Raise if the output column is missing (else read no output).
+
+        Returns
+        -------
+        RecordingStream
+        """
+        return open_recording(
+            path,
+            input_column=self.input_column,
+            output_column=self.output_column,
+            time_column=self.time_column,
+            rate=self.rate,
+            group=self.group,
+            output_required=output_required,
+            t_start=self.t_start,
+            t_stop=self.t_stop,
+            input_unit=self.input_unit,
+            output_unit=self.output_unit,
+            time_unit=self.time_unit,
+        )
 
     def read(
         self,
@@ -966,7 +1422,7 @@ def write_table(
     columns: Mapping[str, ArrayLike],
     units: Mapping[str, str | None] | None = None,
 ) -> Path:
-    """Write equal-length columns as CSV (header row, full precision) or ``.npz``.
+    """Write equal-length columns as CSV (header row, full precision), Parquet or ``.npz``.
 
     The file appears only when complete (temporary file, then rename).
 
@@ -984,49 +1440,96 @@ def write_table(
     -------
     Path
     """
+    write_blocks(path, [columns], units)
+    return Path(path)
+
+
+def write_blocks(
+    path: str | os.PathLike[str],
+    blocks: Iterable[Mapping[str, ArrayLike]],
+    units: Mapping[str, str | None] | None = None,
+) -> int:
+    """Write columns that arrive block by block; CSV and Parquet never hold more than one block.
+
+    The column names are those of the first block. The file appears only when
+    complete: an exception raised while the blocks are made (a bad row found
+    halfway) leaves no file. ``.npz`` cannot be appended to, so its blocks are
+    gathered in memory first.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.npz``, ``.parquet``, or a text file (CSV).
+    blocks : iterable of mapping
+        Column name to values; within a block all of one length.
+    units : mapping, optional
+        Column name to unit (see :func:`write_table`).
+
+    Returns
+    -------
+    int
+        Rows written.
+    """
     p = Path(path)
-    arrays = {k: np.asarray(v, dtype=np.float64).reshape(-1) for k, v in columns.items()}
-    sizes = {a.size for a in arrays.values()}
-    if len(sizes) > 1:
-        msg = f"columns to write have different lengths: {sorted(sizes)}"
-        raise DataFileError(msg)
-    if p.suffix.lower() == ".npz":
+    suffix = p.suffix.lower()
+    named = units or {}
+    rows = [0]
 
-        def write_npz(tmp: Path) -> None:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, **arrays, __piezohyst__=np.array(__version__))  # type: ignore[arg-type]
+    def arrays_of(block: Mapping[str, ArrayLike], names: list[str]) -> list[FloatArray]:
+        if list(block) != names:
+            msg = f"a block to write has columns {list(block)}, the first had {names}"
+            raise DataFileError(msg)
+        arrays = [np.asarray(v, dtype=np.float64).reshape(-1) for v in block.values()]
+        sizes = {a.size for a in arrays}
+        if len(sizes) > 1:
+            msg = f"columns to write have different lengths: {sorted(sizes)}"
+            raise DataFileError(msg)
+        rows[0] += arrays[0].size if arrays else 0
+        return arrays
 
-        atomic_write(p, write_npz)
-        return p
-    if p.suffix.lower() == ".parquet":
+    it = iter(blocks)
+    first = next(it, None)
+    names = [] if first is None else list(first)
+    labels = [f"{k} [{named[k]}]" if named.get(k) else k for k in names]
+    chain = itertools.chain([] if first is None else [first], it)
 
-        def write_parquet(tmp: Path) -> None:
-            import pyarrow as pa
-            import pyarrow.parquet as pq
+    def write_npz(tmp: Path) -> None:
+        parts = [arrays_of(b, names) for b in chain]
+        arrays = {
+            k: np.concatenate([part[j] for part in parts]) if parts else np.empty(0)
+            for j, k in enumerate(names)
+        }
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays, __piezohyst__=np.array(__version__))  # type: ignore[arg-type]
 
-            named = units or {}
-            schema_names = [f"{k} [{named[k]}]" if named.get(k) else k for k in arrays]
-            table = pa.table(dict(zip(schema_names, arrays.values(), strict=True)))
-            table = table.replace_schema_metadata({"written_by": f"piezohyst {__version__}"})
-            pq.write_table(table, tmp)
+    def write_parquet(tmp: Path) -> None:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
 
-        atomic_write(p, write_parquet)
-        return p
+        schema = pa.schema([(label, pa.float64()) for label in labels])
+        schema = schema.with_metadata({"written_by": f"piezohyst {__version__}"})
+        with pq.ParquetWriter(tmp, schema) as writer:
+            for block in chain:
+                columns = arrays_of(block, names)
+                writer.write_table(pa.Table.from_arrays(columns, schema=schema))
 
     def write_csv(tmp: Path) -> None:
         import pyarrow as pa
         import pyarrow.csv as pacsv
 
-        named = units or {}
-        header = io_csv_line([f"{k} [{named[k]}]" if named.get(k) else k for k in arrays])
         with open(tmp, "wb") as fh:
-            fh.write(f"{MARKER} {__version__}\n{header}".encode())
-            table = pa.table({f"c{i}": v for i, v in enumerate(arrays.values())})
-            # shortest round-trip decimal text, written in batches by pyarrow
-            pacsv.write_csv(table, fh, pacsv.WriteOptions(include_header=False, batch_size=1 << 16))
+            fh.write(f"{MARKER} {__version__}\n{io_csv_line(labels)}".encode())
+            schema = pa.schema([(f"c{i}", pa.float64()) for i in range(len(names))])
+            options = pacsv.WriteOptions(include_header=False, batch_size=1 << 16)
+            with pacsv.CSVWriter(fh, schema, write_options=options) as writer:
+                for block in chain:
+                    columns = arrays_of(block, names)
+                    # shortest round-trip decimal text, written in batches by pyarrow
+                    writer.write_table(pa.Table.from_arrays(columns, schema=schema))
 
-    atomic_write(p, write_csv)
-    return p
+    writers = {".npz": write_npz, ".parquet": write_parquet}
+    atomic_write(p, writers.get(suffix, write_csv))
+    return rows[0]
 
 
 def iter_columns(table: Table) -> Iterator[tuple[str, FloatArray]]:

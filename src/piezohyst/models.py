@@ -57,7 +57,17 @@ from .errors import (
     TimeAxisError,
 )
 from .hysteresis import PIHysteresis, Propagation
-from .identification import BLOCK, block_dt, default_thresholds, identify, term_columns
+from .identification import (
+    BLOCK,
+    Blocks,
+    Summary,
+    array_blocks,
+    block_dt,
+    default_thresholds,
+    identify,
+    term_columns,
+    without_time,
+)
 from .metrics import rmse
 from .persistence import (
     model_class,
@@ -424,7 +434,7 @@ class HysteresisModel:
         return {name: rules[name](value, name, owner) for name, value in self.get_params().items()}
 
     def _terms_to_fit(
-        self, x: FloatArray, params: dict[str, Any]
+        self, x_range: FloatArray, params: dict[str, Any]
     ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
         """Bound terms to fit and, for a selection, the subsets to choose from."""
         raise NotImplementedError
@@ -466,48 +476,102 @@ class HysteresisModel:
         InsufficientDataError
             Fewer samples than parameters.
         """
-        params = self.check_params()
         xs = as_signal(x, "x")
         ys = as_signal(y, "y")
         same_length(xs, ys, "x", "y")
-        x_lo, x_hi = float(xs.min()), float(xs.max())
-        if not x_hi - x_lo > 1e-12 * max(abs(x_lo), abs(x_hi), 1e-300):
+        ts = as_time(t, xs.size, required=False, owner=type(self).__name__)
+        blocks = array_blocks(xs, ys, ts)
+        summary = self._fit(blocks, initial_state, ts is not None)
+        if self._refine(xs, ys, ts, summary, initial_state):
+            self._score(blocks, summary)  # the refinement changed the model
+        return self
+
+    def fit_blocks(
+        self, blocks: Blocks, *, timed: bool = True, initial_state: ArrayLike | None = None
+    ) -> Self:
+        """Identify from a record read block by block: memory does not grow with its length.
+
+        The same identification as :meth:`fit` (to rounding): one pass for the
+        record's extremes, one accumulating the normal equations, one for the
+        fit quality. A file streams in through
+        :meth:`piezohyst.io.RecordingStream.blocks`.
+
+        Parameters
+        ----------
+        blocks : callable
+            Called once per pass, returns an iterable of ``(x, y, t)`` blocks
+            from the record's start (``t`` in s, or None; strictly increasing
+            across blocks, as the caller checks).
+        timed : bool, default True
+            Whether the blocks carry times.
+        initial_state : array_like, shape (n,), optional
+            As for :meth:`fit`.
+
+        Returns
+        -------
+        HysteresisModel
+            ``self``, fitted.
+
+        Raises
+        ------
+        ParameterError
+            A setting out of range, or one that needs the record in memory
+            (``optimize_thresholds``).
+        InsufficientDataError
+            A record without excitation, or with fewer samples than parameters.
+        """
+        if self.get_params().get("optimize_thresholds"):
             msg = (
-                f"the input never moves (constant at {float(xs[0]):g} {self.input_unit}): "
+                f"{type(self).__name__}(optimize_thresholds=True) searches the thresholds over "
+                "the record in memory: use fit"
+            )
+            raise ParameterError(msg)
+        self._fit(blocks, initial_state, timed)
+        return self
+
+    def _fit(self, blocks: Blocks, initial_state: ArrayLike | None, timed: bool) -> Summary:
+        params = self.check_params()
+        sm = Summary.of(blocks)
+        if not sm.x_max - sm.x_min > 1e-12 * max(abs(sm.x_min), abs(sm.x_max), 1e-300):
+            msg = (
+                f"the input never moves (constant at {sm.x_first:g} {self.input_unit}): "
                 "a record without excitation holds no hysteresis to identify"
             )
             raise InsufficientDataError(msg)
         thr = params["thresholds"]
         if thr is None:
-            thr = default_thresholds(xs, params["n_operators"])
-        terms, subsets = self._terms_to_fit(xs, params)
+            thr = default_thresholds(sm.x_range, params["n_operators"])
+        terms, subsets = self._terms_to_fit(sm.x_range, params)
         rate = any(term.rate_dependent for term in terms)
-        ts = as_time(t, xs.size, required=rate, owner=type(self).__name__)
-        z0 = self._initial_operators(thr, xs, initial_state)
-        self._solve(PlayCore(thr), terms, subsets, xs, ys, ts if rate else None, z0)
-        self._refine(xs, ys, ts if rate else None, initial_state)
-        self.input_range_ = (x_lo, x_hi)
-        self.max_slew_rate_ = math.nan
-        if ts is not None and xs.size > 1:  # in blocks: no record-length temporaries
-            self.max_slew_rate_ = max(
-                float(
-                    np.max(np.abs(np.diff(xs[k : k + BLOCK + 1])) / np.diff(ts[k : k + BLOCK + 1]))
-                )
-                for k in range(0, xs.size - 1, BLOCK)
-            )
-        self.rmse_ = rmse(self.predict(xs, t=ts), ys)
-        self.nrmse_ = self.rmse_ / max(float(np.ptp(ys)), 1e-300)
-        self._check_leakage(xs, ys, ts)
-        return self
+        if rate and not timed:
+            as_time(None, sm.n, required=True, owner=type(self).__name__)  # raises
+        z0 = self._initial_operators(thr, sm.x_first, initial_state)
+        self._solve(PlayCore(thr), terms, subsets, blocks if rate else without_time(blocks), sm, z0)
+        self.input_range_ = (sm.x_min, sm.x_max)
+        self.max_slew_rate_ = sm.max_slew_rate
+        self._score(blocks, sm)
+        return sm
 
-    def _check_leakage(self, x: FloatArray, y: FloatArray, t: FloatArray | None) -> None:
+    def _score(self, blocks: Blocks, sm: Summary) -> None:
+        """Fit quality over the record (one pass, state carried) and the leakage check."""
+        sse = 0.0
+        state: ModelState | None = None
+        for x, y, t in blocks():
+            run = self.propagate(x, t if self.rate_dependent_ else None, state)
+            state = run.state
+            sse += float(np.sum((run.output - y) ** 2))
+        self.rmse_ = math.sqrt(sse / sm.n)
+        self.nrmse_ = self.rmse_ / max(sm.y_max - sm.y_min, 1e-300)
+        self._check_leakage(sm)
+
+    def _check_leakage(self, sm: Summary) -> None:
         """Warn when the identified leakage drains the capacitance faster than one sample."""
         growth = self.growth_coefficients()
-        if t is None or t.size < 2 or "integral" not in growth:
+        if math.isnan(sm.t_first) or sm.n < 2 or "integral" not in growth:
             return
         conductance = growth["integral"][0]
-        capacitance = float(np.ptp(y)) / float(np.ptp(x))  # mean slope, output per input unit
-        dt = float(t[-1] - t[0]) / (t.size - 1)  # mean interval: no record-length temporaries
+        capacitance = (sm.y_max - sm.y_min) / (sm.x_max - sm.x_min)  # mean slope, output per input
+        dt = (sm.t_last - sm.t_first) / (sm.n - 1)  # mean interval
         if conductance > 0 and capacitance / conductance < dt:
             warnings.warn(
                 f"the identified leakage {conductance:.3g} {self.output_unit}/"
@@ -515,14 +579,14 @@ class HysteresisModel:
                 f"{capacitance / conductance:.3g} s, less than one sample ({dt:.3g} s): check "
                 "the time unit",
                 UserWarning,
-                stacklevel=3,
+                stacklevel=4,
             )
 
     def _initial_operators(
-        self, thr: FloatArray, xs: FloatArray, initial_state: ArrayLike | None
+        self, thr: FloatArray, x_first: float, initial_state: ArrayLike | None
     ) -> FloatArray:
         if initial_state is None:
-            return np.full(thr.size, xs[0])
+            return np.full(thr.size, x_first)
         z0 = as_signal(initial_state, "initial_state")
         if z0.size != thr.size:
             msg = f"'initial_state' must hold one state per operator ({thr.size}). Got {z0.size}."
@@ -534,12 +598,13 @@ class HysteresisModel:
         core: PlayCore,
         terms: list[Term],
         subsets: list[tuple[int, ...]] | None,
-        x: FloatArray,
-        y: FloatArray,
-        t: FloatArray | None,
+        blocks: Blocks,
+        summary: Summary,
         z0: FloatArray,
     ) -> None:
-        sol = identify(core, terms, x, y, t, z0, min_slope=float(self.min_slope), subsets=subsets)
+        sol = identify(
+            core, terms, blocks, summary, z0, min_slope=float(self.min_slope), subsets=subsets
+        )
         params = np.concatenate([sol.core, *[c for c in sol.coefficients if c is not None]])
         tiny = np.finfo(np.float64).tiny * 2**20  # below this, parameters lose digits
         lost = (params != 0) & (np.abs(params) < tiny)
@@ -564,9 +629,15 @@ class HysteresisModel:
         return "+".join(removed) or "none"
 
     def _refine(
-        self, x: FloatArray, y: FloatArray, t: FloatArray | None, initial_state: ArrayLike | None
-    ) -> None:
-        """Optional nonlinear refinement after the linear solve (none by default)."""
+        self,
+        x: FloatArray,
+        y: FloatArray,
+        t: FloatArray | None,
+        summary: Summary,
+        initial_state: ArrayLike | None,
+    ) -> bool:
+        """Optional nonlinear refinement after the linear solve; True if it changed the model."""
+        return False
 
     def set_fitted(
         self, core: PIHysteresis, terms: tuple[Term, ...], coefs: tuple[FloatArray, ...]
@@ -1183,9 +1254,9 @@ class PIModel(HysteresisModel):
     _rules: ClassVar[dict[str, Rule]] = {"terms": _terms}
 
     def _terms_to_fit(
-        self, x: FloatArray, params: dict[str, Any]
+        self, x_range: FloatArray, params: dict[str, Any]
     ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
-        terms = [term.bind(x) for term in params["terms"]]
+        terms = [term.bind(x_range) for term in params["terms"]]
         return [term for term in terms if term.width > 0], None
 
     @classmethod
@@ -1238,7 +1309,7 @@ class ClassicalPI(HysteresisModel):
     cli_name = "classical-pi"
 
     def _terms_to_fit(
-        self, x: FloatArray, params: dict[str, Any]
+        self, x_range: FloatArray, params: dict[str, Any]
     ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
         return [], None
 
@@ -1278,7 +1349,7 @@ class ActivePI(HysteresisModel):
     cli_name = "active-pi"
 
     def _terms_to_fit(
-        self, x: FloatArray, params: dict[str, Any]
+        self, x_range: FloatArray, params: dict[str, Any]
     ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
         return [Integral()], None
 
@@ -1379,20 +1450,20 @@ class GeneralizedPI(HysteresisModel):
     }
 
     def _terms_to_fit(
-        self, x: FloatArray, params: dict[str, Any]
+        self, x_range: FloatArray, params: dict[str, Any]
     ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
         k, creep = params["asymmetry"], params["creep"]
         auto = params["growth_terms"] is None
         names = GROWTH_TERMS if auto else params["growth_terms"]
         fixed: list[Term] = []
         if k:
-            fixed.append(Asymmetry(k).bind(x))
+            fixed.append(Asymmetry(k).bind(x_range))
         if creep is not None:
             fixed.append(creep)
         makers: dict[str, Term] = {
             "integral": Integral(),
             "time": TimeTerm(),
-            "abs_integral": AbsIntegral().bind(x),
+            "abs_integral": AbsIntegral().bind(x_range),
         }
         terms = fixed + [makers[name] for name in names]
         if not auto:
@@ -1407,30 +1478,38 @@ class GeneralizedPI(HysteresisModel):
         return terms, subsets
 
     def _refine(
-        self, x: FloatArray, y: FloatArray, t: FloatArray | None, initial_state: ArrayLike | None
-    ) -> None:
+        self,
+        x: FloatArray,
+        y: FloatArray,
+        t: FloatArray | None,
+        summary: Summary,
+        initial_state: ArrayLike | None,
+    ) -> bool:
         """Nonlinear least squares over the thresholds, the linear solve inside."""
         if not self.optimize_thresholds or self.operator_.n_operators < 2:
-            return
+            return False
         from scipy.optimize import minimize
 
         terms = list(self.terms_)
         selection = self.selection_
         span = max(float(np.ptp(x)), 1e-300)
         start = np.log(np.diff(self.thresholds_) / span)
+        t_fit = t if self.rate_dependent_ else None
+        blocks = array_blocks(x, y, t_fit)
 
         def objective(logs: FloatArray) -> float:
             thr = np.concatenate([[0.0], np.cumsum(np.exp(logs) * span)])
             if thr[-1] >= span:  # a play wider than the range never reverses
                 return 1e300
-            z0 = self._initial_operators(thr, x, initial_state)
-            self._solve(PlayCore(thr), terms, None, x, y, t, z0)
-            return rmse(self.predict(x, t=t), y) / span
+            z0 = self._initial_operators(thr, float(x[0]), initial_state)
+            self._solve(PlayCore(thr), terms, None, blocks, summary, z0)
+            return rmse(self.predict(x, t=t_fit), y) / span
 
         before = objective(start)
         res = minimize(objective, start, method="L-BFGS-B", options={"maxiter": 30})
         objective(res.x if res.fun < before else start)
         self.selection_ = selection
+        return True
 
     def set_fitted(
         self, core: PIHysteresis, terms: tuple[Term, ...], coefs: tuple[FloatArray, ...]

@@ -145,13 +145,16 @@ class Term:
         """
         return {}
 
-    def bind(self, x: FloatArray) -> Term:
-        """This term with its data-dependent settings fixed from the training input.
+    def bind(self, x_range: FloatArray) -> Term:
+        """This term with its data-dependent settings fixed from the training input's range.
+
+        Only the range is given, so a fit can stream a record it never holds
+        in memory.
 
         Parameters
         ----------
-        x : ndarray
-            The training input (input units).
+        x_range : ndarray, shape (2,)
+            The training input's minimum and maximum (input units).
 
         Returns
         -------
@@ -385,9 +388,9 @@ class AbsIntegral(RunningIntegral):
         """See :meth:`Term.get_params`."""
         return {"scale": self.scale}
 
-    def bind(self, x: FloatArray) -> AbsIntegral:
+    def bind(self, x_range: FloatArray) -> AbsIntegral:
         """See :meth:`Term.bind`: the scale defaults to the input's span."""
-        return self if self.scale is not None else AbsIntegral(_span_scale(x))
+        return self if self.scale is not None else AbsIntegral(_span_scale(x_range))
 
     def integrand(self, x: FloatArray) -> FloatArray:
         """See :meth:`RunningIntegral.integrand`: x|x|/s."""
@@ -443,11 +446,11 @@ class Asymmetry(Term):
             "scale": self.scale,
         }
 
-    def bind(self, x: FloatArray) -> Asymmetry:
+    def bind(self, x_range: FloatArray) -> Asymmetry:
         """See :meth:`Term.bind`: knots evenly inside the input's range, scale its span."""
         if self.knots is not None and self.scale is not None:
             return self
-        lo, hi = float(x.min()), float(x.max())
+        lo, hi = float(x_range.min()), float(x_range.max())
         knots = lo + (hi - lo) * np.arange(1, self.n_knots + 1) / (self.n_knots + 1)
         return Asymmetry(self.n_knots, knots.tolist(), max(hi - lo, 1e-300))
 

@@ -11,11 +11,12 @@ these; from Python they are one call each too::
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import json
 import math
 import os
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -27,10 +28,19 @@ from ._validation import FloatArray, check_float, check_int
 from .compensator import Compensator, CompensatorSettings
 from .errors import DataFileError, OverwriteError, ParameterError
 from .export import Precision, c_paths, write_c
-from .identification import default_thresholds, history_state
-from .io import DataSpec, Recording, is_piezohyst_output, read_table, write_table
+from .identification import Blocks, Summary, default_thresholds, history_state
+from .io import (
+    DataSpec,
+    RecordingStream,
+    check_finite,
+    check_increasing,
+    is_piezohyst_output,
+    open_table,
+    write_blocks,
+    write_table,
+)
 from .metrics import hysteresis_width, nrmse, rmse
-from .models import HysteresisModel, model_class
+from .models import HysteresisModel, ModelState, model_class
 from .persistence import load_model
 from .simulation import DEFAULT_PRESET, PRESETS, BenchRecord, simulate
 from .units import to_standard
@@ -185,30 +195,85 @@ def fit_file(
         elif (value if isinstance(value, str) else tuple(value)) != default:
             msg = f"the {name!r} setting does not apply to {model}"
             raise ParameterError(msg)
-    rec = (data_spec or DataSpec()).read(data, progress=progress)
-    assert rec.y is not None
-    w = rec.window
-    x, y, t = rec.x[w], rec.y[w], rec.t[w]
-    fitted: HysteresisModel
-    x_unit, y_unit = rec.units
+    stream = (data_spec or DataSpec()).open(data)
+    x_unit, y_unit = stream.units
     settings: dict[str, Any] = {
         "n_operators": operators,
         "input_unit": x_unit or "V",
-        "output_unit": y_unit or _default_unit(rec.names[1]),
+        "output_unit": y_unit or _default_unit(stream.names[1]),
         **extra,
     }
     estimator = cls(**settings)
-    start = w.start or 0
-    if start > 0:  # the window continues a known input history: start from its state
-        thresholds = default_thresholds(x, check_int(operators, "operators", "fit", 1, 1000))
+    passes = _Passes(progress)
+    window = _window_blocks(stream, passes)
+    initial_state = None
+    if math.isfinite(stream.t_start):  # the window continues a known input history
+        thresholds = default_thresholds(
+            Summary.of(window).x_range, check_int(operators, "operators", "fit", 1, 1000)
+        )
         estimator = cls(**{**settings, "thresholds": thresholds})
-        z0 = history_state(rec.x[:start], thresholds)
-        fitted = estimator.fit(x, y, t=t, initial_state=z0)
-    else:
-        fitted = estimator.fit(x, y, t=t)
+        initial_state = _history(stream, thresholds, passes.tick())
+    fitted: HysteresisModel = estimator.fit_blocks(window, initial_state=initial_state)
     if out is not None:
         fitted.save(out)
     return fitted
+
+
+def _window_blocks(stream: RecordingStream, passes: _Passes) -> Blocks:
+    """The window of a record as a block source (each call a new pass over the file)."""
+
+    def window() -> Iterator[tuple[FloatArray, FloatArray, FloatArray | None]]:
+        first = last = math.nan
+        found = False
+        for b in stream.blocks(passes.tick()):
+            assert b.y is not None
+            first = float(b.t[0]) if b.start == 0 else first
+            last = float(b.t[-1])
+            i0, i1 = np.searchsorted(b.t, [stream.t_start, stream.t_stop], "left")
+            if i1 > i0:
+                found = True
+                yield b.x[i0:i1], b.y[i0:i1], b.t[i0:i1]
+        if not found:
+            raise stream.empty_window(first, last)
+
+    return window
+
+
+class _Passes:
+    """Progress over several passes of one record: rows read, counted over all passes."""
+
+    def __init__(self, progress: Progress) -> None:
+        self.progress = progress
+        self.done = 0  # rows of the finished passes
+        self.rows = 0  # rows of the pass under way
+
+    def tick(self) -> Callable[[int], None] | None:
+        """The callback for the next pass."""
+        if self.progress is None:
+            return None
+        self.done += self.rows
+        self.rows = 0
+        report = self.progress
+
+        def tick(rows: int) -> None:
+            self.rows = rows
+            report(self.done + rows)
+
+        return tick
+
+
+def _history(
+    stream: RecordingStream, thresholds: FloatArray, progress: Callable[[int], None] | None
+) -> FloatArray | None:
+    """Operator states at the window's start, from the input before it (None: no history)."""
+    z = None
+    for b in stream.blocks(progress):
+        before = int(np.searchsorted(b.t, stream.t_start, "left"))
+        if before:
+            z = history_state(b.x[:before], thresholds, z)
+        if before < b.t.size:
+            break
+    return z
 
 
 def _default_unit(column: str | None) -> str:
@@ -216,10 +281,8 @@ def _default_unit(column: str | None) -> str:
     return {"charge": "C", "displacement": "m"}.get(column or "", "a.u.")
 
 
-def _measured(rec: Recording, model: HysteresisModel, data: PathLike) -> FloatArray:
-    """The recorded output in the model's unit; a unit the file does not state is assumed."""
-    assert rec.y is not None
-    unit = rec.units[1]
+def _check_measured_unit(unit: str | None, model: HysteresisModel, data: PathLike) -> None:
+    """The recorded output must be in the model's unit; a unit the file omits is assumed."""
     if unit is None:
         warnings.warn(
             f"{data}: the output column states no unit; taken to be in the model's unit "
@@ -230,12 +293,32 @@ def _measured(rec: Recording, model: HysteresisModel, data: PathLike) -> FloatAr
     elif unit != model.output_unit:
         msg = f"{data}: the output column is in {unit!r}, the model predicts {model.output_unit!r}"
         raise DataFileError(msg)
-    return rec.y
 
 
 def _load(model_path: PathLike) -> HysteresisModel:
     model: HysteresisModel = load_model(model_path)
     return model
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """What :func:`predict_file` wrote.
+
+    Attributes
+    ----------
+    samples : int
+        Rows written (the window's samples).
+    rmse, nrmse : float
+        Error against the measured output over the window (output units; a
+        fraction of its span); NaN when the file has no output column.
+    unit : str
+        The output unit.
+    """
+
+    samples: int
+    rmse: float
+    nrmse: float
+    unit: str
 
 
 def predict_file(
@@ -246,25 +329,50 @@ def predict_file(
     data_spec: DataSpec | None = None,
     force: bool = False,
     progress: Progress = None,
-) -> dict[str, FloatArray]:
+) -> Prediction:
     """Write ``time,predicted`` (plus ``measured`` when the data has the output column).
 
-    ``force`` replaces an existing file piezohyst did not write (see :func:`guard_outputs`);
+    The record streams through block by block, the model's state carried, so
+    memory does not grow with its length. The model runs from the record's
+    first sample: a window's start has a history. ``force`` replaces an
+    existing file piezohyst did not write (see :func:`guard_outputs`);
     ``progress`` is called with the rows read so far.
     """
     guard_outputs([out], [model_path, data], force=force)
     model = _load(model_path)
-    rec = (data_spec or DataSpec()).read(data, output_required=False, progress=progress)
-    w = rec.window  # the model runs over the whole record: the window's start has a history
-    columns: dict[str, FloatArray] = {
-        "time": rec.t[w],
-        "predicted": model.predict(rec.x, t=rec.t)[w],
-    }
-    if rec.y is not None:
-        columns["measured"] = _measured(rec, model, data)[w]
+    stream = (data_spec or DataSpec()).open(data, output_required=False)
+    measured = stream.names[1] is not None
+    if measured:
+        _check_measured_unit(stream.units[1], model, data)
+    sse, lo, hi = 0.0, math.inf, -math.inf
+
+    def rows() -> Iterator[dict[str, FloatArray]]:
+        nonlocal sse, lo, hi
+        state: ModelState | None = None
+        first = last = math.nan
+        written = 0
+        for b in stream.blocks(progress):
+            run = model.propagate(b.x, b.t, state)
+            state = run.state
+            first = float(b.t[0]) if b.start == 0 else first
+            last = float(b.t[-1])
+            i0, i1 = np.searchsorted(b.t, [stream.t_start, stream.t_stop], "left")
+            if i1 <= i0:
+                continue
+            cols = {"time": b.t[i0:i1], "predicted": run.output[i0:i1]}
+            if b.y is not None:
+                cols["measured"] = y = b.y[i0:i1]
+                sse += float(np.sum((cols["predicted"] - y) ** 2))
+                lo, hi = min(lo, float(y.min())), max(hi, float(y.max()))
+            written += i1 - i0
+            yield cols
+        if not written:  # raised before the file is renamed into place: nothing is written
+            raise stream.empty_window(first, last)
+
     unit = model.output_unit
-    write_table(out, columns, units={"time": "s", "predicted": unit, "measured": unit})
-    return columns
+    n = write_blocks(out, rows(), units={"time": "s", "predicted": unit, "measured": unit})
+    err = math.sqrt(sse / n) if measured else math.nan
+    return Prediction(n, err, err / (hi - lo) if hi > lo else math.nan, unit)
 
 
 @dataclass(frozen=True)
@@ -343,7 +451,7 @@ def compensate_file(
     """
     guard_outputs([out], [model_path, target], force=force)
     model = _load(model_path)
-    table = read_table(target, progress=progress)
+    table = open_table(target)
     if column is None:
         others = [c for c in table.columns if c != "time"]
         column = "desired" if "desired" in table else (others[0] if len(others) == 1 else None)
@@ -355,28 +463,26 @@ def compensate_file(
             raise DataFileError(msg)
     name = table.resolve(column)
     expected = "m" if settings.domain == "displacement" else model.output_unit
-    desired, unit = to_standard(
-        table.get(name, finite=False), table.unit(name), "output", f"{target}: column {name!r}"
-    )
+    where = f"{target}: column {name!r}"
+    unit = to_standard(np.empty(0), table.unit(name), "output", where)[1]
     if unit is not None and unit != expected:
         msg = f"{target}: the desired column is in {unit!r}, the compensator expects {expected!r}"
         raise DataFileError(msg)
-    if "time" in table:
-        t = table.get("time")
-        steps = np.diff(t)
-        if steps.size and not np.all(steps > 0):
-            msg = f"{target}: the time column is not increasing"
-            raise DataFileError(msg)
-        fs = settings.sample_rate or (1.0 / float(np.median(steps)) if steps.size else 1.0)
-    elif settings.sample_rate is not None:
-        fs = float(settings.sample_rate)
-        t = np.arange(desired.size) / fs
-    else:
+    timed = "time" in table
+    if not timed and settings.sample_rate is None:
         msg = (
             f"{target}: no time column; the commands need their sample times: add a 'time' "
             "column (s) or give the sample rate"
         )
         raise DataFileError(msg)
+    keys = [name, "time"] if timed else [name]
+    batches = table.batches(keys)
+    head = next(batches)  # the sample rate comes from the first batch
+    t_unit = table.unit("time") if timed else None
+    fs = settings.sample_rate
+    if fs is None:
+        steps = np.diff(to_standard(head["time"], t_unit, "time", f"{target}: column 'time'")[0])
+        fs = 1.0 / float(np.median(steps)) if steps.size and np.all(steps > 0) else 1.0
     slew = settings.slew_rate
     if slew is None and math.isfinite(model.max_slew_rate_) and model.max_slew_rate_ > 0:
         slew = model.max_slew_rate_
@@ -386,30 +492,46 @@ def compensate_file(
         start = float(np.clip(model.initial_state_[0], comp.v_min, comp.v_max))
     comp.reset(voltage=start)
     preamble = comp.precondition(max(3, round(fs))) if precondition else np.empty(0)
-    commands = comp.process(desired)
-    finite = int(np.count_nonzero(np.isfinite(desired)))
-    if finite and comp.saturated_count > 0.5 * finite:
-        lo, hi = _reachable(model, comp, settings)
-        unit = "m" if settings.domain == "displacement" else model.output_unit
-        msg = (
-            f"{target}: {comp.saturated_count} of {finite} desired values "
-            f"({100 * comp.saturated_count / finite:.0f} %) are out of reach of "
-            f"[{comp.v_min:g}, {comp.v_max:g}] V, which reaches about [{lo:.4g}, {hi:.4g}] {unit}; "
-            "check the units and the sign of the gain"
-        )
-        raise ParameterError(msg)
-    n = preamble.size
-    times = np.concatenate([t[0] - np.arange(n, 0, -1) / fs, t]) if n else t
-    write_table(
-        out,
-        {
-            "time": times,
-            "command": np.concatenate([preamble, commands]),
-            "desired": np.concatenate([np.full(n, np.nan), desired]),
-        },
-        units={"time": "s", "command": "V", "desired": expected},
-    )
-    return Compensation(comp, n, fs)
+    finite = 0
+
+    def rows() -> Iterator[dict[str, FloatArray]]:
+        nonlocal finite
+        row = 0
+        t_last: float | None = None
+        for batch in itertools.chain([head], batches):
+            desired = to_standard(batch[name], table.unit(name), "output", where)[0]
+            if timed:
+                check_finite(batch["time"], row, f"{target}", "time")
+                check_increasing(batch["time"], t_last, row, f"{target}", "time")
+                t_last = float(batch["time"][-1])
+                t = to_standard(batch["time"], t_unit, "time", f"{target}: column 'time'")[0]
+            else:
+                t = (row + np.arange(desired.size, dtype=np.float64)) / fs
+            if row == 0 and preamble.size:
+                n = preamble.size
+                yield {
+                    "time": t[0] - np.arange(n, 0, -1) / fs,
+                    "command": preamble,
+                    "desired": np.full(n, np.nan),
+                }
+            finite += int(np.count_nonzero(np.isfinite(desired)))
+            yield {"time": t, "command": comp.process(desired), "desired": desired}
+            row += desired.size
+            if progress is not None:
+                progress(row)
+        if finite and comp.saturated_count > 0.5 * finite:  # before the file is renamed into place
+            lo, hi = _reachable(model, comp, settings)
+            unit = "m" if settings.domain == "displacement" else model.output_unit
+            msg = (
+                f"{target}: {comp.saturated_count} of {finite} desired values "
+                f"({100 * comp.saturated_count / finite:.0f} %) are out of reach of "
+                f"[{comp.v_min:g}, {comp.v_max:g}] V, which reaches about [{lo:.4g}, {hi:.4g}] "
+                f"{unit}; check the units and the sign of the gain"
+            )
+            raise ParameterError(msg)
+
+    write_blocks(out, rows(), units={"time": "s", "command": "V", "desired": expected})
+    return Compensation(comp, preamble.size, fs)
 
 
 def _reachable(
@@ -515,7 +637,9 @@ def model_report(
     rec = spec.read(data, progress=progress)
     w = rec.window  # the model runs over the whole record: the window's start has a history
     pred = model.predict(rec.x, t=rec.t)[w]
-    x, y, t = rec.x[w], _measured(rec, model, data)[w], rec.t[w]
+    assert rec.y is not None
+    _check_measured_unit(rec.units[1], model, data)
+    x, y, t = rec.x[w], rec.y[w], rec.t[w]
     out_dir = Path(out)
     out_dir.mkdir(parents=True, exist_ok=True)
     in_u, out_u = model.input_unit, model.output_unit
