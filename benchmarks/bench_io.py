@@ -67,8 +67,13 @@ def main() -> None:
             "import piezohyst as ph,sys;t=ph.read_table(sys.argv[1]);[t.get(c) for c in t.columns]"
         )
         t_read, m_read = measured([sys.executable, "-c", ours, str(d / "big.csv")])
+        short = args.rows // 5  # the same fit on a fifth of the record: memory must not follow
+        ph.write_table(d / "short.csv", {k: v[:short] for k, v in cols.items()},
+                       units={"time": "s", "voltage": "V", "charge": "C"})  # fmt: skip
+        t_short, m_short = measured([*fit[:2], str(d / "short.csv"), *fit[2:]])
         print(f"  fit from .npz             {t_npz:7.2f} s   peak RSS {m_npz:7.0f} MiB")
         print(f"  fit from CSV              {t_csv:7.2f} s   peak RSS {m_csv:7.0f} MiB")
+        print(f"  fit from CSV, {short:,} rows {t_short:5.2f} s   peak RSS {m_short:7.0f} MiB")
         print(f"  CSV / npz                 {t_csv / t_npz:7.2f} x")
         print(f"  read only: piezohyst       {t_read:7.2f} s   peak RSS {m_read:7.0f} MiB")
         print(f"  read only: np.loadtxt      {t_ref:7.2f} s   peak RSS {m_ref:7.0f} MiB (naive)")
@@ -81,8 +86,20 @@ def main() -> None:
         predict = [piezohyst, "predict", str(d / "m.json"), str(d / "huge.csv"), "--force",
                    "-o", str(d / "pred.csv")]  # fmt: skip
         t_pred, m_pred = measured(predict)
+        comp = [piezohyst, "compensate", str(d / "m.json"), str(d / "target.csv"), "--force",
+                "-o", str(d / "cmd.csv")]  # fmt: skip
+        model = ph.load_model(d / "m.json")
+        t = np.arange(args.predict_rows) / 1000.0
+        lo, hi = model.input_range_
+        v = lo + (hi - lo) * (0.3 + 0.3 * (1 - np.cos(2 * np.pi * 0.5 * t)))
+        ph.write_table(d / "target.csv", {"time": t, "desired": model.hysteresis_.predict(v)},
+                       units={"time": "s", "desired": model.output_unit})  # fmt: skip
+        del t, v
+        t_comp, m_comp = measured(comp)
         print(f"predict {args.predict_rows:,} rows CSV -> CSV")
         print(f"  piezohyst predict          {t_pred:7.2f} s   peak RSS {m_pred:7.0f} MiB")
+        print(f"compensate {args.predict_rows:,} rows CSV -> CSV")
+        print(f"  piezohyst compensate       {t_comp:7.2f} s   peak RSS {m_comp:7.0f} MiB")
 
 
 if __name__ == "__main__":

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +35,7 @@ def split_blocks(
     edges = [0, *sorted(set(c % x.size for c in cuts) - {0}), x.size]
 
     def blocks():  # type: ignore[no-untyped-def]
-        for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        for lo, hi in itertools.pairwise(edges):
             yield x[lo:hi], y[lo:hi], None if t is None else t[lo:hi]
 
     return blocks

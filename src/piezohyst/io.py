@@ -367,32 +367,47 @@ def _csv_batches(
     import pyarrow as pa
     import pyarrow.csv as pacsv
 
-    try:
-        reader = pacsv.open_csv(
-            path,
-            read_options=pacsv.ReadOptions(
-                skip_rows=plan.skip,
-                column_names=plan.names,
-                encoding=plan.encoding,
-                block_size=CSV_BLOCK_BYTES,
-            ),
-            parse_options=pacsv.ParseOptions(delimiter=plan.delimiter),
-            convert_options=pacsv.ConvertOptions(
-                column_types=dict.fromkeys(plan.names, pa.float64()),
-                include_columns=list(columns),
-                decimal_point="," if plan.decimal_comma else ".",
-                strings_can_be_null=False,
-            ),
-        )
-        for batch in reader:
-            if any(col.null_count for col in batch.columns):
-                raise _Fallback  # empty cells: the careful reader names their rows
-            yield {
-                name: np.ascontiguousarray(col.to_numpy(zero_copy_only=False), np.float64)
-                for name, col in zip(columns, batch.columns, strict=True)
-            }
-    except (pa.ArrowInvalid, pa.ArrowTypeError, pa.ArrowNotImplementedError, ValueError):
-        raise _Fallback from None
+    read = pacsv.ReadOptions(column_names=plan.names, encoding=plan.encoding)
+    parse = pacsv.ParseOptions(delimiter=plan.delimiter)
+    convert = pacsv.ConvertOptions(
+        column_types=dict.fromkeys(plan.names, pa.float64()),
+        include_columns=list(columns),
+        decimal_point="," if plan.decimal_comma else ".",
+        strings_can_be_null=False,
+    )
+    # pieces cut at line ends, each parsed on its own: pyarrow's own streaming
+    # reader buffers ahead and its memory grew with the file (measured)
+    with open(path, "rb") as fh:
+        for _ in range(plan.skip):
+            fh.readline()
+        rest = b""
+        while True:
+            piece = fh.read(CSV_BLOCK_BYTES)
+            text = rest + piece
+            if piece:
+                cut = text.rfind(b"\n") + 1
+                if cut == 0:
+                    rest = text
+                    continue
+                text, rest = text[:cut], text[cut:]
+            if text.strip():
+                try:
+                    batch = pacsv.read_csv(
+                        _io.BytesIO(text),
+                        read_options=read,
+                        parse_options=parse,
+                        convert_options=convert,
+                    )
+                except (pa.ArrowInvalid, pa.ArrowTypeError, pa.ArrowNotImplementedError):
+                    raise _Fallback from None
+                if any(col.null_count for col in batch.columns):
+                    raise _Fallback  # empty cells: the careful reader names their rows
+                yield {
+                    name: np.ascontiguousarray(col.to_numpy(zero_copy_only=False), np.float64)
+                    for name, col in zip(columns, batch.columns, strict=True)
+                }
+            if not piece:
+                return
 
 
 def _read_csv_arrow(
