@@ -453,7 +453,8 @@ def fit(
     if growth != "auto":
         terms = () if growth == "none" else tuple(g.strip() for g in growth.split(",") if g.strip())
 
-    with rows_progress(ctx, f"reading {data.name}, then fitting {model_name}") as progress:
+    # three passes over the file (extremes, normal equations, fit quality), rows counted on
+    with rows_progress(ctx, f"fitting {model_name} to {data.name}, 3 passes") as progress:
         model = _run(
             ctx,
             lambda: fit_file(
