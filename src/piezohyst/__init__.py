@@ -25,6 +25,7 @@ from .errors import (
 from .hysteresis import PIHysteresis, Propagation
 from .identification import default_thresholds
 from .io import read_recording, read_table, write_table
+from .leakage import Leakage, calibrate_leakage
 from .models import (
     ActivePI,
     ClassicalPI,
@@ -35,6 +36,7 @@ from .models import (
     PIModel,
 )
 from .persistence import load_model
+from .selfsensing import ControllerState, SelfSensingController
 from .simulation import simulate
 from .terms import Term
 
@@ -43,11 +45,13 @@ __all__ = [
     "ClassicalPI",
     "Compensator",
     "CompensatorState",
+    "ControllerState",
     "DataFileError",
     "GeneralizedPI",
     "HysteresisModel",
     "InsufficientDataError",
     "InverseSpec",
+    "Leakage",
     "ModelFileError",
     "ModelState",
     "NonFiniteError",
@@ -59,10 +63,12 @@ __all__ = [
     "ParameterError",
     "PiezohystError",
     "Propagation",
+    "SelfSensingController",
     "ShapeError",
     "Term",
     "TimeAxisError",
     "__version__",
+    "calibrate_leakage",
     "default_thresholds",
     "io",
     "load_model",

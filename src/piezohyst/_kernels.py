@@ -70,6 +70,27 @@ def running_integral(x, dt, start, out):  # type: ignore[no-untyped-def]
     return acc
 
 
+@njit(cache=True)
+def constant_runs(x, tol, edges):  # type: ignore[no-untyped-def]
+    """Split ``x`` into runs that stay within ``tol`` of their first sample.
+
+    Writes the run boundaries ``0 = e_0 < e_1 < ... < e_m = len(x)`` into
+    ``edges`` and returns ``m``.
+    """
+    n = x.shape[0]
+    m = 0
+    edges[0] = 0
+    k = 0
+    while k < n:
+        j = k + 1
+        while j < n and abs(x[j] - x[k]) <= tol:
+            j += 1
+        m += 1
+        edges[m] = j
+        k = j
+    return m
+
+
 @njit(cache=True, fastmath=FASTMATH)
 def lag_filter(x, dt, tau, state, out):  # type: ignore[no-untyped-def]
     """First-order lags of unit DC gain (creep operators), exact for piecewise-constant input.
@@ -288,6 +309,131 @@ def numeric_process(desired, tables, static, lags, config, state, out):  # type:
         out[k] = numeric_step(desired[k], tables, static, lags, config, state)
 
 
+# Self-sensing controller (analytic inverse only): settings ``ctl``, state ``cs``.
+CTL_KP = 0  # proportional gain on the charge error (model units per model unit)
+CTL_KI = 1  # integral gain per sample
+CTL_G0 = 2  # leakage conductance (model units per V*s)
+CTL_G1 = 3  # voltage-dependent conductance, times v|v| / scale
+CTL_INV_SCALE = 4  # 1 / scale (1/V)
+CTL_DT = 5  # sample interval (s)
+CTL_REF = 6  # model output meaning desired 0 (displacement domain)
+CTL_INV_GAIN = 7  # model units per desired unit
+CTL_TOL = 8  # |achieved - asked| below this counts as delivered (model units)
+CTL_HOLD_TOL = 9  # a desired value within this of the hold's start is still the hold
+CTL_HOLD_SAMPLES = 10  # samples per leakage refresh window
+CTL_REFRESH = 11  # fraction of the bias error corrected per window; 0 = off
+CTL_SIZE = 12
+
+CS_INTEGRAL = 0  # integral action (model units)
+CS_LEAK = 1  # leaked charge since the frame was set (model units)
+CS_FRAME = 2  # measured frame -> model frame
+CS_D_PREV = 3  # the previous sample's desired output (model units; NaN: none)
+CS_STARTED = 4  # 1 once a measurement set the frame
+CS_FAULTS = 5  # non-finite measurements (feedforward used)
+CS_ERROR = 6  # the last charge error (model units)
+CS_BIAS = 7  # bias current in use (model units per s)
+CS_HOLD_REF = 8  # desired value at the start of the current hold
+CS_HOLD_N = 9  # samples into the current refresh window
+CS_SX = 10  # regression sums of the integral over the window
+CS_SY = 11
+CS_SXX = 12
+CS_SXY = 13
+CS_SM = 14
+CS_REFRESHES = 15  # leakage refreshes done
+CS_SIZE = 16
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def _hold_window_reset(cs):  # type: ignore[no-untyped-def]
+    cs[CS_HOLD_N] = 0.0
+    cs[CS_SX] = 0.0
+    cs[CS_SY] = 0.0
+    cs[CS_SXX] = 0.0
+    cs[CS_SXY] = 0.0
+    cs[CS_SM] = 0.0
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def controller_step(desired, measured, tables, config, state, ctl, cs):  # type: ignore[no-untyped-def]
+    """One command (V): feedforward inverse of ``desired`` plus PI feedback on the charge.
+
+    ``measured`` is the charge read at this sample, the response to the
+    commands before it; the leakage estimate integrated over the last
+    command's sample is subtracted, and the first measurement after a reset
+    sets the frame (measured charge -> model output). The feedback acts in the
+    charge domain before the inverse, so the inverse linearises the loop.
+    The integral only moves when the command delivered what was asked (not
+    at a limit or the slew limit): anti-windup by conditional integration.
+    """
+    n = tables.shape[1]
+    end = state.shape[0]
+    last = state[end + ST_LAST]
+    if cs[CS_STARTED] > 0.0:  # leakage over the sample the last command was held
+        current = ctl[CTL_G0] * last + ctl[CTL_G1] * last * abs(last) * ctl[CTL_INV_SCALE]
+        cs[CS_LEAK] += (current + cs[CS_BIAS]) * ctl[CTL_DT]
+    e = 0.0
+    if math.isfinite(measured):
+        qc = measured - cs[CS_LEAK]
+        if cs[CS_STARTED] == 0.0:
+            y = config[CFG_OFFSET]
+            for i in range(n):
+                y += tables[TAB_W, i] * state[i]
+            cs[CS_FRAME] = y - qc
+            cs[CS_STARTED] = 1.0
+        qc += cs[CS_FRAME]
+        if math.isfinite(cs[CS_D_PREV]):
+            e = cs[CS_D_PREV] - qc
+    else:
+        cs[CS_FAULTS] += 1.0
+    cs[CS_ERROR] = e
+    if not math.isfinite(desired):  # hold the last safe command
+        state[end + ST_NONFINITE] += 1.0
+        cs[CS_D_PREV] = math.nan
+        _hold_window_reset(cs)
+        return last
+    d = ctl[CTL_REF] + desired * ctl[CTL_INV_GAIN]
+    integral = cs[CS_INTEGRAL] + ctl[CTL_KI] * e
+    u = d + ctl[CTL_KP] * e + integral
+    v = compensator_step(u, tables, config, state)
+    y = config[CFG_OFFSET]
+    for i in range(n):
+        y += tables[TAB_W, i] * state[i]
+    delivered = abs(y - u) <= ctl[CTL_TOL]
+    if delivered:
+        cs[CS_INTEGRAL] = integral
+    cs[CS_D_PREV] = d
+    if ctl[CTL_REFRESH] > 0.0:  # the integral's drift on a hold is the leakage error
+        if delivered and abs(d - cs[CS_HOLD_REF]) <= ctl[CTL_HOLD_TOL]:
+            cs[CS_HOLD_N] += 1.0
+            k = cs[CS_HOLD_N]
+            if k > 0.25 * ctl[CTL_HOLD_SAMPLES]:  # after the loop settled on the hold
+                yi = cs[CS_INTEGRAL]
+                cs[CS_SM] += 1.0
+                cs[CS_SX] += k
+                cs[CS_SY] += yi
+                cs[CS_SXX] += k * k
+                cs[CS_SXY] += k * yi
+            if k >= ctl[CTL_HOLD_SAMPLES]:
+                m = cs[CS_SM]
+                den = m * cs[CS_SXX] - cs[CS_SX] * cs[CS_SX]
+                if m > 2.0 and den > 0.0:
+                    slope = (m * cs[CS_SXY] - cs[CS_SX] * cs[CS_SY]) / den  # per sample
+                    cs[CS_BIAS] -= ctl[CTL_REFRESH] * slope / ctl[CTL_DT]
+                    cs[CS_REFRESHES] += 1.0
+                _hold_window_reset(cs)
+        else:
+            cs[CS_HOLD_REF] = d
+            _hold_window_reset(cs)
+    return v
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def controller_process(desired, measured, tables, config, state, ctl, cs, out):  # type: ignore[no-untyped-def]
+    """``controller_step`` over a block of recorded samples."""
+    for k in range(desired.shape[0]):
+        out[k] = controller_step(desired[k], measured[k], tables, config, state, ctl, cs)
+
+
 def warm_up() -> None:
     """Compile every kernel once (numba caches the result on disk)."""
     x = np.zeros(2)
@@ -307,3 +453,6 @@ def warm_up() -> None:
     compensator_step(0.0, tables, config, state)
     compensator_process(x, tables, config, state, np.empty(2))
     numeric_process(x, tables, np.zeros((3, 0)), np.zeros((3, 0)), config, np.zeros(4), np.empty(2))
+    ctl = np.zeros(CTL_SIZE)
+    ctl[CTL_DT] = ctl[CTL_INV_GAIN] = 1.0
+    controller_process(x, x, tables, config, state, ctl, np.zeros(CS_SIZE), np.empty(2))

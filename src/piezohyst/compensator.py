@@ -289,6 +289,15 @@ class Compensator:
         return CompensatorState(self._state[:n].copy(), lags.copy(), float(self._state[K.ST_LAST]))
 
     @property
+    def kernel_state(self) -> FloatArray:
+        """The live state array the kernels update (layout ``ST_*`` in ``_kernels``; no copy).
+
+        For loops built on this compensator's kernel (the self-sensing
+        controller); use :attr:`state` and :meth:`reset` otherwise.
+        """
+        return self._state
+
+    @property
     def nonfinite_count(self) -> int:
         """Desired values that were NaN or infinite (the last command was held)."""
         return int(self._state[K.ST_NONFINITE])

@@ -68,6 +68,7 @@ from .identification import (
     term_columns,
     without_time,
 )
+from .leakage import Leakage
 from .metrics import rmse
 from .persistence import (
     model_class,
@@ -908,7 +909,14 @@ class HysteresisModel:
         """
         return self._run(x, t, state, removed_only=True).output
 
-    def remove_growth(self, x: ArrayLike, y: ArrayLike, t: ArrayLike | None = None) -> FloatArray:
+    def remove_growth(
+        self,
+        x: ArrayLike,
+        y: ArrayLike,
+        t: ArrayLike | None = None,
+        *,
+        leakage: Leakage | None = None,
+    ) -> FloatArray:
         r"""Eq. 19: the measured output minus the identified growth, :math:`y - R y_2`.
 
         For a charge record this is the pure capacitor charge (Fig. 8).
@@ -921,13 +929,23 @@ class HysteresisModel:
             Measured output.
         t : array_like, shape (N,), optional
             Times (s).
+        leakage : Leakage, optional
+            Remove this leakage (e.g. calibrated from holds,
+            :func:`~piezohyst.leakage.calibrate_leakage`) instead of the
+            model's growth terms; needs ``t``.
 
         Returns
         -------
         ndarray, shape (N,)
         """
         ys = as_signal(y, "y")
-        g = self.growth(x, t)
+        if leakage is not None:
+            if t is None:
+                msg = "remove_growth with a leakage needs the sample times t (s). Got t=None."
+                raise TimeAxisError(msg)
+            g = leakage.charge(x, t)
+        else:
+            g = self.growth(x, t)
         same_length(g, ys, "x", "y")
         return np.asarray(ys - g)
 

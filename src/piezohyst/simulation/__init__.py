@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
-from .bench import DEFAULT_PRESET, PRESETS, BenchPreset, BenchRecord, simulate
+from .bench import DEFAULT_PRESET, PRESETS, Bench, BenchPreset, BenchRecord, Reading, simulate
 from .signals import SIGNALS, make_signal
 
 __all__ = [
     "DEFAULT_PRESET",
     "PRESETS",
     "SIGNALS",
+    "Bench",
     "BenchPreset",
     "BenchRecord",
+    "Reading",
     "make_signal",
     "simulate",
 ]

@@ -19,6 +19,7 @@ Signal chain (paper Fig. 3 and Section 4)::
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -30,7 +31,7 @@ from ..errors import ParameterError
 from . import _plant
 from .signals import make_signal
 
-__all__ = ["PRESETS", "BenchPreset", "BenchRecord", "simulate"]
+__all__ = ["PRESETS", "Bench", "BenchPreset", "BenchRecord", "Reading", "simulate"]
 
 
 @dataclass(frozen=True)
@@ -175,6 +176,220 @@ def _preisach_plane(p: BenchPreset, n: int = 120) -> tuple[FloatArray, FloatArra
     return (hh + cc).ravel(), (hh - cc).ravel(), w.ravel()
 
 
+class _Plant:
+    """The bench's physics with its state carried from call to call."""
+
+    def __init__(self, p: BenchPreset, v0: float) -> None:
+        self.p = p
+        self.alpha, self.beta, self.mu = _preisach_plane(p)
+        self.by_alpha = np.argsort(self.alpha)
+        self.by_beta = np.argsort(self.beta)
+        self.relays = np.where(0.5 * (self.alpha + self.beta) < v0, 1.0, -1.0)  # demagnetised
+        self.elec = np.array(
+            [p.c0, p.g_leak, p.leak_voltage_coeff, max(p.v_max, 1e-9), p.i_bias, p.c_ref, p.r_ref]
+        )
+        self.state = np.zeros(_plant.STATE_SIZE)
+        self.lsb = 2.0 * p.adc_range / 2**p.adc_bits
+
+    def run(
+        self, t: FloatArray, v: FloatArray, out: FloatArray | None = None
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Capacitor charge, leaked charge and amplifier output at each sample.
+
+        ``out`` (3, N) receives them when given (no allocation per call).
+        """
+        if out is None:
+            out = np.empty((3, v.size))
+        q_c, q_r, v_amp = out[0], out[1], out[2]
+        _plant.bench_kernel(
+            t, v, self.alpha, self.beta, self.mu, self.by_alpha, self.by_beta, self.relays,
+            self.elec, self.state, q_c, q_r, v_amp,
+        )  # fmt: skip
+        return q_c, q_r, v_amp
+
+    def adc(self, v_out: FloatArray) -> FloatArray:
+        """Charge (C) read through the quantising ADC from the amplifier output (V, noisy)."""
+        p = self.p
+        v_meas = np.clip(v_out, -p.adc_range, p.adc_range)
+        return np.asarray(np.round(v_meas / self.lsb) * self.lsb * p.c_ref, dtype=np.float64)
+
+    def laser(self, s: FloatArray) -> FloatArray:
+        """Displacement (m) in the laser sensor's resolution steps."""
+        res = self.p.laser_resolution
+        return np.asarray(np.round(s / res) * res, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class Reading:
+    """What the bench's DAQ reads at one sample.
+
+    Attributes
+    ----------
+    t : float
+        Time (s).
+    voltage : float
+        The voltage applied (V).
+    charge : float
+        Charge measured by the Sawyer-Tower circuit (C): all a self-sensing
+        controller may use.
+    displacement : float
+        The laser's reading (m): for checking only.
+    capacitor_charge, true_displacement : float
+        The simulator's hidden truth (C, m).
+    """
+
+    t: float
+    voltage: float
+    charge: float
+    displacement: float
+    capacitor_charge: float
+    true_displacement: float
+
+
+class Bench:
+    """The simulated bench driven one sample at a time: a plant for closed loops.
+
+    Each :meth:`apply` sends one voltage for one sample period and returns
+    what the DAQ reads at the end of it, as on a rig where the controller
+    reads the ADC, computes, and writes the DAC once per sample. The
+    measured charge at a sample is therefore the response to the commands
+    before it. Blocks (:meth:`apply_block`) equal the same samples one by one.
+
+    Parameters
+    ----------
+    preset : str or BenchPreset
+        Bench parameters (``dataclasses.replace`` a preset to change, say,
+        the op-amp's bias current).
+    voltage : float, default 0.0
+        The actuator rests here at t = 0, its hysteresis demagnetised about it.
+    seed : int, default 0
+        Seeds the measurement noise.
+
+    Examples
+    --------
+    >>> bench = Bench(seed=1)
+    >>> r = bench.apply(70.0)
+    >>> r.t, r.voltage, r.charge > 0
+    (0.001, 70.0, True)
+    """
+
+    def __init__(
+        self, preset: str | BenchPreset = DEFAULT_PRESET, *, voltage: float = 0.0, seed: int = 0
+    ) -> None:
+        self.preset = _preset(preset)
+        self._plant = _Plant(self.preset, float(voltage))
+        self._rng = np.random.default_rng(seed)
+        self._k = 0
+        self._q_rest = 0.0
+        self._t, self._v, self._out = np.zeros(1), np.zeros(1), np.zeros((3, 1))
+        self.reading = self.apply_block([float(voltage)], _at_rest=True)
+
+    @property
+    def sample_rate(self) -> float:
+        """Samples per second (Hz)."""
+        return float(self.preset.rate)
+
+    def apply(self, voltage: float) -> Reading:
+        """Send ``voltage`` for one sample; the DAQ's reading at its end.
+
+        Parameters
+        ----------
+        voltage : float
+            V, inside the preset's limits (an amplifier refuses others).
+
+        Returns
+        -------
+        Reading
+        """
+        p = self.preset
+        v = float(voltage)
+        if not (math.isfinite(v) and p.v_min - 1e-9 <= v <= p.v_max + 1e-9):
+            self.run([v])  # raises naming the limits
+        self._k += 1
+        self._t[0] = self._k / p.rate
+        self._v[0] = v
+        self._plant.run(self._t, self._v, self._out)  # the same arithmetic as run(), scalar
+        q_c, v_amp = float(self._out[0, 0]), float(self._out[2, 0])
+        noise = self._rng.standard_normal(2)
+        lsb = self._plant.lsb
+        v_meas = min(max(v_amp + p.amp_noise * float(noise[0]), -p.adc_range), p.adc_range)
+        s_true = p.gain * (q_c - self._q_rest)
+        res = p.laser_resolution
+        self.reading = Reading(
+            float(self._t[0]),
+            v,
+            round(v_meas / lsb) * lsb * p.c_ref,
+            round((s_true + p.laser_noise * float(noise[1])) / res) * res,
+            q_c,
+            s_true,
+        )
+        return self.reading
+
+    def apply_block(self, voltages: ArrayLike, *, _at_rest: bool = False) -> Reading:
+        """Send several voltages, one per sample; the reading after the last.
+
+        Use :meth:`run` for every sample's reading.
+
+        Parameters
+        ----------
+        voltages : array_like
+            V, one per sample.
+
+        Returns
+        -------
+        Reading
+        """
+        rec = self.run(voltages, _at_rest=_at_rest)
+        k = -1
+        self.reading = Reading(
+            float(rec.t[k]),
+            float(rec.voltage[k]),
+            float(rec.charge[k]),
+            float(rec.displacement[k]),
+            float(rec.capacitor_charge[k]),
+            float(rec.true_displacement[k]),
+        )
+        return self.reading
+
+    def run(self, voltages: ArrayLike, *, _at_rest: bool = False) -> BenchRecord:
+        """Send voltages, one per sample, and record every reading.
+
+        Parameters
+        ----------
+        voltages : array_like
+            V, one per sample.
+
+        Returns
+        -------
+        BenchRecord
+            ``true_growth_rate`` is the preset's conductance at 0 V.
+
+        Raises
+        ------
+        ParameterError
+            A voltage outside the preset's limits, or not finite.
+        """
+        p = self.preset
+        v = as_signal(voltages, "voltages")
+        if v.min() < p.v_min - 1e-9 or v.max() > p.v_max + 1e-9:
+            msg = (
+                f"voltage must stay within the actuator's limits [{p.v_min}, {p.v_max}] V. "
+                f"Got [{float(v.min()):.6g}, {float(v.max()):.6g}] V."
+            )
+            raise ParameterError(msg)
+        first = self._k if _at_rest else self._k + 1
+        t = (first + np.arange(v.size, dtype=np.float64)) / p.rate
+        self._k = first + v.size - 1
+        q_c, q_r, v_amp = self._plant.run(t, v)
+        if _at_rest:
+            self._q_rest = float(q_c[0])
+        noise = self._rng.standard_normal((v.size, 2))
+        charge = self._plant.adc(v_amp + p.amp_noise * noise[:, 0])
+        s_true = p.gain * (q_c - self._q_rest)
+        s_meas = self._plant.laser(s_true + p.laser_noise * noise[:, 1])
+        return BenchRecord(t, v, charge, s_meas, q_c, q_r, s_true, p.g_leak, p)
+
+
 def simulate(
     voltage: ArrayLike | None = None,
     t: ArrayLike | None = None,
@@ -236,23 +451,13 @@ def simulate(
             f"Got [{float(v.min()):.6g}, {float(v.max()):.6g}] V."
         )
         raise ParameterError(msg)
-    q_c = np.empty_like(v)
-    q_r = np.empty_like(v)
-    v_amp = np.empty_like(v)
-    alpha, beta, mu = _preisach_plane(p)
-    relays = np.where(0.5 * (alpha + beta) < v[0], 1.0, -1.0)  # demagnetised about V(0)
-    elec = np.array(
-        [p.c0, p.g_leak, p.leak_voltage_coeff, max(p.v_max, 1e-9), p.i_bias, p.c_ref, p.r_ref]
-    )
-    _plant.bench_kernel(ts, v, alpha, beta, mu, relays, elec, q_c, q_r, v_amp)
+    plant = _Plant(p, float(v[0]))
+    q_c, q_r, v_amp = plant.run(ts, v)
 
     rng = np.random.default_rng(seed)
-    lsb = 2.0 * p.adc_range / 2**p.adc_bits
-    v_meas = np.clip(v_amp + p.amp_noise * rng.standard_normal(v.size), -p.adc_range, p.adc_range)
-    charge = np.round(v_meas / lsb) * lsb * p.c_ref
+    charge = plant.adc(v_amp + p.amp_noise * rng.standard_normal(v.size))
     s_true = p.gain * (q_c - q_c[0])
-    s_meas = s_true + p.laser_noise * rng.standard_normal(v.size)
-    s_meas = np.round(s_meas / p.laser_resolution) * p.laser_resolution
+    s_meas = plant.laser(s_true + p.laser_noise * rng.standard_normal(v.size))
 
     integral = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(ts))])
     denom = float(integral @ integral)

@@ -79,6 +79,24 @@ def hold(amplitude: float, frequency: float, duration: float, rate: float) -> Fl
     return amplitude * shape
 
 
+def decaying(amplitude: float, frequency: float, duration: float, rate: float) -> FloatArray:
+    """Loops that shrink towards a centre, 10 s at a time, the centre moving each time.
+
+    Every 10 s the loops start at full range and decay to 15 % of it around a
+    new centre (50, 20, then 70 % of ``amplitude``): minor loops of many sizes
+    at several places in the major loop, where a PI model's congruent minor
+    loops differ most from a real actuator's.
+    """
+    t = _time(duration, rate)
+    block = 10.0
+    k = np.floor(t / block).astype(int)
+    a = 0.15 + 0.85 * np.exp(-3.0 * (t % block) / block)
+    centre = np.array([0.5, 0.2, 0.7])[k % 3]
+    return np.asarray(
+        amplitude * ((1 - a) * centre + a * 0.5 * (1 - np.cos(2 * np.pi * frequency * t)))
+    )
+
+
 _LEVELS = np.array([1.0, 0.0, 0.5, 1.0, 0.25, 0.75, 0.0, 1.0, 0.5, 0.0, 0.75, 0.25, 1.0, 0.0])
 
 
@@ -103,6 +121,7 @@ def levels(amplitude: float, frequency: float, duration: float, rate: float) -> 
 
 SIGNALS = {
     "fixed": fixed,
+    "decaying": decaying,
     "multi": multi,
     "bipolar": bipolar,
     "triangle": triangle,
