@@ -1,0 +1,250 @@
+"""Leakage from holds, the self-sensing controller, and the step-by-step bench."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import piezohyst as ph
+from piezohyst.metrics import hysteresis_width
+from piezohyst.simulation import PRESETS, Bench, make_signal
+
+FS = 1000.0
+
+
+@pytest.fixture(scope="module")
+def model() -> ph.ActivePI:
+    rec = ph.simulate(signal="hold", duration=10.0, seed=0)
+    return ph.ActivePI(12).fit(rec.voltage, rec.charge, t=rec.t)
+
+
+def staircase(levels: list[float], seconds: float = 3.0) -> tuple[np.ndarray, np.ndarray]:
+    v = np.concatenate([np.full(round(seconds * FS), lv) for lv in levels])
+    return np.arange(v.size) / FS, v
+
+
+# ------------------------------------------------------------------ bench
+def test_bench_steps_equal_one_run() -> None:
+    v = 10 + 60 * (1 - np.cos(np.linspace(0, 6 * np.pi, 1500)))
+    one = Bench(seed=4, voltage=10.0)
+    readings = [one.apply(x) for x in v]
+    block = Bench(seed=4, voltage=10.0).run(v)
+    np.testing.assert_array_equal([r.charge for r in readings], block.charge)
+    np.testing.assert_array_equal([r.displacement for r in readings], block.displacement)
+    np.testing.assert_array_equal([r.t for r in readings], block.t)
+    assert one.reading == readings[-1] and one.reading.t == pytest.approx(1.5)
+    rest = Bench(seed=4, voltage=10.0).reading
+    assert rest.t == 0.0 and rest.true_displacement == 0.0
+    with pytest.raises(ph.ParameterError, match="actuator's limits"):
+        one.apply(200.0)
+    with pytest.raises(ph.NonFiniteError, match="must be finite"):
+        one.apply(math.nan)
+
+
+def test_bench_charge_reads_the_previous_command() -> None:
+    bench = Bench(seed=0)
+    before = bench.reading.capacitor_charge
+    after = bench.apply(100.0)
+    assert after.capacitor_charge > before + 1e-6  # the reading after a command shows it
+
+
+# ---------------------------------------------------------------- leakage
+@settings(max_examples=30, deadline=None)
+@given(
+    st.floats(1e-11, 1e-8),
+    st.floats(0.0, 1e-8),
+    st.floats(-1e-10, 1e-10),
+)
+def test_calibration_recovers_the_leakage(g0: float, g1: float, bias: float) -> None:
+    t, v = staircase([0.0, 40.0, 80.0, 120.0, 60.0])
+    true = ph.Leakage(g0, g1, bias, scale=120.0)
+    q = 1e-6 * np.tanh(v / 50.0) + true.charge(v, t)  # hysteresis still on holds
+    leak = ph.calibrate_leakage(t, v, q, scale=120.0, settle=0.0)
+    assert len(leak.holds) == 5
+    for name in ("conductance", "quadratic", "bias"):
+        got, want = getattr(leak, name), getattr(true, name)
+        assert got == pytest.approx(want, rel=1e-6, abs=1e-6 * (abs(g0) * 120 + 1e-12))
+
+
+def test_calibration_refuses_what_holds_cannot_tell(tmp_path: Path) -> None:
+    t, v = staircase([70.0, 70.0])
+    q = np.cumsum(1e-9 * v) / FS
+    with pytest.raises(ph.InsufficientDataError, match=r"1 distinct voltage\(s\) \(70 V\)"):
+        ph.calibrate_leakage(t, v, q, terms=("conductance", "bias"))
+    leak = ph.calibrate_leakage(t, v, q, terms=("conductance",))
+    assert leak.conductance == pytest.approx(1e-9, rel=1e-6) and leak.bias == 0.0
+    with pytest.raises(ph.ParameterError, match="distinct names"):
+        ph.calibrate_leakage(t, v, q, terms=("ohmic",))
+    with pytest.raises(ph.InsufficientDataError, match="0 hold"):
+        ph.calibrate_leakage(t, np.sin(t), q, terms=("bias",))
+    leak.save(tmp_path / "leak.json")
+    back = ph.Leakage.load(tmp_path / "leak.json")
+    assert back == leak and back.holds == leak.holds
+    (tmp_path / "bad.json").write_text('{"kind": "leakage", "conductance": "x"}')
+    with pytest.raises(ph.ModelFileError, match=r"bad.json: .*'conductance' must be a number"):
+        ph.Leakage.load(tmp_path / "bad.json")
+
+
+def test_leakage_from_a_model_and_remove_growth(model: ph.ActivePI) -> None:
+    leak = ph.Leakage.from_model(model)
+    assert leak.conductance == model.growth_rate_ and leak.bias == 0.0
+    rec = ph.simulate(signal="fixed", duration=4.0, seed=9)
+    np.testing.assert_allclose(
+        model.remove_growth(rec.voltage, rec.charge, rec.t, leakage=leak),
+        model.remove_growth(rec.voltage, rec.charge, rec.t),
+        rtol=0,
+        atol=1e-18,
+    )
+    gpi = ph.GeneralizedPI(8, growth_terms=("integral", "time", "abs_integral"))
+    gpi.fit(rec.voltage, rec.charge, t=rec.t)
+    full = ph.Leakage.from_model(gpi)
+    c = gpi.growth_coefficients()
+    assert (full.conductance, full.quadratic, full.bias) == (
+        c["integral"][0],
+        c["abs_integral"][0],
+        c["time"][0],
+    )
+
+
+# -------------------------------------------------------------- controller
+def controller(model: ph.ActivePI, **kw: object) -> ph.SelfSensingController:
+    return ph.SelfSensingController(model, v_min=0.0, v_max=140.0, sample_rate=FS, **kw)  # type: ignore[arg-type]
+
+
+def test_without_feedback_it_is_the_compensator(model: ph.ActivePI) -> None:
+    _t, shape = make_signal("decaying", amplitude=1.0, duration=6.0)
+    desired = model.hysteresis_.predict(20 + 100 * shape)
+    ctl = controller(model, ki=0.0)
+    comp = ph.Compensator(model, v_min=0.0, v_max=140.0)
+    noise = np.random.default_rng(0).normal(0, 1e-6, desired.size)
+    np.testing.assert_array_equal(ctl.process(desired, noise), comp.process(desired))
+
+
+def test_process_equals_steps_in_any_chunks(model: ph.ActivePI) -> None:
+    rng = np.random.default_rng(1)
+    n = 3000
+    desired = model.hysteresis_.predict(70 + 60 * np.sin(np.arange(n) / 150))
+    measured = desired + rng.normal(0, 2e-8, n) + 1e-6
+    desired[[10, 500]] = np.nan
+    measured[[20, 21, 2500]] = [np.inf, np.nan, np.nan]
+    kw = {"slew_rate": 5e4, "refresh_leakage": True, "hold_time": 0.1}
+    a, b = controller(model, **kw), controller(model, **kw)
+    whole = a.process(desired, measured)
+    steps = [b.step(d, m) for d, m in zip(desired, measured, strict=True)]
+    np.testing.assert_array_equal(whole, steps)
+    np.testing.assert_array_equal(a.feedback, b.feedback)
+    assert a.nonfinite_count == 2 and a.measurement_faults == 3
+    saved = a.state
+    tail = a.process(desired[:700], measured[:700])
+    a.reset(saved)
+    np.testing.assert_array_equal(a.process(desired[:700], measured[:700]), tail)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.lists(
+        st.one_of(st.floats(-1e300, 1e300), st.sampled_from([math.nan, math.inf, -math.inf])),
+        min_size=1,
+        max_size=40,
+    ),
+    st.lists(
+        st.one_of(st.floats(-1e300, 1e300), st.sampled_from([math.nan, math.inf])),
+        min_size=40,
+        max_size=40,
+    ),
+)
+def test_every_command_is_finite_and_inside_the_limits(
+    model: ph.ActivePI, desired: list[float], measured: list[float]
+) -> None:
+    ctl = ph.SelfSensingController(
+        model, v_min=10.0, v_max=120.0, sample_rate=FS, slew_rate=2e4, ki=1.0, kp=0.5
+    )
+    start = ctl.last_command
+    out = ctl.process(np.array(desired), np.array(measured[: len(desired)]))
+    assert np.all(np.isfinite(out)) and np.all((out >= 10.0) & (out <= 120.0))
+    steps = np.abs(np.diff(np.concatenate([[start], out])))
+    assert np.all(steps <= 20.0 * (1 + 1e-12))  # 2e4 V/s at 1 kHz
+
+
+def test_a_constant_offset_in_the_measurement_changes_nothing(model: ph.ActivePI) -> None:
+    desired = model.hysteresis_.predict(70 + 50 * np.sin(np.arange(2000) / 100))
+    measured = desired * 1.02
+    a = controller(model).process(desired, measured)
+    b = controller(model).process(desired, measured + 3e-6)  # the frame absorbs it
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-6)
+
+
+def test_anti_windup_recovers_at_once(model: ph.ActivePI) -> None:
+    h = model.hysteresis_
+    top = float(h.predict(np.array([0.0, 140.0]))[1])
+    desired = np.concatenate([np.full(500, 2 * top), h.predict(np.full(500, 70.0))])
+    plant_gain = 0.9  # the real actuator gives 10 % less charge than the model
+    ctl = controller(model, ki=0.5)
+    m = 0.0
+    out = []
+    for k, d in enumerate(desired):
+        v = ctl.step(d, m)
+        out.append(v)
+        m = plant_gain * float(h.predict(np.array([v]))[0])
+        if k == 499:
+            assert abs(ctl.integral) < 1e-3 * top  # 500 samples at the limit: no windup
+    out_a = np.array(out)
+    assert np.all(out_a[:500] == 140.0) and ctl.saturated_count >= 499
+    assert np.all(out_a[501:] < 140.0)  # leaves the limit at once
+
+
+def test_online_refresh_finds_an_unseen_bias(model: ph.ActivePI) -> None:
+    # a plant that is the model itself plus a bias current nobody told the controller
+    h = model.hysteresis_
+    bias = 2e-9  # C/s
+    levels = h.predict(np.array([30.0, 90.0, 60.0, 120.0]))
+    desired = np.repeat(levels, 4000)
+    ctl = controller(model, refresh_leakage=True, hold_time=1.0, refresh_gain=0.8)
+    state = None
+    m, leaked = float(h.predict(np.array([0.0]))[0]), 0.0
+    for d in desired:
+        v = ctl.step(d, m)
+        run = h.propagate(np.array([v]), None, state)
+        state = run.state
+        leaked += bias / FS + model.growth_rate_ * v / FS
+        m = float(run.output[0]) + leaked
+    assert ctl.leakage_refreshes >= 8
+    assert ctl.leakage_estimate.bias == pytest.approx(bias, rel=0.05)
+
+
+def test_refuses_models_it_cannot_invert_analytically() -> None:
+    rec = ph.simulate(duration=4.0)
+    creep = ph.GeneralizedPI(6, creep=(0.5,), growth_terms=("integral",))
+    creep.fit(rec.voltage, rec.charge, t=rec.t)
+    with pytest.raises(ph.ParameterError, match="analytically"):
+        ph.SelfSensingController(creep, v_min=0.0, v_max=140.0, sample_rate=FS)
+    model = ph.ActivePI(5).fit(rec.voltage, rec.charge, t=rec.t)
+    with pytest.raises(ph.ParameterError, match="'ki' parameter"):
+        ph.SelfSensingController(model, v_min=0.0, v_max=140.0, sample_rate=FS, ki=2.5)
+
+
+def test_closed_loop_on_the_bench_beats_feedforward(model: ph.ActivePI) -> None:
+    p = dataclasses.replace(PRESETS["T226-H4-203X"], i_bias=40e-12)  # a bias never identified
+    _t_cal, v_cal = staircase([0.0, 35.0, 70.0, 105.0, 140.0], seconds=3.0)
+    cal = Bench(p, seed=3).run(v_cal)
+    leak = ph.calibrate_leakage(cal.t, cal.voltage, cal.charge)
+    _, shape = make_signal("decaying", amplitude=1.0, duration=20.0)
+    h = model.hysteresis_
+    q_top, q_rem = (float(q) for q in h.predict(np.array([140.0, 0.0])))
+    desired = q_rem + (q_top - q_rem) * (0.05 + 0.9 * shape)  # inside the major loop
+    ff = ph.Compensator(model, v_min=0.0, v_max=140.0)
+    ff_run = Bench(p, seed=5).run(ff.process(desired))
+    ctl = controller(model, leakage=leak)
+    bench = Bench(p, seed=5, voltage=ctl.last_command)
+    actual = np.empty_like(desired)
+    for k, d in enumerate(desired):
+        actual[k] = bench.apply(ctl.step(d, bench.reading.charge)).true_displacement
+    w_ff = hysteresis_width(desired, ff_run.true_displacement)
+    w_cl = hysteresis_width(desired, actual)
+    assert w_cl < 0.5 * w_ff and w_cl < 0.003
