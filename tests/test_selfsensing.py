@@ -91,6 +91,33 @@ def test_calibration_refuses_what_holds_cannot_tell(tmp_path: Path) -> None:
         ph.Leakage.load(tmp_path / "bad.json")
 
 
+def test_discharge_needs_holds_reached_from_both_sides() -> None:
+    t, v = staircase([0.0, 50.0, 100.0, 25.0])
+    q = 1e-8 * v + np.cumsum(1e-13 * v) / FS  # the charge almost a function of the voltage
+    with pytest.raises(ph.InsufficientDataError, match="once on the way up and once on the way"):
+        ph.calibrate_leakage(t, v, q)
+    leak = ph.calibrate_leakage(t, v, q, terms=("conductance", "bias"))
+    assert leak.conductance == pytest.approx(1e-13, rel=1e-6)
+
+
+def test_calibration_on_the_bench_finds_its_truth() -> None:
+    p = dataclasses.replace(PRESETS["T226-H4-203X"], i_bias=45e-12)
+    _, v = staircase([0.0, 35.0, 70.0, 105.0, 140.0, 105.0, 70.0, 35.0, 0.0], seconds=10.0)
+    rec = Bench(p, seed=1).run(v)
+    leak = ph.calibrate_leakage(rec.t, rec.voltage, rec.charge)
+    assert leak.conductance == pytest.approx(p.g_leak, rel=0.02)
+    assert leak.quadratic == pytest.approx(p.g_leak * p.leak_voltage_coeff, rel=0.05)
+    assert leak.bias == pytest.approx(p.i_bias, rel=0.25)
+    assert leak.discharge == pytest.approx(1 / (p.r_ref * p.c_ref), rel=0.15)
+    # remove_growth with it leaves the capacitor charge (plus the reading's start)
+    pure = ph.ActivePI(3).fit(rec.voltage, rec.charge, t=rec.t)
+    removed = pure.remove_growth(rec.voltage, rec.charge, rec.t, leakage=leak)
+    truth = rec.capacitor_charge - rec.capacitor_charge[0]
+    assert ph.metrics.rmse(truth, removed) < 1e-3 * np.ptp(truth)  # 1 nC rms noise on 2.6 uC
+    with pytest.raises(ph.ParameterError, match="pass the measured charge"):
+        leak.charge(rec.voltage, rec.t)
+
+
 def test_leakage_from_a_model_and_remove_growth(model: ph.ActivePI) -> None:
     leak = ph.Leakage.from_model(model)
     assert leak.conductance == model.growth_rate_ and leak.bias == 0.0

@@ -322,7 +322,8 @@ CTL_TOL = 8  # |achieved - asked| below this counts as delivered (model units)
 CTL_HOLD_TOL = 9  # a desired value within this of the hold's start is still the hold
 CTL_HOLD_SAMPLES = 10  # samples per leakage refresh window
 CTL_REFRESH = 11  # fraction of the bias error corrected per window; 0 = off
-CTL_SIZE = 12
+CTL_DISCHARGE = 12  # the measuring circuit's loss rate 1/tau (1/s), times the measured charge
+CTL_SIZE = 13
 
 CS_INTEGRAL = 0  # integral action (model units)
 CS_LEAK = 1  # leaked charge since the frame was set (model units)
@@ -340,7 +341,8 @@ CS_SXX = 12
 CS_SXY = 13
 CS_SM = 14
 CS_REFRESHES = 15  # leakage refreshes done
-CS_SIZE = 16
+CS_Q_LAST = 16  # the last finite measured charge (for the discharge term)
+CS_SIZE = 17
 
 
 @njit(cache=True, fastmath=FASTMATH)
@@ -368,9 +370,12 @@ def controller_step(desired, measured, tables, config, state, ctl, cs):  # type:
     n = tables.shape[1]
     end = state.shape[0]
     last = state[end + ST_LAST]
+    if math.isfinite(measured):
+        cs[CS_Q_LAST] = measured
     if cs[CS_STARTED] > 0.0:  # leakage over the sample the last command was held
         current = ctl[CTL_G0] * last + ctl[CTL_G1] * last * abs(last) * ctl[CTL_INV_SCALE]
-        cs[CS_LEAK] += (current + cs[CS_BIAS]) * ctl[CTL_DT]
+        current += cs[CS_BIAS] - ctl[CTL_DISCHARGE] * cs[CS_Q_LAST]
+        cs[CS_LEAK] += current * ctl[CTL_DT]
     e = 0.0
     if math.isfinite(measured):
         qc = measured - cs[CS_LEAK]

@@ -289,6 +289,11 @@ class Compensator:
         return CompensatorState(self._state[:n].copy(), lags.copy(), float(self._state[K.ST_LAST]))
 
     @property
+    def last_command(self) -> float:
+        """The command sent last (V): where the actuator sits now."""
+        return float(self._state[K.ST_LAST])
+
+    @property
     def kernel_state(self) -> FloatArray:
         """The live state array the kernels update (layout ``ST_*`` in ``_kernels``; no copy).
 

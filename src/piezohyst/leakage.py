@@ -1,11 +1,18 @@
 r"""Leakage current of a piezo capacitor, calibrated from constant-voltage holds.
 
-While the voltage is held, the hysteresis is still, so everything the charge
-amplifier integrates is leakage plus the amplifier's bias current:
+While the voltage is held, the hysteresis is still, so all the measured
+charge does is leak: through the piezo (ohmic and voltage-dependent
+conductance), by the charge amplifier's bias current, and out of the
+amplifier's reference capacitor through its insulation or feedback resistance
+(time constant :math:`\tau = R_f C_f`, the amplifier's "time constant"):
 
 .. math::
 
-    \frac{dq}{dt} = i(v) = G_0\,v + G_1\,\frac{v\,|v|}{s} + i_b .
+    \frac{dq}{dt} = G_0\,v + G_1\,\frac{v\,|v|}{s} + i_b - q / \tau .
+
+The last term depends on the measured charge itself, which differs between
+holds at one voltage reached from below and from above: that is how the holds
+tell it from the others.
 
 While the voltage cycles, leakage cannot be told from a model's minor-loop
 error (that error drifts like a leak), which is why a closed loop on the
@@ -34,7 +41,7 @@ from .errors import InsufficientDataError, ModelFileError, ParameterError
 
 __all__ = ["LEAKAGE_TERMS", "Hold", "Leakage", "calibrate_leakage", "find_holds"]
 
-LEAKAGE_TERMS = ("conductance", "quadratic", "bias")
+LEAKAGE_TERMS = ("conductance", "quadratic", "bias", "discharge")
 
 
 @dataclass(frozen=True)
@@ -47,6 +54,8 @@ class Hold:
         Samples ``start:stop`` used for the slope (after the settling time).
     voltage : float
         Mean voltage (input units).
+    charge : float
+        Mean measured charge (output units).
     current : float
         Slope of the charge (output units per s).
     stderr : float
@@ -58,6 +67,7 @@ class Hold:
     start: int
     stop: int
     voltage: float
+    charge: float
     current: float
     stderr: float
     duration: float
@@ -65,7 +75,7 @@ class Hold:
 
 @dataclass(frozen=True)
 class Leakage:
-    r"""A leakage current :math:`i(v) = G_0 v + G_1 v|v|/s + i_b` and its integral.
+    r"""A leakage current :math:`G_0 v + G_1 v|v|/s + i_b - q/\tau` and its integral.
 
     Made by :func:`calibrate_leakage`, or from a fitted model's growth terms
     by :meth:`from_model`, or by hand. Accepted by
@@ -80,6 +90,9 @@ class Leakage:
         :math:`G_1`, same unit: the conductance's rise, reached at :math:`|v| = s`.
     bias : float
         :math:`i_b`, output units per s (A): e.g. the charge amplifier's bias current.
+    discharge : float
+        :math:`1/\tau` (1/s): the measuring circuit loses this fraction of
+        the measured charge per second (0: an ideal charge amplifier).
     scale : float
         :math:`s` (input units).
     input_unit, output_unit : str
@@ -93,13 +106,14 @@ class Leakage:
     quadratic: float = 0.0
     bias: float = 0.0
     scale: float = 1.0
+    discharge: float = 0.0
     input_unit: str = "V"
     output_unit: str = "C"
     holds: tuple[Hold, ...] = field(default=(), compare=False)
     residual: float = field(default=math.nan, compare=False)
 
     def __post_init__(self) -> None:
-        for name in ("conductance", "quadratic", "bias", "scale"):
+        for name in ("conductance", "quadratic", "bias", "scale", "discharge"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float):
                 msg = f"Leakage's {name!r} must be a number. Got {value!r}."
@@ -111,13 +125,15 @@ class Leakage:
             msg = f"Leakage's 'scale' must be > 0 (input units). Got {self.scale!r}."
             raise ParameterError(msg)
 
-    def current(self, v: ArrayLike) -> FloatArray:
-        """Leakage current at voltages ``v`` (output units per s).
+    def current(self, v: ArrayLike, q: ArrayLike | float = 0.0) -> FloatArray:
+        """Leakage current at voltages ``v`` and measured charges ``q`` (output units per s).
 
         Parameters
         ----------
         v : array_like
             Voltages (input units).
+        q : array_like or float, default 0
+            Measured charge (output units), for the discharge term.
 
         Returns
         -------
@@ -125,14 +141,17 @@ class Leakage:
         """
         x = np.asarray(v, dtype=np.float64)
         return np.asarray(
-            self.conductance * x + self.quadratic * x * np.abs(x) / self.scale + self.bias
+            self.conductance * x
+            + self.quadratic * x * np.abs(x) / self.scale
+            + self.bias
+            - self.discharge * np.asarray(q, dtype=np.float64)
         )
 
-    def charge(self, v: ArrayLike, t: ArrayLike) -> FloatArray:
+    def charge(self, v: ArrayLike, t: ArrayLike, q: ArrayLike | None = None) -> FloatArray:
         """Charge leaked since the first sample: the paper's backward-rectangle integral (eq. 13).
 
-        ``q[k] = q[k-1] + i(v[k]) (t[k] - t[k-1])``, ``q[0] = 0``: the same
-        rule as the models' growth terms.
+        ``L[k] = L[k-1] + i(v[k], q[k]) (t[k] - t[k-1])``, ``L[0] = 0``: the
+        same rule as the models' growth terms.
 
         Parameters
         ----------
@@ -140,6 +159,8 @@ class Leakage:
             Voltages (input units).
         t : array_like, shape (N,)
             Times (s), strictly increasing.
+        q : array_like, shape (N,), optional
+            The measured charge, needed when ``discharge`` is not 0.
 
         Returns
         -------
@@ -149,8 +170,14 @@ class Leakage:
         x = as_signal(v, "v")
         ts = as_time(t, x.size, required=True, owner="Leakage.charge")
         assert ts is not None
+        if q is None and self.discharge != 0.0:
+            msg = "this leakage has a discharge term: pass the measured charge q"
+            raise ParameterError(msg)
+        qs = 0.0 if q is None else as_signal(q, "q")
+        if not isinstance(qs, float):
+            same_length(x, qs, "v", "q")
         dt = np.diff(ts, prepend=ts[0])
-        return np.asarray(np.cumsum(self.current(x) * dt))
+        return np.asarray(np.cumsum(self.current(x, qs) * dt))
 
     def coefficients(self) -> dict[str, tuple[float, str]]:
         """Each term's value and unit, by name (``conductance``, ``quadratic``, ``bias``).
@@ -164,6 +191,7 @@ class Leakage:
             "conductance": (self.conductance, per_v),
             "quadratic": (self.quadratic, per_v),
             "bias": (self.bias, f"{self.output_unit}/s"),
+            "discharge": (self.discharge, "1/s"),
         }
 
     @classmethod
@@ -204,6 +232,7 @@ class Leakage:
             values["abs_integral"],
             values["time"],
             scale,
+            0.0,
             model.input_unit,
             model.output_unit,
         )
@@ -243,7 +272,15 @@ class Leakage:
             msg = f'{where}: not a piezohyst leakage file (no "kind": "leakage")'
             raise ModelFileError(msg)
         fields = {k: v for k, v in data.items() if k != "kind"}
-        known = {"conductance", "quadratic", "bias", "scale", "input_unit", "output_unit"}
+        known = {
+            "conductance",
+            "quadratic",
+            "bias",
+            "scale",
+            "discharge",
+            "input_unit",
+            "output_unit",
+        }
         extra = set(fields) - known - {"holds", "residual"}
         if extra:
             msg = f"{where}: unknown field {sorted(extra)[0]!r}"
@@ -363,16 +400,20 @@ def calibrate_leakage(
     r"""Fit the leakage current from the charge's slope on constant-voltage holds.
 
     On each hold the slope of a straight line through the charge is the
-    current at that voltage; the selected terms of
-    :math:`i(v) = G_0 v + G_1 v|v|/s + i_b` are then fitted to those
-    currents, each hold weighted by its duration.
+    current there; the selected terms of
+    :math:`G_0 v + G_1 v|v|/s + i_b - q/\tau` are then fitted to those
+    currents, each hold weighted by its duration. The discharge term needs
+    holds at one voltage with different charges (reached from below and from
+    above); the others need as many voltage levels as terms. A hold's slope
+    is uncertain by about ``noise * sqrt(12 / samples) / duration``, so a few
+    long holds beat many short ones.
 
     Parameters
     ----------
     t, v, q : array_like, shape (N,)
         Times (s), voltages and measured charge.
     terms : sequence of str, default all
-        Of ``"conductance"``, ``"quadratic"``, ``"bias"``.
+        Of ``"conductance"``, ``"quadratic"``, ``"bias"``, ``"discharge"``.
     holds : sequence of (start, stop), optional
         The holds as sample ranges; default found by :func:`find_holds`.
     tolerance, min_duration, settle
@@ -401,7 +442,7 @@ def calibrate_leakage(
     >>> t = np.arange(12000) / 1000.0
     >>> v = np.repeat([0.0, 50.0, 100.0], 4000)
     >>> q = np.cumsum((2e-9 * v + 1e-11) * 1e-3)
-    >>> leak = calibrate_leakage(t, v, q, terms=("conductance", "bias"))
+    >>> leak = calibrate_leakage(t, v, q, terms=("conductance", "bias"))  # 3 levels, no way down
     >>> round(leak.conductance / 1e-9, 6), round(leak.bias / 1e-11, 6), len(leak.holds)
     (2.0, 1.0, 3)
     """
@@ -433,16 +474,27 @@ def calibrate_leakage(
         slope = float(tt @ qq) / sxx
         resid = qq - slope * tt
         stderr = math.sqrt(float(resid @ resid) / max(b - a - 2, 1) / sxx)
-        found.append(Hold(a, b, float(x[a:b].mean()), slope, stderr, float(ts[b - 1] - ts[a])))
+        found.append(
+            Hold(
+                a,
+                b,
+                float(x[a:b].mean()),
+                float(y[a:b].mean()),
+                slope,
+                stderr,
+                float(ts[b - 1] - ts[a]),
+            )
+        )
     span = float(np.ptp(x)) or 1.0
     levels = _distinct([h.voltage for h in found], 0.02 * span)
-    if len(levels) < len(chosen):
+    by_voltage = [name for name in chosen if name != "discharge"]
+    if len(levels) < len(by_voltage) or len(found) < len(chosen):
         where = ", ".join(f"{lv:.4g}" for lv in levels) or "none"
         msg = (
             f"{len(found)} hold(s) at {len(levels)} distinct voltage(s) ({where} {input_unit}) "
             f"cannot determine {len(chosen)} leakage term(s) ({', '.join(chosen)}): record "
-            "holds of a few seconds at more levels (e.g. 0, 25, 50, 75 and 100 % of the range) "
-            "or ask for fewer terms"
+            "holds of several seconds at more levels, up and down again (e.g. 0, 25, 50, 75, "
+            "100, 75, 50, 25, 0 % of the range), or ask for fewer terms"
         )
         raise InsufficientDataError(msg)
     volts = np.array([h.voltage for h in found])
@@ -450,11 +502,27 @@ def calibrate_leakage(
         "conductance": volts,
         "quadratic": volts * np.abs(volts) / s,
         "bias": np.ones_like(volts),
+        "discharge": -np.array([h.charge for h in found]),
     }
     a_mat = np.column_stack([columns[name] for name in chosen])
     rhs = np.array([h.current for h in found])
     w = np.sqrt(np.array([h.duration for h in found]))
-    coef, *_ = np.linalg.lstsq(a_mat * w[:, None], rhs * w, rcond=None)
+    design = a_mat * w[:, None]
+    norms = np.linalg.norm(design, axis=0)
+    sv = np.linalg.svd(design / np.where(norms > 0, norms, 1.0), compute_uv=False)
+    if norms.min() == 0 or sv[-1] < 1e-3 * sv[0]:
+        msg = (
+            f"the {len(found)} holds cannot tell the terms {', '.join(chosen)} apart"
+            + (
+                ": the discharge term needs holds at one voltage with different charges "
+                "(hold each level once on the way up and once on the way down)"
+                if "discharge" in chosen
+                else ""
+            )
+            + "; or ask for fewer terms"
+        )
+        raise InsufficientDataError(msg)
+    coef, *_ = np.linalg.lstsq(design, rhs * w, rcond=None)
     values = dict.fromkeys(LEAKAGE_TERMS, 0.0)
     values.update({name: float(c) for name, c in zip(chosen, coef, strict=True)})
     misfit = rhs - a_mat @ coef
@@ -463,6 +531,7 @@ def calibrate_leakage(
         values["quadratic"],
         values["bias"],
         s,
+        values["discharge"],
         input_unit,
         output_unit,
         holds=tuple(found),

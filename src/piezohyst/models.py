@@ -943,7 +943,7 @@ class HysteresisModel:
             if t is None:
                 msg = "remove_growth with a leakage needs the sample times t (s). Got t=None."
                 raise TimeAxisError(msg)
-            g = leakage.charge(x, t)
+            g = leakage.charge(x, t, ys if leakage.discharge else None)
         else:
             g = self.growth(x, t)
         same_length(g, ys, "x", "y")

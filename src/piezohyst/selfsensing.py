@@ -68,7 +68,7 @@ class SelfSensingController:
     r"""Hysteresis feedforward plus charge feedback, without a position sensor.
 
     Each sample: the leakage estimate :math:`L` advances by
-    :math:`i(v)\,\Delta t` for the command held over the last sample; the
+    :math:`i(v, q)\,\Delta t` for the command held over the last sample; the
     error is :math:`e = d_{k-1} - (q_k - L_k + \text{frame})`; the command is
     the model's inverse of :math:`d_k + k_p e + I_k` with
     :math:`I_k = I_{k-1} + k_i e` (kept only when the command delivered it:
@@ -196,6 +196,7 @@ class SelfSensingController:
         self.ctl[K.CTL_G0] = leakage.conductance
         self.ctl[K.CTL_G1] = leakage.quadratic
         self.ctl[K.CTL_INV_SCALE] = 1.0 / leakage.scale
+        self.ctl[K.CTL_DISCHARGE] = leakage.discharge
         self.ctl[K.CTL_DT] = 1.0 / fs
         self.ctl[K.CTL_REF] = comp.config[K.CFG_REFERENCE]
         self.ctl[K.CTL_INV_GAIN] = comp.config[K.CFG_INV_GAIN]
@@ -228,7 +229,7 @@ class SelfSensingController:
     @property
     def last_command(self) -> float:
         """The command sent last (V): where the actuator sits now."""
-        return self.compensator.state.command
+        return self.compensator.last_command
 
     def _fresh_feedback(self) -> None:
         fb = self.feedback

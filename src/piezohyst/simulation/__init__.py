@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from .bench import DEFAULT_PRESET, PRESETS, Bench, BenchPreset, BenchRecord, Reading, simulate
+from .loop import run_loop
 from .signals import SIGNALS, make_signal
 
 __all__ = [
@@ -14,5 +15,6 @@ __all__ = [
     "BenchRecord",
     "Reading",
     "make_signal",
+    "run_loop",
     "simulate",
 ]

@@ -234,8 +234,8 @@ class Reading:
         controller may use.
     displacement : float
         The laser's reading (m): for checking only.
-    capacitor_charge, true_displacement : float
-        The simulator's hidden truth (C, m).
+    capacitor_charge, leak_charge, true_displacement : float
+        The simulator's hidden truth (C, C, m).
     """
 
     t: float
@@ -243,6 +243,7 @@ class Reading:
     charge: float
     displacement: float
     capacitor_charge: float
+    leak_charge: float
     true_displacement: float
 
 
@@ -321,6 +322,7 @@ class Bench:
             round(v_meas / lsb) * lsb * p.c_ref,
             round((s_true + p.laser_noise * float(noise[1])) / res) * res,
             q_c,
+            float(self._out[1, 0]),
             s_true,
         )
         return self.reading
@@ -347,6 +349,7 @@ class Bench:
             float(rec.charge[k]),
             float(rec.displacement[k]),
             float(rec.capacitor_charge[k]),
+            float(rec.leak_charge[k]),
             float(rec.true_displacement[k]),
         )
         return self.reading

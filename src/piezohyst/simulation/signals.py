@@ -80,21 +80,23 @@ def hold(amplitude: float, frequency: float, duration: float, rate: float) -> Fl
 
 
 def decaying(amplitude: float, frequency: float, duration: float, rate: float) -> FloatArray:
-    """Loops that shrink towards a centre, 10 s at a time, the centre moving each time.
+    """Loops that decay towards a centre that moves, repeating every two blocks of ~10 s.
 
-    Every 10 s the loops start at full range and decay to 15 % of it around a
-    new centre (50, 20, then 70 % of ``amplitude``): minor loops of many sizes
-    at several places in the major loop, where a PI model's congruent minor
-    loops differ most from a real actuator's.
+    Each block holds whole cycles (about 10 s): the loops start full range
+    and decay to 15 % of what the centre allows; the centre moves smoothly
+    between 25 % and 75 % of ``amplitude`` over two blocks, so the signal
+    repeats exactly (after the first cycle, which rises from 0) and stays
+    continuous. Minor loops of many sizes at several
+    places in the major loop: where a PI model's congruent minor loops differ
+    most from a real actuator's.
     """
     t = _time(duration, rate)
-    block = 10.0
-    k = np.floor(t / block).astype(int)
-    a = 0.15 + 0.85 * np.exp(-3.0 * (t % block) / block)
-    centre = np.array([0.5, 0.2, 0.7])[k % 3]
-    return np.asarray(
-        amplitude * ((1 - a) * centre + a * 0.5 * (1 - np.cos(2 * np.pi * frequency * t)))
-    )
+    block = max(1, round(10.0 * frequency)) / frequency  # whole cycles: sin = 0 at the edges
+    centre = 0.5 - 0.25 * np.sin(np.pi * t / block)
+    decay = 0.15 + 0.85 * np.exp(-3.0 * (t % block) / block)
+    reach = np.minimum(centre, 1.0 - centre) * decay
+    rise = 0.5 * (1 - np.cos(np.pi * np.clip(t * frequency, 0.0, 1.0)))  # from 0 in one cycle
+    return np.asarray(amplitude * rise * (centre + reach * np.sin(2 * np.pi * frequency * t)))
 
 
 _LEVELS = np.array([1.0, 0.0, 0.5, 1.0, 0.25, 0.75, 0.0, 1.0, 0.5, 0.0, 0.75, 0.25, 1.0, 0.0])
