@@ -146,3 +146,81 @@ def test_bad_export_arguments() -> None:
         export_c(comp, precision="half")  # type: ignore[arg-type]
     with pytest.raises(ph.ParameterError, match="C identifier"):
         export_c(comp, prefix="3-bad")
+
+
+CONTROLLER_HARNESS = r"""
+#include <stdio.h>
+#include <stdlib.h>
+#include "NAME.h"
+int main(void)
+{
+    char line[256];
+    NAME_t s;
+    NAME_init(&s);
+    while (fgets(line, sizeof line, stdin)) {
+        char *rest;
+        NAME_real d = (NAME_real)strtod(line, &rest);
+        NAME_real m = (NAME_real)strtod(rest, NULL);
+        printf("%.17g\n", (double)NAME_step(&s, d, m));
+    }
+    printf("%lu %lu %lu %lu\n", s.nonfinite, s.saturated, s.faults, s.refreshes);
+    return 0;
+}
+"""
+
+
+@pytest.mark.parametrize(
+    ("flags", "refresh", "samples", "atol"),
+    [
+        (("-O2",), False, 3500, 1e-9),
+        # -ffast-math reorders the sums: the commands part by ~2e-9 V over 3.5 s
+        (("-O2", "-ffast-math"), False, 3500, 1e-8),
+        # the refresh's regression turns rounding into a bias difference (~1e-10 relative)
+        # that a replay of recorded measurements (no plant to answer) then integrates
+        (("-O2",), True, 1700, 1e-9),
+    ],
+)
+def test_controller_matches_python(
+    tmp_path: Path, flags: tuple[str, ...], refresh: bool, samples: int, atol: float
+) -> None:
+    model = fitted_model()
+    leak = ph.Leakage(6e-10, 2e-10, 3e-11, scale=140.0, discharge=2e-5)
+    kw = {"leakage": leak, "slew_rate": 2e4, "refresh_leakage": refresh, "hold_time": 0.2}
+    ctl = ph.SelfSensingController(model, v_min=0.0, v_max=140.0, sample_rate=1000.0, **kw)  # type: ignore[arg-type]
+    desired = desired_values(model)[:samples]
+    desired[1000:1600] = desired[999]  # a hold: the online refresh acts
+    c_path, _ = write_c(ctl, tmp_path / "ph_ctl.c")  # the state before any step
+    # the measurements a plant gives in the loop: 5 % more charge than the model, a leak,
+    # noise, and dropped or broken readings
+    rng = np.random.default_rng(2)
+    plant = model.hysteresis_
+    state = None
+    reading = 0.0
+    measured = np.empty_like(desired)
+    py = np.empty_like(desired)
+    for k, d in enumerate(desired):
+        measured[k] = np.nan if k % 53 == 0 else (np.inf if k % 151 == 3 else reading)
+        py[k] = ctl.step(d, measured[k])
+        run = plant.propagate(np.array([py[k]]), None, state)
+        state = run.state
+        reading = 1.05 * float(run.output[0]) + 4e-11 * k + 1e-9 * rng.standard_normal()
+    (tmp_path / "main.c").write_text(CONTROLLER_HARNESS.replace("NAME", "ph_ctl"))
+    exe = tmp_path / "ctl"
+    subprocess.run(
+        [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", *flags, str(c_path),
+         str(tmp_path / "main.c"), "-o", str(exe)],
+        check=True, capture_output=True, text=True,
+    )  # fmt: skip
+    text = "".join(f"{float(d)!r} {float(m)!r}\n" for d, m in zip(desired, measured, strict=True))
+    out = subprocess.run([str(exe)], input=text, check=True, capture_output=True, text=True)
+    lines = out.stdout.split("\n")
+    c_cmds = np.array([float(x) for x in lines[: desired.size]])
+    np.testing.assert_allclose(c_cmds, py, rtol=0, atol=atol)
+    counters = tuple(int(x) for x in lines[desired.size].split())
+    assert counters == (
+        ctl.nonfinite_count,
+        ctl.saturated_count,
+        ctl.measurement_faults,
+        ctl.leakage_refreshes,
+    )
+    assert ctl.measurement_faults > 0 and (ctl.leakage_refreshes > 0) == refresh

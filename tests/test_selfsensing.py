@@ -275,3 +275,89 @@ def test_closed_loop_on_the_bench_beats_feedforward(model: ph.ActivePI) -> None:
     w_ff = hysteresis_width(desired, ff_run.true_displacement)
     w_cl = hysteresis_width(desired, actual)
     assert w_cl < 0.5 * w_ff and w_cl < 0.003
+
+
+# ---------------------------------------------------------------------- CLI
+def test_command_line_loop(tmp_path: Path) -> None:
+    from click.testing import CliRunner
+
+    from piezohyst.cli import main
+
+    def run(*args: object) -> tuple[int, str, str]:
+        res = CliRunner().invoke(main, [str(a) for a in args])
+        return res.exit_code, res.stdout, res.stderr
+
+    p = dataclasses.replace(PRESETS["T226-H4-203X"], i_bias=45e-12)
+    _, v = staircase([0.0, 35.0, 70.0, 105.0, 140.0, 105.0, 70.0, 35.0, 0.0], seconds=6.0)
+    rec = Bench(p, seed=8).run(v)
+    units = {"time": "s", "voltage": "V", "charge": "C"}
+    ph.write_table(
+        tmp_path / "holds.csv",
+        {"time": rec.t, "voltage": rec.voltage, "charge": rec.charge},
+        units=units,
+    )
+    code, out, err = run("calibrate-leakage", tmp_path / "holds.csv", "-o", tmp_path / "leak.json")
+    assert code == 0, err
+    assert "discharge" in out and "from 9 holds" in out
+    leak = ph.Leakage.load(tmp_path / "leak.json")
+    assert leak.conductance == pytest.approx(p.g_leak, rel=0.05)
+    code, _, err = run(
+        "calibrate-leakage",
+        tmp_path / "holds.csv",
+        "--terms",
+        "bias,ohmic",
+        "-o",
+        tmp_path / "x.json",
+    )
+    assert code == 1 and err.count("\n") == 1 and "distinct names" in err
+    ident = ph.simulate(signal="hold", duration=10.0, seed=0)
+    ph.write_table(
+        tmp_path / "run.csv",
+        {"time": ident.t, "voltage": ident.voltage, "charge": ident.charge},
+        units=units,
+    )
+    assert run("fit", tmp_path / "run.csv", "-o", tmp_path / "m.json")[0] == 0
+    model = ph.load_model(tmp_path / "m.json")
+    t, shape = make_signal("decaying", amplitude=1.0, duration=10.0)
+    h = model.hysteresis_
+    q_top, q_rem = (float(q) for q in h.predict(np.array([140.0, 0.0])))
+    target = q_rem + (q_top - q_rem) * (0.05 + 0.9 * shape)
+    ph.write_table(tmp_path / "target.csv", {"time": t, "desired": target}, units={"time": "s"})
+    common = ("--extra-bias", "4e-11", "--seed", "2")
+    code, ff_out, err = run(
+        "simulate-loop", tmp_path / "m.json", tmp_path / "target.csv", "--feedforward",
+        *common, "-o", tmp_path / "ff.csv",
+    )  # fmt: skip
+    assert code == 0, err
+    code, cl_out, err = run(
+        "simulate-loop", tmp_path / "m.json", tmp_path / "target.csv",
+        "--leakage", tmp_path / "leak.json", *common, "-o", tmp_path / "cl.csv",
+    )  # fmt: skip
+    assert code == 0, err
+
+    def width(text: str) -> float:
+        return float(text.split("width desired->displacement ")[1].split(" %")[0])
+
+    assert width(cl_out) < 0.5 * width(ff_out)
+    loop = ph.read_table(tmp_path / "cl.csv")
+    assert loop.columns == ["time", "desired", "command", "charge", "displacement"]
+    assert 0.0 <= loop.get("command").min() and loop.get("command").max() <= 140.0
+    code, out, err = run(
+        "export-c", tmp_path / "m.json", "--controller", "--leakage", tmp_path / "leak.json",
+        "-o", tmp_path / "loop.c",
+    )  # fmt: skip
+    assert code == 1 and "sample rate" in err and err.count("\n") == 1
+    code, out, err = run(
+        "export-c", tmp_path / "m.json", "--controller", "--leakage", tmp_path / "leak.json",
+        "--sample-rate", "1000", "-o", tmp_path / "loop.c",
+    )  # fmt: skip
+    assert code == 0, err
+    header = (tmp_path / "loop.h").read_text()
+    assert "loop_real loop_step(loop_t *s, loop_real desired, loop_real measured);" in header
+    wrong = ph.Leakage(1e-9, output_unit="uC")
+    wrong.save(tmp_path / "uc.json")
+    code, _, err = run(
+        "simulate-loop", tmp_path / "m.json", tmp_path / "target.csv",
+        "--leakage", tmp_path / "uc.json", "-o", tmp_path / "x.csv",
+    )  # fmt: skip
+    assert code == 1 and "the leakage is in uC/V, the model in C/V" in err

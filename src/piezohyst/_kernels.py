@@ -342,7 +342,8 @@ CS_SXY = 13
 CS_SM = 14
 CS_REFRESHES = 15  # leakage refreshes done
 CS_Q_LAST = 16  # the last finite measured charge (for the discharge term)
-CS_SIZE = 17
+CS_Y0 = 17  # the integral where the window's regression starts (sums relative to it)
+CS_SIZE = 18
 
 
 @njit(cache=True, fastmath=FASTMATH)
@@ -412,7 +413,9 @@ def controller_step(desired, measured, tables, config, state, ctl, cs):  # type:
             cs[CS_HOLD_N] += 1.0
             k = cs[CS_HOLD_N]
             if k > 0.25 * ctl[CTL_HOLD_SAMPLES]:  # after the loop settled on the hold
-                yi = cs[CS_INTEGRAL]
+                if cs[CS_SM] == 0.0:
+                    cs[CS_Y0] = cs[CS_INTEGRAL]
+                yi = cs[CS_INTEGRAL] - cs[CS_Y0]  # small numbers: no cancellation in the sums
                 cs[CS_SM] += 1.0
                 cs[CS_SX] += k
                 cs[CS_SY] += yi

@@ -23,7 +23,9 @@ from ._version import __version__
 from .compensator import CompensatorSettings, Domain
 from .errors import PiezohystError
 from .io import DataSpec
+from .leakage import LEAKAGE_TERMS
 from .models import HysteresisModel, model_names
+from .selfsensing import LoopSettings
 
 
 class Context:
@@ -301,6 +303,53 @@ def _limit_options(fn: Callable[..., Any]) -> Callable[..., Any]:
     return wrapped
 
 
+def _loop_options(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """--leakage/--ki/--kp/--refresh-leakage, gathered into one LoopSettings."""
+    options = [
+        click.option(
+            "--leakage",
+            type=click.Path(dir_okay=False, path_type=Path),
+            default=None,
+            help="Leakage file from calibrate-leakage (default: the model's growth terms).",
+        ),
+        click.option(
+            "--ki",
+            type=click.FloatRange(0.0, 1.9),
+            default=0.5,
+            show_default=True,
+            help="Integral gain per sample.",
+        ),
+        click.option(
+            "--kp",
+            type=click.FloatRange(0.0, 1.0),
+            default=0.0,
+            show_default=True,
+            help="Proportional gain.",
+        ),
+        click.option(
+            "--refresh-leakage",
+            is_flag=True,
+            help="Refine the bias current online from holds of the desired value.",
+        ),
+    ]
+
+    @functools.wraps(fn)
+    def with_loop(
+        *args: Any,
+        leakage: Path | None,
+        ki: float,
+        kp: float,
+        refresh_leakage: bool,
+        **kwargs: Any,
+    ) -> Any:
+        return fn(*args, loop=LoopSettings(leakage, ki, kp, refresh_leakage), **kwargs)
+
+    wrapped: Callable[..., Any] = with_loop
+    for option in reversed(options):
+        wrapped = option(wrapped)
+    return wrapped
+
+
 FORCE = click.option(
     "--force", is_flag=True, help="Replace an existing output that piezohyst did not write."
 )
@@ -312,6 +361,14 @@ OUT_FILE = click.option(
     required=True,
     help="Output file (.csv or .npz).",
 )
+OUT_FILE_JSON = click.option(
+    "-o",
+    "--out",
+    "out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="Output file (.json).",
+)
 EXISTING = click.Path(exists=False, dir_okay=False, path_type=Path)
 
 
@@ -320,7 +377,9 @@ EXISTING = click.Path(exists=False, dir_okay=False, path_type=Path)
 @click.option("--preset", default="T226-H4-203X", show_default=True, help="Bench preset.")
 @click.option(
     "--signal",
-    type=click.Choice(["fixed", "multi", "bipolar", "triangle", "two-rate", "hold", "levels"]),
+    type=click.Choice(
+        ["fixed", "multi", "decaying", "bipolar", "triangle", "two-rate", "hold", "levels"]
+    ),
     default="hold",
     show_default=True,
     help="Excitation.",
@@ -638,6 +697,12 @@ def report(
     show_default=True,
     help="C file (the .h goes beside it).",
 )
+@click.option(
+    "--controller",
+    is_flag=True,
+    help="Export the self-sensing controller (charge feedback; needs --sample-rate).",
+)
+@_loop_options
 @FORCE
 @click.pass_obj
 def export_c(
@@ -646,13 +711,20 @@ def export_c(
     settings: CompensatorSettings,
     use_float: bool,
     out: Path,
+    controller: bool,
+    loop: LoopSettings,
     force: bool,
 ) -> None:
     """Write a dependency-free C99 compensator (NAME.c and NAME.h) for a microcontroller.
 
+    With --controller, the self-sensing controller: NAME_step(s, desired,
+    measured) takes the charge read at each sample as well.
+
     \b
-    Example:
+    Examples:
       piezohyst export-c model.json --v-min 0 --v-max 140 -o ph_comp.c
+      piezohyst export-c model.json --controller --leakage leak.json \\
+          --sample-rate 1000 -o ph_loop.c
     """
     from .workflows import export_c_file
 
@@ -663,10 +735,152 @@ def export_c(
             out,
             settings=settings,
             precision="float" if use_float else "double",
+            controller=loop if controller else None,
             force=force,
         ),
     )
     click.echo(f"{c_path}\n{h_path}")
+
+
+@main.command("calibrate-leakage")
+@click.argument("data", type=EXISTING)
+@_data_options
+@click.option(
+    "--terms",
+    default=",".join(LEAKAGE_TERMS),
+    show_default=True,
+    help="Leakage terms to fit, separated by commas.",
+)
+@click.option(
+    "--min-hold",
+    type=click.FloatRange(0.0, min_open=True),
+    default=1.0,
+    show_default=True,
+    help="Shortest hold used, in s (after settling).",
+)
+@click.option(
+    "--settle",
+    type=click.FloatRange(0.0, 1.0, max_open=True),
+    default=0.25,
+    show_default=True,
+    help="Fraction of each hold skipped at its start.",
+)
+@OUT_FILE_JSON
+@FORCE
+@click.pass_obj
+def calibrate_leakage(
+    ctx: Context,
+    data: Path,
+    data_spec: DataSpec,
+    terms: str,
+    min_hold: float,
+    settle: float,
+    out: Path,
+    force: bool,
+) -> None:
+    """Calibrate the leakage current from the constant-voltage holds of a record.
+
+    While the voltage is held the hysteresis is still: the charge's slope on
+    each hold is the leakage current there. Record holds of several seconds
+    at several levels, up and down again (e.g. 0, 35, 70, 105, 140, 105, 70,
+    35, 0 V, 10 s each).
+
+    \b
+    Example:
+      piezohyst calibrate-leakage holds.csv -o leak.json
+    """
+    from .workflows import calibrate_leakage_file
+
+    names = tuple(t.strip() for t in terms.split(",") if t.strip())
+    leak = _run(
+        ctx,
+        lambda: calibrate_leakage_file(
+            data,
+            out,
+            data_spec=data_spec,
+            terms=names,
+            min_duration=min_hold,
+            settle=settle,
+            force=force,
+        ),
+    )
+    for name, (value, unit) in leak.coefficients().items():
+        click.echo(f"{name:12s} {value:.4g} {unit}")
+    click.echo(
+        f"from {len(leak.holds)} holds at "
+        f"{', '.join(f'{h.voltage:.4g}' for h in leak.holds)} {leak.input_unit}; "
+        f"RMS misfit {leak.residual:.3g} {leak.output_unit}/s"
+    )
+    ctx.info(f"saved {out}")
+
+
+@main.command("simulate-loop")
+@click.argument("model", type=EXISTING)
+@click.argument("target", type=EXISTING)
+@click.option("--column", default=None, help="Desired column (default: 'desired' or the only one).")
+@_limit_options
+@_loop_options
+@click.option("--feedforward", is_flag=True, help="Run the feedforward compensator alone.")
+@click.option("--preset", default="T226-H4-203X", show_default=True, help="Bench preset.")
+@click.option(
+    "--extra-bias",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Bias current in A added to the bench's (a change the model never saw).",
+)
+@click.option(
+    "--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True, help="Noise seed."
+)
+@OUT_FILE
+@FORCE
+@click.pass_obj
+def simulate_loop(
+    ctx: Context,
+    model: Path,
+    target: Path,
+    column: str | None,
+    settings: CompensatorSettings,
+    loop: LoopSettings,
+    feedforward: bool,
+    preset: str,
+    extra_bias: float,
+    seed: int,
+    out: Path,
+    force: bool,
+) -> None:
+    """Drive the simulated bench with the self-sensing controller (or feedforward alone).
+
+    Each sample the controller gets the charge the bench read after the
+    previous command; the laser reading is written for checking only.
+
+    \b
+    Example:
+      piezohyst simulate-loop model.json target.csv --leakage leak.json -o loop.csv
+    """
+    from .workflows import simulate_loop_file
+
+    run = _run(
+        ctx,
+        lambda: simulate_loop_file(
+            model,
+            target,
+            out,
+            column=column,
+            settings=settings,
+            loop=None if feedforward else loop,
+            preset=preset,
+            extra_bias=extra_bias,
+            seed=seed,
+            force=force,
+        ),
+    )
+    what = "feedforward" if feedforward else "closed loop"
+    line = f"{what}: width desired->displacement {100 * run.width:.3g} %"
+    if math.isfinite(run.nrmse):
+        line += f", tracking NRMSE {100 * run.nrmse:.3g} %"
+    click.echo(f"{line}; {run.saturated} samples saturated")
+    ctx.info(f"saved {out}")
 
 
 @main.command()

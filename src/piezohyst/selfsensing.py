@@ -19,6 +19,7 @@ sample asked for (the reading is the response to the commands before it).
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 from typing import Literal
 
@@ -27,12 +28,12 @@ from numpy.typing import ArrayLike
 
 from . import _kernels as K
 from ._validation import FloatArray
-from .compensator import Compensator, CompensatorState
+from .compensator import Compensator, CompensatorSettings, CompensatorState
 from .errors import ParameterError, ShapeError
 from .leakage import Leakage
 from .models import HysteresisModel
 
-__all__ = ["ControllerState", "SelfSensingController"]
+__all__ = ["ControllerState", "LoopSettings", "SelfSensingController", "build_controller"]
 
 Domain = Literal["charge", "displacement"]
 
@@ -373,3 +374,106 @@ class SelfSensingController:
             d, m, comp.tables, self.config, comp.kernel_state, self.ctl, self.feedback, out
         )
         return out
+
+
+def build_controller(
+    settings: CompensatorSettings,
+    model: HysteresisModel,
+    *,
+    leakage: Leakage | None = None,
+    ki: float = 0.5,
+    kp: float = 0.0,
+    refresh_leakage: bool = False,
+) -> SelfSensingController:
+    """A controller with the limits, domain and slew of ``settings``, checked as files are.
+
+    Limits default to the model's training range; wider ones are refused
+    unless ``settings.allow_extrapolation`` (see :class:`CompensatorSettings`).
+
+    Parameters
+    ----------
+    settings : CompensatorSettings
+        ``sample_rate`` is required.
+    model : HysteresisModel
+    leakage : Leakage, optional
+    ki, kp : float
+    refresh_leakage : bool
+
+    Returns
+    -------
+    SelfSensingController
+
+    Raises
+    ------
+    ParameterError
+    """
+    if settings.sample_rate is None:
+        msg = "the self-sensing controller needs the loop's sample rate (Hz)"
+        raise ParameterError(msg)
+    comp = settings.build(model)
+    return SelfSensingController(
+        model,
+        v_min=comp.v_min,
+        v_max=comp.v_max,
+        sample_rate=settings.sample_rate,
+        leakage=leakage,
+        ki=ki,
+        kp=kp,
+        slew_rate=settings.slew_rate,
+        domain=settings.domain,
+        gain=settings.gain,
+        allow_extrapolation=settings.allow_extrapolation,
+        refresh_leakage=refresh_leakage,
+    )
+
+
+@dataclass(frozen=True)
+class LoopSettings:
+    """The self-sensing controller's own settings (see :class:`~piezohyst.SelfSensingController`).
+
+    Attributes
+    ----------
+    leakage : path or None
+        A leakage file (:func:`~piezohyst.workflows.calibrate_leakage_file`); None: the
+        model's growth terms.
+    ki, kp : float
+        Integral and proportional gains.
+    refresh_leakage : bool
+        Refine the bias current online from holds of the desired value.
+    """
+
+    leakage: str | os.PathLike[str] | None = None
+    ki: float = 0.5
+    kp: float = 0.0
+    refresh_leakage: bool = False
+
+    def build(self, settings: CompensatorSettings, model: HysteresisModel) -> SelfSensingController:
+        """The controller for ``model`` with ``settings`` (limits, slew, sample rate).
+
+        Parameters
+        ----------
+        settings : CompensatorSettings
+        model : HysteresisModel
+
+        Returns
+        -------
+        SelfSensingController
+        """
+        leakage = None if self.leakage is None else Leakage.load(self.leakage)
+        if leakage is not None and (leakage.input_unit, leakage.output_unit) != (
+            model.input_unit,
+            model.output_unit,
+        ):
+            msg = (
+                f"{self.leakage}: the leakage is in {leakage.output_unit}/{leakage.input_unit}, "
+                f"the model in {model.output_unit}/{model.input_unit}"
+            )
+            raise ParameterError(msg)
+        return build_controller(
+            settings,
+            model,
+            leakage=leakage,
+            ki=self.ki,
+            kp=self.kp,
+            refresh_leakage=self.refresh_leakage,
+        )

@@ -32,21 +32,28 @@ from .identification import Blocks, Summary, default_thresholds, history_state
 from .io import (
     DataSpec,
     RecordingStream,
+    Table,
     check_finite,
     check_increasing,
     is_piezohyst_output,
     open_table,
+    read_table,
     write_blocks,
     write_table,
 )
+from .leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
 from .metrics import hysteresis_width, nrmse, rmse
 from .models import HysteresisModel, ModelState, model_class
 from .persistence import load_model
-from .simulation import DEFAULT_PRESET, PRESETS, BenchRecord, simulate
+from .selfsensing import LoopSettings
+from .simulation import DEFAULT_PRESET, PRESETS, Bench, BenchRecord, run_loop, simulate
 from .units import to_standard
 
 __all__ = [
     "Compensation",
+    "LoopRun",
+    "Prediction",
+    "calibrate_leakage_file",
     "compensate_file",
     "export_c_file",
     "fit_file",
@@ -54,6 +61,7 @@ __all__ = [
     "model_report",
     "predict_file",
     "simulate_file",
+    "simulate_loop_file",
 ]
 
 PathLike = str | os.PathLike[str]
@@ -452,16 +460,7 @@ def compensate_file(
     guard_outputs([out], [model_path, target], force=force)
     model = _load(model_path)
     table = open_table(target)
-    if column is None:
-        others = [c for c in table.columns if c != "time"]
-        column = "desired" if "desired" in table else (others[0] if len(others) == 1 else None)
-        if column is None:
-            msg = (
-                f"{target}: which column is the desired trajectory? Name it 'desired' or name "
-                f"the column (columns: {', '.join(map(repr, table.columns))})"
-            )
-            raise DataFileError(msg)
-    name = table.resolve(column)
+    name = _desired_column(table, column, target)
     expected = "m" if settings.domain == "displacement" else model.output_unit
     where = f"{target}: column {name!r}"
     unit = to_standard(np.empty(0), table.unit(name), "output", where)[1]
@@ -534,6 +533,20 @@ def compensate_file(
     return Compensation(comp, preamble.size, fs)
 
 
+def _desired_column(table: Table, column: str | None, target: PathLike) -> str:
+    """The desired trajectory's column: as named, else ``desired``, else the only one but time."""
+    if column is None:
+        others = [c for c in table.columns if c != "time"]
+        column = "desired" if "desired" in table else (others[0] if len(others) == 1 else None)
+        if column is None:
+            msg = (
+                f"{target}: which column is the desired trajectory? Name it 'desired' or name "
+                f"the column (columns: {', '.join(map(repr, table.columns))})"
+            )
+            raise DataFileError(msg)
+    return table.resolve(column)
+
+
 def _reachable(
     model: HysteresisModel, comp: Compensator, settings: CompensatorSettings
 ) -> tuple[float, float]:
@@ -553,6 +566,7 @@ def export_c_file(
     *,
     settings: CompensatorSettings = _DEFAULT_SETTINGS,
     precision: Precision = "double",
+    controller: LoopSettings | None = None,
     force: bool = False,
 ) -> tuple[Path, Path]:
     """Write ``NAME.c`` and ``NAME.h`` for the model's compensator (see :mod:`piezohyst.export`).
@@ -564,9 +578,11 @@ def export_c_file(
     out : str or os.PathLike
         The ``.c`` file.
     settings : CompensatorSettings
-        Limits, domain, gain, slew rate.
+        Limits, domain, gain, slew rate (and the sample rate a controller needs).
     precision : {"double", "float"}
         The C type of every real.
+    controller : LoopSettings, optional
+        Export the self-sensing controller instead of the feedforward compensator.
     force : bool, default False
         Replace existing files piezohyst did not write.
 
@@ -575,8 +591,184 @@ def export_c_file(
     tuple of Path
     """
     c_path, h_path, _ = c_paths(out)
-    guard_outputs([c_path, h_path], [model_path], force=force)
-    return write_c(settings.build(_load(model_path)), out, precision=precision)
+    inputs: list[PathLike] = [model_path]
+    if controller is not None and controller.leakage is not None:
+        inputs.append(controller.leakage)
+    guard_outputs([c_path, h_path], inputs, force=force)
+    model = _load(model_path)
+    built = settings.build(model) if controller is None else controller.build(settings, model)
+    return write_c(built, out, precision=precision)
+
+
+def calibrate_leakage_file(
+    data: PathLike,
+    out: PathLike | None = None,
+    *,
+    data_spec: DataSpec | None = None,
+    terms: Sequence[str] = LEAKAGE_TERMS,
+    min_duration: float = 1.0,
+    settle: float = 0.25,
+    force: bool = False,
+) -> Leakage:
+    """Calibrate the leakage from the holds of a record and save it (JSON) to ``out``.
+
+    Parameters
+    ----------
+    data : str or os.PathLike
+        A record with constant-voltage holds (voltage, charge, time).
+    out : str or os.PathLike, optional
+        Where to save the leakage.
+    data_spec : DataSpec, optional
+        Columns, units and window.
+    terms : sequence of str
+        Leakage terms to fit (see :func:`~piezohyst.leakage.calibrate_leakage`).
+    min_duration, settle
+        Hold detection (see :func:`~piezohyst.leakage.find_holds`).
+    force : bool
+        Replace an existing ``out`` that piezohyst did not write.
+
+    Returns
+    -------
+    Leakage
+    """
+    if out is not None:
+        guard_outputs([out], [data], force=force)
+    rec = (data_spec or DataSpec()).read(data)
+    assert rec.y is not None
+    w = rec.window
+    x_unit, y_unit = rec.units
+    leak = calibrate_leakage(
+        rec.t[w],
+        rec.x[w],
+        rec.y[w],
+        terms=terms,
+        min_duration=min_duration,
+        settle=settle,
+        input_unit=x_unit or "V",
+        output_unit=y_unit or _default_unit(rec.names[1]),
+    )
+    if out is not None:
+        leak.save(out)
+    return leak
+
+
+@dataclass(frozen=True)
+class LoopRun:
+    """What :func:`simulate_loop_file` did.
+
+    Attributes
+    ----------
+    record : BenchRecord
+        Commands, readings and the bench's hidden truth.
+    desired : ndarray
+        The desired trajectory.
+    width : float
+        Hysteresis width desired → laser displacement (fraction of the span).
+    nrmse : float
+        Tracking NRMSE desired → laser displacement (displacement domain; else NaN).
+    saturated : int
+        Commands clipped to the limits.
+    """
+
+    record: BenchRecord
+    desired: FloatArray
+    width: float
+    nrmse: float
+    saturated: int
+
+
+def simulate_loop_file(
+    model_path: PathLike,
+    target: PathLike,
+    out: PathLike,
+    *,
+    column: str | None = None,
+    settings: CompensatorSettings = _DEFAULT_SETTINGS,
+    loop: LoopSettings | None = None,
+    preset: str = DEFAULT_PRESET,
+    extra_bias: float = 0.0,
+    seed: int = 0,
+    force: bool = False,
+) -> LoopRun:
+    """Run a desired trajectory through a controller against the simulated bench.
+
+    Writes ``time, desired, command, charge, displacement`` (s, desired
+    units, V, C, m): what the bench read after each command. ``loop=None``
+    runs the feedforward compensator alone, otherwise the self-sensing
+    controller. ``extra_bias`` (A) adds to the preset's amplifier bias
+    current, a change the model never saw.
+
+    Parameters
+    ----------
+    model_path, target, out : path
+        A saved model, the desired trajectory (``time`` and ``desired``), the output.
+    column : str, optional
+        The desired column.
+    settings : CompensatorSettings
+        Limits, domain, gain, slew; the sample rate defaults to the preset's.
+    loop : LoopSettings, optional
+        The controller's settings; None: feedforward alone.
+    preset : str
+        Bench preset.
+    extra_bias : float
+        A (added to the preset's bias current).
+    seed : int
+        Noise seed.
+    force : bool
+        Replace an existing ``out`` that piezohyst did not write.
+
+    Returns
+    -------
+    LoopRun
+    """
+    inputs: list[PathLike] = [model_path, target]
+    if loop is not None and loop.leakage is not None:
+        inputs.append(loop.leakage)
+    guard_outputs([out], inputs, force=force)
+    if preset not in PRESETS:
+        msg = f"unknown preset {preset!r}; available: {', '.join(PRESETS)}"
+        raise ParameterError(msg)
+    p = PRESETS[preset]
+    p = dataclasses.replace(
+        p, i_bias=p.i_bias + check_float(extra_bias, "extra_bias", "simulate-loop", -1e-6, 1e-6)
+    )
+    model = _load(model_path)
+    table = read_table(target)
+    name = _desired_column(table, column, target)
+    desired = table.get(name, finite=False)
+    fs = settings.sample_rate or p.rate
+    if abs(fs - p.rate) > 1e-9 * p.rate:
+        msg = f"the bench {preset} samples at {p.rate:g} Hz; the loop rate must be the same"
+        raise ParameterError(msg)
+    settings = dataclasses.replace(settings, sample_rate=fs)
+    ctl = settings.build(model) if loop is None else loop.build(settings, model)
+    bench = Bench(
+        p, voltage=ctl.last_command, seed=check_int(seed, "seed", "simulate-loop", 0, 2**32 - 1)
+    )
+    rec = run_loop(ctl, desired, bench)
+    write_table(
+        out,
+        {
+            "time": rec.t,
+            "desired": desired,
+            "command": rec.voltage,
+            "charge": rec.charge,
+            "displacement": rec.displacement,
+        },
+        units={
+            "time": "s",
+            "desired": "m" if settings.domain == "displacement" else model.output_unit,
+            "command": "V",
+            "charge": "C",
+            "displacement": "m",
+        },
+    )
+    ok = np.isfinite(desired)
+    width = hysteresis_width(desired[ok], rec.displacement[ok])
+    err = (
+        nrmse(desired[ok], rec.displacement[ok]) if settings.domain == "displacement" else math.nan
+    )
+    return LoopRun(rec, desired, width, err, ctl.saturated_count)
 
 
 @dataclass(frozen=True)
