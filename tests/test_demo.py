@@ -86,7 +86,8 @@ def test_demo_closed_loop_targets(demo_run: tuple[Path, dict[str, Any]]) -> None
     cal = runs["closed loop, hold-calibrated leakage"]
     # issue 10: hold-calibrated loop <= 0.3 % width and tracking, no drift; identified <= 1.2 %
     assert cal["width_S_pct"] <= 0.3 and cal["tracking_nrmse_S_pct"] <= 0.3
-    assert cal["last_20s_nrmse_S_pct"] <= cal["first_20s_nrmse_S_pct"]
+    # no drift: the last 20 s as good as the first, to the noise floor (benchmarks: +-0.003 %)
+    assert cal["last_20s_nrmse_S_pct"] <= cal["first_20s_nrmse_S_pct"] + 0.005
     assert ident["width_S_pct"] <= 1.2
     assert cal["width_S_pct"] < ff["width_S_pct"] / 3
     assert cal["samples_saturated"] == 0

@@ -378,7 +378,17 @@ EXISTING = click.Path(exists=False, dir_okay=False, path_type=Path)
 @click.option(
     "--signal",
     type=click.Choice(
-        ["fixed", "multi", "decaying", "bipolar", "triangle", "two-rate", "hold", "levels"]
+        [
+            "fixed",
+            "multi",
+            "decaying",
+            "bipolar",
+            "triangle",
+            "two-rate",
+            "hold",
+            "levels",
+            "staircase",
+        ]
     ),
     default="hold",
     show_default=True,

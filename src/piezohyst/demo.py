@@ -126,10 +126,12 @@ def _compensation_run(
 
 LOOP_EXTRA_BIAS = 40e-12  # A: the charge amplifier's bias on the day of the loop, never identified
 CALIBRATION_LEVELS = (0.0, 35.0, 70.0, 105.0, 140.0, 105.0, 70.0, 35.0, 0.0)  # V, up and down
-CALIBRATION_HOLD = 10.0  # s per level
+CALIBRATION_HOLD = 20.0  # s per level
 
 
-def _closed_loop_study(model: ActivePI, *, gain: float, seed: int, preset: str) -> dict[str, Any]:
+def _closed_loop_study(
+    model: ActivePI, *, gain: float, seed: int, preset: str, ki: float = 0.5
+) -> dict[str, Any]:
     """Feedforward vs the self-sensing loop on a 60 s decaying trajectory, unseen bias current.
 
     The bench of the loop has a bias current the identification never saw.
@@ -163,7 +165,13 @@ def _closed_loop_study(model: ActivePI, *, gain: float, seed: int, preset: str) 
             ctl = Compensator(model, v_min=0.0, v_max=p.v_max, **settings)
         else:
             ctl = SelfSensingController(
-                model, v_min=0.0, v_max=p.v_max, sample_rate=p.rate, leakage=leakage, **settings
+                model,
+                v_min=0.0,
+                v_max=p.v_max,
+                sample_rate=p.rate,
+                leakage=leakage,
+                ki=ki,
+                **settings,
             )
         bench = Bench(p, seed=seed + 1, voltage=ctl.last_command)
         rec = run_loop(ctl, d_des, bench)

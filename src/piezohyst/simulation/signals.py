@@ -121,6 +121,29 @@ def levels(amplitude: float, frequency: float, duration: float, rate: float) -> 
     return np.asarray(amplitude * (frm + (to - frm) * move))
 
 
+_STAIRCASE = np.array([0.0, 0.25, 0.5, 0.75, 1.0, 0.75, 0.5, 0.25, 0.0])
+
+
+def staircase(amplitude: float, frequency: float, duration: float, rate: float) -> FloatArray:
+    """Holds at 0, 25, 50, 75, 100, 75, 50, 25, 0 % of ``amplitude``, ``1/frequency`` s each.
+
+    The record for a leakage calibration (:func:`~piezohyst.calibrate_leakage`):
+    every level is held once on the way up and once on the way down, which
+    tells a leak that depends on the charge (the charge amplifier's own
+    discharge) from one that depends on the voltage. Each hold starts with a
+    raised-cosine move of a tenth of it (at most 0.5 s); the pattern repeats.
+    """
+    t = _time(duration, rate)
+    period = 1.0 / frequency
+    seg = np.floor(t / period).astype(int)
+    to = _STAIRCASE[seg % _STAIRCASE.size]
+    frm = _STAIRCASE[(seg - 1) % _STAIRCASE.size]
+    frm[seg == 0] = 0.0
+    move = min(0.5, 0.1 * period)
+    phase = np.clip((t - seg * period) / move, 0.0, 1.0)
+    return np.asarray(amplitude * (frm + (to - frm) * 0.5 * (1 - np.cos(np.pi * phase))))
+
+
 SIGNALS = {
     "fixed": fixed,
     "decaying": decaying,
@@ -130,6 +153,7 @@ SIGNALS = {
     "two-rate": two_rate,
     "hold": hold,
     "levels": levels,
+    "staircase": staircase,
 }
 
 

@@ -1,0 +1,203 @@
+"""Self-sensing closed loop: its targets on the bench, and its cost per sample.
+
+Run: ``python benchmarks/bench_selfsensing.py [--seeds 3] [--operators 20]``.
+
+1. Targets (issue 10), on the simulated bench for each seed: an ActivePI
+   identified on a 20 s ``hold`` record; the loop's bench has a bias current
+   40 pA above the identification's; a hold record (0..140..0 V in 35 V
+   steps, 10 s each) on that bench calibrates the leakage; 60 s of
+   ``decaying`` loops are driven by feedforward alone, by the loop with the
+   model's identified leakage, and by the loop with the calibrated leakage.
+   Width and NRMSE are desired -> laser displacement; the first and last 20 s
+   are RMS errors over the whole trajectory's span.
+2. Cost: ``step`` called from Python, against the same algorithm written as a
+   plain Python function (measured in the same run); ``process`` throughput,
+   against a NumPy loop over time.
+
+Not a test: nothing here asserts a time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+
+import numpy as np
+
+import piezohyst as ph
+from piezohyst import demo
+
+
+def python_controller(ctl: ph.SelfSensingController):  # type: ignore[no-untyped-def]
+    """The controller's step written plainly in Python (lists, one operator at a time)."""
+    op = ctl.compensator.spec.operator
+    inv = op.inverse()
+    r, w, s = op.thresholds.tolist(), op.weights.tolist(), op.loading_slopes.tolist()
+    ri, wi = inv.thresholds.tolist(), inv.weights.tolist()
+    c, ci = op.offset, inv.offset
+    z = op.initial_state.tolist()
+    n = len(r)
+    lk = ctl.leakage
+    st = {"last": ctl.last_command, "leak": 0.0, "frame": 0.0, "integral": 0.0,
+          "d_prev": math.nan, "started": False, "q": 0.0}  # fmt: skip
+    zeta = [0.0] * n
+
+    def sync() -> None:
+        tail = 0.0
+        for i in range(n - 1, -1, -1):
+            zeta[i] = c + s[i] * z[i] + tail
+            tail += w[i] * z[i]
+
+    sync()
+
+    def step(desired: float, measured: float) -> float:
+        last = st["last"]
+        if math.isfinite(measured):
+            st["q"] = measured
+        if st["started"]:
+            i_leak = lk.conductance * last + lk.quadratic * last * abs(last) / lk.scale
+            st["leak"] += (i_leak + lk.bias - lk.discharge * st["q"]) / ctl.sample_rate
+        e = 0.0
+        if math.isfinite(measured):
+            qc = measured - st["leak"]
+            if not st["started"]:
+                st["frame"] = c + sum(wi_ * zi for wi_, zi in zip(w, z, strict=True)) - qc
+                st["started"] = True
+            if math.isfinite(st["d_prev"]):
+                e = st["d_prev"] - (qc + st["frame"])
+        integral = st["integral"] + ctl.ki * e
+        u = desired + integral
+        x = ci
+        for i in range(n):
+            zeta[i] = min(max(zeta[i], u - ri[i]), u + ri[i])
+            x += wi[i] * zeta[i]
+        v = min(max(x, ctl.v_min), ctl.v_max)
+        for i in range(n):
+            z[i] = min(max(z[i], v - r[i]), v + r[i])
+        if v != x:
+            sync()
+        else:
+            st["integral"] = integral
+        st["d_prev"] = desired
+        st["last"] = v
+        return v
+
+    return step
+
+
+def numpy_process(ctl: ph.SelfSensingController, desired: np.ndarray, measured: np.ndarray):  # type: ignore[no-untyped-def]
+    """A NumPy loop over time: the same loop with vector operations over the operators."""
+    op = ctl.compensator.spec.operator
+    inv = op.inverse()
+    z = op.initial_state.copy()
+    lk = ctl.leakage
+    last, leak, integral, d_prev, frame = ctl.last_command, 0.0, 0.0, math.nan, None
+    out = np.empty_like(desired)
+    for k in range(desired.size):
+        if frame is not None:
+            leak += (lk.conductance * last + lk.bias - lk.discharge * measured[k]) / 1000.0
+        qc = measured[k] - leak
+        if frame is None:
+            frame = op.offset + op.weights @ z - qc
+        e = 0.0 if math.isnan(d_prev) else d_prev - (qc + frame)
+        u = desired[k] + integral + ctl.ki * e
+        tail = np.concatenate([np.cumsum((op.weights * z)[::-1])[::-1][1:], [0.0]])
+        zeta = op.offset + op.loading_slopes * z + tail
+        x = inv.offset + inv.weights @ np.clip(zeta, u - inv.thresholds, u + inv.thresholds)
+        v = min(max(x, 0.0), 140.0)
+        if v == x:
+            integral += ctl.ki * e
+        z = np.clip(z, v - op.thresholds, v + op.thresholds)
+        d_prev, last = desired[k], v
+        out[k] = v
+    return out
+
+
+def targets(seed: int, operators: int, ki: float = 0.5) -> dict[str, dict[str, float]]:
+    ident = ph.simulate(signal="hold", duration=20.0, seed=seed)
+    active = ph.ActivePI(operators).fit(ident.voltage, ident.charge, t=ident.t)
+    pure = active.remove_growth(ident.voltage, ident.charge, t=ident.t)
+    gain = demo._calibration_gain(ident, pure)
+    study = demo._closed_loop_study(
+        active, gain=gain, seed=seed + 700, preset=demo.DEFAULT_PRESET, ki=ki
+    )
+    return {
+        name: {k: v for k, v in run.items() if k != "record"} for name, run in study["runs"].items()
+    }
+
+
+def cost(operators: int) -> None:
+    rec = ph.simulate(signal="hold", duration=10.0, seed=0)
+    model = ph.ActivePI(operators).fit(rec.voltage, rec.charge, t=rec.t)
+    n = 200_000
+    t = np.arange(n) / 1000.0
+    desired = model.hysteresis_.predict(70 + 50 * np.sin(2 * np.pi * 0.5 * t))
+    measured = desired * 1.01 + 1e-9 * np.random.default_rng(0).standard_normal(n)
+
+    def make() -> ph.SelfSensingController:
+        return ph.SelfSensingController(model, v_min=0.0, v_max=140.0, sample_rate=1000.0)
+
+    ctl = make()
+    ctl.step(float(desired[0]), float(measured[0]))  # compiled
+    reps = 20_000
+    best_step = best_ref = math.inf
+    for _ in range(5):
+        ctl = make()
+        t0 = time.perf_counter()
+        for k in range(reps):
+            ctl.step(float(desired[k]), float(measured[k]))
+        best_step = min(best_step, (time.perf_counter() - t0) / reps)
+        ref = python_controller(make())
+        t0 = time.perf_counter()
+        for k in range(reps):
+            ref(float(desired[k]), float(measured[k]))
+        best_ref = min(best_ref, (time.perf_counter() - t0) / reps)
+    best_block = math.inf
+    for _ in range(5):
+        ctl = make()
+        t0 = time.perf_counter()
+        ctl.process(desired, measured)
+        best_block = min(best_block, time.perf_counter() - t0)
+    print(f"cost, ActivePI with {operators} operators, best of 5:")
+    print(f"  step() from Python        {best_step * 1e6:6.2f} us")
+    print(f"  pure-Python step          {best_ref * 1e6:6.2f} us   ({best_ref / best_step:.1f}x)")
+    m = 20_000
+    t0 = time.perf_counter()
+    numpy_process(make(), desired[:m], measured[:m])
+    numpy_rate = m / (time.perf_counter() - t0)
+    rate = n / best_block
+    print(f"  process() {n:,} samples  {rate / 1e6:6.1f} M samples/s")
+    ratio = rate / numpy_rate
+    print(f"  NumPy loop over time      {numpy_rate / 1e6:6.3f} M samples/s ({ratio:.0f}x)")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--operators", type=int, default=20)
+    args = parser.parse_args()
+    print(f"piezohyst {ph.__version__}: self-sensing loop, 60 s decaying loops, +40 pA unseen bias")
+    rows = []
+    for seed in range(args.seeds):
+        t0 = time.perf_counter()
+        runs = targets(seed, args.operators)
+        rows.append(runs)
+        print(f"seed {seed} ({time.perf_counter() - t0:.1f} s)")
+        for name, m in runs.items():
+            print(
+                f"  {name:38s} width {m['width_S_pct']:6.3f} %  "
+                f"NRMSE {m['tracking_nrmse_S_pct']:6.3f} %"
+                f"  first 20 s {m['first_20s_nrmse_S_pct']:6.3f} %  last 20 s "
+                f"{m['last_20s_nrmse_S_pct']:6.3f} %"
+            )
+    print("integral gain, seed 0, hold-calibrated loop:")
+    for ki in (0.2, 0.5, 1.0):
+        m = targets(0, args.operators, ki)["closed loop, hold-calibrated leakage"]
+        width, err = m["width_S_pct"], m["tracking_nrmse_S_pct"]
+        print(f"  ki {ki:3.1f}  width {width:6.3f} %  NRMSE {err:6.3f} %")
+    cost(args.operators)
+
+
+if __name__ == "__main__":
+    main()
