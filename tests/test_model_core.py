@@ -287,6 +287,7 @@ LAYERS = {
     "cores": 3,
     "terms": 3,
     "leakage": 3,
+    "dynamics": 1,
     "persistence": 4,
     "identification": 4,
     "models": 5,

@@ -70,6 +70,46 @@ def running_integral(x, dt, start, out):  # type: ignore[no-untyped-def]
     return acc
 
 
+@njit(cache=True, fastmath=FASTMATH)
+def input_filter(x, dt, d_int, d_frac, tau, state, out):  # type: ignore[no-untyped-def]
+    """Delay (``d_int + d_frac`` samples, linear interpolation) then a first-order lag ``tau``.
+
+    ``state`` = [unused, lag, head, ring buffer of the last ``d_int + 2``
+    inputs]; the lag is exact for an input held over each sample
+    (``u += (1 - exp(-dt/tau)) (v - u)``); ``tau = 0`` means no lag.
+    """
+    size = state.shape[0] - 3
+    head = int(state[2])
+    lag = state[1]
+    dt_seen = -1.0
+    gain = 0.0
+    n = x.shape[0]
+    for k in range(n):
+        if k > d_int:  # both delayed samples lie in this block
+            a = x[k - d_int]
+            b = x[k - d_int - 1]
+        else:  # reach back into the ring of earlier inputs
+            head = (head + 1) % size
+            state[3 + head] = x[k]
+            a = state[3 + (head - d_int) % size]
+            b = state[3 + (head - d_int - 1) % size]
+        v = a + d_frac * (b - a)
+        if tau > 0.0:
+            if dt[k] != dt_seen:  # uniform sampling: one exp per record, not per sample
+                dt_seen = dt[k]
+                gain = 1.0 - math.exp(-dt_seen / tau)
+            lag += gain * (v - lag)
+        else:
+            lag = v
+        out[k] = lag
+    for k in range(max(d_int + 1, 0), n):  # the ring ends holding the last inputs
+        if k >= n - size:
+            head = (head + 1) % size
+            state[3 + head] = x[k]
+    state[1] = lag
+    state[2] = float(head)
+
+
 @njit(cache=True)
 def constant_runs(x, tol, edges):  # type: ignore[no-untyped-def]
     """Split ``x`` into runs that stay within ``tol`` of their first sample.

@@ -29,10 +29,12 @@ the early segments and scoring it on a later one needs no second pass.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 from numpy.typing import ArrayLike
 
 from . import _kernels
@@ -359,22 +361,28 @@ def _accumulate(
     z0: FloatArray,
     col_scale: FloatArray,
     edges: Sequence[int],
+    stride: int = 1,
+    block: int = BLOCK,
 ) -> list[NormalEquations]:
     """Normal equations of every segment ``edges[k]:edges[k+1]`` (model run through all).
 
-    One pass over the record. The core runs on the scaled input ``x / sx``
+    One pass over the record; with ``stride`` > 1 the model still runs through
+    every sample but only about one row in ``stride`` enters the sums, picked
+    by a hash of its index (no aliasing with a periodic drive): a cheap
+    objective for an outer search. The core runs on the scaled input ``x / sx``
     (a power of two: exact), the terms on ``x`` with their columns divided by
     their scale; the output is taken as ``y / sy - y_ref``.
     """
     n = core.n_operators
     p = col_scale.size
     sx, sy = scales
-    work = np.empty((BLOCK, p))
+    work = np.empty((block, p))
     work[:, n] = 1.0
     scaled_core = core.scaled(sx)
     z = z0 / sx
     states = [term.rest_state(x_first) for term in terms]
     parts = [(np.zeros((p, p)), np.zeros(p), [0.0]) for _ in edges[1:]]
+    counts = [0 for _ in edges[1:]]
     pos = 0  # index of the next sample in the record
     seg = 0
     t_prev: float | None = None
@@ -386,7 +394,7 @@ def _accumulate(
                 seg += 1
             if seg == len(parts):
                 break
-            stop = min(size, k + BLOCK, edges[seg + 1] - pos)
+            stop = min(size, k + block, edges[seg + 1] - pos)
             m = stop - k
             xs = x_blk[k:stop]
             scaled_core.fill(xs / sx, z, work)
@@ -399,19 +407,35 @@ def _accumulate(
                     dt[1:] = np.diff(ts)
                     t_prev = float(ts[-1])
                 term_columns(terms, xs, ts, dt, states, work[:m, n + 1 :])
-                work[:m, n + 1 :] /= col_scale[n + 1 :]
-            b = work[:m]
-            ys = y_blk[k:stop] / sy - y_ref
+            if stride > 1:  # the rows kept, then scaled: the rest is never touched again
+                keep = _picked(pos + k, m, stride)
+                b, ys = work[:m][keep], y_blk[k:stop][keep] / sy - y_ref
+                b[:, n + 1 :] /= col_scale[n + 1 :]
+            else:
+                b, ys = work[:m], y_blk[k:stop] / sy - y_ref
+                b[:, n + 1 :] /= col_scale[n + 1 :]
             gram, rhs, yy = parts[seg]
             gram += b.T @ b
             rhs += b.T @ ys
             yy[0] += float(ys @ ys)
+            counts[seg] += ys.size
             k = stop
         pos += size
     return [
-        NormalEquations(gram, rhs, yy[0], hi - lo)
-        for (gram, rhs, yy), lo, hi in zip(parts, edges[:-1], edges[1:], strict=True)
+        NormalEquations(gram, rhs, yy[0], count)
+        for (gram, rhs, yy), count in zip(parts, counts, strict=True)
     ]
+
+
+@functools.lru_cache(maxsize=256)
+def _picked(first: int, m: int, stride: int) -> npt.NDArray[np.intp]:
+    """About one in ``stride`` of the rows ``first .. first + m - 1``, by a hash of the index.
+
+    Cached: an outer search asks for the same rows at every evaluation.
+    """
+    g = np.arange(first, first + m, dtype=np.uint64)
+    h = (g * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(40)  # Fibonacci hashing, 24 bits
+    return np.flatnonzero(h < np.uint64((1 << 24) // stride)).astype(np.intp)
 
 
 def _bounded_lstsq(gram: FloatArray, rhs: FloatArray, lower: FloatArray) -> FloatArray:
@@ -460,12 +484,15 @@ class Identification:
         Each term's coefficients; None for a term the selection left out.
     scores : dict
         Held-out RMSE (output units) of every subset tried, keyed by the tuple
-        of term indices (empty without selection).
+        of term indices (empty without selection or validation).
+    rmse : float
+        RMSE of the final solve over the rows it used (output units).
     """
 
     core: FloatArray
     coefficients: tuple[FloatArray | None, ...]
     scores: dict[tuple[int, ...], float]
+    rmse: float = float("nan")
 
 
 def identify(
@@ -478,6 +505,9 @@ def identify(
     min_slope: float,
     subsets: Sequence[tuple[int, ...]] | None = None,
     holdout: float = 0.3,
+    validate: bool = False,
+    stride: int = 1,
+    block: int = BLOCK,
 ) -> Identification:
     """Identify a core and terms jointly from checked inputs (the one fit path).
 
@@ -505,6 +535,13 @@ def identify(
         Default: all terms, no selection.
     holdout : float, default 0.3
         Fraction of the record held out for the selection.
+    validate : bool, default False
+        Score the (single) subset on the held-out part too (``scores``).
+    stride : int, default 1
+        Use about one row in ``stride`` in the sums (the model runs through
+        all): a cheaper, noisier fit for outer searches.
+    block : int
+        Samples per block (larger: less overhead, more memory).
 
     Returns
     -------
@@ -533,10 +570,20 @@ def identify(
         term.lower_bounds() * col_scale[c] / sy for term, c in zip(terms, term_cols, strict=True)
     ]
     candidates = [tuple(range(len(terms)))] if subsets is None else list(subsets)
-    split = int((1.0 - holdout) * sm.n) if len(candidates) > 1 else sm.n
+    split = int((1.0 - holdout) * sm.n) if len(candidates) > 1 or validate else sm.n
     edges = [0, split, sm.n] if 0 < split < sm.n else [0, sm.n]
     parts = _accumulate(
-        core, terms, blocks, sm.x_first, y_ref, (sx, sy), initial_state, col_scale, edges
+        core,
+        terms,
+        blocks,
+        sm.x_first,
+        y_ref,
+        (sx, sy),
+        initial_state,
+        col_scale,
+        edges,
+        stride,
+        block,
     )
     whole = parts[0] if len(parts) == 1 else parts[0] + parts[1]
 
@@ -562,7 +609,7 @@ def identify(
 
     scores: dict[tuple[int, ...], float] = {}
     best = candidates[0]
-    if len(candidates) > 1 and len(parts) == 2:
+    if (len(candidates) > 1 or validate) and len(parts) == 2:
         best_err = np.inf
         for subset in candidates:
             try:
@@ -573,11 +620,13 @@ def identify(
             scores[subset] = err
             if err < best_err * (1 - 1e-3):  # a term must earn its place
                 best, best_err = subset, err
-    beta = solve(whole, best) / col_scale[columns_of(best)] * sy
+    scaled = solve(whole, best)
+    fit_rmse = float(np.sqrt(whole.sse(scaled, columns_of(best)) / whole.n_samples)) * sy
+    beta = scaled / col_scale[columns_of(best)] * sy
     beta[n] += y_ref * sy
     coefficients: list[FloatArray | None] = [None] * len(terms)
     pos = n + 1
     for j in best:
         coefficients[j] = beta[pos : pos + terms[j].width].copy()
         pos += terms[j].width
-    return Identification(beta[: n + 1].copy(), tuple(coefficients), scores)
+    return Identification(beta[: n + 1].copy(), tuple(coefficients), scores, fit_rmse)

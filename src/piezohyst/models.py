@@ -39,7 +39,7 @@ import math
 import os
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar, Self
 
 import numpy as np
@@ -47,6 +47,8 @@ from numpy.typing import ArrayLike
 
 from ._validation import FloatArray, as_signal, as_time, check_float, check_int, same_length
 from .cores import PlayCore
+from .dynamics import KINDS as DYNAMICS_KINDS
+from .dynamics import InputDynamics
 from .errors import (
     InsufficientDataError,
     NotFittedError,
@@ -121,11 +123,14 @@ class ModelState:
     t_last : float or None
         Time (s) of the last sample run, None before any (or for a
         rate-independent model run without times).
+    input : ndarray
+        The input dynamics' state (delay buffer and lag; empty without them).
     """
 
     operators: FloatArray
     terms: tuple[FloatArray, ...] = ()
     t_last: float | None = None
+    input: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON data.
@@ -138,6 +143,7 @@ class ModelState:
             "operators": self.operators.tolist(),
             "terms": [s.tolist() for s in self.terms],
             "t_last": self.t_last,
+            "input": self.input.tolist(),
         }
 
     @classmethod
@@ -157,6 +163,7 @@ class ModelState:
             as_signal(data["operators"], "operators").copy(),
             tuple(as_signal(s, "terms", allow_empty=True).copy() for s in data.get("terms", [])),
             None if t_last is None else float(t_last),
+            as_signal(data.get("input", []), "input", allow_empty=True).copy(),
         )
 
 
@@ -176,6 +183,8 @@ class InverseSpec:
         The training input range (V); NaN when unknown.
     input_unit, output_unit : str
         The model's units.
+    dynamics : InputDynamics
+        Delay and lag between the command and the hysteresis (none by default).
     """
 
     operator: PIHysteresis
@@ -184,6 +193,7 @@ class InverseSpec:
     input_range: tuple[float, float]
     input_unit: str
     output_unit: str
+    dynamics: InputDynamics = field(default_factory=InputDynamics)
 
     @property
     def analytic(self) -> bool:
@@ -280,6 +290,14 @@ def _creep(value: object, name: str, owner: str) -> Creep | None:
     raise ParameterError(msg)
 
 
+def _dynamics_kind(value: object, name: str, owner: str) -> str:
+    choices = (*DYNAMICS_KINDS, "auto")
+    if value not in choices:
+        msg = f"The '{name}' parameter of {owner} must be one of {choices}. Got {value!r} instead."
+        raise ParameterError(msg)
+    return str(value)
+
+
 def _terms(value: object, name: str, owner: str) -> tuple[Term, ...]:
     if isinstance(value, str | Term) or not isinstance(value, Sequence):
         msg = (
@@ -315,6 +333,11 @@ class HysteresisModel:
         slope ``span(y) / span(x)``. It guarantees the analytic inverse.
     input_unit, output_unit : str, default "V", "C"
         Units recorded with the model.
+    input_dynamics : {"none", "delay", "first-order", "delay+first-order", "auto"}
+        Dynamics between the logged command and the hysteresis (an amplifier's
+        lag, a logging delay), identified jointly by a search around the
+        linear solve; ``"auto"`` chooses the kind on a held-out last 30 %.
+        Needs the sample times. The result is ``input_dynamics_``.
     """
 
     cli_name: ClassVar[str] = ""
@@ -324,8 +347,10 @@ class HysteresisModel:
         "min_slope": _min_slope,
         "input_unit": _unit,
         "output_unit": _unit,
+        "input_dynamics": _dynamics_kind,
     }
     selection_: dict[str, float]
+    input_dynamics_: InputDynamics
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -339,6 +364,7 @@ class HysteresisModel:
         min_slope: float = 1e-3,
         input_unit: str = "V",
         output_unit: str = "C",
+        input_dynamics: str = "none",
     ) -> None:
         # the settings every model has; subclasses add theirs after the first
         self.n_operators = n_operators
@@ -346,6 +372,7 @@ class HysteresisModel:
         self.min_slope = min_slope
         self.input_unit = input_unit
         self.output_unit = output_unit
+        self.input_dynamics = input_dynamics
 
     # ------------------------------------------------------ sklearn contract
     @classmethod
@@ -481,11 +508,133 @@ class HysteresisModel:
         ys = as_signal(y, "y")
         same_length(xs, ys, "x", "y")
         ts = as_time(t, xs.size, required=False, owner=type(self).__name__)
-        blocks = array_blocks(xs, ys, ts)
+        dyn = InputDynamics()
+        us = xs
+        kind = _dynamics_kind(self.input_dynamics, "input_dynamics", type(self).__name__)
+        if kind != "none":  # the hysteresis sees the voltage on the piezo, not the command
+            if ts is None:
+                msg = (
+                    f"{type(self).__name__}(input_dynamics={kind!r}) needs the sample times: "
+                    "pass t= (s)"
+                )
+                raise TimeAxisError(msg)
+            dyn = self._search_dynamics(xs, ys, ts, kind)
+            us, _ = dyn.apply(xs, block_dt(ts, 0, ts.size, None))
+        blocks = array_blocks(us, ys, ts)
         summary = self._fit(blocks, initial_state, ts is not None)
-        if self._refine(xs, ys, ts, summary, initial_state):
+        if self._refine(us, ys, ts, summary, initial_state):
             self._score(blocks, summary)  # the refinement changed the model
+        if dyn.active:  # commands, their range and slew are the logged input's
+            self.input_range_ = (float(xs.min()), float(xs.max()))
+            assert ts is not None
+            self.max_slew_rate_ = Summary.of(array_blocks(xs, ys, ts)).max_slew_rate
+        self.input_dynamics_ = dyn
         return self
+
+    def _search_dynamics(
+        self, x: FloatArray, y: FloatArray, t: FloatArray, kind: str
+    ) -> InputDynamics:
+        """The delay and lag that fit best: a search around the linear solve.
+
+        Each candidate filters the command, then one bounded linear solve
+        scores it (up to 8 operators, about 5 000 rows in the sums: the
+        search needs the shape of the objective, not the final model). 1-D
+        kinds: a grid, then Brent's method around its best point; the 2-D kind
+        starts a Nelder-Mead from the two 1-D results. ``"auto"`` compares every
+        kind on the held-out last 30 % and keeps a more complex one only when
+        it is better by 0.1 %.
+        """
+        from scipy.optimize import minimize, minimize_scalar
+
+        params = self.check_params()
+        dt = block_dt(t, 0, t.size, None)
+        assert dt is not None
+        dt0 = float(np.median(np.diff(t)))
+        x_range = np.array([float(x.min()), float(x.max())])
+        terms, _ = self._terms_to_fit(x_range, params)
+        rate = any(term.rate_dependent for term in terms)
+        core = PlayCore(default_thresholds(x_range, min(int(params["n_operators"]), 8)))
+        stride = max(1, x.size // 5000)
+        # lags of amplifiers and sensor filters: up to 50 ms (or 50 samples), never more than a
+        # tenth of the record
+        limit = min(max(50.0 * dt0, 0.05), 0.1 * float(t[-1] - t[0]))
+
+        def make(name: str, delay: float, tau: float) -> InputDynamics:
+            return InputDynamics(name, max(tau, 0.0), max(delay, 0.0), dt0)
+
+        y_stats = (float(y[0]), float(y.min()), float(y.max()))
+        cache: dict[tuple[float, float, bool], float] = {}
+
+        def score(dyn: InputDynamics, validate: bool = False) -> float:
+            key = (round(dyn.delay / dt0, 6), round(dyn.tau / dt0, 6), validate)
+            if key in cache:
+                return cache[key]
+            u, _ = dyn.apply(x, dt)
+            sm = Summary(u.size, float(u[0]), float(u.min()), float(u.max()), *y_stats)
+            z0 = np.full(core.n_operators, float(u[0]))
+            blocks = array_blocks(u, y, t if rate else None)
+            sol = identify(
+                core,
+                terms,
+                blocks,
+                sm,
+                z0,
+                min_slope=float(params["min_slope"]),
+                validate=validate,
+                stride=stride,
+                block=1 << 16,
+            )
+            cache[key] = next(iter(sol.scores.values())) if validate else sol.rmse
+            return cache[key]
+
+        def search_1d(name: str) -> InputDynamics:
+            def build(v: float) -> InputDynamics:
+                return make(name, v, 0.0) if name == "delay" else make(name, 0.0, v)
+
+            grid = np.linspace(0.0, limit, 6)
+            values = [score(build(float(g))) for g in grid]
+            k = int(np.argmin(values))
+            lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
+            res = minimize_scalar(
+                lambda v: score(build(float(v))),
+                bounds=(lo, hi),
+                method="bounded",
+                options={"xatol": 0.05 * dt0},
+            )
+            best = float(res.x) if res.fun < values[k] else float(grid[k])
+            return build(best)
+
+        def search_2d(first: InputDynamics, second: InputDynamics) -> InputDynamics:
+            start = np.array([0.5 * first.delay, 0.5 * second.tau])
+            res = minimize(
+                lambda p: score(make("delay+first-order", float(p[0]), float(p[1]))),
+                start,
+                method="Nelder-Mead",
+                bounds=[(0.0, limit), (0.0, limit)],
+                options={"xatol": 0.05 * dt0, "fatol": 0.0, "maxfev": 20},
+            )
+            best = make("delay+first-order", float(res.x[0]), float(res.x[1]))
+            for candidate in (first, second):  # either 1-D result is a point of the 2-D space
+                as_2d = make("delay+first-order", candidate.delay, candidate.tau)
+                if score(as_2d) < score(best):
+                    best = as_2d
+            return best
+
+        if kind in ("delay", "first-order"):
+            return search_1d(kind)
+        delayed, lagged = search_1d("delay"), search_1d("first-order")
+        both = search_2d(delayed, lagged)
+        if kind == "delay+first-order":
+            return both
+        # auto: every kind on the held-out part; complexity must earn its place
+        ranked = [(InputDynamics(), 0), (delayed, 1), (lagged, 1), (both, 2)]
+        best_dyn, best_err, best_level = ranked[0][0], score(ranked[0][0], True), 0
+        for dyn, level in ranked[1:]:
+            err = score(dyn, True)
+            margin = 1.0 - 1e-3 * (level - best_level) if level > best_level else 1.0
+            if err < best_err * margin:
+                best_dyn, best_err, best_level = dyn, err, level
+        return best_dyn
 
     def fit_blocks(
         self, blocks: Blocks, *, timed: bool = True, initial_state: ArrayLike | None = None
@@ -527,7 +676,14 @@ class HysteresisModel:
                 "the record in memory: use fit"
             )
             raise ParameterError(msg)
+        if self.get_params().get("input_dynamics", "none") != "none":
+            msg = (
+                f"{type(self).__name__}(input_dynamics={self.input_dynamics!r}) searches the "
+                "dynamics over the record in memory: use fit"
+            )
+            raise ParameterError(msg)
         self._fit(blocks, initial_state, timed)
+        self.input_dynamics_ = InputDynamics()
         return self
 
     def _fit(self, blocks: Blocks, initial_state: ArrayLike | None, timed: bool) -> Summary:
@@ -667,6 +823,7 @@ class HysteresisModel:
         self.rmse_ = self.nrmse_ = math.nan  # set by fit; unknown for a model built by hand
         self.input_range_ = (math.nan, math.nan)
         self.max_slew_rate_ = math.nan
+        self.input_dynamics_ = InputDynamics()
 
     # ---------------------------------------------------- fitted attributes
     def _check_fitted(self) -> None:
@@ -686,7 +843,7 @@ class HysteresisModel:
     def rate_dependent_(self) -> bool:
         """True when a fitted term needs the sample times."""
         self._check_fitted()
-        return any(term.rate_dependent for term in self.terms_)
+        return self.input_dynamics_.active or any(term.rate_dependent for term in self.terms_)
 
     def coefficients(self) -> dict[str, tuple[float, str]]:
         """Every term coefficient with its unit, by label (``"integral"``, ``"creep[1 s]"``).
@@ -765,11 +922,13 @@ class HysteresisModel:
 
     def _start(self, state: ModelState | ArrayLike | None, x0: float) -> ModelState:
         n = self.operator_.n_operators
+        dyn = self.input_dynamics_
         if state is None:
             return ModelState(
                 self.operator_.initial_state.copy(),
                 tuple(term.rest_state(x0) for term in self.terms_),
                 None,
+                dyn.rest_state(x0) if dyn.active else np.zeros(0),
             )
         if not isinstance(state, ModelState):  # operator states only
             z = as_signal(state, "state").copy()
@@ -778,7 +937,8 @@ class HysteresisModel:
                     f"'state' must be a ModelState or {n} operator states (V). Got {z.size} values."
                 )
                 raise ShapeError(msg)
-            return ModelState(z, tuple(term.rest_state(x0) for term in self.terms_), None)
+            rest = dyn.rest_state(x0) if dyn.active else np.zeros(0)
+            return ModelState(z, tuple(term.rest_state(x0) for term in self.terms_), None, rest)
         z = as_signal(state.operators, "state.operators").copy()
         if z.size != n or len(state.terms) != len(self.terms_):
             msg = (
@@ -793,7 +953,12 @@ class HysteresisModel:
                 msg = f"the state of term {term.kind!r} needs {len(term.state_names)} values."
                 raise ShapeError(msg)
             terms.append(arr)
-        return ModelState(z, tuple(terms), state.t_last)
+        inp = np.array(state.input, dtype=np.float64)
+        expected = dyn.rest_state(x0).size if dyn.active else 0
+        if inp.size != expected:
+            msg = f"the input dynamics state needs {expected} values. Got {inp.size}."
+            raise ShapeError(msg)
+        return ModelState(z, tuple(terms), state.t_last, inp)
 
     # ------------------------------------------------------------- running
     def propagate(
@@ -843,6 +1008,9 @@ class HysteresisModel:
                 f"Got t[0]={float(ts[0])!r}."
             )
             raise TimeAxisError(msg)
+        if self.input_dynamics_.active:  # the command becomes the voltage on the piezo
+            assert ts is not None
+            xs, _ = self.input_dynamics_.apply(xs, block_dt(ts, 0, ts.size, st.t_last), st.input)
         if removed_only:
             out = np.zeros_like(xs)
             z = st.operators
@@ -863,7 +1031,7 @@ class HysteresisModel:
                 term_columns(terms, xs[start:stop], ts_b, dt, states, block)
                 out[start:stop] += block @ coef
         t_last = float(ts[-1]) if (rate and ts is not None) else st.t_last
-        return Propagation(out, ModelState(z, st.terms, t_last))
+        return Propagation(out, ModelState(z, st.terms, t_last, st.input))
 
     def predict(
         self, x: ArrayLike, t: ArrayLike | None = None, state: ModelState | ArrayLike | None = None
@@ -1003,7 +1171,13 @@ class HysteresisModel:
                 )
                 raise ParameterError(msg)
         return InverseSpec(
-            self.operator_, static, lags, self.input_range_, self.input_unit, self.output_unit
+            self.operator_,
+            static,
+            lags,
+            self.input_range_,
+            self.input_unit,
+            self.output_unit,
+            self.input_dynamics_,
         )
 
     @property
@@ -1259,6 +1433,7 @@ class PIModel(HysteresisModel):
         min_slope: float = 1e-3,
         input_unit: str = "V",
         output_unit: str = "C",
+        input_dynamics: str = "none",
     ) -> None:
         super().__init__(
             n_operators,
@@ -1266,6 +1441,7 @@ class PIModel(HysteresisModel):
             min_slope=min_slope,
             input_unit=input_unit,
             output_unit=output_unit,
+            input_dynamics=input_dynamics,
         )
         self.terms = terms
 
@@ -1447,6 +1623,7 @@ class GeneralizedPI(HysteresisModel):
         min_slope: float = 1e-3,
         input_unit: str = "V",
         output_unit: str = "C",
+        input_dynamics: str = "none",
     ) -> None:
         super().__init__(
             n_operators,
@@ -1454,6 +1631,7 @@ class GeneralizedPI(HysteresisModel):
             min_slope=min_slope,
             input_unit=input_unit,
             output_unit=output_unit,
+            input_dynamics=input_dynamics,
         )
         self.growth_terms = growth_terms
         self.asymmetry = asymmetry

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from ._version import __version__
+from .dynamics import InputDynamics
 from .errors import ModelFileError, NotFittedError, ParameterError, PiezohystError
 from .hysteresis import PIHysteresis
 from .io import atomic_write_text
@@ -149,6 +150,7 @@ def model_to_dict(model: Model) -> dict[str, Any]:
             "nrmse": _nullable(model.nrmse_),
             "input_range": None if math.isnan(lo) else [lo, hi],
             "max_slew_rate": _nullable(model.max_slew_rate_),
+            "input_dynamics": model.input_dynamics_.to_dict(),
         },
     }
     body["checksum"] = _checksum(body)
@@ -374,6 +376,13 @@ def model_from_dict(data: Any, expected: type | None = None) -> Model:
     model.nrmse_ = fitted.number("nrmse", optional=True)
     model.input_range_ = _range(fitted)
     model.max_slew_rate_ = fitted.number("max_slew_rate", optional=True)
+    dyn = fitted.data.get("input_dynamics")
+    if dyn is not None:
+        try:
+            model.input_dynamics_ = InputDynamics.from_dict(dict(dyn))
+        except (TypeError, ValueError) as exc:
+            msg = f"field '{fitted.name('input_dynamics')}': {exc}"
+            raise ModelFileError(msg) from None
     return model
 
 

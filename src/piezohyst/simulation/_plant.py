@@ -119,3 +119,28 @@ def bench_kernel(  # type: ignore[no-untyped-def]
     state[S_V] = v_prev
     state[S_T] = t_prev
     state[S_STARTED] = 1.0 if started else 0.0
+
+
+@njit(cache=True)
+def amplifier_lag(t, v, tau, state, out):  # type: ignore[no-untyped-def]
+    """The voltage that reaches the piezo: a first-order lag ``tau`` (s) of the command.
+
+    The command ``v[k]`` is held over the sample ending at ``t[k]``, so the
+    piezo voltage there is ``u[k] = u[k-1] + (1 - exp(-dt/tau)) (v[k] - u[k-1])``
+    (exact for the held command). ``state`` = [u, t, started]; the first sample
+    starts settled at its command.
+    """
+    u = state[0]
+    t_prev = state[1]
+    started = state[2] > 0.0
+    for k in range(v.shape[0]):
+        if not started or tau <= 0.0:
+            u = v[k]
+            started = True
+        else:
+            u += (1.0 - math.exp(-(t[k] - t_prev) / tau)) * (v[k] - u)
+        t_prev = t[k]
+        out[k] = u
+    state[0] = u
+    state[1] = t_prev
+    state[2] = 1.0

@@ -20,7 +20,7 @@ Signal chain (paper Fig. 3 and Section 4)::
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -63,6 +63,7 @@ class BenchPreset:
     laser_resolution: float  # m
     laser_noise: float  # m rms
     sources: dict[str, str] = field(default_factory=dict)
+    amp_tau: float = 0.0  # s, the amplifier's lag driving the capacitive load (0: none)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -119,6 +120,20 @@ PRESETS: dict[str, BenchPreset] = {
         sources=_T226_SOURCES,
     ),
 }
+
+PRESETS["T226-H4-203X-amp4ms"] = replace(
+    PRESETS["T226-H4-203X"],
+    name="T226-H4-203X-amp4ms",
+    amp_tau=4e-3,
+    sources={
+        **_T226_SOURCES,
+        "amp_tau": (
+            "assumption: a high-voltage amplifier whose output resistance and current limit "
+            "charge the piezo's capacitance with a 4 ms time constant (about 40 Hz bandwidth); "
+            "it logs the command, not the piezo voltage, as the measured 1 Hz sets do"
+        ),
+    },
+)
 
 DEFAULT_PRESET = "T226-H4-203X"
 
@@ -189,6 +204,7 @@ class _Plant:
             [p.c0, p.g_leak, p.leak_voltage_coeff, max(p.v_max, 1e-9), p.i_bias, p.c_ref, p.r_ref]
         )
         self.state = np.zeros(_plant.STATE_SIZE)
+        self.lag_state = np.zeros(3)
         self.lsb = 2.0 * p.adc_range / 2**p.adc_bits
 
     def run(
@@ -201,6 +217,10 @@ class _Plant:
         if out is None:
             out = np.empty((3, v.size))
         q_c, q_r, v_amp = out[0], out[1], out[2]
+        if self.p.amp_tau > 0.0:  # the piezo sees the amplifier's lagging output
+            lagged = np.empty_like(v)
+            _plant.amplifier_lag(t, v, self.p.amp_tau, self.lag_state, lagged)
+            v = lagged
         _plant.bench_kernel(
             t, v, self.alpha, self.beta, self.mu, self.by_alpha, self.by_beta, self.relays,
             self.elec, self.state, q_c, q_r, v_amp,

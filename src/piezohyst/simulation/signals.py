@@ -121,6 +121,31 @@ def levels(amplitude: float, frequency: float, duration: float, rate: float) -> 
     return np.asarray(amplitude * (frm + (to - frm) * move))
 
 
+def multifreq(amplitude: float, frequency: float, duration: float, rate: float) -> FloatArray:
+    """Thirds of the record at ``frequency``, 10x and 40x it, loops decaying in each third.
+
+    For identifying rate dependence (an amplifier's lag, sensor filters): at
+    one frequency lag and hysteresis cannot be told apart, at several they can.
+    Each third holds whole cycles (raised cosines from 0) whose amplitude
+    decays from ``amplitude`` to 30 % of it, so the record is continuous.
+    """
+    t = _time(duration, rate)
+    out = np.zeros_like(t)
+    third = duration / 3.0
+    start = 0.0
+    for factor in (1.0, 10.0, 40.0):
+        f = frequency * factor
+        cycles = max(1, int(third * f))
+        stop = start + cycles / f
+        seg = (t >= start) & (t < stop)
+        tau = t[seg] - start
+        decay = 0.3 + 0.7 * np.exp(-3.0 * tau / (stop - start))
+        loops = 0.5 * (1 - np.cos(2 * np.pi * f * tau))
+        out[seg] = amplitude * decay * loops
+        start = stop
+    return out
+
+
 _STAIRCASE = np.array([0.0, 0.25, 0.5, 0.75, 1.0, 0.75, 0.5, 0.25, 0.0])
 
 
@@ -154,6 +179,7 @@ SIGNALS = {
     "hold": hold,
     "levels": levels,
     "staircase": staircase,
+    "multifreq": multifreq,
 }
 
 
