@@ -243,6 +243,101 @@ def compensator_step(desired, tables, config, state):  # type: ignore[no-untyped
     return v
 
 
+# Input dynamics of a compensator (analytic path): command -> [fractional delay as a lag A]
+# -> [lag B] -> piezo voltage. ``dyn`` = [gain A, gain B] (0: absent; gain = 1 - exp(-dt/tau)),
+# ``dstate`` = [after A, after B]. An integer delay is handled by the caller (preview).
+DYN_GAIN_A = 0
+DYN_GAIN_B = 1
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def _advance_dynamics(x, dyn, dstate):  # type: ignore[no-untyped-def]
+    """The piezo voltage after command ``x`` is held for one sample (state updated)."""
+    w = dstate[0] + dyn[DYN_GAIN_A] * (x - dstate[0]) if dyn[DYN_GAIN_A] > 0.0 else x
+    u = dstate[1] + dyn[DYN_GAIN_B] * (w - dstate[1]) if dyn[DYN_GAIN_B] > 0.0 else w
+    dstate[0] = w
+    dstate[1] = u
+    return u
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def dynamic_step(desired, tables, config, state, dyn, dstate):  # type: ignore[no-untyped-def]
+    """``compensator_step`` with lags between the command and the piezo, inverted exactly.
+
+    The inverse operators give the piezo voltage that yields ``desired``; the
+    lags are inverted one sample at a time (exact for a command held over the
+    sample); the command is limited; the piezo voltage it really produces
+    drives the forward states, and the inverse states are rebuilt when it
+    differs from the target (a limit acted).
+    """
+    n = tables.shape[1]
+    end = state.shape[0]
+    last = state[end + ST_LAST]
+    lo = config[CFG_V_MIN]
+    hi = config[CFG_V_MAX]
+    if not math.isfinite(desired):  # hold the last command: the piezo keeps settling on it
+        state[end + ST_NONFINITE] += 1.0
+        u = _advance_dynamics(last, dyn, dstate)
+        for i in range(n):
+            state[i] = min(max(state[i], u - tables[TAB_R, i]), u + tables[TAB_R, i])
+        inverse_states(tables, config, state)
+        return last
+    q = config[CFG_REFERENCE] + desired * config[CFG_INV_GAIN]
+    c = config[CFG_OFFSET]
+    q = min(max(q, c - config[CFG_BOUND]), c + config[CFG_BOUND])
+    target = config[CFG_INV_OFFSET]
+    for i in range(n):
+        zeta = min(max(state[n + i], q - tables[TAB_RI, i]), q + tables[TAB_RI, i])
+        state[n + i] = zeta
+        target += tables[TAB_WI, i] * zeta
+    w_target = target
+    if dyn[DYN_GAIN_B] > 0.0:
+        w_target = dstate[1] + (target - dstate[1]) / dyn[DYN_GAIN_B]
+    x = w_target
+    if dyn[DYN_GAIN_A] > 0.0:
+        x = dstate[0] + (w_target - dstate[0]) / dyn[DYN_GAIN_A]
+    if not math.isfinite(x):
+        state[end + ST_NONFINITE] += 1.0
+        inverse_states(tables, config, state)
+        return last
+    if x < lo or x > hi:
+        tol = 1e-12 * (hi - lo)
+        if x < lo - tol or x > hi + tol:
+            state[end + ST_SATURATED] += 1.0
+        x = min(max(x, lo), hi)
+    step = config[CFG_MAX_STEP]
+    if x > last + step:
+        x = last + step
+    elif x < last - step:
+        x = last - step
+    u = _advance_dynamics(x, dyn, dstate)
+    for i in range(n):
+        state[i] = min(max(state[i], u - tables[TAB_R, i]), u + tables[TAB_R, i])
+    if abs(u - target) > 1e-12 * (hi - lo):
+        inverse_states(tables, config, state)
+    state[end + ST_LAST] = x
+    return x
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def dynamic_process(desired, delay, tables, config, state, dyn, dstate, out):  # type: ignore[no-untyped-def]
+    """``dynamic_step`` over a block; the command at k targets ``desired[k + delay]``.
+
+    The block is the preview of an integer delay: its last ``delay`` targets
+    lie beyond it and are extrapolated linearly from its last two values.
+    """
+    m = desired.shape[0]
+    for k in range(m):
+        j = k + delay
+        if j < m:
+            target = desired[j]
+        elif m >= 2:
+            target = desired[m - 1] + (j - m + 1) * (desired[m - 1] - desired[m - 2])
+        else:
+            target = desired[m - 1]
+        out[k] = dynamic_step(target, tables, config, state, dyn, dstate)
+
+
 @njit(cache=True, fastmath=FASTMATH)
 def compensator_process(desired, tables, config, state, out):  # type: ignore[no-untyped-def]
     """``compensator_step`` over a block (same arithmetic, one call)."""
@@ -500,6 +595,7 @@ def warm_up() -> None:
     inverse_states(tables, config, state)
     compensator_step(0.0, tables, config, state)
     compensator_process(x, tables, config, state, np.empty(2))
+    dynamic_process(x, 1, tables, config, state, np.zeros(2), np.zeros(2), np.empty(2))
     numeric_process(x, tables, np.zeros((3, 0)), np.zeros((3, 0)), config, np.zeros(4), np.empty(2))
     ctl = np.zeros(CTL_SIZE)
     ctl[CTL_DT] = ctl[CTL_INV_GAIN] = 1.0

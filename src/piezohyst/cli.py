@@ -26,6 +26,7 @@ from .io import DataSpec
 from .leakage import LEAKAGE_TERMS
 from .models import HysteresisModel, model_names
 from .selfsensing import LoopSettings
+from .simulation.signals import SIGNALS
 
 
 class Context:
@@ -377,19 +378,7 @@ EXISTING = click.Path(exists=False, dir_okay=False, path_type=Path)
 @click.option("--preset", default="T226-H4-203X", show_default=True, help="Bench preset.")
 @click.option(
     "--signal",
-    type=click.Choice(
-        [
-            "fixed",
-            "multi",
-            "decaying",
-            "bipolar",
-            "triangle",
-            "two-rate",
-            "hold",
-            "levels",
-            "staircase",
-        ]
-    ),
+    type=click.Choice(list(SIGNALS)),
     default="hold",
     show_default=True,
     help="Excitation.",
@@ -458,6 +447,12 @@ def describe(model: HysteresisModel) -> str:
     shape = [term for term in model.terms_ if not term.removed]
     if shape:
         text += "; shape terms: " + ", ".join(f"{t.kind} ({t.width} coefficients)" for t in shape)
+    dyn = model.input_dynamics_
+    if dyn.active:
+        text += (
+            f"; input dynamics {dyn.kind}: lag {1e3 * dyn.tau:.4g} ms, "
+            f"delay {1e3 * dyn.delay:.4g} ms"
+        )
     return text
 
 
@@ -488,6 +483,14 @@ def describe(model: HysteresisModel) -> str:
 @click.option(
     "--creep", default="", help="generalized-pi: creep time constants in s, e.g. 0.1,1,10."
 )
+@click.option(
+    "--input-dynamics",
+    type=click.Choice(["none", "delay", "first-order", "delay+first-order", "auto"]),
+    default="none",
+    show_default=True,
+    help="Delay/lag between the logged command and the piezo, identified with the model "
+    "(record several drive frequencies).",
+)
 @_data_options
 @OUT_FILE
 @FORCE
@@ -499,6 +502,7 @@ def fit(
     operators: int,
     growth: str,
     creep: str,
+    input_dynamics: str,
     data_spec: DataSpec,
     out: Path,
     force: bool,
@@ -534,6 +538,7 @@ def fit(
                 data_spec=data_spec,
                 growth_terms=terms,
                 creep=taus,
+                input_dynamics=input_dynamics,
                 force=force,
                 progress=progress,
             ),

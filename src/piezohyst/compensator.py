@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -60,11 +60,14 @@ class CompensatorState:
         Creep lag states (V); empty without creep.
     command : float
         The last command sent (V).
+    dynamics : ndarray
+        The input dynamics' state (V; empty without input dynamics).
     """
 
     operators: FloatArray
     lags: FloatArray
     command: float
+    dynamics: FloatArray = field(default_factory=lambda: np.zeros(0))
 
 
 class Compensator:
@@ -180,6 +183,19 @@ class Compensator:
         if spec.lags is not None and sample_rate is None:
             msg = "A model with creep needs the loop's sample_rate (Hz). Got sample_rate=None."
             raise ParameterError(msg)
+        dyn = spec.dynamics
+        if dyn.active and sample_rate is None:
+            msg = (
+                "A model with input dynamics needs the loop's sample_rate (Hz). "
+                "Got sample_rate=None."
+            )
+            raise ParameterError(msg)
+        if dyn.active and not spec.analytic:
+            msg = (
+                "A model with input dynamics is compensated with the analytic inverse only: fit "
+                "it without asymmetry or creep terms."
+            )
+            raise ParameterError(msg)
         self.model = model
         self.spec = spec
         #: True when eq. 18's analytic inverse runs (no Newton solve); fixed by the model
@@ -224,6 +240,21 @@ class Compensator:
             n_aux = self.lags.shape[1]
         self._state = np.zeros(n + n_aux + 3)
         self._n_aux = n_aux
+        # input dynamics: an integer delay (handled by preview) and lags inverted per sample
+        self.dynamic = dyn.active
+        self.delay_samples = 0
+        self.dyn = np.zeros(2)
+        self.dstate = np.zeros(2)
+        self._last_desired = math.nan
+        if dyn.active:
+            dt = 1.0 / float(sample_rate)  # type: ignore[arg-type]
+            d = dyn.delay / dt
+            self.delay_samples = math.floor(d + 1e-9)
+            frac = d - self.delay_samples
+            if frac > 1e-9:  # the fraction of a sample inverted as a lag of that length
+                self.dyn[K.DYN_GAIN_A] = 1.0 - math.exp(-1.0 / frac)
+            if dyn.tau > 0:
+                self.dyn[K.DYN_GAIN_B] = 1.0 - math.exp(-dt / dyn.tau)
         if domain == "displacement":  # displacement 0 = output at rest in the initial state
             if spec.analytic:
                 self.config[K.CFG_REFERENCE] = op.offset + float(op.weights @ op.initial_state)
@@ -286,7 +317,12 @@ class Compensator:
         """The forward states and the last command (copies; see :meth:`reset`)."""
         n = self.n_operators
         lags = self._state[n : n + self._n_aux] if not self.analytic else np.zeros(0)
-        return CompensatorState(self._state[:n].copy(), lags.copy(), float(self._state[K.ST_LAST]))
+        return CompensatorState(
+            self._state[:n].copy(),
+            lags.copy(),
+            float(self._state[K.ST_LAST]),
+            self.dstate.copy() if self.dynamic else np.zeros(0),
+        )
 
     @property
     def last_command(self) -> float:
@@ -377,6 +413,10 @@ class Compensator:
             )
             raise ParameterError(msg)
         self._set_forward((np.array(ops, dtype=np.float64), np.array(lags, dtype=np.float64)))
+        self.dstate[:] = last  # the piezo settled at the last command
+        if isinstance(state, CompensatorState) and state.dynamics.size == 2 and self.dynamic:
+            self.dstate[:] = state.dynamics
+        self._last_desired = math.nan
         self._state[K.ST_LAST] = last
         self._state[K.ST_NONFINITE] = 0.0
         self._state[K.ST_SATURATED] = 0.0
@@ -418,6 +458,12 @@ class Compensator:
             np.linspace(a, b, int(m) + 1)[1:]
             for a, b, m in zip(knots[:-1], knots[1:], counts, strict=True)
         ]
+        if self.dynamic:  # hold each extreme until the lagging piezo voltage has reached it
+            gains = self.dyn[self.dyn > 0]
+            settle = int(np.ceil(np.sum(-np.log(1e-9) / -np.log1p(-gains)))) if gains.size else 0
+            settle += self.delay_samples
+            for j in (0, 1):
+                pieces[j] = np.concatenate([pieces[j], np.full(settle, knots[j + 1])])
         cycle = np.concatenate(pieces)
         r = self.tables[K.TAB_R]
         z = self._state[:n]
@@ -427,8 +473,9 @@ class Compensator:
         last = start
         for k, v_target in enumerate(cycle):
             v = min(max(v_target, last - step), last + step)
-            z[:] = np.clip(z, v - r, v + r)
-            lag += alpha * (v - lag)
+            u = K._advance_dynamics(v, self.dyn, self.dstate) if self.dynamic else v
+            z[:] = np.clip(z, u - r, u + r)
+            lag += alpha * (u - lag)
             out[k] = last = v
         self._state[K.ST_LAST] = last
         if self.analytic:
@@ -436,7 +483,7 @@ class Compensator:
         return out
 
     # -------------------------------------------------------------- commands
-    def step(self, desired: float) -> float:
+    def step(self, desired: float, preview: ArrayLike | None = None) -> float:
         """The command for one desired value.
 
         Parameters
@@ -444,12 +491,33 @@ class Compensator:
         desired : float
             Desired output (model output units, or m for ``domain="displacement"``).
             NaN or infinity holds the last command and is counted.
+        preview : array_like, optional
+            The desired values of the next samples, for a model with an input
+            delay of ``delay_samples`` samples: the command sent now acts that
+            many samples later, so it is computed for ``preview[delay_samples - 1]``.
+            Without enough preview the target is extrapolated linearly from
+            the last two desired values (the best causal guess). Lags need no
+            preview: they are inverted exactly one sample at a time.
 
         Returns
         -------
         float
             The command (V), finite and inside ``[v_min, v_max]``.
         """
+        if self.dynamic:
+            d = float(desired)
+            m = self.delay_samples
+            target = d
+            if m:
+                ahead = np.asarray(preview if preview is not None else [], dtype=np.float64)
+                if ahead.size >= m:
+                    target = float(ahead[m - 1])
+                elif math.isfinite(self._last_desired):
+                    target = d + m * (d - self._last_desired)
+            self._last_desired = d
+            return float(
+                K.dynamic_step(target, self.tables, self.config, self._state, self.dyn, self.dstate)
+            )
         if self.analytic:
             return float(K.compensator_step(float(desired), self.tables, self.config, self._state))
         return float(
@@ -460,6 +528,11 @@ class Compensator:
 
     def process(self, desired: ArrayLike) -> FloatArray:
         """Commands for a block of desired values; equal to calling :meth:`step` on each.
+
+        With an input delay, the block is its own preview: the command at
+        sample k targets ``desired[k + delay_samples]``, and the last
+        ``delay_samples`` targets, beyond the block, are extrapolated. Give a
+        planned trajectory in one call (or blocks that overlap by the delay).
 
         Parameters
         ----------
@@ -476,7 +549,20 @@ class Compensator:
             msg = f"'desired' must be a 1-D array. Got shape {d.shape}."
             raise ShapeError(msg)
         out = np.empty_like(d)
-        if self.analytic:
+        if self.dynamic:
+            K.dynamic_process(
+                d,
+                self.delay_samples,
+                self.tables,
+                self.config,
+                self._state,
+                self.dyn,
+                self.dstate,
+                out,
+            )
+            if d.size:
+                self._last_desired = float(d[-1])
+        elif self.analytic:
             K.compensator_process(d, self.tables, self.config, self._state, out)
         else:
             K.numeric_process(d, self.tables, self.static, self.lags, self.config, self._state, out)

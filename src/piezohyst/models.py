@@ -1204,6 +1204,7 @@ class HysteresisModel:
         model.set_fitted(self.operator_, tuple(tm for tm, _ in kept), tuple(c for _, c in kept))
         model.input_range_ = self.input_range_
         model.max_slew_rate_ = self.max_slew_rate_
+        model.input_dynamics_ = self.input_dynamics_  # the lag sits before the hysteresis
         return model
 
     def inverse(self) -> ClassicalPI:

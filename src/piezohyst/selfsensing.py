@@ -173,6 +173,12 @@ class SelfSensingController:
                 "without them"
             )
             raise ParameterError(msg)
+        if comp.dynamic:
+            msg = (
+                "SelfSensingController does not invert input dynamics yet: fit the model with "
+                "input_dynamics='none', or use the Compensator (feedforward) with this model"
+            )
+            raise ParameterError(msg)
         if leakage is None:
             leakage = Leakage.from_model(model)
         if not isinstance(leakage, Leakage):

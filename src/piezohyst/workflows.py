@@ -163,10 +163,14 @@ def fit_file(
     data_spec: DataSpec | None = None,
     growth_terms: str | Sequence[str] = "auto",
     creep: Sequence[float] = (),
+    input_dynamics: str = "none",
     force: bool = False,
     progress: Progress = None,
 ) -> HysteresisModel:
     """Fit a model to a data file and save it (JSON) to ``out`` if given.
+
+    The file streams through block by block; with ``input_dynamics`` other
+    than ``"none"`` the search over the dynamics needs the window in memory.
 
     Parameters
     ----------
@@ -182,6 +186,9 @@ def fit_file(
         Columns and samples (default: voltage, charge, time).
     growth_terms, creep
         Settings of models that have them (``generalized-pi``).
+    input_dynamics : str
+        Delay and lag between command and piezo (see
+        :class:`~piezohyst.models.HysteresisModel`).
     force : bool
         Replace an existing ``out`` that piezohyst did not write.
     progress : callable, optional
@@ -210,8 +217,17 @@ def fit_file(
         "input_unit": x_unit or "V",
         "output_unit": y_unit or _default_unit(stream.names[1]),
         **extra,
+        "input_dynamics": input_dynamics,
     }
     estimator = cls(**settings)
+    if input_dynamics != "none":  # the search runs over the window in memory
+        rec = (data_spec or DataSpec()).read(data, progress=progress)
+        w = rec.window
+        assert rec.y is not None
+        fitted_dyn: HysteresisModel = estimator.fit(rec.x[w], rec.y[w], t=rec.t[w])
+        if out is not None:
+            fitted_dyn.save(out)
+        return fitted_dyn
     passes = _Passes(progress)
     window = _window_blocks(stream, passes)
     initial_state = None

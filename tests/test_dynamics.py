@@ -1,0 +1,227 @@
+"""Input dynamics: the filter, identified lags, files, and compensation that inverts them."""
+
+from __future__ import annotations
+
+import itertools
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import piezohyst as ph
+from piezohyst.dynamics import InputDynamics
+from piezohyst.export import write_c
+from piezohyst.metrics import hysteresis_width, nrmse
+from piezohyst.simulation import make_signal, simulate
+
+LAGGED = "T226-H4-203X-amp4ms"
+DT = 1e-3
+
+
+def naive_filter(dyn: InputDynamics, x: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    """Delay by interpolation in a padded list, then the lag, one sample at a time."""
+    d = dyn.delay_samples
+    m = int(np.floor(d + 1e-9))
+    f = d - m
+    padded = np.concatenate([np.full(m + 2, x[0]), x])
+    out = np.empty_like(x)
+    lag = x[0]
+    for k in range(x.size):
+        a, b = padded[k + 2], padded[k + 1]
+        v = a + f * (b - a)
+        lag = lag + (1 - np.exp(-dt[k] / dyn.tau)) * (v - lag) if dyn.tau > 0 else v
+        out[k] = lag
+    return out
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.one_of(st.just(0.0), st.floats(1e-6, 0.02)),
+    st.one_of(st.just(0.0), st.floats(1e-6, 0.02)),
+    st.lists(st.integers(1, 300), min_size=1, max_size=5),
+)
+def test_filter_matches_a_naive_reference_in_any_chunks(
+    tau: float, delay: float, cuts: list[int]
+) -> None:
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal(400).cumsum()
+    dt = np.full(x.size, DT)
+    dt[0] = 0.0
+    dyn = InputDynamics("delay+first-order", tau, delay, DT)
+    whole, _ = dyn.apply(x, dt)
+    np.testing.assert_allclose(whole, naive_filter(dyn, x, dt), rtol=0, atol=1e-12)
+    state = dyn.rest_state(x[0])
+    edges = sorted({0, *[c % x.size for c in cuts], x.size})
+    parts = [dyn.apply(x[a:b], dt[a:b], state)[0] for a, b in itertools.pairwise(edges)]
+    np.testing.assert_array_equal(np.concatenate(parts), whole)
+
+
+def test_bad_dynamics_are_refused() -> None:
+    with pytest.raises(ph.ParameterError, match="kind must be one of"):
+        InputDynamics("second-order")
+    with pytest.raises(ph.ParameterError, match="needs the record's sample interval"):
+        InputDynamics("delay", delay=0.01)
+    with pytest.raises(ph.ParameterError, match="'input_dynamics' parameter"):
+        ph.ActivePI(5, input_dynamics="lag").fit([0.0, 1.0, 0.0, 1.0], [0, 1, 0, 1], t=[0, 1, 2, 3])
+    rec = simulate(duration=2.0)
+    with pytest.raises(ph.TimeAxisError, match="needs the sample times"):
+        ph.ClassicalPI(5, input_dynamics="first-order").fit(rec.voltage, rec.charge)
+
+
+@pytest.fixture(scope="module")
+def lagged_bench() -> tuple[ph.simulation.BenchRecord, ph.ActivePI]:
+    t, v = make_signal("multifreq", amplitude=140.0, frequency=0.5, duration=30.0)
+    rec = simulate(v, t, preset=LAGGED, seed=0)
+    return rec, ph.ActivePI(20, input_dynamics="auto").fit(rec.voltage, rec.charge, t=rec.t)
+
+
+def test_the_amplifier_lag_is_found_and_predicts_other_frequencies(
+    lagged_bench: tuple[ph.simulation.BenchRecord, ph.ActivePI],
+) -> None:
+    rec, model = lagged_bench
+    dyn = model.input_dynamics_
+    assert dyn.kind == "first-order" and dyn.tau == pytest.approx(4e-3, rel=0.05)
+    plain = ph.ActivePI(20).fit(rec.voltage, rec.charge, t=rec.t)
+    for f in (1.0, 10.0, 40.0):
+        t, v = make_signal("multi", amplitude=140.0, frequency=f, duration=6.0)
+        new = simulate(v, t, preset=LAGGED, seed=int(f))
+        aware = nrmse(new.charge, model.predict(new.voltage, t=new.t))
+        blind = nrmse(new.charge, plain.predict(new.voltage, t=new.t))
+        assert aware <= 0.025 and aware < blind
+
+
+def test_none_is_todays_model(lagged_bench: tuple[ph.simulation.BenchRecord, ph.ActivePI]) -> None:
+    rec, _ = lagged_bench
+    a = ph.ActivePI(10).fit(rec.voltage, rec.charge, t=rec.t)
+    b = ph.ActivePI(10, input_dynamics="none").fit(rec.voltage, rec.charge, t=rec.t)
+    np.testing.assert_array_equal(a.weights_, b.weights_)
+    np.testing.assert_array_equal(a.predict(rec.voltage, t=rec.t), b.predict(rec.voltage, t=rec.t))
+    assert not b.input_dynamics_.active
+
+
+def test_state_chunks_and_files(
+    tmp_path: Path, lagged_bench: tuple[ph.simulation.BenchRecord, ph.ActivePI]
+) -> None:
+    rec, model = lagged_bench
+    whole = model.predict(rec.voltage, t=rec.t)
+    state = None
+    parts = []
+    for a, b in ((0, 7), (7, 9000), (9000, rec.t.size)):
+        run = model.propagate(rec.voltage[a:b], rec.t[a:b], state)
+        state = run.state
+        parts.append(run.output)
+    np.testing.assert_array_equal(np.concatenate(parts), whole)
+    saved = ph.ModelState.from_dict(state.to_dict())
+    np.testing.assert_array_equal(saved.input, state.input)
+    model.save(tmp_path / "m.json")
+    back = ph.load_model(tmp_path / "m.json")
+    assert back.input_dynamics_ == model.input_dynamics_
+    np.testing.assert_array_equal(back.predict(rec.voltage, t=rec.t), whole)
+    with pytest.raises(ph.ParameterError, match="record in memory"):
+        ph.ActivePI(5, input_dynamics="delay").fit_blocks(
+            ph.identification.array_blocks(rec.voltage, rec.charge, rec.t)
+        )
+
+
+def model_with(dyn: InputDynamics) -> ph.ActivePI:
+    h = ph.PIHysteresis([0.0, 15.0, 30.0], [1.0e-8, 4e-9, 2e-9])
+    model = ph.ActivePI.from_operator(h)
+    model.input_range_ = (0.0, 140.0)
+    model.input_dynamics_ = dyn
+    return model
+
+
+@pytest.mark.parametrize(
+    "dyn",
+    [
+        InputDynamics("first-order", tau=4e-3, sample_interval=DT),
+        InputDynamics("delay+first-order", tau=2e-3, delay=3e-3, sample_interval=DT),
+    ],
+)
+def test_compensation_inverts_the_lag_exactly(dyn: InputDynamics) -> None:
+    """Plant = the model: the compensated output is the desired one, at every frequency."""
+    model = model_with(dyn)
+    t = np.arange(3000) * DT
+    desired = model.operator_.predict(70 + 40 * np.sin(2 * np.pi * 40 * t))  # reachable
+    comp = ph.Compensator(model, v_min=0.0, v_max=140.0, sample_rate=1000.0)
+    commands = comp.process(desired)
+    actual = model.hysteresis_.predict(commands, t=t)
+    if comp.delay_samples == 0:  # a lag alone is inverted exactly
+        np.testing.assert_allclose(actual[200:], desired[200:], rtol=0, atol=2e-14)
+    else:  # the fractional part of a delay is inverted as a lag of its length: close
+        err = np.max(np.abs(actual[200:-10] - desired[200:-10])) / np.ptp(desired)
+        assert err < 0.02
+    assert np.all((commands >= 0.0) & (commands <= 140.0))
+    # step with preview equals the block; without preview it extrapolates
+    again = ph.Compensator(model, v_min=0.0, v_max=140.0, sample_rate=1000.0)
+    m = again.delay_samples
+    stepped = [again.step(desired[k], desired[k + 1 : k + 1 + m]) for k in range(500)]
+    np.testing.assert_allclose(stepped, commands[:500], rtol=0, atol=1e-12)
+    saved = again.state
+    tail = again.process(desired[500:900])
+    again.reset(saved)
+    np.testing.assert_array_equal(again.process(desired[500:900]), tail)
+
+
+def test_compensation_at_40_hz_on_the_lagged_bench(
+    lagged_bench: tuple[ph.simulation.BenchRecord, ph.ActivePI],
+) -> None:
+    _, model = lagged_bench
+    t, shape = make_signal("fixed", amplitude=1.0, frequency=40.0, duration=3.0)
+    top, bottom = (float(q) for q in model.operator_.predict(np.array([140.0, 0.0])))
+    desired = bottom + (top - bottom) * (0.25 + 0.5 * shape)
+    lo, hi = model.input_range_  # the voltages it was identified on
+    comp = ph.Compensator(model, v_min=lo, v_max=hi, sample_rate=1000.0)
+    run = simulate(comp.process(desired), t, preset=LAGGED, seed=3)
+    keep = t >= 1.0
+    width = hysteresis_width(desired[keep], run.true_displacement[keep])
+    assert width <= 0.02
+    slow = simulate(signal="hold", duration=20.0, preset=LAGGED, seed=1)  # identified at 0.5 Hz
+    static = ph.ActivePI(20).fit(slow.voltage, slow.charge, t=slow.t)
+    blind = ph.Compensator(static, v_min=lo, v_max=hi, allow_extrapolation=True)
+    blind_run = simulate(blind.process(desired), t, preset=LAGGED, seed=3)
+    assert hysteresis_width(desired[keep], blind_run.true_displacement[keep]) > 5 * width
+
+
+CC = shutil.which("cc") or shutil.which("gcc")
+
+
+@pytest.mark.skipif(CC is None, reason="no C compiler")
+def test_exported_c_inverts_the_lag_like_python(tmp_path: Path) -> None:
+    model = model_with(
+        InputDynamics("delay+first-order", tau=4e-3, delay=1.4e-3, sample_interval=DT)
+    )
+    comp = ph.Compensator(model, v_min=0.0, v_max=140.0, sample_rate=1000.0, slew_rate=3e4)
+    c_path, h_path = write_c(comp, tmp_path / "lagc.c")
+    assert "samples from now" in h_path.read_text()
+    (tmp_path / "main.c").write_text(
+        '#include <stdio.h>\n#include <stdlib.h>\n#include "lagc.h"\n'
+        "int main(void){char l[64];lagc_t s;lagc_init(&s);"
+        'while(fgets(l,sizeof l,stdin)){printf("%.17g\\n",(double)lagc_step(&s,strtod(l,NULL)));}'
+        'printf("%lu %lu\\n",s.nonfinite,s.saturated);return 0;}\n'
+    )
+    exe = tmp_path / "c"
+    subprocess.run(
+        [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", str(c_path),
+         str(tmp_path / "main.c"), "-o", str(exe)],
+        check=True, capture_output=True, text=True,
+    )  # fmt: skip
+    t = np.arange(2000) * DT
+    targets = model.operator_.predict(70 + 60 * np.sin(2 * np.pi * 25 * t))
+    targets[::101] = np.nan
+    targets[50::301] = 1.0  # unreachable
+    out = subprocess.run(
+        [str(exe)], input="".join(f"{float(v)!r}\n" for v in targets),
+        check=True, capture_output=True, text=True,
+    ).stdout.split("\n")  # fmt: skip
+    c_cmds = np.array([float(v) for v in out[: targets.size]])
+    py = np.array([comp.step(float(v), [float(v)]) for v in targets])  # the caller's preview
+    np.testing.assert_allclose(c_cmds, py, rtol=0, atol=1e-9)
+    assert tuple(int(v) for v in out[targets.size].split()) == (
+        comp.nonfinite_count,
+        comp.saturated_count,
+    )
