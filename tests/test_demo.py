@@ -98,3 +98,15 @@ def test_demo_closed_loop_targets(demo_run: tuple[Path, dict[str, Any]]) -> None
     assert 1 / calibrated["discharge"][0] == pytest.approx(cl["true_tau_s"], rel=0.15)
     assert (out / "fig11_self_sensing_loop.png").stat().st_size > 1000
     assert "## Self-sensing closed loop" in (out / "report.md").read_text()
+
+
+def test_demo_rate_targets(demo_run: tuple[Path, dict[str, Any]]) -> None:
+    out, m = demo_run
+    rate = m["rate"]
+    assert rate["identified"]["tau"] == pytest.approx(rate["bench_lag_s"], rel=0.1)
+    aware = rate["runs"]["rate-aware, 0.5-20 Hz"]
+    slow = rate["runs"]["identified at 1 Hz"]
+    assert aware["nrmse_40Hz_pct"] <= 2.5 and aware["width_40Hz_pct"] <= 2.0
+    assert slow["nrmse_40Hz_pct"] > 4 * aware["nrmse_40Hz_pct"]
+    assert slow["width_40Hz_pct"] > 10 * aware["width_40Hz_pct"]
+    assert (out / "fig12_rate.png").stat().st_size > 1000

@@ -871,7 +871,17 @@ def model_report(
             f"{model.input_range_[0]:.6g} to {model.input_range_[1]:.6g} {in_u}",
         ),
         *[(k, f"{v:.6g} {u}") for k, (v, u) in model.coefficients().items()],
+        (
+            "input dynamics",
+            "none"
+            if not model.input_dynamics_.active
+            else f"{model.input_dynamics_.kind}: lag {model.input_dynamics_.tau * 1e3:.4g} ms, "
+            f"delay {model.input_dynamics_.delay * 1e3:.4g} ms",
+        ),
     ]
+    if model.input_dynamics_.active:
+        rep.add("input_lag_s", "input dynamics: lag", model.input_dynamics_.tau, "s")
+        rep.add("input_delay_s", "input dynamics: delay", model.input_dynamics_.delay, "s")
     err = y - pred
     rep.add("samples", "samples", int(x.size))
     nrmse_pct = 100 * nrmse(y, pred)

@@ -1,0 +1,122 @@
+"""Rate: input dynamics identified over several frequencies, predicted and compensated at others.
+
+Run: ``python benchmarks/bench_dynamics.py [--seeds 3]``.
+
+On the bench preset ``T226-H4-203X-amp4ms`` (an amplifier with a 4 ms lag; the
+record logs the command), for each seed:
+
+1. Identification on 30 s of ``multifreq`` (0.5, 5 and 20 Hz, decaying loops):
+   ActivePI with ``input_dynamics="auto"``; the lag it finds against 4 ms.
+2. Prediction of new ``multi`` records at 1, 10 and 40 Hz: NRMSE of the
+   rate-aware model, of the same rate-independent model identified on the same
+   record, and of one identified at 0.5 Hz only (``hold``).
+3. Compensation of a fixed-amplitude trajectory (25-75 % of the charge span)
+   at 1, 10 and 40 Hz: displacement hysteresis width with the rate-aware
+   inverse against the 0.5 Hz rate-independent one.
+4. ``input_dynamics="none"`` against a model fitted without the argument
+   (must agree to 1e-12), and fit times: plain, each kind, ``auto``, at 3e4
+   and 1e6 samples (the latter at 10 kHz).
+
+Not a test: nothing here asserts a time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import time
+
+import numpy as np
+
+import piezohyst as ph
+from piezohyst.metrics import hysteresis_width, nrmse
+from piezohyst.simulation import PRESETS, make_signal, simulate
+
+PRESET = "T226-H4-203X-amp4ms"
+
+
+def fit_time(rec: ph.simulation.BenchRecord, kind: str | None, repeats: int = 3) -> float:
+    """Best of ``repeats`` fits of ActivePI(20), with ``input_dynamics=kind`` unless None."""
+    best = float("inf")
+    for _ in range(repeats):
+        model = ph.ActivePI(20) if kind is None else ph.ActivePI(20, input_dynamics=kind)
+        t0 = time.perf_counter()
+        model.fit(rec.voltage, rec.charge, t=rec.t)
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def one_seed(seed: int) -> None:
+    t, v = make_signal("multifreq", amplitude=140.0, frequency=0.5, duration=30.0)
+    rec = simulate(v, t, preset=PRESET, seed=seed)
+    aware = ph.ActivePI(20, input_dynamics="auto").fit(rec.voltage, rec.charge, t=rec.t)
+    same = ph.ActivePI(20).fit(rec.voltage, rec.charge, t=rec.t)
+    slow_rec = simulate(signal="hold", duration=20.0, preset=PRESET, seed=seed + 50)
+    slow = ph.ActivePI(20).fit(slow_rec.voltage, slow_rec.charge, t=slow_rec.t)
+    dyn = aware.input_dynamics_
+    print(
+        f"seed {seed}: found {dyn.kind}, lag {dyn.tau * 1e3:.3f} ms, "
+        f"delay {dyn.delay * 1e3:.3f} ms "
+        f"(bench: 4 ms lag, {100 * (dyn.tau / 4e-3 - 1):+.1f} %)"
+    )
+    for f in (1.0, 10.0, 40.0):
+        tt, vv = make_signal("multi", amplitude=140.0, frequency=f, duration=6.0)
+        new = simulate(vv, tt, preset=PRESET, seed=seed + int(f))
+        errs = [
+            100 * nrmse(new.charge, m.predict(new.voltage, t=new.t)) for m in (aware, same, slow)
+        ]
+        print(
+            f"  predict {f:4.0f} Hz: rate-aware {errs[0]:5.2f} %, rate-independent (same record) "
+            f"{errs[1]:5.2f} %, rate-independent (0.5 Hz) {errs[2]:5.2f} %"
+        )
+    top, bottom = (float(q) for q in aware.operator_.predict(np.array([140.0, 0.0])))
+    lo, hi = aware.input_range_
+    for f in (1.0, 10.0, 40.0):
+        tt, shape = make_signal("fixed", amplitude=1.0, frequency=f, duration=3.0)
+        desired = bottom + (top - bottom) * (0.25 + 0.5 * shape)
+        keep = tt >= 1.0
+        widths = []
+        for m in (aware, slow):
+            comp = ph.Compensator(
+                m, v_min=lo, v_max=hi, sample_rate=1000.0, allow_extrapolation=True
+            )
+            run = simulate(comp.process(desired), tt, preset=PRESET, seed=seed + 9)
+            widths.append(100 * hysteresis_width(desired[keep], run.true_displacement[keep]))
+        print(
+            f"  compensate {f:4.0f} Hz, 25-75 % of span: rate-aware width {widths[0]:5.2f} %, "
+            f"rate-independent (0.5 Hz) {widths[1]:5.2f} %"
+        )
+
+
+def timing() -> None:
+    print("fit time, ActivePI with 20 operators, best of 3:")
+    for rate, duration in ((1000.0, 30.0), (10_000.0, 100.0)):
+        p = dataclasses.replace(PRESETS[PRESET], rate=rate)
+        t, v = make_signal(
+            "multifreq", amplitude=140.0, frequency=0.5, duration=duration, rate=rate
+        )
+        rec = simulate(v, t, preset=p, seed=0)
+        plain = fit_time(rec, None)
+        row = [f"  {t.size:>9,} samples: plain {plain:.3f} s"]
+        for kind in ("none", "first-order", "delay", "delay+first-order", "auto"):
+            row.append(f"{kind} {fit_time(rec, kind) / plain:.1f}x")
+        print(", ".join(row))
+    rec = simulate(duration=20.0, seed=0)
+    a = ph.ActivePI(20).fit(rec.voltage, rec.charge, t=rec.t)
+    b = ph.ActivePI(20, input_dynamics="none").fit(rec.voltage, rec.charge, t=rec.t)
+    diff = np.max(np.abs(a.predict(rec.voltage, t=rec.t) - b.predict(rec.voltage, t=rec.t)))
+    print(f"input_dynamics='none' vs no argument: largest prediction difference {diff:.1e} C")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--seeds", type=int, default=3)
+    args = parser.parse_args()
+    print(f"piezohyst {ph.__version__}: input dynamics on {PRESET}")
+    for seed in range(args.seeds):
+        one_seed(seed)
+    timing()
+
+
+if __name__ == "__main__":
+    main()
