@@ -225,3 +225,67 @@ def test_exported_c_inverts_the_lag_like_python(tmp_path: Path) -> None:
         comp.nonfinite_count,
         comp.saturated_count,
     )
+
+
+# ------------------------------------------------------------ output dynamics
+MODE = "T226-H4-203X-mode"
+
+
+@pytest.fixture(scope="module")
+def mode_models() -> tuple[ph.ClassicalPI, ph.ClassicalPI]:
+    t, v = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=30.0)  # to 100 Hz
+    rec = simulate(v, t, preset=MODE, seed=0)
+    kw = {"output_unit": "m", "input_dynamics": "first-order"}
+    full = ph.ClassicalPI(20, output_dynamics="second-order", **kw)  # type: ignore[arg-type]
+    lag = ph.ClassicalPI(20, **kw)  # type: ignore[arg-type]
+    return (
+        full.fit(rec.voltage, rec.displacement, t=rec.t),
+        lag.fit(rec.voltage, rec.displacement, t=rec.t),
+    )
+
+
+def test_a_mode_is_found_with_the_lag(
+    mode_models: tuple[ph.ClassicalPI, ph.ClassicalPI], tmp_path: Path
+) -> None:
+    full, lag = mode_models
+    p = ph.simulation.PRESETS[MODE]
+    assert full.output_dynamics_.f0 == pytest.approx(p.mech_f0, rel=0.02)
+    assert full.output_dynamics_.zeta == pytest.approx(p.mech_zeta, rel=0.1)
+    assert full.input_dynamics_.tau == pytest.approx(p.amp_tau, rel=0.05)
+    for f in (40.0, 80.0):
+        t, v = make_signal("multi", amplitude=140.0, frequency=f, duration=3.0)
+        new = simulate(v, t, preset=MODE, seed=int(f))
+        with_mode = nrmse(new.displacement, full.predict(new.voltage, t=new.t))
+        without = nrmse(new.displacement, lag.predict(new.voltage, t=new.t))
+        assert with_mode < 0.6 * without
+    full.save(tmp_path / "mode.json")
+    back = ph.load_model(tmp_path / "mode.json")
+    assert back.output_dynamics_ == full.output_dynamics_
+    np.testing.assert_array_equal(back.predict(v, t=t), full.predict(v, t=t))
+    run = full.propagate(v[:1000], t[:1000])
+    rest = full.propagate(v[1000:], t[1000:], ph.ModelState.from_dict(run.state.to_dict()))
+    np.testing.assert_allclose(
+        np.concatenate([run.output, rest.output]), full.predict(v, t=t), rtol=0, atol=1e-18
+    )
+
+
+def test_compensation_through_the_mode(mode_models: tuple[ph.ClassicalPI, ph.ClassicalPI]) -> None:
+    full, lag = mode_models
+    lo, hi = full.input_range_
+    top, bottom = (float(q) for q in full.operator_.predict(np.array([140.0, 0.0])))
+    t, shape = make_signal("fixed", amplitude=1.0, frequency=40.0, duration=3.0)
+    desired = bottom + (top - bottom) * (0.3 + 0.4 * shape)
+    keep = t >= 1.0
+    widths = []
+    for model in (full, lag):
+        comp = ph.Compensator(model, v_min=lo, v_max=hi, sample_rate=1000.0)
+        pre = comp.precondition(2000)  # the bench starts where the compensator does
+        commands = np.concatenate([pre, comp.process(desired)])
+        run = simulate(commands, np.arange(commands.size) * DT, preset=MODE, seed=4)
+        moved = run.true_displacement[pre.size :]
+        widths.append(hysteresis_width(desired[keep], moved[keep]))
+    assert widths[0] <= 0.01 and widths[0] < 0.2 * widths[1]
+    with pytest.raises(ph.ParameterError, match="output mode"):
+        write_c(ph.Compensator(full, v_min=lo, v_max=hi, sample_rate=1000.0), Path("x.c"))
+    with pytest.raises(ph.ParameterError, match="input or output dynamics"):
+        ph.SelfSensingController(full, v_min=lo, v_max=hi, sample_rate=1000.0)

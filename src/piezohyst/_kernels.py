@@ -110,6 +110,27 @@ def input_filter(x, dt, d_int, d_frac, tau, state, out):  # type: ignore[no-unty
     state[2] = float(head)
 
 
+@njit(cache=True, fastmath=FASTMATH)
+def mode_filter(u, ad, bd, state, out):  # type: ignore[no-untyped-def]
+    """A second-order mode of unit DC gain on every column of ``u`` (m x p), state carried.
+
+    ``state`` (2 x p): position and velocity per column. Each row's input is
+    held over the sample that ends at it (exact discretisation ``ad``, ``bd``);
+    the output is the position at the sample's end.
+    """
+    for j in range(u.shape[1]):
+        x1 = state[0, j]
+        x2 = state[1, j]
+        for k in range(u.shape[0]):
+            n1 = ad[0, 0] * x1 + ad[0, 1] * x2 + bd[0] * u[k, j]
+            n2 = ad[1, 0] * x1 + ad[1, 1] * x2 + bd[1] * u[k, j]
+            x1 = n1
+            x2 = n2
+            out[k, j] = x1
+        state[0, j] = x1
+        state[1, j] = x2
+
+
 @njit(cache=True)
 def constant_runs(x, tol, edges):  # type: ignore[no-untyped-def]
     """Split ``x`` into runs that stay within ``tol`` of their first sample.

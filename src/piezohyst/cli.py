@@ -448,6 +448,9 @@ def describe(model: HysteresisModel) -> str:
     if shape:
         text += "; shape terms: " + ", ".join(f"{t.kind} ({t.width} coefficients)" for t in shape)
     dyn = model.input_dynamics_
+    mode = model.output_dynamics_
+    if mode.active:
+        text += f"; output mode {mode.f0:.4g} Hz, damping {mode.zeta:.3g}"
     if dyn.active:
         text += (
             f"; input dynamics {dyn.kind}: lag {1e3 * dyn.tau:.4g} ms, "
@@ -491,6 +494,14 @@ def describe(model: HysteresisModel) -> str:
     help="Delay/lag between the logged command and the piezo, identified with the model "
     "(record several drive frequencies).",
 )
+@click.option(
+    "--output-dynamics",
+    type=click.Choice(["none", "second-order"]),
+    default="none",
+    show_default=True,
+    help="A mechanical mode between the hysteresis and a displacement output "
+    "(record up to near the resonance).",
+)
 @_data_options
 @OUT_FILE
 @FORCE
@@ -503,6 +514,7 @@ def fit(
     growth: str,
     creep: str,
     input_dynamics: str,
+    output_dynamics: str,
     data_spec: DataSpec,
     out: Path,
     force: bool,
@@ -539,6 +551,7 @@ def fit(
                 growth_terms=terms,
                 creep=taus,
                 input_dynamics=input_dynamics,
+                output_dynamics=output_dynamics,
                 force=force,
                 progress=progress,
             ),

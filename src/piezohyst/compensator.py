@@ -246,6 +246,9 @@ class Compensator:
         self.dyn = np.zeros(2)
         self.dstate = np.zeros(2)
         self._last_desired = math.nan
+        #: A mechanical mode after the hysteresis, inverted from the desired trajectory
+        self.mode = spec.output_dynamics
+        self._mode_history = np.full(2, np.nan)
         if dyn.active:
             dt = 1.0 / float(sample_rate)  # type: ignore[arg-type]
             d = dyn.delay / dt
@@ -414,6 +417,7 @@ class Compensator:
             raise ParameterError(msg)
         self._set_forward((np.array(ops, dtype=np.float64), np.array(lags, dtype=np.float64)))
         self.dstate[:] = last  # the piezo settled at the last command
+        self._mode_history[:] = np.nan
         if isinstance(state, CompensatorState) and state.dynamics.size == 2 and self.dynamic:
             self.dstate[:] = state.dynamics
         self._last_desired = math.nan
@@ -483,6 +487,16 @@ class Compensator:
         return out
 
     # -------------------------------------------------------------- commands
+    def _through_mode(self, desired: FloatArray, preview: ArrayLike | None) -> FloatArray:
+        """The hysteresis output that makes the model's mode follow ``desired``."""
+        if not self.mode.active:
+            return desired
+        ahead = np.asarray(preview if preview is not None else [], dtype=np.float64).reshape(-1)
+        target = self.mode.invert(desired, self._mode_history, ahead)
+        both = np.concatenate([self._mode_history, desired])
+        self._mode_history = both[-2:].copy()
+        return target
+
     def step(self, desired: float, preview: ArrayLike | None = None) -> float:
         """The command for one desired value.
 
@@ -497,13 +511,17 @@ class Compensator:
             many samples later, so it is computed for ``preview[delay_samples - 1]``.
             Without enough preview the target is extrapolated linearly from
             the last two desired values (the best causal guess). Lags need no
-            preview: they are inverted exactly one sample at a time.
+            preview: they are inverted exactly one sample at a time. A model
+            with an output mode uses ``preview[0]`` for the trajectory's
+            derivatives (extrapolated without it).
 
         Returns
         -------
         float
             The command (V), finite and inside ``[v_min, v_max]``.
         """
+        if self.mode.active:
+            desired = float(self._through_mode(np.array([float(desired)]), preview)[0])
         if self.dynamic:
             d = float(desired)
             m = self.delay_samples
@@ -548,6 +566,8 @@ class Compensator:
         if d.ndim != 1:
             msg = f"'desired' must be a 1-D array. Got shape {d.shape}."
             raise ShapeError(msg)
+        if self.mode.active:
+            d = np.ascontiguousarray(self._through_mode(d, None))
         out = np.empty_like(d)
         if self.dynamic:
             K.dynamic_process(

@@ -23,7 +23,7 @@ from . import _kernels
 from ._validation import FloatArray
 from .errors import ParameterError
 
-__all__ = ["KINDS", "InputDynamics"]
+__all__ = ["KINDS", "InputDynamics", "OutputDynamics"]
 
 KINDS = ("none", "delay", "first-order", "delay+first-order")
 
@@ -169,3 +169,193 @@ class InputDynamics:
             float(data.get("delay", 0.0)),
             float(data.get("sample_interval", 0.0)),
         )
+
+
+@dataclass(frozen=True)
+class OutputDynamics:
+    r"""A mechanical mode between the hysteresis and the measured displacement (Hammerstein).
+
+    :math:`H(s) = \omega_0^2 / (s^2 + 2\zeta\omega_0 s + \omega_0^2)`, unit gain
+    at DC, discretised exactly for an input held over each sample of
+    ``sample_interval``. Identified from displacement records with
+    ``output_dynamics="second-order"``; charge has no mechanical mode.
+
+    Attributes
+    ----------
+    f0 : float
+        Resonance (Hz); 0 for none.
+    zeta : float
+        Damping ratio.
+    sample_interval : float
+        The sample interval it is discretised for (s).
+
+    Examples
+    --------
+    >>> mode = OutputDynamics(100.0, 0.05, 1e-3)
+    >>> y, _ = mode.apply(np.ones(2000))
+    >>> round(float(y[-1]), 6)       # unit gain at DC
+    1.0
+    """
+
+    f0: float = 0.0
+    zeta: float = 0.0
+    sample_interval: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("f0", "zeta", "sample_interval"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
+                msg = f"output dynamics {name!r} must be a finite number >= 0. Got {value!r}."
+                raise ParameterError(msg)
+        if self.f0 > 0 and (self.sample_interval <= 0 or self.zeta <= 0):
+            msg = "a mode needs its damping ratio (> 0) and the sample interval (s)"
+            raise ParameterError(msg)
+
+    @property
+    def active(self) -> bool:
+        """True for a mode at all."""
+        return self.f0 > 0
+
+    def matrices(self) -> tuple[FloatArray, FloatArray]:
+        """The exact discretisation (``ad``, ``bd``) of the state (position, velocity).
+
+        Returns
+        -------
+        tuple of ndarray
+        """
+        from scipy.linalg import expm
+
+        w = 2.0 * math.pi * self.f0
+        a = np.array([[0.0, 1.0], [-w * w, -2.0 * self.zeta * w]])
+        b = np.array([0.0, w * w])
+        aug = np.zeros((3, 3))
+        aug[:2, :2] = a * self.sample_interval
+        aug[:2, 2] = b * self.sample_interval
+        e = expm(aug)
+        return np.ascontiguousarray(e[:2, :2]), np.ascontiguousarray(e[:2, 2])
+
+    def rest_state(self, values: Any) -> FloatArray:
+        """At rest at ``values`` (one per column): position there, velocity 0.
+
+        Parameters
+        ----------
+        values : array_like, shape (p,)
+
+        Returns
+        -------
+        ndarray, shape (2, p)
+        """
+        v = np.atleast_1d(np.asarray(values, dtype=np.float64))
+        return np.vstack([v, np.zeros_like(v)])
+
+    def apply_columns(self, u: FloatArray, state: FloatArray) -> FloatArray:
+        """Every column of ``u`` (m x p) through the mode; ``state`` (2 x p) updated.
+
+        Parameters
+        ----------
+        u : ndarray, shape (m, p)
+        state : ndarray, shape (2, p)
+
+        Returns
+        -------
+        ndarray, shape (m, p)
+        """
+        ad, bd = self._cached()
+        out = np.empty_like(u)
+        _kernels.mode_filter(np.ascontiguousarray(u), ad, bd, state, out)
+        return out
+
+    def apply(self, y: Any, state: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+        """One signal through the mode (state at rest at its first value by default).
+
+        Parameters
+        ----------
+        y : array_like, shape (N,)
+        state : ndarray, shape (2, 1), optional
+
+        Returns
+        -------
+        tuple of ndarray
+            The output and the state.
+        """
+        ys = np.ascontiguousarray(y, dtype=np.float64)
+        st = self.rest_state([ys[0] if ys.size else 0.0]) if state is None else state
+        if not self.active:
+            return ys.copy(), st
+        return self.apply_columns(ys[:, None], st)[:, 0], st
+
+    def invert(self, desired: FloatArray, before: FloatArray, after: FloatArray) -> FloatArray:
+        """The input that makes the mode follow ``desired``: y + 2ζ/ω y' + y''/ω².
+
+        The input held over a sample acts, on average, half a sample before its
+        end, so each input is the continuous inverse evaluated there, from
+        differences of the trajectory: it needs the two desired values before
+        the block (``before``, the last two already used) and one after
+        (``after``, the preview; extrapolated when empty). Error of order
+        (ω Δt)².
+
+        Parameters
+        ----------
+        desired : ndarray, shape (N,)
+        before : ndarray, shape (2,)
+            The two desired values before the block (NaN: none, taken as the first).
+        after : ndarray
+            Desired values after the block.
+
+        Returns
+        -------
+        ndarray, shape (N,)
+        """
+        if not self.active or desired.size == 0:
+            return desired.copy()
+        b = np.where(np.isfinite(before), before, desired[0])
+        if after.size and math.isfinite(after[0]):
+            nxt = float(after[0])
+        else:
+            last2 = np.concatenate([b, desired])[-2:]
+            nxt = 2.0 * last2[1] - last2[0]
+        e = np.concatenate([b, desired, [nxt]])  # e[j + 2] is desired[j]
+        dt = self.sample_interval
+        w = 2.0 * math.pi * self.f0
+        k = np.arange(desired.size) + 2
+        mid = 0.5 * (e[k] + e[k - 1])
+        d1 = (e[k] - e[k - 1]) / dt
+        d2 = ((e[k + 1] - e[k]) - (e[k - 1] - e[k - 2])) / (2.0 * dt * dt)
+        return np.asarray(mid + 2.0 * self.zeta / w * d1 + d2 / (w * w))
+
+    def _cached(self) -> tuple[FloatArray, FloatArray]:
+        key = (self.f0, self.zeta, self.sample_interval)
+        hit = _MATRICES.get(key)
+        if hit is None:
+            hit = _MATRICES[key] = self.matrices()
+        return hit
+
+    def to_dict(self) -> dict[str, Any]:
+        """``f0`` (Hz), ``zeta``, ``sample_interval`` (s).
+
+        Returns
+        -------
+        dict
+        """
+        return {"f0": self.f0, "zeta": self.zeta, "sample_interval": self.sample_interval}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> OutputDynamics:
+        """Inverse of :meth:`to_dict`.
+
+        Parameters
+        ----------
+        data : dict
+
+        Returns
+        -------
+        OutputDynamics
+        """
+        return cls(
+            float(data.get("f0", 0.0)),
+            float(data.get("zeta", 0.0)),
+            float(data.get("sample_interval", 0.0)),
+        )
+
+
+_MATRICES: dict[tuple[float, float, float], tuple[FloatArray, FloatArray]] = {}

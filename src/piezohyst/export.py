@@ -98,6 +98,12 @@ def export_c(
     if controller is not None and comp.dynamic:  # pragma: no cover - the controller refuses it
         msg = "the self-sensing controller does not invert input dynamics"
         raise ParameterError(msg)
+    if comp.mode.active:
+        msg = (
+            "C export does not invert an output mode (it needs the trajectory's derivatives): "
+            "pass the pre-inverted target (OutputDynamics.invert) or fit without the mode"
+        )
+        raise ParameterError(msg)
     if not comp.analytic:
         msg = (
             "C export covers the analytic inverse (play operators and growth terms); a model "

@@ -40,6 +40,7 @@ from numpy.typing import ArrayLike
 from . import _kernels
 from ._validation import FloatArray, as_signal, check_int
 from .cores import PlayCore
+from .dynamics import OutputDynamics
 from .errors import InsufficientDataError
 from .terms import Term
 
@@ -363,13 +364,17 @@ def _accumulate(
     edges: Sequence[int],
     stride: int = 1,
     block: int = BLOCK,
+    output: OutputDynamics | None = None,
 ) -> list[NormalEquations]:
     """Normal equations of every segment ``edges[k]:edges[k+1]`` (model run through all).
 
     One pass over the record; with ``stride`` > 1 the model still runs through
     every sample but only about one row in ``stride`` enters the sums, picked
     by a hash of its index (no aliasing with a periodic drive): a cheap
-    objective for an outer search. The core runs on the scaled input ``x / sx``
+    objective for an outer search. With ``output`` (a mechanical mode) every
+    column goes through it before entering the sums: the output is linear in
+    the parameters, so filtering the columns filters the model. The core runs
+    on the scaled input ``x / sx``
     (a power of two: exact), the terms on ``x`` with their columns divided by
     their scale; the output is taken as ``y / sy - y_ref``.
     """
@@ -385,6 +390,7 @@ def _accumulate(
     counts = [0 for _ in edges[1:]]
     pos = 0  # index of the next sample in the record
     seg = 0
+    mode_state: FloatArray | None = None
     t_prev: float | None = None
     for x_blk, y_blk, t_blk in blocks():
         size = x_blk.size
@@ -407,6 +413,11 @@ def _accumulate(
                     dt[1:] = np.diff(ts)
                     t_prev = float(ts[-1])
                 term_columns(terms, xs, ts, dt, states, work[:m, n + 1 :])
+            if output is not None and output.active:
+                work[:m, n] = 1.0  # the offset column, filtered in place before
+                if mode_state is None:
+                    mode_state = output.rest_state(work[0])
+                work[:m] = output.apply_columns(work[:m], mode_state)
             if stride > 1:  # the rows kept, then scaled: the rest is never touched again
                 keep = _picked(pos + k, m, stride)
                 b, ys = work[:m][keep], y_blk[k:stop][keep] / sy - y_ref
@@ -508,6 +519,7 @@ def identify(
     validate: bool = False,
     stride: int = 1,
     block: int = BLOCK,
+    output: OutputDynamics | None = None,
 ) -> Identification:
     """Identify a core and terms jointly from checked inputs (the one fit path).
 
@@ -542,6 +554,8 @@ def identify(
         all): a cheaper, noisier fit for outer searches.
     block : int
         Samples per block (larger: less overhead, more memory).
+    output : OutputDynamics, optional
+        A mode between the model's output and the measured one.
 
     Returns
     -------
@@ -584,6 +598,7 @@ def identify(
         edges,
         stride,
         block,
+        output,
     )
     whole = parts[0] if len(parts) == 1 else parts[0] + parts[1]
 

@@ -48,7 +48,7 @@ from numpy.typing import ArrayLike
 from ._validation import FloatArray, as_signal, as_time, check_float, check_int, same_length
 from .cores import PlayCore
 from .dynamics import KINDS as DYNAMICS_KINDS
-from .dynamics import InputDynamics
+from .dynamics import InputDynamics, OutputDynamics
 from .errors import (
     InsufficientDataError,
     NotFittedError,
@@ -125,12 +125,15 @@ class ModelState:
         rate-independent model run without times).
     input : ndarray
         The input dynamics' state (delay buffer and lag; empty without them).
+    output : ndarray
+        The output mode's state (position, velocity; empty without it).
     """
 
     operators: FloatArray
     terms: tuple[FloatArray, ...] = ()
     t_last: float | None = None
     input: FloatArray = field(default_factory=lambda: np.zeros(0))
+    output: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON data.
@@ -144,6 +147,7 @@ class ModelState:
             "terms": [s.tolist() for s in self.terms],
             "t_last": self.t_last,
             "input": self.input.tolist(),
+            "output": self.output.tolist(),
         }
 
     @classmethod
@@ -164,6 +168,7 @@ class ModelState:
             tuple(as_signal(s, "terms", allow_empty=True).copy() for s in data.get("terms", [])),
             None if t_last is None else float(t_last),
             as_signal(data.get("input", []), "input", allow_empty=True).copy(),
+            as_signal(data.get("output", []), "output", allow_empty=True).copy(),
         )
 
 
@@ -185,6 +190,8 @@ class InverseSpec:
         The model's units.
     dynamics : InputDynamics
         Delay and lag between the command and the hysteresis (none by default).
+    output_dynamics : OutputDynamics
+        A mode between the hysteresis and the output (none by default).
     """
 
     operator: PIHysteresis
@@ -194,6 +201,7 @@ class InverseSpec:
     input_unit: str
     output_unit: str
     dynamics: InputDynamics = field(default_factory=InputDynamics)
+    output_dynamics: OutputDynamics = field(default_factory=OutputDynamics)
 
     @property
     def analytic(self) -> bool:
@@ -298,6 +306,16 @@ def _dynamics_kind(value: object, name: str, owner: str) -> str:
     return str(value)
 
 
+def _output_kind(value: object, name: str, owner: str) -> str:
+    if value not in ("none", "second-order"):
+        msg = (
+            f"The '{name}' parameter of {owner} must be 'none' or 'second-order'. "
+            f"Got {value!r} instead."
+        )
+        raise ParameterError(msg)
+    return str(value)
+
+
 def _terms(value: object, name: str, owner: str) -> tuple[Term, ...]:
     if isinstance(value, str | Term) or not isinstance(value, Sequence):
         msg = (
@@ -338,6 +356,10 @@ class HysteresisModel:
         lag, a logging delay), identified jointly by a search around the
         linear solve; ``"auto"`` chooses the kind on a held-out last 30 %.
         Needs the sample times. The result is ``input_dynamics_``.
+    output_dynamics : {"none", "second-order"}
+        A mechanical mode between the hysteresis and the measured output (for
+        displacement records near resonance), identified by a search around
+        the linear solve. The result is ``output_dynamics_``.
     """
 
     cli_name: ClassVar[str] = ""
@@ -348,9 +370,11 @@ class HysteresisModel:
         "input_unit": _unit,
         "output_unit": _unit,
         "input_dynamics": _dynamics_kind,
+        "output_dynamics": _output_kind,
     }
     selection_: dict[str, float]
     input_dynamics_: InputDynamics
+    output_dynamics_: OutputDynamics
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -365,6 +389,7 @@ class HysteresisModel:
         input_unit: str = "V",
         output_unit: str = "C",
         input_dynamics: str = "none",
+        output_dynamics: str = "none",
     ) -> None:
         # the settings every model has; subclasses add theirs after the first
         self.n_operators = n_operators
@@ -373,6 +398,7 @@ class HysteresisModel:
         self.input_unit = input_unit
         self.output_unit = output_unit
         self.input_dynamics = input_dynamics
+        self.output_dynamics = output_dynamics
 
     # ------------------------------------------------------ sklearn contract
     @classmethod
@@ -510,20 +536,28 @@ class HysteresisModel:
         ts = as_time(t, xs.size, required=False, owner=type(self).__name__)
         dyn = InputDynamics()
         us = xs
-        kind = _dynamics_kind(self.input_dynamics, "input_dynamics", type(self).__name__)
-        if kind != "none":  # the hysteresis sees the voltage on the piezo, not the command
+        owner = type(self).__name__
+        kind = _dynamics_kind(self.input_dynamics, "input_dynamics", owner)
+        out_kind = _output_kind(self.output_dynamics, "output_dynamics", owner)
+        if kind != "none" or out_kind != "none":
             if ts is None:
                 msg = (
-                    f"{type(self).__name__}(input_dynamics={kind!r}) needs the sample times: "
-                    "pass t= (s)"
+                    f"{owner}(input_dynamics={kind!r}, output_dynamics={out_kind!r}) needs the "
+                    "sample times: pass t= (s)"
                 )
                 raise TimeAxisError(msg)
-            dyn = self._search_dynamics(xs, ys, ts, kind)
+            seed_mode = OutputDynamics() if out_kind != "none" else None
+            dyn, mode = self._search_dynamics(xs, ys, ts, kind, seed_mode)
             us, _ = dyn.apply(xs, block_dt(ts, 0, ts.size, None))
+            if mode is not None:
+                self._fitting_output = mode
         blocks = array_blocks(us, ys, ts)
-        summary = self._fit(blocks, initial_state, ts is not None)
-        if self._refine(us, ys, ts, summary, initial_state):
-            self._score(blocks, summary)  # the refinement changed the model
+        try:
+            summary = self._fit(blocks, initial_state, ts is not None)
+            if self._refine(us, ys, ts, summary, initial_state):
+                self._score(blocks, summary)  # the refinement changed the model
+        finally:
+            self.__dict__.pop("_fitting_output", None)
         if dyn.active:  # commands, their range and slew are the logged input's
             self.input_range_ = (float(xs.min()), float(xs.max()))
             assert ts is not None
@@ -531,83 +565,108 @@ class HysteresisModel:
         self.input_dynamics_ = dyn
         return self
 
-    def _search_dynamics(
-        self, x: FloatArray, y: FloatArray, t: FloatArray, kind: str
-    ) -> InputDynamics:
-        """The delay and lag that fit best: a search around the linear solve.
+    def _scorer(
+        self, x: FloatArray, y: FloatArray, t: FloatArray
+    ) -> Callable[[InputDynamics, OutputDynamics | None, bool], float]:
+        """A cheap objective for the dynamics searches: fit RMSE (or held-out RMSE).
 
         Each candidate filters the command, then one bounded linear solve
-        scores it (up to 8 operators, about 5 000 rows in the sums: the
-        search needs the shape of the objective, not the final model). 1-D
-        kinds: a grid, then Brent's method around its best point; the 2-D kind
-        starts a Nelder-Mead from the two 1-D results. ``"auto"`` compares every
-        kind on the held-out last 30 % and keeps a more complex one only when
-        it is better by 0.1 %.
+        scores it, the columns through the candidate mode if any (up to 8
+        operators, about 5 000 hashed rows in the sums: the search needs the
+        shape of the objective, not the final model). Results are cached.
         """
-        from scipy.optimize import minimize, minimize_scalar
-
         params = self.check_params()
         dt = block_dt(t, 0, t.size, None)
         assert dt is not None
-        dt0 = float(np.median(np.diff(t)))
         x_range = np.array([float(x.min()), float(x.max())])
         terms, _ = self._terms_to_fit(x_range, params)
         rate = any(term.rate_dependent for term in terms)
         core = PlayCore(default_thresholds(x_range, min(int(params["n_operators"]), 8)))
         stride = max(1, x.size // 5000)
-        # lags of amplifiers and sensor filters: up to 50 ms (or 50 samples), never more than a
-        # tenth of the record
-        limit = min(max(50.0 * dt0, 0.05), 0.1 * float(t[-1] - t[0]))
-
-        def make(name: str, delay: float, tau: float) -> InputDynamics:
-            return InputDynamics(name, max(tau, 0.0), max(delay, 0.0), dt0)
-
         y_stats = (float(y[0]), float(y.min()), float(y.max()))
-        cache: dict[tuple[float, float, bool], float] = {}
+        cache: dict[tuple[Any, ...], float] = {}
 
-        def score(dyn: InputDynamics, validate: bool = False) -> float:
-            key = (round(dyn.delay / dt0, 6), round(dyn.tau / dt0, 6), validate)
+        def score(dyn: InputDynamics, mode: OutputDynamics | None, validate: bool) -> float:
+            key = (dyn.delay, dyn.tau, None if mode is None else (mode.f0, mode.zeta), validate)
             if key in cache:
                 return cache[key]
             u, _ = dyn.apply(x, dt)
             sm = Summary(u.size, float(u[0]), float(u.min()), float(u.max()), *y_stats)
             z0 = np.full(core.n_operators, float(u[0]))
-            blocks = array_blocks(u, y, t if rate else None)
             sol = identify(
                 core,
                 terms,
-                blocks,
+                array_blocks(u, y, t if rate else None),
                 sm,
                 z0,
                 min_slope=float(params["min_slope"]),
                 validate=validate,
                 stride=stride,
                 block=1 << 16,
+                output=mode,
             )
             cache[key] = next(iter(sol.scores.values())) if validate else sol.rmse
             return cache[key]
 
-        def search_1d(name: str) -> InputDynamics:
+        return score
+
+    def _search_dynamics(
+        self,
+        x: FloatArray,
+        y: FloatArray,
+        t: FloatArray,
+        kind: str,
+        output: OutputDynamics | None = None,
+    ) -> tuple[InputDynamics, OutputDynamics | None]:
+        """The delay, lag (and mode, with ``output_dynamics``) that fit best.
+
+        1-D kinds: a grid, then Brent's method around its best point; the 2-D
+        kind starts a Nelder-Mead from the two 1-D results. ``"auto"``
+        compares every kind on the held-out last 30 % and keeps a more complex
+        one only when it is better by 0.1 %. With a mode to find (``output``
+        given, its resonance 0), the search is joint: a log grid of
+        resonances, the lag searched at each, then Nelder-Mead over all three
+        (a lag and a mode trade phase, so searching them one after the other
+        lands on the wrong pair).
+        """
+        from scipy.optimize import minimize, minimize_scalar
+
+        score = self._scorer(x, y, t)
+        dt0 = float(np.median(np.diff(t)))
+        fs = 1.0 / dt0
+        # lags of amplifiers and sensor filters: up to 50 ms (or 50 samples), never more than a
+        # tenth of the record
+        limit = min(max(50.0 * dt0, 0.05), 0.1 * float(t[-1] - t[0]))
+
+        def make(name: str, delay: float, tau: float) -> InputDynamics:
+            if name == "none":
+                return InputDynamics()
+            return InputDynamics(name, max(tau, 0.0), max(delay, 0.0), dt0)
+
+        def search_1d(name: str, mode: OutputDynamics | None) -> tuple[InputDynamics, float]:
             def build(v: float) -> InputDynamics:
                 return make(name, v, 0.0) if name == "delay" else make(name, 0.0, v)
 
             grid = np.linspace(0.0, limit, 6)
-            values = [score(build(float(g))) for g in grid]
+            values = [score(build(float(g)), mode, False) for g in grid]
             k = int(np.argmin(values))
             lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
             res = minimize_scalar(
-                lambda v: score(build(float(v))),
+                lambda v: score(build(float(v)), mode, False),
                 bounds=(lo, hi),
                 method="bounded",
                 options={"xatol": 0.05 * dt0},
             )
-            best = float(res.x) if res.fun < values[k] else float(grid[k])
-            return build(best)
+            if res.fun < values[k]:
+                return build(float(res.x)), float(res.fun)
+            return build(float(grid[k])), values[k]
 
-        def search_2d(first: InputDynamics, second: InputDynamics) -> InputDynamics:
+        def search_2d(
+            first: InputDynamics, second: InputDynamics, mode: OutputDynamics | None
+        ) -> InputDynamics:
             start = np.array([0.5 * first.delay, 0.5 * second.tau])
             res = minimize(
-                lambda p: score(make("delay+first-order", float(p[0]), float(p[1]))),
+                lambda p: score(make("delay+first-order", float(p[0]), float(p[1])), mode, False),
                 start,
                 method="Nelder-Mead",
                 bounds=[(0.0, limit), (0.0, limit)],
@@ -616,25 +675,64 @@ class HysteresisModel:
             best = make("delay+first-order", float(res.x[0]), float(res.x[1]))
             for candidate in (first, second):  # either 1-D result is a point of the 2-D space
                 as_2d = make("delay+first-order", candidate.delay, candidate.tau)
-                if score(as_2d) < score(best):
+                if score(as_2d, mode, False) < score(best, mode, False):
                     best = as_2d
             return best
 
+        mode = output
+        if output is not None:  # joint search of the mode and a 1-D input dynamics
+            simple = kind if kind in ("none", "delay", "first-order") else "first-order"
+            lo_f, hi_f = fs / 200.0, fs / 3.0
+            best_err, best_dyn, best_f = math.inf, InputDynamics(), lo_f
+            for f0 in np.geomspace(lo_f, hi_f, 10):
+                trial = OutputDynamics(float(f0), 0.05, dt0)
+                if simple == "none":
+                    dyn, err = InputDynamics(), score(InputDynamics(), trial, False)
+                else:
+                    dyn, err = search_1d(simple, trial)
+                if err < best_err:
+                    best_err, best_dyn, best_f = err, dyn, float(f0)
+            value = best_dyn.delay if simple == "delay" else best_dyn.tau
+
+            def joint(p: FloatArray) -> float:
+                f0 = float(np.clip(np.exp(p[0]), lo_f, hi_f))
+                zeta = float(np.clip(np.exp(p[1]), 1e-3, 2.0))
+                v = float(np.clip(p[2], 0.0, limit)) if simple != "none" else 0.0
+                dyn = make(simple, v, 0.0) if simple == "delay" else make(simple, 0.0, v)
+                return score(dyn, OutputDynamics(f0, zeta, dt0), False)
+
+            res = minimize(
+                joint,
+                np.array([np.log(best_f), np.log(0.05), value]),
+                method="Nelder-Mead",
+                options={"xatol": 1e-4, "fatol": 0.0, "maxfev": 80},
+            )
+            p = res.x
+            mode = OutputDynamics(
+                float(np.clip(np.exp(p[0]), lo_f, hi_f)),
+                float(np.clip(np.exp(p[1]), 1e-3, 2.0)),
+                dt0,
+            )
+            v = float(np.clip(p[2], 0.0, limit))
+            if kind in ("none", "delay", "first-order"):
+                dyn = make(kind, v, 0.0) if kind == "delay" else make(kind, 0.0, v)
+                return dyn, mode
         if kind in ("delay", "first-order"):
-            return search_1d(kind)
-        delayed, lagged = search_1d("delay"), search_1d("first-order")
-        both = search_2d(delayed, lagged)
+            return search_1d(kind, mode)[0], mode
+        delayed, lagged = search_1d("delay", mode)[0], search_1d("first-order", mode)[0]
+        both = search_2d(delayed, lagged, mode)
         if kind == "delay+first-order":
-            return both
+            return both, mode
         # auto: every kind on the held-out part; complexity must earn its place
         ranked = [(InputDynamics(), 0), (delayed, 1), (lagged, 1), (both, 2)]
-        best_dyn, best_err, best_level = ranked[0][0], score(ranked[0][0], True), 0
+        best_dyn, best_level = ranked[0][0], 0
+        best_err = score(best_dyn, mode, True)
         for dyn, level in ranked[1:]:
-            err = score(dyn, True)
+            err = score(dyn, mode, True)
             margin = 1.0 - 1e-3 * (level - best_level) if level > best_level else 1.0
             if err < best_err * margin:
                 best_dyn, best_err, best_level = dyn, err, level
-        return best_dyn
+        return best_dyn, mode
 
     def fit_blocks(
         self, blocks: Blocks, *, timed: bool = True, initial_state: ArrayLike | None = None
@@ -676,10 +774,13 @@ class HysteresisModel:
                 "the record in memory: use fit"
             )
             raise ParameterError(msg)
-        if self.get_params().get("input_dynamics", "none") != "none":
+        if (
+            self.get_params().get("input_dynamics", "none") != "none"
+            or self.get_params().get("output_dynamics", "none") != "none"
+        ):
             msg = (
-                f"{type(self).__name__}(input_dynamics={self.input_dynamics!r}) searches the "
-                "dynamics over the record in memory: use fit"
+                f"{type(self).__name__} with input or output dynamics searches them over the "
+                "record in memory: use fit"
             )
             raise ParameterError(msg)
         self._fit(blocks, initial_state, timed)
@@ -760,7 +861,14 @@ class HysteresisModel:
         z0: FloatArray,
     ) -> None:
         sol = identify(
-            core, terms, blocks, summary, z0, min_slope=float(self.min_slope), subsets=subsets
+            core,
+            terms,
+            blocks,
+            summary,
+            z0,
+            min_slope=float(self.min_slope),
+            subsets=subsets,
+            output=getattr(self, "_fitting_output", None),
         )
         params = np.concatenate([sol.core, *[c for c in sol.coefficients if c is not None]])
         tiny = np.finfo(np.float64).tiny * 2**20  # below this, parameters lose digits
@@ -824,6 +932,7 @@ class HysteresisModel:
         self.input_range_ = (math.nan, math.nan)
         self.max_slew_rate_ = math.nan
         self.input_dynamics_ = InputDynamics()
+        self.output_dynamics_ = getattr(self, "_fitting_output", OutputDynamics())
 
     # ---------------------------------------------------- fitted attributes
     def _check_fitted(self) -> None:
@@ -898,10 +1007,13 @@ class HysteresisModel:
             Growth integrals at 0, ``t_last`` None.
         """
         self._check_fitted()
+        dyn = self.input_dynamics_
         return ModelState(
             np.full(self.operator_.n_operators, float(x0)),
             tuple(term.rest_state(float(x0)) for term in self.terms_),
             None,
+            dyn.rest_state(float(x0)) if dyn.active else np.zeros(0),
+            np.full(2, np.nan) if self.output_dynamics_.active else np.zeros(0),
         )
 
     def state_after(self, history: ArrayLike, t: ArrayLike | None = None) -> ModelState:
@@ -929,6 +1041,7 @@ class HysteresisModel:
                 tuple(term.rest_state(x0) for term in self.terms_),
                 None,
                 dyn.rest_state(x0) if dyn.active else np.zeros(0),
+                np.full(2, np.nan) if self.output_dynamics_.active else np.zeros(0),
             )
         if not isinstance(state, ModelState):  # operator states only
             z = as_signal(state, "state").copy()
@@ -938,7 +1051,10 @@ class HysteresisModel:
                 )
                 raise ShapeError(msg)
             rest = dyn.rest_state(x0) if dyn.active else np.zeros(0)
-            return ModelState(z, tuple(term.rest_state(x0) for term in self.terms_), None, rest)
+            out = np.full(2, np.nan) if self.output_dynamics_.active else np.zeros(0)
+            return ModelState(
+                z, tuple(term.rest_state(x0) for term in self.terms_), None, rest, out
+            )
         z = as_signal(state.operators, "state.operators").copy()
         if z.size != n or len(state.terms) != len(self.terms_):
             msg = (
@@ -958,7 +1074,11 @@ class HysteresisModel:
         if inp.size != expected:
             msg = f"the input dynamics state needs {expected} values. Got {inp.size}."
             raise ShapeError(msg)
-        return ModelState(z, tuple(terms), state.t_last, inp)
+        outp = np.array(state.output, dtype=np.float64)
+        if outp.size != (2 if self.output_dynamics_.active else 0):
+            msg = f"the output mode's state needs 2 values. Got {outp.size}."
+            raise ShapeError(msg)
+        return ModelState(z, tuple(terms), state.t_last, inp, outp)
 
     # ------------------------------------------------------------- running
     def propagate(
@@ -1031,7 +1151,16 @@ class HysteresisModel:
                 term_columns(terms, xs[start:stop], ts_b, dt, states, block)
                 out[start:stop] += block @ coef
         t_last = float(ts[-1]) if (rate and ts is not None) else st.t_last
-        return Propagation(out, ModelState(z, st.terms, t_last, st.input))
+        mode = self.output_dynamics_
+        if mode.active:  # the mechanical mode between the hysteresis and the displacement
+            if removed_only:  # the growth alone, through the mode from rest at its start
+                out = mode.apply(out)[0]
+            else:
+                ms = st.output.reshape(2, 1)
+                if np.isnan(ms).any():  # not started yet: at rest at the first output
+                    ms[:] = mode.rest_state([out[0]])
+                out = mode.apply(out, ms)[0]
+        return Propagation(out, ModelState(z, st.terms, t_last, st.input, st.output))
 
     def predict(
         self, x: ArrayLike, t: ArrayLike | None = None, state: ModelState | ArrayLike | None = None
@@ -1178,6 +1307,7 @@ class HysteresisModel:
             self.input_unit,
             self.output_unit,
             self.input_dynamics_,
+            self.output_dynamics_,
         )
 
     @property
@@ -1205,6 +1335,7 @@ class HysteresisModel:
         model.input_range_ = self.input_range_
         model.max_slew_rate_ = self.max_slew_rate_
         model.input_dynamics_ = self.input_dynamics_  # the lag sits before the hysteresis
+        model.output_dynamics_ = self.output_dynamics_  # and the mode after it
         return model
 
     def inverse(self) -> ClassicalPI:
@@ -1435,6 +1566,7 @@ class PIModel(HysteresisModel):
         input_unit: str = "V",
         output_unit: str = "C",
         input_dynamics: str = "none",
+        output_dynamics: str = "none",
     ) -> None:
         super().__init__(
             n_operators,
@@ -1443,6 +1575,7 @@ class PIModel(HysteresisModel):
             input_unit=input_unit,
             output_unit=output_unit,
             input_dynamics=input_dynamics,
+            output_dynamics=output_dynamics,
         )
         self.terms = terms
 
@@ -1625,6 +1758,7 @@ class GeneralizedPI(HysteresisModel):
         input_unit: str = "V",
         output_unit: str = "C",
         input_dynamics: str = "none",
+        output_dynamics: str = "none",
     ) -> None:
         super().__init__(
             n_operators,
@@ -1633,6 +1767,7 @@ class GeneralizedPI(HysteresisModel):
             input_unit=input_unit,
             output_unit=output_unit,
             input_dynamics=input_dynamics,
+            output_dynamics=output_dynamics,
         )
         self.growth_terms = growth_terms
         self.asymmetry = asymmetry

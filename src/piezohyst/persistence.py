@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from ._version import __version__
-from .dynamics import InputDynamics
+from .dynamics import InputDynamics, OutputDynamics
 from .errors import ModelFileError, NotFittedError, ParameterError, PiezohystError
 from .hysteresis import PIHysteresis
 from .io import atomic_write_text
@@ -151,6 +151,7 @@ def model_to_dict(model: Model) -> dict[str, Any]:
             "input_range": None if math.isnan(lo) else [lo, hi],
             "max_slew_rate": _nullable(model.max_slew_rate_),
             "input_dynamics": model.input_dynamics_.to_dict(),
+            "output_dynamics": model.output_dynamics_.to_dict(),
         },
     }
     body["checksum"] = _checksum(body)
@@ -382,6 +383,13 @@ def model_from_dict(data: Any, expected: type | None = None) -> Model:
             model.input_dynamics_ = InputDynamics.from_dict(dict(dyn))
         except (TypeError, ValueError) as exc:
             msg = f"field '{fitted.name('input_dynamics')}': {exc}"
+            raise ModelFileError(msg) from None
+    mode = fitted.data.get("output_dynamics")
+    if mode is not None:
+        try:
+            model.output_dynamics_ = OutputDynamics.from_dict(dict(mode))
+        except (TypeError, ValueError) as exc:
+            msg = f"field '{fitted.name('output_dynamics')}': {exc}"
             raise ModelFileError(msg) from None
     return model
 

@@ -173,10 +173,10 @@ class SelfSensingController:
                 "without them"
             )
             raise ParameterError(msg)
-        if comp.dynamic:
+        if comp.dynamic or comp.mode.active:
             msg = (
-                "SelfSensingController does not invert input dynamics yet: fit the model with "
-                "input_dynamics='none', or use the Compensator (feedforward) with this model"
+                "SelfSensingController does not invert input or output dynamics yet: fit the "
+                "model without them, or use the Compensator (feedforward) with this model"
             )
             raise ParameterError(msg)
         if leakage is None:

@@ -164,6 +164,7 @@ def fit_file(
     growth_terms: str | Sequence[str] = "auto",
     creep: Sequence[float] = (),
     input_dynamics: str = "none",
+    output_dynamics: str = "none",
     force: bool = False,
     progress: Progress = None,
 ) -> HysteresisModel:
@@ -186,9 +187,9 @@ def fit_file(
         Columns and samples (default: voltage, charge, time).
     growth_terms, creep
         Settings of models that have them (``generalized-pi``).
-    input_dynamics : str
-        Delay and lag between command and piezo (see
-        :class:`~piezohyst.models.HysteresisModel`).
+    input_dynamics, output_dynamics : str
+        Delay and lag between command and piezo, mode between hysteresis and
+        output (see :class:`~piezohyst.models.HysteresisModel`).
     force : bool
         Replace an existing ``out`` that piezohyst did not write.
     progress : callable, optional
@@ -218,9 +219,10 @@ def fit_file(
         "output_unit": y_unit or _default_unit(stream.names[1]),
         **extra,
         "input_dynamics": input_dynamics,
+        "output_dynamics": output_dynamics,
     }
     estimator = cls(**settings)
-    if input_dynamics != "none":  # the search runs over the window in memory
+    if input_dynamics != "none" or output_dynamics != "none":  # searched over the window in memory
         rec = (data_spec or DataSpec()).read(data, progress=progress)
         w = rec.window
         assert rec.y is not None
@@ -879,6 +881,9 @@ def model_report(
             f"delay {model.input_dynamics_.delay * 1e3:.4g} ms",
         ),
     ]
+    if model.output_dynamics_.active:
+        rep.add("output_mode_hz", "output mode: resonance", model.output_dynamics_.f0, "Hz")
+        rep.add("output_mode_zeta", "output mode: damping ratio", model.output_dynamics_.zeta, "")
     if model.input_dynamics_.active:
         rep.add("input_lag_s", "input dynamics: lag", model.input_dynamics_.tau, "s")
         rep.add("input_delay_s", "input dynamics: delay", model.input_dynamics_.delay, "s")

@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_signal, as_time, same_length
+from ..dynamics import OutputDynamics
 from ..errors import ParameterError
 from . import _plant
 from .signals import make_signal
@@ -64,6 +65,8 @@ class BenchPreset:
     laser_noise: float  # m rms
     sources: dict[str, str] = field(default_factory=dict)
     amp_tau: float = 0.0  # s, the amplifier's lag driving the capacitive load (0: none)
+    mech_f0: float = 0.0  # Hz, the bender's first mode between charge and displacement (0: none)
+    mech_zeta: float = 0.0  # its damping ratio
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -131,6 +134,21 @@ PRESETS["T226-H4-203X-amp4ms"] = replace(
             "assumption: a high-voltage amplifier whose output resistance and current limit "
             "charge the piezo's capacitance with a 4 ms time constant (about 40 Hz bandwidth); "
             "it logs the command, not the piezo voltage, as the measured 1 Hz sets do"
+        ),
+    },
+)
+
+PRESETS["T226-H4-203X-mode"] = replace(
+    PRESETS["T226-H4-203X-amp4ms"],
+    name="T226-H4-203X-mode",
+    mech_f0=150.0,
+    mech_zeta=0.05,
+    sources={
+        **PRESETS["T226-H4-203X-amp4ms"].sources,
+        "mech_f0, mech_zeta": (
+            "assumption: a first bending mode at 150 Hz with 5 % damping, the order of a "
+            "cantilevered bender some centimetres long carrying a small mirror; the laser sees "
+            "it, the charge does not"
         ),
     },
 )
@@ -206,6 +224,16 @@ class _Plant:
         self.state = np.zeros(_plant.STATE_SIZE)
         self.lag_state = np.zeros(3)
         self.lsb = 2.0 * p.adc_range / 2**p.adc_bits
+        self.mode = OutputDynamics(p.mech_f0, p.mech_zeta, 1.0 / p.rate)
+        self.mode_state: FloatArray | None = None
+
+    def displacement(self, static: FloatArray) -> FloatArray:
+        """The displacement the bender makes of its quasi-static one (its first mode, if any)."""
+        if not self.mode.active:
+            return static
+        if self.mode_state is None:
+            self.mode_state = self.mode.rest_state([static[0]])
+        return self.mode.apply_columns(static[:, None], self.mode_state)[:, 0]
 
     def run(
         self, t: FloatArray, v: FloatArray, out: FloatArray | None = None
@@ -335,6 +363,8 @@ class Bench:
         lsb = self._plant.lsb
         v_meas = min(max(v_amp + p.amp_noise * float(noise[0]), -p.adc_range), p.adc_range)
         s_true = p.gain * (q_c - self._q_rest)
+        if self._plant.mode.active:
+            s_true = float(self._plant.displacement(np.array([s_true]))[0])
         res = p.laser_resolution
         self.reading = Reading(
             float(self._t[0]),
@@ -408,7 +438,7 @@ class Bench:
             self._q_rest = float(q_c[0])
         noise = self._rng.standard_normal((v.size, 2))
         charge = self._plant.adc(v_amp + p.amp_noise * noise[:, 0])
-        s_true = p.gain * (q_c - self._q_rest)
+        s_true = self._plant.displacement(p.gain * (q_c - self._q_rest))
         s_meas = self._plant.laser(s_true + p.laser_noise * noise[:, 1])
         return BenchRecord(t, v, charge, s_meas, q_c, q_r, s_true, p.g_leak, p)
 
@@ -479,7 +509,7 @@ def simulate(
 
     rng = np.random.default_rng(seed)
     charge = plant.adc(v_amp + p.amp_noise * rng.standard_normal(v.size))
-    s_true = p.gain * (q_c - q_c[0])
+    s_true = plant.displacement(p.gain * (q_c - q_c[0]))
     s_meas = plant.laser(s_true + p.laser_noise * rng.standard_normal(v.size))
 
     integral = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(ts))])
