@@ -289,3 +289,25 @@ def test_compensation_through_the_mode(mode_models: tuple[ph.ClassicalPI, ph.Cla
         write_c(ph.Compensator(full, v_min=lo, v_max=hi, sample_rate=1000.0), Path("x.c"))
     with pytest.raises(ph.ParameterError, match="input or output dynamics"):
         ph.SelfSensingController(full, v_min=lo, v_max=hi, sample_rate=1000.0)
+
+
+@pytest.mark.parametrize(
+    ("truth", "kind"),
+    [
+        (InputDynamics("delay", delay=3.4e-3, sample_interval=DT), "delay"),
+        (InputDynamics("first-order", tau=5e-3, sample_interval=DT), "first-order"),
+        (InputDynamics("delay+first-order", tau=3e-3, delay=4e-3, sample_interval=DT),
+         "delay+first-order"),
+    ],
+)  # fmt: skip
+def test_auto_tells_a_delay_from_a_lag(truth: InputDynamics, kind: str) -> None:
+    """A rate-independent plant behind known dynamics: auto picks the kind and its values."""
+    t, v = make_signal("multifreq", amplitude=140.0, frequency=0.5, duration=30.0)
+    h = ph.PIHysteresis([0.0, 10.0, 25.0, 45.0], [1e-8, 6e-9, 3e-9, -2e-9])
+    dt = np.diff(t, prepend=t[0])
+    u, _ = truth.apply(v, dt)
+    y = h.predict(u) + 1e-10 * np.random.default_rng(1).standard_normal(t.size)
+    found = ph.ClassicalPI(8, input_dynamics="auto").fit(v, y, t=t).input_dynamics_
+    assert found.kind == kind
+    assert found.delay == pytest.approx(truth.delay, abs=0.2e-3)
+    assert found.tau == pytest.approx(truth.tau, abs=0.2e-3)

@@ -58,6 +58,26 @@ def play_states(x, r, z, out):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, fastmath=FASTMATH)
+def play_states_rows(x, r, z, rows, out):  # type: ignore[no-untyped-def]
+    """``play_states`` that runs through every sample but writes only ``rows`` (sorted).
+
+    ``out[j, i]`` is operator i after sample ``rows[j]``: an outer search that
+    sums a few rows of a long record does not pay for writing all of them.
+    """
+    n = r.shape[0]
+    j = 0
+    m = rows.shape[0]
+    for k in range(x.shape[0]):
+        xk = x[k]
+        for i in range(n):
+            z[i] = min(max(z[i], xk - r[i]), xk + r[i])
+        if j < m and rows[j] == k:
+            for i in range(n):
+                out[j, i] = z[i]
+            j += 1
+
+
+@njit(cache=True, fastmath=FASTMATH)
 def running_integral(x, dt, start, out):  # type: ignore[no-untyped-def]
     """Backward-rectangle integral of the paper (eq. 13): ``y2[k] = y2[k-1] + x[k]*dt[k]``.
 
@@ -84,6 +104,19 @@ def input_filter(x, dt, d_int, d_frac, tau, state, out):  # type: ignore[no-unty
     dt_seen = -1.0
     gain = 0.0
     n = x.shape[0]
+    if d_int == 0 and d_frac == 0.0 and tau > 0.0:  # a lag alone: the common case, kept lean
+        for k in range(n):
+            if dt[k] != dt_seen:
+                dt_seen = dt[k]
+                gain = 1.0 - math.exp(-dt_seen / tau)
+            lag += gain * (x[k] - lag)
+            out[k] = lag
+        for k in range(max(n - size, 0), n):
+            head = (head + 1) % size
+            state[3 + head] = x[k]
+        state[1] = lag
+        state[2] = float(head)
+        return
     for k in range(n):
         if k > d_int:  # both delayed samples lie in this block
             a = x[k - d_int]

@@ -10,6 +10,7 @@ operators of eq. 9-12 with an output offset.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from . import _kernels
 from ._validation import FloatArray
@@ -88,6 +89,21 @@ class PlayCore:
             Destination; its offset column (``n``) must already hold 1.
         """
         _kernels.play_states(x, self.thresholds, state, block)
+
+    def fill_rows(
+        self, x: FloatArray, state: FloatArray, rows: npt.NDArray[np.intp], block: FloatArray
+    ) -> None:
+        """:meth:`fill` for the rows ``rows`` of ``x`` only (the states run through all).
+
+        Parameters
+        ----------
+        x : ndarray, shape (N,)
+        state : ndarray, shape (n,)
+            Updated in place.
+        rows : ndarray of int, sorted
+        block : ndarray, shape (len(rows), p)
+        """
+        _kernels.play_states_rows(x, self.thresholds, state, rows, block)
 
     def slope_map(self, p: int) -> FloatArray:
         """Matrix M with ``parameters = M @ (slopes, other parameters)``.

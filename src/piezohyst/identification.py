@@ -403,28 +403,40 @@ def _accumulate(
             stop = min(size, k + block, edges[seg + 1] - pos)
             m = stop - k
             xs = x_blk[k:stop]
-            scaled_core.fill(xs / sx, z, work)
-            if terms:
-                ts = None if t_blk is None else t_blk[k:stop]
-                dt = None
-                if ts is not None:
-                    dt = np.empty(m)
-                    dt[0] = 0.0 if t_prev is None else ts[0] - t_prev
-                    dt[1:] = np.diff(ts)
-                    t_prev = float(ts[-1])
-                term_columns(terms, xs, ts, dt, states, work[:m, n + 1 :])
-            if output is not None and output.active:
-                work[:m, n] = 1.0  # the offset column, filtered in place before
-                if mode_state is None:
-                    mode_state = output.rest_state(work[0])
-                work[:m] = output.apply_columns(work[:m], mode_state)
-            if stride > 1:  # the rows kept, then scaled: the rest is never touched again
+            ts = None if t_blk is None else t_blk[k:stop]
+            dt = None
+            if terms and ts is not None:
+                dt = np.empty(m)
+                dt[0] = 0.0 if t_prev is None else ts[0] - t_prev
+                dt[1:] = np.diff(ts)
+                t_prev = float(ts[-1])
+            filtered = output is not None and output.active
+            if stride > 1 and not filtered:
+                # a cheap objective: the model runs through every sample, a few rows are summed
                 keep = _picked(pos + k, m, stride)
-                b, ys = work[:m][keep], y_blk[k:stop][keep] / sy - y_ref
-                b[:, n + 1 :] /= col_scale[n + 1 :]
+                b = np.empty((keep.size, p))
+                b[:, n] = 1.0
+                scaled_core.fill_rows(xs / sx, z, keep, b)
+                if terms:
+                    cols = np.empty((m, p - n - 1))
+                    term_columns(terms, xs, ts, dt, states, cols)
+                    b[:, n + 1 :] = cols[keep]
+                ys = y_blk[k:stop][keep] / sy - y_ref
             else:
+                scaled_core.fill(xs / sx, z, work)
+                if terms:
+                    term_columns(terms, xs, ts, dt, states, work[:m, n + 1 :])
+                if filtered:
+                    assert output is not None
+                    work[:m, n] = 1.0  # the offset column, filtered in place before
+                    if mode_state is None:
+                        mode_state = output.rest_state(work[0])
+                    work[:m] = output.apply_columns(work[:m], mode_state)
                 b, ys = work[:m], y_blk[k:stop] / sy - y_ref
-                b[:, n + 1 :] /= col_scale[n + 1 :]
+                if stride > 1:  # the rows kept: the rest is never touched again
+                    keep = _picked(pos + k, m, stride)
+                    b, ys = b[keep], ys[keep]
+            b[:, n + 1 :] /= col_scale[n + 1 :]
             gram, rhs, yy = parts[seg]
             gram += b.T @ b
             rhs += b.T @ ys

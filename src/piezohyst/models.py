@@ -621,9 +621,10 @@ class HysteresisModel:
         """The delay, lag (and mode, with ``output_dynamics``) that fit best.
 
         1-D kinds: a grid, then Brent's method around its best point; the 2-D
-        kind starts a Nelder-Mead from the two 1-D results. ``"auto"``
-        compares every kind on the held-out last 30 % and keeps a more complex
-        one only when it is better by 0.1 %. With a mode to find (``output``
+        kind starts a short Nelder-Mead from the lag-only result. ``"auto"``
+        compares on the held-out last 30 %: none, the lag alone, a pure delay
+        searched near the 2-D result's total lag, and the 2-D result, keeping a
+        more complex one only when it is better by 0.1 %. With a mode to find (``output``
         given, its resonance 0), the search is joint: a log grid of
         resonances, the lag searched at each, then Nelder-Mead over all three
         (a lag and a mode trade phase, so searching them one after the other
@@ -655,29 +656,33 @@ class HysteresisModel:
                 lambda v: score(build(float(v)), mode, False),
                 bounds=(lo, hi),
                 method="bounded",
-                options={"xatol": 0.05 * dt0},
+                options={"xatol": 0.1 * dt0},
             )
             if res.fun < values[k]:
                 return build(float(res.x)), float(res.fun)
             return build(float(grid[k])), values[k]
 
-        def search_2d(
-            first: InputDynamics, second: InputDynamics, mode: OutputDynamics | None
-        ) -> InputDynamics:
-            start = np.array([0.5 * first.delay, 0.5 * second.tau])
+        def search_2d(lagged: InputDynamics, mode: OutputDynamics | None) -> InputDynamics:
+            """Nelder-Mead over (delay, lag) from the lag-only result (a delay trades with it)."""
+            tau1 = max(lagged.tau, dt0)
+            start = np.array([0.0, lagged.tau])
+            steps = np.array([[0.0, 0.0], [0.5 * tau1, -0.5 * tau1], [0.0, 0.25 * tau1]])
+            simplex = start + steps
             res = minimize(
                 lambda p: score(make("delay+first-order", float(p[0]), float(p[1])), mode, False),
                 start,
                 method="Nelder-Mead",
                 bounds=[(0.0, limit), (0.0, limit)],
-                options={"xatol": 0.05 * dt0, "fatol": 0.0, "maxfev": 20},
+                options={
+                    "xatol": 0.1 * dt0,
+                    "fatol": 0.0,
+                    "maxfev": 14,
+                    "initial_simplex": np.clip(simplex, 0.0, limit),
+                },
             )
             best = make("delay+first-order", float(res.x[0]), float(res.x[1]))
-            for candidate in (first, second):  # either 1-D result is a point of the 2-D space
-                as_2d = make("delay+first-order", candidate.delay, candidate.tau)
-                if score(as_2d, mode, False) < score(best, mode, False):
-                    best = as_2d
-            return best
+            as_2d = make("delay+first-order", 0.0, lagged.tau)  # the lag-only point itself
+            return as_2d if score(as_2d, mode, False) < score(best, mode, False) else best
 
         mode = output
         if output is not None:  # joint search of the mode and a 1-D input dynamics
@@ -719,10 +724,19 @@ class HysteresisModel:
                 return dyn, mode
         if kind in ("delay", "first-order"):
             return search_1d(kind, mode)[0], mode
-        delayed, lagged = search_1d("delay", mode)[0], search_1d("first-order", mode)[0]
-        both = search_2d(delayed, lagged, mode)
+        lagged = search_1d("first-order", mode)[0]
+        both = search_2d(lagged, mode)
         if kind == "delay+first-order":
             return both, mode
+        # the pure delay, searched near the 2-D result's total lag (they trade one for one)
+        lo_d, hi_d = max(both.delay - dt0, 0.0), min(both.delay + both.tau + dt0, limit)
+        res_d = minimize_scalar(
+            lambda d: score(make("delay", float(d), 0.0), mode, False),
+            bounds=(lo_d, hi_d),
+            method="bounded",
+            options={"xatol": 0.1 * dt0},
+        )
+        delayed = make("delay", float(res_d.x), 0.0)
         # auto: every kind on the held-out part; complexity must earn its place
         ranked = [(InputDynamics(), 0), (delayed, 1), (lagged, 1), (both, 2)]
         best_dyn, best_level = ranked[0][0], 0
