@@ -243,6 +243,30 @@ def inverse_states(tables, config, state):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, fastmath=FASTMATH)
+def _limit(v, last, config, state):  # type: ignore[no-untyped-def]
+    """A command clamped to the limits (real overshoots counted) and slew; True if they acted."""
+    end = state.shape[0]
+    lo = config[CFG_V_MIN]
+    hi = config[CFG_V_MAX]
+    acted = False
+    if v < lo or v > hi:
+        # count real overshoots, not a limit reached exactly but for rounding
+        tol = 1e-12 * (hi - lo)
+        if v < lo - tol or v > hi + tol:
+            state[end + ST_SATURATED] += 1.0
+        v = min(max(v, lo), hi)
+        acted = True
+    step = config[CFG_MAX_STEP]
+    if v > last + step:
+        v = last + step
+        acted = True
+    elif v < last - step:
+        v = last - step
+        acted = True
+    return v, acted
+
+
+@njit(cache=True, fastmath=FASTMATH)
 def compensator_step(desired, tables, config, state):  # type: ignore[no-untyped-def]
     """One feedforward command (V) for one desired value, analytic inverse; updates ``state``.
 
@@ -271,24 +295,7 @@ def compensator_step(desired, tables, config, state):  # type: ignore[no-untyped
         state[end + ST_NONFINITE] += 1.0
         inverse_states(tables, config, state)
         return last
-    v = x
-    limited = False
-    lo = config[CFG_V_MIN]
-    hi = config[CFG_V_MAX]
-    if v < lo or v > hi:
-        # count real overshoots, not a limit reached exactly but for rounding
-        tol = 1e-12 * (hi - lo)
-        if v < lo - tol or v > hi + tol:
-            state[end + ST_SATURATED] += 1.0
-        v = min(max(v, lo), hi)
-        limited = True
-    step = config[CFG_MAX_STEP]
-    if v > last + step:
-        v = last + step
-        limited = True
-    elif v < last - step:
-        v = last - step
-        limited = True
+    v, limited = _limit(x, last, config, state)
     for i in range(n):
         state[i] = min(max(state[i], v - tables[TAB_R, i]), v + tables[TAB_R, i])
     if limited:
@@ -354,16 +361,7 @@ def dynamic_step(desired, tables, config, state, dyn, dstate):  # type: ignore[n
         state[end + ST_NONFINITE] += 1.0
         inverse_states(tables, config, state)
         return last
-    if x < lo or x > hi:
-        tol = 1e-12 * (hi - lo)
-        if x < lo - tol or x > hi + tol:
-            state[end + ST_SATURATED] += 1.0
-        x = min(max(x, lo), hi)
-    step = config[CFG_MAX_STEP]
-    if x > last + step:
-        x = last + step
-    elif x < last - step:
-        x = last - step
+    x, _ = _limit(x, last, config, state)
     u = _advance_dynamics(x, dyn, dstate)
     for i in range(n):
         state[i] = min(max(state[i], u - tables[TAB_R, i]), u + tables[TAB_R, i])

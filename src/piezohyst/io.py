@@ -16,6 +16,7 @@ import dataclasses
 import io as _io
 import itertools
 import logging
+import math
 import os
 import re
 import tempfile
@@ -43,6 +44,7 @@ __all__ = [
     "atomic_write_text",
     "check_finite",
     "check_increasing",
+    "collect",
     "is_piezohyst_output",
     "open_recording",
     "open_table",
@@ -1239,13 +1241,34 @@ def read_recording(
         output_unit=output_unit,
         time_unit=time_unit,
     )
+    return collect(stream, progress)
+
+
+def collect(stream: RecordingStream, progress: Callable[[int], None] | None = None) -> Recording:
+    """A whole :class:`RecordingStream` in memory, with the window's samples marked.
+
+    Parameters
+    ----------
+    stream : RecordingStream
+    progress : callable, optional
+        Called with the rows read so far.
+
+    Returns
+    -------
+    Recording
+
+    Raises
+    ------
+    DataFileError
+        A window that holds no sample (or any error of the stream).
+    """
     blocks = list(stream.blocks(progress))
     t = np.concatenate([b.t for b in blocks])
     x = np.concatenate([b.x for b in blocks])
     ys = [b.y for b in blocks if b.y is not None]
     y = np.concatenate(ys) if ys else None
     window = slice(None)
-    if t_start is not None or t_stop is not None:
+    if math.isfinite(stream.t_start) or math.isfinite(stream.t_stop):
         i0 = int(np.searchsorted(t, stream.t_start, "left"))
         i1 = int(np.searchsorted(t, stream.t_stop, "left"))
         if i1 <= i0:
@@ -1348,21 +1371,7 @@ class DataSpec:
         -------
         Recording
         """
-        return read_recording(
-            path,
-            input_column=self.input_column,
-            output_column=self.output_column,
-            time_column=self.time_column,
-            rate=self.rate,
-            group=self.group,
-            output_required=output_required,
-            t_start=self.t_start,
-            t_stop=self.t_stop,
-            input_unit=self.input_unit,
-            output_unit=self.output_unit,
-            time_unit=self.time_unit,
-            progress=progress,
-        )
+        return collect(self.open(path, output_required=output_required), progress)
 
 
 # ------------------------------------------------------------------ writers

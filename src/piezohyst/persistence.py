@@ -377,19 +377,14 @@ def model_from_dict(data: Any, expected: type | None = None) -> Model:
     model.nrmse_ = fitted.number("nrmse", optional=True)
     model.input_range_ = _range(fitted)
     model.max_slew_rate_ = fitted.number("max_slew_rate", optional=True)
-    dyn = fitted.data.get("input_dynamics")
-    if dyn is not None:
+    for name, kind in (("input_dynamics", InputDynamics), ("output_dynamics", OutputDynamics)):
+        data = fitted.data.get(name)  # absent from older files: none
+        if data is None:
+            continue
         try:
-            model.input_dynamics_ = InputDynamics.from_dict(dict(dyn))
+            setattr(model, f"{name}_", kind.from_dict(dict(data)))
         except (TypeError, ValueError) as exc:
-            msg = f"field '{fitted.name('input_dynamics')}': {exc}"
-            raise ModelFileError(msg) from None
-    mode = fitted.data.get("output_dynamics")
-    if mode is not None:
-        try:
-            model.output_dynamics_ = OutputDynamics.from_dict(dict(mode))
-        except (TypeError, ValueError) as exc:
-            msg = f"field '{fitted.name('output_dynamics')}': {exc}"
+            msg = f"field '{fitted.name(name)}': {exc}"
             raise ModelFileError(msg) from None
     return model
 
