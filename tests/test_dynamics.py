@@ -233,11 +233,12 @@ MODE = "T226-H4-203X-mode"
 
 @pytest.fixture(scope="module")
 def mode_models() -> tuple[ph.ClassicalPI, ph.ClassicalPI]:
-    t, v = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=30.0)  # to 100 Hz
+    # 2.5, 25 and 100 Hz, 3 s each: short, so the suite without the JIT stays quick
+    t, v = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=9.0)
     rec = simulate(v, t, preset=MODE, seed=0)
     kw = {"output_unit": "m", "input_dynamics": "first-order"}
-    full = ph.ClassicalPI(20, output_dynamics="second-order", **kw)  # type: ignore[arg-type]
-    lag = ph.ClassicalPI(20, **kw)  # type: ignore[arg-type]
+    full = ph.ClassicalPI(8, output_dynamics="second-order", **kw)  # type: ignore[arg-type]
+    lag = ph.ClassicalPI(8, **kw)  # type: ignore[arg-type]
     return (
         full.fit(rec.voltage, rec.displacement, t=rec.t),
         lag.fit(rec.voltage, rec.displacement, t=rec.t),
@@ -284,7 +285,7 @@ def test_compensation_through_the_mode(mode_models: tuple[ph.ClassicalPI, ph.Cla
         run = simulate(commands, np.arange(commands.size) * DT, preset=MODE, seed=4)
         moved = run.true_displacement[pre.size :]
         widths.append(hysteresis_width(desired[keep], moved[keep]))
-    assert widths[0] <= 0.01 and widths[0] < 0.2 * widths[1]
+    assert widths[0] <= 0.02 and widths[0] < 0.2 * widths[1]  # issue 14: <= 2 % at 40 Hz
     with pytest.raises(ph.ParameterError, match="output mode"):
         write_c(ph.Compensator(full, v_min=lo, v_max=hi, sample_rate=1000.0), Path("x.c"))
     with pytest.raises(ph.ParameterError, match="input or output dynamics"):
