@@ -295,7 +295,25 @@ def compensator_step(desired, tables, config, state):  # type: ignore[no-untyped
         state[end + ST_NONFINITE] += 1.0
         inverse_states(tables, config, state)
         return last
-    v, limited = _limit(x, last, config, state)
+    # inline, not _limit(): a helper returning a tuple cost a third of process() (measured)
+    v = x
+    limited = False
+    lo = config[CFG_V_MIN]
+    hi = config[CFG_V_MAX]
+    if v < lo or v > hi:
+        # count real overshoots, not a limit reached exactly but for rounding
+        tol = 1e-12 * (hi - lo)
+        if v < lo - tol or v > hi + tol:
+            state[end + ST_SATURATED] += 1.0
+        v = min(max(v, lo), hi)
+        limited = True
+    step = config[CFG_MAX_STEP]
+    if v > last + step:
+        v = last + step
+        limited = True
+    elif v < last - step:
+        v = last - step
+        limited = True
     for i in range(n):
         state[i] = min(max(state[i], v - tables[TAB_R, i]), v + tables[TAB_R, i])
     if limited:

@@ -249,6 +249,7 @@ class Compensator:
         #: A mechanical mode after the hysteresis, inverted from the desired trajectory
         self.mode = spec.output_dynamics
         self._mode_history = np.full(2, np.nan)
+        self._plain = spec.analytic and not dyn.active and not self.mode.active
         if dyn.active:
             dt = 1.0 / float(sample_rate)  # type: ignore[arg-type]
             d = dyn.delay / dt
@@ -520,6 +521,8 @@ class Compensator:
         float
             The command (V), finite and inside ``[v_min, v_max]``.
         """
+        if self._plain:  # the common case first: one kernel call
+            return float(K.compensator_step(float(desired), self.tables, self.config, self._state))
         if self.mode.active:
             desired = float(self._through_mode(np.array([float(desired)]), preview)[0])
         if self.dynamic:
