@@ -410,9 +410,76 @@ def dynamic_process(desired, delay, tables, config, state, dyn, dstate, out):  #
 
 @njit(cache=True, fastmath=FASTMATH)
 def compensator_process(desired, tables, config, state, out):  # type: ignore[no-untyped-def]
-    """``compensator_step`` over a block (same arithmetic, one call)."""
+    """``compensator_step`` over a block: the same arithmetic, fused.
+
+    The settings, the last command and the counters live in locals and the
+    tables in contiguous rows for the whole block (``compensator_step`` reads
+    them from the arrays at every sample); the results are identical.
+    """
+    n = tables.shape[1]
+    end = state.shape[0]
+    r = tables[TAB_R].copy()
+    w = tables[TAB_W].copy()
+    s_ = tables[TAB_S].copy()
+    ri = tables[TAB_RI].copy()
+    wi = tables[TAB_WI].copy()
+    c = config[CFG_OFFSET]
+    c_inv = config[CFG_INV_OFFSET]
+    lo = config[CFG_V_MIN]
+    hi = config[CFG_V_MAX]
+    step = config[CFG_MAX_STEP]
+    ref = config[CFG_REFERENCE]
+    inv_gain = config[CFG_INV_GAIN]
+    bound = config[CFG_BOUND]
+    tol = 1e-12 * (hi - lo)
+    last = state[end + ST_LAST]
+    nonfinite = state[end + ST_NONFINITE]
+    saturated = state[end + ST_SATURATED]
     for k in range(desired.shape[0]):
-        out[k] = compensator_step(desired[k], tables, config, state)
+        d = desired[k]
+        if not math.isfinite(d):
+            nonfinite += 1.0
+            out[k] = last
+            continue
+        q = min(max(ref + d * inv_gain, c - bound), c + bound)
+        x = c_inv
+        for i in range(n):
+            zeta = min(max(state[n + i], q - ri[i]), q + ri[i])
+            state[n + i] = zeta
+            x += wi[i] * zeta
+        if not math.isfinite(x):
+            nonfinite += 1.0
+            tail = 0.0
+            for i in range(n - 1, -1, -1):
+                state[n + i] = c + s_[i] * state[i] + tail
+                tail += w[i] * state[i]
+            out[k] = last
+            continue
+        v = x
+        limited = False
+        if v < lo or v > hi:
+            if v < lo - tol or v > hi + tol:
+                saturated += 1.0
+            v = min(max(v, lo), hi)
+            limited = True
+        if v > last + step:
+            v = last + step
+            limited = True
+        elif v < last - step:
+            v = last - step
+            limited = True
+        for i in range(n):
+            state[i] = min(max(state[i], v - r[i]), v + r[i])
+        if limited:
+            tail = 0.0
+            for i in range(n - 1, -1, -1):
+                state[n + i] = c + s_[i] * state[i] + tail
+                tail += w[i] * state[i]
+        last = v
+        out[k] = v
+    state[end + ST_LAST] = last
+    state[end + ST_NONFINITE] = nonfinite
+    state[end + ST_SATURATED] = saturated
 
 
 @njit(cache=True, fastmath=FASTMATH)
