@@ -22,25 +22,37 @@ from piezohyst.export import write_c
 
 
 def python_step_reference(h: ph.PIHysteresis, inv: ph.PIHysteresis):  # type: ignore[no-untyped-def]
-    """The same algorithm written plainly in Python (lists, one operator at a time)."""
+    """The kernel's algorithm written plainly in Python (lists, one operator at a time).
+
+    Like the kernel it keeps the inverse states and advances them by their
+    own play recursion, rebuilding them from the forward states only when a
+    limit acted.
+    """
     r, w, s = h.thresholds.tolist(), h.weights.tolist(), h.loading_slopes.tolist()
     ri, wi = inv.thresholds.tolist(), inv.weights.tolist()
     c, ci = h.offset, inv.offset
     z = h.initial_state.tolist()
     n = len(r)
-    state = {"last": z[0]}
+    zeta = [0.0] * n
+
+    def rebuild() -> None:
+        tail = 0.0
+        for i in range(n - 1, -1, -1):
+            zeta[i] = c + s[i] * z[i] + tail
+            tail += w[i] * z[i]
+
+    rebuild()
 
     def step(q: float) -> float:
-        tail = 0.0
         x = ci
-        for i in range(n - 1, -1, -1):
-            zeta = c + s[i] * z[i] + tail
-            tail += w[i] * z[i]
-            x += wi[i] * min(max(zeta, q - ri[i]), q + ri[i])
+        for i in range(n):
+            zeta[i] = min(max(zeta[i], q - ri[i]), q + ri[i])
+            x += wi[i] * zeta[i]
         v = min(max(x, 0.0), 140.0)
         for i in range(n):
             z[i] = min(max(z[i], v - r[i]), v + r[i])
-        state["last"] = v
+        if v != x:
+            rebuild()
         return v
 
     return step
