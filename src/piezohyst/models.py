@@ -622,9 +622,10 @@ class HysteresisModel:
 
         1-D kinds: a grid, then Brent's method around its best point; the 2-D
         kind starts a short Nelder-Mead from the lag-only result. ``"auto"``
-        compares on the held-out last 30 %: none, the lag alone, a pure delay
-        searched near the 2-D result's total lag, and the 2-D result, keeping a
-        more complex one only when it is better by 0.1 %. With a mode to find (``output``
+        compares on the held-out last 30 %: none, the lag alone and, when the
+        2-D result holds a delay, a pure delay searched near its total lag and
+        the 2-D result itself, keeping a more complex one only when it is
+        better by 0.1 %. With a mode to find (``output``
         given, its resonance 0), the search is joint: a log grid of
         resonances, the lag searched at each, then Nelder-Mead over all three
         (a lag and a mode trade phase, so searching them one after the other
@@ -728,17 +729,21 @@ class HysteresisModel:
         both = search_2d(lagged, mode)
         if kind == "delay+first-order":
             return both, mode
-        # the pure delay, searched near the 2-D result's total lag (they trade one for one)
-        lo_d, hi_d = max(both.delay - dt0, 0.0), min(both.delay + both.tau + dt0, limit)
-        res_d = minimize_scalar(
-            lambda d: score(make("delay", float(d), 0.0), mode, False),
-            bounds=(lo_d, hi_d),
-            method="bounded",
-            options={"xatol": 0.1 * dt0},
-        )
-        delayed = make("delay", float(res_d.x), 0.0)
-        # auto: every kind on the held-out part; complexity must earn its place
-        ranked = [(InputDynamics(), 0), (delayed, 1), (lagged, 1), (both, 2)]
+        # auto: the kinds the 2-D result leaves plausible, on the held-out part; complexity
+        # must earn its place. A 2-D result with (almost) no delay is the lag alone; one
+        # with a delay earns a pure delay searched near its total lag (they trade one for one)
+        ranked: list[tuple[InputDynamics, int]] = [(InputDynamics(), 0), (lagged, 1)]
+        if both.delay >= 0.5 * dt0:
+            lo_d, hi_d = max(both.delay - dt0, 0.0), min(both.delay + both.tau + dt0, limit)
+            res_d = minimize_scalar(
+                lambda d: score(make("delay", float(d), 0.0), mode, False),
+                bounds=(lo_d, hi_d),
+                method="bounded",
+                options={"xatol": 0.1 * dt0},
+            )
+            ranked.append((make("delay", float(res_d.x), 0.0), 1))
+            if both.tau >= 0.5 * dt0:
+                ranked.append((both, 2))
         best_dyn, best_level = ranked[0][0], 0
         best_err = score(best_dyn, mode, True)
         for dyn, level in ranked[1:]:
