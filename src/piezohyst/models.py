@@ -549,7 +549,7 @@ class HysteresisModel:
             seed_mode = OutputDynamics() if out_kind != "none" else None
             dyn, mode = self._search_dynamics(xs, ys, ts, kind, seed_mode)
             us, _ = dyn.apply(xs, block_dt(ts, 0, ts.size, None))
-            if mode is not None:
+            if mode is not None:  # the solve filters its columns through it; set_fitted keeps it
                 self._fitting_output = mode
         blocks = array_blocks(us, ys, ts)
         try:
