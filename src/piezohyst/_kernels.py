@@ -90,7 +90,7 @@ def running_integral(x, dt, start, out):  # type: ignore[no-untyped-def]
     return acc
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(cache=True)  # no fastmath: its ring and block loops must round alike (chunks == one call)
 def input_filter(x, dt, d_int, d_frac, tau, state, out):  # type: ignore[no-untyped-def]
     """Delay (``d_int + d_frac`` samples, linear interpolation) then a first-order lag ``tau``.
 
@@ -104,41 +104,38 @@ def input_filter(x, dt, d_int, d_frac, tau, state, out):  # type: ignore[no-unty
     dt_seen = -1.0
     gain = 0.0
     n = x.shape[0]
-    if d_int == 0 and d_frac == 0.0 and tau > 0.0:  # a lag alone: the common case, kept lean
-        for k in range(n):
-            if dt[k] != dt_seen:
-                dt_seen = dt[k]
-                gain = 1.0 - math.exp(-dt_seen / tau)
-            lag += gain * (x[k] - lag)
-            out[k] = lag
-        for k in range(max(n - size, 0), n):
-            head = (head + 1) % size
-            state[3 + head] = x[k]
-        state[1] = lag
-        state[2] = float(head)
-        return
-    for k in range(n):
-        if k > d_int:  # both delayed samples lie in this block
-            a = x[k - d_int]
-            b = x[k - d_int - 1]
-        else:  # reach back into the ring of earlier inputs
-            head = (head + 1) % size
-            state[3 + head] = x[k]
-            a = state[3 + (head - d_int) % size]
-            b = state[3 + (head - d_int - 1) % size]
+    first = min(n, d_int + 1)  # samples whose delayed inputs reach back into the ring
+    for k in range(first):
+        head = (head + 1) % size
+        state[3 + head] = x[k]
+        a = state[3 + (head - d_int) % size]
+        b = state[3 + (head - d_int - 1) % size]
         v = a + d_frac * (b - a)
         if tau > 0.0:
-            if dt[k] != dt_seen:  # uniform sampling: one exp per record, not per sample
+            if dt[k] != dt_seen:
                 dt_seen = dt[k]
                 gain = 1.0 - math.exp(-dt_seen / tau)
             lag += gain * (v - lag)
         else:
             lag = v
         out[k] = lag
-    for k in range(max(d_int + 1, 0), n):  # the ring ends holding the last inputs
-        if k >= n - size:
-            head = (head + 1) % size
-            state[3 + head] = x[k]
+    if tau > 0.0:  # the rest reads the block itself, in two branch-free loops
+        for k in range(first, n):
+            a = x[k - d_int]
+            v = a + d_frac * (x[k - d_int - 1] - a)
+            if dt[k] != dt_seen:  # uniform sampling: one exp per record, not per sample
+                dt_seen = dt[k]
+                gain = 1.0 - math.exp(-dt_seen / tau)
+            lag += gain * (v - lag)
+            out[k] = lag
+    else:
+        for k in range(first, n):
+            a = x[k - d_int]
+            lag = a + d_frac * (x[k - d_int - 1] - a)
+            out[k] = lag
+    for k in range(max(first, n - size), n):  # the ring ends holding the last inputs
+        head = (head + 1) % size
+        state[3 + head] = x[k]
     state[1] = lag
     state[2] = float(head)
 

@@ -381,8 +381,7 @@ def _accumulate(
     n = core.n_operators
     p = col_scale.size
     sx, sy = scales
-    work = np.empty((block, p))
-    work[:, n] = 1.0
+    work = np.empty((0, p))  # made at the first block that needs it, no larger than it
     scaled_core = core.scaled(sx)
     z = z0 / sx
     states = [term.rest_state(x_first) for term in terms]
@@ -423,6 +422,9 @@ def _accumulate(
                     b[:, n + 1 :] = cols[keep]
                 ys = y_blk[k:stop][keep] / sy - y_ref
             else:
+                if work.shape[0] < m:
+                    work = np.empty((max(m, min(block, x_blk.size)), p))
+                    work[:, n] = 1.0
                 scaled_core.fill(xs / sx, z, work)
                 if terms:
                     term_columns(terms, xs, ts, dt, states, work[:m, n + 1 :])
