@@ -291,6 +291,7 @@ LAYERS = {
     "persistence": 4,
     "identification": 4,
     "models": 5,
+    "bank": 6,
     "compensator": 7,
     "selfsensing": 7,
     "export": 8,

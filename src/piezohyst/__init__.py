@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from . import io, metrics, terms
 from ._version import __version__
-from .compensator import Compensator, CompensatorState
+from .bank import ModelBank, load_bank
+from .compensator import BankCompensator, Compensator, CompensatorState
 from .errors import (
     DataFileError,
     InsufficientDataError,
@@ -42,6 +43,7 @@ from .terms import Term
 
 __all__ = [
     "ActivePI",
+    "BankCompensator",
     "ClassicalPI",
     "Compensator",
     "CompensatorState",
@@ -52,6 +54,7 @@ __all__ = [
     "InsufficientDataError",
     "InverseSpec",
     "Leakage",
+    "ModelBank",
     "ModelFileError",
     "ModelState",
     "NonFiniteError",
@@ -71,6 +74,7 @@ __all__ = [
     "calibrate_leakage",
     "default_thresholds",
     "io",
+    "load_bank",
     "load_model",
     "metrics",
     "read_recording",

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 # The one fastmath policy of every kernel: reassociation lets LLVM vectorise the
 # weighted sums over operators; min/max and comparisons stay exact, so results
@@ -711,6 +711,57 @@ def controller_process(desired, measured, tables, config, state, ctl, cs, out): 
         out[k] = controller_step(desired[k], measured[k], tables, config, state, ctl, cs)
 
 
+# ---------------------------------------------------------------------------
+# Banks: C channels of one structure, the single-channel kernels run per
+# channel in parallel. tables (C, 5, n), config (C, CONFIG_SIZE), state
+# (C, 2n + 3): row c is exactly what a single compensator of channel c holds.
+
+
+@njit(cache=True, parallel=True, fastmath=FASTMATH)
+def bank_step(desired, tables, config, state, out):  # type: ignore[no-untyped-def]
+    """One command per channel: ``compensator_step`` on every row, across threads."""
+    for c in prange(desired.shape[0]):
+        out[c] = compensator_step(desired[c], tables[c], config[c], state[c])
+
+
+BANK_GROUP = 128  # channels per task of bank_process
+BANK_CHUNK = 128  # samples per tile: a tile's desired values and commands stay in cache
+
+
+@njit(cache=True, parallel=True, fastmath=FASTMATH)
+def bank_process(desired, tables, config, state, out):  # type: ignore[no-untyped-def]
+    """``compensator_process`` of every channel over a block ``desired`` (samples, C).
+
+    Tiles of ``BANK_GROUP`` channels × ``BANK_CHUNK`` samples are copied
+    channel-major into a buffer (contiguous reads of each row of the block),
+    each channel runs the fused single-channel loop on its row of the tile,
+    and the commands are copied back. The arithmetic is a single compensator's.
+    """
+    m, channels = desired.shape
+    groups = (channels + BANK_GROUP - 1) // BANK_GROUP
+    for g in prange(groups):
+        c0 = BANK_GROUP * g
+        c1 = min(c0 + BANK_GROUP, channels)
+        tile = np.empty((c1 - c0, BANK_CHUNK))
+        result = np.empty((c1 - c0, BANK_CHUNK))
+        for k0 in range(0, m, BANK_CHUNK):
+            k1 = min(k0 + BANK_CHUNK, m)
+            for k in range(k0, k1):
+                for c in range(c0, c1):
+                    tile[c - c0, k - k0] = desired[k, c]
+            for c in range(c0, c1):
+                compensator_process(
+                    tile[c - c0, : k1 - k0],
+                    tables[c],
+                    config[c],
+                    state[c],
+                    result[c - c0, : k1 - k0],
+                )
+            for k in range(k0, k1):
+                for c in range(c0, c1):
+                    out[k, c] = result[c - c0, k - k0]
+
+
 def warm_up() -> None:
     """Compile every kernel once (numba caches the result on disk)."""
     x = np.zeros(2)
@@ -729,6 +780,8 @@ def warm_up() -> None:
     inverse_states(tables, config, state)
     compensator_step(0.0, tables, config, state)
     compensator_process(x, tables, config, state, np.empty(2))
+    bank_step(x[:1], tables[None], config[None], state[None], np.empty(1))
+    bank_process(x[:, None], tables[None], config[None], state[None], np.empty((2, 1)))
     dynamic_process(x, 1, tables, config, state, np.zeros(2), np.zeros(2), np.empty(2))
     numeric_process(x, tables, np.zeros((3, 0)), np.zeros((3, 0)), config, np.zeros(4), np.empty(2))
     ctl = np.zeros(CTL_SIZE)

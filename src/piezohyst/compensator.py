@@ -22,17 +22,18 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from . import _kernels as K
 from ._validation import FloatArray, as_signal
+from .bank import ModelBank
 from .errors import ParameterError, ShapeError
 from .models import HysteresisModel, InverseSpec
 
-__all__ = ["Compensator", "CompensatorState"]
+__all__ = ["BankCompensator", "Compensator", "CompensatorState"]
 
 Domain = Literal["charge", "displacement"]
 
@@ -116,7 +117,15 @@ class Compensator:
     (100.0, 1)
     >>> comp.step(1.0)          # far beyond what 140 V gives: saturates
     140.0
+
+    Given a :class:`~piezohyst.ModelBank`, it builds a
+    :class:`BankCompensator` (one command per channel per step).
     """
+
+    def __new__(cls, model: HysteresisModel | ModelBank, **kwargs: Any) -> Compensator:
+        if isinstance(model, ModelBank):  # many channels: the bank's compensator
+            return BankCompensator(model, **kwargs)  # type: ignore[return-value]
+        return super().__new__(cls)
 
     def __init__(
         self,
@@ -327,6 +336,26 @@ class Compensator:
             float(self._state[K.ST_LAST]),
             self.dstate.copy() if self.dynamic else np.zeros(0),
         )
+
+    @property
+    def plain(self) -> bool:
+        """True when :meth:`step` is one analytic kernel call (no input dynamics, no mode)."""
+        return self._plain
+
+    def share(self, tables: FloatArray, config: FloatArray, state: FloatArray) -> None:
+        """Run on arrays owned by a multi-channel container (views of its rows).
+
+        The arrays must hold this compensator's current values (the bank
+        stacks them first); from then on both see every update.
+        """
+        if not (
+            np.array_equal(tables, self.tables)
+            and np.array_equal(config, self.config)
+            and np.array_equal(state, self._state)
+        ):
+            msg = "shared arrays must hold the compensator's current tables, config and state"
+            raise ParameterError(msg)
+        self.tables, self.config, self._state = tables, config, state
 
     @property
     def last_command(self) -> float:
@@ -664,3 +693,234 @@ class CompensatorSettings:
             sample_rate=self.sample_rate,
             allow_extrapolation=self.allow_extrapolation,
         )
+
+
+def _per_channel(value: object, c: int, name: str) -> list[Any]:
+    """A scalar (or None) repeated C times, or C values."""
+    if value is None or isinstance(value, int | float | np.integer | np.floating):
+        return [value] * c
+    arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    if arr.size != c:
+        msg = f"'{name}' must be a number or one value per channel ({c}). Got {arr.size} values."
+        raise ShapeError(msg)
+    return [float(a) for a in arr]
+
+
+class BankCompensator:
+    r"""Feedforward compensation of every channel of a :class:`~piezohyst.ModelBank`.
+
+    Channel ``c`` is exactly the :class:`Compensator` of ``bank[c]`` (same
+    inverse, limits, slew limit, NaN handling and counters; :meth:`channel`
+    returns it, live): :meth:`step` takes one desired value per channel and
+    returns one command per channel. When every channel inverts analytically
+    without input dynamics (play operators and removed growth terms), all
+    channels run in one numba kernel, in parallel across cores, allocating
+    nothing; otherwise the channels' own compensators run one after another.
+
+    Usually built as ``ph.Compensator(bank, v_min=..., v_max=...)``.
+
+    Parameters
+    ----------
+    bank : ModelBank
+        A fitted bank (every channel fitted).
+    v_min, v_max : float or array_like of C
+        Voltage limits (V), shared or one per channel.
+    slew_rate, gain : float or array_like of C, optional
+        As for :class:`Compensator`, shared or per channel.
+    sample_rate : float, optional
+        The loop rate (Hz), shared.
+    domain : {"charge", "displacement"}
+    allow_extrapolation : bool, default False
+        Limits beyond a channel's identified range are narrowed to it, with
+        one warning naming how many channels were narrowed.
+
+    Examples
+    --------
+    >>> import numpy as np, piezohyst as ph
+    >>> units = [ph.PIHysteresis([0.0, 20.0], [g * 1e-8, 5e-9]) for g in (1.0, 2.0)]
+    >>> bank = ph.ModelBank.from_models([ph.ClassicalPI.from_operator(u) for u in units])
+    >>> comp = ph.Compensator(bank, v_min=0.0, v_max=140.0)
+    >>> desired = np.array([units[0].predict([50.0])[0], units[1].predict([80.0])[0]])
+    >>> np.round(comp.step(desired), 9).tolist()
+    [50.0, 80.0]
+    """
+
+    def __init__(
+        self,
+        bank: ModelBank,
+        *,
+        v_min: float | ArrayLike,
+        v_max: float | ArrayLike,
+        slew_rate: float | ArrayLike | None = None,
+        sample_rate: float | None = None,
+        domain: Domain = "charge",
+        gain: float | ArrayLike | None = None,
+        allow_extrapolation: bool = False,
+    ) -> None:
+        if not isinstance(bank, ModelBank):
+            msg = f"BankCompensator needs a fitted ModelBank. Got {type(bank).__name__}."
+            raise ParameterError(msg)
+        models = bank.complete_models()
+        c = len(models)
+        lows = _per_channel(v_min, c, "v_min")
+        highs = _per_channel(v_max, c, "v_max")
+        slews = _per_channel(slew_rate, c, "slew_rate")
+        gains = _per_channel(gain, c, "gain")
+        channels: list[Compensator] = []
+        narrowed = 0
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            for i, m in enumerate(models):
+                try:
+                    comp = Compensator(
+                        m,
+                        v_min=lows[i],
+                        v_max=highs[i],
+                        slew_rate=slews[i],
+                        sample_rate=sample_rate,
+                        domain=domain,
+                        gain=gains[i],
+                        allow_extrapolation=allow_extrapolation,
+                    )
+                except ParameterError as exc:
+                    raise ParameterError(f"channel {i}: {exc}") from None
+                narrowed += comp.requested_limits is not None
+                channels.append(comp)
+        if narrowed:
+            warnings.warn(
+                f"Compensator limits narrowed on {narrowed} of {c} channels to the voltages "
+                "each was identified on (pass allow_extrapolation=True to keep them; "
+                "v_min/v_max show the limits in force).",
+                UserWarning,
+                stacklevel=3,
+            )
+        self.bank = bank
+        self._channels = channels
+        #: True when all channels run in the one parallel kernel
+        self.fused = all(ch.plain for ch in channels)
+        if self.fused:
+            # one array per quantity; each channel's compensator keeps views of its row,
+            # so channel(i) stays live and identical to the bank's state
+            self.tables = np.ascontiguousarray(np.stack([ch.tables for ch in channels]))
+            self.config = np.ascontiguousarray(np.stack([ch.config for ch in channels]))
+            self._state = np.ascontiguousarray(np.stack([ch.kernel_state for ch in channels]))
+            for i, ch in enumerate(channels):
+                ch.share(self.tables[i], self.config[i], self._state[i])
+
+    def __len__(self) -> int:
+        return len(self._channels)
+
+    def channel(self, index: int) -> Compensator:
+        """Channel ``index``'s compensator: live, sharing the bank's state."""
+        return self._channels[index]
+
+    @property
+    def v_min(self) -> FloatArray:
+        """Lower limits in force, per channel (V)."""
+        return np.array([ch.v_min for ch in self._channels])
+
+    @property
+    def v_max(self) -> FloatArray:
+        """Upper limits in force, per channel (V)."""
+        return np.array([ch.v_max for ch in self._channels])
+
+    @property
+    def last_command(self) -> FloatArray:
+        """The last command of every channel (V)."""
+        return np.array([ch.last_command for ch in self._channels])
+
+    @property
+    def nonfinite_count(self) -> NDArray[np.int64]:
+        """Per channel: desired values that were NaN or infinite (the last command held)."""
+        return np.array([ch.nonfinite_count for ch in self._channels], dtype=np.int64)
+
+    @property
+    def saturated_count(self) -> NDArray[np.int64]:
+        """Per channel: commands clipped to the limits."""
+        return np.array([ch.saturated_count for ch in self._channels], dtype=np.int64)
+
+    def reset(self, *, voltage: float | ArrayLike | None = None) -> None:
+        """Every channel back to its model's initial state, or settled at ``voltage`` (per channel).
+
+        Parameters
+        ----------
+        voltage : float or array_like of C, optional
+        """
+        volts = _per_channel(voltage, len(self), "voltage")
+        for ch, v in zip(self._channels, volts, strict=True):
+            ch.reset(voltage=v)
+
+    def precondition(self, samples: int = 1000) -> FloatArray:
+        """Every channel's preconditioning cycle (see :meth:`Compensator.precondition`).
+
+        Returns
+        -------
+        ndarray, shape (samples', C)
+            Commands to send first; a channel whose cycle is shorter (wider
+            slew limit) holds its last command to the end.
+        """
+        cycles = [ch.precondition(samples) for ch in self._channels]
+        m = max(cy.size for cy in cycles)
+        out = np.empty((m, len(cycles)))
+        for c, cy in enumerate(cycles):
+            out[: cy.size, c] = cy
+            out[cy.size :, c] = cy[-1]
+        return out
+
+    def _desired(self, desired: ArrayLike, ndim: int) -> FloatArray:
+        d = np.ascontiguousarray(desired, dtype=np.float64)
+        c = len(self._channels)
+        if d.ndim != ndim or d.shape[-1] != c:
+            want = f"({c},)" if ndim == 1 else f"(samples, {c})"
+            msg = f"'desired' must have shape {want}, one value per channel. Got {d.shape}."
+            raise ShapeError(msg)
+        return d
+
+    def step(self, desired: ArrayLike, out: FloatArray | None = None) -> FloatArray:
+        """One command per channel.
+
+        Parameters
+        ----------
+        desired : array_like, shape (C,)
+            Desired output per channel; NaN or infinity holds that channel's
+            last command (counted).
+        out : ndarray, shape (C,), optional
+            Written in place (a float64 array): nothing is allocated.
+
+        Returns
+        -------
+        ndarray, shape (C,)
+            Commands (V), each inside its channel's limits.
+        """
+        d = self._desired(desired, 1)
+        if out is None:
+            out = np.empty(d.shape[0])
+        elif out.shape != d.shape or out.dtype != np.float64:
+            msg = f"'out' must be a float64 array of shape {d.shape}. Got {out.dtype} {out.shape}."
+            raise ShapeError(msg)
+        if self.fused:
+            K.bank_step(d, self.tables, self.config, self._state, out)
+        else:
+            for i, ch in enumerate(self._channels):
+                out[i] = ch.step(float(d[i]))
+        return out
+
+    def process(self, desired: ArrayLike) -> FloatArray:
+        """Commands for a block: equal to :meth:`step` on each row.
+
+        Parameters
+        ----------
+        desired : array_like, shape (samples, C)
+
+        Returns
+        -------
+        ndarray, shape (samples, C)
+        """
+        d = self._desired(desired, 2)
+        out = np.empty_like(d)
+        if self.fused:
+            K.bank_process(d, self.tables, self.config, self._state, out)
+        else:
+            for i, ch in enumerate(self._channels):
+                out[:, i] = ch.process(np.ascontiguousarray(d[:, i]))
+        return out
