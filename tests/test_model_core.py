@@ -299,6 +299,7 @@ LAYERS = {
     "report": 8,
     "simulation": 8,
     "workflows": 9,
+    "fleet": 9,
     "demo": 9,
     "cli": 10,
     "__init__": 11,

@@ -27,6 +27,7 @@ def small_batches(monkeypatch: pytest.MonkeyPatch) -> None:
     """pyarrow parses 16 kB at a time: a few hundred rows per batch, many batches per file."""
     monkeypatch.setattr(pio, "CSV_BLOCK_BYTES", 1 << 14)
     monkeypatch.setattr(pio, "BATCH_ROWS", 700)
+    monkeypatch.setattr(wf, "KEEP_ROWS", 1000)  # fits stream every pass, as for a huge file
 
 
 def split_blocks(
@@ -109,6 +110,18 @@ def test_fit_file_streams_to_the_in_memory_fit(
     ref = ph.ActivePI(10).fit(record.voltage, record.charge, record.t)
     assert_same_model(model, ref, record.voltage, record.t)
     assert rows == sorted(rows) and rows[-1] == 3 * record.t.size  # three passes, counted on
+
+
+def test_a_window_that_fits_in_memory_is_read_once(
+    tmp_path: Path, record: ph.simulation.BenchRecord
+) -> None:
+    path = tmp_path / "run.csv"
+    ph.write_table(path, {"time": record.t, "voltage": record.voltage, "charge": record.charge})
+    rows: list[int] = []
+    model = wf.fit_file(path, operators=10, progress=rows.append)
+    assert rows[-1] == record.t.size  # one pass over the file; the others from memory
+    ref = ph.ActivePI(10).fit(record.voltage, record.charge, record.t)
+    assert_same_model(model, ref, record.voltage, record.t)
 
 
 def test_windowed_fit_starts_from_the_history(

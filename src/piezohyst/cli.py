@@ -538,8 +538,9 @@ def fit(
     if growth != "auto":
         terms = () if growth == "none" else tuple(g.strip() for g in growth.split(",") if g.strip())
 
-    # three passes over the file (extremes, normal equations, fit quality), rows counted on
-    with rows_progress(ctx, f"fitting {model_name} to {data.name}, 3 passes") as progress:
+    # up to three passes over the file (extremes, normal equations, fit quality), rows counted
+    # on; a window of up to 2e6 samples is read once and kept
+    with rows_progress(ctx, f"fitting {model_name} to {data.name}") as progress:
         model = _run(
             ctx,
             lambda: fit_file(
@@ -709,6 +710,121 @@ def report(
             ),
         )
     click.echo(f"NRMSE {res.metrics['nrmse_pct']:.4g} %; report in {out / 'report.html'}")
+
+
+@main.command("fit-many")
+@click.argument("records", nargs=-1, required=True, type=EXISTING)
+@click.option(
+    "-o",
+    "--out-dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Folder for one model per unit (<unit>.json) and the summary.",
+)
+@click.option(
+    "--model",
+    "model_name",
+    type=click.Choice(model_names()),
+    default="active-pi",
+    show_default=True,
+    help="Model to identify for every unit.",
+)
+@click.option(
+    "--operators", type=click.IntRange(1, 1000), default=10, show_default=True,
+    help="Play operators.",
+)  # fmt: skip
+@click.option(
+    "--channel",
+    "channels",
+    multiple=True,
+    metavar="IN:OUT",
+    help="An input:output column pair; each pair is a unit of every file (repeatable). "
+    "Default: each file is one unit (--input/--output columns).",
+)
+@click.option(
+    "--summary",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Summary table (.csv or .parquet). Default: OUT_DIR/summary.csv.",
+)
+@click.option(
+    "--scheduler",
+    default=None,
+    metavar="ADDRESS",
+    help="A running dask.distributed scheduler (tcp://host:8786). Default: a local pool of "
+    "processes, one per core.",
+)
+@click.option(
+    "--workers", type=click.IntRange(1, 1024), default=None,
+    help="Processes of the local pool (default: one per core).",
+)  # fmt: skip
+@_data_options
+@FORCE
+@click.pass_obj
+def fit_many_cmd(
+    ctx: Context,
+    records: tuple[Path, ...],
+    out_dir: Path,
+    model_name: str,
+    operators: int,
+    channels: tuple[str, ...],
+    summary: Path | None,
+    scheduler: str | None,
+    workers: int | None,
+    data_spec: DataSpec,
+    force: bool,
+) -> None:
+    """Fit one model per unit of many RECORDS, on Dask; write a summary table.
+
+    Each unit (a file, or an IN:OUT column pair of every file) is fitted
+    alone with the same settings. A unit that cannot be fitted is a row of
+    the summary with its reason and the others go on; the exit status is 1
+    when any unit failed. Units far from the fleet's median (fit error,
+    hysteresis width, leakage) are flagged in the 'outlier' column.
+
+    \b
+    Example:
+      piezohyst fit-many line/*.csv --operators 20 -o models/
+      piezohyst fit-many mirror.parquet --channel v0:q0 --channel v1:q1 -o m/
+      piezohyst fit-many units/*.csv -o models/ --scheduler tcp://10.0.0.5:8786
+    """
+    from .fleet import fit_many
+
+    pairs: list[tuple[str, str]] = []
+    for c in channels:
+        x_col, sep, y_col = c.partition(":")
+        if not sep or not x_col or not y_col:
+            raise click.BadParameter(f"expected IN:OUT, got {c!r}", param_hint="--channel")
+        pairs.append((x_col, y_col))
+    with progress_steps(ctx, len(records) * max(len(pairs), 1)) as step:
+        result = _run(
+            ctx,
+            lambda: fit_many(
+                records,
+                out_dir,
+                model=model_name,
+                operators=operators,
+                data_spec=data_spec,
+                channels=pairs,
+                summary=summary,
+                scheduler=scheduler,
+                workers=workers,
+                force=force,
+                progress=lambda done, total: step(f"fitted {done}/{total} units"),
+            ),
+        )
+    ok = len(result.rows) - len(result.failed)
+    click.echo(
+        f"fitted {ok} of {len(result.rows)} units; {len(result.failed)} failed, "
+        f"{len(result.outliers)} flagged as outliers"
+    )
+    for row in result.failed:
+        click.echo(f"  failed  {row['unit']}: {row['error']}")
+    for row in result.outliers:
+        click.echo(f"  outlier {row['unit']}: {row['outlier']} (NRMSE {row['nrmse'] * 100:.3f} %)")
+    ctx.info(f"saved {ok} models in {out_dir} and the summary {result.summary}")
+    if result.failed:
+        sys.exit(1)
 
 
 @main.command("export-c")

@@ -87,18 +87,27 @@ def guard_outputs(
     ------
     OverwriteError
     """
-    ins = [Path(p) for p in inputs]
+    # inputs by resolved path and by file identity (hard links), each looked up once
+    by_path: dict[Path, Path] = {}
+    by_inode: dict[tuple[int, int], Path] = {}
+    for src in map(Path, inputs):
+        by_path.setdefault(src.resolve(), src)
+        try:
+            st = src.stat()
+        except OSError:
+            continue
+        by_inode.setdefault((st.st_dev, st.st_ino), src)
     for out in map(Path, outputs):
-        for src in ins:
-            same = out.resolve() == src.resolve()
-            if not same and out.exists() and src.exists():
-                same = os.path.samefile(out, src)
-            if same:
-                msg = (
-                    f"{out}: that is an input of this command ({src}); piezohyst never writes "
-                    "over its input: choose another output name"
-                )
-                raise OverwriteError(msg, replaceable=False)
+        same = by_path.get(out.resolve())
+        if same is None and out.exists():
+            st = out.stat()
+            same = by_inode.get((st.st_dev, st.st_ino))
+        if same is not None:
+            msg = (
+                f"{out}: that is an input of this command ({same}); piezohyst never writes "
+                "over its input: choose another output name"
+            )
+            raise OverwriteError(msg, replaceable=False)
         if out.exists() and not force and not is_piezohyst_output(out):
             kind = "folder" if out.is_dir() else "file"
             msg = f"{out}: an existing {kind} that piezohyst did not write; not replacing it"
@@ -245,12 +254,29 @@ def fit_file(
     return fitted
 
 
+#: A window of at most this many samples is read from the file once and kept in memory
+#: (24 MB per million samples) for the fit's later passes; a longer one streams every pass.
+KEEP_ROWS = 2_000_000
+
+
 def _window_blocks(stream: RecordingStream, passes: _Passes) -> Blocks:
-    """The window of a record as a block source (each call a new pass over the file)."""
+    """The window of a record as a block source (each call a pass over it).
+
+    The first pass reads the file; a window of up to :data:`KEEP_ROWS` samples
+    is kept, so the later passes (normal equations, fit quality) do not parse
+    the file again. Longer windows are read from the file on every pass.
+    """
+    kept: list[tuple[FloatArray, FloatArray, FloatArray | None]] = []
+    complete = [False]
 
     def window() -> Iterator[tuple[FloatArray, FloatArray, FloatArray | None]]:
+        if complete[0]:
+            yield from kept
+            return
         first = last = math.nan
         found = False
+        keeping = True
+        rows = 0
         for b in stream.blocks(passes.tick()):
             assert b.y is not None
             first = float(b.t[0]) if b.start == 0 else first
@@ -258,9 +284,17 @@ def _window_blocks(stream: RecordingStream, passes: _Passes) -> Blocks:
             i0, i1 = np.searchsorted(b.t, [stream.t_start, stream.t_stop], "left")
             if i1 > i0:
                 found = True
-                yield b.x[i0:i1], b.y[i0:i1], b.t[i0:i1]
+                block = (b.x[i0:i1], b.y[i0:i1], b.t[i0:i1])
+                rows += int(i1 - i0)
+                keeping = keeping and rows <= KEEP_ROWS
+                if keeping:
+                    kept.append(block)
+                else:
+                    kept.clear()
+                yield block
         if not found:
             raise stream.empty_window(first, last)
+        complete[0] = keeping
 
     return window
 
