@@ -7,9 +7,19 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 import piezohyst as ph
-from piezohyst import compensator, export, identification, io, models, persistence, terms
+from piezohyst import (
+    bank,
+    compensator,
+    export,
+    fleet,
+    identification,
+    io,
+    models,
+    persistence,
+    terms,
+)
 
-MODULES = [ph, models, terms, identification, compensator, export, persistence, io]
+MODULES = [ph, models, terms, identification, compensator, export, persistence, io, bank, fleet]
 
 
 def _documented_objects() -> Iterator[tuple[str, Any]]:

@@ -42,6 +42,60 @@ def pi_forward(x, r, w, z, y):  # type: ignore[no-untyped-def]
         y[k] = acc
 
 
+# Fast prediction: the play operators plus at most one running integral, from the model's
+# initial state. Inputs are checked here, not in Python (a bad one returns its index and
+# the caller takes the checked path, which names the problem). No fastmath on the sums
+# added here: they round exactly as the general path (output + column * coefficient).
+FAST_NONE = 0  # no growth term
+FAST_INTEGRAL = 1  # + c * sum x dt
+FAST_TIME = 2  # + c * (t - t0)
+
+
+@njit(cache=True)
+def fast_predict(x, t, timed, r, w, z0, offset, kind, coef, out):  # type: ignore[no-untyped-def]
+    """``out`` = the model's output for ``x`` (and ``t``) from ``z0``; -1, or the first bad index.
+
+    Bad: a non-finite input, or (``timed``) a time not finite or not after the previous one.
+    """
+    m = x.shape[0]
+    for k in range(m):
+        if not math.isfinite(x[k]):
+            return k
+    if timed and kind == FAST_NONE:  # with a term, checked below while the intervals are formed
+        for k in range(m):
+            if not math.isfinite(t[k]) or (k > 0 and not t[k] > t[k - 1]):
+                return k
+    z = z0.copy()
+    pi_forward(x, r, w, z, out)
+    if offset != 0.0:
+        for k in range(m):
+            out[k] += offset
+    if kind != FAST_NONE:  # in cache-sized pieces: no large temporaries
+        size = min(m, 2048)
+        dt = np.empty(size)
+        col = np.empty(size)
+        ones = np.ones(size)
+        acc = 0.0
+        for s in range(0, m, size):
+            e = min(s + size, m)
+            first = s
+            if s == 0:  # the record's first interval is 0 (eq. 13 starts at rest)
+                if not math.isfinite(t[0]):
+                    return 0
+                dt[0] = 0.0
+                first = 1
+            for k in range(first, e):
+                d = t[k] - t[k - 1]
+                if not d > 0.0 or not math.isfinite(t[k]):
+                    return k
+                dt[k - s] = d
+            f = x[s:e] if kind == FAST_INTEGRAL else ones[: e - s]
+            acc = running_integral(f, dt[: e - s], acc, col[: e - s])
+            for k in range(s, e):
+                out[k] += col[k - s] * coef
+    return -1
+
+
 @njit(cache=True, fastmath=FASTMATH)
 def play_states(x, r, z, out):  # type: ignore[no-untyped-def]
     """Every operator's output: ``out[k, i] = z_i[k]``; ``z`` updated in place.
@@ -768,6 +822,7 @@ def warm_up() -> None:
     r = np.zeros(1)
     z = np.zeros(1)
     pi_forward(x, r, np.ones(1), z, np.empty(2))
+    fast_predict(x, x, True, r, np.ones(1), z, 0.0, FAST_INTEGRAL, 1.0, np.empty(2))
     play_states(x, r, z, np.empty((2, 1)))
     running_integral(x, np.zeros(2), 0.0, np.empty(2))
     lag_filter(x, np.zeros(2), np.ones(1), np.zeros(1), np.empty((2, 1)))

@@ -297,7 +297,12 @@ class ModelBank:
         return [i for i, m in enumerate(self._check_fitted()) if m is not None]
 
     def complete_models(self) -> list[HysteresisModel]:
-        """Every channel's model; raises naming the channels that failed to fit."""
+        """Every channel's model; raises naming the channels that failed to fit.
+
+        Returns
+        -------
+        list of HysteresisModel
+        """
         models = self._check_fitted()
         if self.failed_:
             bad = sorted(self.failed_)

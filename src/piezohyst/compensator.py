@@ -347,6 +347,11 @@ class Compensator:
 
         The arrays must hold this compensator's current values (the bank
         stacks them first); from then on both see every update.
+
+        Parameters
+        ----------
+        tables, config, state : ndarray
+            Views of the container's rows, laid out as this compensator's own.
         """
         if not (
             np.array_equal(tables, self.tables)
@@ -811,7 +816,16 @@ class BankCompensator:
         return len(self._channels)
 
     def channel(self, index: int) -> Compensator:
-        """Channel ``index``'s compensator: live, sharing the bank's state."""
+        """Channel ``index``'s compensator: live, sharing the bank's state.
+
+        Parameters
+        ----------
+        index : int
+
+        Returns
+        -------
+        Compensator
+        """
         return self._channels[index]
 
     @property
@@ -852,6 +866,11 @@ class BankCompensator:
 
     def precondition(self, samples: int = 1000) -> FloatArray:
         """Every channel's preconditioning cycle (see :meth:`Compensator.precondition`).
+
+        Parameters
+        ----------
+        samples : int, default 1000
+            Samples in each channel's cycle (more where a slew limit needs them).
 
         Returns
         -------

@@ -44,7 +44,17 @@ OUTLIER_MIN_UNITS = 5
 
 @dataclass(frozen=True)
 class Unit:
-    """One actuator to calibrate: a recording and the columns that are its input and output."""
+    """One actuator to calibrate: a recording and the columns that are its input and output.
+
+    Attributes
+    ----------
+    name : str
+        Names its model file and its summary row.
+    path : str
+        The recording.
+    spec : DataSpec
+        Its columns, units, window and rate.
+    """
 
     name: str
     path: str

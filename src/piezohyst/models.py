@@ -45,6 +45,7 @@ from typing import Any, ClassVar, Self
 import numpy as np
 from numpy.typing import ArrayLike
 
+from . import _kernels as K
 from ._validation import FloatArray, as_signal, as_time, check_float, check_int, same_length
 from .cores import PlayCore
 from .dynamics import KINDS as DYNAMICS_KINDS
@@ -1181,6 +1182,36 @@ class HysteresisModel:
                 out = mode.apply(out, ms)[0]
         return Propagation(out, ModelState(z, st.terms, t_last, st.input, st.output))
 
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name.endswith("_"):  # a fitted attribute changed: the fast path is rebuilt
+            self.__dict__.pop("_fast", None)
+        object.__setattr__(self, name, value)
+
+    def _fast_plan(self) -> tuple[Any, ...] | None:
+        """What :meth:`predict` runs in one kernel call, or None (the general path).
+
+        Eligible: play operators plus at most one ``integral`` or ``time`` term,
+        no input dynamics, no output mode (the classical and active models).
+        """
+        plan: tuple[Any, ...] | None
+        if self.input_dynamics_.active or self.output_dynamics_.active or len(self.terms_) > 1:
+            plan = None
+        elif not self.terms_:
+            plan = (K.FAST_NONE, 0.0)
+        elif self.terms_[0].kind in ("integral", "time") and type(self.terms_[0]) in (
+            Integral,
+            TimeTerm,
+        ):
+            kind = K.FAST_INTEGRAL if self.terms_[0].kind == "integral" else K.FAST_TIME
+            plan = (kind, float(self.coefs_[0][0]))
+        else:
+            plan = None
+        if plan is not None:
+            op = self.operator_
+            plan = (op.thresholds, op.weights, op.initial_state, float(op.offset), *plan)
+        self.__dict__["_fast"] = plan
+        return plan
+
     def predict(
         self, x: ArrayLike, t: ArrayLike | None = None, state: ModelState | ArrayLike | None = None
     ) -> FloatArray:
@@ -1199,7 +1230,28 @@ class HysteresisModel:
         -------
         ndarray, shape (N,)
             Output (output units).
+
+        Notes
+        -----
+        The classical and active models, from their initial state, run in one
+        compiled call that also checks the input (a few microseconds for
+        short blocks); the result is :meth:`propagate`'s, bit for bit.
         """
+        if state is None and type(x) is np.ndarray and x.dtype == np.float64 and x.ndim == 1:
+            try:
+                plan = self.__dict__["_fast"]
+            except KeyError:
+                plan = self._fast_plan() if self.is_fitted else None
+            if plan is not None and x.size:
+                r, w, z0, offset, kind, coef = plan
+                timed = t is not None
+                if (not timed and kind == K.FAST_NONE) or (
+                    type(t) is np.ndarray and t.dtype == np.float64 and t.shape == x.shape
+                ):
+                    out = np.empty(x.size)
+                    tt = t if timed else x
+                    if K.fast_predict(x, tt, timed, r, w, z0, offset, kind, coef, out) < 0:
+                        return out
         return self.propagate(x, t, state).output
 
     def growth(
