@@ -11,6 +11,8 @@ from .errors import NonFiniteError, ParameterError, ShapeError, TimeAxisError
 
 FloatArray = NDArray[np.float64]
 
+PIECE = 1 << 16  # samples checked at a time (temporaries of 64 kB, whatever the record)
+
 
 def as_signal(values: ArrayLike, name: str, *, allow_empty: bool = False) -> FloatArray:
     """Return ``values`` as a finite, contiguous, 1-D float64 array."""
@@ -27,14 +29,16 @@ def as_signal(values: ArrayLike, name: str, *, allow_empty: bool = False) -> Flo
     if arr.size == 0 and not allow_empty:
         msg = f"'{name}' must not be empty. Got 0 samples."
         raise ShapeError(msg)
-    bad = ~np.isfinite(arr)
-    if bad.any():
-        first = int(np.argmax(bad))
-        msg = (
-            f"'{name}' must be finite. Got {arr[first]} at index {first} "
-            f"({int(bad.sum())} non-finite values in all)."
-        )
-        raise NonFiniteError(msg)
+    for a in range(0, arr.size, PIECE):  # in pieces: no temporary the size of the record
+        ok = np.isfinite(arr[a : a + PIECE])
+        if not ok.all():
+            first = a + int(np.argmin(ok))
+            count = int(np.count_nonzero(~np.isfinite(arr)))
+            msg = (
+                f"'{name}' must be finite. Got {arr[first]} at index {first} "
+                f"({count} non-finite values in all)."
+            )
+            raise NonFiniteError(msg)
     return arr
 
 
@@ -59,11 +63,11 @@ def as_time(t: ArrayLike | None, n: int, *, required: bool, owner: str) -> Float
     if arr.size != n:
         msg = f"'t' must have one time stamp per sample ({n}). Got {arr.size}."
         raise ShapeError(msg)
-    if arr.size > 1:
-        steps = np.diff(arr)
-        bad = steps <= 0
+    for a in range(0, arr.size - 1, PIECE):
+        seg = arr[a : a + PIECE + 1]
+        bad = seg[1:] <= seg[:-1]
         if bad.any():
-            i = int(np.argmax(bad)) + 1
+            i = a + int(np.argmax(bad)) + 1
             msg = (
                 "'t' must be strictly increasing. Got "
                 f"t[{i - 1}]={float(arr[i - 1])!r} followed by t[{i}]={float(arr[i])!r}."

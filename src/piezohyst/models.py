@@ -332,6 +332,9 @@ def _terms(value: object, name: str, owner: str) -> tuple[Term, ...]:
     return terms
 
 
+SCORE_PIECE = 1 << 16  # samples per piece when scoring a fit (2 MB of temporaries)
+
+
 class HysteresisModel:
     """Base of every model: the fit, run, inverse and file contract (see the module doc).
 
@@ -834,10 +837,15 @@ class HysteresisModel:
         """Fit quality over the record (one pass, state carried) and the leakage check."""
         sse = 0.0
         state: ModelState | None = None
-        for x, y, t in blocks():
-            run = self.propagate(x, t if self.rate_dependent_ else None, state)
-            state = run.state
-            sse += float(np.sum((run.output - y) ** 2))
+        rate = self.rate_dependent_
+        for x_blk, y_blk, t_blk in blocks():
+            for a in range(0, x_blk.size, SCORE_PIECE):  # memory O(piece), not O(record)
+                x, y = x_blk[a : a + SCORE_PIECE], y_blk[a : a + SCORE_PIECE]
+                t = t_blk[a : a + SCORE_PIECE] if rate and t_blk is not None else None
+                run = self.propagate(x, t, state)
+                state = run.state
+                r = run.output - y
+                sse += float(r @ r)
         self.rmse_ = math.sqrt(sse / sm.n)
         self.nrmse_ = self.rmse_ / max(sm.y_max - sm.y_min, 1e-300)
         self._check_leakage(sm)
