@@ -1,4 +1,4 @@
-"""predict's one-call path equals the general path bit for bit, and every input it cannot
+"""predict's one-call path equals the general path to rounding, and every input it cannot
 vouch for goes the general way (same results, same errors)."""
 
 from __future__ import annotations
@@ -38,7 +38,9 @@ def test_one_call_equals_the_general_path(
     t = 5.0 + step * np.arange(x.size)
     for name, model in models.items():
         tt = None if name == "classical" else t
-        np.testing.assert_array_equal(model.predict(x, t=tt), _general(model, x, tt))
+        general = _general(model, x, tt)
+        scale = float(np.max(np.abs(general)))
+        np.testing.assert_allclose(model.predict(x, t=tt), general, rtol=0, atol=1e-13 * scale)
         assert model.__dict__.get("_fast") is not None, name  # the one-call path ran
     # a rate-independent model given times checks them too
     classical = models["classical"]

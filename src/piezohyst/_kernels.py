@@ -51,48 +51,43 @@ FAST_INTEGRAL = 1  # + c * sum x dt
 FAST_TIME = 2  # + c * (t - t0)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FASTMATH)
 def fast_predict(x, t, timed, r, w, z0, offset, kind, coef, out):  # type: ignore[no-untyped-def]
     """``out`` = the model's output for ``x`` (and ``t``) from ``z0``; -1, or the first bad index.
 
-    Bad: a non-finite input, or (``timed``) a time not finite or not after the previous one.
+    Bad: a non-finite input, or (``timed``) a time not finite or not after the
+    previous one. One pass computes the operators, the offset and the running
+    integral per sample; the result equals the general path's to rounding.
     """
     m = x.shape[0]
     for k in range(m):
         if not math.isfinite(x[k]):
             return k
-    if timed and kind == FAST_NONE:  # with a term, checked below while the intervals are formed
+    if timed:
         for k in range(m):
             if not math.isfinite(t[k]) or (k > 0 and not t[k] > t[k - 1]):
                 return k
     z = z0.copy()
-    pi_forward(x, r, w, z, out)
-    if offset != 0.0:
-        for k in range(m):
-            out[k] += offset
-    if kind != FAST_NONE:  # in cache-sized pieces: no large temporaries
-        size = min(m, 2048)
-        dt = np.empty(size)
-        col = np.empty(size)
-        ones = np.ones(size)
+    if kind == FAST_NONE:
+        pi_forward(x, r, w, z, out)
+        if offset != 0.0:
+            for k in range(m):
+                out[k] += offset
+        return -1
+    n = r.shape[0]
+    integral = 0.0
+    t_prev = t[0]
+    for k in range(m):
+        xk = x[k]
         acc = 0.0
-        for s in range(0, m, size):
-            e = min(s + size, m)
-            first = s
-            if s == 0:  # the record's first interval is 0 (eq. 13 starts at rest)
-                if not math.isfinite(t[0]):
-                    return 0
-                dt[0] = 0.0
-                first = 1
-            for k in range(first, e):
-                d = t[k] - t[k - 1]
-                if not d > 0.0 or not math.isfinite(t[k]):
-                    return k
-                dt[k - s] = d
-            f = x[s:e] if kind == FAST_INTEGRAL else ones[: e - s]
-            acc = running_integral(f, dt[: e - s], acc, col[: e - s])
-            for k in range(s, e):
-                out[k] += col[k - s] * coef
+        for i in range(n):
+            zi = min(max(z[i], xk - r[i]), xk + r[i])
+            z[i] = zi
+            acc += w[i] * zi
+        tk = t[k]
+        integral += (xk if kind == FAST_INTEGRAL else 1.0) * (tk - t_prev)
+        t_prev = tk
+        out[k] = (acc + offset) + integral * coef
     return -1
 
 
