@@ -150,10 +150,20 @@ def fit_unit(unit: Unit, out_dir: str, settings: dict[str, Any]) -> dict[str, An
 
 
 def _one_thread() -> None:
-    """Parse files on one thread in this worker process (the pool has one process per core)."""
+    """Parse files and run BLAS on one thread in this worker (the pool has a process per core).
+
+    Two processes each waking a thread per core would spin against each other.
+    """
     import pyarrow as pa
+    from threadpoolctl import threadpool_limits
 
     pa.set_cpu_count(1)
+    global _LIMITS
+    if _LIMITS is None:
+        _LIMITS = threadpool_limits(1)
+
+
+_LIMITS: object = None  # the worker's thread limits, set once per process
 
 
 def _start_method() -> str:

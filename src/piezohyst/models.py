@@ -845,7 +845,7 @@ class HysteresisModel:
                 run = self.propagate(x, t, state)
                 state = run.state
                 r = run.output - y
-                sse += float(r @ r)
+                sse += float(np.sum(r * r))  # not BLAS: no thread pool woken for a sum
         self.rmse_ = math.sqrt(sse / sm.n)
         self.nrmse_ = self.rmse_ / max(sm.y_max - sm.y_min, 1e-300)
         self._check_leakage(sm)
