@@ -53,7 +53,10 @@ def test_filter_matches_a_naive_reference_in_any_chunks(
     dt[0] = 0.0
     dyn = InputDynamics("delay+first-order", tau, delay, DT)
     whole, _ = dyn.apply(x, dt)
-    np.testing.assert_allclose(whole, naive_filter(dyn, x, dt), rtol=0, atol=1e-12)
+    # the kernel forms the lag as e*u + (1-e)*v, the reference as u + (1-e)*(v-u): rounding apart
+    np.testing.assert_allclose(
+        whole, naive_filter(dyn, x, dt), rtol=0, atol=1e-13 * np.abs(x).max()
+    )
     state = dyn.rest_state(x[0])
     edges = sorted({0, *[c % x.size for c in cuts], x.size})
     parts = [dyn.apply(x[a:b], dt[a:b], state)[0] for a, b in itertools.pairwise(edges)]

@@ -140,18 +140,26 @@ def running_integral(x, dt, start, out):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)  # no fastmath: its ring and block loops must round alike (chunks == one call)
-def input_filter(x, dt, d_int, d_frac, tau, state, out):  # type: ignore[no-untyped-def]
+def input_filter(x, dt, d_int, d_frac, tau, nominal, state, out):  # type: ignore[no-untyped-def]
     """Delay (``d_int + d_frac`` samples, linear interpolation) then a first-order lag ``tau``.
 
     ``state`` = [unused, lag, head, ring buffer of the last ``d_int + 2``
     inputs]; the lag is exact for an input held over each sample
-    (``u += (1 - exp(-dt/tau)) (v - u)``); ``tau = 0`` means no lag.
+    (``u = e u + (1 - e) v``, ``e = exp(-dt/tau)``); ``tau = 0`` means no lag.
+    An interval within 1 ppm of ``nominal`` (the record's sample interval; 0:
+    none) is taken as ``nominal``: time stamps' rounding makes a uniform
+    record's intervals differ in their last digits, and one ``exp`` serves
+    the record. A function of each interval alone, so chunks equal one call.
     """
     size = state.shape[0] - 3
     head = int(state[2])
     lag = state[1]
     dt_seen = -1.0
     gain = 0.0
+    keep = 1.0
+    keep0 = math.exp(-nominal / tau) if tau > 0.0 and nominal > 0.0 else 1.0
+    gain0 = 1.0 - keep0
+    near = 1e-6 * nominal
     n = x.shape[0]
     first = min(n, d_int + 1)  # samples whose delayed inputs reach back into the ring
     for k in range(first):
@@ -161,10 +169,14 @@ def input_filter(x, dt, d_int, d_frac, tau, state, out):  # type: ignore[no-unty
         b = state[3 + (head - d_int - 1) % size]
         v = a + d_frac * (b - a)
         if tau > 0.0:
-            if dt[k] != dt_seen:
-                dt_seen = dt[k]
-                gain = 1.0 - math.exp(-dt_seen / tau)
-            lag += gain * (v - lag)
+            if abs(dt[k] - nominal) <= near:
+                lag = keep0 * lag + gain0 * v
+            else:
+                if dt[k] != dt_seen:
+                    dt_seen = dt[k]
+                    keep = math.exp(-dt_seen / tau)
+                    gain = 1.0 - keep
+                lag = keep * lag + gain * v
         else:
             lag = v
         out[k] = lag
@@ -172,10 +184,14 @@ def input_filter(x, dt, d_int, d_frac, tau, state, out):  # type: ignore[no-unty
         for k in range(first, n):
             a = x[k - d_int]
             v = a + d_frac * (x[k - d_int - 1] - a)
-            if dt[k] != dt_seen:  # uniform sampling: one exp per record, not per sample
-                dt_seen = dt[k]
-                gain = 1.0 - math.exp(-dt_seen / tau)
-            lag += gain * (v - lag)
+            if abs(dt[k] - nominal) <= near:  # the chain through ``lag``: one multiply, one add
+                lag = keep0 * lag + gain0 * v
+            else:
+                if dt[k] != dt_seen:
+                    dt_seen = dt[k]
+                    keep = math.exp(-dt_seen / tau)
+                    gain = 1.0 - keep
+                lag = keep * lag + gain * v
             out[k] = lag
     else:
         for k in range(first, n):

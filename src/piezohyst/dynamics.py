@@ -134,7 +134,9 @@ class InputDynamics:
         if st.size != 3 + whole + 2:
             msg = f"the input dynamics state must hold {3 + whole + 2} values. Got {st.size}."
             raise ParameterError(msg)
-        _kernels.input_filter(xs, ds, whole, frac, float(self.tau), st, out)
+        _kernels.input_filter(
+            xs, ds, whole, frac, float(self.tau), float(self.sample_interval), st, out
+        )
         return out, st
 
     def to_dict(self) -> dict[str, Any]:

@@ -583,6 +583,7 @@ class HysteresisModel:
         dt = block_dt(t, 0, t.size, None)
         assert dt is not None
         x_range = np.array([float(x.min()), float(x.max())])
+        x_lo, x_hi = float(x_range[0]), float(x_range[1])
         terms, _ = self._terms_to_fit(x_range, params)
         rate = any(term.rate_dependent for term in terms)
         core = PlayCore(default_thresholds(x_range, min(int(params["n_operators"]), 8)))
@@ -595,7 +596,8 @@ class HysteresisModel:
             if key in cache:
                 return cache[key]
             u, _ = dyn.apply(x, dt)
-            sm = Summary(u.size, float(u[0]), float(u.min()), float(u.max()), *y_stats)
+            # a delay or a lag keeps the voltage inside the command's range: its extremes serve
+            sm = Summary(u.size, float(u[0]), x_lo, x_hi, *y_stats)
             z0 = np.full(core.n_operators, float(u[0]))
             sol = identify(
                 core,
@@ -624,7 +626,7 @@ class HysteresisModel:
     ) -> tuple[InputDynamics, OutputDynamics | None]:
         """The delay, lag (and mode, with ``output_dynamics``) that fit best.
 
-        1-D kinds: a grid, then Brent's method around its best point; the 2-D
+        1-D kinds: a geometric grid, then Brent's method around its best point; the 2-D
         kind starts a short Nelder-Mead from the lag-only result. ``"auto"``
         compares on the held-out last 30 %: none, the lag alone and, when the
         2-D result holds a delay, a pure delay searched near its total lag and
@@ -653,18 +655,29 @@ class HysteresisModel:
             def build(v: float) -> InputDynamics:
                 return make(name, v, 0.0) if name == "delay" else make(name, 0.0, v)
 
-            grid = np.linspace(0.0, limit, 6)
+            # lags are scale parameters: a geometric grid from a sample to the limit (and 0)
+            grid = np.concatenate([[0.0], np.geomspace(min(dt0, 0.5 * limit), limit, 5)])
             values = [score(build(float(g)), mode, False) for g in grid]
             k = int(np.argmin(values))
-            lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
-            res = minimize_scalar(
-                lambda v: score(build(float(v)), mode, False),
-                bounds=(lo, hi),
-                method="bounded",
-                options={"xatol": 0.1 * dt0},
-            )
+            if 0 < k < grid.size - 1:  # a bracket with its three values known (cached)
+                res = minimize_scalar(
+                    lambda v: score(build(max(float(v), 0.0)), mode, False),
+                    bracket=(grid[k - 1], grid[k], grid[k + 1]),
+                    method="brent",
+                    options={"xtol": 0.02, "maxiter": 30},  # 2 % of the lag
+                )
+                found = max(float(res.x), 0.0)
+            else:  # at an end of the grid: a bounded search next to it
+                lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
+                res = minimize_scalar(
+                    lambda v: score(build(float(v)), mode, False),
+                    bounds=(lo, hi),
+                    method="bounded",
+                    options={"xatol": max(0.2 * dt0, 0.01 * float(hi - lo))},
+                )
+                found = float(res.x)
             if res.fun < values[k]:
-                return build(float(res.x)), float(res.fun)
+                return build(found), float(res.fun)
             return build(float(grid[k])), values[k]
 
         def search_2d(lagged: InputDynamics, mode: OutputDynamics | None) -> InputDynamics:
@@ -688,6 +701,19 @@ class HysteresisModel:
             best = make("delay+first-order", float(res.x[0]), float(res.x[1]))
             as_2d = make("delay+first-order", 0.0, lagged.tau)  # the lag-only point itself
             return as_2d if score(as_2d, mode, False) < score(best, mode, False) else best
+
+        def delay_helps(lagged: InputDynamics, mode: OutputDynamics | None) -> bool:
+            """Does moving part of the lag into a delay (same total) fit better?
+
+            A delay and a lag trade one for one, so the probes lie on the line
+            of constant total lag: half of it as a delay, and all of it.
+            """
+            if lagged.tau < 0.5 * dt0:
+                return False
+            here = score(lagged, mode, False)
+            half = make("delay+first-order", 0.5 * lagged.tau, 0.5 * lagged.tau)
+            full = make("delay+first-order", lagged.tau, 0.0)
+            return min(score(half, mode, False), score(full, mode, False)) < here
 
         mode = output
         if output is not None:  # joint search of the mode and a 1-D input dynamics
@@ -730,7 +756,10 @@ class HysteresisModel:
         if kind in ("delay", "first-order"):
             return search_1d(kind, mode)[0], mode
         lagged = search_1d("first-order", mode)[0]
-        both = search_2d(lagged, mode)
+        if kind == "auto" and not delay_helps(lagged, mode):
+            both = lagged  # the 2-D search would only confirm the lag alone
+        else:
+            both = search_2d(lagged, mode)
         if kind == "delay+first-order":
             return both, mode
         # auto: the kinds the 2-D result leaves plausible, on the held-out part; complexity
