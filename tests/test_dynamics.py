@@ -289,10 +289,51 @@ def test_compensation_through_the_mode(mode_models: tuple[ph.ClassicalPI, ph.Cla
         moved = run.true_displacement[pre.size :]
         widths.append(hysteresis_width(desired[keep], moved[keep]))
     assert widths[0] <= 0.02 and widths[0] < 0.2 * widths[1]  # issue 14: <= 2 % at 40 Hz
-    with pytest.raises(ph.ParameterError, match="output mode"):
-        write_c(ph.Compensator(full, v_min=lo, v_max=hi, sample_rate=1000.0), Path("x.c"))
     with pytest.raises(ph.ParameterError, match="input or output dynamics"):
         ph.SelfSensingController(full, v_min=lo, v_max=hi, sample_rate=1000.0)
+
+
+@pytest.mark.skipif(CC is None, reason="no C compiler")
+@pytest.mark.parametrize("precision", ["double", "float"])
+def test_exported_c_inverts_the_mode_like_python(
+    mode_models: tuple[ph.ClassicalPI, ph.ClassicalPI], tmp_path: Path, precision: str
+) -> None:
+    full, _ = mode_models  # a lag and a mode
+    lo, hi = full.input_range_
+    comp = ph.Compensator(full, v_min=lo, v_max=hi, sample_rate=1000.0, slew_rate=5e4)
+    c_path, h_path = write_c(comp, tmp_path / "modec.c", precision=precision)  # type: ignore[arg-type]
+    assert "desired value of the next sample" in h_path.read_text()
+    (tmp_path / "main.c").write_text(
+        '#include <stdio.h>\n#include <stdlib.h>\n#include "modec.h"\n'
+        "int main(void){char l[128];modec_t s;modec_init(&s);"
+        "while(fgets(l,sizeof l,stdin)){char*e;double d=strtod(l,&e);double n=strtod(e,NULL);"
+        'printf("%.17g\\n",(double)modec_step(&s,(modec_real)d,(modec_real)n));}'
+        'printf("%lu %lu\\n",s.nonfinite,s.saturated);return 0;}\n'
+    )
+    exe = tmp_path / "c"
+    subprocess.run(
+        [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", str(c_path),
+         str(tmp_path / "main.c"), "-o", str(exe)],
+        check=True, capture_output=True, text=True,
+    )  # fmt: skip
+    t = np.arange(1500) * DT
+    top, bottom = (float(q) for q in full.operator_.predict(np.array([140.0, 0.0])))
+    desired = bottom + (top - bottom) * (0.3 + 0.4 * np.sin(2 * np.pi * 40 * t) ** 2)
+    desired[::97] = np.nan  # gaps, and no preview at some samples
+    nxt = np.append(desired[1:], np.nan)
+    nxt[5::50] = np.nan
+    lines = "".join(f"{float(d)!r} {float(n)!r}\n" for d, n in zip(desired, nxt, strict=True))
+    out = subprocess.run(
+        [str(exe)], input=lines, check=True, capture_output=True, text=True
+    ).stdout.split("\n")
+    c_cmds = np.array([float(v) for v in out[: desired.size]])
+    py = np.array([comp.step(float(d), [float(n)]) for d, n in zip(desired, nxt, strict=True)])
+    tol = 1e-9 if precision == "double" else 2e-3 * (hi - lo)
+    np.testing.assert_allclose(c_cmds, py, rtol=0, atol=tol)
+    assert tuple(int(v) for v in out[desired.size].split()) == (
+        comp.nonfinite_count,
+        comp.saturated_count,
+    )
 
 
 @pytest.mark.parametrize(
@@ -315,3 +356,23 @@ def test_auto_tells_a_delay_from_a_lag(truth: InputDynamics, kind: str) -> None:
     assert found.kind == kind
     assert found.delay == pytest.approx(truth.delay, abs=0.2e-3)
     assert found.tau == pytest.approx(truth.tau, abs=0.2e-3)
+
+
+def test_a_mode_behind_a_delay_steps_like_the_block(
+    mode_models: tuple[ph.ClassicalPI, ph.ClassicalPI],
+) -> None:
+    full, _ = mode_models
+    model = ph.ClassicalPI.from_dict(full.to_dict())
+    model.input_dynamics_ = InputDynamics("delay+first-order", 3e-3, 2.0e-3, DT)
+    lo, hi = model.input_range_
+    t = np.arange(600) * DT
+    top, bottom = (float(q) for q in model.operator_.predict(np.array([140.0, 0.0])))
+    desired = bottom + (top - bottom) * (0.3 + 0.4 * np.sin(2 * np.pi * 30 * t) ** 2)
+    block = ph.Compensator(model, v_min=lo, v_max=hi, sample_rate=1000.0)
+    assert block.delay_samples == 2
+    whole = block.process(desired)
+    stepper = ph.Compensator(model, v_min=lo, v_max=hi, sample_rate=1000.0)
+    stepped = [stepper.step(desired[k], desired[k + 1 : k + 4]) for k in range(590)]
+    np.testing.assert_allclose(stepped, whole[:590], rtol=0, atol=1e-9)
+    with pytest.raises(ph.ParameterError, match="integer input delay"):
+        write_c(stepper, Path("never.c"))

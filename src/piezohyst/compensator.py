@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -255,8 +255,11 @@ class Compensator:
         self.dyn = np.zeros(2)
         self.dstate = np.zeros(2)
         self._last_desired = math.nan
-        #: A mechanical mode after the hysteresis, inverted from the desired trajectory
+        #: A mechanical mode after the hysteresis, inverted from the desired trajectory (its
+        #: differences taken at the loop's rate when given, else the training record's)
         self.mode = spec.output_dynamics
+        if self.mode.active and sample_rate is not None:
+            self.mode = replace(self.mode, sample_interval=1.0 / float(sample_rate))
         self._mode_history = np.full(2, np.nan)
         self._plain = spec.analytic and not dyn.active and not self.mode.active
         if dyn.active:
@@ -336,6 +339,11 @@ class Compensator:
             float(self._state[K.ST_LAST]),
             self.dstate.copy() if self.dynamic else np.zeros(0),
         )
+
+    @property
+    def mode_history(self) -> FloatArray:
+        """The two desired values before the next one (raw; NaN: none yet), for the mode."""
+        return self._mode_history.copy()
 
     @property
     def plain(self) -> bool:
@@ -557,6 +565,8 @@ class Compensator:
         """
         if self._plain:  # the common case first: one kernel call
             return float(K.compensator_step(float(desired), self.tables, self.config, self._state))
+        if self.mode.active and self.dynamic and self.delay_samples:
+            return self._step_mode_delayed(float(desired), preview)
         if self.mode.active:
             desired = float(self._through_mode(np.array([float(desired)]), preview)[0])
         if self.dynamic:
@@ -579,6 +589,24 @@ class Compensator:
             K.numeric_step(
                 float(desired), self.tables, self.static, self.lags, self.config, self._state
             )
+        )
+
+    def _step_mode_delayed(self, d: float, preview: ArrayLike | None) -> float:
+        """A mode and an integer delay: the command now acts ``m`` samples later, so the
+        mode is inverted at the desired value ``m`` samples ahead, from the preview."""
+        m = self.delay_samples
+        ahead = np.asarray(preview if preview is not None else [], dtype=np.float64).reshape(-1)
+        seq = [float(v) for v in self._mode_history] + [d] + [float(v) for v in ahead]
+        while len(seq) < m + 5:  # up to the sample after the target, extrapolated linearly
+            a, b = seq[-2], seq[-1]
+            seq.append(2.0 * b - a if math.isfinite(a) else b)
+        j = 2 + m  # the target's index: k + m
+        e = np.array(seq)
+        target = float(self.mode.invert(e[j : j + 1], e[j - 2 : j], e[j + 1 : j + 2])[0])
+        self._mode_history = np.array([self._mode_history[1], d])
+        self._last_desired = d
+        return float(
+            K.dynamic_step(target, self.tables, self.config, self._state, self.dyn, self.dstate)
         )
 
     def process(self, desired: ArrayLike) -> FloatArray:
