@@ -114,6 +114,20 @@ def bench_step(channels: int, operators: int) -> None:
         f"  bank step {op_step / 1e6:.0f} M op-samples/s = {op_step / op_single:.2f}x single; "
         f"bank process {op_proc / 1e6:.0f} M = {op_proc / op_single:.2f}x single"
     )
+    # the self-sensing controller over the same bank: measured charge fed back per channel
+    ctl = ph.SelfSensingController(bank, v_min=0.0, v_max=140.0, sample_rate=1e4)
+    measured = qs * 1.02
+    ctl.step(qs[0], measured[0], out=out)
+
+    def run_ctl() -> None:
+        for row, meas in zip(qs, measured, strict=True):
+            ctl.step(row, meas, out=out)
+
+    per_ctl = best(run_ctl, 3) / steps
+    print(
+        f"  self-sensing bank step: {per_ctl * 1e6:8.1f} us per step of all channels "
+        f"({1 / per_ctl / 1e3:.1f} kHz)"
+    )
 
 
 def bench_fit(channels: int, samples: int, operators: int) -> None:

@@ -227,3 +227,34 @@ def test_bank_compensator_limits_and_inputs(bank: ph.ModelBank) -> None:
     assert cycle.shape[1] == 5 and np.allclose(cycle.max(axis=0), comp.v_max)
     comp.reset(voltage=np.linspace(10.0, 50.0, 5))
     np.testing.assert_allclose(comp.last_command, np.linspace(10.0, 50.0, 5))
+
+
+def test_bank_controller_is_each_channels_controller(bank: ph.ModelBank) -> None:
+    t = np.arange(800) / FS
+    desired = _desired(bank, t)
+    rng = np.random.default_rng(5)
+    # recorded charge: each unit's model with a 3 % gain error and noise, a dropout
+    measured = np.column_stack(
+        [1.03 * m.hysteresis_.predict(np.clip(60 + 50 * np.sin(7 * t), 0, 130)) for m in bank]
+    ) + rng.normal(0.0, 1e-10, desired.shape)
+    measured[300:305, 2] = np.nan
+    settings = {"v_min": 1.0, "v_max": 130.0, "sample_rate": FS, "ki": 0.4, "kp": 0.1}
+    ctl = ph.SelfSensingController(bank, **settings)  # type: ignore[arg-type]
+    assert isinstance(ctl, ph.BankController) and len(ctl) == 5
+    singles = [ph.SelfSensingController(m, **settings) for m in bank]  # type: ignore[arg-type]
+    expected = np.column_stack(
+        [s.process(desired[:, c], measured[:, c]) for c, s in enumerate(singles)]
+    )
+    out = np.empty(5)
+    stepped = np.array(
+        [ctl.step(d, q, out=out).copy() for d, q in zip(desired, measured, strict=True)]
+    )
+    np.testing.assert_allclose(stepped, expected, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(ctl.measurement_faults, [0, 0, 5, 0, 0])
+    assert ctl.channel(3).integral == singles[3].integral
+    ctl.reset()
+    np.testing.assert_allclose(ctl.process(desired, measured), expected, rtol=0, atol=1e-12)
+    with pytest.raises(ph.ShapeError, match="one value per channel"):
+        ctl.step(np.zeros(5), np.zeros(4))
+    with pytest.raises(ph.ShapeError, match="one Leakage or one per channel"):
+        ph.SelfSensingController(bank, leakage=[ph.Leakage()], **settings)  # type: ignore[arg-type]

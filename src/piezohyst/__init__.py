@@ -37,13 +37,14 @@ from .models import (
     PIModel,
 )
 from .persistence import load_model
-from .selfsensing import ControllerState, SelfSensingController
+from .selfsensing import BankController, ControllerState, SelfSensingController
 from .simulation import simulate
 from .terms import Term
 
 __all__ = [
     "ActivePI",
     "BankCompensator",
+    "BankController",
     "ClassicalPI",
     "Compensator",
     "CompensatorState",

@@ -827,6 +827,30 @@ def bank_process(desired, tables, config, state, out):  # type: ignore[no-untype
                     out[k, c] = result[c - c0, k - k0]
 
 
+@njit(cache=True, parallel=True, fastmath=FASTMATH)
+def bank_controller_step(desired, measured, tables, config, state, ctl, cs, out):  # type: ignore[no-untyped-def]
+    """One self-sensing command per channel: ``controller_step`` on every row, across threads."""
+    for c in prange(desired.shape[0]):
+        out[c] = controller_step(
+            desired[c], measured[c], tables[c], config[c], state[c], ctl[c], cs[c]
+        )
+
+
+@njit(cache=True, parallel=True, fastmath=FASTMATH)
+def bank_controller_process(desired, measured, tables, config, state, ctl, cs, out):  # type: ignore[no-untyped-def]
+    """``controller_step`` over blocks (samples, C): groups of channels across threads."""
+    m, channels = desired.shape
+    groups = (channels + BANK_GROUP - 1) // BANK_GROUP
+    for g in prange(groups):
+        c0 = BANK_GROUP * g
+        c1 = min(c0 + BANK_GROUP, channels)
+        for k in range(m):
+            for c in range(c0, c1):
+                out[k, c] = controller_step(
+                    desired[k, c], measured[k, c], tables[c], config[c], state[c], ctl[c], cs[c]
+                )
+
+
 def warm_up() -> None:
     """Compile every kernel once (numba caches the result on disk)."""
     x = np.zeros(2)
@@ -853,3 +877,17 @@ def warm_up() -> None:
     ctl = np.zeros(CTL_SIZE)
     ctl[CTL_DT] = ctl[CTL_INV_GAIN] = 1.0
     controller_process(x, x, tables, config, state, ctl, np.zeros(CS_SIZE), np.empty(2))
+    cs = np.zeros((1, CS_SIZE))
+    bank_controller_step(
+        x[:1], x[:1], tables[None], config[None], state[None], ctl[None], cs, np.empty(1)
+    )
+    bank_controller_process(
+        x[:, None],
+        x[:, None],
+        tables[None],
+        config[None],
+        state[None],
+        ctl[None],
+        cs,
+        np.empty((2, 1)),
+    )

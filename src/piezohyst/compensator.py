@@ -728,8 +728,22 @@ class CompensatorSettings:
         )
 
 
-def _per_channel(value: object, c: int, name: str) -> list[Any]:
-    """A scalar (or None) repeated C times, or C values."""
+def per_channel(value: object, c: int, name: str) -> list[Any]:
+    """A setting for each of ``c`` channels: a scalar (or None) repeated, or ``c`` values.
+
+    Parameters
+    ----------
+    value : float, None or array_like
+    c : int
+        Channels.
+    name : str
+        The setting, named in the error.
+
+    Returns
+    -------
+    list
+        ``c`` values.
+    """
     if value is None or isinstance(value, int | float | np.integer | np.floating):
         return [value] * c
     arr = np.asarray(value, dtype=np.float64).reshape(-1)
@@ -795,10 +809,10 @@ class BankCompensator:
             raise ParameterError(msg)
         models = bank.complete_models()
         c = len(models)
-        lows = _per_channel(v_min, c, "v_min")
-        highs = _per_channel(v_max, c, "v_max")
-        slews = _per_channel(slew_rate, c, "slew_rate")
-        gains = _per_channel(gain, c, "gain")
+        lows = per_channel(v_min, c, "v_min")
+        highs = per_channel(v_max, c, "v_max")
+        slews = per_channel(slew_rate, c, "slew_rate")
+        gains = per_channel(gain, c, "gain")
         channels: list[Compensator] = []
         narrowed = 0
         with warnings.catch_warnings():
@@ -888,7 +902,7 @@ class BankCompensator:
         ----------
         voltage : float or array_like of C, optional
         """
-        volts = _per_channel(voltage, len(self), "voltage")
+        volts = per_channel(voltage, len(self), "voltage")
         for ch, v in zip(self._channels, volts, strict=True):
             ch.reset(voltage=v)
 

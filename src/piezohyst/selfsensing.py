@@ -21,19 +21,26 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from . import _kernels as K
 from ._validation import FloatArray
-from .compensator import Compensator, CompensatorSettings, CompensatorState
+from .bank import ModelBank
+from .compensator import Compensator, CompensatorSettings, CompensatorState, per_channel
 from .errors import ParameterError, ShapeError
 from .leakage import Leakage
 from .models import HysteresisModel
 
-__all__ = ["ControllerState", "LoopSettings", "SelfSensingController", "build_controller"]
+__all__ = [
+    "BankController",
+    "ControllerState",
+    "LoopSettings",
+    "SelfSensingController",
+    "build_controller",
+]
 
 Domain = Literal["charge", "displacement"]
 
@@ -134,7 +141,14 @@ class SelfSensingController:
     ...     _ = bench.apply(commands[-1])
     >>> all(0.0 <= v <= 140.0 for v in commands)
     True
+
+    Given a :class:`~piezohyst.ModelBank`, it builds a :class:`BankController`.
     """
+
+    def __new__(cls, model: HysteresisModel | ModelBank, **kwargs: Any) -> SelfSensingController:
+        if isinstance(model, ModelBank):  # many channels: the bank's controller
+            return BankController(model, **kwargs)  # type: ignore[return-value]
+        return super().__new__(cls)
 
     def __init__(
         self,
@@ -378,6 +392,194 @@ class SelfSensingController:
         comp = self.compensator
         K.controller_process(
             d, m, comp.tables, self.config, comp.kernel_state, self.ctl, self.feedback, out
+        )
+        return out
+
+
+class BankController:
+    """The self-sensing controller of every channel of a :class:`~piezohyst.ModelBank`.
+
+    Channel ``c`` is exactly the :class:`SelfSensingController` of ``bank[c]``
+    (:meth:`channel` returns it, live); :meth:`step` takes one desired value
+    and one measured charge per channel, and all channels run in one numba
+    kernel across cores. Usually built as
+    ``ph.SelfSensingController(bank, v_min=..., v_max=..., sample_rate=...)``.
+
+    Parameters
+    ----------
+    bank : ModelBank
+        A fitted bank (every channel fitted, play operators and removable
+        terms only).
+    v_min, v_max : float or array_like of C
+        Voltage limits (V).
+    sample_rate : float
+        The loop rate (Hz), shared.
+    leakage : Leakage or sequence of Leakage, optional
+        One calibration for all channels, or one per channel (default: each
+        channel's identified leakage).
+    **settings
+        The other settings of :class:`SelfSensingController` (``ki``, ``kp``,
+        ``slew_rate``, ``domain``, ``gain``...), shared; ``slew_rate`` and
+        ``gain`` may be one per channel.
+
+    Examples
+    --------
+    >>> import numpy as np, piezohyst as ph
+    >>> units = [ph.PIHysteresis([0.0, 20.0], [g * 1e-8, 5e-9]) for g in (1.0, 2.0)]
+    >>> bank = ph.ModelBank.from_models([ph.ClassicalPI.from_operator(u) for u in units])
+    >>> ctl = ph.SelfSensingController(bank, v_min=0.0, v_max=140.0, sample_rate=1000.0)
+    >>> ctl.step(np.array([2e-7, 4e-7]), np.array([0.0, 0.0])).shape
+    (2,)
+    """
+
+    def __init__(
+        self,
+        bank: ModelBank,
+        *,
+        v_min: float | ArrayLike,
+        v_max: float | ArrayLike,
+        sample_rate: float,
+        leakage: Leakage | list[Leakage] | tuple[Leakage, ...] | None = None,
+        **settings: Any,
+    ) -> None:
+        if not isinstance(bank, ModelBank):
+            msg = f"BankController needs a fitted ModelBank. Got {type(bank).__name__}."
+            raise ParameterError(msg)
+        models = bank.complete_models()
+        c = len(models)
+        lows = per_channel(v_min, c, "v_min")
+        highs = per_channel(v_max, c, "v_max")
+        per = {k: per_channel(settings.pop(k, None), c, k) for k in ("slew_rate", "gain")}
+        if leakage is None or isinstance(leakage, Leakage):
+            leaks: list[Leakage | None] = [leakage] * c
+        else:
+            leaks = list(leakage)
+            if len(leaks) != c:
+                msg = f"'leakage' must be one Leakage or one per channel ({c}). Got {len(leaks)}."
+                raise ShapeError(msg)
+        channels: list[SelfSensingController] = []
+        for i, m in enumerate(models):
+            try:
+                channels.append(
+                    SelfSensingController(
+                        m,
+                        v_min=lows[i],
+                        v_max=highs[i],
+                        sample_rate=sample_rate,
+                        leakage=leaks[i],
+                        slew_rate=per["slew_rate"][i],
+                        gain=per["gain"][i],
+                        **settings,
+                    )
+                )
+            except (ParameterError, ShapeError) as exc:
+                raise type(exc)(f"channel {i}: {exc}") from None
+        self.bank = bank
+        self._channels = channels
+        comps = [ch.compensator for ch in channels]
+        self.tables = np.ascontiguousarray(np.stack([cp.tables for cp in comps]))
+        comp_config = np.ascontiguousarray(np.stack([cp.config for cp in comps]))
+        self.state_array = np.ascontiguousarray(np.stack([cp.kernel_state for cp in comps]))
+        self.config = np.ascontiguousarray(np.stack([ch.config for ch in channels]))
+        self.ctl = np.ascontiguousarray(np.stack([ch.ctl for ch in channels]))
+        self.feedback = np.ascontiguousarray(np.stack([ch.feedback for ch in channels]))
+        for i, ch in enumerate(channels):  # each channel keeps views of its rows: live
+            ch.compensator.share(self.tables[i], comp_config[i], self.state_array[i])
+            ch.config, ch.ctl, ch.feedback = self.config[i], self.ctl[i], self.feedback[i]
+
+    def __len__(self) -> int:
+        return len(self._channels)
+
+    def channel(self, index: int) -> SelfSensingController:
+        """Channel ``index``'s controller: live, sharing the bank's state.
+
+        Parameters
+        ----------
+        index : int
+
+        Returns
+        -------
+        SelfSensingController
+        """
+        return self._channels[index]
+
+    @property
+    def last_command(self) -> FloatArray:
+        """The last command of every channel (V)."""
+        return np.array([ch.last_command for ch in self._channels])
+
+    @property
+    def measurement_faults(self) -> NDArray[np.int64]:
+        """Per channel: non-finite measurements (feedforward used)."""
+        return np.array([ch.measurement_faults for ch in self._channels], dtype=np.int64)
+
+    @property
+    def saturated_count(self) -> NDArray[np.int64]:
+        """Per channel: commands clipped to the limits."""
+        return np.array([ch.saturated_count for ch in self._channels], dtype=np.int64)
+
+    def reset(self) -> None:
+        """Every channel back to its initial state, feedback cleared."""
+        for ch in self._channels:
+            ch.reset()
+
+    def _pair(self, desired: ArrayLike, measured: ArrayLike, ndim: int) -> tuple[FloatArray, ...]:
+        d = np.ascontiguousarray(desired, dtype=np.float64)
+        m = np.ascontiguousarray(measured, dtype=np.float64)
+        c = len(self._channels)
+        if d.ndim != ndim or d.shape[-1] != c or d.shape != m.shape:
+            want = f"({c},)" if ndim == 1 else f"(samples, {c})"
+            msg = (
+                f"'desired' and 'measured' must both have shape {want}, one value per channel. "
+                f"Got {d.shape} and {m.shape}."
+            )
+            raise ShapeError(msg)
+        return d, m
+
+    def step(
+        self, desired: ArrayLike, measured: ArrayLike, out: FloatArray | None = None
+    ) -> FloatArray:
+        """One command per channel.
+
+        Parameters
+        ----------
+        desired, measured : array_like, shape (C,)
+            Desired output and the charge read at this sample, per channel
+            (NaN: hold / feedforward alone for that channel).
+        out : ndarray, shape (C,), optional
+            Written in place.
+
+        Returns
+        -------
+        ndarray, shape (C,)
+            Commands (V).
+        """
+        d, m = self._pair(desired, measured, 1)
+        if out is None:
+            out = np.empty(d.shape[0])
+        elif out.shape != d.shape or out.dtype != np.float64:
+            msg = f"'out' must be a float64 array of shape {d.shape}. Got {out.dtype} {out.shape}."
+            raise ShapeError(msg)
+        K.bank_controller_step(
+            d, m, self.tables, self.config, self.state_array, self.ctl, self.feedback, out
+        )
+        return out
+
+    def process(self, desired: ArrayLike, measured: ArrayLike) -> FloatArray:
+        """Commands for recorded blocks (samples, C); equal to :meth:`step` on each row.
+
+        Parameters
+        ----------
+        desired, measured : array_like, shape (samples, C)
+
+        Returns
+        -------
+        ndarray, shape (samples, C)
+        """
+        d, m = self._pair(desired, measured, 2)
+        out = np.empty_like(d)
+        K.bank_controller_process(
+            d, m, self.tables, self.config, self.state_array, self.ctl, self.feedback, out
         )
         return out
 
