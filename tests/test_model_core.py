@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import itertools
 import json
 import os
 from pathlib import Path
@@ -123,23 +124,38 @@ def test_active_equals_generalized_with_only_the_integral(seed: int) -> None:
     np.testing.assert_array_equal(cg.process(desired), ca.process(desired))
 
 
-def test_selection_scores_from_matrices_equal_refits(record: Any) -> None:
-    """The held-out scores of 'auto' equal fitting each subset on 70 % and predicting."""
-    v, q, t = record.voltage, record.charge, record.t
+@pytest.mark.parametrize("which", ["fixture", "ten cycles"])
+def test_selection_scores_from_matrices_equal_refits(record: Any, which: str) -> None:
+    """The fold scores of 'auto' equal fitting each subset on the record up to a fold's
+    start and predicting the fold (forward chaining: 40 % trains, then folds of cycles)."""
+    rec = record if which == "fixture" else ph.simulate(duration=10.0)
+    v, q, t = rec.voltage, rec.charge, rec.t
     auto = ph.GeneralizedPI(6, asymmetry=2).fit(v, q, t=t)
-    split = int(0.7 * v.size)
+    n = v.size
+    edges = auto.selection_splits_
+    assert edges[-1] == n
+    # few reversals after the start: one test block, the last 30 %; many: folds of cycles
+    assert len(edges) == (2 if which == "fixture" else 4)
+    first = edges[0]
+    assert set(auto.selection_) == set(auto.selection_folds_)
     for label, score in auto.selection_.items():
         terms = () if label == "none" else tuple(label.split("+"))
-        part = ph.GeneralizedPI(thresholds=auto.thresholds_, growth_terms=terms, asymmetry=2).fit(
-            v[:split], q[:split], t=t[:split]
-        )
-        # the part fit binds knots and min_slope to its own data; give it the same knots
-        part_terms = list(auto.terms_[:1]) + [tm for tm in part.terms_ if tm.removed]
-        refit = ph.PIModel(thresholds=auto.thresholds_, terms=part_terms).fit(
-            v[:split], q[:split], t=t[:split]
-        )
-        err = float(np.sqrt(np.mean((refit.predict(v, t=t)[split:] - q[split:]) ** 2)))
-        assert score == pytest.approx(err, rel=2e-2), label
+        folds = auto.selection_folds_[label]
+        assert len(folds) == len(edges) - 1
+        sse = 0.0
+        for f, (a, b) in enumerate(itertools.pairwise(edges)):
+            part = ph.GeneralizedPI(
+                thresholds=auto.thresholds_, growth_terms=terms, asymmetry=2
+            ).fit(v[:a], q[:a], t=t[:a])
+            # the part fit binds knots and min_slope to its own data; give it the same knots
+            part_terms = list(auto.terms_[:1]) + [tm for tm in part.terms_ if tm.removed]
+            refit = ph.PIModel(thresholds=auto.thresholds_, terms=part_terms).fit(
+                v[:a], q[:a], t=t[:a]
+            )
+            r = refit.predict(v, t=t)[a:b] - q[a:b]
+            assert folds[f] == pytest.approx(float(np.sqrt(np.mean(r**2))), rel=3e-2), label
+            sse += float(r @ r)
+        assert score == pytest.approx(np.sqrt(sse / (n - first)), rel=3e-2), label
     best = min(auto.selection_, key=auto.selection_.__getitem__)
     assert auto.selection_["+".join(auto.growth_terms_) or "none"] <= 1.001 * auto.selection_[best]
 

@@ -227,6 +227,47 @@ def mode_filter(u, ad, bd, state, out):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
+def reversals(x, band, state):  # type: ignore[no-untyped-def]
+    """Count the input's reversals: turns of at least ``band`` back from the last extreme.
+
+    ``state`` = [direction (+1 rising, -1 falling, 0 not yet known), the
+    running extreme (the start while the direction is unknown), started];
+    updated, so the blocks of one record count like one call.
+    """
+    direction = state[0]
+    extreme = state[1]
+    if state[2] == 0.0 and x.shape[0]:
+        extreme = x[0]
+        state[2] = 1.0
+    count = 0
+    for k in range(x.shape[0]):
+        v = x[k]
+        if direction == 0.0:
+            if v - extreme >= band:
+                direction = 1.0
+                extreme = v
+            elif extreme - v >= band:
+                direction = -1.0
+                extreme = v
+        elif direction > 0.0:
+            if v > extreme:
+                extreme = v
+            elif extreme - v >= band:
+                count += 1
+                direction = -1.0
+                extreme = v
+        elif v < extreme:
+            extreme = v
+        elif v - extreme >= band:
+            count += 1
+            direction = 1.0
+            extreme = v
+    state[0] = direction
+    state[1] = extreme
+    return count
+
+
+@njit(cache=True)
 def constant_runs(x, tol, edges):  # type: ignore[no-untyped-def]
     """Split ``x`` into runs that stay within ``tol`` of their first sample.
 
@@ -860,6 +901,7 @@ def warm_up() -> None:
     fast_predict(x, x, True, r, np.ones(1), z, 0.0, FAST_INTEGRAL, 1.0, np.empty(2))
     play_states(x, r, z, np.empty((2, 1)))
     running_integral(x, np.zeros(2), 0.0, np.empty(2))
+    reversals(x, 1.0, np.zeros(3))
     lag_filter(x, np.zeros(2), np.ones(1), np.zeros(1), np.empty((2, 1)))
     tables = np.zeros((5, 1))
     tables[TAB_W] = tables[TAB_S] = tables[TAB_WI] = 1.0

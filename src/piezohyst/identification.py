@@ -30,8 +30,10 @@ the early segments and scoring it on a later one needs no second pass.
 from __future__ import annotations
 
 import functools
+import itertools
+import operator
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -59,6 +61,42 @@ __all__ = [
 ]
 
 BLOCK = 4096  # samples per block when accumulating or streaming
+# term selection by forward-chaining (blocked) time-series cross-validation: the first
+# SELECT_START of the record trains, the rest is cut into SELECT_FOLDS blocks, each
+# predicted by a fit on everything before it
+SELECT_START = 0.4
+SELECT_FOLDS = 4
+SELECT_PIECES = 20  # the tested part is accumulated in pieces, grouped into folds after
+
+
+def _folds(parts: list[NormalEquations]) -> list[NormalEquations]:
+    """[training start, fold 1, ...]: up to SELECT_FOLDS folds of 2 or more input reversals.
+
+    A fold shorter than a cycle of the drive tests half a loop; when the
+    tested part holds fewer than two folds' worth of reversals, the record's
+    last 30 % is the one test block (the first 70 % trains).
+    """
+    start, pieces = parts[0], parts[1:]
+    total = sum(p.reversals for p in pieces)
+    target = max(2, -(-total // SELECT_FOLDS))
+    folds: list[NormalEquations] = []
+    acc: NormalEquations | None = None
+    for piece in pieces:
+        acc = piece if acc is None else acc + piece
+        if acc.reversals >= target and len(folds) < SELECT_FOLDS - 1:
+            folds.append(acc)
+            acc = None
+    if acc is not None:
+        if acc.reversals >= 2 or not folds:
+            folds.append(acc)
+        else:  # a last piece with less than a cycle joins the fold before it
+            folds[-1] = folds[-1] + acc
+    if len(folds) < 2:
+        half = len(pieces) // 2
+        return [functools.reduce(operator.add, [start, *pieces[:half]]),
+                functools.reduce(operator.add, pieces[half:])]  # fmt: skip
+    return [start, *folds]
+
 
 Triple = tuple[FloatArray, FloatArray, FloatArray | None]
 Blocks = Callable[[], Iterable[Triple]]
@@ -309,12 +347,15 @@ class NormalEquations:
     rhs : ndarray, shape (p,)
     yy : float
     n_samples : int
+    reversals : int
+        Reversals of the input counted in these samples (when asked for).
     """
 
     gram: FloatArray
     rhs: FloatArray
     yy: float
     n_samples: int
+    reversals: int = 0
 
     def __add__(self, other: NormalEquations) -> NormalEquations:
         return NormalEquations(
@@ -322,6 +363,7 @@ class NormalEquations:
             self.rhs + other.rhs,
             self.yy + other.yy,
             self.n_samples + other.n_samples,
+            self.reversals + other.reversals,
         )
 
     def sse(self, beta: FloatArray, columns: FloatArray) -> float:
@@ -365,6 +407,7 @@ def _accumulate(
     stride: int = 1,
     block: int = BLOCK,
     output: OutputDynamics | None = None,
+    reversal_band: float | None = None,
 ) -> list[NormalEquations]:
     """Normal equations of every segment ``edges[k]:edges[k+1]`` (model run through all).
 
@@ -387,6 +430,8 @@ def _accumulate(
     states = [term.rest_state(x_first) for term in terms]
     parts = [(np.zeros((p, p)), np.zeros(p), [0.0]) for _ in edges[1:]]
     counts = [0 for _ in edges[1:]]
+    turns = [0 for _ in edges[1:]]
+    turn_state = np.zeros(3)
     pos = 0  # index of the next sample in the record
     seg = 0
     mode_state: FloatArray | None = None
@@ -402,6 +447,8 @@ def _accumulate(
             stop = min(size, k + block, edges[seg + 1] - pos)
             m = stop - k
             xs = x_blk[k:stop]
+            if reversal_band is not None:
+                turns[seg] += int(_kernels.reversals(xs, reversal_band, turn_state))
             ts = None if t_blk is None else t_blk[k:stop]
             dt = None
             if terms and ts is not None:
@@ -447,8 +494,8 @@ def _accumulate(
             k = stop
         pos += size
     return [
-        NormalEquations(gram, rhs, yy[0], count)
-        for (gram, rhs, yy), count in zip(parts, counts, strict=True)
+        NormalEquations(gram, rhs, yy[0], count, turn)
+        for (gram, rhs, yy), count, turn in zip(parts, counts, turns, strict=True)
     ]
 
 
@@ -509,15 +556,22 @@ class Identification:
         Each term's coefficients; None for a term the selection left out.
     scores : dict
         Held-out RMSE (output units) of every subset tried, keyed by the tuple
-        of term indices (empty without selection or validation).
+        of term indices (empty without selection or validation); with
+        selection, pooled over the folds.
     rmse : float
         RMSE of the final solve over the rows it used (output units).
+    fold_scores : dict
+        With selection: each subset's held-out RMSE per fold, in time order.
+    splits : list of int
+        With selection: the first sample of each fold, then the record's length.
     """
 
     core: FloatArray
     coefficients: tuple[FloatArray | None, ...]
     scores: dict[tuple[int, ...], float]
     rmse: float = float("nan")
+    fold_scores: dict[tuple[int, ...], list[float]] = field(default_factory=dict)
+    splits: list[int] = field(default_factory=list)
 
 
 def identify(
@@ -554,13 +608,15 @@ def identify(
         Lower bound of every loading-curve slope, relative to the mean slope
         ``span(y) / span(x)``.
     subsets : sequence of tuple of int, optional
-        Term subsets (indices into ``terms``) to choose from: each is fitted
-        on the first ``1 - holdout`` of the record and scored on the rest (the
-        model running through the whole record); the best, where a larger
-        subset must beat a smaller one by 0.1 %, is refitted on everything.
-        Default: all terms, no selection.
+        Term subsets (indices into ``terms``) to choose from, by forward-chaining
+        time-series cross-validation: the record after its first 40 % is cut
+        into 4 blocks, and each block is predicted by the subset fitted on
+        everything before it (the model running through the whole record).
+        The best pooled held-out RMSE wins, where a larger subset must beat a
+        smaller one by 0.1 %; it is refitted on everything. Default: all
+        terms, no selection.
     holdout : float, default 0.3
-        Fraction of the record held out for the selection.
+        Fraction of the record held out for ``validate``.
     validate : bool, default False
         Score the (single) subset on the held-out part too (``scores``).
     stride : int, default 1
@@ -598,8 +654,14 @@ def identify(
         term.lower_bounds() * col_scale[c] / sy for term, c in zip(terms, term_cols, strict=True)
     ]
     candidates = [tuple(range(len(terms)))] if subsets is None else list(subsets)
-    split = int((1.0 - holdout) * sm.n) if len(candidates) > 1 or validate else sm.n
-    edges = [0, split, sm.n] if 0 < split < sm.n else [0, sm.n]
+    selecting = len(candidates) > 1
+    if selecting:  # forward chaining over pieces, grouped into folds after the pass
+        first = int(SELECT_START * sm.n)
+        edges = sorted({0, *(first + (sm.n - first) * j // SELECT_PIECES
+                             for j in range(SELECT_PIECES)), sm.n})  # fmt: skip
+    else:
+        split = int((1.0 - holdout) * sm.n) if validate else sm.n
+        edges = [0, split, sm.n] if 0 < split < sm.n else [0, sm.n]
     parts = _accumulate(
         core,
         terms,
@@ -613,8 +675,13 @@ def identify(
         stride,
         block,
         output,
+        0.05 * (sm.x_max - sm.x_min) if selecting else None,
     )
-    whole = parts[0] if len(parts) == 1 else parts[0] + parts[1]
+    whole = functools.reduce(operator.add, parts)
+    splits: list[int] = []
+    if selecting:
+        parts = _folds(parts)
+        splits = list(itertools.accumulate(p.n_samples for p in parts))
 
     def columns_of(subset: tuple[int, ...]) -> FloatArray:
         return np.concatenate([np.arange(n + 1), *[term_cols[j] for j in subset]]).astype(int)
@@ -637,16 +704,31 @@ def identify(
         return np.asarray(m @ _bounded_lstsq(m.T @ g @ m, m.T @ eqs.rhs[cols], lower))
 
     scores: dict[tuple[int, ...], float] = {}
+    fold_scores: dict[tuple[int, ...], list[float]] = {}
     best = candidates[0]
-    if (len(candidates) > 1 or validate) and len(parts) == 2:
+    if (selecting or validate) and len(parts) >= 2:
         best_err = np.inf
         for subset in candidates:
-            try:
-                beta = solve(parts[0], subset)
-            except InsufficientDataError:
+            sse = 0.0
+            count = 0
+            folds: list[float] = []
+            train = parts[0]
+            for test in parts[1:]:  # train on everything before the test block
+                try:
+                    beta = solve(train, subset)
+                except InsufficientDataError:
+                    train = train + test
+                    continue
+                fold_sse = test.sse(beta, columns_of(subset))
+                folds.append(float(np.sqrt(fold_sse / test.n_samples)) * sy)
+                sse += fold_sse
+                count += test.n_samples
+                train = train + test
+            if not count:
                 continue
-            err = float(np.sqrt(parts[1].sse(beta, columns_of(subset)) / parts[1].n_samples)) * sy
+            err = float(np.sqrt(sse / count)) * sy
             scores[subset] = err
+            fold_scores[subset] = folds
             if err < best_err * (1 - 1e-3):  # a term must earn its place
                 best, best_err = subset, err
     scaled = solve(whole, best)
@@ -658,4 +740,6 @@ def identify(
     for j in best:
         coefficients[j] = beta[pos : pos + terms[j].width].copy()
         pos += terms[j].width
-    return Identification(beta[: n + 1].copy(), tuple(coefficients), scores, fit_rmse)
+    return Identification(
+        beta[: n + 1].copy(), tuple(coefficients), scores, fit_rmse, fold_scores, splits
+    )

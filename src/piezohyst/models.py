@@ -377,6 +377,8 @@ class HysteresisModel:
         "output_dynamics": _output_kind,
     }
     selection_: dict[str, float]
+    selection_folds_: dict[str, list[float]]
+    selection_splits_: list[int]
     input_dynamics_: InputDynamics
     output_dynamics_: OutputDynamics
 
@@ -944,6 +946,10 @@ class HysteresisModel:
             tuple(np.asarray(sol.coefficients[j]) for j in kept),
         )
         self.selection_ = {self._subset_label(terms, s): e for s, e in sol.scores.items()}
+        self.selection_folds_ = {
+            self._subset_label(terms, s): f for s, f in sol.fold_scores.items()
+        }
+        self.selection_splits_ = sol.splits
 
     @staticmethod
     def _subset_label(terms: Sequence[Term], subset: tuple[int, ...]) -> str:
@@ -985,6 +991,8 @@ class HysteresisModel:
         self.terms_ = terms
         self.coefs_ = coefs
         self.selection_ = {}
+        self.selection_folds_ = {}
+        self.selection_splits_ = []
         self.rmse_ = self.nrmse_ = math.nan  # set by fit; unknown for a model built by hand
         self.input_range_ = (math.nan, math.nan)
         self.max_slew_rate_ = math.nan
@@ -1652,7 +1660,9 @@ class PIModel(HysteresisModel):
     input_range_ : tuple of float
         Smallest and largest training input (V).
     selection_ : dict
-        Held-out RMSE of every term subset tried (models that select terms).
+        Held-out RMSE of every term subset tried (models that select terms),
+        pooled over the folds of a forward-chaining time-series
+        cross-validation; ``selection_folds_`` holds each fold's.
 
     Examples
     --------
@@ -1841,15 +1851,25 @@ class GeneralizedPI(HysteresisModel):
     creep_taus_, creep_gains_ : ndarray
         Creep time constants (s) and gains (output/V).
     selection_ : dict
-        Held-out RMSE of every growth subset tried (``growth_terms="auto"``).
+        Held-out RMSE of every growth subset tried (``growth_terms="auto"``),
+        pooled over 4 forward-chaining folds (the first 40 % trains, each later
+        block is predicted from everything before it).
+    selection_folds_ : dict
+        The same per fold, in time order. Each fold holds two or more
+        reversals of the input (at most 4 folds); a record with fewer has one
+        test block, its last 30 %.
+    selection_splits_ : list of int
+        The first sample of each fold, then the record's length.
 
     Examples
     --------
     >>> import numpy as np, piezohyst as ph
     >>> rec = ph.simulate(duration=10.0)
     >>> model = ph.GeneralizedPI(10).fit(rec.voltage, rec.charge, t=rec.t)
-    >>> bool(model.nrmse_ < 0.005), "integral" in model.growth_terms_
+    >>> bool(model.nrmse_ < 0.005), len(model.growth_terms_) > 0
     (True, True)
+    >>> len(model.selection_folds_["none"])      # forward-chaining folds, each a few cycles
+    3
     """
 
     cli_name = "generalized-pi"
@@ -1932,7 +1952,7 @@ class GeneralizedPI(HysteresisModel):
         from scipy.optimize import minimize
 
         terms = list(self.terms_)
-        selection = self.selection_
+        selection, folds, splits = self.selection_, self.selection_folds_, self.selection_splits_
         span = max(float(np.ptp(x)), 1e-300)
         start = np.log(np.diff(self.thresholds_) / span)
         t_fit = t if self.rate_dependent_ else None
@@ -1949,7 +1969,8 @@ class GeneralizedPI(HysteresisModel):
         before = objective(start)
         res = minimize(objective, start, method="L-BFGS-B", options={"maxiter": 30})
         objective(res.x if res.fun < before else start)
-        self.selection_ = selection
+        self.selection_, self.selection_folds_ = selection, folds
+        self.selection_splits_ = splits
         return True
 
     def set_fitted(

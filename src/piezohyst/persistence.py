@@ -146,6 +146,8 @@ def model_to_dict(model: Model) -> dict[str, Any]:
                 for term, coef in zip(model.terms_, model.coefs_, strict=True)
             ],
             "selection": model.selection_,
+            "selection_folds": model.selection_folds_,
+            "selection_splits": model.selection_splits_,
             "rmse": _nullable(model.rmse_),
             "nrmse": _nullable(model.nrmse_),
             "input_range": None if math.isnan(lo) else [lo, hi],
@@ -373,6 +375,14 @@ def model_from_dict(data: Any, expected: type | None = None) -> Model:
     selection = fitted.data.get("selection") or {}
     if isinstance(selection, dict):
         model.selection_ = {str(k): float(v) for k, v in selection.items()}
+    splits = fitted.data.get("selection_splits") or []
+    if isinstance(splits, list):
+        model.selection_splits_ = [int(k) for k in splits]
+    folds = fitted.data.get("selection_folds") or {}
+    if isinstance(folds, dict):
+        model.selection_folds_ = {
+            str(k): [float(x) for x in v] for k, v in folds.items() if isinstance(v, list)
+        }
     model.rmse_ = fitted.number("rmse", optional=True)
     model.nrmse_ = fitted.number("nrmse", optional=True)
     model.input_range_ = _range(fitted)

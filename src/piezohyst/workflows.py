@@ -958,6 +958,12 @@ def model_report(
                         (x, pure, "growth removed", {"lw": 1.1, "color": "C1"})],
              "xlabel": "input", "xunit": in_u, "ylabel": "output", "yunit": out_u},
         ])  # fmt: skip
+    chosen = "+".join(k for k in growth) or "none"
+    for label, score in model.selection_.items():  # the term selection, fold by fold
+        folds = ", ".join(f"{f:.4g}" for f in model.selection_folds_.get(label, []))
+        mark = " (chosen)" if label == chosen else ""
+        rep.add(f"selection_{label}", f"held-out RMSE, growth {label}{mark}",
+                f"{score:.4g} {out_u}; per fold: {folds}")  # fmt: skip
     files = rep.write()
     return ReportResult({m.key: m.value for m in rep.metrics}, files)
 
