@@ -232,6 +232,51 @@ def pzt_amplitudes(data: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
+def pzt_periodic(data: Path) -> str:
+    """Each period on its own: 1000 V fitted, 800 V predicted, from rest or periodic."""
+    folder = data / "pnzt_ceramic_aixacct" / "derived_csv"
+    n = 20
+
+    def load(name: str) -> tuple[np.ndarray, ...]:
+        tb = ph.read_table(folder / f"{name}.csv")
+        return tb.get("time_s"), tb.get("voltage_V"), tb.get("polarization_uC_per_cm2")
+
+    t1, v1, p1 = load("SLOW_T04_TEST_1000V")
+    t0, v0, p0 = load("SLOW_T03_TEST_800V")
+    print("PZT periods on their own: fit 1000 V, predict 800 V, from rest or periodic")
+    lines = [
+        "### PZT ceramic, 1000 V → 800 V, each period on its own (initial state)",
+        "",
+        "Each record is one period of a 1 Hz bipolar triangle that had been running, and "
+        f"starts mid-cycle (at {v1[0]:.0f} V and {v0[0]:.0f} V). Fitted on the 1000 V period, "
+        "then the 800 V period predicted, both starting at rest (the models' default) or in "
+        'the periodic steady state (`initial_state="periodic"`, `predict(..., '
+        'state="periodic")`). NRMSE after removing one offset (the instrument\'s '
+        "polarisation zero is arbitrary per record).",
+        "",
+        "| model | start | training NRMSE (1000 V) | 800 V | fit time |",
+        "|---|---|---|---|---|",
+    ]
+    models: list[tuple[str, Factory]] = [
+        ("classical PI", lambda: ph.ClassicalPI(n, output_unit="uC/cm2")),
+        ("active PI (paper)", lambda: ph.ActivePI(n, output_unit="uC/cm2")),
+        ("generalized PI (auto growth, asymmetry)",
+         lambda: ph.GeneralizedPI(n, output_unit="uC/cm2")),
+    ]  # fmt: skip
+    for name, factory in models:
+        for start in ("rest", "periodic"):
+            began = time.perf_counter()
+            model = factory().fit(v1, p1, t=t1, initial_state=start)
+            sec = time.perf_counter() - began
+            diff = model.predict(v0, t=t0, state=start) - p0
+            err = float(np.std(diff)) / float(np.ptp(p0))
+            print(f"  {name:45s} {start:9s} train {100 * model.nrmse_:6.2f} %  "
+                  f"800 V {100 * err:6.2f} %")  # fmt: skip
+            lines.append(f"| {name} | {start} | {100 * model.nrmse_:.2f} % | "
+                         f"**{100 * err:.2f} %** | {sec:.2f} s |")  # fmt: skip
+    return "\n".join(lines) + "\n"
+
+
 def rate(data: Path) -> str:
     """What a lag model absorbs on the two 1 Hz sets that log the *commanded* voltage."""
     from piezohyst.identification import block_dt
@@ -304,6 +349,7 @@ def main() -> None:
         actuator(args.data),
         pzt_creep(args.data),
         pzt_amplitudes(args.data),
+        pzt_periodic(args.data),
         rate(args.data),
     ]
     header = (
@@ -323,7 +369,9 @@ def main() -> None:
 - **Long holds (1400 s).** Classical PI cannot follow the drift at all. The extra terms fit the
   first half far better than the paper's one-term model but extrapolate 700 s of drift worse:
   the drift slows during the hold, which no constant-rate term describes, and the automatic
-  choice is made on the last 30 % of the training part, a shorter horizon than the test. Creep
+  choice (forward-chaining folds of at least two reversals; this record's hold has too few, so
+  one test block, the last 30 % of the training part) looks a shorter horizon ahead than the
+  test. Creep
   operators with long time constants (relaxation) recover part of it. For long extrapolation in
   time the simplest growth model was the safest here.
 - **Short hold (105 s).** Polarisation relaxes after the excursion; only the creep operators
@@ -332,6 +380,10 @@ def main() -> None:
   switching 1400 V loop: a PI model's minor loops are fixed by its major loop, and ferroelectric
   switching makes the major loop a poor guide. Extra growth terms make it worse across records.
   Identify at the amplitudes you will use.
+- **Records that start mid-cycle.** A record cut out of a running periodic drive does not start
+  at rest: started in the periodic steady state, the 800 V loop predicted from the 1000 V one
+  roughly halves its error for every model. The classical model, with no growth term to absorb
+  the wrong start, gains most and is the best here.
 
 Not covered: the Bouc-Wen benchmark in `shared/data` is a dynamic (mass-spring) hysteresis
 that needs PI combined with second-order dynamics, which piezohyst does not offer yet.

@@ -292,3 +292,20 @@ def test_fit_generalized_with_options(workdir: Path) -> None:
     res = run("fit", workdir / "run.csv", "--model", "active-pi", "--creep", "1", "-o",
               workdir / "x.json")  # fmt: skip
     assert_clean_error(res, "does not apply to active-pi")
+
+
+def test_fit_from_the_periodic_state(tmp_path: Path) -> None:
+    """A record cut out of a running periodic drive starts mid-cycle: --initial-state periodic."""
+    t = np.arange(3000) / 1e3
+    v = 70.0 + 60.0 * np.sin(2 * np.pi * t + 0.4)
+    q = ph.PIHysteresis([0.0, 15.0, 35.0], [1e-8, 4e-9, 3e-9]).predict(v)
+    data = tmp_path / "mid.csv"
+    ph.write_table(data, {"time": t[2000:] - t[2000], "voltage": v[2000:], "charge": q[2000:]})
+    errors = []
+    for start in ("rest", "periodic"):
+        out = tmp_path / f"{start}.json"
+        res = run("fit", data, "--model", "classical-pi", "--operators", "6",
+                  "--initial-state", start, "-o", out)  # fmt: skip
+        assert res.exit_code == 0, res.output
+        errors.append(ph.load_model(out).nrmse_)
+    assert errors[1] < 0.5 * errors[0]

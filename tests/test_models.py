@@ -388,3 +388,52 @@ def test_inverse_model_round_trips(tmp_path: Path, bench: tuple) -> None:
     assert inv.input_unit == "C" and inv.output_unit == "V"
     inv.save(tmp_path / "inv.json")
     np.testing.assert_array_equal(ph.load_model(tmp_path / "inv.json").predict(q), inv.predict(q))
+
+
+# ------------------------------------------------------------ initial states
+def _mid_cycle_record() -> tuple[ph.PIHysteresis, np.ndarray, np.ndarray, np.ndarray]:
+    """One period of a periodic drive that had been running: it starts mid-cycle."""
+    truth = ph.PIHysteresis([0.0, 15.0, 35.0], [1e-8, 4e-9, 3e-9])
+    period = 1000
+    t = np.arange(3 * period) / 1e3
+    v = 70.0 + 60.0 * np.sin(2 * np.pi * t + 0.4)
+    q = truth.predict(v)  # from rest, then two periods: periodic by the last one
+    return truth, t[-period:] - t[-period], v[-period:], q[-period:]
+
+
+def test_a_record_that_starts_mid_cycle_fits_from_its_periodic_state() -> None:
+    truth, _t, v, q = _mid_cycle_record()
+    kw = {"thresholds": truth.thresholds}
+    periodic = ph.ClassicalPI(3, **kw).fit(v, q, initial_state="periodic")  # type: ignore[arg-type]
+    rest = ph.ClassicalPI(3, **kw).fit(v, q)  # type: ignore[arg-type]
+    assert periodic.nrmse_ < 1e-10 < 1e-3 < rest.nrmse_
+    np.testing.assert_allclose(periodic.weights_, truth.weights, rtol=1e-8)
+    # the same period again, predicted from its periodic state
+    np.testing.assert_allclose(periodic.predict(v, state="periodic"), q, rtol=0, atol=1e-15)
+    z = ph.identification.periodic_state(
+        ph.identification.array_blocks(v, v, None), truth.thresholds, float(v[0])
+    )
+    np.testing.assert_array_equal(
+        periodic.predict(v, state="periodic"), periodic.predict(v, state=z)
+    )
+    # an input history instead: the two periods before
+    full = 70.0 + 60.0 * np.sin(2 * np.pi * np.arange(3000) / 1e3 + 0.4)
+    hist = ph.ClassicalPI(3, **kw).fit(v, q, initial_state=ph.History(full[:2001]))  # type: ignore[arg-type]
+    assert hist.nrmse_ < 1e-10
+    assert rest.predict(v, state="rest").tolist() == rest.predict(v, state=v[:1].repeat(3)).tolist()
+    with pytest.raises(ph.ParameterError, match="'rest', 'periodic'"):
+        ph.ClassicalPI(3).fit(v, q, initial_state="sideways")
+    with pytest.raises(ph.ParameterError, match="'periodic' or a History"):
+        rest.predict(v, state="sideways")
+
+
+def test_periodic_start_with_growth_and_dynamics() -> None:
+    truth, t, v, q = _mid_cycle_record()
+    q = q + 2e-10 * np.cumsum(v) / 1e3
+    active = ph.ActivePI(3, thresholds=truth.thresholds).fit(v, q, t=t, initial_state="periodic")
+    assert active.growth_rate_ == pytest.approx(2e-10, rel=1e-6)
+    lagged = ph.ClassicalPI(3, thresholds=truth.thresholds, input_dynamics="first-order")
+    lagged.fit(v, truth.predict(v), t=t)
+    out = lagged.predict(v, t=t, state="periodic")
+    again = lagged.predict(np.concatenate([v, v]), t=np.arange(2000) / 1e3, state="periodic")
+    np.testing.assert_allclose(out, again[:1000], rtol=0, atol=1e-12)

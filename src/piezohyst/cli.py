@@ -502,6 +502,14 @@ def describe(model: HysteresisModel) -> str:
     help="A mechanical mode between the hysteresis and a displacement output "
     "(record up to near the resonance).",
 )
+@click.option(
+    "--initial-state",
+    type=click.Choice(["rest", "periodic"]),
+    default="rest",
+    show_default=True,
+    help="periodic: the record is one period of a drive that was already running (it "
+    "starts mid-cycle); the operators start in the periodic steady state.",
+)
 @_data_options
 @OUT_FILE
 @FORCE
@@ -515,6 +523,7 @@ def fit(
     creep: str,
     input_dynamics: str,
     output_dynamics: str,
+    initial_state: str,
     data_spec: DataSpec,
     out: Path,
     force: bool,
@@ -553,6 +562,7 @@ def fit(
                 creep=taus,
                 input_dynamics=input_dynamics,
                 output_dynamics=output_dynamics,
+                initial_state=initial_state,
                 force=force,
                 progress=progress,
             ),

@@ -283,6 +283,52 @@ def history_state(
     return z
 
 
+#: Passes over a period before its operator states must repeat (play operators settle
+#: within two passes once the period reaches its extremes; more covers rounding)
+PERIODIC_PASSES = 10
+
+
+def periodic_state(blocks: Blocks, thresholds: ArrayLike, x_first: float) -> FloatArray:
+    """Play-operator states at the start of a record that is one period of a periodic drive.
+
+    The record is run again and again from rest at ``x_first`` until the
+    states at its end repeat (a play operator forgets its start once the
+    input has passed both its extremes): the periodic steady state, where an
+    actuator driven by this signal for a while sits when the record starts.
+
+    Parameters
+    ----------
+    blocks : Blocks
+        The record (only the input is read).
+    thresholds : array_like
+        The play thresholds (V).
+    x_first : float
+        The record's first input.
+
+    Returns
+    -------
+    ndarray
+        One state per threshold (V).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> x = 5.0 + 5.0 * np.sin(np.linspace(0.0, 2 * np.pi, 101))  # starts mid-cycle, rising
+    >>> periodic_state(array_blocks(x, x, None), [0.0, 2.0], float(x[0])).round(3).tolist()
+    [5.0, 3.0]
+    """
+    thr = as_signal(thresholds, "thresholds")
+    z = np.full(thr.size, float(x_first))
+    for _ in range(PERIODIC_PASSES):
+        before = z.copy()
+        for xb, _, _ in blocks():
+            if xb.size:
+                z = history_state(xb, thr, z)
+        if np.array_equal(z, before):
+            break
+    return z
+
+
 def block_dt(
     t: FloatArray | None, start: int, stop: int, t_previous: float | None
 ) -> FloatArray | None:

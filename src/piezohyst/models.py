@@ -67,7 +67,9 @@ from .identification import (
     array_blocks,
     block_dt,
     default_thresholds,
+    history_state,
     identify,
+    periodic_state,
     term_columns,
     without_time,
 )
@@ -107,6 +109,37 @@ __all__ = [
 ]
 
 GROWTH_TERMS = ("integral", "time", "abs_integral")
+
+
+@dataclass(frozen=True)
+class History:
+    """The input an actuator saw before a record: its operators start where it left them.
+
+    Attributes
+    ----------
+    input : ndarray
+        The earlier input (V), from rest at its first sample.
+
+    Examples
+    --------
+    >>> import numpy as np, piezohyst as ph
+    >>> before = np.array([0.0, 100.0, 40.0])
+    >>> h = ph.PIHysteresis([0.0, 20.0], [1e-8, 5e-9])
+    >>> model = ph.ClassicalPI.from_operator(h)
+    >>> x = np.array([40.0, 60.0])
+    >>> model.predict(x, state=ph.History(before)).tolist() == h.predict(
+    ...     np.concatenate([before, x]))[3:].tolist()
+    True
+    """
+
+    input: FloatArray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "input", as_signal(self.input, "History.input"))
+
+
+#: What a fit or a prediction may start from: "rest" (None), "periodic", a History, or states
+InitialState = str | History | ArrayLike | None
 
 
 @dataclass(frozen=True)
@@ -506,7 +539,7 @@ class HysteresisModel:
         y: ArrayLike,
         t: ArrayLike | None = None,
         *,
-        initial_state: ArrayLike | None = None,
+        initial_state: InitialState = None,
     ) -> Self:
         """Identify the core and every term jointly from input ``x`` and output ``y``.
 
@@ -519,10 +552,14 @@ class HysteresisModel:
         t : array_like, shape (N,), optional
             Sample times (s), strictly increasing, may be non-uniform. Required
             when a term is rate dependent; checked and otherwise unused.
-        initial_state : array_like, shape (n,), optional
-            Operator states (V) before the first sample when the record
-            continues a known history (:func:`~piezohyst.identification.history_state`);
-            default: at rest at ``x[0]``.
+        initial_state : {"rest", "periodic"}, History or array_like, optional
+            Where the operators stand before the first sample. ``"rest"``
+            (default): at rest at ``x[0]``. ``"periodic"``: the record is one
+            period (or whole periods) of a periodic drive that had been
+            running, so they start in the periodic steady state (the record
+            run again and again until its states repeat) — for a record that
+            starts mid-cycle. A :class:`History`: the input before the
+            record. An array: the operator states (V) themselves.
 
         Returns
         -------
@@ -789,7 +826,7 @@ class HysteresisModel:
         return best_dyn, mode
 
     def fit_blocks(
-        self, blocks: Blocks, *, timed: bool = True, initial_state: ArrayLike | None = None
+        self, blocks: Blocks, *, timed: bool = True, initial_state: InitialState = None
     ) -> Self:
         """Identify from a record read block by block: memory does not grow with its length.
 
@@ -841,7 +878,7 @@ class HysteresisModel:
         self.input_dynamics_ = InputDynamics()
         return self
 
-    def _fit(self, blocks: Blocks, initial_state: ArrayLike | None, timed: bool) -> Summary:
+    def _fit(self, blocks: Blocks, initial_state: InitialState, timed: bool) -> Summary:
         params = self.check_params()
         sm = Summary.of(blocks)
         if not sm.x_max - sm.x_min > 1e-12 * max(abs(sm.x_min), abs(sm.x_max), 1e-300):
@@ -857,7 +894,7 @@ class HysteresisModel:
         rate = any(term.rate_dependent for term in terms)
         if rate and not timed:
             as_time(None, sm.n, required=True, owner=type(self).__name__)  # raises
-        z0 = self._initial_operators(thr, sm.x_first, initial_state)
+        z0 = self._initial_operators(thr, sm.x_first, initial_state, blocks)
         self._solve(PlayCore(thr), terms, subsets, blocks if rate else without_time(blocks), sm, z0)
         self.input_range_ = (sm.x_min, sm.x_max)
         self.max_slew_rate_ = sm.max_slew_rate
@@ -900,10 +937,24 @@ class HysteresisModel:
             )
 
     def _initial_operators(
-        self, thr: FloatArray, x_first: float, initial_state: ArrayLike | None
+        self,
+        thr: FloatArray,
+        x_first: float,
+        initial_state: InitialState,
+        blocks: Blocks | None = None,
     ) -> FloatArray:
-        if initial_state is None:
+        if initial_state is None or (isinstance(initial_state, str) and initial_state == "rest"):
             return np.full(thr.size, x_first)
+        if isinstance(initial_state, str):
+            if initial_state != "periodic" or blocks is None:
+                msg = (
+                    "'initial_state' must be 'rest', 'periodic', a History, or operator "
+                    f"states. Got {initial_state!r}."
+                )
+                raise ParameterError(msg)
+            return periodic_state(blocks, thr, x_first)
+        if isinstance(initial_state, History):
+            return history_state(initial_state.input, thr)
         z0 = as_signal(initial_state, "initial_state")
         if z0.size != thr.size:
             msg = f"'initial_state' must hold one state per operator ({thr.size}). Got {z0.size}."
@@ -962,7 +1013,7 @@ class HysteresisModel:
         y: FloatArray,
         t: FloatArray | None,
         summary: Summary,
-        initial_state: ArrayLike | None,
+        initial_state: InitialState,
     ) -> bool:
         """Optional nonlinear refinement after the linear solve; True if it changed the model."""
         return False
@@ -1097,6 +1148,45 @@ class HysteresisModel:
         """
         return self.propagate(history, t).state
 
+    def _named_start(
+        self, state: str | History, xs: FloatArray, ts: FloatArray | None
+    ) -> ModelState | None:
+        """ "rest", "periodic" or a History as a start state for the input ``xs``.
+
+        Growth terms start at rest (their integrals count from the record's
+        start); input dynamics, when the model has them, settle over the same
+        passes as the operators.
+        """
+        thr = self.operator_.thresholds
+        x0 = float(xs[0])
+        dyn = self.input_dynamics_
+        if isinstance(state, History):
+            z = history_state(state.input, thr)
+        elif state == "rest":
+            return None
+        elif state == "periodic":
+            if dyn.active:
+                assert ts is not None
+                dt = block_dt(ts, 0, ts.size, None)
+                assert dt is not None
+                dt[0] = float(np.median(np.diff(ts))) if ts.size > 1 else 0.0  # the wrap
+                inner = dyn.rest_state(x0)
+                u = xs
+                for _ in range(2):  # the lag settles into the period, then the operators
+                    u, inner = dyn.apply(xs, dt, inner)
+                z = periodic_state(array_blocks(u, u, None), thr, float(u[0]))
+                terms = tuple(term.rest_state(x0) for term in self.terms_)
+                out = np.full(2, np.nan) if self.output_dynamics_.active else np.zeros(0)
+                return ModelState(z, terms, None, inner, out)
+            z = periodic_state(array_blocks(xs, xs, None), thr, x0)
+        else:
+            msg = (
+                "'state' must be a ModelState, operator states, 'rest', 'periodic' or a "
+                f"History. Got {state!r}."
+            )
+            raise ParameterError(msg)
+        return self._start(z, x0)
+
     def _start(self, state: ModelState | ArrayLike | None, x0: float) -> ModelState:
         n = self.operator_.n_operators
         dyn = self.input_dynamics_
@@ -1150,7 +1240,7 @@ class HysteresisModel:
         self,
         x: ArrayLike,
         t: ArrayLike | None = None,
-        state: ModelState | ArrayLike | None = None,
+        state: ModelState | InitialState = None,
     ) -> Propagation[ModelState]:
         """Output and final state; chunks, each passed the last state, equal one call.
 
@@ -1161,9 +1251,13 @@ class HysteresisModel:
         t : array_like, shape (N,), optional
             Times (s); required by rate-dependent models, continuing after
             ``state.t_last``.
-        state : ModelState or array_like, optional
-            Where to start: a :class:`ModelState`, or the operator states alone
-            (V; terms at rest). Default: the model's initial state.
+        state : ModelState, {"rest", "periodic"}, History or array_like, optional
+            Where to start: a :class:`ModelState`; the operator states alone
+            (V; terms at rest); ``"periodic"``, the periodic steady state of
+            ``x`` run as one period of a periodic drive (for a record that
+            starts mid-cycle); a :class:`History` of earlier input; or
+            ``"rest"``, at rest at ``x[0]``. Default: the model's initial
+            state (where its training record started).
 
         Returns
         -------
@@ -1176,7 +1270,7 @@ class HysteresisModel:
         self,
         x: ArrayLike,
         t: ArrayLike | None,
-        state: ModelState | ArrayLike | None,
+        state: ModelState | InitialState,
         *,
         removed_only: bool,
     ) -> Propagation[ModelState]:
@@ -1184,7 +1278,12 @@ class HysteresisModel:
         xs = as_signal(x, "x", allow_empty=True)
         rate = self.rate_dependent_
         ts = as_time(t, xs.size, required=rate and xs.size > 0, owner=type(self).__name__)
-        st = self._start(state, float(xs[0]) if xs.size else 0.0)
+        start: ModelState | ArrayLike | None
+        if isinstance(state, History | str):
+            start = self._named_start(state, xs, ts) if xs.size else None
+        else:
+            start = state
+        st = self._start(start, float(xs[0]) if xs.size else 0.0)
         if xs.size == 0:
             return Propagation(xs.copy(), st)
         if rate and ts is not None and st.t_last is not None and ts[0] <= st.t_last:
@@ -1258,7 +1357,7 @@ class HysteresisModel:
         return plan
 
     def predict(
-        self, x: ArrayLike, t: ArrayLike | None = None, state: ModelState | ArrayLike | None = None
+        self, x: ArrayLike, t: ArrayLike | None = None, state: ModelState | InitialState = None
     ) -> FloatArray:
         """Modelled output for input ``x`` (see :meth:`propagate`).
 
@@ -1268,7 +1367,7 @@ class HysteresisModel:
             Input (V).
         t : array_like, shape (N,), optional
             Times (s), required by rate-dependent models.
-        state : ModelState or array_like, optional
+        state : ModelState, {"rest", "periodic"}, History or array_like, optional
             Start state; default the model's initial state.
 
         Returns
@@ -1944,7 +2043,7 @@ class GeneralizedPI(HysteresisModel):
         y: FloatArray,
         t: FloatArray | None,
         summary: Summary,
-        initial_state: ArrayLike | None,
+        initial_state: InitialState,
     ) -> bool:
         """Nonlinear least squares over the thresholds, the linear solve inside."""
         if not self.optimize_thresholds or self.operator_.n_operators < 2:
@@ -1962,7 +2061,7 @@ class GeneralizedPI(HysteresisModel):
             thr = np.concatenate([[0.0], np.cumsum(np.exp(logs) * span)])
             if thr[-1] >= span:  # a play wider than the range never reverses
                 return 1e300
-            z0 = self._initial_operators(thr, float(x[0]), initial_state)
+            z0 = self._initial_operators(thr, float(x[0]), initial_state, blocks)
             self._solve(PlayCore(thr), terms, None, blocks, summary, z0)
             return rmse(self.predict(x, t=t_fit), y) / span
 

@@ -43,7 +43,7 @@ from .io import (
 )
 from .leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
 from .metrics import hysteresis_width, nrmse, rmse
-from .models import HysteresisModel, ModelState, model_class
+from .models import HysteresisModel, InitialState, ModelState, model_class
 from .persistence import load_model
 from .selfsensing import LoopSettings
 from .simulation import DEFAULT_PRESET, PRESETS, Bench, BenchRecord, run_loop, simulate
@@ -174,6 +174,7 @@ def fit_file(
     creep: Sequence[float] = (),
     input_dynamics: str = "none",
     output_dynamics: str = "none",
+    initial_state: str = "rest",
     force: bool = False,
     progress: Progress = None,
 ) -> HysteresisModel:
@@ -199,6 +200,10 @@ def fit_file(
     input_dynamics, output_dynamics : str
         Delay and lag between command and piezo, mode between hysteresis and
         output (see :class:`~piezohyst.models.HysteresisModel`).
+    initial_state : {"rest", "periodic"}
+        Where the operators start: at rest, or (a record that is one period of
+        a periodic drive, starting mid-cycle) in the periodic steady state. A
+        window after ``t_start`` starts from the input before it either way.
     force : bool
         Replace an existing ``out`` that piezohyst did not write.
     progress : callable, optional
@@ -235,20 +240,22 @@ def fit_file(
         rec = (data_spec or DataSpec()).read(data, progress=progress)
         w = rec.window
         assert rec.y is not None
-        fitted_dyn: HysteresisModel = estimator.fit(rec.x[w], rec.y[w], t=rec.t[w])
+        fitted_dyn: HysteresisModel = estimator.fit(
+            rec.x[w], rec.y[w], t=rec.t[w], initial_state=initial_state
+        )
         if out is not None:
             fitted_dyn.save(out)
         return fitted_dyn
     passes = _Passes(progress)
     window = _window_blocks(stream, passes)
-    initial_state = None
+    start: InitialState = initial_state
     if math.isfinite(stream.t_start):  # the window continues a known input history
         thresholds = default_thresholds(
             Summary.of(window).x_range, check_int(operators, "operators", "fit", 1, 1000)
         )
         estimator = cls(**{**settings, "thresholds": thresholds})
-        initial_state = _history(stream, thresholds, passes.tick())
-    fitted: HysteresisModel = estimator.fit_blocks(window, initial_state=initial_state)
+        start = _history(stream, thresholds, passes.tick())
+    fitted: HysteresisModel = estimator.fit_blocks(window, initial_state=start)
     if out is not None:
         fitted.save(out)
     return fitted
