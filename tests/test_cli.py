@@ -309,3 +309,14 @@ def test_fit_from_the_periodic_state(tmp_path: Path) -> None:
         assert res.exit_code == 0, res.output
         errors.append(ph.load_model(out).nrmse_)
     assert errors[1] < 0.5 * errors[0]
+    # the same period predicted from its periodic state by the periodic model
+    nrmse = []
+    for start in ("model", "periodic"):
+        res = run("predict", tmp_path / "periodic.json", data, "--initial-state", start,
+                  "-o", tmp_path / f"pred-{start}.csv")  # fmt: skip
+        assert res.exit_code == 0, res.output
+        nrmse.append(float(res.output.split("NRMSE ")[1].split(" %")[0]))
+    assert nrmse[1] == pytest.approx(nrmse[0], rel=1e-6)  # it was identified periodic
+    res = run("predict", tmp_path / "rest.json", data, "--initial-state", "periodic",
+              "-o", tmp_path / "p3.csv")  # fmt: skip
+    assert res.exit_code == 0, res.output

@@ -577,12 +577,26 @@ def fit(
 @main.command()
 @click.argument("model", type=EXISTING)
 @click.argument("data", type=EXISTING)
+@click.option(
+    "--initial-state",
+    type=click.Choice(["model", "rest", "periodic"]),
+    default="model",
+    show_default=True,
+    help="Where the model starts: its training record's start, at rest, or (DATA is one "
+    "period of a drive already running) the periodic steady state.",
+)
 @_data_options
 @OUT_FILE
 @FORCE
 @click.pass_obj
 def predict(
-    ctx: Context, model: Path, data: Path, data_spec: DataSpec, out: Path, force: bool
+    ctx: Context,
+    model: Path,
+    data: Path,
+    initial_state: str,
+    data_spec: DataSpec,
+    out: Path,
+    force: bool,
 ) -> None:
     """Predict the output of MODEL for the input in DATA; write time,predicted[,measured].
 
@@ -596,7 +610,13 @@ def predict(
         cols: Prediction = _run(
             ctx,
             lambda: predict_file(
-                model, data, out, data_spec=data_spec, force=force, progress=progress
+                model,
+                data,
+                out,
+                data_spec=data_spec,
+                initial_state=initial_state,
+                force=force,
+                progress=progress,
             ),
         )
     if math.isfinite(cols.rmse):

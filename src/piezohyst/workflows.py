@@ -28,7 +28,7 @@ from ._validation import FloatArray, check_float, check_int
 from .compensator import Compensator, CompensatorSettings
 from .errors import DataFileError, OverwriteError, ParameterError
 from .export import Precision, c_paths, write_c
-from .identification import Blocks, Summary, default_thresholds, history_state
+from .identification import Blocks, Summary, default_thresholds, history_state, periodic_state
 from .io import (
     DataSpec,
     RecordingStream,
@@ -394,6 +394,7 @@ def predict_file(
     out: PathLike,
     *,
     data_spec: DataSpec | None = None,
+    initial_state: str = "model",
     force: bool = False,
     progress: Progress = None,
 ) -> Prediction:
@@ -401,10 +402,17 @@ def predict_file(
 
     The record streams through block by block, the model's state carried, so
     memory does not grow with its length. The model runs from the record's
-    first sample: a window's start has a history. ``force`` replaces an
-    existing file piezohyst did not write (see :func:`guard_outputs`);
-    ``progress`` is called with the rows read so far.
+    first sample: a window's start has a history. ``initial_state`` is
+    ``"model"`` (where the training record started), ``"rest"`` (at rest at
+    the first sample) or ``"periodic"`` (the record is one period of a drive
+    that was already running: the periodic steady state, found in extra
+    passes over the file). ``force`` replaces an existing file piezohyst did
+    not write (see :func:`guard_outputs`); ``progress`` is called with the
+    rows read so far.
     """
+    if initial_state not in ("model", "rest", "periodic"):
+        msg = f"initial_state must be 'model', 'rest' or 'periodic'. Got {initial_state!r}."
+        raise ParameterError(msg)
     guard_outputs([out], [model_path, data], force=force)
     model = _load(model_path)
     stream = (data_spec or DataSpec()).open(data, output_required=False)
@@ -413,9 +421,27 @@ def predict_file(
         _check_measured_unit(stream.units[1], model, data)
     sse, lo, hi = 0.0, math.inf, -math.inf
 
+    start: ModelState | FloatArray | None = None
+    if initial_state != "model":
+        if model.input_dynamics_.active and initial_state == "periodic":
+            msg = (
+                "a periodic start over a file is for models without input dynamics; "
+                "read the record and call model.predict(x, t, state='periodic')"
+            )
+            raise ParameterError(msg)
+        first_x = next(iter(stream.blocks())).x[0]
+        if initial_state == "rest":
+            start = np.full(model.operator_.n_operators, float(first_x))
+        else:
+            start = periodic_state(
+                lambda: ((b.x, b.x, None) for b in stream.blocks()),
+                model.operator_.thresholds,
+                float(first_x),
+            )
+
     def rows() -> Iterator[dict[str, FloatArray]]:
         nonlocal sse, lo, hi
-        state: ModelState | None = None
+        state: ModelState | FloatArray | None = start
         first = last = math.nan
         written = 0
         for b in stream.blocks(progress):
