@@ -373,6 +373,29 @@ OUT_FILE_JSON = click.option(
 EXISTING = click.Path(exists=False, dir_okay=False, path_type=Path)
 
 
+def _model_options(model_help: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """--model and --operators, shared by fit and fit-many."""
+
+    def decorate(fn: Callable[..., Any]) -> Callable[..., Any]:
+        fn = click.option(
+            "--operators",
+            type=click.IntRange(1, 1000),
+            default=10,
+            show_default=True,
+            help="Play operators, the linear one included.",
+        )(fn)
+        return click.option(
+            "--model",
+            "model_name",
+            type=click.Choice(model_names()),
+            default="active-pi",
+            show_default=True,
+            help=model_help,
+        )(fn)
+
+    return decorate
+
+
 # ---------------------------------------------------------------------- commands
 @main.command()
 @click.option("--preset", default="T226-H4-203X", show_default=True, help="Bench preset.")
@@ -461,21 +484,7 @@ def describe(model: HysteresisModel) -> str:
 
 @main.command()
 @click.argument("data", type=EXISTING)
-@click.option(
-    "--model",
-    "model_name",
-    type=click.Choice(model_names()),
-    default="active-pi",
-    show_default=True,
-    help="Model to identify.",
-)
-@click.option(
-    "--operators",
-    type=click.IntRange(1, 1000),
-    default=10,
-    show_default=True,
-    help="Play operators, the linear one included.",
-)
+@_model_options("Model to identify.")
 @click.option(
     "--growth",
     default="auto",
@@ -751,18 +760,7 @@ def report(
     type=click.Path(file_okay=False, path_type=Path),
     help="Folder for one model per unit (<unit>.json) and the summary.",
 )
-@click.option(
-    "--model",
-    "model_name",
-    type=click.Choice(model_names()),
-    default="active-pi",
-    show_default=True,
-    help="Model to identify for every unit.",
-)
-@click.option(
-    "--operators", type=click.IntRange(1, 1000), default=10, show_default=True,
-    help="Play operators.",
-)  # fmt: skip
+@_model_options("Model to identify for every unit.")
 @click.option(
     "--channel",
     "channels",
