@@ -193,6 +193,18 @@ def test_compensation_at_40_hz_on_the_lagged_bench(
 CC = shutil.which("cc") or shutil.which("gcc")
 
 
+def _compile(c_path: Path, folder: Path) -> Path:
+    """The exported source and the test's main.c, strictly, as an executable."""
+    exe = folder / "c"
+    assert CC is not None
+    subprocess.run(
+        [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", str(c_path),
+         str(folder / "main.c"), "-o", str(exe)],
+        check=True, capture_output=True, text=True,
+    )  # fmt: skip
+    return exe
+
+
 @pytest.mark.skipif(CC is None, reason="no C compiler")
 def test_exported_c_inverts_the_lag_like_python(tmp_path: Path) -> None:
     model = model_with(
@@ -207,12 +219,7 @@ def test_exported_c_inverts_the_lag_like_python(tmp_path: Path) -> None:
         'while(fgets(l,sizeof l,stdin)){printf("%.17g\\n",(double)lagc_step(&s,strtod(l,NULL)));}'
         'printf("%lu %lu\\n",s.nonfinite,s.saturated);return 0;}\n'
     )
-    exe = tmp_path / "c"
-    subprocess.run(
-        [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", str(c_path),
-         str(tmp_path / "main.c"), "-o", str(exe)],
-        check=True, capture_output=True, text=True,
-    )  # fmt: skip
+    exe = _compile(c_path, tmp_path)
     t = np.arange(2000) * DT
     targets = model.operator_.predict(70 + 60 * np.sin(2 * np.pi * 25 * t))
     targets[::101] = np.nan
@@ -310,12 +317,7 @@ def test_exported_c_inverts_the_mode_like_python(
         'printf("%.17g\\n",(double)modec_step(&s,(modec_real)d,(modec_real)n));}'
         'printf("%lu %lu\\n",s.nonfinite,s.saturated);return 0;}\n'
     )
-    exe = tmp_path / "c"
-    subprocess.run(
-        [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", str(c_path),
-         str(tmp_path / "main.c"), "-o", str(exe)],
-        check=True, capture_output=True, text=True,
-    )  # fmt: skip
+    exe = _compile(c_path, tmp_path)
     t = np.arange(1500) * DT
     top, bottom = (float(q) for q in full.operator_.predict(np.array([140.0, 0.0])))
     desired = bottom + (top - bottom) * (0.3 + 0.4 * np.sin(2 * np.pi * 40 * t) ** 2)

@@ -843,8 +843,9 @@ class HysteresisModel:
             across blocks, as the caller checks).
         timed : bool, default True
             Whether the blocks carry times.
-        initial_state : array_like, shape (n,), optional
-            As for :meth:`fit`.
+        initial_state : {"rest", "periodic"}, History or array_like, optional
+            As for :meth:`fit` (``"periodic"`` reads the blocks until the
+            operator states repeat).
 
         Returns
         -------
