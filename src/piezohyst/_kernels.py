@@ -335,14 +335,20 @@ ST_SATURATED = -1  # commands clipped to the limits
 # constants (s), gains, a = 1 - exp(-dt / tau) for the loop's dt.
 
 
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _inverse_states_at(c, tables, config, state):  # type: ignore[no-untyped-def]
+    """``inverse_states`` of channel ``c`` of stacked arrays (no views: see ``_step_at``)."""
+    n = tables.shape[2]
+    tail = 0.0
+    for i in range(n - 1, -1, -1):
+        state[c, n + i] = config[c, CFG_OFFSET] + tables[c, TAB_S, i] * state[c, i] + tail
+        tail += tables[c, TAB_W, i] * state[c, i]
+
+
 @njit(cache=True, fastmath=FASTMATH)
 def inverse_states(tables, config, state):  # type: ignore[no-untyped-def]
     """zeta_i = c + S_i z_i + sum_{j>i} w_j z_j (eq. 18's state map), from the forward states."""
-    n = tables.shape[1]
-    tail = 0.0
-    for i in range(n - 1, -1, -1):
-        state[n + i] = config[CFG_OFFSET] + tables[TAB_S, i] * state[i] + tail
-        tail += tables[TAB_W, i] * state[i]
+    _inverse_states_at(0, tables[np.newaxis], config[np.newaxis], state[np.newaxis])
 
 
 @njit(cache=True, fastmath=FASTMATH)
@@ -369,6 +375,62 @@ def _limit(v, last, config, state):  # type: ignore[no-untyped-def]
     return v, acted
 
 
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _step_at(c, desired, tables, config, state):  # type: ignore[no-untyped-def]
+    """``compensator_step`` for channel ``c`` of stacked arrays: tables (C, 5, n), config (C, 9),
+    state (C, m).
+
+    Indexed, never sliced: a view per channel and call costs an atomic reference count on
+    the shared array, and in a parallel bank every thread fought over that one count (the
+    bank step ran 1.5x slower for it).
+    """
+    n = tables.shape[2]
+    end = state.shape[1]
+    last = state[c, end + ST_LAST]
+    if not math.isfinite(desired):  # NaN or +-inf: hold the last safe command
+        state[c, end + ST_NONFINITE] += 1.0
+        return last
+    q = config[c, CFG_REFERENCE] + desired * config[c, CFG_INV_GAIN]
+    # beyond +-bound nothing is reachable: clamping keeps huge values from overflowing the
+    # inverse sums (inf - inf = NaN) while they still saturate on the correct side
+    off = config[c, CFG_OFFSET]
+    q = min(max(q, off - config[c, CFG_BOUND]), off + config[c, CFG_BOUND])
+    x = config[c, CFG_INV_OFFSET]
+    for i in range(n):
+        zeta = min(max(state[c, n + i], q - tables[c, TAB_RI, i]), q + tables[c, TAB_RI, i])
+        state[c, n + i] = zeta
+        x += tables[c, TAB_WI, i] * zeta
+    if not math.isfinite(x):  # belt and braces: never emit a non-finite command
+        state[c, end + ST_NONFINITE] += 1.0
+        _inverse_states_at(c, tables, config, state)
+        return last
+    # inline, not _limit(): a helper returning a tuple cost a third of process() (measured)
+    v = x
+    limited = False
+    lo = config[c, CFG_V_MIN]
+    hi = config[c, CFG_V_MAX]
+    if v < lo or v > hi:
+        # count real overshoots, not a limit reached exactly but for rounding
+        tol = 1e-12 * (hi - lo)
+        if v < lo - tol or v > hi + tol:
+            state[c, end + ST_SATURATED] += 1.0
+        v = min(max(v, lo), hi)
+        limited = True
+    step = config[c, CFG_MAX_STEP]
+    if v > last + step:
+        v = last + step
+        limited = True
+    elif v < last - step:
+        v = last - step
+        limited = True
+    for i in range(n):
+        state[c, i] = min(max(state[c, i], v - tables[c, TAB_R, i]), v + tables[c, TAB_R, i])
+    if limited:
+        _inverse_states_at(c, tables, config, state)
+    state[c, end + ST_LAST] = v
+    return v
+
+
 @njit(cache=True, fastmath=FASTMATH)
 def compensator_step(desired, tables, config, state):  # type: ignore[no-untyped-def]
     """One feedforward command (V) for one desired value, analytic inverse; updates ``state``.
@@ -378,51 +440,7 @@ def compensator_step(desired, tables, config, state):  # type: ignore[no-untyped
     part, and then the inverse states are rebuilt from the forward ones, so the
     next inversion starts from the actuator's real state.
     """
-    n = tables.shape[1]
-    end = state.shape[0]
-    last = state[end + ST_LAST]
-    if not math.isfinite(desired):  # NaN or +-inf: hold the last safe command
-        state[end + ST_NONFINITE] += 1.0
-        return last
-    q = config[CFG_REFERENCE] + desired * config[CFG_INV_GAIN]
-    # beyond +-bound nothing is reachable: clamping keeps huge values from overflowing the
-    # inverse sums (inf - inf = NaN) while they still saturate on the correct side
-    c = config[CFG_OFFSET]
-    q = min(max(q, c - config[CFG_BOUND]), c + config[CFG_BOUND])
-    x = config[CFG_INV_OFFSET]
-    for i in range(n):
-        zeta = min(max(state[n + i], q - tables[TAB_RI, i]), q + tables[TAB_RI, i])
-        state[n + i] = zeta
-        x += tables[TAB_WI, i] * zeta
-    if not math.isfinite(x):  # belt and braces: never emit a non-finite command
-        state[end + ST_NONFINITE] += 1.0
-        inverse_states(tables, config, state)
-        return last
-    # inline, not _limit(): a helper returning a tuple cost a third of process() (measured)
-    v = x
-    limited = False
-    lo = config[CFG_V_MIN]
-    hi = config[CFG_V_MAX]
-    if v < lo or v > hi:
-        # count real overshoots, not a limit reached exactly but for rounding
-        tol = 1e-12 * (hi - lo)
-        if v < lo - tol or v > hi + tol:
-            state[end + ST_SATURATED] += 1.0
-        v = min(max(v, lo), hi)
-        limited = True
-    step = config[CFG_MAX_STEP]
-    if v > last + step:
-        v = last + step
-        limited = True
-    elif v < last - step:
-        v = last - step
-        limited = True
-    for i in range(n):
-        state[i] = min(max(state[i], v - tables[TAB_R, i]), v + tables[TAB_R, i])
-    if limited:
-        inverse_states(tables, config, state)
-    state[end + ST_LAST] = v
-    return v
+    return _step_at(0, desired, tables[np.newaxis], config[np.newaxis], state[np.newaxis])
 
 
 # Input dynamics of a compensator (analytic path): command -> [fractional delay as a lag A]
@@ -827,7 +845,7 @@ def controller_process(desired, measured, tables, config, state, ctl, cs, out): 
 def bank_step(desired, tables, config, state, out):  # type: ignore[no-untyped-def]
     """One command per channel: ``compensator_step`` on every row, across threads."""
     for c in prange(desired.shape[0]):
-        out[c] = compensator_step(desired[c], tables[c], config[c], state[c])
+        out[c] = _step_at(c, desired[c], tables, config, state)
 
 
 BANK_GROUP = 128  # channels per task of bank_process
