@@ -739,14 +739,84 @@ CS_Y0 = 17  # the integral where the window's regression starts (sums relative t
 CS_SIZE = 18
 
 
-@njit(cache=True, fastmath=FASTMATH)
-def _hold_window_reset(cs):  # type: ignore[no-untyped-def]
-    cs[CS_HOLD_N] = 0.0
-    cs[CS_SX] = 0.0
-    cs[CS_SY] = 0.0
-    cs[CS_SXX] = 0.0
-    cs[CS_SXY] = 0.0
-    cs[CS_SM] = 0.0
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _hold_window_reset_at(c, cs):  # type: ignore[no-untyped-def]
+    cs[c, CS_HOLD_N] = 0.0
+    cs[c, CS_SX] = 0.0
+    cs[c, CS_SY] = 0.0
+    cs[c, CS_SXX] = 0.0
+    cs[c, CS_SXY] = 0.0
+    cs[c, CS_SM] = 0.0
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _controller_step_at(c, desired, measured, tables, config, state, ctl, cs):  # type: ignore[no-untyped-def]
+    """``controller_step`` for channel ``c`` of stacked arrays (indexed: see ``_step_at``)."""
+    n = tables.shape[2]
+    end = state.shape[1]
+    last = state[c, end + ST_LAST]
+    if math.isfinite(measured):
+        cs[c, CS_Q_LAST] = measured
+    if cs[c, CS_STARTED] > 0.0:  # leakage over the sample the last command was held
+        current = ctl[c, CTL_G0] * last + ctl[c, CTL_G1] * last * abs(last) * ctl[c, CTL_INV_SCALE]
+        current += cs[c, CS_BIAS] - ctl[c, CTL_DISCHARGE] * cs[c, CS_Q_LAST]
+        cs[c, CS_LEAK] += current * ctl[c, CTL_DT]
+    e = 0.0
+    if math.isfinite(measured):
+        qc = measured - cs[c, CS_LEAK]
+        if cs[c, CS_STARTED] == 0.0:
+            y = config[c, CFG_OFFSET]
+            for i in range(n):
+                y += tables[c, TAB_W, i] * state[c, i]
+            cs[c, CS_FRAME] = y - qc
+            cs[c, CS_STARTED] = 1.0
+        qc += cs[c, CS_FRAME]
+        if math.isfinite(cs[c, CS_D_PREV]):
+            e = cs[c, CS_D_PREV] - qc
+    else:
+        cs[c, CS_FAULTS] += 1.0
+    cs[c, CS_ERROR] = e
+    if not math.isfinite(desired):  # hold the last safe command
+        state[c, end + ST_NONFINITE] += 1.0
+        cs[c, CS_D_PREV] = math.nan
+        _hold_window_reset_at(c, cs)
+        return last
+    d = ctl[c, CTL_REF] + desired * ctl[c, CTL_INV_GAIN]
+    integral = cs[c, CS_INTEGRAL] + ctl[c, CTL_KI] * e
+    u = d + ctl[c, CTL_KP] * e + integral
+    v = _step_at(c, u, tables, config, state)
+    y = config[c, CFG_OFFSET]
+    for i in range(n):
+        y += tables[c, TAB_W, i] * state[c, i]
+    delivered = abs(y - u) <= ctl[c, CTL_TOL]
+    if delivered:
+        cs[c, CS_INTEGRAL] = integral
+    cs[c, CS_D_PREV] = d
+    if ctl[c, CTL_REFRESH] > 0.0:  # the integral's drift on a hold is the leakage error
+        if delivered and abs(d - cs[c, CS_HOLD_REF]) <= ctl[c, CTL_HOLD_TOL]:
+            cs[c, CS_HOLD_N] += 1.0
+            k = cs[c, CS_HOLD_N]
+            if k > 0.25 * ctl[c, CTL_HOLD_SAMPLES]:  # after the loop settled on the hold
+                if cs[c, CS_SM] == 0.0:
+                    cs[c, CS_Y0] = cs[c, CS_INTEGRAL]
+                yi = cs[c, CS_INTEGRAL] - cs[c, CS_Y0]  # small numbers: no cancellation in the sums
+                cs[c, CS_SM] += 1.0
+                cs[c, CS_SX] += k
+                cs[c, CS_SY] += yi
+                cs[c, CS_SXX] += k * k
+                cs[c, CS_SXY] += k * yi
+            if k >= ctl[c, CTL_HOLD_SAMPLES]:
+                m = cs[c, CS_SM]
+                den = m * cs[c, CS_SXX] - cs[c, CS_SX] * cs[c, CS_SX]
+                if m > 2.0 and den > 0.0:
+                    slope = (m * cs[c, CS_SXY] - cs[c, CS_SX] * cs[c, CS_SY]) / den  # per sample
+                    cs[c, CS_BIAS] -= ctl[c, CTL_REFRESH] * slope / ctl[c, CTL_DT]
+                    cs[c, CS_REFRESHES] += 1.0
+                _hold_window_reset_at(c, cs)
+        else:
+            cs[c, CS_HOLD_REF] = d
+            _hold_window_reset_at(c, cs)
+    return v
 
 
 @njit(cache=True, fastmath=FASTMATH)
@@ -761,78 +831,25 @@ def controller_step(desired, measured, tables, config, state, ctl, cs):  # type:
     The integral only moves when the command delivered what was asked (not
     at a limit or the slew limit): anti-windup by conditional integration.
     """
-    n = tables.shape[1]
-    end = state.shape[0]
-    last = state[end + ST_LAST]
-    if math.isfinite(measured):
-        cs[CS_Q_LAST] = measured
-    if cs[CS_STARTED] > 0.0:  # leakage over the sample the last command was held
-        current = ctl[CTL_G0] * last + ctl[CTL_G1] * last * abs(last) * ctl[CTL_INV_SCALE]
-        current += cs[CS_BIAS] - ctl[CTL_DISCHARGE] * cs[CS_Q_LAST]
-        cs[CS_LEAK] += current * ctl[CTL_DT]
-    e = 0.0
-    if math.isfinite(measured):
-        qc = measured - cs[CS_LEAK]
-        if cs[CS_STARTED] == 0.0:
-            y = config[CFG_OFFSET]
-            for i in range(n):
-                y += tables[TAB_W, i] * state[i]
-            cs[CS_FRAME] = y - qc
-            cs[CS_STARTED] = 1.0
-        qc += cs[CS_FRAME]
-        if math.isfinite(cs[CS_D_PREV]):
-            e = cs[CS_D_PREV] - qc
-    else:
-        cs[CS_FAULTS] += 1.0
-    cs[CS_ERROR] = e
-    if not math.isfinite(desired):  # hold the last safe command
-        state[end + ST_NONFINITE] += 1.0
-        cs[CS_D_PREV] = math.nan
-        _hold_window_reset(cs)
-        return last
-    d = ctl[CTL_REF] + desired * ctl[CTL_INV_GAIN]
-    integral = cs[CS_INTEGRAL] + ctl[CTL_KI] * e
-    u = d + ctl[CTL_KP] * e + integral
-    v = compensator_step(u, tables, config, state)
-    y = config[CFG_OFFSET]
-    for i in range(n):
-        y += tables[TAB_W, i] * state[i]
-    delivered = abs(y - u) <= ctl[CTL_TOL]
-    if delivered:
-        cs[CS_INTEGRAL] = integral
-    cs[CS_D_PREV] = d
-    if ctl[CTL_REFRESH] > 0.0:  # the integral's drift on a hold is the leakage error
-        if delivered and abs(d - cs[CS_HOLD_REF]) <= ctl[CTL_HOLD_TOL]:
-            cs[CS_HOLD_N] += 1.0
-            k = cs[CS_HOLD_N]
-            if k > 0.25 * ctl[CTL_HOLD_SAMPLES]:  # after the loop settled on the hold
-                if cs[CS_SM] == 0.0:
-                    cs[CS_Y0] = cs[CS_INTEGRAL]
-                yi = cs[CS_INTEGRAL] - cs[CS_Y0]  # small numbers: no cancellation in the sums
-                cs[CS_SM] += 1.0
-                cs[CS_SX] += k
-                cs[CS_SY] += yi
-                cs[CS_SXX] += k * k
-                cs[CS_SXY] += k * yi
-            if k >= ctl[CTL_HOLD_SAMPLES]:
-                m = cs[CS_SM]
-                den = m * cs[CS_SXX] - cs[CS_SX] * cs[CS_SX]
-                if m > 2.0 and den > 0.0:
-                    slope = (m * cs[CS_SXY] - cs[CS_SX] * cs[CS_SY]) / den  # per sample
-                    cs[CS_BIAS] -= ctl[CTL_REFRESH] * slope / ctl[CTL_DT]
-                    cs[CS_REFRESHES] += 1.0
-                _hold_window_reset(cs)
-        else:
-            cs[CS_HOLD_REF] = d
-            _hold_window_reset(cs)
-    return v
+    return _controller_step_at(
+        0,
+        desired,
+        measured,
+        tables[np.newaxis],
+        config[np.newaxis],
+        state[np.newaxis],
+        ctl[np.newaxis],
+        cs[np.newaxis],
+    )
 
 
 @njit(cache=True, fastmath=FASTMATH)
 def controller_process(desired, measured, tables, config, state, ctl, cs, out):  # type: ignore[no-untyped-def]
     """``controller_step`` over a block of recorded samples."""
+    t3, c2, s2 = tables[np.newaxis], config[np.newaxis], state[np.newaxis]  # once, not per sample
+    ctl2, cs2 = ctl[np.newaxis], cs[np.newaxis]
     for k in range(desired.shape[0]):
-        out[k] = controller_step(desired[k], measured[k], tables, config, state, ctl, cs)
+        out[k] = _controller_step_at(0, desired[k], measured[k], t3, c2, s2, ctl2, cs2)
 
 
 # ---------------------------------------------------------------------------
@@ -890,9 +907,7 @@ def bank_process(desired, tables, config, state, out):  # type: ignore[no-untype
 def bank_controller_step(desired, measured, tables, config, state, ctl, cs, out):  # type: ignore[no-untyped-def]
     """One self-sensing command per channel: ``controller_step`` on every row, across threads."""
     for c in prange(desired.shape[0]):
-        out[c] = controller_step(
-            desired[c], measured[c], tables[c], config[c], state[c], ctl[c], cs[c]
-        )
+        out[c] = _controller_step_at(c, desired[c], measured[c], tables, config, state, ctl, cs)
 
 
 @njit(cache=True, parallel=True, fastmath=FASTMATH)
@@ -905,8 +920,8 @@ def bank_controller_process(desired, measured, tables, config, state, ctl, cs, o
         c1 = min(c0 + BANK_GROUP, channels)
         for k in range(m):
             for c in range(c0, c1):
-                out[k, c] = controller_step(
-                    desired[k, c], measured[k, c], tables[c], config[c], state[c], ctl[c], cs[c]
+                out[k, c] = _controller_step_at(
+                    c, desired[k, c], measured[k, c], tables, config, state, ctl, cs
                 )
 
 
