@@ -277,6 +277,51 @@ def pzt_periodic(data: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
+def boucwen(data: Path) -> str:
+    """The Bouc-Wen benchmark (force -> displacement, 750 Hz): PI with and without a mode."""
+    import h5py
+
+    folder = data / "boucwen_benchmark"
+    with h5py.File(folder / "train_dynonet_generated.h5", "r") as f:
+        u, y = f["multisine/u"][:, 0], f["multisine/y"][:, 0]
+        fs = float(np.ravel(f["multisine/fs"][()])[0])
+    with h5py.File(folder / "test_dynonet_h5copy.h5", "r") as f:
+        um, ym = np.ravel(f["multisine/u"][()]), np.ravel(f["multisine/y"][()])
+        us, ys = np.ravel(f["sinesweep/u"][()]), np.ravel(f["sinesweep/y"][()])
+    t = np.arange(u.size) / fs
+    print("Bouc-Wen benchmark: PI with and without a second-order mode")
+    lines = [
+        "### Bouc-Wen benchmark (nonlinearbenchmark.org; force → displacement, 750 Hz)",
+        "",
+        "A mass-spring system whose restoring force is hysteretic (NOTES.txt): the hysteresis "
+        "sits inside the mechanical feedback loop. Fitted on the generated 5-period multisine "
+        "(training set), simulated on the benchmark's test sets: the multisine period started "
+        "in its periodic steady state (two periods run, the second scored), the sine sweep from "
+        "rest. Figure of merit e_RMS in m. For scale (NOTES.txt): zero predictor 6.67e-4 / "
+        "6.64e-4, a linear ARX(4,4) 1.77e-4 / 1.65e-4, dynoNet 4.52e-5 (multisine).",
+        "",
+        "| model | multisine e_RMS | sweep e_RMS | fit time | notes |",
+        "|---|---|---|---|---|",
+    ]
+    for name, kw in (
+        ("classical PI", {}),
+        ("classical PI + second-order mode", {"output_dynamics": "second-order"}),
+    ):
+        began = time.perf_counter()
+        model = ph.ClassicalPI(20, input_unit="N", output_unit="m", **kw).fit(u, y, t=t)
+        sec = time.perf_counter() - began
+        two = np.tile(um, 2)
+        pm = model.predict(two, t=np.arange(two.size) / fs, state="periodic")[um.size :]
+        ps = model.predict(us, t=np.arange(us.size) / fs, state="rest")
+        e_m = float(np.sqrt(np.mean((pm - ym) ** 2)))
+        e_s = float(np.sqrt(np.mean((ps - ys) ** 2)))
+        mode = model.output_dynamics_
+        note = f"mode {mode.f0:.1f} Hz, damping {mode.zeta:.3f}" if mode.active else ""
+        print(f"  {name:35s} multisine {e_m:.3g} m  sweep {e_s:.3g} m  {note}")
+        lines.append(f"| {name} | **{e_m:.3g}** | **{e_s:.3g}** | {sec:.2f} s | {note} |")
+    return "\n".join(lines) + "\n"
+
+
 def rate(data: Path) -> str:
     """What a lag model absorbs on the two 1 Hz sets that log the *commanded* voltage."""
     from piezohyst.identification import block_dt
@@ -350,6 +395,7 @@ def main() -> None:
         pzt_creep(args.data),
         pzt_amplitudes(args.data),
         pzt_periodic(args.data),
+        boucwen(args.data),
         rate(args.data),
     ]
     header = (
@@ -385,8 +431,14 @@ def main() -> None:
   roughly halves its error for every model. The classical model, with no growth term to absorb
   the wrong start, gains most and is the best here.
 
-Not covered: the Bouc-Wen benchmark in `shared/data` is a dynamic (mass-spring) hysteresis
-that needs PI combined with second-order dynamics, which piezohyst does not offer yet.
+- **Bouc-Wen benchmark.** A play-operator model with a second-order mode after it (the
+  Hammerstein structure piezohyst identifies for a stage's resonance) cuts the error to a third
+  of the static model's, but stays slightly worse than a linear ARX model (1.93e-4 against
+  1.77e-4 m on the multisine) and far from models built for this system: here the hysteretic
+  force feeds back into the mass-spring dynamics, which a hysteresis-then-mode cascade cannot
+  represent (its mode comes out at 39.5 Hz and 9 % damping against the true 35.6 Hz and
+  1.1 %). A Bouc-Wen model with the dynamics around it is the right tool; it is not in
+  piezohyst yet.
 """
     text = header + "\n".join(sections) + reading
     args.out.write_text(text)
