@@ -10,8 +10,11 @@ from . import io, metrics, terms
 from ._version import __version__
 from .bank import ModelBank, load_bank
 from .compensator import BankCompensator, Compensator, CompensatorState
+from .differential import BoucWenHysteresis, DuhemHysteresis, Region
+from .differential_models import BoucWenModel, DuhemModel
 from .errors import (
     DataFileError,
+    ExtrapolationWarning,
     InsufficientDataError,
     ModelFileError,
     NonFiniteError,
@@ -46,11 +49,16 @@ __all__ = [
     "ActivePI",
     "BankCompensator",
     "BankController",
+    "BoucWenHysteresis",
+    "BoucWenModel",
     "ClassicalPI",
     "Compensator",
     "CompensatorState",
     "ControllerState",
     "DataFileError",
+    "DuhemHysteresis",
+    "DuhemModel",
+    "ExtrapolationWarning",
     "GeneralizedPI",
     "History",
     "HysteresisModel",
@@ -69,6 +77,7 @@ __all__ = [
     "ParameterError",
     "PiezohystError",
     "Propagation",
+    "Region",
     "SelfSensingController",
     "ShapeError",
     "Term",

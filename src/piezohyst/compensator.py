@@ -27,13 +27,16 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from . import _diffkernels as D
 from . import _kernels as K
 from ._validation import FloatArray, as_signal
 from .bank import ModelBank
+from .differential import DifferentialCore
 from .errors import ParameterError, ShapeError
+from .hysteresis import PIHysteresis
 from .models import HysteresisModel, InverseSpec
 
-__all__ = ["BankCompensator", "Compensator", "CompensatorState"]
+__all__ = ["BankCompensator", "Compensator", "CompensatorState", "CoreCompensator"]
 
 Domain = Literal["charge", "displacement"]
 
@@ -125,6 +128,8 @@ class Compensator:
     def __new__(cls, model: HysteresisModel | ModelBank, **kwargs: Any) -> Compensator:
         if isinstance(model, ModelBank):  # many channels: the bank's compensator
             return BankCompensator(model, **kwargs)  # type: ignore[return-value]
+        if cls is Compensator and _differential(model):  # a Duhem or Bouc-Wen core
+            return super().__new__(CoreCompensator)
         return super().__new__(cls)
 
     def __init__(
@@ -139,6 +144,81 @@ class Compensator:
         gain: float | None = None,
         allow_extrapolation: bool = False,
     ) -> None:
+        spec, max_step, inv_gain = self._settings(
+            model, v_min, v_max, slew_rate, sample_rate, domain, gain, allow_extrapolation
+        )
+        op = _play(spec)
+        if not op.is_invertible:
+            op.inverse()  # raises NotInvertibleError with the reason
+        dyn = spec.dynamics
+        if spec.lags is not None and sample_rate is None:
+            msg = "A model with creep needs the loop's sample_rate (Hz). Got sample_rate=None."
+            raise ParameterError(msg)
+        if dyn.active and not spec.analytic:
+            msg = (
+                "A model with input dynamics is compensated with the analytic inverse only: fit "
+                "it without asymmetry or creep terms."
+            )
+            raise ParameterError(msg)
+        #: True when eq. 18's analytic inverse runs (no Newton solve); fixed by the model
+        self.analytic = spec.analytic
+        self._plain = spec.analytic and not dyn.active and not self.mode.active
+        n = op.n_operators
+        self.tables = np.zeros((5, n))
+        self.tables[K.TAB_R] = op.thresholds
+        self.tables[K.TAB_W] = op.weights
+        self.config = np.zeros(K.CONFIG_SIZE)
+        self.config[K.CFG_OFFSET] = op.offset
+        self.config[K.CFG_V_MIN] = self.v_min
+        self.config[K.CFG_V_MAX] = self.v_max
+        self.config[K.CFG_MAX_STEP] = max_step
+        self.config[K.CFG_INV_GAIN] = inv_gain
+        self.config[K.CFG_STATIC_SCALE] = 1.0
+        if spec.analytic:
+            inv = op.inverse()
+            self.tables[K.TAB_S] = op.loading_slopes
+            self.tables[K.TAB_RI] = inv.thresholds
+            self.tables[K.TAB_WI] = inv.weights
+            self.config[K.CFG_INV_OFFSET] = inv.offset
+            reach = max(abs(self.v_min), abs(self.v_max)) + float(op.thresholds[-1])
+            self.config[K.CFG_BOUND] = 2.0 * float(np.abs(op.weights).sum()) * reach + 1.0
+            self.static = np.zeros((3, 0))
+            self.lags = np.zeros((3, 0))
+            n_aux = n
+        else:
+            st = spec.static
+            self.static = np.zeros((3, 0)) if st is None else np.vstack([st.knots, st.up, st.down])
+            if st is not None:
+                self.config[K.CFG_STATIC_SCALE] = st.scale
+            lg = spec.lags
+            if lg is None:
+                self.lags = np.zeros((3, 0))
+            else:
+                dt = 1.0 / float(sample_rate)  # type: ignore[arg-type]
+                self.lags = np.vstack([lg.taus, lg.gains, 1.0 - np.exp(-dt / lg.taus)])
+            n_aux = self.lags.shape[1]
+        self._state = np.zeros(n + n_aux + 3)
+        self._n_aux = n_aux
+        if domain == "displacement":  # displacement 0 = output at rest in the initial state
+            if spec.analytic:
+                self.config[K.CFG_REFERENCE] = op.offset + float(op.weights @ op.initial_state)
+            else:
+                self._set_forward(self._initial_forward())
+                self.config[K.CFG_REFERENCE] = self._output_now(float(op.initial_state[0]))
+        self.reset()
+
+    def _settings(
+        self,
+        model: HysteresisModel,
+        v_min: float,
+        v_max: float,
+        slew_rate: float | None,
+        sample_rate: float | None,
+        domain: Domain,
+        gain: float | None,
+        allow_extrapolation: bool,
+    ) -> tuple[InverseSpec, float, float]:
+        """The checks and settings every compensator shares; (spec, max step, inverse gain)."""
         inversion = getattr(model, "inversion", None)
         if not callable(inversion):
             msg = (
@@ -147,9 +227,6 @@ class Compensator:
             )
             raise ParameterError(msg)
         spec: InverseSpec = inversion()
-        op = spec.operator
-        if not op.is_invertible:
-            op.inverse()  # raises NotInvertibleError with the reason
         self.v_min = _finite_number(v_min, "v_min")
         self.v_max = _finite_number(v_max, "v_max")
         if not self.v_min < self.v_max:
@@ -189,9 +266,6 @@ class Compensator:
                 msg = "The 'gain' parameter of Compensator must be non-zero. Got 0."
                 raise ParameterError(msg)
             inv_gain = 1.0 / g
-        if spec.lags is not None and sample_rate is None:
-            msg = "A model with creep needs the loop's sample_rate (Hz). Got sample_rate=None."
-            raise ParameterError(msg)
         dyn = spec.dynamics
         if dyn.active and sample_rate is None:
             msg = (
@@ -199,56 +273,12 @@ class Compensator:
                 "Got sample_rate=None."
             )
             raise ParameterError(msg)
-        if dyn.active and not spec.analytic:
-            msg = (
-                "A model with input dynamics is compensated with the analytic inverse only: fit "
-                "it without asymmetry or creep terms."
-            )
-            raise ParameterError(msg)
         self.model = model
         self.spec = spec
-        #: True when eq. 18's analytic inverse runs (no Newton solve); fixed by the model
-        self.analytic = spec.analytic
         self.domain: Domain = domain
         self.gain = gain
         self.slew_rate = slew_rate
         self.sample_rate = sample_rate
-        n = op.n_operators
-        self.tables = np.zeros((5, n))
-        self.tables[K.TAB_R] = op.thresholds
-        self.tables[K.TAB_W] = op.weights
-        self.config = np.zeros(K.CONFIG_SIZE)
-        self.config[K.CFG_OFFSET] = op.offset
-        self.config[K.CFG_V_MIN] = self.v_min
-        self.config[K.CFG_V_MAX] = self.v_max
-        self.config[K.CFG_MAX_STEP] = max_step
-        self.config[K.CFG_INV_GAIN] = inv_gain
-        self.config[K.CFG_STATIC_SCALE] = 1.0
-        if spec.analytic:
-            inv = op.inverse()
-            self.tables[K.TAB_S] = op.loading_slopes
-            self.tables[K.TAB_RI] = inv.thresholds
-            self.tables[K.TAB_WI] = inv.weights
-            self.config[K.CFG_INV_OFFSET] = inv.offset
-            reach = max(abs(self.v_min), abs(self.v_max)) + float(op.thresholds[-1])
-            self.config[K.CFG_BOUND] = 2.0 * float(np.abs(op.weights).sum()) * reach + 1.0
-            self.static = np.zeros((3, 0))
-            self.lags = np.zeros((3, 0))
-            n_aux = n
-        else:
-            st = spec.static
-            self.static = np.zeros((3, 0)) if st is None else np.vstack([st.knots, st.up, st.down])
-            if st is not None:
-                self.config[K.CFG_STATIC_SCALE] = st.scale
-            lg = spec.lags
-            if lg is None:
-                self.lags = np.zeros((3, 0))
-            else:
-                dt = 1.0 / float(sample_rate)  # type: ignore[arg-type]
-                self.lags = np.vstack([lg.taus, lg.gains, 1.0 - np.exp(-dt / lg.taus)])
-            n_aux = self.lags.shape[1]
-        self._state = np.zeros(n + n_aux + 3)
-        self._n_aux = n_aux
         # input dynamics: an integer delay (handled by preview) and lags inverted per sample
         self.dynamic = dyn.active
         self.delay_samples = 0
@@ -261,7 +291,6 @@ class Compensator:
         if self.mode.active and sample_rate is not None:
             self.mode = replace(self.mode, sample_interval=1.0 / float(sample_rate))
         self._mode_history = np.full(2, np.nan)
-        self._plain = spec.analytic and not dyn.active and not self.mode.active
         if dyn.active:
             dt = 1.0 / float(sample_rate)  # type: ignore[arg-type]
             d = dyn.delay / dt
@@ -271,13 +300,8 @@ class Compensator:
                 self.dyn[K.DYN_GAIN_A] = 1.0 - math.exp(-1.0 / frac)
             if dyn.tau > 0:
                 self.dyn[K.DYN_GAIN_B] = 1.0 - math.exp(-dt / dyn.tau)
-        if domain == "displacement":  # displacement 0 = output at rest in the initial state
-            if spec.analytic:
-                self.config[K.CFG_REFERENCE] = op.offset + float(op.weights @ op.initial_state)
-            else:
-                self._set_forward(self._initial_forward())
-                self.config[K.CFG_REFERENCE] = self._output_now(float(op.initial_state[0]))
-        self.reset()
+        self._max_step = max_step
+        return spec, max_step, inv_gain
 
     def _narrow_to(self, trained: tuple[float, float]) -> None:
         """Keep every command inside the voltages the model was identified on."""
@@ -311,7 +335,7 @@ class Compensator:
         return int(self.tables.shape[1])
 
     def _initial_forward(self) -> tuple[FloatArray, FloatArray]:
-        op = self.spec.operator
+        op = _play(self.spec)
         x0 = float(op.initial_state[0])
         return op.initial_state.copy(), np.full(self.lags.shape[1], x0)
 
@@ -423,7 +447,7 @@ class Compensator:
         """
         n = self.n_operators
         m = self.lags.shape[1]
-        op = self.spec.operator
+        op = _play(self.spec)
         if isinstance(state, CompensatorState):
             ops = as_signal(state.operators, "state.operators")
             lags = as_signal(state.lags, "state.lags", allow_empty=True)
@@ -488,14 +512,36 @@ class Compensator:
         ndarray
             The voltages (V) to send.
         """
+        cycle = self._cycle(samples)
+        n = self.n_operators
+        r = self.tables[K.TAB_R]
+        z = self._state[:n]
+        lag = self._state[n : n + self._n_aux] if not self.analytic else np.empty(0)
+        alpha = self.lags[2]
+        out = np.empty_like(cycle)
+        last = self.last_command
+        step = self._max_step
+        for k, v_target in enumerate(cycle):
+            v = min(max(v_target, last - step), last + step)
+            u = K._advance_dynamics(v, self.dyn, self.dstate) if self.dynamic else v
+            z[:] = np.clip(z, u - r, u + r)
+            lag += alpha * (u - lag)
+            out[k] = last = v
+        self._state[K.ST_LAST] = last
+        if self.analytic:
+            K.inverse_states(self.tables, self.config, self._state)
+        return out
+
+    def _cycle(self, samples: int) -> FloatArray:
+        """last command -> v_max -> v_min -> back, each extreme reached exactly (and held
+        until a lagging piezo voltage reached it)."""
         if isinstance(samples, bool) or not isinstance(samples, int) or samples < 3:
             msg = f"'samples' must be an int >= 3. Got {samples!r}."
             raise ParameterError(msg)
-        n = self.n_operators
-        start = float(self._state[K.ST_LAST])
+        start = self.last_command
         knots = [start, self.v_max, self.v_min, start]
         legs = np.abs(np.diff(knots))
-        step = float(self.config[K.CFG_MAX_STEP])
+        step = self._max_step
         # every leg ends exactly on its knot: reaching v_max and v_min is what wipes history
         share = legs / max(float(legs.sum()), 1e-300)
         counts = np.maximum(np.round(share * (samples - 1)).astype(int), 1)
@@ -512,22 +558,7 @@ class Compensator:
             for j in (0, 1):
                 pieces[j] = np.concatenate([pieces[j], np.full(settle, knots[j + 1])])
         cycle = np.concatenate(pieces)
-        r = self.tables[K.TAB_R]
-        z = self._state[:n]
-        lag = self._state[n : n + self._n_aux] if not self.analytic else np.empty(0)
-        alpha = self.lags[2]
-        out = np.empty_like(cycle)
-        last = start
-        for k, v_target in enumerate(cycle):
-            v = min(max(v_target, last - step), last + step)
-            u = K._advance_dynamics(v, self.dyn, self.dstate) if self.dynamic else v
-            z[:] = np.clip(z, u - r, u + r)
-            lag += alpha * (u - lag)
-            out[k] = last = v
-        self._state[K.ST_LAST] = last
-        if self.analytic:
-            K.inverse_states(self.tables, self.config, self._state)
-        return out
+        return cycle
 
     # -------------------------------------------------------------- commands
     def _through_mode(self, desired: FloatArray, preview: ArrayLike | None) -> FloatArray:
@@ -580,15 +611,19 @@ class Compensator:
                 elif math.isfinite(self._last_desired):
                     target = d + m * (d - self._last_desired)
             self._last_desired = d
+            return self._inner_step(target)
+        return self._inner_step(float(desired))
+
+    def _inner_step(self, target: float) -> float:
+        """The kernel's command for the hysteresis output ``target`` (after mode and delay)."""
+        if self.dynamic:
             return float(
                 K.dynamic_step(target, self.tables, self.config, self._state, self.dyn, self.dstate)
             )
         if self.analytic:
-            return float(K.compensator_step(float(desired), self.tables, self.config, self._state))
+            return float(K.compensator_step(target, self.tables, self.config, self._state))
         return float(
-            K.numeric_step(
-                float(desired), self.tables, self.static, self.lags, self.config, self._state
-            )
+            K.numeric_step(target, self.tables, self.static, self.lags, self.config, self._state)
         )
 
     def _step_mode_delayed(self, d: float, preview: ArrayLike | None) -> float:
@@ -605,9 +640,7 @@ class Compensator:
         target = float(self.mode.invert(e[j : j + 1], e[j - 2 : j], e[j + 1 : j + 2])[0])
         self._mode_history = np.array([self._mode_history[1], d])
         self._last_desired = d
-        return float(
-            K.dynamic_step(target, self.tables, self.config, self._state, self.dyn, self.dstate)
-        )
+        return self._inner_step(target)
 
     def process(self, desired: ArrayLike) -> FloatArray:
         """Commands for a block of desired values; equal to calling :meth:`step` on each.
@@ -634,6 +667,13 @@ class Compensator:
         if self.mode.active:
             d = np.ascontiguousarray(self._through_mode(d, None))
         out = np.empty_like(d)
+        self._inner_process(d, out)
+        if self.dynamic and d.size:
+            self._last_desired = float(d[-1])
+        return out
+
+    def _inner_process(self, d: FloatArray, out: FloatArray) -> None:
+        """The kernel over a block of hysteresis outputs (after the mode)."""
         if self.dynamic:
             K.dynamic_process(
                 d,
@@ -645,13 +685,231 @@ class Compensator:
                 self.dstate,
                 out,
             )
-            if d.size:
-                self._last_desired = float(d[-1])
         elif self.analytic:
             K.compensator_process(d, self.tables, self.config, self._state, out)
         else:
             K.numeric_process(d, self.tables, self.static, self.lags, self.config, self._state, out)
-        return out
+
+
+def _play(spec: InverseSpec) -> PIHysteresis:
+    """The play operators of a spec (every model the base class compensates has them)."""
+    assert isinstance(spec.operator, PIHysteresis)
+    return spec.operator
+
+
+def _differential(model: object) -> bool:
+    inversion = getattr(model, "inversion", None)
+    return callable(inversion) and isinstance(inversion().operator, DifferentialCore)
+
+
+class CoreCompensator(Compensator):
+    r"""The :class:`Compensator` of a model on a differential core (Duhem, Bouc-Wen).
+
+    Built by ``ph.Compensator(model, ...)`` for such a model: the same
+    parameters, limits, slew limit, NaN handling, counters, input dynamics
+    (lags inverted per sample, an integer delay by preview) and output mode.
+    Each sample inverts the core's step from the actuator's state: explicitly
+    for Duhem, by a safeguarded Newton solve (at most
+    ``_diffkernels.NEWTON_MAX`` iterations) for Bouc-Wen; the state then
+    advances with the command actually sent.
+
+    Beyond the (voltage, output) region the model was identified on (its
+    ``region_tolerance``), a command is not sent: the last one is held and
+    counted in :attr:`outside_count`, unless ``allow_extrapolation=True``
+    (then it is sent and counted).
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        A fitted model on a differential core.
+    v_min, v_max, slew_rate, sample_rate, domain, gain, allow_extrapolation
+        As for :class:`Compensator`; ``allow_extrapolation`` also lets
+        commands leave the identified region.
+    """
+
+    def __init__(
+        self,
+        model: HysteresisModel,
+        *,
+        v_min: float,
+        v_max: float,
+        slew_rate: float | None = None,
+        sample_rate: float | None = None,
+        domain: Domain = "charge",
+        gain: float | None = None,
+        allow_extrapolation: bool = False,
+    ) -> None:
+        spec, max_step, inv_gain = self._settings(
+            model, v_min, v_max, slew_rate, sample_rate, domain, gain, allow_extrapolation
+        )
+        core = spec.operator
+        assert isinstance(core, DifferentialCore)
+        self.core = core
+        self.analytic = False
+        self._plain = False
+        self.params = np.array(core.packed)
+        self.config = np.zeros(D.CC_SIZE)
+        self.config[D.CC_V_MIN] = self.v_min
+        self.config[D.CC_V_MAX] = self.v_max
+        self.config[D.CC_MAX_STEP] = max_step
+        self.config[D.CC_INV_GAIN] = inv_gain
+        self.config[D.CC_REFUSE] = 0.0 if allow_extrapolation else 1.0
+        region = core.region
+        if region is None:
+            self.config[D.CC_TOL] = math.inf
+            self.region = np.zeros((2, 0))
+        else:
+            self.config[D.CC_TOL] = spec.region_tolerance * region.span
+            self.config[D.CC_RV_LO] = region.v_lo
+            self.config[D.CC_RV_HI] = region.v_hi
+            self.region = region.array
+        if domain == "displacement":  # displacement 0 = the output in the initial state
+            self.config[D.CC_REF] = core.output(core.initial_state)
+        self._ns = core.n_states
+        self._state = np.zeros(self._ns + D.DS_STATUS)
+        self.reset()
+
+    @property
+    def n_operators(self) -> int:
+        """Values in the core's state (the last voltage, the internal variable, ...)."""
+        return self._ns
+
+    @property
+    def state(self) -> CompensatorState:
+        """The core's state ``[v, x, ...]`` as ``operators``, and the last command (copies)."""
+        return CompensatorState(
+            self._state[: self._ns].copy(),
+            np.zeros(0),
+            float(self._state[self._ns + D.DS_STATUS + D.DS_LAST]),
+            self.dstate.copy() if self.dynamic else np.zeros(0),
+        )
+
+    @property
+    def last_command(self) -> float:
+        """The command sent last (V)."""
+        return float(self._state[self._ns + D.DS_STATUS + D.DS_LAST])
+
+    @property
+    def nonfinite_count(self) -> int:
+        """Desired values that were NaN or infinite (the last command was held)."""
+        return int(self._state[self._ns + D.DS_STATUS + D.DS_NONFINITE])
+
+    @property
+    def saturated_count(self) -> int:
+        """Desired values out of reach within ``[v_min, v_max]`` (the nearer limit was sent)."""
+        return int(self._state[self._ns + D.DS_STATUS + D.DS_SATURATED])
+
+    @property
+    def outside_count(self) -> int:
+        """Commands that would have left the identified region (held unless extrapolating)."""
+        return int(self._state[self._ns + D.DS_STATUS + D.DS_OUTSIDE])
+
+    def share(self, tables: FloatArray, config: FloatArray, state: FloatArray) -> None:
+        """Not available: a bank runs these channels one by one.
+
+        Parameters
+        ----------
+        tables, config, state : ndarray
+        """
+        msg = "a compensator on a differential core runs on its own arrays"
+        raise ParameterError(msg)
+
+    def _moved(self, start: FloatArray, v: float) -> FloatArray:
+        """The core's state after the voltage moves from ``start`` to ``v`` in small steps."""
+        v0 = float(start[0])
+        span = max(self.v_max - self.v_min, 1e-300)
+        steps = max(2, math.ceil(abs(v - v0) / (span / 400.0)) + 1)
+        return self.core.propagate(np.linspace(v0, v, steps), start).state
+
+    def reset(
+        self, state: CompensatorState | ArrayLike | None = None, *, voltage: float | None = None
+    ) -> None:
+        """Start again from a known condition; counters back to 0.
+
+        Parameters
+        ----------
+        state : CompensatorState or array_like, optional
+            ``[v, x]`` (the core's state), optionally followed by the last command.
+        voltage : float, optional
+            The actuator now sits at ``voltage``: the model's initial state moved
+            there along a ramp.
+
+        Raises
+        ------
+        ParameterError
+            If the last command would lie outside the limits.
+        """
+        core = self.core
+        if isinstance(state, CompensatorState):
+            z = as_signal(state.operators, "state.operators")
+            if z.size != self._ns:
+                msg = f"'state' must hold the core's {self._ns} values [v, x, ...]. Got {z.size}."
+                raise ShapeError(msg)
+            last = float(state.command)
+        elif state is not None:
+            z = as_signal(state, "state")
+            ns = self._ns
+            if z.size not in (ns, ns + 1):
+                msg = (
+                    f"'state' must hold the core's {ns} values and optionally the last "
+                    f"command. Got {z.size}."
+                )
+                raise ShapeError(msg)
+            last = (
+                float(z[ns]) if z.size == ns + 1 else float(np.clip(z[0], self.v_min, self.v_max))
+            )
+            z = z[:ns]
+        elif voltage is None:
+            z = np.array(core.initial_state)
+            last = float(np.clip(z[0], self.v_min, self.v_max))
+        else:
+            last = _finite_number(voltage, "voltage")
+            z = self._moved(np.array(core.initial_state), last)
+        if not self.v_min <= last <= self.v_max:
+            msg = (
+                f"The actuator's voltage {last!r} V is outside the limits "
+                f"[{self.v_min}, {self.v_max}] V."
+            )
+            raise ParameterError(msg)
+        self._state[:] = 0.0
+        self._state[: self._ns] = z
+        self._state[self._ns + D.DS_STATUS + D.DS_LAST] = last
+        self.dstate[:] = last
+        if isinstance(state, CompensatorState) and state.dynamics.size == 2 and self.dynamic:
+            self.dstate[:] = state.dynamics
+        self._mode_history[:] = np.nan
+        self._last_desired = math.nan
+
+    def precondition(self, samples: int = 1000) -> FloatArray:
+        """The preconditioning cycle to send first (see :meth:`Compensator.precondition`).
+
+        Parameters
+        ----------
+        samples : int, default 1000
+
+        Returns
+        -------
+        ndarray
+            The voltages (V) to send; the state advanced as if they had been.
+        """
+        cycle = self._cycle(samples)
+        u = np.empty_like(cycle)
+        for k, v in enumerate(cycle):
+            u[k] = K._advance_dynamics(v, self.dyn, self.dstate) if self.dynamic else v
+        self._state[: self._ns] = self.core.propagate(u, self._state[: self._ns]).state
+        self._state[self._ns + D.DS_STATUS + D.DS_LAST] = cycle[-1]
+        return cycle
+
+    def _inner_step(self, target: float) -> float:
+        return float(
+            D.core_step(
+                target, self.params, self.config, self._state, self.region, self.dyn, self.dstate
+            )
+        )
+
+    def _inner_process(self, d: FloatArray, out: FloatArray) -> None:
+        D.core_process(d, self.delay_samples, self.params, self.config, self._state, self.region,
+                       self.dyn, self.dstate, out)  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 __all__ = [
     "DataFileError",
+    "ExtrapolationWarning",
     "InsufficientDataError",
     "ModelFileError",
     "NonFiniteError",
@@ -76,3 +77,7 @@ class OverwriteError(DataFileError):
     def __init__(self, message: str, *, replaceable: bool) -> None:
         super().__init__(message)
         self.replaceable = replaceable
+
+
+class ExtrapolationWarning(UserWarning):
+    """A model ran outside the (input, output) region its training data covered."""

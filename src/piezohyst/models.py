@@ -48,6 +48,7 @@ from numpy.typing import ArrayLike
 from . import _kernels as K
 from ._validation import FloatArray, as_signal, as_time, check_float, check_int, same_length
 from .cores import PlayCore
+from .differential import DifferentialCore
 from .dynamics import KINDS as DYNAMICS_KINDS
 from .dynamics import InputDynamics, OutputDynamics
 from .errors import (
@@ -226,9 +227,12 @@ class InverseSpec:
         Delay and lag between the command and the hysteresis (none by default).
     output_dynamics : OutputDynamics
         A mode between the hysteresis and the output (none by default).
+    region_tolerance : float
+        For a core that records its region (Duhem, Bouc-Wen): how far outside
+        it, as a fraction of its output span, counts as extrapolating.
     """
 
-    operator: PIHysteresis
+    operator: PIHysteresis | DifferentialCore
     static: StaticShape | None
     lags: LagShape | None
     input_range: tuple[float, float]
@@ -236,6 +240,7 @@ class InverseSpec:
     output_unit: str
     dynamics: InputDynamics = field(default_factory=InputDynamics)
     output_dynamics: OutputDynamics = field(default_factory=OutputDynamics)
+    region_tolerance: float = 0.05
 
     @property
     def analytic(self) -> bool:
@@ -625,7 +630,9 @@ class HysteresisModel:
         x_lo, x_hi = float(x_range[0]), float(x_range[1])
         terms, _ = self._terms_to_fit(x_range, params)
         rate = any(term.rate_dependent for term in terms)
-        core = PlayCore(default_thresholds(x_range, min(int(params["n_operators"]), 8)))
+        # the proxy of every model (differential cores too): up to 8 play operators
+        n_proxy = min(int(params.get("n_operators", 8)), 8)
+        core = PlayCore(default_thresholds(x_range, n_proxy))
         stride = max(1, x.size // 5000)
         y_stats = (float(y[0]), float(y.min()), float(y.max()))
         cache: dict[tuple[Any, ...], float] = {}
@@ -644,7 +651,7 @@ class HysteresisModel:
                 array_blocks(u, y, t if rate else None),
                 sm,
                 z0,
-                min_slope=float(params["min_slope"]),
+                min_slope=float(params.get("min_slope", 1e-3)),
                 validate=validate,
                 stride=stride,
                 block=1 << 16,
@@ -1035,11 +1042,7 @@ class HysteresisModel:
         coefs : tuple of ndarray
             One coefficient array per term.
         """
-        self.operator_ = core
-        self.thresholds_ = core.thresholds
-        self.weights_ = core.weights
-        self.offset_ = core.offset
-        self.initial_state_ = core.initial_state
+        self._set_core(core)
         self.terms_ = terms
         self.coefs_ = coefs
         self.selection_ = {}
@@ -1050,6 +1053,14 @@ class HysteresisModel:
         self.max_slew_rate_ = math.nan
         self.input_dynamics_ = InputDynamics()
         self.output_dynamics_ = getattr(self, "_fitting_output", OutputDynamics())
+
+    def _set_core(self, core: Any) -> None:
+        """The core and the fitted attributes that describe it."""
+        self.operator_ = core
+        self.thresholds_ = core.thresholds
+        self.weights_ = core.weights
+        self.offset_ = core.offset
+        self.initial_state_ = core.initial_state
 
     # ---------------------------------------------------- fitted attributes
     def _check_fitted(self) -> None:
@@ -1126,7 +1137,7 @@ class HysteresisModel:
         self._check_fitted()
         dyn = self.input_dynamics_
         return ModelState(
-            np.full(self.operator_.n_operators, float(x0)),
+            self.operator_.rest_state(float(x0)),
             tuple(term.rest_state(float(x0)) for term in self.terms_),
             None,
             dyn.rest_state(float(x0)) if dyn.active else np.zeros(0),
@@ -1158,11 +1169,10 @@ class HysteresisModel:
         start); input dynamics, when the model has them, settle over the same
         passes as the operators.
         """
-        thr = self.operator_.thresholds
         x0 = float(xs[0])
         dyn = self.input_dynamics_
         if isinstance(state, History):
-            z = history_state(state.input, thr)
+            z = self._history_operators(as_signal(state.input, "history"))
         elif state == "rest":
             return None
         elif state == "periodic":
@@ -1175,11 +1185,11 @@ class HysteresisModel:
                 u = xs
                 for _ in range(2):  # the lag settles into the period, then the operators
                     u, inner = dyn.apply(xs, dt, inner)
-                z = periodic_state(array_blocks(u, u, None), thr, float(u[0]))
+                z = self._periodic_operators(u)
                 terms = tuple(term.rest_state(x0) for term in self.terms_)
                 out = np.full(2, np.nan) if self.output_dynamics_.active else np.zeros(0)
                 return ModelState(z, terms, None, inner, out)
-            z = periodic_state(array_blocks(xs, xs, None), thr, x0)
+            z = self._periodic_operators(xs)
         else:
             msg = (
                 "'state' must be a ModelState, operator states, 'rest', 'periodic' or a "
@@ -1188,8 +1198,16 @@ class HysteresisModel:
             raise ParameterError(msg)
         return self._start(z, x0)
 
+    def _history_operators(self, history: FloatArray) -> FloatArray:
+        """The core's state after the input ``history`` (from rest at its first sample)."""
+        return history_state(history, self.operator_.thresholds)
+
+    def _periodic_operators(self, x: FloatArray) -> FloatArray:
+        """The core's state before ``x`` run as one period of a periodic drive."""
+        return periodic_state(array_blocks(x, x, None), self.operator_.thresholds, float(x[0]))
+
     def _start(self, state: ModelState | ArrayLike | None, x0: float) -> ModelState:
-        n = self.operator_.n_operators
+        n = self.operator_.initial_state.size
         dyn = self.input_dynamics_
         if state is None:
             return ModelState(
@@ -1301,6 +1319,7 @@ class HysteresisModel:
             z = st.operators
         else:
             out, z = self.operator_.propagate(xs, st.operators)
+            self._check_region(xs, out)
         use = [j for j, term in enumerate(self.terms_) if term.removed or not removed_only]
         terms = [self.terms_[j] for j in use]
         states = [st.terms[j] for j in use]
@@ -1326,6 +1345,9 @@ class HysteresisModel:
                     ms[:] = mode.rest_state([out[0]])
                 out = mode.apply(out, ms)[0]
         return Propagation(out, ModelState(z, st.terms, t_last, st.input, st.output))
+
+    def _check_region(self, x: FloatArray, core_output: FloatArray) -> None:
+        """Warn when a run leaves where the model was identified (cores that record it)."""
 
     def __setattr__(self, name: str, value: Any) -> None:
         if name.endswith("_"):  # a fitted attribute changed: the fast path is rebuilt
@@ -1525,6 +1547,7 @@ class HysteresisModel:
             self.output_unit,
             self.input_dynamics_,
             self.output_dynamics_,
+            float(getattr(self, "region_tolerance", 0.05)),
         )
 
     @property
@@ -1626,12 +1649,13 @@ class HysteresisModel:
             if c.size != term.width:
                 msg = f"the {term.kind!r} term takes {term.width} coefficients. Got {c.size}."
                 raise ShapeError(msg)
-        model = cls._bare(op.n_operators, input_unit, output_unit)
+        model = cls._bare(getattr(op, "n_operators", 0), input_unit, output_unit)
         model.set_fitted(op, tuple(terms), coefs)
         return model
 
     @classmethod
     def _bare(cls, n: int, input_unit: str, output_unit: str) -> HysteresisModel:
+        """An unfitted instance with default settings, ``n`` operators and these units."""
         model = cls.__new__(cls)
         defaults = {
             p.name: p.default

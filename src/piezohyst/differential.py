@@ -1,0 +1,764 @@
+r"""Differential hysteresis cores: a data-driven Duhem model and the Bouc-Wen model.
+
+Where the Prandtl-Ishlinskii operators (:mod:`piezohyst.hysteresis`) fix every
+minor loop by the major loop (congruent minor loops), these cores describe the
+hysteresis by its slope, which depends on where the actuator stands:
+
+* :class:`DuhemHysteresis` — :math:`dq/dv = f_\pm(v, q)`, rising (+) or
+  falling (−), each slope a non-negative bilinear surface on a grid over the
+  (voltage, output) region the training data covered. Linear in its
+  coefficients, so identified by one bounded least squares; rate independent;
+  inverted explicitly, one sample at a time.
+* :class:`BoucWenHysteresis` — :math:`y = c_0 v + \alpha h + c`,
+  :math:`dh/dv = 1 - |h|^n (\beta\,\mathrm{sign}(h\,dv) + \gamma)`: five
+  physical parameters, the model most papers on piezo stacks fit; inverted by
+  a safeguarded Newton solve per sample.
+
+Both carry a two-value state ``[v, x]`` (the last input, and the output
+``q`` for Duhem or :math:`h` for Bouc-Wen), run in numba kernels
+(:mod:`piezohyst._diffkernels`), and record the :class:`Region` of
+(voltage, output) their training data covered: outside it, the model
+extrapolates.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from . import _diffkernels as D
+from ._validation import FloatArray, as_signal
+from .errors import ParameterError, ShapeError
+from .hysteresis import Propagation
+
+__all__ = ["BoucWenHysteresis", "DifferentialCore", "DuhemHysteresis", "Region"]
+
+PERIODIC_PASSES = 200  # at most this many passes of a record for its periodic state
+
+
+def _frozen(values: ArrayLike, name: str, *, allow_empty: bool = False) -> FloatArray:
+    arr = as_signal(values, name, allow_empty=allow_empty).copy()
+    arr.flags.writeable = False
+    return arr
+
+
+def _finite(value: object, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
+        msg = f"'{name}' must be a number. Got {value!r}."
+        raise ParameterError(msg)
+    v = float(value)
+    if not math.isfinite(v):
+        msg = f"'{name}' must be finite. Got {value!r}."
+        raise ParameterError(msg)
+    return v
+
+
+@dataclass(frozen=True, eq=False)
+class Region:
+    """The (input, output) band a model's training data covered.
+
+    The input range ``[v_lo, v_hi]`` is cut into ``len(q_lo)`` equal bins; in
+    each, the output of the pure hysteresis stayed within ``[q_lo, q_hi]``
+    (bins the data never entered take their nearest neighbour's band).
+
+    Parameters
+    ----------
+    v_lo, v_hi : float
+        Input range (V).
+    q_lo, q_hi : array_like, shape (M,)
+        Output band per bin (output units).
+    """
+
+    v_lo: float
+    v_hi: float
+    q_lo: FloatArray
+    q_hi: FloatArray
+
+    def __post_init__(self) -> None:
+        lo, hi = _finite(self.v_lo, "v_lo"), _finite(self.v_hi, "v_hi")
+        if not lo < hi:
+            msg = f"a region needs v_lo < v_hi. Got {lo!r}, {hi!r}."
+            raise ParameterError(msg)
+        a, b = _frozen(self.q_lo, "q_lo"), _frozen(self.q_hi, "q_hi")
+        if a.size != b.size or np.any(a > b):
+            msg = "a region's q_lo and q_hi must have one value per bin, q_lo <= q_hi"
+            raise ShapeError(msg)
+        object.__setattr__(self, "v_lo", lo)
+        object.__setattr__(self, "v_hi", hi)
+        object.__setattr__(self, "q_lo", a)
+        object.__setattr__(self, "q_hi", b)
+
+    @classmethod
+    def of(cls, v: FloatArray, q: FloatArray, bins: int = 40) -> Region:
+        """The band of samples ``(v, q)``.
+
+        Parameters
+        ----------
+        v, q : ndarray, shape (N,)
+            Input and pure-hysteresis output of the training record.
+        bins : int, default 40
+
+        Returns
+        -------
+        Region
+        """
+        lo, hi = float(v.min()), float(v.max())
+        if not hi > lo:
+            hi = lo + 1.0
+        b = np.clip(((v - lo) / (hi - lo) * bins).astype(np.int64), 0, bins - 1)
+        q_lo = np.full(bins, np.inf)
+        q_hi = np.full(bins, -np.inf)
+        np.minimum.at(q_lo, b, q)
+        np.maximum.at(q_hi, b, q)
+        seen = np.flatnonzero(np.isfinite(q_lo))
+        if seen.size < bins:  # empty bins: the nearest visited bin's band
+            near = seen[np.abs(np.arange(bins)[:, None] - seen[None, :]).argmin(axis=1)]
+            q_lo, q_hi = q_lo[near], q_hi[near]
+        return cls(lo, hi, q_lo, q_hi)
+
+    @property
+    def span(self) -> float:
+        """The output span the region covers."""
+        return float(self.q_hi.max() - self.q_lo.min())
+
+    @property
+    def array(self) -> FloatArray:
+        """``[q_lo; q_hi]``, shape (2, M), as the compensator kernel reads it."""
+        return np.ascontiguousarray(np.vstack([self.q_lo, self.q_hi]))
+
+    def distance(self, v: ArrayLike, y: ArrayLike) -> FloatArray:
+        """How far each output lies outside the band at its input (0 inside), output units.
+
+        Inputs beyond ``[v_lo, v_hi]`` count by the voltage they exceed it by,
+        times the band's mean slope.
+
+        Parameters
+        ----------
+        v, y : array_like, shape (N,)
+
+        Returns
+        -------
+        ndarray, shape (N,)
+        """
+        va = np.asarray(v, dtype=np.float64)
+        ya = np.asarray(y, dtype=np.float64)
+        m = self.q_lo.size
+        b = np.clip(((va - self.v_lo) / (self.v_hi - self.v_lo) * m).astype(np.int64), 0, m - 1)
+        d = np.maximum(np.maximum(self.q_lo[b] - ya, ya - self.q_hi[b]), 0.0)
+        slope = self.span / (self.v_hi - self.v_lo)
+        beyond = np.maximum(np.maximum(self.v_lo - va, va - self.v_hi), 0.0)
+        return np.asarray(np.maximum(d, beyond * slope))
+
+    def middle(self, v: float) -> float:
+        """The middle of the band at input ``v`` (the output an actuator at rest there has).
+
+        Parameters
+        ----------
+        v : float
+
+        Returns
+        -------
+        float
+        """
+        m = self.q_lo.size
+        centres = self.v_lo + (np.arange(m) + 0.5) * (self.v_hi - self.v_lo) / m
+        mid = 0.5 * (self.q_lo + self.q_hi)
+        return float(np.interp(v, centres, mid))
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON data.
+
+        Returns
+        -------
+        dict
+        """
+        return {
+            "v_lo": self.v_lo,
+            "v_hi": self.v_hi,
+            "q_lo": self.q_lo.tolist(),
+            "q_hi": self.q_hi.tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Region:
+        """Inverse of :meth:`to_dict`.
+
+        Parameters
+        ----------
+        data : dict
+
+        Returns
+        -------
+        Region
+        """
+        return cls(data["v_lo"], data["v_hi"], data["q_lo"], data["q_hi"])
+
+
+class DifferentialCore:
+    """What the Duhem and Bouc-Wen cores share: a packed parameter array and a [v, x] state.
+
+    Subclasses set ``kind`` and build ``packed`` (the kernels' layout).
+    """
+
+    kind: ClassVar[str] = ""
+    packed: FloatArray
+    initial_state: FloatArray
+    region: Region | None
+
+    @property
+    def n_states(self) -> int:
+        """Values in the state: the last input, the internal variable (and, for a Duhem
+        core on reversal memory, the direction and the stack of reversal points)."""
+        return int(D.state_size(self.packed))
+
+    @property
+    def is_invertible(self) -> bool:
+        """True: the identification keeps every branch strictly increasing."""
+        return True
+
+    def _state(self, state: ArrayLike | None) -> FloatArray:
+        if state is None:
+            return np.array(self.initial_state, dtype=np.float64)
+        z = as_signal(state, "state").copy()
+        if z.size != self.n_states:
+            msg = (
+                f"'state' of this {type(self).__name__} must hold {self.n_states} values "
+                f"([input, {self.inner}, ...]). Got {z.size}."
+            )
+            raise ShapeError(msg)
+        return z
+
+    inner: ClassVar[str] = "x"
+
+    def propagate(self, x: ArrayLike, state: ArrayLike | None = None) -> Propagation[FloatArray]:
+        """Run the core over ``x`` from ``state`` (default :attr:`initial_state`).
+
+        Parameters
+        ----------
+        x : array_like, shape (N,)
+            Input (V).
+        state : array_like, shape (2,), optional
+            ``[last input, internal variable]``.
+
+        Returns
+        -------
+        Propagation
+            ``output`` (N,) and the final state; chunks equal one call.
+        """
+        xs = as_signal(x, "x", allow_empty=True)
+        z = self._state(state)
+        y = np.empty_like(xs)
+        D.core_propagate(self.packed, xs, z, y)
+        return Propagation(y, z)
+
+    def predict(self, x: ArrayLike, state: ArrayLike | None = None) -> FloatArray:
+        """See :meth:`propagate`: the output alone.
+
+        Parameters
+        ----------
+        x : array_like
+        state : array_like, optional
+
+        Returns
+        -------
+        ndarray
+        """
+        return self.propagate(x, state).output
+
+    def output(self, state: ArrayLike) -> float:
+        """The output at a state (no input applied).
+
+        Parameters
+        ----------
+        state : array_like, shape (2,)
+
+        Returns
+        -------
+        float
+        """
+        z = self._state(state)
+        return float(D.core_output(self.packed, z))
+
+    def rest_state(self, x0: float) -> FloatArray:
+        """The state of an actuator resting at input ``x0`` with no memory of its history.
+
+        Parameters
+        ----------
+        x0 : float
+
+        Returns
+        -------
+        ndarray, shape (2,)
+        """
+        raise NotImplementedError
+
+    def history_state(self, history: ArrayLike) -> FloatArray:
+        """The state after the input ``history``, starting at rest at its first sample.
+
+        Parameters
+        ----------
+        history : array_like
+
+        Returns
+        -------
+        ndarray, shape (2,)
+        """
+        h = as_signal(history, "history")
+        return self.propagate(h, self.rest_state(float(h[0]))).state
+
+    def periodic_state(self, x: ArrayLike) -> FloatArray:
+        """The state before ``x`` when ``x`` is one period of a drive that has been running.
+
+        The record is run again and again from rest at its first sample until
+        the state after it repeats (to 1e-12 of the output span).
+
+        Parameters
+        ----------
+        x : array_like
+
+        Returns
+        -------
+        ndarray, shape (2,)
+        """
+        xs = as_signal(x, "x")
+        z = self.rest_state(float(xs[0]))
+        y = np.empty_like(xs)
+        span = 0.0
+        for _ in range(PERIODIC_PASSES):
+            before = z.copy()
+            D.core_propagate(self.packed, xs, z, y)
+            span = max(span, float(np.ptp(y)), 1e-300)
+            same = np.array_equal(np.delete(z, 1), np.delete(before, 1))
+            if same and abs(float(z[1]) - float(before[1])) <= 1e-12 * span:
+                break
+        return z
+
+    def with_initial_state(self, state: ArrayLike) -> DifferentialCore:
+        """This core with another initial state.
+
+        Parameters
+        ----------
+        state : array_like, shape (2,)
+
+        Returns
+        -------
+        DifferentialCore
+        """
+        raise NotImplementedError
+
+    def describe(self, input_unit: str, output_unit: str) -> list[tuple[str, str]]:
+        """Labelled parameters with units, for reports.
+
+        Parameters
+        ----------
+        input_unit, output_unit : str
+
+        Returns
+        -------
+        list of (str, str)
+        """
+        raise NotImplementedError
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON data (its ``from_dict`` reads it back).
+
+        Returns
+        -------
+        dict
+        """
+        raise NotImplementedError
+
+
+def _region_dict(region: Region | None) -> dict[str, Any] | None:
+    return None if region is None else region.to_dict()
+
+
+def _region_from(data: Any) -> Region | None:
+    return None if data is None else Region.from_dict(dict(data))
+
+
+@dataclass(frozen=True, eq=False)
+class DuhemHysteresis(DifferentialCore):
+    r"""Rate-independent Duhem hysteresis: :math:`dq/dv = f_\pm(v, m)` on a grid.
+
+    ``f+`` while the input rises, ``f-`` while it falls, each bilinear between
+    the nodes and constant beyond the grid's edges. The second coordinate
+    ``m`` is the model's memory:
+
+    * ``memory="reversal"``: the excursion since the branch's last reversal,
+      :math:`m = |v - v_r|` (V). The reversal points form a stack with the
+      wiping-out rule of Preisach models (passing the previous extremum of the
+      same direction closes the inner loop), so nested minor loops of any
+      size have their own shapes. Each step integrates the slope by Simpson's
+      rule (sub-steps of at most ``dv_max``): rate independent. A
+      Prandtl-Ishlinskii model is the special case of slopes that depend on
+      the excursion alone.
+    * ``memory="charge"``: the output itself, :math:`m = q` — the classical
+      Duhem form. Explicit Euler: ``q[k+1] = q[k] + f±(v[k], q[k]) (v[k+1] - v[k])``
+      (sub-steps of at most ``dv_max``).
+
+    Parameters
+    ----------
+    v_nodes : array_like, shape (nv,)
+        Equally spaced voltages (V), at least 2.
+    memory_nodes : array_like, shape (nm,)
+        Equally spaced values of the memory coordinate (V of excursion, or
+        output units), at least 2.
+    up, down : array_like, shape (nv, nm)
+        Slopes (output per V) at the nodes, all > 0.
+    initial_state : array_like
+        ``[v, q]`` before the first sample; for reversal memory followed by
+        the direction (0, ±1), the number of reversal points k and the
+        ``_diffkernels.STACK`` slots of the stack (the first k used).
+    region : Region, optional
+        Where the training data lay.
+    dv_max : float, optional
+        Largest Euler sub-step (V); default a quarter of the voltage grid's spacing.
+    """
+
+    v_nodes: FloatArray
+    memory_nodes: FloatArray
+    up: FloatArray
+    down: FloatArray
+    initial_state: FloatArray
+    region: Region | None = None
+    dv_max: float | None = None
+    memory: str = "reversal"
+    packed: FloatArray = field(init=False, repr=False)
+    kind: ClassVar[str] = "duhem"
+    inner: ClassVar[str] = "output"
+
+    def __post_init__(self) -> None:
+        if self.memory not in ("reversal", "charge"):
+            msg = f"'memory' must be 'reversal' or 'charge'. Got {self.memory!r}."
+            raise ParameterError(msg)
+        vn = _frozen(self.v_nodes, "v_nodes")
+        qn = _frozen(self.memory_nodes, "memory_nodes")
+        for name, nodes in (("v_nodes", vn), ("memory_nodes", qn)):
+            steps = np.diff(nodes)
+            if nodes.size < 2 or np.any(steps <= 0) or np.ptp(steps) > 1e-9 * abs(steps[0]):
+                msg = f"'{name}' must hold at least 2 equally spaced, increasing values."
+                raise ParameterError(msg)
+        shape = (vn.size, qn.size)
+        up = np.array(self.up, dtype=np.float64)
+        down = np.array(self.down, dtype=np.float64)
+        for name, c in (("up", up), ("down", down)):
+            if c.shape != shape:
+                msg = f"'{name}' must have shape {shape} (voltage, memory nodes). Got {c.shape}."
+                raise ShapeError(msg)
+            if not np.all(np.isfinite(c)) or np.any(c <= 0):
+                msg = f"every '{name}' slope must be finite and > 0 (strictly increasing branches)."
+                raise ParameterError(msg)
+            c.flags.writeable = False
+        z0 = _frozen(self.initial_state, "initial_state")
+        size = D.RV_SIZE if self.memory == "reversal" else 2
+        if z0.size != size:
+            msg = (
+                f"'initial_state' of a Duhem core on {self.memory} memory holds {size} "
+                f"values. Got {z0.size}."
+            )
+            raise ShapeError(msg)
+        object.__setattr__(self, "v_nodes", vn)
+        object.__setattr__(self, "memory_nodes", qn)
+        object.__setattr__(self, "up", up)
+        object.__setattr__(self, "down", down)
+        object.__setattr__(self, "initial_state", z0)
+        v_step = (vn[-1] - vn[0]) / (vn.size - 1)
+        dv = _finite(0.25 * v_step if self.dv_max is None else self.dv_max, "dv_max")
+        if not dv > 0:
+            msg = f"'dv_max' must be > 0. Got {dv!r}."
+            raise ParameterError(msg)
+        object.__setattr__(self, "dv_max", dv)
+        f_min = min(float(up.min()), float(down.min()))
+        kind = D.KIND_DUHEM_REV if self.memory == "reversal" else D.KIND_DUHEM
+        head = [kind, vn.size, qn.size, vn[0], v_step, qn[0],
+                (qn[-1] - qn[0]) / (qn.size - 1), dv, f_min]  # fmt: skip
+        packed = np.concatenate([head, up.ravel(), down.ravel()])
+        packed.flags.writeable = False
+        object.__setattr__(self, "packed", packed)
+
+    @classmethod
+    def from_packed(
+        cls,
+        packed: FloatArray,
+        initial_state: ArrayLike,
+        region: Region | None = None,
+    ) -> DuhemHysteresis:
+        """A core from the kernels' parameter layout (the identification's solution).
+
+        Parameters
+        ----------
+        packed : ndarray
+        initial_state : array_like, shape (2,)
+        region : Region, optional
+
+        Returns
+        -------
+        DuhemHysteresis
+        """
+        nv, nq = int(packed[D.DU_NV]), int(packed[D.DU_NQ])
+        vn = packed[D.DU_V_LO] + packed[D.DU_V_STEP] * np.arange(nv)
+        qn = packed[D.DU_Q_LO] + packed[D.DU_Q_STEP] * np.arange(nq)
+        cells = nv * nq
+        up = packed[D.DU_UP : D.DU_UP + cells].reshape(nv, nq)
+        down = packed[D.DU_UP + cells : D.DU_UP + 2 * cells].reshape(nv, nq)
+        memory = "reversal" if packed[0] == D.KIND_DUHEM_REV else "charge"
+        z0 = np.asarray(initial_state, dtype=np.float64)
+        return cls(vn, qn, up, down, z0, region, float(packed[D.DU_DV_MAX]), memory)
+
+    def rest_state(self, x0: float) -> FloatArray:
+        """See :meth:`DifferentialCore.rest_state`: the middle of the recorded band at ``x0``.
+
+        Without a region: the initial state's output, moved to ``x0``. Reversal
+        memory: no reversal yet, the rest point ``x0`` alone on the stack.
+        """
+        q = self.region.middle(x0) if self.region is not None else float(self.initial_state[1])
+        if self.memory == "charge":
+            return np.array([float(x0), q])
+        z = np.zeros(D.RV_SIZE)
+        z[0], z[1], z[D.RV_K], z[D.RV_R] = float(x0), q, 1.0, float(x0)
+        return z
+
+    def with_initial_state(self, state: ArrayLike) -> DuhemHysteresis:
+        """See :meth:`DifferentialCore.with_initial_state`."""
+        z = as_signal(state, "state")
+        return DuhemHysteresis(self.v_nodes, self.memory_nodes, self.up, self.down, z,
+                               self.region, self.dv_max, self.memory)  # fmt: skip
+
+    def slopes(self, v: ArrayLike, q: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """``f+`` and ``f-`` at points (v, m) of the grid's coordinates.
+
+        Parameters
+        ----------
+        v, q : array_like, shape (N,)
+            Voltages and memory coordinates (excursions or outputs).
+
+        Returns
+        -------
+        (ndarray, ndarray)
+        """
+        va = np.asarray(v, dtype=np.float64).reshape(-1)
+        qa = np.asarray(q, dtype=np.float64).reshape(-1)  # the memory coordinate
+        pairs = list(zip(va, qa, strict=True))
+        up = np.array([D.duhem_slope(self.packed, a, b, True)[0] for a, b in pairs])
+        down = np.array([D.duhem_slope(self.packed, a, b, False)[0] for a, b in pairs])
+        return up, down
+
+    def describe(self, input_unit: str, output_unit: str) -> list[tuple[str, str]]:
+        """See :meth:`DifferentialCore.describe`."""
+        slope = f"{output_unit}/{input_unit}"
+        if self.memory == "reversal":
+            form, unit = "Duhem on reversal memory, dq/dv = f±(v, |v - v_r|), bilinear", input_unit
+        else:
+            form, unit = "Duhem on charge memory, dq/dv = f±(v, q), bilinear", output_unit
+        m = self.memory_nodes
+        return [
+            ("core", form),
+            ("grid", f"{self.v_nodes.size} × {m.size} nodes over "
+                     f"[{self.v_nodes[0]:.6g}, {self.v_nodes[-1]:.6g}] {input_unit} × "
+                     f"[{m[0]:.6g}, {m[-1]:.6g}] {unit}"),
+            ("rising slopes f+", f"{self.up.min():.4g} to {self.up.max():.4g} {slope}"),
+            ("falling slopes f-", f"{self.down.min():.4g} to {self.down.max():.4g} {slope}"),
+        ]  # fmt: skip
+
+    def to_dict(self) -> dict[str, Any]:
+        """See :meth:`DifferentialCore.to_dict`."""
+        return {
+            "memory": self.memory,
+            "v_nodes": self.v_nodes.tolist(),
+            "memory_nodes": self.memory_nodes.tolist(),
+            "up": self.up.tolist(),
+            "down": self.down.tolist(),
+            "initial_state": self.initial_state.tolist(),
+            "region": _region_dict(self.region),
+            "dv_max": self.dv_max,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> DuhemHysteresis:
+        """Inverse of :meth:`to_dict`.
+
+        Parameters
+        ----------
+        data : dict
+
+        Returns
+        -------
+        DuhemHysteresis
+        """
+        return cls(
+            data["v_nodes"],
+            data["memory_nodes"],
+            data["up"],
+            data["down"],
+            data["initial_state"],
+            _region_from(data.get("region")),
+            data.get("dv_max"),
+            data.get("memory", "reversal"),
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class BoucWenHysteresis(DifferentialCore):
+    r"""The Bouc-Wen model: :math:`y = c_0 v + \alpha h + c`.
+
+    .. math::
+
+        \frac{dh}{dv} = 1 - |h|^n \bigl(\beta\,\mathrm{sign}(h\,\dot v) + \gamma\bigr)
+
+    (the usual form with :math:`A = 1`, so :math:`h` is in volts), integrated
+    in the voltage by classical Runge-Kutta with sub-steps of at most
+    ``dv_max`` V: rate independent. :math:`h` saturates at
+    :math:`(\beta + \gamma)^{-1/n}` on a long rise.
+
+    Parameters
+    ----------
+    c0 : float
+        Linear slope (output per V), > 0.
+    alpha : float
+        Weight of the hysteretic variable (output per V), of either sign (the
+        sign sets the loop's orientation) with ``c0 + alpha g_max > 0``,
+        :math:`g_{max} = 2\beta / (\beta + \gamma)` the largest ``dh/dv``.
+    beta, gamma : float
+        Shape: ``beta > 0``, ``|gamma| <= beta`` (stable loops, increasing branches).
+    n : float
+        Smoothness of the transition, in [1, 6].
+    offset : float
+        Output at v = 0, h = 0.
+    initial_state : array_like, shape (2,)
+        ``[v, h]`` before the first sample.
+    dv_max : float, optional
+        Largest integration sub-step (V); default a tenth of the saturation value of h.
+    region : Region, optional
+    """
+
+    c0: float
+    alpha: float
+    beta: float
+    gamma: float
+    n: float
+    offset: float
+    initial_state: FloatArray
+    dv_max: float | None = None
+    region: Region | None = None
+    packed: FloatArray = field(init=False, repr=False)
+    kind: ClassVar[str] = "bouc_wen"
+    inner: ClassVar[str] = "h"
+
+    def __post_init__(self) -> None:
+        names = ("c0", "alpha", "beta", "gamma", "n", "offset")
+        vals = {k: _finite(getattr(self, k), k) for k in names}
+        if not vals["beta"] > 0 or abs(vals["gamma"]) > vals["beta"] * (1 + 1e-12):
+            msg = "Bouc-Wen needs beta > 0 and |gamma| <= beta (bounded, stable loops)."
+            raise ParameterError(msg)
+        g_max = (
+            2.0 * vals["beta"] / (vals["beta"] + vals["gamma"])
+            if vals["beta"] + vals["gamma"] > 0
+            else 2.0
+        )
+        s_min = vals["c0"] + min(vals["alpha"], 0.0) * g_max
+        if not vals["c0"] > 0 or not s_min > 0:
+            msg = (
+                "Bouc-Wen needs c0 > 0 and c0 + alpha * g_max > 0 (strictly increasing "
+                f"branches; g_max = {g_max:.6g})."
+            )
+            raise ParameterError(msg)
+        if not 1.0 <= vals["n"] <= 6.0:
+            msg = f"Bouc-Wen's exponent n must lie in [1, 6]. Got {vals['n']!r}."
+            raise ParameterError(msg)
+        for k, v in vals.items():
+            object.__setattr__(self, k, v)
+        z0 = _frozen(self.initial_state, "initial_state")
+        if z0.size != 2:
+            msg = f"'initial_state' must be [v, h]. Got {z0.size} values."
+            raise ShapeError(msg)
+        object.__setattr__(self, "initial_state", z0)
+        dv = self.dv_max
+        if dv is None:
+            dv = 0.1 * self.h_max if math.isfinite(self.h_max) else 1.0
+        dv = _finite(dv, "dv_max")
+        if not dv > 0:
+            msg = f"'dv_max' must be > 0. Got {dv!r}."
+            raise ParameterError(msg)
+        object.__setattr__(self, "dv_max", dv)
+        packed = np.array([D.KIND_BOUC_WEN, vals["c0"], vals["alpha"], vals["beta"],
+                           vals["gamma"], vals["n"], vals["offset"], dv, g_max, s_min])  # fmt: skip
+        packed.flags.writeable = False
+        object.__setattr__(self, "packed", packed)
+
+    @property
+    def h_max(self) -> float:
+        """The value h saturates at on a long rise, :math:`(\\beta + \\gamma)^{-1/n}` (V)."""
+        s = self.beta + self.gamma
+        return float(s ** (-1.0 / self.n)) if s > 0 else math.inf
+
+    def rest_state(self, x0: float) -> FloatArray:
+        """See :meth:`DifferentialCore.rest_state`: h = 0 at ``x0``."""
+        return np.array([float(x0), 0.0])
+
+    def with_initial_state(self, state: ArrayLike) -> BoucWenHysteresis:
+        """See :meth:`DifferentialCore.with_initial_state`."""
+        z = as_signal(state, "state")
+        return BoucWenHysteresis(self.c0, self.alpha, self.beta, self.gamma, self.n,
+                                 self.offset, z, self.dv_max, self.region)  # fmt: skip
+
+    def describe(self, input_unit: str, output_unit: str) -> list[tuple[str, str]]:
+        """See :meth:`DifferentialCore.describe`."""
+        slope = f"{output_unit}/{input_unit}"
+        return [
+            ("core", "Bouc-Wen, y = c0 v + alpha h + offset"),
+            ("c0", f"{self.c0:.6g} {slope}"),
+            ("alpha", f"{self.alpha:.6g} {slope}"),
+            ("beta, gamma", f"{self.beta:.6g}, {self.gamma:.6g} {input_unit}^-{self.n:.4g}"),
+            ("n", f"{self.n:.4g}"),
+            ("h saturates at", f"{self.h_max:.6g} {input_unit}"),
+            ("offset", f"{self.offset:.6g} {output_unit}"),
+        ]
+
+    def to_dict(self) -> dict[str, Any]:
+        """See :meth:`DifferentialCore.to_dict`."""
+        return {
+            "c0": self.c0,
+            "alpha": self.alpha,
+            "beta": self.beta,
+            "gamma": self.gamma,
+            "n": self.n,
+            "offset": self.offset,
+            "dv_max": self.dv_max,
+            "initial_state": self.initial_state.tolist(),
+            "region": _region_dict(self.region),
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> BoucWenHysteresis:
+        """Inverse of :meth:`to_dict`.
+
+        Parameters
+        ----------
+        data : dict
+
+        Returns
+        -------
+        BoucWenHysteresis
+        """
+        return cls(
+            data["c0"],
+            data["alpha"],
+            data["beta"],
+            data["gamma"],
+            data["n"],
+            data["offset"],
+            data["initial_state"],
+            data.get("dv_max"),
+            _region_from(data.get("region")),
+        )
+
+
+CORES: dict[str, type[DifferentialCore]] = {
+    DuhemHysteresis.kind: DuhemHysteresis,
+    BoucWenHysteresis.kind: BoucWenHysteresis,
+}

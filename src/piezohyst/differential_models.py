@@ -1,0 +1,852 @@
+r"""Models on a differential core: :class:`DuhemModel` and :class:`BoucWenModel`.
+
+Both are :class:`~piezohyst.models.HysteresisModel`\ s — the same ``fit``,
+``predict``/``propagate`` with a named state, ``growth``/``remove_growth``,
+``inversion()`` for the :class:`~piezohyst.Compensator`, files, input and output
+dynamics — whose hysteresis is a :mod:`~piezohyst.differential` core instead
+of play operators, plus growth terms (leakage ``integral``, bias ``time``,
+voltage-dependent leakage ``abs_integral``) identified jointly:
+
+* :class:`DuhemModel`: one bounded least squares on the record's increments
+  (slopes on a grid, the growth terms' increments beside them), repeated with
+  the growth removed, then refined on the output error (Gauss-Newton with the
+  exact sensitivities of the simulated output, bounds kept).
+* :class:`BoucWenModel`: an outer search over the three shape parameters
+  (saturation of h, :math:`\gamma/\beta`, n) around a linear bounded solve of
+  :math:`c_0`, :math:`\alpha`, the offset and the growth coefficients, scored
+  on the simulated output (output error).
+
+Their fits need the record in memory (``fit_blocks`` reads it in).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import warnings
+from collections.abc import Sequence
+from typing import Any, ClassVar
+
+import numpy as np
+
+from . import _diffkernels as D
+from ._validation import FloatArray, as_signal, as_time, check_float
+from .cores import PlayCore
+from .differential import BoucWenHysteresis, DifferentialCore, DuhemHysteresis, Region
+from .errors import ExtrapolationWarning, InsufficientDataError, NotInvertibleError, ParameterError
+from .identification import (
+    Blocks,
+    Summary,
+    _bounded_lstsq,
+    array_blocks,
+    block_dt,
+    default_thresholds,
+    identify,
+    periodic_state,
+    term_columns,
+)
+from .models import (
+    GROWTH_TERMS,
+    ClassicalPI,
+    History,
+    HysteresisModel,
+    InitialState,
+    Rule,
+    _bool,
+    _dynamics_kind,
+    _growth_terms,
+    _output_kind,
+    _unit,
+)
+from .terms import Term, make_term
+
+__all__ = ["BoucWenModel", "DifferentialModel", "DuhemModel"]
+
+REFINE_ROWS = 8000  # output-error refinement: residual rows (hashed picks)
+REFINE_EVALS = 25  # and evaluations
+PROXY_OPERATORS = 16  # play operators of the proxy that settles the growth terms
+FIT_ROWS = 40_000  # output-error residuals use at most this many samples (hashed picks)
+
+
+def _grid(value: object, name: str, owner: str) -> tuple[int, int] | None:
+    if value is None:
+        return None
+    ok = (
+        isinstance(value, Sequence)
+        and not isinstance(value, str)
+        and len(value) == 2
+        and all(isinstance(v, int | np.integer) and not isinstance(v, bool) for v in value)
+        and all(2 <= int(v) <= 40 for v in value)
+    )
+    if not ok:
+        msg = (
+            f"The '{name}' parameter of {owner} must be two ints in [2, 40] (voltage nodes, "
+            f"output nodes). Got {value!r} instead."
+        )
+        raise ParameterError(msg)
+    assert isinstance(value, Sequence)
+    return int(value[0]), int(value[1])
+
+
+def _memory(value: object, name: str, owner: str) -> str:
+    if value not in ("reversal", "charge"):
+        msg = (
+            f"The '{name}' parameter of {owner} must be 'reversal' or 'charge'. "
+            f"Got {value!r} instead."
+        )
+        raise ParameterError(msg)
+    return str(value)
+
+
+def _smoothing(value: object, name: str, owner: str) -> float | None:
+    return None if value is None else _nonneg(value, name, owner)
+
+
+def _nonneg(value: object, name: str, owner: str) -> float:
+    return check_float(value, name, owner, 0.0, 1e6)
+
+
+def _fraction(value: object, name: str, owner: str) -> float:
+    return check_float(value, name, owner, 0.0, 1.0, low_open=True)
+
+
+def _picked_rows(n: int, limit: int) -> np.ndarray:
+    """All rows, or about ``limit`` of them spread by a hash of the index (no aliasing)."""
+    if n <= limit:
+        return np.arange(n)
+    g = np.arange(n, dtype=np.uint64)
+    h = (g * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(40)
+    return np.flatnonzero(h < np.uint64(((1 << 24) * limit) // n))
+
+
+def _growth_matrix(terms: Sequence[Term], x: FloatArray, t: FloatArray | None) -> FloatArray:
+    """Every growth term's columns over the record, from rest at its start."""
+    width = sum(term.width for term in terms)
+    out = np.zeros((x.size, width))
+    if width:
+        states = [term.rest_state(float(x[0])) for term in terms]
+        dt = block_dt(t, 0, x.size, None) if t is not None else None
+        term_columns(terms, x, t, dt, states, out)
+    return out
+
+
+def _collect(blocks: Blocks) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+    xs, ys, ts = [], [], []
+    timed = True
+    for x, y, t in blocks():
+        xs.append(np.asarray(x, dtype=np.float64))
+        ys.append(np.asarray(y, dtype=np.float64))
+        if t is None:
+            timed = False
+        else:
+            ts.append(np.asarray(t, dtype=np.float64))
+    x_all = np.concatenate(xs) if xs else np.zeros(0)
+    y_all = np.concatenate(ys) if ys else np.zeros(0)
+    return x_all, y_all, (np.concatenate(ts) if timed and ts else None)
+
+
+class DifferentialModel(HysteresisModel):
+    """Base of the models on a differential core (see the module documentation).
+
+    Subclasses implement :meth:`_identify`: the core and the growth
+    coefficients from the record in memory.
+    """
+
+    _rules: ClassVar[dict[str, Rule]] = {
+        "growth_terms": _growth_terms,
+        "min_slope": _fraction,
+        "region_tolerance": _nonneg,
+        "input_unit": _unit,
+        "output_unit": _unit,
+        "input_dynamics": _dynamics_kind,
+        "output_dynamics": _output_kind,
+    }
+    region_: Region | None
+    region_tolerance: float
+    #: the growth terms come from the PI proxy (True) or are fitted with the core (False)
+    growth_from_proxy: ClassVar[bool] = True
+
+    # --------------------------------------------------------------- fitting
+    def _terms_to_fit(
+        self, x_range: FloatArray, params: dict[str, Any]
+    ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
+        names = params["growth_terms"]
+        if names is None:  # "auto": the input dynamics' proxy fits them all
+            names = GROWTH_TERMS
+        return [make_term(name).bind(x_range) for name in names], None
+
+    def _fit(self, blocks: Blocks, initial_state: InitialState, timed: bool) -> Summary:
+        params = self.check_params()
+        x, y, t = _collect(blocks)
+        sm = Summary.of(array_blocks(x, y, t))
+        if not sm.x_max - sm.x_min > 1e-12 * max(abs(sm.x_min), abs(sm.x_max), 1e-300):
+            msg = (
+                f"the input never moves (constant at {sm.x_first:g} {self.input_unit}): "
+                "a record without excitation holds no hysteresis to identify"
+            )
+            raise InsufficientDataError(msg)
+        select = params["growth_terms"] is None
+        names = GROWTH_TERMS if select else params["growth_terms"]
+        terms = [make_term(name).bind(sm.x_range) for name in names]
+        if any(term.rate_dependent for term in terms) and (not timed or t is None):
+            if select:
+                terms = []  # no times: no growth term to choose
+            else:
+                as_time(None, sm.n, required=True, owner=type(self).__name__)  # raises
+        proxy: list[FloatArray] | None = None
+        if terms and (select or self.growth_from_proxy):
+            terms, proxy = self._proxy(x, y, t, terms, select, initial_state)
+        core, coefs = self._identify(
+            x, y, t if terms else None, terms, params, initial_state, proxy
+        )
+        self.set_fitted(core, tuple(terms), tuple(coefs))
+        self.input_range_ = (sm.x_min, sm.x_max)
+        self.max_slew_rate_ = sm.max_slew_rate
+        with warnings.catch_warnings():  # its own record: no extrapolation warning
+            warnings.simplefilter("ignore", ExtrapolationWarning)
+            self._score(array_blocks(x, y, t), sm)
+        return sm
+
+    def _identify(
+        self,
+        x: FloatArray,
+        y: FloatArray,
+        t: FloatArray | None,
+        terms: list[Term],
+        params: dict[str, Any],
+        initial_state: InitialState,
+        growth: list[FloatArray] | None,
+    ) -> tuple[DifferentialCore, list[FloatArray]]:
+        """The core and each term's coefficients (``growth``: fixed by the proxy)."""
+        raise NotImplementedError
+
+    def _proxy(
+        self,
+        x: FloatArray,
+        y: FloatArray,
+        t: FloatArray | None,
+        terms: list[Term],
+        select: bool,
+        initial_state: InitialState,
+    ) -> tuple[list[Term], list[FloatArray]]:
+        """Growth terms identified jointly with Prandtl-Ishlinskii operators (a proxy core).
+
+        PI loops close by construction: every drift of the charge is the
+        growth terms'. A Duhem core's loops need not close, so identified
+        jointly with it a leak trades against the slopes; the proxy settles the
+        growth first. With ``select`` (``growth_terms="auto"``) the proxy's
+        forward-chaining cross-validation chooses the terms (``selection_``).
+        """
+        sm = Summary.of(array_blocks(x, y, t))
+        thr = default_thresholds(sm.x_range, PROXY_OPERATORS)
+        z0 = np.full(thr.size, float(x[0]))
+        if isinstance(initial_state, str) and initial_state == "periodic":
+            z0 = periodic_state(array_blocks(x, x, None), thr, float(x[0]))
+        subsets = None
+        if select:
+            subsets = [
+                combo for size in range(len(terms) + 1)
+                for combo in itertools.combinations(range(len(terms)), size)
+            ]  # fmt: skip
+        sol = identify(PlayCore(thr), terms, array_blocks(x, y, t), sm, z0, min_slope=1e-3,
+                       subsets=subsets)  # fmt: skip
+        if select:
+            label = self._subset_label
+            self._selection = (
+                {label(terms, k): v for k, v in sol.scores.items()},
+                {label(terms, k): v for k, v in sol.fold_scores.items()},
+                sol.splits,
+            )
+        kept = [j for j, c in enumerate(sol.coefficients) if c is not None]
+        return [terms[j] for j in kept], [np.asarray(sol.coefficients[j]) for j in kept]
+
+    def set_fitted(self, core: Any, terms: tuple[Term, ...], coefs: tuple[FloatArray, ...]) -> None:
+        """See :meth:`HysteresisModel.set_fitted`; ``core`` is a differential core.
+
+        Parameters
+        ----------
+        core : DifferentialCore
+        terms : tuple of Term
+        coefs : tuple of ndarray
+        """
+        super().set_fitted(core, terms, coefs)
+        chosen = self.__dict__.pop("_selection", None)
+        if chosen is not None:
+            self.selection_, self.selection_folds_, self.selection_splits_ = chosen
+
+    def _set_core(self, core: Any) -> None:
+        self.operator_ = core
+        self.initial_state_ = core.initial_state
+        self.region_ = core.region
+
+    def _history_operators(self, history: FloatArray) -> FloatArray:
+        return np.asarray(self.operator_.history_state(history), dtype=np.float64)
+
+    def _periodic_operators(self, x: FloatArray) -> FloatArray:
+        return np.asarray(self.operator_.periodic_state(x), dtype=np.float64)
+
+    def _fast_plan(self) -> tuple[Any, ...] | None:
+        self.__dict__["_fast"] = None
+        return None
+
+    def _check_region(self, x: FloatArray, core_output: FloatArray) -> None:
+        region = self.operator_.region
+        if region is None or x.size == 0:
+            return
+        d = region.distance(x, core_output)
+        tol = float(self.region_tolerance) * region.span
+        outside = d > tol
+        if outside.any():
+            k = int(np.argmax(outside))
+            warnings.warn(
+                f"{int(outside.sum())} of {x.size} samples (first: sample {k}, "
+                f"{x[k]:.4g} {self.input_unit}) lie outside the (voltage, output) region the "
+                f"{type(self).__name__} was identified on, by up to {float(d.max()):.3g} "
+                f"{self.output_unit}: the model extrapolates there",
+                ExtrapolationWarning,
+                stacklevel=4,
+            )
+
+    # ------------------------------------------------------- pure hysteresis
+    @property
+    def hysteresis_(self) -> HysteresisModel:
+        """The model without its growth terms (eq. 19's pure hysteresis), as a fitted model."""
+        self._check_fitted()
+        model = type(self)(**{**self.get_params(), "growth_terms": ()})
+        model.set_fitted(self.operator_, (), ())
+        model.input_range_ = self.input_range_
+        model.max_slew_rate_ = self.max_slew_rate_
+        model.input_dynamics_ = self.input_dynamics_
+        model.output_dynamics_ = self.output_dynamics_
+        return model
+
+    def inverse(self) -> ClassicalPI:
+        """No closed-form inverse model: :class:`~piezohyst.Compensator` inverts it per sample.
+
+        Returns
+        -------
+        ClassicalPI
+            Never: always raises.
+
+        Raises
+        ------
+        NotInvertibleError
+        """
+        msg = (
+            f"a {type(self).__name__} has no closed-form inverse model; ph.Compensator inverts "
+            "it exactly, one sample at a time"
+        )
+        raise NotInvertibleError(msg)
+
+    @classmethod
+    def _bare(cls, n: int, input_unit: str, output_unit: str) -> HysteresisModel:
+        model = cls(input_unit=input_unit, output_unit=output_unit)
+        return model
+
+    def rest_state_output(self, x0: float) -> float:
+        """The pure hysteresis output of an actuator resting at ``x0`` (see ``rest_state``).
+
+        Parameters
+        ----------
+        x0 : float
+
+        Returns
+        -------
+        float
+        """
+        self._check_fitted()
+        return float(self.operator_.output(self.operator_.rest_state(float(x0))))
+
+
+def _start_inner(core_rest: Any, x: FloatArray, initial_state: InitialState) -> FloatArray | None:
+    """The core state before the record for a named initial state, or None (fit it)."""
+    if isinstance(initial_state, History):
+        z = core_rest.history_state(as_signal(initial_state.input, "history"))
+    elif isinstance(initial_state, str) and initial_state == "periodic":
+        z = core_rest.periodic_state(x)
+    else:
+        return None
+    return np.asarray(z, dtype=np.float64)
+
+
+class DuhemModel(DifferentialModel):
+    r"""Rate-independent Duhem hysteresis, identified from data, plus growth terms.
+
+    .. math::
+
+        \frac{dq}{dv} = f_\pm(v, m), \qquad y = q + \sum_j c_j g_j(t)
+
+    ``f+`` while the voltage rises, ``f-`` while it falls: positive bilinear
+    surfaces on a ``grid`` over the voltage and a memory coordinate ``m``:
+
+    * ``memory="reversal"`` (default): the excursion since the last reversal,
+      with Preisach's wiping-out of closed inner loops. The model's output is
+      linear in its slopes *given the input alone*, so one bounded linear
+      least squares, joint with the growth terms, is its exact output-error
+      fit. Minor loops are not congruent: each has the shape its place in
+      the major loop and its size give it, learnt from loops of many sizes
+      (the simulator's ``decaying`` signal). Prandtl-Ishlinskii is the
+      special case of slopes that depend on the excursion alone.
+    * ``memory="charge"``: the classical Duhem form, :math:`m = q`. Its
+      slopes see the output they produce, so the fit is an integrated
+      regression on the measured path refined on the simulated output; its
+      loops need not close, so the growth terms come from a
+      Prandtl-Ishlinskii proxy first (a drift would otherwise trade against
+      the slopes). Kept for comparison: on the bench it predicts worse than
+      reversal memory (``docs/validation.md``).
+
+    Outside the (voltage, output) region the training record covered, the
+    slopes are held at the grid's edge: predictions warn
+    (:class:`~piezohyst.ExtrapolationWarning`) and the compensator holds its
+    command unless allowed to extrapolate.
+
+    Parameters
+    ----------
+    grid : (int, int), optional
+        Nodes along the voltage and the memory coordinate, each in [2, 40].
+        Default (12, 12) for reversal memory, (8, 6) for charge memory.
+    memory : {"reversal", "charge"}, default "reversal"
+    growth_terms : "auto" or sequence of {"integral", "time", "abs_integral"}, default ("integral",)
+        Growth terms fitted jointly (removed before compensating); ``"auto"``
+        chooses by forward-chaining validation (``selection_``).
+    smoothing : float, optional
+        Weight of the curvature penalty on the slope surfaces, relative to the
+        data's (fills cells the data barely visit). Default 1e-4 for reversal
+        memory, 1e-3 for charge memory.
+    min_slope : float, default 0.02
+        Smallest slope, as a fraction of the mean slope: strictly increasing
+        branches.
+    refine : bool, default True
+        Charge memory: refine on the output error.
+    region_tolerance : float, default 0.05
+        How far outside the recorded band (fraction of the output span)
+        counts as extrapolating.
+    input_unit, output_unit : str
+    input_dynamics, output_dynamics : str
+        As for :class:`~piezohyst.models.HysteresisModel`.
+
+    Attributes
+    ----------
+    operator_ : DuhemHysteresis
+        The core (slopes, grid, initial state, region).
+    region_ : Region
+        Where the training data lay.
+
+    Examples
+    --------
+    >>> import piezohyst as ph
+    >>> rec = ph.simulate(signal="decaying", duration=20.0)
+    >>> model = ph.DuhemModel().fit(rec.voltage, rec.charge, t=rec.t)
+    >>> bool(model.nrmse_ < 0.001)
+    True
+    """
+
+    cli_name = "duhem"
+    _rules: ClassVar[dict[str, Rule]] = {
+        "grid": _grid,
+        "memory": _memory,
+        "smoothing": _smoothing,
+        "refine": _bool,
+    }
+
+    def __init__(
+        self,
+        grid: tuple[int, int] | None = None,
+        *,
+        memory: str = "reversal",
+        growth_terms: str | Sequence[str] = ("integral",),
+        smoothing: float | None = None,
+        min_slope: float = 0.02,
+        refine: bool = True,
+        region_tolerance: float = 0.05,
+        input_unit: str = "V",
+        output_unit: str = "C",
+        input_dynamics: str = "none",
+        output_dynamics: str = "none",
+    ) -> None:
+        self.grid = grid
+        self.memory = memory
+        self.growth_terms = growth_terms
+        self.smoothing = smoothing
+        self.min_slope = min_slope
+        self.refine = refine
+        self.region_tolerance = region_tolerance
+        self.input_unit = input_unit
+        self.output_unit = output_unit
+        self.input_dynamics = input_dynamics
+        self.output_dynamics = output_dynamics
+
+    @property
+    def growth_from_proxy(self) -> bool:  # type: ignore[override]
+        """Charge memory takes its growth terms from the proxy (its loops need not close)."""
+        return bool(self.memory == "charge")
+
+    def _identify(
+        self,
+        x: FloatArray,
+        y: FloatArray,
+        t: FloatArray | None,
+        terms: list[Term],
+        params: dict[str, Any],
+        initial_state: InitialState,
+        growth: list[FloatArray] | None,
+    ) -> tuple[DifferentialCore, list[FloatArray]]:
+        charge = params["memory"] == "charge"
+        grid = params["grid"] or ((8, 6) if charge else (12, 12))
+        smoothing = params["smoothing"]
+        if smoothing is None:
+            smoothing = 1e-3 if charge else 1e-4
+        nv, nq = grid
+        cells = nv * nq
+        n = x.size
+        if n < 2 * cells + 2:
+            msg = f"{n} samples cannot identify {2 * cells} slopes: give a longer record"
+            raise InsufficientDataError(msg)
+        if charge:
+            return self._identify_charge(x, y, t, terms, params, initial_state, growth,
+                                         grid, smoothing)  # fmt: skip
+        g_mat = _growth_matrix(terms, x, t)
+        m = g_mat.shape[1]
+        lower_g = np.concatenate([term.lower_bounds() for term in terms]) if terms else np.zeros(0)
+        span = float(np.ptp(x))
+        s_min = float(params["min_slope"]) * max(float(np.ptp(y)), 1e-300) / span
+        v_step = span / (nv - 1)
+        head = [D.KIND_DUHEM_REV, nv, nq, float(x.min()), v_step, 0.0, span / (nq - 1),
+                0.25 * min(v_step, span / (nq - 1)), s_min]  # fmt: skip
+        packed = np.concatenate([head, np.ones(2 * cells)])
+        probe = DuhemHysteresis.from_packed(packed, np.zeros(D.RV_SIZE))
+        start = _start_inner(probe, x, initial_state)  # the reversal stack before the record
+        z0 = probe.rest_state(float(x[0])) if start is None else start
+        rows = _picked_rows(n, FIT_ROWS)
+        design = np.empty((rows.size, 2 * cells))
+        D.rev_design(packed, x, z0.copy(), rows, design)
+        a = np.hstack([design, g_mat[rows], np.ones((rows.size, 1))])
+        gram = a.T @ a
+        weight = smoothing * max(float(np.mean(np.diag(gram)[: 2 * cells])), 1e-300)
+        penalty = _curvature(nv, nq)
+        for half in (0, cells):
+            sl = slice(half, half + cells)
+            gram[sl, sl] += weight * penalty
+        lower = np.concatenate([np.full(2 * cells, s_min), lower_g, [-np.inf]])
+        sol = _bounded_lstsq(gram, a.T @ y[rows], lower)
+        packed[D.DU_UP :] = np.maximum(sol[: 2 * cells], s_min)
+        g = sol[2 * cells : 2 * cells + m]
+        z0 = np.array(z0)
+        z0[1] = float(sol[-1])
+        qh = y - g_mat @ g if m else y
+        core = DuhemHysteresis.from_packed(packed, z0, Region.of(x, qh))
+        coefs, col = [], 0
+        for term in terms:
+            coefs.append(np.asarray(g[col : col + term.width], dtype=np.float64))
+            col += term.width
+        return core, coefs
+
+    def _identify_charge(
+        self,
+        x: FloatArray,
+        y: FloatArray,
+        t: FloatArray | None,
+        terms: list[Term],
+        params: dict[str, Any],
+        initial_state: InitialState,
+        growth: list[FloatArray] | None,
+        grid: tuple[int, int],
+        smoothing: float,
+    ) -> tuple[DifferentialCore, list[FloatArray]]:
+        """Charge memory: integrated regression on the measured path, then output error."""
+        nv, nq = grid
+        cells = nv * nq
+        n = x.size
+        g_mat = _growth_matrix(terms, x, t)
+        g = np.concatenate(growth) if growth else np.zeros(0)
+        qh = y - g_mat @ g if g.size else y  # the pure hysteresis the slopes describe
+        mean_slope = max(float(np.ptp(qh)), 1e-300) / float(np.ptp(x))
+        s_min = float(params["min_slope"]) * mean_slope
+        lo, hi = float(qh.min()), float(qh.max())
+        pad = 0.02 * (hi - lo)
+        v_step = float(np.ptp(x)) / (nv - 1)
+        head = [D.KIND_DUHEM, nv, nq, float(x.min()), v_step, lo - pad,
+                (hi - lo + 2 * pad) / (nq - 1), 0.25 * v_step, s_min]  # fmt: skip
+        packed = np.concatenate([head, np.zeros(2 * cells)])
+        penalty = _curvature(nv, nq)
+        rows = _picked_rows(n, FIT_ROWS)
+        # integrated regression: the output is q0 plus the slopes summed along the measured
+        # path; linear in the slopes, noise enters through the path only
+        cum = np.empty((rows.size, 2 * cells))
+        D.duhem_cumulative(packed, x, qh, rows, cum)
+        a = np.hstack([cum, np.ones((rows.size, 1))])
+        gram = a.T @ a
+        weight = smoothing * max(float(np.mean(np.diag(gram)[:-1])), 1e-300)
+        for half in (0, cells):
+            sl = slice(half, half + cells)
+            gram[sl, sl] += weight * penalty
+        sol = _bounded_lstsq(gram, a.T @ qh[rows], np.append(np.full(2 * cells, s_min), -np.inf))
+        packed[D.DU_UP :] = np.maximum(sol[:-1], s_min)
+        q0 = float(sol[-1])
+        start = _start_inner(DuhemHysteresis.from_packed(packed, [x[0], q0]), x, initial_state)
+        if start is not None:
+            q0 = float(start[1])
+        if params["refine"]:
+            packed, q0 = _refine_duhem(packed, x, qh, q0, s_min, smoothing,
+                                       penalty, fit_q0=start is None)  # fmt: skip
+        core = DuhemHysteresis.from_packed(packed, [x[0], q0], Region.of(x, qh))
+        assert core.memory == "charge"
+        return core, list(growth or [])
+
+
+def _curvature(nv: int, nq: int) -> FloatArray:
+    """DᵀD of second differences along both axes of an (nv, nq) grid (first differences
+    where an axis has two nodes)."""
+    rows = []
+    for i in range(nv):
+        for j in range(nq):
+            for di, dj in ((1, 0), (0, 1)):
+                a, b = i + 2 * di, j + 2 * dj
+                if a < nv and b < nq:
+                    r = np.zeros(nv * nq)
+                    r[i * nq + j] += 1.0
+                    r[(i + di) * nq + (j + dj)] -= 2.0
+                    r[a * nq + b] += 1.0
+                    rows.append(r)
+                elif (nv if di else nq) == 2 and (i + di < nv and j + dj < nq):
+                    r = np.zeros(nv * nq)
+                    r[i * nq + j] += 1.0
+                    r[(i + di) * nq + (j + dj)] -= 1.0
+                    rows.append(r)
+    d = np.array(rows) if rows else np.zeros((0, nv * nq))
+    return np.asarray(d.T @ d)
+
+
+def _refine_duhem(
+    packed: FloatArray,
+    x: FloatArray,
+    q: FloatArray,
+    q0: float,
+    s_min: float,
+    smoothing: float,
+    penalty: FloatArray,
+    *,
+    fit_q0: bool,
+) -> tuple[FloatArray, float]:
+    """Output-error refinement of the slopes (and the start): bounded least squares on the
+    simulated output, with the exact sensitivities of the simulation as its Jacobian."""
+    from scipy.optimize import least_squares
+
+    cells2 = packed.size - D.DU_UP
+    cells = cells2 // 2
+    rows = _picked_rows(x.size, REFINE_ROWS)
+    scale = max(float(np.ptp(q)), 1e-300)
+    q_rows = q[rows]
+    lam, vec = np.linalg.eigh(penalty)
+    root = (vec * np.sqrt(np.maximum(lam, 0.0))).T  # root.T @ root = penalty
+    qsim = np.empty(x.size)
+    jac_core = np.empty((rows.size, cells2 + 1))
+    no_rows = np.zeros(0, dtype=np.int64)
+    no_jac = np.zeros((0, cells2 + 1))
+    theta0 = np.concatenate([packed[D.DU_UP :], [q0] if fit_q0 else []])
+
+    def split(theta: FloatArray) -> tuple[FloatArray, float]:
+        p = packed.copy()
+        p[D.DU_UP :] = theta[:cells2]
+        return p, float(theta[-1]) if fit_q0 else q0
+
+    p0, start = split(theta0)
+    D.duhem_jacobian(p0, x, start, rows, qsim, jac_core)
+    # the curvature penalty has the weight it had in the linear fit, relative to the data
+    col = float(np.mean(np.sum(jac_core[:, :cells2] ** 2, axis=0))) / scale**2
+    w_pen = math.sqrt(smoothing * max(col, 1e-300))
+
+    def residual(theta: FloatArray) -> FloatArray:
+        p, qq = split(theta)
+        D.duhem_jacobian(p, x, qq, no_rows, qsim, no_jac)
+        pen = [w_pen * (root @ theta[h : h + cells]) for h in (0, cells)]
+        return np.concatenate([(qsim[rows] - q_rows) / scale, *pen])
+
+    def jacobian(theta: FloatArray) -> FloatArray:
+        p, qq = split(theta)
+        D.duhem_jacobian(p, x, qq, rows, qsim, jac_core)
+        top = jac_core if fit_q0 else jac_core[:, :cells2]
+        pen = np.zeros((2 * root.shape[0], theta.size))
+        pen[: root.shape[0], :cells] = w_pen * root
+        pen[root.shape[0] :, cells:cells2] = w_pen * root
+        return np.vstack([top / scale, pen])
+
+    lower = np.concatenate([np.full(cells2, s_min), [-np.inf] if fit_q0 else []])
+    theta0[:cells2] = np.maximum(theta0[:cells2], s_min * (1 + 1e-9))
+    res = least_squares(
+        residual, theta0, jac=jacobian, bounds=(lower, np.inf), method="trf",
+        x_scale="jac", max_nfev=REFINE_EVALS, tr_solver="exact",
+    )  # fmt: skip
+    p, qq = split(res.x)
+    p[D.DU_UP :] = np.maximum(p[D.DU_UP :], s_min)
+    return p, qq
+
+
+class BoucWenModel(DifferentialModel):
+    r"""The Bouc-Wen model of hysteresis, plus growth terms.
+
+    .. math::
+
+        y = c_0 v + \alpha h + c + \sum_j c_j g_j(t), \qquad
+        \frac{dh}{dv} = 1 - |h|^n \bigl(\beta\,\mathrm{sign}(h\,\dot v) + \gamma\bigr)
+
+    Identified by output error: an outer search over the shape (where h
+    saturates, :math:`\gamma/\beta` and n; a coarse grid, then
+    ``scipy.optimize.least_squares`` within bounds) around a bounded linear
+    solve of :math:`c_0 > 0`, :math:`\alpha \ge 0`, the offset and the growth
+    coefficients. The bounds (:math:`\beta > 0`, :math:`|\gamma| \le \beta`,
+    :math:`c_0 > 0`, :math:`\alpha \ge 0`) keep it passive with strictly
+    increasing branches, so the compensator's Newton solve always has one
+    root. Its minor loops are not congruent but they do not close (no
+    return-point memory).
+
+    Parameters
+    ----------
+    growth_terms : "auto" or sequence of {"integral", "time", "abs_integral"}, default ("integral",)
+    min_slope : float, default 1e-3
+        Smallest c0, as a fraction of the mean slope.
+    region_tolerance : float, default 0.05
+    input_unit, output_unit : str
+    input_dynamics, output_dynamics : str
+
+    Attributes
+    ----------
+    operator_ : BoucWenHysteresis
+        c0, alpha, beta, gamma, n, offset and the initial state [v, h].
+
+    Examples
+    --------
+    >>> import piezohyst as ph
+    >>> rec = ph.simulate(signal="decaying", duration=20.0)
+    >>> model = ph.BoucWenModel().fit(rec.voltage, rec.charge, t=rec.t)
+    >>> bool(model.nrmse_ < 0.02), model.operator_.n >= 1.0
+    (True, True)
+    """
+
+    cli_name = "bouc-wen"
+    growth_from_proxy = False  # its loops close: the growth is fitted with it, jointly
+
+    def __init__(
+        self,
+        growth_terms: str | Sequence[str] = ("integral",),
+        *,
+        min_slope: float = 1e-3,
+        region_tolerance: float = 0.05,
+        input_unit: str = "V",
+        output_unit: str = "C",
+        input_dynamics: str = "none",
+        output_dynamics: str = "none",
+    ) -> None:
+        self.growth_terms = growth_terms
+        self.min_slope = min_slope
+        self.region_tolerance = region_tolerance
+        self.input_unit = input_unit
+        self.output_unit = output_unit
+        self.input_dynamics = input_dynamics
+        self.output_dynamics = output_dynamics
+
+    def _identify(
+        self,
+        x: FloatArray,
+        y: FloatArray,
+        t: FloatArray | None,
+        terms: list[Term],
+        params: dict[str, Any],
+        initial_state: InitialState,
+        growth: list[FloatArray] | None,
+    ) -> tuple[DifferentialCore, list[FloatArray]]:
+        from scipy.optimize import least_squares
+
+        n = x.size
+        g_mat = _growth_matrix(terms, x, t)
+        m = g_mat.shape[1]
+        if n < 8 + m:
+            msg = f"{n} samples cannot identify a Bouc-Wen model with {m} growth terms"
+            raise InsufficientDataError(msg)
+        lower_g = np.concatenate([term.lower_bounds() for term in terms]) if terms else np.zeros(0)
+        span = float(np.ptp(x))
+        mean_slope = max(float(np.ptp(y)), 1e-300) / span
+        s_min = float(params["min_slope"]) * mean_slope
+        lower = np.concatenate([[s_min, 0.0, -np.inf], lower_g])
+        rows = _picked_rows(n, FIT_ROWS)
+        h = np.empty(n)
+        scale = max(float(np.ptp(y)), 1e-300)
+        g_rows = g_mat[rows].T if m else np.zeros((0, rows.size))
+
+        def shape(theta: FloatArray) -> tuple[float, float, float]:
+            h_sat = span * math.exp(float(theta[0]))
+            rho, expo = float(theta[1]), float(theta[2])
+            total = h_sat ** (-expo)  # beta + gamma
+            beta = total / (1.0 + rho)
+            return beta, rho * beta, expo
+
+        def packed(theta: FloatArray) -> FloatArray:
+            beta, gamma, expo = shape(theta)
+            h_sat = span * math.exp(float(theta[0]))
+            g_max = 2.0 * beta / (beta + gamma)
+            return np.array([D.KIND_BOUC_WEN, 1.0, 0.0, beta, gamma, expo, 0.0, 0.1 * h_sat,
+                             g_max, 1.0])  # fmt: skip
+
+        def start_h(p: FloatArray) -> float:
+            probe = BoucWenHysteresis(1.0, 0.0, p[3], p[4], p[5], 0.0, np.array([x[0], 0.0]), p[7])
+            s = _start_inner(probe, x, initial_state)
+            return 0.0 if s is None else float(s[1])
+
+        def solve(theta: FloatArray) -> tuple[float, float, FloatArray, FloatArray, float]:
+            """(c0, alpha, offset and growth, residual rows, h0): the better loop orientation.
+
+            alpha >= 0: c0 >= s_min. alpha = -a <= 0: with u = c0 - a g_max >= s_min,
+            y = u v + a (g_max v - h), so both are bounds on the columns' coefficients.
+            """
+            p = packed(theta)
+            h0 = start_h(p)
+            D.bw_trace(p, x, h0, h)
+            hr, xr = h[rows], x[rows]
+            g_max = float(p[D.BW_G_MAX])
+            best_fit: tuple[float, float, FloatArray, FloatArray, float] | None = None
+            for second in (hr, g_max * xr - hr):
+                a = np.vstack([xr, second, np.ones(rows.size), g_rows]).T
+                coef = _bounded_lstsq(a.T @ a, a.T @ y[rows], lower)
+                r = a @ coef - y[rows]
+                if second is hr:
+                    c0, alpha = float(coef[0]), float(coef[1])
+                else:
+                    c0, alpha = float(coef[0]) + float(coef[1]) * g_max, -float(coef[1])
+                if best_fit is None or float(r @ r) < float(best_fit[3] @ best_fit[3]):
+                    best_fit = (c0, alpha, coef[2:], r, h0)
+            assert best_fit is not None
+            return best_fit
+
+        def residual(theta: FloatArray) -> FloatArray:
+            return solve(theta)[3] / scale
+
+        best, best_cost = None, math.inf
+        for hs, rho, expo in itertools.product(
+            (0.03, 0.08, 0.2, 0.5, 1.2), (-0.6, 0.0, 0.6, 1.0), (1.0, 2.0, 4.0)
+        ):
+            theta = np.array([math.log(hs), rho, expo])
+            cost = float(np.sum(residual(theta) ** 2))
+            if cost < best_cost:
+                best, best_cost = theta, cost
+        assert best is not None
+        res = least_squares(
+            residual, best, bounds=([math.log(1e-3), -0.95, 1.0], [math.log(10.0), 1.0, 6.0]),
+            method="trf", x_scale=[1.0, 0.5, 1.0], diff_step=1e-4, max_nfev=60,
+        )  # fmt: skip
+        theta = res.x if float(np.sum(res.fun**2)) <= best_cost else best
+        c0, alpha, rest, _, h0 = solve(theta)
+        beta, gamma, expo = shape(theta)
+        p = packed(theta)
+        g_max = float(p[D.BW_G_MAX])
+        c0 = max(c0, s_min * (1 + 1e-12) - min(alpha, 0.0) * g_max, s_min)
+        D.bw_trace(p, x, h0, h)
+        offset = float(rest[0])
+        pure = c0 * x + alpha * h + offset
+        core = BoucWenHysteresis(c0, alpha, beta, gamma, expo, offset, np.array([x[0], h0]), p[7],
+                                 Region.of(x, pure))  # fmt: skip
+        coefs, col = [], 0
+        g = rest[1:]
+        for term in terms:
+            coefs.append(np.asarray(g[col : col + term.width], dtype=np.float64))
+            col += term.width
+        return core, coefs
