@@ -37,6 +37,7 @@ import math
 import numpy as np
 from numba import njit
 
+from . import _kernels as K
 from ._kernels import FASTMATH
 
 KIND_DUHEM = 0.0  # slopes over (voltage, output): the classical Duhem form
@@ -64,6 +65,7 @@ BW_DV_MAX = 7
 BW_G_MAX = 8  # dh/dv never exceeds it (2 beta / (beta + gamma)): clamped there
 BW_S_MIN = 9  # the smallest slope dy/dv, c0 + min(alpha, 0) g_max > 0
 BW_SIZE = 10
+REGION_BISECTIONS = 40  # halvings to find the region's edge along a refused move
 NEWTON_MAX = 40  # iterations of the Bouc-Wen inverse (bisection halves the bracket each time)
 
 
@@ -465,16 +467,31 @@ def core_step(desired, p, cfg, st, region, dyn, dstate):  # type: ignore[no-unty
         x = min(max(x, lo), hi)
         x = min(max(x, last - step), last + step)
         u = _advance(x, dyn, dstate)
-    if cfg[CC_TOL] < math.inf:
+    if cfg[CC_TOL] < math.inf:  # leaving the region (moves back towards it always pass)
         y1, _ = core_move(p, st, u, False)
-        if region_distance(region, cfg, u, y1) > cfg[CC_TOL]:
+        d1 = region_distance(region, cfg, u, y1)
+        d0 = region_distance(region, cfg, st[0], core_output(p, st))
+        if d1 > cfg[CC_TOL] and d1 > d0:
             st[end + DS_OUTSIDE] += 1.0
-            if cfg[CC_REFUSE] > 0.0:  # hold the last command instead
-                if dynamic:
+            if cfg[CC_REFUSE] > 0.0:
+                if dynamic:  # hold the last command instead
                     dstate[0] = saved0
                     dstate[1] = saved1
                     core_move(p, st, _advance(last, dyn, dstate), True)
-                return last
+                    return last
+                # stop at the region's edge: the largest move towards u that stays inside
+                edge = max(cfg[CC_TOL], d0)
+                a = st[0]
+                b = u
+                for _ in range(REGION_BISECTIONS):
+                    mid = 0.5 * (a + b)
+                    ym, _ = core_move(p, st, mid, False)
+                    if region_distance(region, cfg, mid, ym) <= edge:
+                        a = mid
+                    else:
+                        b = mid
+                u = a
+                x = a
     core_move(p, st, u, True)
     st[end + DS_LAST] = x
     return x
@@ -637,3 +654,35 @@ def duhem_cumulative(p, v, q, rows, out):  # type: ignore[no-untyped-def]
             for a in range(2 * cells):
                 out[r, a] = s[a]
             r += 1
+
+
+# ---------------------------------------------------------- self-sensing loop
+@njit(cache=True, fastmath=FASTMATH)
+def core_controller_step(desired, measured, p, cfg, st, region, dyn, dstate, ctl, cs):  # type: ignore[no-untyped-def]
+    """``_kernels.controller_step`` on a differential core: the same feedback arithmetic
+    (shared helpers), the core's inverse in place of eq. 18. ``cfg`` takes model units."""
+    c2 = ctl[np.newaxis]
+    cs2 = cs[np.newaxis]
+    end = st.shape[0]
+    last = st[end + DS_LAST]
+    qc = K.feedback_measure_at(0, measured, last, c2, cs2)
+    if math.isfinite(qc) and cs[K.CS_STARTED] == 0.0:  # the first measurement sets the frame
+        cs[K.CS_FRAME] = core_output(p, st) - qc
+        cs[K.CS_STARTED] = 1.0
+    e = K.feedback_error_at(0, qc, cs2)
+    d, integral, u = K.feedback_command_at(0, desired, e, c2, cs2)
+    if not math.isfinite(d):  # hold the last safe command
+        st[end + DS_NONFINITE] += 1.0
+        return last
+    v = core_step(u, p, cfg, st, region, dyn, dstate)
+    K.feedback_close_at(0, d, u, core_output(p, st), integral, c2, cs2)
+    return v
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def core_controller_process(desired, measured, p, cfg, st, region, dyn, dstate, ctl, cs, out):  # type: ignore[no-untyped-def]
+    """``core_controller_step`` over a block of recorded samples."""
+    for k in range(desired.shape[0]):
+        out[k] = core_controller_step(
+            desired[k], measured[k], p, cfg, st, region, dyn, dstate, ctl, cs
+        )

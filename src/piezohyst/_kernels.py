@@ -750,44 +750,54 @@ def _hold_window_reset_at(c, cs):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
-def _controller_step_at(c, desired, measured, tables, config, state, ctl, cs):  # type: ignore[no-untyped-def]
-    """``controller_step`` for channel ``c`` of stacked arrays (indexed: see ``_step_at``)."""
-    n = tables.shape[2]
-    end = state.shape[1]
-    last = state[c, end + ST_LAST]
+def feedback_measure_at(c, measured, last, ctl, cs):  # type: ignore[no-untyped-def]
+    """The leakage over the last sample, then the measured charge minus it (NaN if none).
+
+    The first of the controller's three steps, shared by every model: measure,
+    then ``feedback_error_at`` once the caller has set the frame, then
+    ``feedback_command_at`` and, after the model's inverse, ``feedback_close_at``.
+    """
     if math.isfinite(measured):
         cs[c, CS_Q_LAST] = measured
     if cs[c, CS_STARTED] > 0.0:  # leakage over the sample the last command was held
         current = ctl[c, CTL_G0] * last + ctl[c, CTL_G1] * last * abs(last) * ctl[c, CTL_INV_SCALE]
         current += cs[c, CS_BIAS] - ctl[c, CTL_DISCHARGE] * cs[c, CS_Q_LAST]
         cs[c, CS_LEAK] += current * ctl[c, CTL_DT]
-    e = 0.0
     if math.isfinite(measured):
-        qc = measured - cs[c, CS_LEAK]
-        if cs[c, CS_STARTED] == 0.0:
-            y = config[c, CFG_OFFSET]
-            for i in range(n):
-                y += tables[c, TAB_W, i] * state[c, i]
-            cs[c, CS_FRAME] = y - qc
-            cs[c, CS_STARTED] = 1.0
+        return measured - cs[c, CS_LEAK]
+    cs[c, CS_FAULTS] += 1.0
+    return math.nan
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def feedback_error_at(c, qc, cs):  # type: ignore[no-untyped-def]
+    """The charge error against the previous sample's desired value (0 without one)."""
+    e = 0.0
+    if math.isfinite(qc):
         qc += cs[c, CS_FRAME]
         if math.isfinite(cs[c, CS_D_PREV]):
             e = cs[c, CS_D_PREV] - qc
-    else:
-        cs[c, CS_FAULTS] += 1.0
     cs[c, CS_ERROR] = e
-    if not math.isfinite(desired):  # hold the last safe command
-        state[c, end + ST_NONFINITE] += 1.0
+    return e
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def feedback_command_at(c, desired, e, ctl, cs):  # type: ignore[no-untyped-def]
+    """(d, integral, u): the desired output in model units, the integral if delivered, and
+    what the inverse is asked for; NaN d for a non-finite desired value (the caller holds)."""
+    if not math.isfinite(desired):
         cs[c, CS_D_PREV] = math.nan
         _hold_window_reset_at(c, cs)
-        return last
+        return math.nan, 0.0, math.nan
     d = ctl[c, CTL_REF] + desired * ctl[c, CTL_INV_GAIN]
     integral = cs[c, CS_INTEGRAL] + ctl[c, CTL_KI] * e
-    u = d + ctl[c, CTL_KP] * e + integral
-    v = _step_at(c, u, tables, config, state)
-    y = config[c, CFG_OFFSET]
-    for i in range(n):
-        y += tables[c, TAB_W, i] * state[c, i]
+    return d, integral, d + ctl[c, CTL_KP] * e + integral
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def feedback_close_at(c, d, u, y, integral, ctl, cs):  # type: ignore[no-untyped-def]
+    """After the inverse: integrate only what was delivered (anti-windup), and refresh the
+    bias current from the integral's drift on holds of the desired value."""
     delivered = abs(y - u) <= ctl[c, CTL_TOL]
     if delivered:
         cs[c, CS_INTEGRAL] = integral
@@ -816,6 +826,34 @@ def _controller_step_at(c, desired, measured, tables, config, state, ctl, cs):  
         else:
             cs[c, CS_HOLD_REF] = d
             _hold_window_reset_at(c, cs)
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _output_at(c, tables, config, state):  # type: ignore[no-untyped-def]
+    """The play operators' output now (forward states)."""
+    n = tables.shape[2]
+    y = config[c, CFG_OFFSET]
+    for i in range(n):
+        y += tables[c, TAB_W, i] * state[c, i]
+    return y
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _controller_step_at(c, desired, measured, tables, config, state, ctl, cs):  # type: ignore[no-untyped-def]
+    """``controller_step`` for channel ``c`` of stacked arrays (indexed: see ``_step_at``)."""
+    end = state.shape[1]
+    last = state[c, end + ST_LAST]
+    qc = feedback_measure_at(c, measured, last, ctl, cs)
+    if math.isfinite(qc) and cs[c, CS_STARTED] == 0.0:  # the first measurement sets the frame
+        cs[c, CS_FRAME] = _output_at(c, tables, config, state) - qc
+        cs[c, CS_STARTED] = 1.0
+    e = feedback_error_at(c, qc, cs)
+    d, integral, u = feedback_command_at(c, desired, e, ctl, cs)
+    if not math.isfinite(d):  # hold the last safe command
+        state[c, end + ST_NONFINITE] += 1.0
+        return last
+    v = _step_at(c, u, tables, config, state)
+    feedback_close_at(c, d, u, _output_at(c, tables, config, state), integral, ctl, cs)
     return v
 
 

@@ -458,8 +458,9 @@ def simulate(
 
 def describe(model: HysteresisModel) -> str:
     """One line on a fitted model's quality and terms, from its public attributes."""
+    core = model.operator_.summary
     text = (
-        f"{type(model).__name__}: {model.operator_.n_operators} operators, "
+        f"{type(model).__name__}: {core}, "
         f"NRMSE {100 * model.nrmse_:.4g} %, RMSE {model.rmse_:.4g} {model.output_unit}"
     )
     growth = model.growth_coefficients()
@@ -578,8 +579,8 @@ def fit(
         )
     click.echo(describe(model))
     if ctx.verbose:
-        click.echo(f"thresholds {model.thresholds_.tolist()}")
-        click.echo(f"weights {model.weights_.tolist()}")
+        for label, text in model.operator_.describe(model.input_unit, model.output_unit)[1:]:
+            click.echo(f"{label} {text}")
     ctx.info(f"saved {out}")
 
 

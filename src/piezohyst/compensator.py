@@ -714,9 +714,11 @@ class CoreCompensator(Compensator):
     advances with the command actually sent.
 
     Beyond the (voltage, output) region the model was identified on (its
-    ``region_tolerance``), a command is not sent: the last one is held and
-    counted in :attr:`outside_count`, unless ``allow_extrapolation=True``
-    (then it is sent and counted).
+    ``region_tolerance``), a command that would move the actuator further
+    out is not sent: the command stops at the region's edge (with input
+    dynamics: the last command is held) and is counted in
+    :attr:`outside_count`, unless ``allow_extrapolation=True`` (then it is
+    sent and counted). Moves back towards the region always pass.
 
     Parameters
     ----------

@@ -220,6 +220,11 @@ class DifferentialCore:
         """True: the identification keeps every branch strictly increasing."""
         return True
 
+    @property
+    def summary(self) -> str:
+        """A few words on the core, for one-line descriptions."""
+        raise NotImplementedError
+
     def _state(self, state: ArrayLike | None) -> FloatArray:
         if state is None:
             return np.array(self.initial_state, dtype=np.float64)
@@ -510,6 +515,11 @@ class DuhemHysteresis(DifferentialCore):
         z0 = np.asarray(initial_state, dtype=np.float64)
         return cls(vn, qn, up, down, z0, region, float(packed[D.DU_DV_MAX]), memory)
 
+    @property
+    def summary(self) -> str:
+        """See :attr:`DifferentialCore.summary`."""
+        return f"Duhem on {self.memory} memory, {self.v_nodes.size} × {self.memory_nodes.size} grid"
+
     def rest_state(self, x0: float) -> FloatArray:
         """See :meth:`DifferentialCore.rest_state`: the middle of the recorded band at ``x0``.
 
@@ -695,6 +705,11 @@ class BoucWenHysteresis(DifferentialCore):
         """The value h saturates at on a long rise, :math:`(\\beta + \\gamma)^{-1/n}` (V)."""
         s = self.beta + self.gamma
         return float(s ** (-1.0 / self.n)) if s > 0 else math.inf
+
+    @property
+    def summary(self) -> str:
+        """See :attr:`DifferentialCore.summary`."""
+        return f"Bouc-Wen, n = {self.n:.3g}"
 
     def rest_state(self, x0: float) -> FloatArray:
         """See :meth:`DifferentialCore.rest_state`: h = 0 at ``x0``."""

@@ -377,8 +377,12 @@ def fit_file_check(settings: dict[str, Any]) -> None:
 
     cls = model_class(settings["model"])
     params = cls().get_params()
-    trial: dict[str, Any] = {"n_operators": settings["operators"],
-                             "input_dynamics": settings["input_dynamics"]}  # fmt: skip
+    trial: dict[str, Any] = {"input_dynamics": settings["input_dynamics"]}
+    if "n_operators" in params:
+        trial["n_operators"] = settings["operators"]
+    elif settings["operators"] != 10:
+        msg = f"the 'operators' setting does not apply to {settings['model']}"
+        raise ParameterError(msg)
     if "growth_terms" in params:
         trial["growth_terms"] = settings["growth_terms"]
     elif settings["growth_terms"] not in ("auto", ()):

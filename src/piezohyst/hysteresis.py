@@ -9,7 +9,7 @@ estimators in :mod:`piezohyst.models` produce these.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Generic, NamedTuple, TypeVar
+from typing import Any, ClassVar, Generic, NamedTuple, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -87,6 +87,7 @@ class PIHysteresis:
     weights: FloatArray
     offset: float = 0.0
     initial_state: FloatArray = field(default=None)  # type: ignore[arg-type]
+    kind: ClassVar[str] = "play"  # the core's name in model files
 
     def __post_init__(self) -> None:
         r = _frozen(self.thresholds, "thresholds")
@@ -267,6 +268,29 @@ class PIHysteresis:
         w = self.weights
         tail = np.concatenate([np.cumsum((w * z)[::-1])[::-1][1:], [0.0]])
         return np.asarray(self.offset + np.cumsum(w) * z + tail, dtype=np.float64)
+
+    @property
+    def summary(self) -> str:
+        """A few words on the core, for one-line descriptions."""
+        return f"{self.n_operators} operators"
+
+    def describe(self, input_unit: str, output_unit: str) -> list[tuple[str, str]]:
+        """Labelled parameters with units, for reports.
+
+        Parameters
+        ----------
+        input_unit, output_unit : str
+
+        Returns
+        -------
+        list of (str, str)
+        """
+        fmt = ", ".join
+        return [
+            ("core", f"Prandtl-Ishlinskii, {self.n_operators} play operators"),
+            ("thresholds", f"{fmt(f'{r:.4g}' for r in self.thresholds)} {input_unit}"),
+            ("weights", f"{fmt(f'{w:.4g}' for w in self.weights)} {output_unit}/{input_unit}"),
+        ]
 
     # ------------------------------------------------------------ persistence
     def to_dict(self) -> dict[str, Any]:

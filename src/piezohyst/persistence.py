@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from ._version import __version__
+from .differential import CORES, DifferentialCore
 from .dynamics import InputDynamics, OutputDynamics
 from .errors import ModelFileError, NotFittedError, ParameterError, PiezohystError
 from .hysteresis import PIHysteresis
@@ -140,7 +141,7 @@ def model_to_dict(model: Model) -> dict[str, Any]:
         "piezohyst_version": __version__,
         "params": model.params_to_json(),
         "fitted": {
-            "core": {"kind": "play", **model.operator_.to_dict()},
+            "core": {"kind": model.operator_.kind, **model.operator_.to_dict()},
             "terms": [
                 {"kind": term.kind, "params": term.get_params(), "coefficients": coef.tolist()}
                 for term, coef in zip(model.terms_, model.coefs_, strict=True)
@@ -237,7 +238,23 @@ def _range(fitted: _Reader) -> tuple[float, float]:
     return lo, hi
 
 
-def _core(reader: _Reader) -> PIHysteresis:
+def _core(reader: _Reader) -> PIHysteresis | DifferentialCore:
+    kind = reader.data.get("kind", "play")
+    if kind != "play":
+        if kind not in CORES:
+            msg = (
+                f"field '{reader.name('kind')}' names an unknown core {kind!r} "
+                f"(known: {['play', *CORES]})"
+            )
+            raise ModelFileError(msg)
+        try:
+            return CORES[str(kind)].from_dict(reader.data)  # type: ignore[attr-defined,no-any-return]
+        except KeyError as exc:
+            msg = f"missing field '{reader.name(str(exc.args[0]))}'"
+            raise ModelFileError(msg) from None
+        except (PiezohystError, TypeError, ValueError) as exc:
+            msg = f"field '{reader.where}': {exc}"
+            raise ModelFileError(msg) from None
     try:
         return PIHysteresis(
             thresholds=reader.numbers("thresholds"),

@@ -26,10 +26,17 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from . import _diffkernels as D
 from . import _kernels as K
 from ._validation import FloatArray
 from .bank import ModelBank
-from .compensator import Compensator, CompensatorSettings, CompensatorState, per_channel
+from .compensator import (
+    Compensator,
+    CompensatorSettings,
+    CompensatorState,
+    CoreCompensator,
+    per_channel,
+)
 from .errors import ParameterError, ShapeError
 from .leakage import Leakage
 from .models import HysteresisModel
@@ -180,7 +187,9 @@ class SelfSensingController:
             gain=gain,
             allow_extrapolation=allow_extrapolation,
         )
-        if not comp.analytic:
+        #: True on a differential core (Duhem, Bouc-Wen): its inverse runs in the loop
+        self.core = isinstance(comp, CoreCompensator)
+        if not comp.analytic and not self.core:
             msg = (
                 "SelfSensingController inverts play operators analytically (eq. 18); this "
                 f"{type(model).__name__} keeps terms besides them (asymmetry, creep): fit it "
@@ -208,9 +217,11 @@ class SelfSensingController:
         self.ki = _gain(ki, "ki", 0.0, 1.9)
         self.kp = _gain(kp, "kp", 0.0, 1.0)
         self.refresh_leakage = refresh_leakage
-        op = comp.spec.operator
-        h = op.predict(np.array([comp.v_min, comp.v_max, comp.v_min]))
+        sweep = np.concatenate([np.linspace(comp.v_min, comp.v_max, 200), [comp.v_min]])
+        h = comp.spec.operator.predict(sweep if self.core else sweep[[0, -2, -1]])
         span = float(np.ptp(h)) or 1.0  # model output over the limits
+        ref_slot, gain_slot = (D.CC_REF, D.CC_INV_GAIN) if self.core else (
+            K.CFG_REFERENCE, K.CFG_INV_GAIN)  # fmt: skip
         self.ctl = np.zeros(K.CTL_SIZE)
         self.ctl[K.CTL_KP] = self.kp
         self.ctl[K.CTL_KI] = self.ki
@@ -219,10 +230,10 @@ class SelfSensingController:
         self.ctl[K.CTL_INV_SCALE] = 1.0 / leakage.scale
         self.ctl[K.CTL_DISCHARGE] = leakage.discharge
         self.ctl[K.CTL_DT] = 1.0 / fs
-        self.ctl[K.CTL_REF] = comp.config[K.CFG_REFERENCE]
-        self.ctl[K.CTL_INV_GAIN] = comp.config[K.CFG_INV_GAIN]
+        self.ctl[K.CTL_REF] = comp.config[ref_slot]
+        self.ctl[K.CTL_INV_GAIN] = comp.config[gain_slot]
         self.ctl[K.CTL_TOL] = 1e-9 * span
-        inv_gain = float(comp.config[K.CFG_INV_GAIN])
+        inv_gain = float(comp.config[gain_slot])
         tol = 1e-4 * span if hold_tolerance is None else abs(float(hold_tolerance)) * abs(inv_gain)
         self.ctl[K.CTL_HOLD_TOL] = tol
         self.ctl[K.CTL_HOLD_SAMPLES] = max(8.0, round(_gain(hold_time, "hold_time", 0, 1e6) * fs))
@@ -231,8 +242,8 @@ class SelfSensingController:
         )
         # the compensator's kernel sees model units: the controller converts desired values
         self.config = comp.config.copy()
-        self.config[K.CFG_REFERENCE] = 0.0
-        self.config[K.CFG_INV_GAIN] = 1.0
+        self.config[ref_slot] = 0.0
+        self.config[gain_slot] = 1.0
         self.feedback = np.zeros(K.CS_SIZE)
         self.reset()
 
@@ -356,6 +367,21 @@ class SelfSensingController:
             The command (V): finite, inside ``[v_min, v_max]``.
         """
         comp = self.compensator
+        if isinstance(comp, CoreCompensator):
+            return float(
+                D.core_controller_step(
+                    float(desired),
+                    float(measured),
+                    comp.params,
+                    self.config,
+                    comp.kernel_state,
+                    comp.region,
+                    comp.dyn,
+                    comp.dstate,
+                    self.ctl,
+                    self.feedback,
+                )
+            )
         return float(
             K.controller_step(
                 float(desired),
@@ -390,6 +416,11 @@ class SelfSensingController:
             raise ShapeError(msg)
         out = np.empty_like(d)
         comp = self.compensator
+        if isinstance(comp, CoreCompensator):
+            D.core_controller_process(d, m, comp.params, self.config, comp.kernel_state,
+                                      comp.region, comp.dyn, comp.dstate, self.ctl,
+                                      self.feedback, out)  # fmt: skip
+            return out
         K.controller_process(
             d, m, comp.tables, self.config, comp.kernel_state, self.ctl, self.feedback, out
         )

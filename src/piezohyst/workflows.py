@@ -26,6 +26,7 @@ import numpy as np
 
 from ._validation import FloatArray, check_float, check_int
 from .compensator import Compensator, CompensatorSettings
+from .differential import DifferentialCore
 from .errors import DataFileError, OverwriteError, ParameterError
 from .export import Precision, c_paths, write_c
 from .identification import Blocks, Summary, default_thresholds, history_state, periodic_state
@@ -43,7 +44,7 @@ from .io import (
 )
 from .leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
 from .metrics import hysteresis_width, nrmse, rmse
-from .models import HysteresisModel, InitialState, ModelState, model_class
+from .models import History, HysteresisModel, InitialState, ModelState, model_class
 from .persistence import load_model
 from .selfsensing import LoopSettings
 from .simulation import DEFAULT_PRESET, PRESETS, Bench, BenchRecord, run_loop, simulate
@@ -227,8 +228,11 @@ def fit_file(
             raise ParameterError(msg)
     stream = (data_spec or DataSpec()).open(data)
     x_unit, y_unit = stream.units
+    if "n_operators" not in accepted and operators != 10:
+        msg = f"the 'operators' setting does not apply to {model} (it has no play operators)"
+        raise ParameterError(msg)
     settings: dict[str, Any] = {
-        "n_operators": operators,
+        **({"n_operators": operators} if "n_operators" in accepted else {}),
         "input_unit": x_unit or "V",
         "output_unit": y_unit or _default_unit(stream.names[1]),
         **extra,
@@ -249,7 +253,10 @@ def fit_file(
     passes = _Passes(progress)
     window = _window_blocks(stream, passes)
     start: InitialState = initial_state
-    if math.isfinite(stream.t_start):  # the window continues a known input history
+    if math.isfinite(stream.t_start) and "n_operators" not in accepted:
+        before = _history_input(stream, passes.tick())  # a differential core runs it
+        start = History(before) if before is not None else initial_state
+    elif math.isfinite(stream.t_start):  # the window continues a known input history
         thresholds = default_thresholds(
             Summary.of(window).x_range, check_int(operators, "operators", "fit", 1, 1000)
         )
@@ -327,6 +334,20 @@ class _Passes:
             report(self.done + rows)
 
         return tick
+
+
+def _history_input(
+    stream: RecordingStream, progress: Callable[[int], None] | None
+) -> FloatArray | None:
+    """The input before the window's start (None: none), read into memory."""
+    parts = []
+    for b in stream.blocks(progress):
+        before = int(np.searchsorted(b.t, stream.t_start, "left"))
+        parts.append(b.x[:before])
+        if before < b.t.size:
+            break
+    x = np.concatenate(parts) if parts else np.zeros(0)
+    return x if x.size else None
 
 
 def _history(
@@ -430,8 +451,11 @@ def predict_file(
             )
             raise ParameterError(msg)
         first_x = next(iter(stream.blocks())).x[0]
+        core = model.operator_
         if initial_state == "rest":
-            start = np.full(model.operator_.n_operators, float(first_x))
+            start = core.rest_state(float(first_x))
+        elif isinstance(core, DifferentialCore):  # its periodic state needs the input in memory
+            start = core.periodic_state(np.concatenate([b.x for b in stream.blocks()]))
         else:
             start = periodic_state(
                 lambda: ((b.x, b.x, None) for b in stream.blocks()),
@@ -933,8 +957,7 @@ def model_report(
     rep.tables["Model"] = [
         ("class", type(model).__name__),
         *[(f"setting {k}", json.dumps(v)) for k, v in model.params_to_json().items()],
-        ("fitted thresholds", f"{_fmt(model.thresholds_)} {in_u}"),
-        ("fitted weights", f"{_fmt(model.weights_)} {out_u}/{in_u}"),
+        *model.operator_.describe(in_u, out_u),
         (
             "training input range",
             f"{model.input_range_[0]:.6g} to {model.input_range_[1]:.6g} {in_u}",
