@@ -10,8 +10,8 @@ from . import io, metrics, terms
 from ._version import __version__
 from .bank import ModelBank, load_bank
 from .compensator import BankCompensator, Compensator, CompensatorState
-from .differential import BoucWenHysteresis, DuhemHysteresis, Region
-from .differential_models import BoucWenModel, DuhemModel
+from .differential import BoucWenHysteresis, DuhemHysteresis, PreisachHysteresis, Region
+from .differential_models import BoucWenModel, DuhemModel, PreisachModel
 from .errors import (
     DataFileError,
     ExtrapolationWarning,
@@ -76,6 +76,8 @@ __all__ = [
     "PIModel",
     "ParameterError",
     "PiezohystError",
+    "PreisachHysteresis",
+    "PreisachModel",
     "Propagation",
     "Region",
     "SelfSensingController",

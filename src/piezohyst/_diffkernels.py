@@ -1,10 +1,13 @@
-"""Numba kernels of the differential hysteresis cores: Duhem and Bouc-Wen.
+"""Numba kernels of the cores beyond play operators: Duhem, Bouc-Wen and Preisach.
 
-Both cores carry a two-value state ``[v, x]``: the last input ``v`` (V) and one
-internal variable ``x`` — the hysteresis output ``q`` itself for Duhem, the
-Bouc-Wen variable ``h`` (V) for Bouc-Wen. A core's parameters are one packed
-array ``p`` whose first slot names its kind; nothing outside
-:mod:`piezohyst.differential` and the compensator builds one.
+A core's state starts ``[v, x]``: the last input ``v`` (V) and one internal
+variable ``x`` — the output ``q`` itself for Duhem and Preisach, the
+Bouc-Wen variable ``h`` (V) for Bouc-Wen; Preisach adds its stack of
+reversal points. A core's parameters are one packed array ``p`` whose first
+slot names its kind; nothing outside :mod:`piezohyst.differential` and the
+compensator builds one. Every core's step is strictly increasing in the new
+input, so the compensator inverts it by Newton's method in a bracket (or
+explicitly, for a Duhem step within ``dv_max``).
 
 Duhem (rate independent, explicit Euler in the voltage, sub-steps of at most
 ``dv_max``)::
@@ -28,6 +31,9 @@ With ``beta > 0`` and ``|gamma| <= beta``, ``dh/dv`` lies in ``[0, g_max]``,
 ``s_min = c0 + min(alpha, 0) g_max > 0`` and a step is strictly increasing in
 ``v[k+1]``; its inverse is a safeguarded Newton solve (bisection when a Newton
 step leaves the bracket), at most ``NEWTON_MAX`` iterations.
+
+Preisach: see the section below; its output is an Everett function's
+differences (no integration), linear in the Everett function's node values.
 """
 
 from __future__ import annotations
@@ -42,7 +48,7 @@ from ._kernels import FASTMATH
 
 KIND_DUHEM = 0.0  # slopes over (voltage, output): the classical Duhem form
 KIND_BOUC_WEN = 1.0
-KIND_DUHEM_REV = 2.0  # slopes over (voltage, excursion since the last reversal)
+KIND_PREISACH = 2.0  # an Everett function over pairs of reversal points
 # Duhem: p = [kind, nv, nq, v_lo, v_step, q_lo, q_step, dv_max, f_min, up (nv*nq),
 # down (nv*nq)], the slopes row-major in (voltage node, output node)
 DU_NV = 1
@@ -126,17 +132,15 @@ def _bw_g(p, h, s):  # type: ignore[no-untyped-def]
 
 @njit(cache=True, fastmath=FASTMATH)
 def bw_next(p, v0, h0, v1):  # type: ignore[no-untyped-def]
-    """h after the input moves from v0 to v1 (RK4 sub-steps of at most dv_max)."""
+    """h after the input moves from v0 to v1 (RK4 steps of dv_max, then the rest)."""
     dv = v1 - v0
     if dv == 0.0:
         return h0
     s = 1.0 if dv > 0.0 else -1.0
-    m = math.ceil(abs(dv) / p[BW_DV_MAX])
-    if m < 1:
-        m = 1
-    d = dv / m
+    full, rest = _steps(abs(dv), p[BW_DV_MAX])
     h = h0
-    for _ in range(m):
+    for i in range(full + (1 if rest > 0.0 else 0)):
+        d = s * (p[BW_DV_MAX] if i < full else rest)
         k1 = _bw_g(p, h, s)
         k2 = _bw_g(p, h + 0.5 * d * k1, s)
         k3 = _bw_g(p, h + 0.5 * d * k2, s)
@@ -147,31 +151,49 @@ def bw_next(p, v0, h0, v1):  # type: ignore[no-untyped-def]
 
 @njit(cache=True, fastmath=FASTMATH)
 def duhem_next(p, v0, q0, v1):  # type: ignore[no-untyped-def]
-    """q after the input moves from v0 to v1 (Euler sub-steps of at most dv_max)."""
+    """q after the input moves from v0 to v1 (Euler steps of dv_max, then the rest)."""
     dv = v1 - v0
     up = dv > 0.0
     if abs(dv) <= p[DU_DV_MAX]:
         f, _ = duhem_slope(p, v0, q0, up)
         return q0 + f * dv
-    m = math.ceil(abs(dv) / p[DU_DV_MAX])
-    d = dv / m
+    s = 1.0 if up else -1.0
+    full, rest = _steps(abs(dv), p[DU_DV_MAX])
     q = q0
     v = v0
-    for _ in range(m):
+    for i in range(full + (1 if rest > 0.0 else 0)):
+        d = s * (p[DU_DV_MAX] if i < full else rest)
         f, _ = duhem_slope(p, v, q, up)
         q += f * d
         v += d
     return q
 
 
-# ------------------------------------------------- Duhem on reversal memory
-# The slope depends on the voltage and the excursion since the branch's
-# reversal point, d = |v - v_r|; the reversal points form a stack with the
-# wiping-out rule of Preisach models (passing the previous extremum of the
-# same direction removes the inner loop's pair). Every step integrates the
-# slope by Simpson's rule over sub-steps of at most dv_max, and the same walk,
-# given an accumulator, adds up the basis functions instead: the fit's
-# regressors are the simulation's own arithmetic.
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _steps(distance, step):  # type: ignore[no-untyped-def]
+    """(full steps, rest): ``distance`` covered by steps of ``step`` and a last shorter one.
+
+    A step's outcome is continuous in its end point: when the distance grows
+    past a multiple of ``step``, a vanishing rest becomes a full step. (Equal
+    sub-steps, ``ceil(distance / step)`` of them, would jump there, and an
+    inverse could not meet every target.)
+    """
+    full = int(distance / step)
+    rest = distance - full * step
+    if rest < 0.0:  # rounding
+        rest = 0.0
+    return full, rest
+
+
+# --------------------------------------------------------------- Preisach
+# The Everett function E(a, b) (a <= b) on a square grid of n nodes, bilinear,
+# extended by E(b, a) = -E(a, b) below the diagonal (so E(v, v) = 0 inside the
+# diagonal cells too) and by the smallest slope beyond the grid. Rising from a
+# reversal point (minimum) a, q(v) = q(a) + E(a, v); falling from a maximum b,
+# q(v) = q(b) - E(v, b): every minor loop closes by construction. The reversal
+# points form a stack with Preisach's wiping-out rule (passing the previous
+# extremum of the same direction removes the inner loop's pair).
+# p = [kind, n, n, v_lo, h, 0, 0, 0, s_min, E (n*n, row-major, lower half unused)]
 # state: [v, q, direction (0 none, +-1), k (points on the stack), R[0..STACK-1]]
 STACK = 32
 RV_DIR = 2
@@ -181,52 +203,91 @@ RV_SIZE = RV_R + STACK
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
-def _basis_add(p, acc, base, w, d, weight):  # type: ignore[no-untyped-def]
-    """acc[base + cell] += weight * bilinear weights at (w, d)."""
-    nv = p[DU_NV]
-    nq = p[DU_NQ]
-    m = int(nq)
-    i, fa, _ = _cell(w, p[DU_V_LO], p[DU_V_STEP], nv)
-    j, fb, _ = _cell(d, p[DU_Q_LO], p[DU_Q_STEP], nq)
-    acc[base + i * m + j] += (1.0 - fa) * (1.0 - fb) * weight
-    acc[base + i * m + j + 1] += (1.0 - fa) * fb * weight
-    acc[base + (i + 1) * m + j] += fa * (1.0 - fb) * weight
-    acc[base + (i + 1) * m + j + 1] += fa * fb * weight
+def _node(p, i, j):  # type: ignore[no-untyped-def]
+    """E at nodes (i, j), antisymmetric below the diagonal."""
+    n = int(p[DU_NV])
+    if i <= j:
+        return p[DU_UP + i * n + j]
+    return -p[DU_UP + j * n + i]
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def _rev_integral(p, u0, u1, top, up, acc):  # type: ignore[no-untyped-def]
-    """The integral of f(w, |w - top|) dw from u0 to u1 (Simpson on sub-steps); with an
-    accumulator (size > 0), the basis functions' integrals are added to it as well."""
-    du = u1 - u0
-    if du == 0.0:
-        return 0.0
-    n = math.ceil(abs(du) / p[DU_DV_MAX])
-    if n < 1:
-        n = 1
-    h = du / n
-    cells = int(p[DU_NV] * p[DU_NQ])
-    base = 0 if up else cells
-    total = 0.0
-    track = acc.shape[0] > 0
-    for m in range(n):
-        a = u0 + m * h
-        b = a + h if m < n - 1 else u1
-        c = 0.5 * (a + b)
-        fa_, _ = duhem_slope(p, a, abs(a - top), up)
-        fc, _ = duhem_slope(p, c, abs(c - top), up)
-        fb_, _ = duhem_slope(p, b, abs(b - top), up)
-        w = b - a
-        total += w * (fa_ + 4.0 * fc + fb_) / 6.0
+def everett(p, a, b):  # type: ignore[no-untyped-def]
+    """(E(a, b), dE/da, dE/db): bilinear inside the grid, slope s_min beyond it."""
+    n = p[DU_NV]
+    lo = p[DU_V_LO]
+    h = p[DU_V_STEP]
+    hi = lo + h * (n - 1.0)
+    extra = 0.0
+    da_out = 0.0
+    db_out = 0.0
+    if b > hi:
+        extra += p[DU_F_MIN] * (b - hi)
+        db_out = p[DU_F_MIN]
+    if a < lo:
+        extra += p[DU_F_MIN] * (lo - a)
+        da_out = -p[DU_F_MIN]
+    i, fa, inside_a = _cell(a, lo, h, n)
+    j, fb, inside_b = _cell(b, lo, h, n)
+    e00 = _node(p, i, j)
+    e01 = _node(p, i, j + 1)
+    e10 = _node(p, i + 1, j)
+    e11 = _node(p, i + 1, j + 1)
+    e = (1.0 - fa) * ((1.0 - fb) * e00 + fb * e01) + fa * ((1.0 - fb) * e10 + fb * e11)
+    dea = ((1.0 - fb) * (e10 - e00) + fb * (e11 - e01)) / h if inside_a else da_out
+    deb = ((1.0 - fa) * (e01 - e00) + fa * (e11 - e10)) / h if inside_b else db_out
+    return e + extra, dea, deb
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _everett_add(p, acc, a, b, weight):  # type: ignore[no-untyped-def]
+    """acc += weight * dE(a, b)/d(nodes): the bilinear weights, antisymmetry applied."""
+    n = p[DU_NV]
+    m = int(n)
+    i, fa, _ = _cell(a, p[DU_V_LO], p[DU_V_STEP], n)
+    j, fb, _ = _cell(b, p[DU_V_LO], p[DU_V_STEP], n)
+    for di in range(2):
+        for dj in range(2):
+            w = (fa if di else 1.0 - fa) * (fb if dj else 1.0 - fb) * weight
+            r = i + di
+            c = j + dj
+            if r <= c:
+                acc[r * m + c] += w
+            else:
+                acc[c * m + r] -= w
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def _branch(p, u0, u1, top, up, acc, track):  # type: ignore[no-untyped-def]
+    """The output change along a branch from u0 to u1 whose reversal point is ``top``;
+    with ``track``, its derivative in the Everett nodes is added to ``acc``."""
+    if up:
+        e1, _, _ = everett(p, top, u1)
+        e0, _, _ = everett(p, top, u0)
         if track:
-            _basis_add(p, acc, base, a, abs(a - top), w / 6.0)
-            _basis_add(p, acc, base, c, abs(c - top), 4.0 * w / 6.0)
-            _basis_add(p, acc, base, b, abs(b - top), w / 6.0)
-    return total
+            _everett_add(p, acc, top, u1, 1.0)
+            _everett_add(p, acc, top, u0, -1.0)
+        return e1 - e0
+    e1, _, _ = everett(p, u1, top)
+    e0, _, _ = everett(p, u0, top)
+    if track:
+        _everett_add(p, acc, u1, top, -1.0)
+        _everett_add(p, acc, u0, top, 1.0)
+    return e0 - e1
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _branch_slope(p, v, top, up):  # type: ignore[no-untyped-def]
+    """dq/dv at v on a branch from reversal point ``top``."""
+    if up:
+        _, _, deb = everett(p, top, v)
+        return deb
+    _, dea, _ = everett(p, v, top)
+    return -dea
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def rev_move(p, st, v1, commit, acc):  # type: ignore[no-untyped-def]
+def rev_move(p, st, v1, commit, acc, track):  # type: ignore[no-untyped-def]
     """Output after the input moves from st[0] to v1, and the slope there; st updated if
     ``commit``. A reversal at st[0] is pushed; extrema passed are wiped out."""
     v0 = st[0]
@@ -235,9 +296,7 @@ def rev_move(p, st, v1, commit, acc):  # type: ignore[no-untyped-def]
     k = int(st[RV_K])
     top = st[RV_R + k - 1]
     if dv == 0.0:
-        up0 = st[RV_DIR] >= 0.0
-        f, _ = duhem_slope(p, v0, abs(v0 - top), up0)
-        return q, f
+        return q, _branch_slope(p, v0, top, st[RV_DIR] >= 0.0)
     sd = 1.0 if dv > 0.0 else -1.0
     up = sd > 0.0
     push = st[RV_DIR] != 0.0 and sd != st[RV_DIR]
@@ -253,13 +312,13 @@ def rev_move(p, st, v1, commit, acc):  # type: ignore[no-untyped-def]
             if (up and prev < v1 and prev >= u) or (not up and prev > v1 and prev <= u):
                 end = prev
                 popped = True
-        q += _rev_integral(p, u, end, top, up, acc)
+        q += _branch(p, u, end, top, up, acc, track)
         if not popped:
             break
         kk -= 2
         top = v0 if (push and kk - 1 == k) else st[RV_R + kk - 1]
         u = end
-    f, _ = duhem_slope(p, v1, abs(v1 - top), up)
+    f = _branch_slope(p, v1, top, up)
     if commit:
         if push and kk == k + 1:
             if k >= STACK:  # full: forget the oldest pair after the rest point
@@ -279,7 +338,7 @@ def rev_move(p, st, v1, commit, acc):  # type: ignore[no-untyped-def]
 @njit(cache=True, fastmath=FASTMATH)
 def state_size(p):  # type: ignore[no-untyped-def]
     """Values in a core's state."""
-    return RV_SIZE if p[0] == KIND_DUHEM_REV else 2
+    return RV_SIZE if p[0] == KIND_PREISACH else 2
 
 
 @njit(cache=True, fastmath=FASTMATH)
@@ -293,8 +352,8 @@ def core_output(p, st):  # type: ignore[no-untyped-def]
 @njit(cache=True, fastmath=FASTMATH)
 def core_move(p, st, v1, commit):  # type: ignore[no-untyped-def]
     """(output, slope dy/dv) after the input moves from st[0] to v1; st updated if ``commit``."""
-    if p[0] == KIND_DUHEM_REV:
-        return rev_move(p, st, v1, commit, np.empty(0))
+    if p[0] == KIND_PREISACH:
+        return rev_move(p, st, v1, commit, st, False)
     v0 = st[0]
     x0 = st[1]
     s = 1.0 if v1 >= v0 else -1.0
@@ -320,21 +379,33 @@ def core_propagate(p, x, st, out):  # type: ignore[no-untyped-def]
         out[k] = y
 
 
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _trial(p, st, trial, v):  # type: ignore[no-untyped-def]
+    """``trial`` = the state after moving from ``st`` to ``v``; (output, slope) there."""
+    for i in range(trial.shape[0]):
+        trial[i] = st[i]
+    return core_move(p, trial, v, True)
+
+
 @njit(cache=True, fastmath=FASTMATH)
-def core_inverse(p, st, y, lo, hi):  # type: ignore[no-untyped-def]
+def core_inverse(p, st, y, lo, hi, trial):  # type: ignore[no-untyped-def]
     """The input v in [lo, hi] whose step from st gives output y, or the nearer end.
 
-    Returns (v, clamped): ``clamped`` is True when y is out of reach inside [lo, hi].
-    A step's output is strictly increasing in v with slope at least ``s_min``
-    (c0 for Bouc-Wen, the smallest slope for Duhem), so the root lies between
-    v0 and v0 + dy / s_min: Newton's method inside that bracket, bisecting
-    whenever a step would leave it. A Duhem step on charge memory within
-    dv_max is one Euler step: its explicit inverse is exact.
+    Returns (v, clamped): ``clamped`` is True when y is out of reach inside [lo, hi];
+    ``trial`` holds the state after the step to v. A step's output is strictly
+    increasing in v with slope at least ``s_min`` (c0 + min(alpha, 0) g_max for
+    Bouc-Wen, the smallest slope for Duhem), so the root lies between v0 and
+    v0 + dy / s_min: Newton's method inside that bracket, bisecting whenever a
+    step would leave it, until the output is within 1e-12 of the step's
+    change. A Duhem step on charge memory within dv_max is one Euler step:
+    its explicit inverse is exact.
     """
     v0 = st[0]
     dy = y - core_output(p, st)
     if dy == 0.0:
-        return min(max(v0, lo), hi), v0 < lo or v0 > hi
+        v = min(max(v0, lo), hi)
+        _trial(p, st, trial, v)
+        return v, v0 < lo or v0 > hi
     s = 1.0 if dy > 0.0 else -1.0
     if p[0] == KIND_BOUC_WEN:
         s_min = p[BW_S_MIN]
@@ -343,35 +414,38 @@ def core_inverse(p, st, y, lo, hi):  # type: ignore[no-untyped-def]
         s_min = p[DU_F_MIN]
         if p[0] == KIND_DUHEM:
             slope0, _ = duhem_slope(p, v0, st[1], s > 0.0)
-        else:  # a reversal here starts the new branch at excursion 0
+        else:  # a reversal here starts a new branch at v0
             reverse = st[RV_DIR] != 0.0 and s != st[RV_DIR]
             top = v0 if reverse else st[RV_R + int(st[RV_K]) - 1]
-            slope0, _ = duhem_slope(p, v0, abs(v0 - top), s > 0.0)
+            slope0 = _branch_slope(p, v0, top, s > 0.0)
     v = v0 + dy / slope0
     if p[0] == KIND_DUHEM and abs(v - v0) <= p[DU_DV_MAX] and lo <= v <= hi:
+        _trial(p, st, trial, v)
         return v, False
     far = v0 + dy / s_min
     a = min(v0, far)
     b = max(v0, far)
     if b > hi:  # the root may lie beyond the upper limit
-        yh, _ = core_move(p, st, hi, False)
+        yh, _ = _trial(p, st, trial, hi)
         if yh <= y:
             return hi, True
         b = hi
     if a < lo:
-        yl, _ = core_move(p, st, lo, False)
+        yl, _ = _trial(p, st, trial, lo)
         if yl >= y:
             return lo, True
         a = lo
     if a >= b:
+        _trial(p, st, trial, a)
         return a, True
     if not a < v < b:
         v = 0.5 * (a + b)
+    tol = 1e-12 * abs(dy)
     eps = 1e-13 * (abs(a) + abs(b) + 1.0)
     for _ in range(NEWTON_MAX):
-        y1, f1 = core_move(p, st, v, False)
+        y1, f1 = _trial(p, st, trial, v)
         res = y1 - y
-        if res == 0.0:
+        if abs(res) <= tol:
             return v, False
         if res < 0.0:
             a = v
@@ -381,8 +455,9 @@ def core_inverse(p, st, y, lo, hi):  # type: ignore[no-untyped-def]
         if not a < vn < b:
             vn = 0.5 * (a + b)
         if abs(vn - v) <= eps or b - a <= eps:
-            return vn, False
+            return v, False
         v = vn
+    _trial(p, st, trial, v)  # the iterations ran out: the state at the v returned
     return v, False
 
 
@@ -430,9 +505,18 @@ def _advance(x, dyn, dstate):  # type: ignore[no-untyped-def]
     return u
 
 
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _commit(st, trial):  # type: ignore[no-untyped-def]
+    for i in range(trial.shape[0]):
+        st[i] = trial[i]
+
+
 @njit(cache=True, fastmath=FASTMATH)
-def core_step(desired, p, cfg, st, region, dyn, dstate):  # type: ignore[no-untyped-def]
-    """One feedforward command (V) for one desired value; ``st`` updated."""
+def core_step(desired, p, cfg, st, region, dyn, dstate, trial):  # type: ignore[no-untyped-def]
+    """One feedforward command (V) for one desired value; ``st`` updated.
+
+    ``trial`` is scratch of the core state's size (no allocation per sample).
+    """
     end = st.shape[0]
     last = st[end + DS_LAST]
     lo = cfg[CC_V_MIN]
@@ -441,7 +525,8 @@ def core_step(desired, p, cfg, st, region, dyn, dstate):  # type: ignore[no-unty
     if not math.isfinite(desired):  # hold the last command (the piezo keeps settling on it)
         st[end + DS_NONFINITE] += 1.0
         if dynamic:
-            core_move(p, st, _advance(last, dyn, dstate), True)
+            _trial(p, st, trial, _advance(last, dyn, dstate))
+            _commit(st, trial)
         return last
     y = cfg[CC_REF] + desired * cfg[CC_INV_GAIN]
     step = cfg[CC_MAX_STEP]
@@ -449,7 +534,7 @@ def core_step(desired, p, cfg, st, region, dyn, dstate):  # type: ignore[no-unty
     if not dynamic:  # the slew limit bounds the inverse itself
         a = max(lo, last - step)
         b = min(hi, last + step)
-    u, clamped = core_inverse(p, st, y, a, b)
+    u, clamped = core_inverse(p, st, y, a, b, trial)
     if clamped and (u <= lo or u >= hi):  # out of reach inside the limits (not the slew)
         st[end + DS_SATURATED] += 1.0
     x = u
@@ -467,9 +552,10 @@ def core_step(desired, p, cfg, st, region, dyn, dstate):  # type: ignore[no-unty
         x = min(max(x, lo), hi)
         x = min(max(x, last - step), last + step)
         u = _advance(x, dyn, dstate)
+        if trial[0] != u:
+            _trial(p, st, trial, u)
     if cfg[CC_TOL] < math.inf:  # leaving the region (moves back towards it always pass)
-        y1, _ = core_move(p, st, u, False)
-        d1 = region_distance(region, cfg, u, y1)
+        d1 = region_distance(region, cfg, u, core_output(p, trial))
         d0 = region_distance(region, cfg, st[0], core_output(p, st))
         if d1 > cfg[CC_TOL] and d1 > d0:
             st[end + DS_OUTSIDE] += 1.0
@@ -477,7 +563,8 @@ def core_step(desired, p, cfg, st, region, dyn, dstate):  # type: ignore[no-unty
                 if dynamic:  # hold the last command instead
                     dstate[0] = saved0
                     dstate[1] = saved1
-                    core_move(p, st, _advance(last, dyn, dstate), True)
+                    _trial(p, st, trial, _advance(last, dyn, dstate))
+                    _commit(st, trial)
                     return last
                 # stop at the region's edge: the largest move towards u that stays inside
                 edge = max(cfg[CC_TOL], d0)
@@ -485,20 +572,21 @@ def core_step(desired, p, cfg, st, region, dyn, dstate):  # type: ignore[no-unty
                 b = u
                 for _ in range(REGION_BISECTIONS):
                     mid = 0.5 * (a + b)
-                    ym, _ = core_move(p, st, mid, False)
+                    ym, _ = _trial(p, st, trial, mid)
                     if region_distance(region, cfg, mid, ym) <= edge:
                         a = mid
                     else:
                         b = mid
                 u = a
                 x = a
-    core_move(p, st, u, True)
+                _trial(p, st, trial, u)
+    _commit(st, trial)
     st[end + DS_LAST] = x
     return x
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def core_process(desired, delay, p, cfg, st, region, dyn, dstate, out):  # type: ignore[no-untyped-def]
+def core_process(desired, delay, p, cfg, st, region, dyn, dstate, trial, out):  # type: ignore[no-untyped-def]
     """``core_step`` over a block; with an integer delay the command at k targets k + delay."""
     m = desired.shape[0]
     for k in range(m):
@@ -509,7 +597,7 @@ def core_process(desired, delay, p, cfg, st, region, dyn, dstate, out):  # type:
             target = desired[m - 1] + (j - m + 1) * (desired[m - 1] - desired[m - 2])
         else:
             target = desired[m - 1]
-        out[k] = core_step(target, p, cfg, st, region, dyn, dstate)
+        out[k] = core_step(target, p, cfg, st, region, dyn, dstate, trial)
 
 
 # ------------------------------------------------------------ identification
@@ -598,14 +686,14 @@ def duhem_jacobian(p, v, q0, rows, qsim, jac):  # type: ignore[no-untyped-def]
 
 @njit(cache=True)
 def rev_design(p, v, st, rows, out):  # type: ignore[no-untyped-def]
-    """The reversal-memory Duhem's regressors: ``out[r]`` = the basis functions' integrals
-    from the record's start to sample rows[r] (the walk of ``rev_move``, st from its start)."""
+    """The Preisach core's regressors: ``out[r]`` = d(q[rows[r]] - q[0]) / d(Everett nodes)
+    (the walk of ``rev_move`` from st)."""
     acc = np.zeros(out.shape[1])
     r = 0
     nr = rows.shape[0]
     for k in range(v.shape[0]):
         if k > 0:
-            rev_move(p, st, v[k], True, acc)
+            rev_move(p, st, v[k], True, acc, True)
         if r < nr and rows[r] == k:
             for a in range(acc.shape[0]):
                 out[r, a] = acc[a]
@@ -658,7 +746,7 @@ def duhem_cumulative(p, v, q, rows, out):  # type: ignore[no-untyped-def]
 
 # ---------------------------------------------------------- self-sensing loop
 @njit(cache=True, fastmath=FASTMATH)
-def core_controller_step(desired, measured, p, cfg, st, region, dyn, dstate, ctl, cs):  # type: ignore[no-untyped-def]
+def core_controller_step(desired, measured, p, cfg, st, region, dyn, dstate, trial, ctl, cs):  # type: ignore[no-untyped-def]
     """``_kernels.controller_step`` on a differential core: the same feedback arithmetic
     (shared helpers), the core's inverse in place of eq. 18. ``cfg`` takes model units."""
     c2 = ctl[np.newaxis]
@@ -674,15 +762,15 @@ def core_controller_step(desired, measured, p, cfg, st, region, dyn, dstate, ctl
     if not math.isfinite(d):  # hold the last safe command
         st[end + DS_NONFINITE] += 1.0
         return last
-    v = core_step(u, p, cfg, st, region, dyn, dstate)
+    v = core_step(u, p, cfg, st, region, dyn, dstate, trial)
     K.feedback_close_at(0, d, u, core_output(p, st), integral, c2, cs2)
     return v
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def core_controller_process(desired, measured, p, cfg, st, region, dyn, dstate, ctl, cs, out):  # type: ignore[no-untyped-def]
+def core_controller_process(des, meas, p, cfg, st, region, dyn, dstate, trial, ctl, cs, out):  # type: ignore[no-untyped-def]
     """``core_controller_step`` over a block of recorded samples."""
-    for k in range(desired.shape[0]):
+    for k in range(des.shape[0]):
         out[k] = core_controller_step(
-            desired[k], measured[k], p, cfg, st, region, dyn, dstate, ctl, cs
+            des[k], meas[k], p, cfg, st, region, dyn, dstate, trial, ctl, cs
         )

@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import warnings
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any, overload
@@ -27,6 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ._validation import FloatArray, as_time
 from .errors import (
+    ExtrapolationWarning,
     ModelFileError,
     NonFiniteError,
     NotFittedError,
@@ -104,7 +106,9 @@ def model_width(model: HysteresisModel, *, cycles: int = 2, samples: int = 400) 
     half = samples // 2
     cycle = np.concatenate([np.linspace(lo, hi, half), np.linspace(hi, lo, half)])
     x = np.tile(cycle, cycles)
-    y = pure.predict(x)
+    with warnings.catch_warnings():  # a full-range loop may leave what the data covered
+        warnings.simplefilter("ignore", ExtrapolationWarning)
+        y = pure.predict(x)
     return hysteresis_width(x[-samples:], y[-samples:])
 
 
@@ -172,10 +176,11 @@ class ModelBank:
             if not isinstance(m, HysteresisModel) or not m.is_fitted:
                 msg = f"channel {i} of the bank is not a fitted piezohyst model."
                 raise ParameterError(msg)
-            if type(m) is not type(first) or m.n_operators != first.n_operators:
+            size, size0 = m.operator_.initial_state.size, first.operator_.initial_state.size
+            if type(m) is not type(first) or size != size0:
                 msg = (
-                    f"channel {i} is a {type(m).__name__} with {m.n_operators} operators; "
-                    f"channel 0 a {type(first).__name__} with {first.n_operators}: a bank holds "
+                    f"channel {i} is a {type(m).__name__} with {size} core states; "
+                    f"channel 0 a {type(first).__name__} with {size0}: a bank holds "
                     "one structure"
                 )
                 raise ParameterError(msg)
@@ -447,14 +452,17 @@ class ModelBank:
             ),
         }
         models = self._check_fitted()
-        n = self.template.n_operators
-        nan_rows = np.full(n, np.nan)
-        arrays["thresholds"] = np.array([nan_rows if m is None else m.thresholds_ for m in models])
-        arrays["weights"] = np.array([nan_rows if m is None else m.weights_ for m in models])
-        arrays["initial_state"] = np.array(
-            [nan_rows if m is None else m.initial_state_ for m in models]
-        )
-        arrays["offset"] = np.array([math.nan if m is None else m.offset_ for m in models])
+        if "n_operators" in self.template.get_params():  # play operators: their arrays too
+            n = self.template.n_operators
+            nan_rows = np.full(n, np.nan)
+            arrays["thresholds"] = np.array(
+                [nan_rows if m is None else m.thresholds_ for m in models]
+            )
+            arrays["weights"] = np.array([nan_rows if m is None else m.weights_ for m in models])
+            arrays["initial_state"] = np.array(
+                [nan_rows if m is None else m.initial_state_ for m in models]
+            )
+            arrays["offset"] = np.array([math.nan if m is None else m.offset_ for m in models])
         arrays["rmse"] = np.array([math.nan if m is None else m.rmse_ for m in models])
         arrays["nrmse"] = np.array([math.nan if m is None else m.nrmse_ for m in models])
         return arrays

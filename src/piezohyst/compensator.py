@@ -769,6 +769,8 @@ class CoreCompensator(Compensator):
             self.config[D.CC_REF] = core.output(core.initial_state)
         self._ns = core.n_states
         self._state = np.zeros(self._ns + D.DS_STATUS)
+        #: scratch for the kernel's trial steps (the core's state after a candidate command)
+        self.trial = np.zeros(self._ns)
         self.reset()
 
     @property
@@ -905,13 +907,20 @@ class CoreCompensator(Compensator):
     def _inner_step(self, target: float) -> float:
         return float(
             D.core_step(
-                target, self.params, self.config, self._state, self.region, self.dyn, self.dstate
+                target,
+                self.params,
+                self.config,
+                self._state,
+                self.region,
+                self.dyn,
+                self.dstate,
+                self.trial,
             )
         )
 
     def _inner_process(self, d: FloatArray, out: FloatArray) -> None:
         D.core_process(d, self.delay_samples, self.params, self.config, self._state, self.region,
-                       self.dyn, self.dstate, out)  # fmt: skip
+                       self.dyn, self.dstate, self.trial, out)  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,15 @@ from ._validation import FloatArray, as_signal
 from .errors import ParameterError, ShapeError
 from .hysteresis import Propagation
 
-__all__ = ["BoucWenHysteresis", "DifferentialCore", "DuhemHysteresis", "Region"]
+__all__ = [
+    "BoucWenHysteresis",
+    "DifferentialCore",
+    "DuhemHysteresis",
+    "PreisachHysteresis",
+    "Region",
+    "everett_map",
+    "everett_nodes",
+]
 
 PERIODIC_PASSES = 200  # at most this many passes of a record for its periodic state
 
@@ -337,8 +345,8 @@ class DifferentialCore:
             before = z.copy()
             D.core_propagate(self.packed, xs, z, y)
             span = max(span, float(np.ptp(y)), 1e-300)
-            same = np.array_equal(np.delete(z, 1), np.delete(before, 1))
-            if same and abs(float(z[1]) - float(before[1])) <= 1e-12 * span:
+            moved = abs(self.output(z) - self.output(before))  # in output units, like span
+            if z[0] == before[0] and np.array_equal(z[2:], before[2:]) and moved <= 1e-12 * span:
                 break
         return z
 
@@ -388,99 +396,61 @@ def _region_from(data: Any) -> Region | None:
 
 @dataclass(frozen=True, eq=False)
 class DuhemHysteresis(DifferentialCore):
-    r"""Rate-independent Duhem hysteresis: :math:`dq/dv = f_\pm(v, m)` on a grid.
+    r"""Rate-independent Duhem hysteresis: :math:`dq/dv = f_\pm(v, q)` on a grid.
 
     ``f+`` while the input rises, ``f-`` while it falls, each bilinear between
-    the nodes and constant beyond the grid's edges. The second coordinate
-    ``m`` is the model's memory:
-
-    * ``memory="reversal"``: the excursion since the branch's last reversal,
-      :math:`m = |v - v_r|` (V). The reversal points form a stack with the
-      wiping-out rule of Preisach models (passing the previous extremum of the
-      same direction closes the inner loop), so nested minor loops of any
-      size have their own shapes. Each step integrates the slope by Simpson's
-      rule (sub-steps of at most ``dv_max``): rate independent. A
-      Prandtl-Ishlinskii model is the special case of slopes that depend on
-      the excursion alone.
-    * ``memory="charge"``: the output itself, :math:`m = q` — the classical
-      Duhem form. Explicit Euler: ``q[k+1] = q[k] + f±(v[k], q[k]) (v[k+1] - v[k])``
-      (sub-steps of at most ``dv_max``).
+    the nodes of a (voltage, output) grid and constant beyond its edges.
+    Explicit Euler, ``q[k+1] = q[k] + f±(v[k], q[k]) (v[k+1] - v[k])``, in steps
+    of at most ``dv_max`` (then the rest): a sampled trajectory's step is one
+    Euler step, inverted explicitly.
 
     Parameters
     ----------
     v_nodes : array_like, shape (nv,)
         Equally spaced voltages (V), at least 2.
-    memory_nodes : array_like, shape (nm,)
-        Equally spaced values of the memory coordinate (V of excursion, or
-        output units), at least 2.
-    up, down : array_like, shape (nv, nm)
+    q_nodes : array_like, shape (nq,)
+        Equally spaced outputs (output units), at least 2.
+    up, down : array_like, shape (nv, nq)
         Slopes (output per V) at the nodes, all > 0.
-    initial_state : array_like
-        ``[v, q]`` before the first sample; for reversal memory followed by
-        the direction (0, ±1), the number of reversal points k and the
-        ``_diffkernels.STACK`` slots of the stack (the first k used).
+    initial_state : array_like, shape (2,)
+        ``[v, q]`` before the first sample.
     region : Region, optional
         Where the training data lay.
     dv_max : float, optional
-        Largest Euler sub-step (V); default a quarter of the voltage grid's spacing.
+        Largest Euler step (V); default a quarter of the voltage grid's spacing.
     """
 
     v_nodes: FloatArray
-    memory_nodes: FloatArray
+    q_nodes: FloatArray
     up: FloatArray
     down: FloatArray
     initial_state: FloatArray
     region: Region | None = None
     dv_max: float | None = None
-    memory: str = "reversal"
     packed: FloatArray = field(init=False, repr=False)
     kind: ClassVar[str] = "duhem"
     inner: ClassVar[str] = "output"
 
     def __post_init__(self) -> None:
-        if self.memory not in ("reversal", "charge"):
-            msg = f"'memory' must be 'reversal' or 'charge'. Got {self.memory!r}."
-            raise ParameterError(msg)
-        vn = _frozen(self.v_nodes, "v_nodes")
-        qn = _frozen(self.memory_nodes, "memory_nodes")
-        for name, nodes in (("v_nodes", vn), ("memory_nodes", qn)):
-            steps = np.diff(nodes)
-            if nodes.size < 2 or np.any(steps <= 0) or np.ptp(steps) > 1e-9 * abs(steps[0]):
-                msg = f"'{name}' must hold at least 2 equally spaced, increasing values."
-                raise ParameterError(msg)
+        vn = _nodes(self.v_nodes, "v_nodes")
+        qn = _nodes(self.q_nodes, "q_nodes")
         shape = (vn.size, qn.size)
-        up = np.array(self.up, dtype=np.float64)
-        down = np.array(self.down, dtype=np.float64)
-        for name, c in (("up", up), ("down", down)):
-            if c.shape != shape:
-                msg = f"'{name}' must have shape {shape} (voltage, memory nodes). Got {c.shape}."
-                raise ShapeError(msg)
-            if not np.all(np.isfinite(c)) or np.any(c <= 0):
-                msg = f"every '{name}' slope must be finite and > 0 (strictly increasing branches)."
-                raise ParameterError(msg)
-            c.flags.writeable = False
+        up = _slopes(self.up, "up", shape)
+        down = _slopes(self.down, "down", shape)
         z0 = _frozen(self.initial_state, "initial_state")
-        size = D.RV_SIZE if self.memory == "reversal" else 2
-        if z0.size != size:
-            msg = (
-                f"'initial_state' of a Duhem core on {self.memory} memory holds {size} "
-                f"values. Got {z0.size}."
-            )
+        if z0.size != 2:
+            msg = f"'initial_state' must be [v, q]. Got {z0.size} values."
             raise ShapeError(msg)
-        object.__setattr__(self, "v_nodes", vn)
-        object.__setattr__(self, "memory_nodes", qn)
-        object.__setattr__(self, "up", up)
-        object.__setattr__(self, "down", down)
-        object.__setattr__(self, "initial_state", z0)
         v_step = (vn[-1] - vn[0]) / (vn.size - 1)
         dv = _finite(0.25 * v_step if self.dv_max is None else self.dv_max, "dv_max")
         if not dv > 0:
             msg = f"'dv_max' must be > 0. Got {dv!r}."
             raise ParameterError(msg)
-        object.__setattr__(self, "dv_max", dv)
+        for name, value in (("v_nodes", vn), ("q_nodes", qn), ("up", up), ("down", down),
+                            ("initial_state", z0), ("dv_max", dv)):  # fmt: skip
+            object.__setattr__(self, name, value)
         f_min = min(float(up.min()), float(down.min()))
-        kind = D.KIND_DUHEM_REV if self.memory == "reversal" else D.KIND_DUHEM
-        head = [kind, vn.size, qn.size, vn[0], v_step, qn[0],
+        head = [D.KIND_DUHEM, vn.size, qn.size, vn[0], v_step, qn[0],
                 (qn[-1] - qn[0]) / (qn.size - 1), dv, f_min]  # fmt: skip
         packed = np.concatenate([head, up.ravel(), down.ravel()])
         packed.flags.writeable = False
@@ -488,10 +458,7 @@ class DuhemHysteresis(DifferentialCore):
 
     @classmethod
     def from_packed(
-        cls,
-        packed: FloatArray,
-        initial_state: ArrayLike,
-        region: Region | None = None,
+        cls, packed: FloatArray, initial_state: ArrayLike, region: Region | None = None
     ) -> DuhemHysteresis:
         """A core from the kernels' parameter layout (the identification's solution).
 
@@ -511,48 +478,41 @@ class DuhemHysteresis(DifferentialCore):
         cells = nv * nq
         up = packed[D.DU_UP : D.DU_UP + cells].reshape(nv, nq)
         down = packed[D.DU_UP + cells : D.DU_UP + 2 * cells].reshape(nv, nq)
-        memory = "reversal" if packed[0] == D.KIND_DUHEM_REV else "charge"
         z0 = np.asarray(initial_state, dtype=np.float64)
-        return cls(vn, qn, up, down, z0, region, float(packed[D.DU_DV_MAX]), memory)
+        return cls(vn, qn, up, down, z0, region, float(packed[D.DU_DV_MAX]))
 
     @property
     def summary(self) -> str:
         """See :attr:`DifferentialCore.summary`."""
-        return f"Duhem on {self.memory} memory, {self.v_nodes.size} × {self.memory_nodes.size} grid"
+        return f"Duhem, {self.v_nodes.size} × {self.q_nodes.size} grid"
 
     def rest_state(self, x0: float) -> FloatArray:
         """See :meth:`DifferentialCore.rest_state`: the middle of the recorded band at ``x0``.
 
-        Without a region: the initial state's output, moved to ``x0``. Reversal
-        memory: no reversal yet, the rest point ``x0`` alone on the stack.
+        Without a region: the initial state's output, moved to ``x0``.
         """
         q = self.region.middle(x0) if self.region is not None else float(self.initial_state[1])
-        if self.memory == "charge":
-            return np.array([float(x0), q])
-        z = np.zeros(D.RV_SIZE)
-        z[0], z[1], z[D.RV_K], z[D.RV_R] = float(x0), q, 1.0, float(x0)
-        return z
+        return np.array([float(x0), q])
 
     def with_initial_state(self, state: ArrayLike) -> DuhemHysteresis:
         """See :meth:`DifferentialCore.with_initial_state`."""
         z = as_signal(state, "state")
-        return DuhemHysteresis(self.v_nodes, self.memory_nodes, self.up, self.down, z,
-                               self.region, self.dv_max, self.memory)  # fmt: skip
+        return DuhemHysteresis(self.v_nodes, self.q_nodes, self.up, self.down, z, self.region,
+                               self.dv_max)  # fmt: skip
 
     def slopes(self, v: ArrayLike, q: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """``f+`` and ``f-`` at points (v, m) of the grid's coordinates.
+        """``f+`` and ``f-`` at points (v, q).
 
         Parameters
         ----------
         v, q : array_like, shape (N,)
-            Voltages and memory coordinates (excursions or outputs).
 
         Returns
         -------
         (ndarray, ndarray)
         """
         va = np.asarray(v, dtype=np.float64).reshape(-1)
-        qa = np.asarray(q, dtype=np.float64).reshape(-1)  # the memory coordinate
+        qa = np.asarray(q, dtype=np.float64).reshape(-1)
         pairs = list(zip(va, qa, strict=True))
         up = np.array([D.duhem_slope(self.packed, a, b, True)[0] for a, b in pairs])
         down = np.array([D.duhem_slope(self.packed, a, b, False)[0] for a, b in pairs])
@@ -561,16 +521,11 @@ class DuhemHysteresis(DifferentialCore):
     def describe(self, input_unit: str, output_unit: str) -> list[tuple[str, str]]:
         """See :meth:`DifferentialCore.describe`."""
         slope = f"{output_unit}/{input_unit}"
-        if self.memory == "reversal":
-            form, unit = "Duhem on reversal memory, dq/dv = f±(v, |v - v_r|), bilinear", input_unit
-        else:
-            form, unit = "Duhem on charge memory, dq/dv = f±(v, q), bilinear", output_unit
-        m = self.memory_nodes
         return [
-            ("core", form),
-            ("grid", f"{self.v_nodes.size} × {m.size} nodes over "
+            ("core", "Duhem, dq/dv = f±(v, q), bilinear"),
+            ("grid", f"{self.v_nodes.size} × {self.q_nodes.size} nodes over "
                      f"[{self.v_nodes[0]:.6g}, {self.v_nodes[-1]:.6g}] {input_unit} × "
-                     f"[{m[0]:.6g}, {m[-1]:.6g}] {unit}"),
+                     f"[{self.q_nodes[0]:.6g}, {self.q_nodes[-1]:.6g}] {output_unit}"),
             ("rising slopes f+", f"{self.up.min():.4g} to {self.up.max():.4g} {slope}"),
             ("falling slopes f-", f"{self.down.min():.4g} to {self.down.max():.4g} {slope}"),
         ]  # fmt: skip
@@ -578,14 +533,13 @@ class DuhemHysteresis(DifferentialCore):
     def to_dict(self) -> dict[str, Any]:
         """See :meth:`DifferentialCore.to_dict`."""
         return {
-            "memory": self.memory,
             "v_nodes": self.v_nodes.tolist(),
-            "memory_nodes": self.memory_nodes.tolist(),
+            "q_nodes": self.q_nodes.tolist(),
             "up": self.up.tolist(),
             "down": self.down.tolist(),
             "initial_state": self.initial_state.tolist(),
-            "region": _region_dict(self.region),
             "dv_max": self.dv_max,
+            "region": _region_dict(self.region),
         }
 
     @classmethod
@@ -602,14 +556,211 @@ class DuhemHysteresis(DifferentialCore):
         """
         return cls(
             data["v_nodes"],
-            data["memory_nodes"],
+            data["q_nodes"],
             data["up"],
             data["down"],
             data["initial_state"],
             _region_from(data.get("region")),
             data.get("dv_max"),
-            data.get("memory", "reversal"),
         )
+
+
+@dataclass(frozen=True, eq=False)
+class PreisachHysteresis(DifferentialCore):
+    r"""The Preisach model, by its Everett function on a grid of reversal points.
+
+    Rising from a minimum :math:`a`: :math:`q(v) = q(a) + E(a, v)`; falling
+    from a maximum :math:`b`: :math:`q(v) = q(b) - E(v, b)`. The reversal
+    points form a stack with the wiping-out rule (passing the previous
+    extremum of the same direction closes the inner loop and resumes the
+    outer branch), so every minor loop closes and returns to its starting
+    point (return-point memory), and minor loops have the shape their place
+    in the major loop gives them — not PI's congruent copies. :math:`E` is
+    bilinear between the nodes, built from a Preisach density
+    :math:`\mu \ge 0` on the grid's cells,
+    :math:`E(a_i, b_j) = \sum_{i \le k \le l < j} \mu_{kl}`, so every branch
+    is increasing; beyond the grid it continues with the smallest slope.
+
+    Parameters
+    ----------
+    nodes : array_like, shape (n,)
+        Equally spaced voltages (V), at least 2.
+    density : array_like, shape (n - 1, n - 1)
+        :math:`\mu_{kl}` (output units) for cells ``k <= l``; ``>= 0``, the
+        diagonal ``> 0``; the lower half is ignored.
+    initial_state : array_like
+        ``[v, q, direction, k, R[0..STACK-1]]`` (see ``_diffkernels``).
+    region : Region, optional
+    """
+
+    nodes: FloatArray
+    density: FloatArray
+    initial_state: FloatArray
+    region: Region | None = None
+    packed: FloatArray = field(init=False, repr=False)
+    kind: ClassVar[str] = "preisach"
+    inner: ClassVar[str] = "output"
+
+    def __post_init__(self) -> None:
+        nodes = _nodes(self.nodes, "nodes")
+        n = nodes.size
+        mu = np.triu(np.array(self.density, dtype=np.float64))
+        if mu.shape != (n - 1, n - 1):
+            msg = f"'density' must have shape {(n - 1, n - 1)} (cells). Got {mu.shape}."
+            raise ShapeError(msg)
+        if not np.all(np.isfinite(mu)) or np.any(mu < 0) or np.any(np.diag(mu) <= 0):
+            msg = "the Preisach density must be finite and >= 0, its diagonal > 0"
+            raise ParameterError(msg)
+        mu.flags.writeable = False
+        z0 = _frozen(self.initial_state, "initial_state")
+        if z0.size != D.RV_SIZE:
+            msg = f"'initial_state' of a Preisach core holds {D.RV_SIZE} values. Got {z0.size}."
+            raise ShapeError(msg)
+        object.__setattr__(self, "nodes", nodes)
+        object.__setattr__(self, "density", mu)
+        object.__setattr__(self, "initial_state", z0)
+        h = (nodes[-1] - nodes[0]) / (n - 1)
+        s_min = float(np.diag(mu).min()) / h
+        head = [D.KIND_PREISACH, n, n, nodes[0], h, 0.0, 0.0, 0.0, s_min]
+        packed = np.concatenate([head, everett_nodes(mu).ravel()])
+        packed.flags.writeable = False
+        object.__setattr__(self, "packed", packed)
+
+    @property
+    def summary(self) -> str:
+        """See :attr:`DifferentialCore.summary`."""
+        return f"Preisach, {self.nodes.size} nodes"
+
+    def rest_state(self, x0: float) -> FloatArray:
+        """See :meth:`DifferentialCore.rest_state`: no reversal yet, the middle of the band."""
+        q = self.region.middle(x0) if self.region is not None else float(self.initial_state[1])
+        z = np.zeros(D.RV_SIZE)
+        z[0], z[1], z[D.RV_K], z[D.RV_R] = float(x0), q, 1.0, float(x0)
+        return z
+
+    def with_initial_state(self, state: ArrayLike) -> PreisachHysteresis:
+        """See :meth:`DifferentialCore.with_initial_state`."""
+        return PreisachHysteresis(self.nodes, self.density, as_signal(state, "state"), self.region)
+
+    def everett(self, a: ArrayLike, b: ArrayLike) -> FloatArray:
+        """The Everett function :math:`E(a, b)` (output units).
+
+        Parameters
+        ----------
+        a, b : array_like
+            Lower and upper reversal points (V).
+
+        Returns
+        -------
+        ndarray
+        """
+        aa, bb = np.broadcast_arrays(
+            np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+        )
+        out = np.array(
+            [D.everett(self.packed, x, y)[0] for x, y in zip(aa.ravel(), bb.ravel(), strict=True)]
+        )
+        return out.reshape(aa.shape)
+
+    def describe(self, input_unit: str, output_unit: str) -> list[tuple[str, str]]:
+        """See :meth:`DifferentialCore.describe`."""
+        mu = self.density
+        return [
+            ("core", "Preisach, Everett function on a grid, wiping-out memory"),
+            ("grid", f"{self.nodes.size} nodes over [{self.nodes[0]:.6g}, "
+                     f"{self.nodes[-1]:.6g}] {input_unit}"),
+            ("density", f"{mu.sum():.4g} {output_unit} in all, "
+                        f"{np.trace(mu) / mu.sum():.1%} on the diagonal (reversible)"),
+            ("smallest slope", f"{self.packed[D.DU_F_MIN]:.4g} {output_unit}/{input_unit}"),
+        ]  # fmt: skip
+
+    def to_dict(self) -> dict[str, Any]:
+        """See :meth:`DifferentialCore.to_dict`."""
+        return {
+            "nodes": self.nodes.tolist(),
+            "density": self.density.tolist(),
+            "initial_state": self.initial_state.tolist(),
+            "region": _region_dict(self.region),
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> PreisachHysteresis:
+        """Inverse of :meth:`to_dict`.
+
+        Parameters
+        ----------
+        data : dict
+
+        Returns
+        -------
+        PreisachHysteresis
+        """
+        return cls(
+            data["nodes"], data["density"], data["initial_state"], _region_from(data.get("region"))
+        )
+
+
+def everett_nodes(density: FloatArray) -> FloatArray:
+    """Everett values at the nodes from a density on the cells: E[i, j] = sum of mu[k, l]
+    over i <= k <= l < j (0 on and below the diagonal).
+
+    Parameters
+    ----------
+    density : ndarray, shape (n - 1, n - 1)
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+    """
+    mu = np.triu(density)
+    m = mu.shape[0]
+    e = np.zeros((m + 1, m + 1))
+    # E[i, j] = sum over k >= i, l < j of mu[k, l] (mu is upper triangular)
+    tail = np.cumsum(mu[::-1], axis=0)[::-1]  # rows k >= i
+    e[:m, 1:] = np.cumsum(tail, axis=1)
+    return np.triu(e, 1)
+
+
+def everett_map(n: int) -> FloatArray:
+    """The matrix T with E.ravel() = T @ mu.ravel() (n nodes, (n-1)^2 cells).
+
+    Parameters
+    ----------
+    n : int
+
+    Returns
+    -------
+    ndarray, shape (n * n, (n - 1) ** 2)
+    """
+    m = n - 1
+    t = np.zeros((n * n, m * m))
+    for k in range(m):
+        for c in range(k, m):
+            unit = np.zeros((m, m))
+            unit[k, c] = 1.0
+            t[:, k * m + c] = everett_nodes(unit).ravel()
+    return t
+
+
+def _nodes(values: ArrayLike, name: str) -> FloatArray:
+    nodes = _frozen(values, name)
+    steps = np.diff(nodes)
+    if nodes.size < 2 or np.any(steps <= 0) or np.ptp(steps) > 1e-9 * abs(steps[0]):
+        msg = f"'{name}' must hold at least 2 equally spaced, increasing values."
+        raise ParameterError(msg)
+    return nodes
+
+
+def _slopes(values: ArrayLike, name: str, shape: tuple[int, int]) -> FloatArray:
+    c = np.array(values, dtype=np.float64)
+    if c.shape != shape:
+        msg = f"'{name}' must have shape {shape} (voltage, output nodes). Got {c.shape}."
+        raise ShapeError(msg)
+    if not np.all(np.isfinite(c)) or np.any(c <= 0):
+        msg = f"every '{name}' slope must be finite and > 0 (strictly increasing branches)."
+        raise ParameterError(msg)
+    c.flags.writeable = False
+    return c
 
 
 @dataclass(frozen=True, eq=False)
@@ -775,5 +926,6 @@ class BoucWenHysteresis(DifferentialCore):
 
 CORES: dict[str, type[DifferentialCore]] = {
     DuhemHysteresis.kind: DuhemHysteresis,
+    PreisachHysteresis.kind: PreisachHysteresis,
     BoucWenHysteresis.kind: BoucWenHysteresis,
 }

@@ -32,7 +32,14 @@ import numpy as np
 from . import _diffkernels as D
 from ._validation import FloatArray, as_signal, as_time, check_float
 from .cores import PlayCore
-from .differential import BoucWenHysteresis, DifferentialCore, DuhemHysteresis, Region
+from .differential import (
+    BoucWenHysteresis,
+    DifferentialCore,
+    DuhemHysteresis,
+    PreisachHysteresis,
+    Region,
+    everett_map,
+)
 from .errors import ExtrapolationWarning, InsufficientDataError, NotInvertibleError, ParameterError
 from .identification import (
     Blocks,
@@ -60,7 +67,7 @@ from .models import (
 )
 from .terms import Term, make_term
 
-__all__ = ["BoucWenModel", "DifferentialModel", "DuhemModel"]
+__all__ = ["BoucWenModel", "DifferentialModel", "DuhemModel", "PreisachModel"]
 
 REFINE_ROWS = 8000  # output-error refinement: residual rows (hashed picks)
 REFINE_EVALS = 25  # and evaluations
@@ -68,9 +75,7 @@ PROXY_OPERATORS = 16  # play operators of the proxy that settles the growth term
 FIT_ROWS = 40_000  # output-error residuals use at most this many samples (hashed picks)
 
 
-def _grid(value: object, name: str, owner: str) -> tuple[int, int] | None:
-    if value is None:
-        return None
+def _grid(value: object, name: str, owner: str) -> tuple[int, int]:
     ok = (
         isinstance(value, Sequence)
         and not isinstance(value, str)
@@ -88,18 +93,11 @@ def _grid(value: object, name: str, owner: str) -> tuple[int, int] | None:
     return int(value[0]), int(value[1])
 
 
-def _memory(value: object, name: str, owner: str) -> str:
-    if value not in ("reversal", "charge"):
-        msg = (
-            f"The '{name}' parameter of {owner} must be 'reversal' or 'charge'. "
-            f"Got {value!r} instead."
-        )
+def _nodes_rule(value: object, name: str, owner: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or not 3 <= value <= 60:
+        msg = f"The '{name}' parameter of {owner} must be an int in [3, 60]. Got {value!r} instead."
         raise ParameterError(msg)
-    return str(value)
-
-
-def _smoothing(value: object, name: str, owner: str) -> float | None:
-    return None if value is None else _nonneg(value, name, owner)
+    return int(value)
 
 
 def _nonneg(value: object, name: str, owner: str) -> float:
@@ -374,50 +372,41 @@ class DuhemModel(DifferentialModel):
 
     .. math::
 
-        \frac{dq}{dv} = f_\pm(v, m), \qquad y = q + \sum_j c_j g_j(t)
+        \frac{dq}{dv} = f_\pm(v, q), \qquad y = q + \sum_j c_j g_j(t)
 
     ``f+`` while the voltage rises, ``f-`` while it falls: positive bilinear
-    surfaces on a ``grid`` over the voltage and a memory coordinate ``m``:
+    surfaces on a ``grid`` over the (voltage, output) region the training
+    record covered. The slopes see the output they produce, so the fit is an
+    integrated regression on the measured path (linear in the slopes; noise
+    enters through the path, not through differences of the output), refined
+    on the simulated output with the exact sensitivities of the simulation
+    (``refine``). A Duhem model's loops need not close by themselves, so a
+    drift of the charge could trade against the slopes: the growth terms come
+    from a Prandtl-Ishlinskii proxy first, whose loops close by construction.
+    Minor loops are not congruent, but they converge to a steady loop over a
+    few cycles rather than closing at once (no return-point memory; see
+    :class:`PreisachModel` for a model that has it).
 
-    * ``memory="reversal"`` (default): the excursion since the last reversal,
-      with Preisach's wiping-out of closed inner loops. The model's output is
-      linear in its slopes *given the input alone*, so one bounded linear
-      least squares, joint with the growth terms, is its exact output-error
-      fit. Minor loops are not congruent: each has the shape its place in
-      the major loop and its size give it, learnt from loops of many sizes
-      (the simulator's ``decaying`` signal). Prandtl-Ishlinskii is the
-      special case of slopes that depend on the excursion alone.
-    * ``memory="charge"``: the classical Duhem form, :math:`m = q`. Its
-      slopes see the output they produce, so the fit is an integrated
-      regression on the measured path refined on the simulated output; its
-      loops need not close, so the growth terms come from a
-      Prandtl-Ishlinskii proxy first (a drift would otherwise trade against
-      the slopes). Kept for comparison: on the bench it predicts worse than
-      reversal memory (``docs/validation.md``).
-
-    Outside the (voltage, output) region the training record covered, the
-    slopes are held at the grid's edge: predictions warn
-    (:class:`~piezohyst.ExtrapolationWarning`) and the compensator holds its
-    command unless allowed to extrapolate.
+    Outside the region the training record covered the slopes are held at
+    the grid's edge: predictions warn (:class:`~piezohyst.ExtrapolationWarning`)
+    and the compensator stops at the region's edge unless allowed to
+    extrapolate.
 
     Parameters
     ----------
-    grid : (int, int), optional
-        Nodes along the voltage and the memory coordinate, each in [2, 40].
-        Default (12, 12) for reversal memory, (8, 6) for charge memory.
-    memory : {"reversal", "charge"}, default "reversal"
+    grid : (int, int), default (8, 6)
+        Nodes along the voltage and the output, each in [2, 40].
     growth_terms : "auto" or sequence of {"integral", "time", "abs_integral"}, default ("integral",)
-        Growth terms fitted jointly (removed before compensating); ``"auto"``
-        chooses by forward-chaining validation (``selection_``).
-    smoothing : float, optional
+        Growth terms (removed before compensating); ``"auto"`` chooses by the
+        proxy's forward-chaining cross-validation (``selection_``).
+    smoothing : float, default 1e-3
         Weight of the curvature penalty on the slope surfaces, relative to the
-        data's (fills cells the data barely visit). Default 1e-4 for reversal
-        memory, 1e-3 for charge memory.
+        data's (fills cells the data barely visit).
     min_slope : float, default 0.02
         Smallest slope, as a fraction of the mean slope: strictly increasing
-        branches.
+        branches, so an exact inverse.
     refine : bool, default True
-        Charge memory: refine on the output error.
+        Refine the integrated regression on the output error.
     region_tolerance : float, default 0.05
         How far outside the recorded band (fraction of the output span)
         counts as extrapolating.
@@ -437,25 +426,24 @@ class DuhemModel(DifferentialModel):
     >>> import piezohyst as ph
     >>> rec = ph.simulate(signal="decaying", duration=20.0)
     >>> model = ph.DuhemModel().fit(rec.voltage, rec.charge, t=rec.t)
-    >>> bool(model.nrmse_ < 0.001)
+    >>> bool(model.nrmse_ < 0.005)
     True
     """
 
     cli_name = "duhem"
+    growth_from_proxy = True  # its loops need not close: the growth comes first, from PI
     _rules: ClassVar[dict[str, Rule]] = {
         "grid": _grid,
-        "memory": _memory,
-        "smoothing": _smoothing,
+        "smoothing": _nonneg,
         "refine": _bool,
     }
 
     def __init__(
         self,
-        grid: tuple[int, int] | None = None,
+        grid: tuple[int, int] = (8, 6),
         *,
-        memory: str = "reversal",
         growth_terms: str | Sequence[str] = ("integral",),
-        smoothing: float | None = None,
+        smoothing: float = 1e-3,
         min_slope: float = 0.02,
         refine: bool = True,
         region_tolerance: float = 0.05,
@@ -465,7 +453,6 @@ class DuhemModel(DifferentialModel):
         output_dynamics: str = "none",
     ) -> None:
         self.grid = grid
-        self.memory = memory
         self.growth_terms = growth_terms
         self.smoothing = smoothing
         self.min_slope = min_slope
@@ -475,11 +462,6 @@ class DuhemModel(DifferentialModel):
         self.output_unit = output_unit
         self.input_dynamics = input_dynamics
         self.output_dynamics = output_dynamics
-
-    @property
-    def growth_from_proxy(self) -> bool:  # type: ignore[override]
-        """Charge memory takes its growth terms from the proxy (its loops need not close)."""
-        return bool(self.memory == "charge")
 
     def _identify(
         self,
@@ -491,70 +473,11 @@ class DuhemModel(DifferentialModel):
         initial_state: InitialState,
         growth: list[FloatArray] | None,
     ) -> tuple[DifferentialCore, list[FloatArray]]:
-        charge = params["memory"] == "charge"
-        grid = params["grid"] or ((8, 6) if charge else (12, 12))
-        smoothing = params["smoothing"]
-        if smoothing is None:
-            smoothing = 1e-3 if charge else 1e-4
-        nv, nq = grid
-        cells = nv * nq
-        n = x.size
-        if n < 2 * cells + 2:
-            msg = f"{n} samples cannot identify {2 * cells} slopes: give a longer record"
+        smoothing = float(params["smoothing"])
+        nv, nq = params["grid"]
+        if x.size < 4 * nv * nq + 2:
+            msg = f"{x.size} samples cannot identify {2 * nv * nq} slopes: give a longer record"
             raise InsufficientDataError(msg)
-        if charge:
-            return self._identify_charge(x, y, t, terms, params, initial_state, growth,
-                                         grid, smoothing)  # fmt: skip
-        g_mat = _growth_matrix(terms, x, t)
-        m = g_mat.shape[1]
-        lower_g = np.concatenate([term.lower_bounds() for term in terms]) if terms else np.zeros(0)
-        span = float(np.ptp(x))
-        s_min = float(params["min_slope"]) * max(float(np.ptp(y)), 1e-300) / span
-        v_step = span / (nv - 1)
-        head = [D.KIND_DUHEM_REV, nv, nq, float(x.min()), v_step, 0.0, span / (nq - 1),
-                0.25 * min(v_step, span / (nq - 1)), s_min]  # fmt: skip
-        packed = np.concatenate([head, np.ones(2 * cells)])
-        probe = DuhemHysteresis.from_packed(packed, np.zeros(D.RV_SIZE))
-        start = _start_inner(probe, x, initial_state)  # the reversal stack before the record
-        z0 = probe.rest_state(float(x[0])) if start is None else start
-        rows = _picked_rows(n, FIT_ROWS)
-        design = np.empty((rows.size, 2 * cells))
-        D.rev_design(packed, x, z0.copy(), rows, design)
-        a = np.hstack([design, g_mat[rows], np.ones((rows.size, 1))])
-        gram = a.T @ a
-        weight = smoothing * max(float(np.mean(np.diag(gram)[: 2 * cells])), 1e-300)
-        penalty = _curvature(nv, nq)
-        for half in (0, cells):
-            sl = slice(half, half + cells)
-            gram[sl, sl] += weight * penalty
-        lower = np.concatenate([np.full(2 * cells, s_min), lower_g, [-np.inf]])
-        sol = _bounded_lstsq(gram, a.T @ y[rows], lower)
-        packed[D.DU_UP :] = np.maximum(sol[: 2 * cells], s_min)
-        g = sol[2 * cells : 2 * cells + m]
-        z0 = np.array(z0)
-        z0[1] = float(sol[-1])
-        qh = y - g_mat @ g if m else y
-        core = DuhemHysteresis.from_packed(packed, z0, Region.of(x, qh))
-        coefs, col = [], 0
-        for term in terms:
-            coefs.append(np.asarray(g[col : col + term.width], dtype=np.float64))
-            col += term.width
-        return core, coefs
-
-    def _identify_charge(
-        self,
-        x: FloatArray,
-        y: FloatArray,
-        t: FloatArray | None,
-        terms: list[Term],
-        params: dict[str, Any],
-        initial_state: InitialState,
-        growth: list[FloatArray] | None,
-        grid: tuple[int, int],
-        smoothing: float,
-    ) -> tuple[DifferentialCore, list[FloatArray]]:
-        """Charge memory: integrated regression on the measured path, then output error."""
-        nv, nq = grid
         cells = nv * nq
         n = x.size
         g_mat = _growth_matrix(terms, x, t)
@@ -590,8 +513,161 @@ class DuhemModel(DifferentialModel):
             packed, q0 = _refine_duhem(packed, x, qh, q0, s_min, smoothing,
                                        penalty, fit_q0=start is None)  # fmt: skip
         core = DuhemHysteresis.from_packed(packed, [x[0], q0], Region.of(x, qh))
-        assert core.memory == "charge"
         return core, list(growth or [])
+
+
+class PreisachModel(DifferentialModel):
+    r"""The Preisach model, identified from data as an Everett function, plus growth terms.
+
+    .. math::
+
+        y = q + \sum_j c_j g_j(t), \qquad
+        q(v) = q(a) + E(a, v) \text{ rising from a minimum } a, \qquad
+        q(v) = q(b) - E(v, b) \text{ falling from a maximum } b
+
+    with the wiping-out rule on the stack of reversal points
+    (:class:`~piezohyst.differential.PreisachHysteresis`). Its minor loops are
+    not congruent copies of each other (PI's limit): each has the shape its
+    place in the major loop gives it; and they close (return-point memory), so
+    a steady periodic drive gives a steady output. The output is linear in
+    the Preisach density given the input alone, so one bounded least squares
+    (density ``>= 0``, its diagonal ``>=`` the smallest slope), joint with the
+    growth terms and a light curvature penalty, *is* its output-error fit.
+    Learnt from loops of many sizes (the simulator's ``decaying`` signal):
+    cells of the density the record never visits only get the penalty's
+    interpolation.
+
+    Parameters
+    ----------
+    nodes : int, default 16
+        Grid nodes over the training voltage range, in [3, 60]; the density
+        has ``(nodes - 1) nodes / 2`` cells.
+    growth_terms : "auto" or sequence of {"integral", "time", "abs_integral"}, default ("integral",)
+        Fitted jointly (its loops close: a drift can only be growth);
+        ``"auto"``: the Prandtl-Ishlinskii proxy's cross-validation chooses them.
+    smoothing : float, default 1e-4
+        Weight of the curvature penalty on the density, relative to the data's.
+    min_slope : float, default 0.02
+        Smallest slope, as a fraction of the mean slope.
+    region_tolerance : float, default 0.05
+    input_unit, output_unit : str
+    input_dynamics, output_dynamics : str
+
+    Attributes
+    ----------
+    operator_ : PreisachHysteresis
+        The density, the grid, the initial state (reversal stack) and the region.
+
+    Examples
+    --------
+    >>> import piezohyst as ph
+    >>> rec = ph.simulate(signal="decaying", duration=20.0)
+    >>> model = ph.PreisachModel().fit(rec.voltage, rec.charge, t=rec.t)
+    >>> bool(model.nrmse_ < 0.003)
+    True
+    """
+
+    cli_name = "preisach"
+    growth_from_proxy = False
+    _rules: ClassVar[dict[str, Rule]] = {
+        "nodes": _nodes_rule,
+        "smoothing": _nonneg,
+    }
+
+    def __init__(
+        self,
+        nodes: int = 16,
+        *,
+        growth_terms: str | Sequence[str] = ("integral",),
+        smoothing: float = 1e-4,
+        min_slope: float = 0.02,
+        region_tolerance: float = 0.05,
+        input_unit: str = "V",
+        output_unit: str = "C",
+        input_dynamics: str = "none",
+        output_dynamics: str = "none",
+    ) -> None:
+        self.nodes = nodes
+        self.growth_terms = growth_terms
+        self.smoothing = smoothing
+        self.min_slope = min_slope
+        self.region_tolerance = region_tolerance
+        self.input_unit = input_unit
+        self.output_unit = output_unit
+        self.input_dynamics = input_dynamics
+        self.output_dynamics = output_dynamics
+
+    def _identify(
+        self,
+        x: FloatArray,
+        y: FloatArray,
+        t: FloatArray | None,
+        terms: list[Term],
+        params: dict[str, Any],
+        initial_state: InitialState,
+        growth: list[FloatArray] | None,
+    ) -> tuple[DifferentialCore, list[FloatArray]]:
+        n = int(params["nodes"])
+        m = n - 1
+        upper = np.flatnonzero(np.triu(np.ones((m, m))).ravel())  # cells k <= l
+        if x.size < upper.size + 2:
+            msg = f"{x.size} samples cannot identify {upper.size} Preisach cells"
+            raise InsufficientDataError(msg)
+        g_mat = _growth_matrix(terms, x, t)
+        ng = g_mat.shape[1]
+        lower_g = np.concatenate([term.lower_bounds() for term in terms]) if terms else np.zeros(0)
+        span = float(np.ptp(x))
+        h = span / m
+        s_min = float(params["min_slope"]) * max(float(np.ptp(y)), 1e-300) / span
+        nodes = np.asarray(float(x.min()) + h * np.arange(n), dtype=np.float64)
+        packed = np.concatenate([[D.KIND_PREISACH, n, n, nodes[0], h, 0.0, 0.0, 0.0, s_min],
+                                 np.zeros(n * n)])  # fmt: skip
+        probe_mu = np.eye(m)
+        probe = PreisachHysteresis(nodes, probe_mu, np.zeros(D.RV_SIZE))
+        start = _start_inner(probe, x, initial_state)  # the reversal stack before the record
+        z0 = probe.rest_state(float(x[0])) if start is None else start
+        rows = _picked_rows(x.size, FIT_ROWS)
+        design_e = np.empty((rows.size, n * n))
+        D.rev_design(packed, x, z0.copy(), rows, design_e)
+        design = design_e @ everett_map(n)[:, upper]
+        a = np.hstack([design, g_mat[rows], np.ones((rows.size, 1))])
+        gram = a.T @ a
+        cells = upper.size
+        weight = float(params["smoothing"]) * max(float(np.mean(np.diag(gram)[:cells])), 1e-300)
+        gram[:cells, :cells] += weight * _curvature_upper(m)
+        diagonal = np.array([(c // m) == (c % m) for c in upper])
+        lower = np.concatenate([np.where(diagonal, s_min * h, 0.0), lower_g, [-np.inf]])
+        sol = _bounded_lstsq(gram, a.T @ y[rows], lower)
+        mu = np.zeros(m * m)
+        mu[upper] = np.maximum(sol[:cells], lower[:cells])
+        g = sol[cells : cells + ng]
+        z0 = np.array(z0)
+        z0[1] = float(sol[-1])
+        qh = y - g_mat @ g if ng else y
+        core = PreisachHysteresis(nodes, mu.reshape(m, m), z0, Region.of(x, qh))
+        coefs, col = [], 0
+        for term in terms:
+            coefs.append(np.asarray(g[col : col + term.width], dtype=np.float64))
+            col += term.width
+        return core, coefs
+
+
+def _curvature_upper(m: int) -> FloatArray:
+    """The curvature penalty of an (m, m) grid restricted to its upper triangle (k <= l):
+    second differences whose three cells all lie there."""
+    rows = []
+    upper = np.triu(np.ones((m, m), dtype=bool))
+    for i in range(m):
+        for j in range(m):
+            for di, dj in ((1, 0), (0, 1)):
+                cells = [(i + s * di, j + s * dj) for s in range(3)]
+                if all(a < m and b < m and upper[a, b] for a, b in cells):
+                    r = np.zeros((m, m))
+                    for (a, b), c in zip(cells, (1.0, -2.0, 1.0), strict=True):
+                        r[a, b] = c
+                    rows.append(r.ravel()[upper.ravel()])
+    d = np.array(rows) if rows else np.zeros((0, int(upper.sum())))
+    return np.asarray(d.T @ d)
 
 
 def _curvature(nv: int, nq: int) -> FloatArray:

@@ -701,8 +701,8 @@ def _core_c(comp: CoreCompensator, prefix: str, precision: Precision) -> CCode:
     spec = comp.spec
     state = comp.state
     desired_unit = "m" if comp.domain == "displacement" else spec.output_unit
-    names = {int(D.KIND_DUHEM): "Duhem (charge memory)", int(D.KIND_DUHEM_REV):
-             "Duhem (reversal memory)", int(D.KIND_BOUC_WEN): "Bouc-Wen"}  # fmt: skip
+    names = {int(D.KIND_DUHEM): "Duhem", int(D.KIND_PREISACH): "Preisach",
+             int(D.KIND_BOUC_WEN): "Bouc-Wen"}  # fmt: skip
     fields = ""
     if comp.dynamic:
         fields += f"    {real} w, u;               /* input dynamics: after the fractional delay, after the lag (V) */\n"  # noqa: E501
@@ -768,6 +768,18 @@ void {prefix}_init({prefix}_t *s);
                          ("GAMMA", D.BW_GAMMA), ("NEXP", D.BW_N), ("OFFSET", D.BW_OFFSET),
                          ("DV_MAX", D.BW_DV_MAX), ("G_MAX", D.BW_G_MAX), ("S_MIN", D.BW_S_MIN))
         )  # fmt: skip
+    elif kind == int(D.KIND_PREISACH):
+        n = int(params[D.DU_NV])
+        constants = "\n".join(
+            [
+                f"#define NN {n}",
+                f"static const {real} V_LO = {_literal(float(params[D.DU_V_LO]), p)};",
+                f"static const {real} H = {_literal(float(params[D.DU_V_STEP]), p)};",
+                f"static const {real} S_MIN = {_literal(float(params[D.DU_F_MIN]), p)};",
+                f"static const {real} EV[NN * NN] = "
+                f"{_array(params[D.DU_UP : D.DU_UP + n * n], p)};",
+            ]
+        )
     else:
         nv, nq = int(params[D.DU_NV]), int(params[D.DU_NQ])
         cells = nv * nq
@@ -808,7 +820,7 @@ void {prefix}_init({prefix}_t *s);
 #include <stdint.h>
 {"#include <math.h>" if kind == int(D.KIND_BOUC_WEN) else ""}
 #define NS {prefix.upper()}_NS
-#define KIND {kind} /* 0 Duhem on charge memory, 1 Bouc-Wen, 2 Duhem on reversal memory */
+#define KIND {kind} /* 0 Duhem, 1 Bouc-Wen, 2 Preisach */
 #define HAS_SLEW {has_slew}
 #define DYNAMIC {int(comp.dynamic)}
 #define MODE {int(comp.mode.active)}
@@ -854,17 +866,19 @@ static {real} abs_real({real} x) {{ return x < 0 ? -x : x; }}
 static {real} min_real({real} a, {real} b) {{ return a < b ? a : b; }}
 static {real} max_real({real} a, {real} b) {{ return a > b ? a : b; }}
 
-/* ceil(a / b) for a >= 0, b > 0, at least 1 */
-static int substeps({real} a, {real} b)
+#if KIND != 2
+/* a distance a >= 0 in steps of b > 0: the number of full steps, *rest the last one */
+static int steps({real} a, {real} b, {real} *rest)
 {{
-    {real} r = a / b;
-    int m = (int)r;
-    if (({real})m < r) {{
-        m++;
+    int full = (int)(a / b);
+    *rest = a - full * b;
+    if (*rest < 0) {{
+        *rest = 0;
     }}
-    return m < 1 ? 1 : m;
+    return full;
 }}
-{_CORE_C_DUHEM if kind != int(D.KIND_BOUC_WEN) else _CORE_C_BW}
+#endif
+{_CORE_C[kind]}
 {_CORE_C_COMMON}"""
     source = source.replace("real_t", real).replace("PREFIX_t", f"{prefix}_t")
     source = source.replace("PREFIX_init", f"{prefix}_init").replace("INIT_EXTRA", init)
@@ -877,7 +891,7 @@ static int substeps({real} a, {real} b)
 
 
 _CORE_C_DUHEM = """
-/* bilinear slope f+ (up) or f- at (v, m), clamped at the grid's edges */
+/* bilinear slope f+ (up) or f- at (v, q), clamped at the grid's edges */
 static void cell(real_t u, real_t lo, real_t step, int nodes, int *i, real_t *frac)
 {
     real_t a = (u - lo) / step;
@@ -904,7 +918,6 @@ static real_t slope(real_t v, real_t m, int up)
         + fa * ((1 - fb) * c[(i + 1) * NQ + j] + fb * c[(i + 1) * NQ + j + 1]);
 }
 
-#if KIND == 0
 /* Euler sub-steps of at most DV_MAX; returns the output, *f the slope at the end */
 static real_t core_move(real_t *st, real_t v1, int commit, real_t *f)
 {
@@ -913,10 +926,11 @@ static real_t core_move(real_t *st, real_t v1, int commit, real_t *f)
     if (abs_real(dv) <= DV_MAX) {
         q = q + slope(v0, q, up) * dv;
     } else {
-        real_t d, v = v0;
-        m = substeps(abs_real(dv), DV_MAX);
-        d = dv / m;
+        real_t d, rest, v = v0, s = up ? 1.0 : -1.0;
+        int full = steps(abs_real(dv), DV_MAX, &rest);
+        m = full + (rest > 0 ? 1 : 0);
         for (k = 0; k < m; ++k) {
+            d = s * (k < full ? DV_MAX : rest);
             q += slope(v, q, up) * d;
             v += d;
         }
@@ -928,27 +942,82 @@ static real_t core_move(real_t *st, real_t v1, int commit, real_t *f)
     }
     return q;
 }
-#else
-/* Simpson on sub-steps of at most DV_MAX of f(w, |w - top|) from u0 to u1 */
-static real_t integral(real_t u0, real_t u1, real_t top, int up)
+
+static real_t core_output(const real_t *st) { return st[1]; }
+
+/* the slope of the step's first instant from st in direction up */
+static real_t first_slope(const real_t *st, int up) { return slope(st[0], st[1], up); }
+"""
+
+_CORE_C_PREISACH = """
+/* the cell of u on the grid, clamped; *frac its fraction, *inside whether u lies on it */
+static void cell(real_t u, int *i, real_t *frac, int *inside)
 {
-    real_t du = u1 - u0, h, total = 0;
-    int n, m;
-    if (du == 0) {
-        return 0;
+    real_t a = (u - V_LO) / H;
+    *inside = 1;
+    if (a < 0) {
+        a = 0;
+        *inside = 0;
+    } else if (a > NN - 1.0) {
+        a = NN - 1.0;
+        *inside = 0;
     }
-    n = substeps(abs_real(du), DV_MAX);
-    h = du / n;
-    for (m = 0; m < n; ++m) {
-        real_t a = u0 + m * h;
-        real_t b = m < n - 1 ? a + h : u1;
-        real_t c = 0.5 * (a + b);
-        total += (b - a) * (slope(a, abs_real(a - top), up) + 4.0 * slope(c, abs_real(c - top), up)
-                            + slope(b, abs_real(b - top), up)) / 6.0;
+    *i = (int)a;
+    if (*i > NN - 2) {
+        *i = NN - 2;
     }
-    return total;
+    *frac = a - *i;
 }
 
+/* the Everett function at nodes, antisymmetric below the diagonal */
+static real_t node(int i, int j) { return i <= j ? EV[i * NN + j] : -EV[j * NN + i]; }
+
+/* E(a, b), bilinear, continued with the smallest slope beyond the grid; *da, *db its
+ * derivatives */
+static real_t everett(real_t a, real_t b, real_t *da, real_t *db)
+{
+    real_t hi = V_LO + H * (NN - 1.0), extra = 0, fa, fb, e00, e01, e10, e11;
+    real_t da_out = 0, db_out = 0;
+    int i, j, in_a, in_b;
+    if (b > hi) {
+        extra += S_MIN * (b - hi);
+        db_out = S_MIN;
+    }
+    if (a < V_LO) {
+        extra += S_MIN * (V_LO - a);
+        da_out = -S_MIN;
+    }
+    cell(a, &i, &fa, &in_a);
+    cell(b, &j, &fb, &in_b);
+    e00 = node(i, j);
+    e01 = node(i, j + 1);
+    e10 = node(i + 1, j);
+    e11 = node(i + 1, j + 1);
+    *da = in_a ? ((1 - fb) * (e10 - e00) + fb * (e11 - e01)) / H : da_out;
+    *db = in_b ? ((1 - fa) * (e01 - e00) + fa * (e11 - e10)) / H : db_out;
+    return (1 - fa) * ((1 - fb) * e00 + fb * e01) + fa * ((1 - fb) * e10 + fb * e11) + extra;
+}
+
+/* the output change along a branch from u0 to u1 with reversal point top */
+static real_t branch(real_t u0, real_t u1, real_t top, int up)
+{
+    real_t da, db;
+    if (up) {
+        return everett(top, u1, &da, &db) - everett(top, u0, &da, &db);
+    }
+    return everett(u0, top, &da, &db) - everett(u1, top, &da, &db);
+}
+
+static real_t branch_slope(real_t v, real_t top, int up)
+{
+    real_t da, db;
+    if (up) {
+        everett(top, v, &da, &db);
+        return db;
+    }
+    everett(v, top, &da, &db);
+    return -da;
+}
 /* st = [v, q, direction, k, R[0..STACK-1]]: reversal points with Preisach's wiping-out */
 static real_t core_move(real_t *st, real_t v1, int commit, real_t *f)
 {
@@ -956,7 +1025,7 @@ static real_t core_move(real_t *st, real_t v1, int commit, real_t *f)
     int k = (int)st[3], kk, push, up, i;
     top = st[4 + k - 1];
     if (dv == 0) {
-        *f = slope(v0, abs_real(v0 - top), st[2] >= 0);
+        *f = branch_slope(v0, top, st[2] >= 0);
         return q;
     }
     sd = dv > 0 ? 1.0 : -1.0;
@@ -977,7 +1046,7 @@ static real_t core_move(real_t *st, real_t v1, int commit, real_t *f)
                 popped = 1;
             }
         }
-        q += integral(u, end, top, up);
+        q += branch(u, end, top, up);
         if (!popped) {
             break;
         }
@@ -985,7 +1054,7 @@ static real_t core_move(real_t *st, real_t v1, int commit, real_t *f)
         top = (push && kk - 1 == k) ? v0 : st[4 + kk - 1];
         u = end;
     }
-    *f = slope(v1, abs_real(v1 - top), up);
+    *f = branch_slope(v1, top, up);
     if (commit) {
         if (push && kk == k + 1) {
             if (k >= STACK) { /* full: forget the oldest pair after the rest point */
@@ -1004,20 +1073,15 @@ static real_t core_move(real_t *st, real_t v1, int commit, real_t *f)
     }
     return q;
 }
-#endif
 
 static real_t core_output(const real_t *st) { return st[1]; }
 
 /* the slope of the step's first instant from st in direction up */
 static real_t first_slope(const real_t *st, int up)
 {
-#if KIND == 0
-    return slope(st[0], st[1], up);
-#else
     int reverse = st[2] != 0 && (up ? 1.0 : -1.0) != st[2];
     real_t top = reverse ? st[0] : st[4 + (int)st[3] - 1];
-    return slope(st[0], abs_real(st[0] - top), up);
-#endif
+    return branch_slope(st[0], top, up);
 }
 """
 
@@ -1036,10 +1100,13 @@ static real_t core_move(real_t *st, real_t v1, int commit, real_t *f)
 {
     real_t v0 = st[0], h = st[1], dv = v1 - v0, s = v1 >= v0 ? 1.0 : -1.0;
     if (dv != 0) {
-        int m = substeps(abs_real(dv), DV_MAX), k;
-        real_t d = dv / m;
+        real_t rest, d;
+        int full = steps(abs_real(dv), DV_MAX, &rest), k;
+        int m = full + (rest > 0 ? 1 : 0);
         for (k = 0; k < m; ++k) {
-            real_t k1 = g(h, s);
+            real_t k1;
+            d = s * (k < full ? DV_MAX : rest);
+            k1 = g(h, s);
             real_t k2 = g(h + 0.5 * d * k1, s);
             real_t k3 = g(h + 0.5 * d * k2, s);
             real_t k4 = g(h + d * k3, s);
@@ -1063,19 +1130,34 @@ static real_t first_slope(const real_t *st, int up)
 """
 
 _CORE_C_COMMON = """
-/* the input in [lo, hi] whose step from st gives y, or the nearer end (*clamped) */
-static real_t core_inverse(real_t *st, real_t y, real_t lo, real_t hi, int *clamped)
+/* trial = the state after moving from st to v; returns the output there, *f the slope */
+static real_t try_move(const real_t *st, real_t *trial, real_t v, real_t *f)
 {
-    real_t v0 = st[0], dy = y - core_output(st), v, far, a, b, eps, f1, y1, res, vn;
+    int i;
+    for (i = 0; i < NS; ++i) {
+        trial[i] = st[i];
+    }
+    return core_move(trial, v, 1, f);
+}
+
+/* the input in [lo, hi] whose step from st gives y, or the nearer end (*clamped);
+ * trial holds the state after the step to it */
+static real_t core_inverse(real_t *st, real_t y, real_t lo, real_t hi, int *clamped,
+                           real_t *trial)
+{
+    real_t v0 = st[0], dy = y - core_output(st), v, far, a, b, eps, tol, f1, y1, res, vn;
     int it;
     *clamped = 0;
     if (dy == 0) {
         *clamped = v0 < lo || v0 > hi;
-        return min_real(max_real(v0, lo), hi);
+        v = min_real(max_real(v0, lo), hi);
+        try_move(st, trial, v, &f1);
+        return v;
     }
     v = v0 + dy / first_slope(st, dy > 0);
 #if KIND == 0
     if (abs_real(v - v0) <= DV_MAX && lo <= v && v <= hi) {
+        try_move(st, trial, v, &f1);
         return v; /* one Euler step: the explicit inverse is exact */
     }
 #endif
@@ -1083,14 +1165,14 @@ static real_t core_inverse(real_t *st, real_t y, real_t lo, real_t hi, int *clam
     a = min_real(v0, far);
     b = max_real(v0, far);
     if (b > hi) {
-        if (core_move(st, hi, 0, &f1) <= y) {
+        if (try_move(st, trial, hi, &f1) <= y) {
             *clamped = 1;
             return hi;
         }
         b = hi;
     }
     if (a < lo) {
-        if (core_move(st, lo, 0, &f1) >= y) {
+        if (try_move(st, trial, lo, &f1) >= y) {
             *clamped = 1;
             return lo;
         }
@@ -1098,16 +1180,18 @@ static real_t core_inverse(real_t *st, real_t y, real_t lo, real_t hi, int *clam
     }
     if (a >= b) {
         *clamped = 1;
+        try_move(st, trial, a, &f1);
         return a;
     }
     if (!(a < v && v < b)) {
         v = 0.5 * (a + b);
     }
+    tol = 1e-12 * abs_real(dy);
     eps = 1e-13 * (abs_real(a) + abs_real(b) + 1.0);
     for (it = 0; it < NEWTON_MAX; ++it) {
-        y1 = core_move(st, v, 0, &f1);
+        y1 = try_move(st, trial, v, &f1);
         res = y1 - y;
-        if (res == 0) {
+        if (abs_real(res) <= tol) {
             return v;
         }
         if (res < 0) {
@@ -1120,10 +1204,11 @@ static real_t core_inverse(real_t *st, real_t y, real_t lo, real_t hi, int *clam
             vn = 0.5 * (a + b);
         }
         if (abs_real(vn - v) <= eps || b - a <= eps) {
-            return vn;
+            return v;
         }
         v = vn;
     }
+    try_move(st, trial, v, &f1); /* the iterations ran out: the state at the v returned */
     return v;
 }
 
@@ -1159,8 +1244,8 @@ INIT_EXTRA}
 
 STEP_SIGNATURE(PREFIX_t *s, real_t desired)
 {
-    real_t y, a = V_MIN, b = V_MAX, u, x, f;
-    int clamped;
+    real_t y, a = V_MIN, b = V_MAX, u, x, f, trial[NS];
+    int clamped, i;
 #if DYNAMIC
     real_t saved_w = s->w, saved_u = s->u;
 #endif
@@ -1176,7 +1261,7 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
     a = max_real(V_MIN, s->last - MAX_STEP);
     b = min_real(V_MAX, s->last + MAX_STEP);
 #endif
-    u = core_inverse(s->st, y, a, b, &clamped);
+    u = core_inverse(s->st, y, a, b, &clamped, trial);
     if (clamped && (u <= V_MIN || u >= V_MAX)) {
         s->saturated++;
     }
@@ -1193,10 +1278,13 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
         x = min_real(max_real(x, s->last - MAX_STEP), s->last + MAX_STEP);
 #endif
         u = advance(s, x);
+        if (trial[0] != u) {
+            try_move(s->st, trial, u, &f);
+        }
     }
 #endif
 #if HAS_REGION /* leaving the region (moves back towards it always pass) */
-    y = region_distance(u, core_move(s->st, u, 0, &f));
+    y = region_distance(u, core_output(trial));
     f = region_distance(s->st[0], core_output(s->st));
     if (y > TOL && y > f) {
         s->outside++;
@@ -1209,10 +1297,9 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
 #else /* stop at the region's edge: the largest move towards u that stays inside */
         {
             real_t edge = max_real(TOL, f), lo_v = s->st[0], hi_v = u, mid;
-            int i;
             for (i = 0; i < REGION_BISECTIONS; ++i) {
                 mid = 0.5 * (lo_v + hi_v);
-                if (region_distance(mid, core_move(s->st, mid, 0, &y)) <= edge) {
+                if (region_distance(mid, try_move(s->st, trial, mid, &y)) <= edge) {
                     lo_v = mid;
                 } else {
                     hi_v = mid;
@@ -1220,13 +1307,27 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
             }
             u = lo_v;
             x = lo_v;
+            try_move(s->st, trial, u, &f);
         }
 #endif
 #endif
     }
 #endif
-    core_move(s->st, u, 1, &f);
+#if DYNAMIC
+    (void)saved_w; /* used only when refusing to leave the region */
+    (void)saved_u;
+#endif
+    for (i = 0; i < NS; ++i) {
+        s->st[i] = trial[i];
+    }
     s->last = x;
     return x;
 }
 """
+
+
+_CORE_C = {
+    int(D.KIND_DUHEM): _CORE_C_DUHEM,
+    int(D.KIND_BOUC_WEN): _CORE_C_BW,
+    int(D.KIND_PREISACH): _CORE_C_PREISACH,
+}

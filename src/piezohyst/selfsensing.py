@@ -378,6 +378,7 @@ class SelfSensingController:
                     comp.region,
                     comp.dyn,
                     comp.dstate,
+                    comp.trial,
                     self.ctl,
                     self.feedback,
                 )
@@ -418,7 +419,7 @@ class SelfSensingController:
         comp = self.compensator
         if isinstance(comp, CoreCompensator):
             D.core_controller_process(d, m, comp.params, self.config, comp.kernel_state,
-                                      comp.region, comp.dyn, comp.dstate, self.ctl,
+                                      comp.region, comp.dyn, comp.dstate, comp.trial, self.ctl,
                                       self.feedback, out)  # fmt: skip
             return out
         K.controller_process(

@@ -1,0 +1,384 @@
+"""Preisach, Duhem and Bouc-Wen cores: identification, state, files, inverse, region, C,
+the closed loop."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from sklearn.base import clone
+
+import piezohyst as ph
+from piezohyst import _diffkernels as D
+from piezohyst.differential_models import _curvature, _curvature_upper
+from piezohyst.export import write_c
+from piezohyst.simulation import make_signal
+
+CC = shutil.which("cc") or shutil.which("gcc")
+
+
+@pytest.fixture(scope="module")
+def record() -> Any:
+    return ph.simulate(signal="decaying", duration=24.0, seed=3)
+
+
+@pytest.fixture(scope="module")
+def models(record: Any) -> dict[str, ph.HysteresisModel]:
+    v, q, t = record.voltage, record.charge, record.t
+    return {
+        "preisach": ph.PreisachModel().fit(v, q, t=t),
+        "duhem": ph.DuhemModel().fit(v, q, t=t),
+        "bouc-wen": ph.BoucWenModel().fit(v, q, t=t),
+    }
+
+
+def inside_trajectory(model: ph.HysteresisModel, seconds: float = 6.0) -> np.ndarray:
+    """A desired output of decaying loops that stays inside the identified region."""
+    lo, hi = model.input_range_
+    _, shape = make_signal("decaying", amplitude=1.0, duration=seconds)
+    volts = lo + (hi - lo) * (0.2 + 0.6 * shape)
+    return np.asarray(model.hysteresis_.predict(volts))
+
+
+# ------------------------------------------------------------- identification
+def test_the_preisach_fit_is_exact_output_error() -> None:
+    """Data made by a known Preisach core (and a leak) are fitted exactly: the output is
+    linear in the density given the input, so the bounded linear solve is the
+    output-error fit."""
+    rec = ph.simulate(signal="decaying", duration=12.0, seed=1)
+    v, t = rec.voltage, rec.t
+    n = 7
+    nodes = float(v.min()) + float(np.ptp(v)) / (n - 1) * np.arange(n)
+    k, c = np.meshgrid(np.arange(n - 1.0), np.arange(n - 1.0), indexing="ij")
+    density = np.triu(2e-8 * np.exp(-((c - k - 1.0) ** 2) / 4.0) * (1.0 + 0.1 * k))
+    core = ph.PreisachHysteresis(nodes, density, ph.PreisachHysteresis(
+        nodes, density, np.zeros(D.RV_SIZE)).rest_state(float(v[0])))  # fmt: skip
+    truth = ph.PreisachModel.from_operator(
+        core, terms=(ph.terms.Integral(),), coefficients=([5e-10],)
+    )
+    q = truth.predict(v, t=t)
+    model = ph.PreisachModel(n, smoothing=0.0, min_slope=1e-3).fit(v, q, t=t)
+    assert model.nrmse_ < 1e-9
+    assert model.growth_coefficients()["integral"][0] == pytest.approx(5e-10, rel=1e-6)
+    np.testing.assert_allclose(model.predict(v, t=t), q, rtol=0, atol=1e-9 * np.ptp(q))
+
+
+def test_everett_nodes_sum_the_density() -> None:
+    rng = np.random.default_rng(0)
+    mu = np.triu(rng.random((4, 4)))
+    e = ph.differential.everett_nodes(mu)
+    brute = np.array([[sum(mu[k, c] for k in range(4) for c in range(4) if i <= k <= c < j)
+                       for j in range(5)] for i in range(5)])  # fmt: skip
+    np.testing.assert_allclose(e, brute)
+    np.testing.assert_allclose(ph.differential.everett_map(5) @ mu.ravel(), e.ravel())
+
+
+def test_bouc_wen_recovers_its_parameters() -> None:
+    rec = ph.simulate(signal="decaying", duration=12.0, seed=2)
+    v, t = rec.voltage, rec.t
+    core = ph.BoucWenHysteresis(1.2e-8, -4e-9, 0.02, 0.01, 1.0, 3e-8, np.array([v[0], 0.0]))
+    truth = ph.BoucWenModel.from_operator(
+        core, terms=(ph.terms.Integral(),), coefficients=([6e-10],)
+    )
+    q = truth.predict(v, t=t)
+    model = ph.BoucWenModel().fit(v, q, t=t)
+    fit = model.operator_
+    assert model.nrmse_ < 1e-5
+    for name in ("c0", "alpha", "beta", "gamma", "n"):
+        assert getattr(fit, name) == pytest.approx(getattr(core, name), rel=2e-3), name
+    assert model.growth_coefficients()["integral"][0] == pytest.approx(6e-10, rel=1e-3)
+
+
+def test_models_on_the_bench_beat_or_match_what_they_should(
+    record: Any, models: dict[str, ph.HysteresisModel]
+) -> None:
+    """On the Preisach bench, Preisach fits better than the paper's model; Duhem and
+    Bouc-Wen fit, and every branch stays increasing."""
+    active = ph.ActivePI(20).fit(record.voltage, record.charge, t=record.t)
+    assert models["preisach"].nrmse_ < active.nrmse_
+    assert models["duhem"].nrmse_ < 0.01
+    assert models["bouc-wen"].nrmse_ < 0.01
+    for model in models.values():
+        assert model.operator_.is_invertible
+        leak = model.growth_coefficients()["integral"][0]
+        assert leak == pytest.approx(record.true_growth_rate, rel=0.15)
+    assert models["duhem"].operator_.up.min() > 0
+    assert models["preisach"].operator_.density.min() >= 0
+
+
+def test_settings_follow_the_estimator_contract(record: Any) -> None:
+    for cls in (ph.PreisachModel, ph.DuhemModel, ph.BoucWenModel):
+        rules = cls.parameter_rules()
+        assert set(cls().get_params()) <= set(rules)
+        model = cls()
+        twin = clone(model)
+        assert twin.get_params() == model.get_params()
+        with pytest.raises(ph.NotFittedError):
+            model.predict([1.0, 2.0])
+    bad = [
+        (ph.DuhemModel((1, 5)), "'grid'"),
+        (ph.PreisachModel(2), "'nodes'"),
+        (ph.DuhemModel(growth_terms=("leak",)), "'growth_terms'"),
+        (ph.BoucWenModel(min_slope=0.0), "'min_slope'"),
+    ]
+    for model, match in bad:
+        with pytest.raises(ph.ParameterError, match=match):
+            model.fit(record.voltage, record.charge, t=record.t)
+    with pytest.raises(ph.InsufficientDataError, match="never moves"):
+        ph.PreisachModel().fit(np.ones(500), np.ones(500), t=np.arange(500) / 1e3)
+
+
+def test_auto_growth_terms_are_chosen_by_the_proxy(record: Any) -> None:
+    """The bench leaks more at high voltage and has a bias current: the proxy's
+    cross-validation picks terms beyond the plain integral, and reports its scores."""
+    model = ph.PreisachModel(growth_terms="auto").fit(record.voltage, record.charge, t=record.t)
+    fixed = ph.PreisachModel().fit(record.voltage, record.charge, t=record.t)
+    assert set(model.growth_coefficients()) != {"integral"}
+    assert min(model.selection_.values()) < model.selection_["integral"]
+    assert model.selection_folds_ and model.selection_splits_
+    assert model.nrmse_ < fixed.nrmse_
+
+
+# ---------------------------------------------------------------------- state
+@pytest.mark.parametrize("name", ["preisach", "duhem", "bouc-wen"])
+@settings(max_examples=15, deadline=None)
+@given(cuts=st.lists(st.integers(1, 2999), min_size=1, max_size=5))
+def test_chunks_equal_one_call(
+    models: dict[str, ph.HysteresisModel], record: Any, name: str, cuts: list[int]
+) -> None:
+    model = models[name]
+    v, t = record.voltage[:3000], record.t[:3000]
+    whole = model.predict(v, t=t)
+    state = None
+    parts = []
+    for piece in np.split(np.arange(v.size), sorted(set(cuts))):
+        run = model.propagate(v[piece], t[piece], state)
+        state = run.state
+        parts.append(run.output)
+    np.testing.assert_array_equal(np.concatenate(parts), whole)
+
+
+def test_preisach_memory_wipes_out_closed_inner_loops(models: dict[str, Any]) -> None:
+    core = models["preisach"].operator_
+    z = core.rest_state(10.0)
+    path = [50.0, 30.0, 45.0, 35.0, 40.0]  # nested loops: 10 up 50, down 30, up 45, ...
+    for v in path:
+        z = core.propagate(np.linspace(z[0], v, 20)[1:], z).state
+    assert z[D.RV_K] == 5  # rest, 50, 30, 45, 35 on the stack
+    z = core.propagate(np.linspace(z[0], 47.0, 30)[1:], z).state  # past 45: two loops close
+    assert z[D.RV_K] == 3 and z[D.RV_R + 2] == 30.0
+    z = core.propagate(np.linspace(z[0], 60.0, 30)[1:], z).state  # past 50: the first rise
+    assert z[D.RV_K] == 1
+    # return-point memory: a closed minor loop leaves the output where it started
+    start = core.propagate(np.linspace(60.0, 40.0, 50), z).state
+    loop = np.concatenate([np.linspace(40.0, 55.0, 80), np.linspace(55.0, 40.0, 80)])
+    end = core.propagate(loop, start).state
+    assert end[1] == pytest.approx(start[1], rel=1e-13)
+
+
+@pytest.mark.parametrize("name", ["preisach", "bouc-wen"])
+def test_periodic_start_repeats(models: dict[str, Any], name: str) -> None:
+    model = models[name].hysteresis_
+    _, v = make_signal("fixed", amplitude=100.0, frequency=1.0, duration=1.0)
+    v = 30.0 + 0.5 * v
+    with warnings.catch_warnings():  # where this loop lies matters not here
+        warnings.simplefilter("ignore", ph.ExtrapolationWarning)
+        first = model.predict(v, state="periodic")
+        again = model.predict(np.tile(v, 2), state="periodic")
+        history = model.predict(v, state=ph.History(v[:500]))
+    tol = 1e-9 * float(np.max(np.abs(first)))  # Bouc-Wen converges to its loop geometrically
+    np.testing.assert_allclose(again[v.size :], first, rtol=0, atol=tol)
+    np.testing.assert_allclose(again[: v.size], first, rtol=0, atol=tol)
+    assert np.all(np.isfinite(history))
+
+
+# ---------------------------------------------------------------------- files
+@pytest.mark.parametrize("name", ["preisach", "duhem", "bouc-wen"])
+def test_files_round_trip(models: dict[str, Any], record: Any, name: str, tmp_path: Path) -> None:
+    model = models[name]
+    path = tmp_path / "model.json"
+    model.save(path)
+    loaded = ph.load_model(path)
+    assert type(loaded) is type(model)
+    v, t = record.voltage, record.t
+    np.testing.assert_array_equal(loaded.predict(v, t=t), model.predict(v, t=t))
+    assert loaded.region_ is not None and loaded.nrmse_ == model.nrmse_
+
+
+def test_a_broken_core_in_a_file_is_named(models: dict[str, Any], tmp_path: Path) -> None:
+    data = models["bouc-wen"].to_dict()
+    data.pop("checksum")
+    data["fitted"]["core"]["kind"] = "jiles-atherton"
+    with pytest.raises(ph.ModelFileError, match="unknown core 'jiles-atherton'"):
+        ph.persistence.model_from_dict(data)
+    data["fitted"]["core"]["kind"] = "bouc_wen"
+    data["fitted"]["core"]["beta"] = -1.0
+    with pytest.raises(ph.ModelFileError, match=r"fitted.core.*beta > 0"):
+        ph.persistence.model_from_dict(data)
+    del data["fitted"]["core"]["c0"]
+    with pytest.raises(ph.ModelFileError, match=r"missing field 'fitted\.core\.c0'"):
+        ph.persistence.model_from_dict(data)
+
+
+# ----------------------------------------------------------------- inversion
+@pytest.mark.parametrize("name", ["preisach", "duhem", "bouc-wen"])
+def test_the_compensator_inverts_exactly_inside_the_region(
+    models: dict[str, Any], name: str
+) -> None:
+    model = models[name]
+    desired = inside_trajectory(model)
+    comp = ph.Compensator(model, v_min=0.0, v_max=model.input_range_[1])
+    assert isinstance(comp, ph.compensator.CoreCompensator)
+    commands = comp.process(desired)
+    achieved = model.hysteresis_.predict(commands)
+    np.testing.assert_allclose(achieved, desired, rtol=0, atol=1e-9 * np.ptp(desired))
+    assert comp.outside_count == comp.saturated_count == 0
+    comp.reset()
+    steps = np.array([comp.step(d) for d in desired[:500]])
+    np.testing.assert_array_equal(steps, commands[:500])
+
+
+@pytest.mark.parametrize("name", ["preisach", "bouc-wen"])
+@settings(max_examples=25, deadline=None)
+@given(
+    targets=st.lists(st.floats(-0.5, 1.5), min_size=1, max_size=30),
+    slew=st.sampled_from([None, 500.0]),
+)
+def test_every_command_is_safe(
+    models: dict[str, Any], name: str, targets: list[float], slew: float | None
+) -> None:
+    """Any desired values, NaN included: commands finite, inside the limits and the slew
+    limit; reachable targets are met, the others saturate at the nearer limit."""
+    model = models[name]
+    hi = model.input_range_[1]
+    kw: dict[str, Any] = {} if slew is None else {"slew_rate": slew, "sample_rate": 1000.0}
+    comp = ph.Compensator(model, v_min=0.0, v_max=hi, allow_extrapolation=True, **kw)
+    span = float(np.ptp(model.hysteresis_.predict(np.linspace(0.0, hi, 100))))
+    base = float(model.hysteresis_.predict([0.0])[0])
+    desired = base + span * np.array(targets)
+    desired[::7] = np.nan
+    last = comp.last_command
+    for d in desired:
+        before = comp.state.operators
+        v = comp.step(float(d))
+        assert np.isfinite(v) and 0.0 <= v <= hi
+        if slew is not None:
+            assert abs(v - last) <= slew / 1000.0 * (1 + 1e-12)
+        if np.isfinite(d) and slew is None and 0.0 < v < hi:
+            y = comp.core.predict([v], before)[0]
+            assert y == pytest.approx(d, abs=1e-9 * span)
+        last = v
+    assert comp.nonfinite_count == int(np.isnan(desired).sum())
+
+
+def test_leaving_the_region_warns_and_the_compensator_stops_at_its_edge(
+    models: dict[str, Any],
+) -> None:
+    model = models["preisach"]
+    hi = model.input_range_[1]
+    far = np.concatenate([np.linspace(0.0, hi, 400), np.linspace(hi, 0.0, 400)])
+    with pytest.warns(ph.ExtrapolationWarning, match="outside the .* region"):
+        model.hysteresis_.predict(far)  # the training never descended from the top to 0 V
+    wanted = model.hysteresis_.predict(np.linspace(0, hi, 400))
+    bottom, top = float(wanted[0]), float(wanted[-1])
+    desired = np.concatenate([np.linspace(bottom, top, 400), np.linspace(top, bottom, 400)])
+    strict = ph.Compensator(model, v_min=0.0, v_max=hi)
+    free = ph.Compensator(model, v_min=0.0, v_max=hi, allow_extrapolation=True)
+    region, config = strict.region, strict.config
+    tol = float(config[D.CC_TOL])
+
+    def distance(comp: Any) -> float:
+        z = comp.state.operators
+        return float(D.region_distance(region, config, z[0], comp.core.output(z)))
+
+    far_free = far_strict = 0.0
+    for d in desired:
+        strict.step(float(d))
+        free.step(float(d))
+        far_strict = max(far_strict, distance(strict))
+        far_free = max(far_free, distance(free))
+    assert strict.outside_count > 0 and free.outside_count > 0
+    assert far_strict <= tol * (1 + 1e-6) < far_free  # it stopped at the edge; free went on
+
+
+# ------------------------------------------------------------------ C export
+@pytest.mark.skipif(CC is None, reason="no C compiler on this machine")
+@pytest.mark.parametrize(
+    ("name", "precision", "slew"),
+    [
+        ("preisach", "double", None),
+        ("preisach", "double", 800.0),
+        ("preisach", "float", None),
+        ("duhem", "double", None),
+        ("bouc-wen", "double", None),
+        ("bouc-wen", "float", None),
+    ],
+)
+def test_exported_c_matches_python(
+    models: dict[str, Any], tmp_path: Path, name: str, precision: str, slew: float | None
+) -> None:
+    from tests.test_export import HARNESS
+
+    model = models[name]
+    hi = model.input_range_[1]
+    kw: dict[str, Any] = {} if slew is None else {"slew_rate": slew, "sample_rate": 1000.0}
+    comp = ph.Compensator(model, v_min=0.0, v_max=hi, **kw)
+    desired = inside_trajectory(model, 4.0)
+    desired[::97] = np.nan
+    desired[7::301] = -1.0  # unreachable: saturates
+    c_path, _ = write_c(comp, tmp_path / "core.c", precision=precision)  # type: ignore[arg-type]
+    (tmp_path / "main.c").write_text(HARNESS.replace("NAME", "core"))
+    exe = tmp_path / "core"
+    cmd = [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", str(c_path),
+           str(tmp_path / "main.c"), "-o", str(exe), "-lm"]  # fmt: skip
+    subprocess.run(cmd, check=True, capture_output=True, text=True)
+    text = "\n".join(repr(float(x)) for x in desired) + "\n"
+    out = subprocess.run([str(exe)], input=text, check=True, capture_output=True, text=True)
+    lines = out.stdout.split("\n")
+    c_cmds = np.array([float(x) for x in lines[: desired.size]])
+    py = comp.process(desired)
+    atol = 1e-9 if precision == "double" else 1e-4 * hi
+    np.testing.assert_allclose(c_cmds, py, rtol=0, atol=atol)
+    counts = tuple(int(x) for x in lines[desired.size].split())
+    assert counts == (comp.nonfinite_count, comp.saturated_count)
+    assert np.all((c_cmds >= 0.0) & (c_cmds <= hi))
+
+
+# -------------------------------------------------------------- closed loop
+@pytest.mark.parametrize("name", ["preisach", "bouc-wen"])
+def test_the_self_sensing_loop_runs_on_a_differential_core(
+    models: dict[str, Any], name: str
+) -> None:
+    model = models[name]
+    hi = model.input_range_[1]
+    ctl = ph.SelfSensingController(model, v_min=0.0, v_max=hi, sample_rate=1000.0)
+    desired = inside_trajectory(model, 3.0)
+    bench = ph.simulation.Bench(voltage=ctl.last_command, seed=4)
+    measured = np.empty_like(desired)
+    commands = np.empty_like(desired)
+    for k, d in enumerate(desired):
+        measured[k] = bench.reading.charge
+        commands[k] = ctl.step(float(d), measured[k])
+        bench.apply(commands[k])
+    assert np.all((commands >= 0.0) & (commands <= hi))
+    replay = ph.SelfSensingController(model, v_min=0.0, v_max=hi, sample_rate=1000.0)
+    np.testing.assert_array_equal(replay.process(desired, measured), commands)
+
+
+def test_curvature_penalty_vanishes_on_planes() -> None:
+    penalty = _curvature(4, 3)
+    i, j = np.meshgrid(np.arange(4.0), np.arange(3.0), indexing="ij")
+    plane = (2.0 + 0.5 * i - 0.25 * j).ravel()
+    assert plane @ penalty @ plane == pytest.approx(0.0, abs=1e-12)
+    bump = np.zeros(12)
+    bump[5] = 1.0
+    assert bump @ penalty @ bump > 0
+    tri = _curvature_upper(4)  # the Preisach cells k <= l: 10 of them
+    assert tri.shape == (10, 10) and np.allclose(tri, tri.T)
