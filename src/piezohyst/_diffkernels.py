@@ -644,16 +644,30 @@ def duhem_normal_equations(p, v, q, dy, dg, gram, rhs):  # type: ignore[no-untyp
                 gram[2 * cells + g, 2 * cells + h] += dg[k, g] * dg[k, h]
 
 
+@njit(cache=True, inline="always")
+def _basis_step(p, s, v, q, d, up):  # type: ignore[no-untyped-def]
+    """s += d * d f±(v, q) / d(up, down) (the 4 bilinear weights of the step's cell)."""
+    nv = p[DU_NV]
+    nq = p[DU_NQ]
+    m = int(nq)
+    base = 0 if up else int(nv * nq)
+    i, fa, _ = _cell(v, p[DU_V_LO], p[DU_V_STEP], nv)
+    j, fb, _ = _cell(q, p[DU_Q_LO], p[DU_Q_STEP], nq)
+    s[base + i * m + j] += (1.0 - fa) * (1.0 - fb) * d
+    s[base + i * m + j + 1] += (1.0 - fa) * fb * d
+    s[base + (i + 1) * m + j] += fa * (1.0 - fb) * d
+    s[base + (i + 1) * m + j + 1] += fa * fb * d
+
+
 @njit(cache=True)
 def duhem_jacobian(p, v, q0, rows, qsim, jac):  # type: ignore[no-untyped-def]
     """Simulate q from q0 (qsim, every sample) and d q / d(up, down, q0) at ``rows``.
 
-    ``jac`` (len(rows), 2 nv nq + 1) is written; rows must be increasing.
+    The same Euler steps as ``duhem_next`` (a long move in steps of dv_max,
+    then the rest). ``jac`` (len(rows), 2 nv nq + 1) is written; rows must be
+    increasing.
     """
-    nv = p[DU_NV]
-    nq = p[DU_NQ]
-    m = int(nq)
-    cells = int(nv * nq)
+    cells = int(p[DU_NV] * p[DU_NQ])
     s = np.zeros(2 * cells + 1)
     s[2 * cells] = 1.0
     q = q0
@@ -664,19 +678,20 @@ def duhem_jacobian(p, v, q0, rows, qsim, jac):  # type: ignore[no-untyped-def]
             dv = v[k] - v[k - 1]
             if dv != 0.0:
                 up = dv > 0.0
-                f, dfdq = duhem_slope(p, v[k - 1], q, up)
-                i, fa, _ = _cell(v[k - 1], p[DU_V_LO], p[DU_V_STEP], nv)
-                j, fb, _ = _cell(q, p[DU_Q_LO], p[DU_Q_STEP], nq)
-                scale = 1.0 + dfdq * dv
-                if scale != 1.0:
-                    for a in range(s.shape[0]):
-                        s[a] *= scale
-                base = 0 if up else cells
-                s[base + i * m + j] += (1.0 - fa) * (1.0 - fb) * dv
-                s[base + i * m + j + 1] += (1.0 - fa) * fb * dv
-                s[base + (i + 1) * m + j] += fa * (1.0 - fb) * dv
-                s[base + (i + 1) * m + j + 1] += fa * fb * dv
-                q = q + f * dv
+                sign = 1.0 if up else -1.0
+                full, rest = _steps(abs(dv), p[DU_DV_MAX])
+                n = 1 if abs(dv) <= p[DU_DV_MAX] else full + (1 if rest > 0.0 else 0)
+                u = v[k - 1]
+                for step in range(n):
+                    d = dv if n == 1 else sign * (p[DU_DV_MAX] if step < full else rest)
+                    f, dfdq = duhem_slope(p, u, q, up)
+                    scale = 1.0 + dfdq * d
+                    if scale != 1.0:
+                        for a in range(s.shape[0]):
+                            s[a] *= scale
+                    _basis_step(p, s, u, q, d, up)
+                    q = q + f * d
+                    u += d
         qsim[k] = q
         if r < nr and rows[r] == k:
             for a in range(s.shape[0]):
@@ -713,17 +728,15 @@ def bw_trace(p, v, h0, out):  # type: ignore[no-untyped-def]
 
 @njit(cache=True)
 def duhem_cumulative(p, v, q, rows, out):  # type: ignore[no-untyped-def]
-    """Integrated regressors of the charge-memory Duhem: ``out[r]`` = the sum over
-    k < rows[r] of d(f±(v[k], q[k]) dv[k]) / d(up, down).
+    """Integrated regressors of the Duhem core: ``out[r]`` = the sum, over the steps before
+    sample rows[r], of d(f±(v, q) dv) / d(up, down) on the measured path.
 
     The output is then ``q[0] + out @ (up, down)`` with the slopes evaluated
     on the measured path: linear in the slopes, and noise enters only through
-    the path, not through differences of the output.
+    the path, not through differences of the output. A long move takes the
+    Euler steps of ``duhem_next``, the output between samples interpolated.
     """
-    nv = p[DU_NV]
-    nq = p[DU_NQ]
-    m = int(nq)
-    cells = int(nv * nq)
+    cells = int(p[DU_NV] * p[DU_NQ])
     s = np.zeros(2 * cells)
     r = 0
     nr = rows.shape[0]
@@ -731,13 +744,16 @@ def duhem_cumulative(p, v, q, rows, out):  # type: ignore[no-untyped-def]
         if k > 0:
             dv = v[k] - v[k - 1]
             if dv != 0.0:
-                i, fa, _ = _cell(v[k - 1], p[DU_V_LO], p[DU_V_STEP], nv)
-                j, fb, _ = _cell(q[k - 1], p[DU_Q_LO], p[DU_Q_STEP], nq)
-                base = 0 if dv > 0.0 else cells
-                s[base + i * m + j] += (1.0 - fa) * (1.0 - fb) * dv
-                s[base + i * m + j + 1] += (1.0 - fa) * fb * dv
-                s[base + (i + 1) * m + j] += fa * (1.0 - fb) * dv
-                s[base + (i + 1) * m + j + 1] += fa * fb * dv
+                up = dv > 0.0
+                sign = 1.0 if up else -1.0
+                full, rest = _steps(abs(dv), p[DU_DV_MAX])
+                n = 1 if abs(dv) <= p[DU_DV_MAX] else full + (1 if rest > 0.0 else 0)
+                u = v[k - 1]
+                for step in range(n):
+                    d = dv if n == 1 else sign * (p[DU_DV_MAX] if step < full else rest)
+                    qu = q[k - 1] + (q[k] - q[k - 1]) * (u - v[k - 1]) / dv
+                    _basis_step(p, s, u, qu, d, up)
+                    u += d
         if r < nr and rows[r] == k:
             for a in range(2 * cells):
                 out[r, a] = s[a]
