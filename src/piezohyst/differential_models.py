@@ -387,10 +387,12 @@ class DuhemModel(DifferentialModel):
     few cycles rather than closing at once (no return-point memory; see
     :class:`PreisachModel` for a model that has it).
 
-    Outside the region the training record covered the slopes are held at
-    the grid's edge: predictions warn (:class:`~piezohyst.ExtrapolationWarning`)
-    and the compensator stops at the region's edge unless allowed to
-    extrapolate.
+    Its state is the output itself, which the fit estimates at the record's
+    first sample: ``initial_state`` (a history, or ``"periodic"``) has
+    nothing to add and is ignored. Outside the region the training record
+    covered the slopes are held at the grid's edge: predictions warn
+    (:class:`~piezohyst.ExtrapolationWarning`) and the compensator stops at
+    the region's edge unless allowed to extrapolate.
 
     Parameters
     ----------
@@ -506,12 +508,13 @@ class DuhemModel(DifferentialModel):
         sol = _bounded_lstsq(gram, a.T @ qh[rows], np.append(np.full(2 * cells, s_min), -np.inf))
         packed[D.DU_UP :] = np.maximum(sol[:-1], s_min)
         q0 = float(sol[-1])
-        start = _start_inner(DuhemHysteresis.from_packed(packed, [x[0], q0]), x, initial_state)
-        if start is not None:
-            q0 = float(start[1])
+        # the state is (v, q): the record's own first output says where q starts, better
+        # than any history run through a model still being fitted, so q0 is always fitted
         if params["refine"]:
-            packed, q0 = _refine_duhem(packed, x, qh, q0, s_min, smoothing,
-                                       penalty, fit_q0=start is None)  # fmt: skip
+            start = (packed.copy(), q0)
+            packed, q0 = _refine_duhem(packed, x, qh, q0, s_min, smoothing, penalty, fit_q0=True)
+            if _sse(packed, q0, x, qh) > _sse(*start, x, qh):  # keep the better of the two
+                packed, q0 = start
         core = DuhemHysteresis.from_packed(packed, [x[0], q0], Region.of(x, qh))
         return core, list(growth or [])
 
@@ -691,6 +694,15 @@ def _curvature(nv: int, nq: int) -> FloatArray:
                     rows.append(r)
     d = np.array(rows) if rows else np.zeros((0, nv * nq))
     return np.asarray(d.T @ d)
+
+
+def _sse(packed: FloatArray, q0: float, x: FloatArray, q: FloatArray) -> float:
+    """Squared output error of a Duhem core simulated from q0 (inf if it blows up)."""
+    sim = np.empty(x.size)
+    D.duhem_jacobian(packed, x, q0, np.zeros(0, dtype=np.int64), sim, np.zeros((0, 1)))
+    r = sim - q
+    total = float(r @ r)
+    return total if np.isfinite(total) else math.inf
 
 
 def _refine_duhem(
