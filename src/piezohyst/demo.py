@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,6 +25,8 @@ import numpy as np
 from ._validation import FloatArray, check_int
 from ._version import __version__
 from .compensator import Compensator
+from .differential_models import BoucWenModel, DuhemModel, PreisachModel
+from .errors import ExtrapolationWarning
 from .io import atomic_write_text
 from .leakage import Leakage, calibrate_leakage
 from .metrics import hysteresis_width, nrmse, rmse
@@ -295,6 +298,64 @@ def _model_comparison(
     return rows
 
 
+def _minor_loop_study(*, gain: float, seed: int, preset: str) -> dict[str, Any]:
+    """Beyond PI: each model identified on 40 s of decaying loops (loops of many sizes),
+    held out on another 40 s at a smaller amplitude, then compensating 20 s of decaying
+    loops on the bench (desired displacement, laser for checking only) and a steady loop.
+
+    Prandtl-Ishlinskii minor loops are congruent copies fixed by the major loop; the
+    bench's Preisach capacitor's are not. The bench starts at rest at 0 V, where every
+    model's training record started too.
+    """
+    p = PRESETS[preset]
+    train = simulate(preset=preset, signal="decaying", duration=40.0, seed=seed)
+    held = simulate(preset=preset, signal="decaying", duration=40.0, seed=seed + 1,
+                    amplitude=0.9 * p.v_max)  # fmt: skip
+    _, shape = make_signal("decaying", amplitude=1.0, duration=20.0, rate=p.rate)
+    _, steady = make_signal("fixed", amplitude=1.0, frequency=1.0, duration=20.0, rate=p.rate)
+    makers: list[tuple[str, Callable[[], HysteresisModel]]] = [
+        ("active PI (paper)", lambda: ActivePI(20)),
+        ("Preisach", lambda: PreisachModel()),
+        ("Duhem", lambda: DuhemModel()),
+        ("Bouc-Wen", lambda: BoucWenModel()),
+    ]
+    rows = []
+    for name, make in makers:
+        began = time.perf_counter()
+        model = make().fit(train.voltage, train.charge, t=train.t)
+        seconds = time.perf_counter() - began
+        hi = model.input_range_[1]
+        with warnings.catch_warnings():  # the major loop's low end lies beyond decaying loops
+            warnings.simplefilter("ignore", ExtrapolationWarning)
+            sweep = np.concatenate([np.linspace(0.0, hi, 2000), np.linspace(hi, 0.0, 2000)])
+            ramp = model.hysteresis_.predict(sweep)
+        top, bottom = float(ramp[1999]), float(ramp[-1])
+        widths: dict[str, float] = {}
+        outside: dict[str, int] = {}
+        for label, form in (("decaying", shape), ("steady", 0.5 + 0.3 * steady)):
+            q_des = bottom + (top - bottom) * (0.05 + 0.9 * form)
+            comp = Compensator(model, v_min=0.0, v_max=hi, domain="displacement", gain=gain)
+            command = comp.process(gain * q_des)
+            run = simulate(np.concatenate([[0.0], command]), np.arange(command.size + 1) / p.rate,
+                           preset=preset, seed=seed + 2)  # fmt: skip
+            keep = slice(0, None) if label == "decaying" else slice(int(2 * p.rate), None)
+            widths[label] = 100 * hysteresis_width(gain * q_des[keep], run.displacement[1:][keep])
+            outside[label] = int(getattr(comp, "outside_count", 0))
+        rows.append(
+            {
+                "model": name,
+                "train_nrmse_pct": 100 * model.nrmse_,
+                "heldout_nrmse_pct": 100
+                * nrmse(held.charge, model.predict(held.voltage, t=held.t)),
+                "width_decaying_S_pct": widths["decaying"],
+                "width_steady_S_pct": widths["steady"],
+                "outside_region": outside,
+                "fit_s": seconds,
+            }
+        )
+    return {"rows": rows, "train_signal": "decaying", "train_duration_s": 40.0}
+
+
 def _growth_text(model: HysteresisModel) -> str:
     growth = model.growth_coefficients()
     return ", ".join(f"{k} {v:.3g} {u}" for k, (v, u) in growth.items()) or "none"
@@ -405,6 +466,8 @@ def run_demo(
     comparison = _model_comparison(
         fixed, valid, gain=gain, n_operators=n_operators, seed=seed + 500, preset=preset
     )
+    say("beyond PI: Preisach, Duhem and Bouc-Wen on loops of many sizes")
+    minor = _minor_loop_study(gain=gain, seed=seed + 1100, preset=preset)
 
     metrics: dict[str, Any] = {
         "piezohyst_version": __version__,
@@ -433,6 +496,7 @@ def run_demo(
         "compensation_multi": multi["metrics"],
         "excitation_study": study,
         "model_comparison": comparison,
+        "minor_loops": minor,
         "rate": {
             "preset": RATE_PRESET,
             "bench_lag_s": rate["bench_lag_s"],
@@ -802,6 +866,37 @@ def render_report(m: dict[str, Any]) -> str:
             f"{r['heldout_nrmse_pct']:.3f} % | {r['width_after_S_pct']:.2f} % | "
             f"{r['tracking_nrmse_after_S_pct']:.2f} % | {r['growth']} |"
         )
+    ml = m["minor_loops"]
+    lines += [
+        "",
+        "## Beyond Prandtl-Ishlinskii: minor loops",
+        "",
+        "A PI model's minor loops are congruent copies fixed by its major loop; the bench's "
+        "Preisach capacitor's are not. Each model identified on 40 s of `decaying` loops (loops "
+        "of many sizes at several places in the major loop), scored on another 40 s at 90 % of "
+        "the amplitude, then compensating 20 s of decaying loops and 20 s of a steady 1 Hz loop "
+        "between 20 and 80 % of the span after its first two cycles (desired displacement; laser "
+        "for checking only).",
+        "",
+        "| model | training NRMSE | held-out NRMSE | width, decaying loops | width, steady loop "
+        "| fit time |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in ml["rows"]:
+        lines.append(
+            f"| {r['model']} | {r['train_nrmse_pct']:.3f} % | {r['heldout_nrmse_pct']:.3f} % | "
+            f"{r['width_decaying_S_pct']:.2f} % | {r['width_steady_S_pct']:.2f} % | "
+            f"{r['fit_s']:.2f} s |"
+        )
+    lines += [
+        "",
+        "Preisach learns where in the major loop each minor loop sits (its loops close, and "
+        "are not copies of each other) and halves the paper's model's width on the decaying "
+        "loops; a steady loop far larger than most the record holds is interpolated between the "
+        "reversal pairs it saw, and every model leaves about the same there. The Duhem and "
+        "Bouc-Wen models fit less well on this capacitor (see `docs/validation.md` for where "
+        "they win).",
+    ]
     rt = m["rate"]
     lines += [
         "",
