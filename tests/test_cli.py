@@ -14,6 +14,7 @@ from click.testing import CliRunner, Result
 
 import piezohyst as ph
 from piezohyst.cli import main
+from piezohyst.simulation import make_signal
 
 
 def run(*args: str | Path) -> Result:
@@ -114,6 +115,43 @@ def test_export_c(workdir: Path) -> None:
     res = run("export-c", workdir / "model.json", "--float", "-o", workdir / "stage.c")
     assert res.exit_code == 0
     assert "typedef float stage_real;" in (workdir / "stage.h").read_text()
+
+
+@pytest.mark.parametrize("model", ["preisach", "duhem", "bouc-wen"])
+def test_models_beyond_pi_from_the_shell(workdir: Path, model: str) -> None:
+    """fit, report, predict, compensate and export-c with a Preisach, Duhem or Bouc-Wen core."""
+    loops = workdir / "loops.csv"
+    if not loops.exists():
+        assert (
+            run("simulate", "--signal", "decaying", "--duration", "16", "-o", loops).exit_code == 0
+        )
+    out = workdir / f"{model}.json"
+    res = run("fit", loops, "--model", model, "--growth", "integral", "-o", out)
+    assert res.exit_code == 0, res.output
+    fitted = ph.load_model(out)
+    assert type(fitted).cli_name == model
+    assert res.stdout.startswith(f"{type(fitted).__name__}: ") and "NRMSE" in res.stdout
+    res = run("predict", out, loops, "-o", workdir / f"{model}-pred.csv")
+    assert res.exit_code == 0, res.output
+    hi = fitted.input_range_[1]
+    t, shape = make_signal("decaying", amplitude=1.0, duration=3.0)
+    v = hi * (0.2 + 0.6 * shape)  # decaying loops inside the region the record covered
+    target = workdir / f"{model}-target.csv"
+    ph.io.write_table(target, {"time": t, "desired": fitted.hysteresis_.predict(v)})
+    res = run("compensate", out, target, "--no-precondition", "-o", workdir / f"{model}-cmd.csv")
+    assert res.exit_code == 0, res.output
+    cmd = ph.io.read_table(workdir / f"{model}-cmd.csv").get("command")
+    assert cmd.min() >= 0.0 and cmd.max() <= hi
+    wanted = fitted.hysteresis_.predict(v)
+    # after the slew-limited start from rest at 0 V, the commands give the desired output
+    np.testing.assert_allclose(fitted.hysteresis_.predict(cmd)[500:], wanted[500:], rtol=0,
+                               atol=1e-6 * np.ptp(wanted))  # fmt: skip
+    res = run("export-c", out, "-o", workdir / f"{model}_c.c")
+    assert res.exit_code == 0, res.output
+    res = run("report", out, loops, "--out", workdir / f"{model}-report")
+    assert res.exit_code == 0, res.output
+    res = run("fit", loops, "--model", model, "--operators", "12", "-o", workdir / "x.json")
+    assert_clean_error(res, "'operators' setting does not apply")
 
 
 def test_tdms_with_group_and_wf_increment(workdir: Path) -> None:

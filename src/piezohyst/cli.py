@@ -490,7 +490,8 @@ def describe(model: HysteresisModel) -> str:
     "--growth",
     default="auto",
     show_default=True,
-    help="generalized-pi: growth terms, 'auto', 'none' or a comma list of "
+    help="generalized-pi, preisach, duhem, bouc-wen: growth terms, 'auto', 'none' or a comma "
+    "list of "
     "integral,time,abs_integral.",
 )
 @click.option(
