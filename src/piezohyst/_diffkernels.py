@@ -601,49 +601,6 @@ def core_process(desired, delay, p, cfg, st, region, dyn, dstate, trial, out):  
 
 
 # ------------------------------------------------------------ identification
-@njit(cache=True)
-def duhem_normal_equations(p, v, q, dy, dg, gram, rhs):  # type: ignore[no-untyped-def]
-    """Accumulate the increment regression: dy[k] ~ f±(v[k], q[k]) dv[k] + dg[k] @ g.
-
-    Columns: the up coefficients, the down coefficients, then the growth
-    increments ``dg`` (N-1, m). ``gram``/``rhs`` are added to.
-    """
-    nv = p[DU_NV]
-    nq = p[DU_NQ]
-    m = int(nq)
-    cells = int(nv * nq)
-    ng = dg.shape[1]
-    idx = np.empty(4, dtype=np.int64)
-    val = np.empty(4)
-    for k in range(v.shape[0] - 1):
-        dv = v[k + 1] - v[k]
-        i, fa, _ = _cell(v[k], p[DU_V_LO], p[DU_V_STEP], nv)
-        j, fb, _ = _cell(q[k], p[DU_Q_LO], p[DU_Q_STEP], nq)
-        base = 0 if dv > 0.0 else cells
-        nz = 0
-        if dv != 0.0:
-            idx[0] = base + i * m + j
-            idx[1] = base + i * m + j + 1
-            idx[2] = base + (i + 1) * m + j
-            idx[3] = base + (i + 1) * m + j + 1
-            val[0] = (1.0 - fa) * (1.0 - fb) * dv
-            val[1] = (1.0 - fa) * fb * dv
-            val[2] = fa * (1.0 - fb) * dv
-            val[3] = fa * fb * dv
-            nz = 4
-        for a in range(nz):
-            rhs[idx[a]] += val[a] * dy[k]
-            for b in range(nz):
-                gram[idx[a], idx[b]] += val[a] * val[b]
-            for g in range(ng):
-                gram[idx[a], 2 * cells + g] += val[a] * dg[k, g]
-                gram[2 * cells + g, idx[a]] += val[a] * dg[k, g]
-        for g in range(ng):
-            rhs[2 * cells + g] += dg[k, g] * dy[k]
-            for h in range(ng):
-                gram[2 * cells + g, 2 * cells + h] += dg[k, g] * dg[k, h]
-
-
 @njit(cache=True, inline="always")
 def _basis_step(p, s, v, q, d, up):  # type: ignore[no-untyped-def]
     """s += d * d f±(v, q) / d(up, down) (the 4 bilinear weights of the step's cell)."""
@@ -687,15 +644,13 @@ def duhem_jacobian(p, v, q0, rows, qsim, jac):  # type: ignore[no-untyped-def]
                     f, dfdq = duhem_slope(p, u, q, up)
                     scale = 1.0 + dfdq * d
                     if scale != 1.0:
-                        for a in range(s.shape[0]):
-                            s[a] *= scale
+                        s *= scale
                     _basis_step(p, s, u, q, d, up)
                     q = q + f * d
                     u += d
         qsim[k] = q
         if r < nr and rows[r] == k:
-            for a in range(s.shape[0]):
-                jac[r, a] = s[a]
+            jac[r, :] = s
             r += 1
 
 
@@ -710,8 +665,7 @@ def rev_design(p, v, st, rows, out):  # type: ignore[no-untyped-def]
         if k > 0:
             rev_move(p, st, v[k], True, acc, True)
         if r < nr and rows[r] == k:
-            for a in range(acc.shape[0]):
-                out[r, a] = acc[a]
+            out[r, :] = acc
             r += 1
 
 
@@ -755,8 +709,7 @@ def duhem_cumulative(p, v, q, rows, out):  # type: ignore[no-untyped-def]
                     _basis_step(p, s, u, qu, d, up)
                     u += d
         if r < nr and rows[r] == k:
-            for a in range(2 * cells):
-                out[r, a] = s[a]
+            out[r, :] = s
             r += 1
 
 

@@ -72,7 +72,8 @@ __all__ = ["BoucWenModel", "DifferentialModel", "DuhemModel", "PreisachModel"]
 REFINE_ROWS = 8000  # output-error refinement: residual rows (hashed picks)
 REFINE_EVALS = 25  # and evaluations
 PROXY_OPERATORS = 16  # play operators of the proxy that settles the growth terms
-FIT_ROWS = 40_000  # output-error residuals use at most this many samples (hashed picks)
+FIT_ROWS = 40_000  # linear solves and residuals use at most this many samples (hashed picks)
+SEARCH_ROWS = 5_000  # Bouc-Wen's shape search runs on a copy decimated to about this many
 
 
 def _grid(value: object, name: str, owner: str) -> tuple[int, int]:
@@ -856,10 +857,7 @@ class BoucWenModel(DifferentialModel):
         mean_slope = max(float(np.ptp(y)), 1e-300) / span
         s_min = float(params["min_slope"]) * mean_slope
         lower = np.concatenate([[s_min, 0.0, -np.inf], lower_g])
-        rows = _picked_rows(n, FIT_ROWS)
-        h = np.empty(n)
         scale = max(float(np.ptp(y)), 1e-300)
-        g_rows = g_mat[rows].T if m else np.zeros((0, rows.size))
 
         def shape(theta: FloatArray) -> tuple[float, float, float]:
             h_sat = span * math.exp(float(theta[0]))
@@ -875,54 +873,73 @@ class BoucWenModel(DifferentialModel):
             return np.array([D.KIND_BOUC_WEN, 1.0, 0.0, beta, gamma, expo, 0.0, 0.1 * h_sat,
                              g_max, 1.0])  # fmt: skip
 
-        def start_h(p: FloatArray) -> float:
-            probe = BoucWenHysteresis(1.0, 0.0, p[3], p[4], p[5], 0.0, np.array([x[0], 0.0]), p[7])
-            s = _start_inner(probe, x, initial_state)
-            return 0.0 if s is None else float(s[1])
+        def solver(xv: FloatArray, yv: FloatArray, gv: FloatArray, rows: np.ndarray) -> Any:
+            """The variable-projection solve on a record (all of it, or a decimated copy)."""
+            hv = np.empty(xv.size)
+            g_rows = gv[rows].T if m else np.zeros((0, rows.size))
 
-        def solve(theta: FloatArray) -> tuple[float, float, FloatArray, FloatArray, float]:
-            """(c0, alpha, offset and growth, residual rows, h0): the better loop orientation.
+            def solve(theta: FloatArray) -> tuple[float, float, FloatArray, FloatArray, float]:
+                """(c0, alpha, offset and growth, residual rows, h0): the better orientation.
 
-            alpha >= 0: c0 >= s_min. alpha = -a <= 0: with u = c0 - a g_max >= s_min,
-            y = u v + a (g_max v - h), so both are bounds on the columns' coefficients.
-            """
-            p = packed(theta)
-            h0 = start_h(p)
-            D.bw_trace(p, x, h0, h)
-            hr, xr = h[rows], x[rows]
-            g_max = float(p[D.BW_G_MAX])
-            best_fit: tuple[float, float, FloatArray, FloatArray, float] | None = None
-            for second in (hr, g_max * xr - hr):
-                a = np.vstack([xr, second, np.ones(rows.size), g_rows]).T
-                coef = _bounded_lstsq(a.T @ a, a.T @ y[rows], lower)
-                r = a @ coef - y[rows]
-                if second is hr:
-                    c0, alpha = float(coef[0]), float(coef[1])
-                else:
-                    c0, alpha = float(coef[0]) + float(coef[1]) * g_max, -float(coef[1])
-                if best_fit is None or float(r @ r) < float(best_fit[3] @ best_fit[3]):
-                    best_fit = (c0, alpha, coef[2:], r, h0)
-            assert best_fit is not None
-            return best_fit
+                alpha >= 0: c0 >= s_min. alpha = -a <= 0: with u = c0 - a g_max >= s_min,
+                y = u v + a (g_max v - h), so both are bounds on the columns' coefficients.
+                """
+                p = packed(theta)
+                probe = BoucWenHysteresis(1.0, 0.0, p[3], p[4], p[5], 0.0,
+                                          np.array([xv[0], 0.0]), p[7])  # fmt: skip
+                start = _start_inner(probe, xv, initial_state)
+                h0 = 0.0 if start is None else float(start[1])
+                D.bw_trace(p, xv, h0, hv)
+                hr, xr = hv[rows], xv[rows]
+                g_max = float(p[D.BW_G_MAX])
+                best_fit: tuple[float, float, FloatArray, FloatArray, float] | None = None
+                for second in (hr, g_max * xr - hr):
+                    a = np.vstack([xr, second, np.ones(rows.size), g_rows]).T
+                    coef = _bounded_lstsq(a.T @ a, a.T @ yv[rows], lower)
+                    r = a @ coef - yv[rows]
+                    if second is hr:
+                        c0, alpha = float(coef[0]), float(coef[1])
+                    else:
+                        c0, alpha = float(coef[0]) + float(coef[1]) * g_max, -float(coef[1])
+                    if best_fit is None or float(r @ r) < float(best_fit[3] @ best_fit[3]):
+                        best_fit = (c0, alpha, coef[2:], r, h0)
+                assert best_fit is not None
+                return best_fit
+
+            return solve
+
+        # the shape is searched on a decimated copy (the model is rate independent: fewer,
+        # longer steps integrate the same loops), then polished on the whole record
+        stride = max(1, n // SEARCH_ROWS)
+        xc = x[::stride]
+        coarse = solver(xc, y[::stride], g_mat[::stride], np.arange(xc.size))
+        solve = solver(x, y, g_mat, _picked_rows(n, FIT_ROWS))
+        bounds = ([math.log(1e-3), -0.95, 1.0], [math.log(10.0), 1.0, 6.0])
+
+        def coarse_residual(theta: FloatArray) -> FloatArray:
+            return coarse(theta)[3] / scale
 
         def residual(theta: FloatArray) -> FloatArray:
             return solve(theta)[3] / scale
 
         best, best_cost = None, math.inf
-        for hs, rho, expo in itertools.product(
-            (0.03, 0.08, 0.2, 0.5, 1.2), (-0.6, 0.0, 0.6, 1.0), (1.0, 2.0, 4.0)
-        ):
+        for hs, rho, expo in itertools.product((0.03, 0.1, 0.3, 1.0), (-0.6, 0.3, 1.0), (1.0, 2.5)):
             theta = np.array([math.log(hs), rho, expo])
-            cost = float(np.sum(residual(theta) ** 2))
+            cost = float(np.sum(coarse_residual(theta) ** 2))
             if cost < best_cost:
                 best, best_cost = theta, cost
         assert best is not None
-        res = least_squares(
-            residual, best, bounds=([math.log(1e-3), -0.95, 1.0], [math.log(10.0), 1.0, 6.0]),
-            method="trf", x_scale=[1.0, 0.5, 1.0], diff_step=1e-4, max_nfev=60,
-        )  # fmt: skip
+        res = least_squares(coarse_residual, best, bounds=bounds, method="trf",
+                            x_scale=[1.0, 0.5, 1.0], diff_step=1e-4, max_nfev=40)  # fmt: skip
+        if stride > 1:  # polish on the whole record
+            start_cost = float(np.sum(residual(res.x) ** 2))
+            res = least_squares(residual, res.x, bounds=bounds, method="trf",
+                                x_scale=[1.0, 0.5, 1.0], diff_step=1e-4, max_nfev=6)  # fmt: skip
+            best_cost = start_cost
+            best = res.x if float(np.sum(res.fun**2)) <= start_cost else best
         theta = res.x if float(np.sum(res.fun**2)) <= best_cost else best
         c0, alpha, rest, _, h0 = solve(theta)
+        h = np.empty(n)
         beta, gamma, expo = shape(theta)
         p = packed(theta)
         g_max = float(p[D.BW_G_MAX])
