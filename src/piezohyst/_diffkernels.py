@@ -409,7 +409,11 @@ def core_inverse(p, st, y, lo, hi, trial):  # type: ignore[no-untyped-def]
     s = 1.0 if dy > 0.0 else -1.0
     if p[0] == KIND_BOUC_WEN:
         s_min = p[BW_S_MIN]
-        slope0 = p[BW_C0] + p[BW_ALPHA] * _bw_g(p, st[1], s)
+        g0 = _bw_g(p, st[1], s)
+        # Heun's guess: the slope averaged with the one an Euler step would end on (one
+        # Newton iteration fewer on a smooth step)
+        g1 = _bw_g(p, st[1] + g0 * dy / (p[BW_C0] + p[BW_ALPHA] * g0), s)
+        slope0 = p[BW_C0] + p[BW_ALPHA] * 0.5 * (g0 + g1)
     else:
         s_min = p[DU_F_MIN]
         if p[0] == KIND_DUHEM:
@@ -422,25 +426,21 @@ def core_inverse(p, st, y, lo, hi, trial):  # type: ignore[no-untyped-def]
     if p[0] == KIND_DUHEM and abs(v - v0) <= p[DU_DV_MAX] and lo <= v <= hi:
         _trial(p, st, trial, v)
         return v, False
-    far = v0 + dy / s_min
-    a = min(v0, far)
-    b = max(v0, far)
-    if b > hi:  # the root may lie beyond the upper limit
-        yh, _ = _trial(p, st, trial, hi)
-        if yh <= y:
-            return hi, True
-        b = hi
-    if a < lo:
-        yl, _ = _trial(p, st, trial, lo)
-        if yl >= y:
-            return lo, True
-        a = lo
-    if a >= b:
-        _trial(p, st, trial, a)
-        return a, True
+    far = v0 + 1.000001 * dy / s_min  # a branch as flat as s_min puts the root at its end
+    a = max(min(v0, far), lo)
+    b = min(max(v0, far), hi)
+    if a >= b:  # at or beyond a limit and asked to go further out
+        v = b if dy > 0.0 else a
+        _trial(p, st, trial, v)
+        return v, True
+    at_hi = max(v0, far) > hi  # the bracket ends at a limit: try it only if Newton heads there
+    at_lo = min(v0, far) < lo
     if not a < v < b:
-        v = 0.5 * (a + b)
-    tol = 1e-12 * abs(dy)
+        if v >= b:
+            v = b if at_hi else 0.5 * (a + b)
+        else:
+            v = a if at_lo else 0.5 * (a + b)
+    tol = 1e-12 * abs(dy) + 4e-16 * abs(y)  # a residual below rounding ends it too
     eps = 1e-13 * (abs(a) + abs(b) + 1.0)
     for _ in range(NEWTON_MAX):
         y1, f1 = _trial(p, st, trial, v)
@@ -448,12 +448,21 @@ def core_inverse(p, st, y, lo, hi, trial):  # type: ignore[no-untyped-def]
         if abs(res) <= tol:
             return v, False
         if res < 0.0:
+            if v >= b:  # at the upper limit and still short: out of reach
+                return v, True
             a = v
         else:
+            if v <= a:  # at the lower limit and still above
+                return v, True
             b = v
         vn = v - res / f1 if f1 > 0.0 else 0.5 * (a + b)
         if not a < vn < b:
-            vn = 0.5 * (a + b)
+            if vn >= b and at_hi and b >= hi:
+                vn = b
+            elif vn <= a and at_lo and a <= lo:
+                vn = a
+            else:
+                vn = 0.5 * (a + b)
         if abs(vn - v) <= eps or b - a <= eps:
             return v, False
         v = vn

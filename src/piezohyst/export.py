@@ -946,7 +946,11 @@ static real_t core_move(real_t *st, real_t v1, int commit, real_t *f)
 static real_t core_output(const real_t *st) { return st[1]; }
 
 /* the slope of the step's first instant from st in direction up */
-static real_t first_slope(const real_t *st, int up) { return slope(st[0], st[1], up); }
+static real_t first_slope(const real_t *st, int up, real_t dy)
+{
+    (void)dy;
+    return slope(st[0], st[1], up);
+}
 """
 
 _CORE_C_PREISACH = """
@@ -1077,10 +1081,11 @@ static real_t core_move(real_t *st, real_t v1, int commit, real_t *f)
 static real_t core_output(const real_t *st) { return st[1]; }
 
 /* the slope of the step's first instant from st in direction up */
-static real_t first_slope(const real_t *st, int up)
+static real_t first_slope(const real_t *st, int up, real_t dy)
 {
     int reverse = st[2] != 0 && (up ? 1.0 : -1.0) != st[2];
     real_t top = reverse ? st[0] : st[4 + (int)st[3] - 1];
+    (void)dy;
     return branch_slope(st[0], top, up);
 }
 """
@@ -1123,9 +1128,13 @@ static real_t core_move(real_t *st, real_t v1, int commit, real_t *f)
 
 static real_t core_output(const real_t *st) { return C0 * st[0] + ALPHA * st[1] + OFFSET; }
 
-static real_t first_slope(const real_t *st, int up)
+/* Heun's guess for a step of output change dy: the slope averaged with the one an Euler
+ * step would end on */
+static real_t first_slope(const real_t *st, int up, real_t dy)
 {
-    return C0 + ALPHA * g(st[1], up ? 1.0 : -1.0);
+    real_t s = up ? 1.0 : -1.0, g0 = g(st[1], s);
+    real_t g1 = g(st[1] + g0 * dy / (C0 + ALPHA * g0), s);
+    return C0 + ALPHA * 0.5 * (g0 + g1);
 }
 """
 
@@ -1146,7 +1155,7 @@ static real_t core_inverse(real_t *st, real_t y, real_t lo, real_t hi, int *clam
                            real_t *trial)
 {
     real_t v0 = st[0], dy = y - core_output(st), v, far, a, b, eps, tol, f1, y1, res, vn;
-    int it;
+    int it, at_hi, at_lo;
     *clamped = 0;
     if (dy == 0) {
         *clamped = v0 < lo || v0 > hi;
@@ -1154,39 +1163,32 @@ static real_t core_inverse(real_t *st, real_t y, real_t lo, real_t hi, int *clam
         try_move(st, trial, v, &f1);
         return v;
     }
-    v = v0 + dy / first_slope(st, dy > 0);
+    v = v0 + dy / first_slope(st, dy > 0, dy);
 #if KIND == 0
     if (abs_real(v - v0) <= DV_MAX && lo <= v && v <= hi) {
         try_move(st, trial, v, &f1);
         return v; /* one Euler step: the explicit inverse is exact */
     }
 #endif
-    far = v0 + dy / S_MIN;
-    a = min_real(v0, far);
-    b = max_real(v0, far);
-    if (b > hi) {
-        if (try_move(st, trial, hi, &f1) <= y) {
-            *clamped = 1;
-            return hi;
-        }
-        b = hi;
-    }
-    if (a < lo) {
-        if (try_move(st, trial, lo, &f1) >= y) {
-            *clamped = 1;
-            return lo;
-        }
-        a = lo;
-    }
-    if (a >= b) {
+    far = v0 + 1.000001 * dy / S_MIN; /* a branch as flat as S_MIN puts the root at its end */
+    a = max_real(min_real(v0, far), lo);
+    b = min_real(max_real(v0, far), hi);
+    if (a >= b) { /* at or beyond a limit and asked to go further out */
+        v = dy > 0 ? b : a;
         *clamped = 1;
-        try_move(st, trial, a, &f1);
-        return a;
+        try_move(st, trial, v, &f1);
+        return v;
     }
+    at_hi = max_real(v0, far) > hi; /* try a limit only if Newton heads there */
+    at_lo = min_real(v0, far) < lo;
     if (!(a < v && v < b)) {
-        v = 0.5 * (a + b);
+        if (v >= b) {
+            v = at_hi ? b : 0.5 * (a + b);
+        } else {
+            v = at_lo ? a : 0.5 * (a + b);
+        }
     }
-    tol = 1e-12 * abs_real(dy);
+    tol = 1e-12 * abs_real(dy) + 4e-16 * abs_real(y);
     eps = 1e-13 * (abs_real(a) + abs_real(b) + 1.0);
     for (it = 0; it < NEWTON_MAX; ++it) {
         y1 = try_move(st, trial, v, &f1);
@@ -1195,13 +1197,27 @@ static real_t core_inverse(real_t *st, real_t y, real_t lo, real_t hi, int *clam
             return v;
         }
         if (res < 0) {
+            if (v >= b) { /* at the upper limit and still short: out of reach */
+                *clamped = 1;
+                return v;
+            }
             a = v;
         } else {
+            if (v <= a) { /* at the lower limit and still above */
+                *clamped = 1;
+                return v;
+            }
             b = v;
         }
         vn = f1 > 0 ? v - res / f1 : 0.5 * (a + b);
         if (!(a < vn && vn < b)) {
-            vn = 0.5 * (a + b);
+            if (vn >= b && at_hi && b >= hi) {
+                vn = b;
+            } else if (vn <= a && at_lo && a <= lo) {
+                vn = a;
+            } else {
+                vn = 0.5 * (a + b);
+            }
         }
         if (abs_real(vn - v) <= eps || b - a <= eps) {
             return v;
