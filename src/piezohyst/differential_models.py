@@ -129,6 +129,15 @@ def _growth_matrix(terms: Sequence[Term], x: FloatArray, t: FloatArray | None) -
     return out
 
 
+def _split(coefficients: FloatArray, terms: Sequence[Term]) -> list[FloatArray]:
+    """One coefficient array per term, from the solution's growth columns."""
+    out, col = [], 0
+    for term in terms:
+        out.append(np.asarray(coefficients[col : col + term.width], dtype=np.float64))
+        col += term.width
+    return out
+
+
 def _collect(blocks: Blocks) -> tuple[FloatArray, FloatArray, FloatArray | None]:
     xs, ys, ts = [], [], []
     timed = True
@@ -162,6 +171,27 @@ class DifferentialModel(HysteresisModel):
     }
     region_: Region | None
     region_tolerance: float
+
+    def __init__(
+        self,
+        *,
+        growth_terms: str | Sequence[str] = ("integral",),
+        min_slope: float = 0.02,
+        region_tolerance: float = 0.05,
+        input_unit: str = "V",
+        output_unit: str = "C",
+        input_dynamics: str = "none",
+        output_dynamics: str = "none",
+    ) -> None:
+        # the settings every model on a differential core has; subclasses add theirs
+        self.growth_terms = growth_terms
+        self.min_slope = min_slope
+        self.region_tolerance = region_tolerance
+        self.input_unit = input_unit
+        self.output_unit = output_unit
+        self.input_dynamics = input_dynamics
+        self.output_dynamics = output_dynamics
+
     #: the growth terms come from the PI proxy (True) or are fitted with the core (False)
     growth_from_proxy: ClassVar[bool] = True
 
@@ -455,16 +485,18 @@ class DuhemModel(DifferentialModel):
         input_dynamics: str = "none",
         output_dynamics: str = "none",
     ) -> None:
+        super().__init__(
+            growth_terms=growth_terms,
+            min_slope=min_slope,
+            region_tolerance=region_tolerance,
+            input_unit=input_unit,
+            output_unit=output_unit,
+            input_dynamics=input_dynamics,
+            output_dynamics=output_dynamics,
+        )
         self.grid = grid
-        self.growth_terms = growth_terms
         self.smoothing = smoothing
-        self.min_slope = min_slope
         self.refine = refine
-        self.region_tolerance = region_tolerance
-        self.input_unit = input_unit
-        self.output_unit = output_unit
-        self.input_dynamics = input_dynamics
-        self.output_dynamics = output_dynamics
 
     def _identify(
         self,
@@ -591,15 +623,17 @@ class PreisachModel(DifferentialModel):
         input_dynamics: str = "none",
         output_dynamics: str = "none",
     ) -> None:
+        super().__init__(
+            growth_terms=growth_terms,
+            min_slope=min_slope,
+            region_tolerance=region_tolerance,
+            input_unit=input_unit,
+            output_unit=output_unit,
+            input_dynamics=input_dynamics,
+            output_dynamics=output_dynamics,
+        )
         self.nodes = nodes
-        self.growth_terms = growth_terms
         self.smoothing = smoothing
-        self.min_slope = min_slope
-        self.region_tolerance = region_tolerance
-        self.input_unit = input_unit
-        self.output_unit = output_unit
-        self.input_dynamics = input_dynamics
-        self.output_dynamics = output_dynamics
 
     def _identify(
         self,
@@ -649,11 +683,7 @@ class PreisachModel(DifferentialModel):
         z0[1] = float(sol[-1])
         qh = y - g_mat @ g if ng else y
         core = PreisachHysteresis(nodes, mu.reshape(m, m), z0, Region.of(x, qh))
-        coefs, col = [], 0
-        for term in terms:
-            coefs.append(np.asarray(g[col : col + term.width], dtype=np.float64))
-            col += term.width
-        return core, coefs
+        return core, _split(g, terms)
 
 
 def _curvature_upper(m: int) -> FloatArray:
@@ -826,13 +856,15 @@ class BoucWenModel(DifferentialModel):
         input_dynamics: str = "none",
         output_dynamics: str = "none",
     ) -> None:
-        self.growth_terms = growth_terms
-        self.min_slope = min_slope
-        self.region_tolerance = region_tolerance
-        self.input_unit = input_unit
-        self.output_unit = output_unit
-        self.input_dynamics = input_dynamics
-        self.output_dynamics = output_dynamics
+        super().__init__(
+            growth_terms=growth_terms,
+            min_slope=min_slope,
+            region_tolerance=region_tolerance,
+            input_unit=input_unit,
+            output_unit=output_unit,
+            input_dynamics=input_dynamics,
+            output_dynamics=output_dynamics,
+        )
 
     def _identify(
         self,
@@ -917,10 +949,10 @@ class BoucWenModel(DifferentialModel):
         bounds = ([math.log(1e-3), -0.95, 1.0], [math.log(10.0), 1.0, 6.0])
 
         def coarse_residual(theta: FloatArray) -> FloatArray:
-            return coarse(theta)[3] / scale
+            return np.asarray(coarse(theta)[3] / scale, dtype=np.float64)
 
         def residual(theta: FloatArray) -> FloatArray:
-            return solve(theta)[3] / scale
+            return np.asarray(solve(theta)[3] / scale, dtype=np.float64)
 
         best, best_cost = None, math.inf
         for hs, rho, expo in itertools.product((0.03, 0.1, 0.3, 1.0), (-0.6, 0.3, 1.0), (1.0, 2.5)):
@@ -949,9 +981,4 @@ class BoucWenModel(DifferentialModel):
         pure = c0 * x + alpha * h + offset
         core = BoucWenHysteresis(c0, alpha, beta, gamma, expo, offset, np.array([x[0], h0]), p[7],
                                  Region.of(x, pure))  # fmt: skip
-        coefs, col = [], 0
-        g = rest[1:]
-        for term in terms:
-            coefs.append(np.asarray(g[col : col + term.width], dtype=np.float64))
-            col += term.width
-        return core, coefs
+        return core, _split(rest[1:], terms)
