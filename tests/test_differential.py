@@ -382,3 +382,43 @@ def test_curvature_penalty_vanishes_on_planes() -> None:
     assert bump @ penalty @ bump > 0
     tri = _curvature_upper(4)  # the Preisach cells k <= l: 10 of them
     assert tri.shape == (10, 10) and np.allclose(tri, tri.T)
+
+
+def test_cores_check_what_they_are_built_from(models: dict[str, Any]) -> None:
+    """Bad parameters are refused with a message naming them; cores describe themselves."""
+    nodes = np.linspace(0.0, 100.0, 4)
+    good = np.triu(np.full((3, 3), 1e-8))
+    rest = np.zeros(D.RV_SIZE)
+    with pytest.raises(ph.ParameterError, match="equally spaced"):
+        ph.PreisachHysteresis([0.0, 1.0, 5.0, 6.0], good, rest)
+    with pytest.raises(ph.ParameterError, match="density must be finite and >= 0"):
+        ph.PreisachHysteresis(nodes, -good, rest)
+    with pytest.raises(ph.ShapeError, match="'density' must have shape"):
+        ph.PreisachHysteresis(nodes, good[:2], rest)
+    with pytest.raises(ph.ShapeError, match="holds 36 values"):
+        ph.PreisachHysteresis(nodes, good, np.zeros(3))
+    with pytest.raises(ph.ParameterError, match="beta > 0"):
+        ph.BoucWenHysteresis(1e-8, 0.0, -1.0, 0.0, 1.0, 0.0, np.zeros(2))
+    with pytest.raises(ph.ParameterError, match="c0 \\+ alpha"):
+        ph.BoucWenHysteresis(1e-8, -1e-7, 0.01, 0.01, 1.0, 0.0, np.zeros(2))
+    with pytest.raises(ph.ParameterError, match="exponent n"):
+        ph.BoucWenHysteresis(1e-8, 0.0, 0.01, 0.0, 9.0, 0.0, np.zeros(2))
+    with pytest.raises(ph.ParameterError, match="'up' slope must be finite and > 0"):
+        ph.DuhemHysteresis(nodes, nodes, np.zeros((4, 4)), np.ones((4, 4)), np.zeros(2))
+    with pytest.raises(ph.ParameterError, match="v_lo < v_hi"):
+        ph.Region(1.0, 1.0, [0.0], [1.0])
+    for model in models.values():
+        core = model.operator_
+        lines = dict(core.describe("V", "C"))
+        assert "core" in lines and core.summary
+        with pytest.raises(ph.ShapeError, match="must hold"):
+            core.propagate([1.0], np.zeros(core.n_states + 1))
+        region = core.region
+        assert region is not None and ph.Region.from_dict(region.to_dict()).span == region.span
+    duhem = models["duhem"].operator_
+    up, down = duhem.slopes([50.0, 60.0], [duhem.q_nodes[1]] * 2)
+    assert np.all(up > 0) and np.all(down > 0)
+    preisach = models["preisach"].operator_
+    lo, hi = preisach.nodes[0], preisach.nodes[-1]
+    e = preisach.everett([lo, lo, 0.5 * (lo + hi)], [lo, hi, 0.5 * (lo + hi)])
+    assert e[0] == pytest.approx(0.0, abs=1e-20) and e[1] > 0 and e[2] == pytest.approx(0.0)

@@ -597,15 +597,8 @@ def core_step(desired, p, cfg, st, region, dyn, dstate, trial):  # type: ignore[
 @njit(cache=True, fastmath=FASTMATH)
 def core_process(desired, delay, p, cfg, st, region, dyn, dstate, trial, out):  # type: ignore[no-untyped-def]
     """``core_step`` over a block; with an integer delay the command at k targets k + delay."""
-    m = desired.shape[0]
-    for k in range(m):
-        j = k + delay
-        if j < m:
-            target = desired[j]
-        elif m >= 2:
-            target = desired[m - 1] + (j - m + 1) * (desired[m - 1] - desired[m - 2])
-        else:
-            target = desired[m - 1]
+    for k in range(desired.shape[0]):
+        target = K.preview_target(desired, k, delay)
         out[k] = core_step(target, p, cfg, st, region, dyn, dstate, trial)
 
 

@@ -510,6 +510,19 @@ def dynamic_step(desired, tables, config, state, dyn, dstate):  # type: ignore[n
     return x
 
 
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def preview_target(desired, k, delay):  # type: ignore[no-untyped-def]
+    """The value the command at k must reach: ``desired[k + delay]``, extrapolated linearly
+    from the block's last two values beyond its end."""
+    m = desired.shape[0]
+    j = k + delay
+    if j < m:
+        return desired[j]
+    if m >= 2:
+        return desired[m - 1] + (j - m + 1) * (desired[m - 1] - desired[m - 2])
+    return desired[m - 1]
+
+
 @njit(cache=True, fastmath=FASTMATH)
 def dynamic_process(desired, delay, tables, config, state, dyn, dstate, out):  # type: ignore[no-untyped-def]
     """``dynamic_step`` over a block; the command at k targets ``desired[k + delay]``.
@@ -517,16 +530,8 @@ def dynamic_process(desired, delay, tables, config, state, dyn, dstate, out):  #
     The block is the preview of an integer delay: its last ``delay`` targets
     lie beyond it and are extrapolated linearly from its last two values.
     """
-    m = desired.shape[0]
-    for k in range(m):
-        j = k + delay
-        if j < m:
-            target = desired[j]
-        elif m >= 2:
-            target = desired[m - 1] + (j - m + 1) * (desired[m - 1] - desired[m - 2])
-        else:
-            target = desired[m - 1]
-        out[k] = dynamic_step(target, tables, config, state, dyn, dstate)
+    for k in range(desired.shape[0]):
+        out[k] = dynamic_step(preview_target(desired, k, delay), tables, config, state, dyn, dstate)
 
 
 @njit(cache=True, fastmath=FASTMATH)

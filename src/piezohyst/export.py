@@ -199,9 +199,6 @@ void {prefix}_init({prefix}_t *s);
 """
     p = precision
     step = float(config[K.CFG_MAX_STEP])
-    bits_type, mantissa, exp_mask = (
-        ("uint64_t", 52, "0x7FF") if precision == "double" else ("uint32_t", 23, "0xFF")
-    )
     has_slew = int(np.isfinite(step))
     feedback_init = "" if controller is None else _feedback_init(controller, precision)
     if comp.dynamic:
@@ -242,24 +239,7 @@ static const {real} BOUND = {_literal(config[K.CFG_BOUND], p)};
 static const {real} SAT_TOL = {_literal(1e-12 * (comp.v_max - comp.v_min), p)};
 static const {real} LAST0 = {_literal(state.command, p)};
 
-/* NaN or +-inf, decided from the IEEE-754 exponent bits: unlike isfinite(), a check
- * that -ffast-math (which assumes finite arithmetic) cannot optimise away. */
-static int non_finite({real} x)
-{{
-    union {{ {real} value; {bits_type} bits; }} u;
-    u.value = x;
-    return (int)((u.bits >> {mantissa}) & {exp_mask}) == {exp_mask};
-}}
-
-#if MODE
-static {real} not_a_number(void)
-{{
-    union {{ {real} value; {bits_type} bits; }} u;
-    u.bits = {"0x7FF8000000000000ULL" if precision == "double" else "0x7FC00000UL"};
-    return u.value;
-}}
-#endif
-
+{_ieee_helpers(real, precision)}
 static {real} clamp({real} x, {real} lo, {real} hi)
 {{
     return x < lo ? lo : (x > hi ? hi : x);
@@ -355,6 +335,34 @@ static {real} core_step({prefix}_t *s, {real} q)
     if comp.mode.active:
         source += _mode_source(comp, prefix, precision)
     return CCode(header=header, source=source, header_name=f"{prefix}.h")
+
+
+def _ieee_helpers(real: str, precision: Precision) -> str:
+    """``non_finite`` (NaN or +-inf from the IEEE-754 exponent bits: unlike isfinite(), a
+    check -ffast-math cannot optimise away) and, with a mode, ``not_a_number``."""
+    bits, mantissa, mask, nan = (
+        ("uint64_t", 52, "0x7FF", "0x7FF8000000000000ULL")
+        if precision == "double"
+        else ("uint32_t", 23, "0xFF", "0x7FC00000UL")
+    )
+    return f"""/* NaN or +-inf, decided from the IEEE-754 exponent bits: unlike isfinite(), a check
+ * that -ffast-math (which assumes finite arithmetic) cannot optimise away. */
+static int non_finite({real} x)
+{{
+    union {{ {real} value; {bits} bits; }} u;
+    u.value = x;
+    return (int)((u.bits >> {mantissa}) & {mask}) == {mask};
+}}
+
+#if MODE
+static {real} not_a_number(void)
+{{
+    union {{ {real} value; {bits} bits; }} u;
+    u.bits = {nan};
+    return u.value;
+}}
+#endif
+"""
 
 
 def _mode_source(comp: Compensator, prefix: str, p: Precision) -> str:
@@ -746,9 +754,6 @@ void {prefix}_init({prefix}_t *s);
 
 #endif /* {guard} */
 """
-    bits_type, mantissa, exp_mask = (
-        ("uint64_t", 52, "0x7FF") if precision == "double" else ("uint32_t", 23, "0xFF")
-    )
     step = float(cfg[D.CC_MAX_STEP])
     has_slew = int(np.isfinite(step))
     region = comp.region
@@ -845,23 +850,7 @@ static const {real} GAIN_A = {_literal(float(comp.dyn[0]), p)}; /* the fractiona
 static const {real} GAIN_B = {_literal(float(comp.dyn[1]), p)}; /* the amplifier's lag */
 #endif
 
-/* NaN or +-inf from the IEEE-754 exponent bits (survives -ffast-math) */
-static int non_finite({real} x)
-{{
-    union {{ {real} value; {bits_type} bits; }} u;
-    u.value = x;
-    return (int)((u.bits >> {mantissa}) & {exp_mask}) == {exp_mask};
-}}
-
-#if MODE
-static {real} not_a_number(void)
-{{
-    union {{ {real} value; {bits_type} bits; }} u;
-    u.bits = {"0x7FF8000000000000ULL" if precision == "double" else "0x7FC00000UL"};
-    return u.value;
-}}
-#endif
-
+{_ieee_helpers(real, precision)}
 static {real} abs_real({real} x) {{ return x < 0 ? -x : x; }}
 static {real} min_real({real} a, {real} b) {{ return a < b ? a : b; }}
 static {real} max_real({real} a, {real} b) {{ return a > b ? a : b; }}
