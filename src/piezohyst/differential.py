@@ -366,19 +366,6 @@ class DifferentialCore:
             raise NumericRangeError(msg)
         return z
 
-    def with_initial_state(self, state: ArrayLike) -> DifferentialCore:
-        """This core with another initial state.
-
-        Parameters
-        ----------
-        state : array_like, shape (2,)
-
-        Returns
-        -------
-        DifferentialCore
-        """
-        raise NotImplementedError
-
     def describe(self, input_unit: str, output_unit: str) -> list[tuple[str, str]]:
         """Labelled parameters with units, for reports.
 
@@ -509,12 +496,6 @@ class DuhemHysteresis(DifferentialCore):
         """
         q = self.region.middle(x0) if self.region is not None else float(self.initial_state[1])
         return np.array([float(x0), q])
-
-    def with_initial_state(self, state: ArrayLike) -> DuhemHysteresis:
-        """See :meth:`DifferentialCore.with_initial_state`."""
-        z = as_signal(state, "state")
-        return DuhemHysteresis(self.v_nodes, self.q_nodes, self.up, self.down, z, self.region,
-                               self.dv_max)  # fmt: skip
 
     def slopes(self, v: ArrayLike, q: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """``f+`` and ``f-`` at points (v, q).
@@ -653,10 +634,6 @@ class PreisachHysteresis(DifferentialCore):
         z = np.zeros(D.RV_SIZE)
         z[0], z[1], z[D.RV_K], z[D.RV_R] = float(x0), q, 1.0, float(x0)
         return z
-
-    def with_initial_state(self, state: ArrayLike) -> PreisachHysteresis:
-        """See :meth:`DifferentialCore.with_initial_state`."""
-        return PreisachHysteresis(self.nodes, self.density, as_signal(state, "state"), self.region)
 
     def everett(self, a: ArrayLike, b: ArrayLike) -> FloatArray:
         """The Everett function :math:`E(a, b)` (output units).
@@ -881,12 +858,6 @@ class BoucWenHysteresis(DifferentialCore):
     def rest_state(self, x0: float) -> FloatArray:
         """See :meth:`DifferentialCore.rest_state`: h = 0 at ``x0``."""
         return np.array([float(x0), 0.0])
-
-    def with_initial_state(self, state: ArrayLike) -> BoucWenHysteresis:
-        """See :meth:`DifferentialCore.with_initial_state`."""
-        z = as_signal(state, "state")
-        return BoucWenHysteresis(self.c0, self.alpha, self.beta, self.gamma, self.n,
-                                 self.offset, z, self.dv_max, self.region)  # fmt: skip
 
     def describe(self, input_unit: str, output_unit: str) -> list[tuple[str, str]]:
         """See :meth:`DifferentialCore.describe`."""

@@ -372,20 +372,6 @@ class DifferentialModel(HysteresisModel):
         model = cls(input_unit=input_unit, output_unit=output_unit)
         return model
 
-    def rest_state_output(self, x0: float) -> float:
-        """The pure hysteresis output of an actuator resting at ``x0`` (see ``rest_state``).
-
-        Parameters
-        ----------
-        x0 : float
-
-        Returns
-        -------
-        float
-        """
-        self._check_fitted()
-        return float(self.operator_.output(self.operator_.rest_state(float(x0))))
-
 
 def _start_inner(core_rest: Any, x: FloatArray, initial_state: InitialState) -> FloatArray | None:
     """The core state before the record for a named initial state, or None (fit it)."""
