@@ -372,6 +372,27 @@ def test_the_self_sensing_loop_runs_on_a_differential_core(
     np.testing.assert_array_equal(replay.process(desired, measured), commands)
 
 
+def test_banks_of_preisach_models_compensate_and_close_the_loop(record: Any) -> None:
+    """A bank of differential models runs each channel's own compensator and controller."""
+    v = np.column_stack([record.voltage[:8000], 0.9 * record.voltage[:8000]])
+    q = np.column_stack([record.charge[:8000], 1.1 * record.charge[:8000]])
+    bank = ph.ModelBank(ph.PreisachModel(10)).fit(v, q, t=record.t[:8000])
+    hi = [m.input_range_[1] for m in bank]
+    desired = np.column_stack([inside_trajectory(m, 1.0) for m in bank])
+    comp = ph.Compensator(bank, v_min=0.0, v_max=hi)
+    ctl = ph.SelfSensingController(bank, v_min=0.0, v_max=hi, sample_rate=1000.0)
+    assert not comp.fused and not ctl.fused
+    commands = comp.process(desired)
+    loop = ctl.process(desired, q[: desired.shape[0]])
+    for i, model in enumerate(bank):
+        alone = ph.Compensator(model, v_min=0.0, v_max=hi[i]).process(desired[:, i])
+        np.testing.assert_array_equal(commands[:, i], alone)
+        own = ph.SelfSensingController(model, v_min=0.0, v_max=hi[i], sample_rate=1000.0)
+        np.testing.assert_array_equal(
+            loop[:, i], own.process(desired[:, i], q[: desired.shape[0], i])
+        )
+
+
 def test_curvature_penalty_vanishes_on_planes() -> None:
     penalty = _curvature(4, 3)
     i, j = np.meshgrid(np.arange(4.0), np.arange(3.0), indexing="ij")

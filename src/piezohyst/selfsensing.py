@@ -440,8 +440,8 @@ class BankController:
     Parameters
     ----------
     bank : ModelBank
-        A fitted bank (every channel fitted, play operators and removable
-        terms only).
+        A fitted bank (every channel fitted). Play-operator channels run in one
+        parallel kernel; Preisach, Duhem or Bouc-Wen channels one after another.
     v_min, v_max : float or array_like of C
         Voltage limits (V).
     sample_rate : float
@@ -508,6 +508,11 @@ class BankController:
                 raise type(exc)(f"channel {i}: {exc}") from None
         self.bank = bank
         self._channels = channels
+        #: True when all channels run in the one parallel kernel (play operators); a bank
+        #: of Preisach, Duhem or Bouc-Wen models runs its channels' controllers in turn
+        self.fused = not any(ch.core for ch in channels)
+        if not self.fused:
+            return
         comps = [ch.compensator for ch in channels]
         self.tables = np.ascontiguousarray(np.stack([cp.tables for cp in comps]))
         comp_config = np.ascontiguousarray(np.stack([cp.config for cp in comps]))
@@ -592,6 +597,10 @@ class BankController:
         elif out.shape != d.shape or out.dtype != np.float64:
             msg = f"'out' must be a float64 array of shape {d.shape}. Got {out.dtype} {out.shape}."
             raise ShapeError(msg)
+        if not self.fused:
+            for i, ch in enumerate(self._channels):
+                out[i] = ch.step(float(d[i]), float(m[i]))
+            return out
         K.bank_controller_step(
             d, m, self.tables, self.config, self.state_array, self.ctl, self.feedback, out
         )
@@ -610,6 +619,10 @@ class BankController:
         """
         d, m = self._pair(desired, measured, 2)
         out = np.empty_like(d)
+        if not self.fused:
+            for i, ch in enumerate(self._channels):
+                out[:, i] = ch.process(np.ascontiguousarray(d[:, i]), np.ascontiguousarray(m[:, i]))
+            return out
         K.bank_controller_process(
             d, m, self.tables, self.config, self.state_array, self.ctl, self.feedback, out
         )
