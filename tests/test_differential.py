@@ -372,7 +372,9 @@ def test_the_self_sensing_loop_runs_on_a_differential_core(
     np.testing.assert_array_equal(replay.process(desired, measured), commands)
 
 
-def test_banks_of_preisach_models_compensate_and_close_the_loop(record: Any) -> None:
+def test_banks_of_preisach_models_compensate_and_close_the_loop(
+    record: Any, tmp_path: Path
+) -> None:
     """A bank of differential models runs each channel's own compensator and controller."""
     v = np.column_stack([record.voltage[:8000], 0.9 * record.voltage[:8000]])
     q = np.column_stack([record.charge[:8000], 1.1 * record.charge[:8000]])
@@ -382,6 +384,12 @@ def test_banks_of_preisach_models_compensate_and_close_the_loop(record: Any) -> 
     comp = ph.Compensator(bank, v_min=0.0, v_max=hi)
     ctl = ph.SelfSensingController(bank, v_min=0.0, v_max=hi, sample_rate=1000.0)
     assert not comp.fused and not ctl.fused
+    for suffix in (".json", ".h5", ".npz"):  # one file for the bank, every channel exact
+        path = tmp_path / f"bank{suffix}"
+        bank.save(path)
+        np.testing.assert_array_equal(
+            ph.load_bank(path).predict(v, t=record.t[:8000]), bank.predict(v, t=record.t[:8000])
+        )
     commands = comp.process(desired)
     loop = ctl.process(desired, q[: desired.shape[0]])
     for i, model in enumerate(bank):
