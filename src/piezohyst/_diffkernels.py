@@ -154,19 +154,31 @@ def duhem_next(p, v0, q0, v1):  # type: ignore[no-untyped-def]
     """q after the input moves from v0 to v1 (Euler steps of dv_max, then the rest)."""
     dv = v1 - v0
     up = dv > 0.0
-    if abs(dv) <= p[DU_DV_MAX]:
-        f, _ = duhem_slope(p, v0, q0, up)
-        return q0 + f * dv
-    s = 1.0 if up else -1.0
-    full, rest = _steps(abs(dv), p[DU_DV_MAX])
+    n, full, rest = _euler_plan(dv, p[DU_DV_MAX])
     q = q0
     v = v0
-    for i in range(full + (1 if rest > 0.0 else 0)):
-        d = s * (p[DU_DV_MAX] if i < full else rest)
+    for i in range(n):
+        d = _euler_step(i, full, rest, dv, p[DU_DV_MAX])
         f, _ = duhem_slope(p, v, q, up)
         q += f * d
         v += d
     return q
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _euler_plan(dv, dv_max):  # type: ignore[no-untyped-def]
+    """(steps, full steps, rest) of a Duhem move: one step within dv_max, else full steps
+    of dv_max then the rest. The simulation and both fit kernels follow this plan."""
+    if abs(dv) <= dv_max:
+        return 1, 0, abs(dv)
+    full, rest = _steps(abs(dv), dv_max)
+    return full + (1 if rest > 0.0 else 0), full, rest
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _euler_step(i, full, rest, dv, dv_max):  # type: ignore[no-untyped-def]
+    """The signed length of step ``i`` of ``_euler_plan``."""
+    return (dv_max if i < full else rest) * (1.0 if dv > 0.0 else -1.0)
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
@@ -637,12 +649,10 @@ def duhem_jacobian(p, v, q0, rows, qsim, jac):  # type: ignore[no-untyped-def]
             dv = v[k] - v[k - 1]
             if dv != 0.0:
                 up = dv > 0.0
-                sign = 1.0 if up else -1.0
-                full, rest = _steps(abs(dv), p[DU_DV_MAX])
-                n = 1 if abs(dv) <= p[DU_DV_MAX] else full + (1 if rest > 0.0 else 0)
+                n, full, rest = _euler_plan(dv, p[DU_DV_MAX])
                 u = v[k - 1]
                 for step in range(n):
-                    d = dv if n == 1 else sign * (p[DU_DV_MAX] if step < full else rest)
+                    d = _euler_step(step, full, rest, dv, p[DU_DV_MAX])
                     f, dfdq = duhem_slope(p, u, q, up)
                     scale = 1.0 + dfdq * d
                     if scale != 1.0:
@@ -701,12 +711,10 @@ def duhem_cumulative(p, v, q, rows, out):  # type: ignore[no-untyped-def]
             dv = v[k] - v[k - 1]
             if dv != 0.0:
                 up = dv > 0.0
-                sign = 1.0 if up else -1.0
-                full, rest = _steps(abs(dv), p[DU_DV_MAX])
-                n = 1 if abs(dv) <= p[DU_DV_MAX] else full + (1 if rest > 0.0 else 0)
+                n, full, rest = _euler_plan(dv, p[DU_DV_MAX])
                 u = v[k - 1]
                 for step in range(n):
-                    d = dv if n == 1 else sign * (p[DU_DV_MAX] if step < full else rest)
+                    d = _euler_step(step, full, rest, dv, p[DU_DV_MAX])
                     qu = q[k - 1] + (q[k] - q[k - 1]) * (u - v[k - 1]) / dv
                     _basis_step(p, s, u, qu, d, up)
                     u += d
