@@ -451,3 +451,162 @@ def test_cores_check_what_they_are_built_from(models: dict[str, Any]) -> None:
     lo, hi = preisach.nodes[0], preisach.nodes[-1]
     e = preisach.everett([lo, lo, 0.5 * (lo + hi)], [lo, hi, 0.5 * (lo + hi)])
     assert e[0] == pytest.approx(0.0, abs=1e-20) and e[1] > 0 and e[2] == pytest.approx(0.0)
+
+
+# ------------------------------------------------------- creep beside a core
+CREEP = (0.02, 0.2)
+
+
+@pytest.fixture(scope="module")
+def creep_models(record: Any) -> dict[str, ph.HysteresisModel]:
+    v, q, t = record.voltage, record.charge, record.t
+    return {
+        "preisach": ph.PreisachModel(creep=CREEP).fit(v, q, t=t),
+        "duhem": ph.DuhemModel(creep=CREEP).fit(v, q, t=t),
+        "bouc-wen": ph.BoucWenModel(creep=CREEP).fit(v, q, t=t),
+    }
+
+
+def creep_trajectory(model: ph.HysteresisModel, fs: float, seconds: float = 4.0) -> Any:
+    """Voltages of decaying loops inside the training range (after a ramp from where the
+    model starts, where a compensator's lags start too), their times, and the output of the
+    model's hysteresis part (core and creep) along them."""
+    lo, hi = model.input_range_
+    _, shape = make_signal("decaying", amplitude=1.0, duration=seconds, rate=fs)
+    loops = lo + (hi - lo) * (0.2 + 0.6 * shape)
+    v0 = float(model.operator_.initial_state[0])
+    volts = np.concatenate([np.linspace(v0, loops[0], 200, endpoint=False), loops])
+    t = np.arange(volts.size) / fs
+    return volts, t, np.asarray(model.hysteresis_.predict(volts, t=t))
+
+
+def test_a_preisach_core_with_creep_is_fitted_exactly() -> None:
+    """Data made by a known Preisach core, creep lags and a leak are fitted exactly: the
+    output is linear in the density, the lag gains and the leak together."""
+    rec = ph.simulate(signal="decaying", duration=12.0, seed=1)
+    v, t = rec.voltage, rec.t
+    n = 7
+    nodes = float(v.min()) + float(np.ptp(v)) / (n - 1) * np.arange(n)
+    k, c = np.meshgrid(np.arange(n - 1.0), np.arange(n - 1.0), indexing="ij")
+    density = np.triu(2e-8 * np.exp(-((c - k - 1.0) ** 2) / 4.0) * (1.0 + 0.1 * k))
+    core = ph.PreisachHysteresis(nodes, density, ph.PreisachHysteresis(
+        nodes, density, np.zeros(D.RV_SIZE)).rest_state(float(v[0])))  # fmt: skip
+    gains = [3e-9, 1e-9]
+    truth = ph.PreisachModel.from_operator(
+        core, terms=(ph.terms.Creep(CREEP), ph.terms.Integral()), coefficients=(gains, [5e-10])
+    )
+    q = truth.predict(v, t=t)
+    model = ph.PreisachModel(n, creep=CREEP, smoothing=0.0, min_slope=1e-3).fit(v, q, t=t)
+    assert model.nrmse_ < 1e-9
+    coefs = model.coefficients()
+    assert coefs["creep[0.02 s]"][0] == pytest.approx(gains[0], rel=1e-6)
+    assert coefs["creep[0.2 s]"][0] == pytest.approx(gains[1], rel=1e-6)
+    assert model.growth_coefficients()["integral"][0] == pytest.approx(5e-10, rel=1e-6)
+    # the creep shapes the hysteresis: removing the growth keeps it
+    assert [term.kind for term in model.hysteresis_.terms_] == ["creep"]
+    with pytest.raises(ph.errors.TimeAxisError):
+        ph.PreisachModel(n, creep=CREEP, growth_terms=()).fit(v, q)  # lags need the times
+
+
+@pytest.mark.parametrize(
+    ("name", "lag"),
+    # with a lag too (the Duhem fit gives the bench's short creep to the lag: gains 0)
+    [("preisach", False), ("duhem", False), ("bouc-wen", False), ("preisach", True),
+     ("bouc-wen", True)],
+)  # fmt: skip
+def test_the_compensator_inverts_core_and_creep_together(
+    creep_models: dict[str, Any], record: Any, name: str, lag: bool
+) -> None:
+    """Commands that reproduce the voltages behind a hysteresis-and-creep output, sample by
+    sample (the lags are affine in each sample's voltage, solved with the core); with an
+    amplifier lag in the model as well."""
+    model = creep_models[name]
+    if lag:
+        model = clone(model).set_params(input_dynamics="first-order")
+        model.fit(record.voltage, record.charge, t=record.t)
+        assert model.input_dynamics_.tau > 0
+    gains = [g for label, (g, _) in model.coefficients().items() if label.startswith("creep")]
+    assert len(gains) == 2 and max(gains) > 0  # the bench creeps: the fit found it
+    fs = 1000.0
+    volts, t, desired = creep_trajectory(model, fs)
+    comp = ph.Compensator(model, v_min=0.0, v_max=model.input_range_[1], sample_rate=fs)
+    commands = comp.process(desired)
+    achieved = model.hysteresis_.predict(commands, t=t)
+    np.testing.assert_allclose(achieved, desired, rtol=0, atol=1e-9 * np.ptp(desired))
+    if not lag:
+        np.testing.assert_allclose(commands, volts, rtol=0, atol=1e-6)
+    assert comp.outside_count == comp.saturated_count == 0
+    # a state saved halfway and restored continues as if never interrupted
+    comp.reset()
+    first = comp.process(desired[:700])
+    saved = comp.state
+    assert saved.lags.size == 2
+    rest_a = comp.process(desired[700:1400])
+    comp.reset(saved)
+    np.testing.assert_array_equal(comp.process(desired[700:1400]), rest_a)
+    np.testing.assert_array_equal(np.concatenate([first, rest_a]), commands[:1400])
+
+
+def test_creep_on_a_core_needs_the_loop_rate(creep_models: dict[str, Any]) -> None:
+    model = creep_models["preisach"]
+    with pytest.raises(ph.errors.ParameterError, match="sample_rate"):
+        ph.Compensator(model, v_min=0.0, v_max=model.input_range_[1])
+    comp = ph.Compensator(model, v_min=0.0, v_max=model.input_range_[1], sample_rate=1e3)
+    bad = ph.compensator.CompensatorState(comp.state.operators, np.zeros(3), 0.0)
+    with pytest.raises(ph.errors.ShapeError, match="creep lag"):
+        comp.reset(bad)
+
+
+@pytest.mark.skipif(CC is None, reason="no C compiler on this machine")
+@pytest.mark.parametrize(
+    ("name", "precision", "slew"),
+    [("preisach", "double", None), ("duhem", "double", 800.0), ("bouc-wen", "float", None)],
+)
+def test_exported_c_with_creep_matches_python(
+    creep_models: dict[str, Any], tmp_path: Path, name: str, precision: str, slew: float | None
+) -> None:
+    from tests.test_export import HARNESS
+
+    model = creep_models[name]
+    hi = model.input_range_[1]
+    kw: dict[str, Any] = {} if slew is None else {"slew_rate": slew}
+    comp = ph.Compensator(model, v_min=0.0, v_max=hi, sample_rate=1000.0, **kw)
+    desired = creep_trajectory(model, 1000.0, 3.0)[2]
+    desired[::97] = np.nan  # the lags keep settling on the held command
+    desired[7::301] = -1.0  # unreachable: saturates
+    c_path, _ = write_c(comp, tmp_path / "core.c", precision=precision)  # type: ignore[arg-type]
+    assert "N_LAGS 2" in c_path.read_text()
+    (tmp_path / "main.c").write_text(HARNESS.replace("NAME", "core"))
+    exe = tmp_path / "core"
+    cmd = [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", str(c_path),
+           str(tmp_path / "main.c"), "-o", str(exe), "-lm"]  # fmt: skip
+    subprocess.run(cmd, check=True, capture_output=True, text=True)
+    text = "\n".join(repr(float(x)) for x in desired) + "\n"
+    out = subprocess.run([str(exe)], input=text, check=True, capture_output=True, text=True)
+    lines = out.stdout.split("\n")
+    c_cmds = np.array([float(x) for x in lines[: desired.size]])
+    py = comp.process(desired)
+    atol = 1e-9 if precision == "double" else 1e-4 * hi
+    np.testing.assert_allclose(c_cmds, py, rtol=0, atol=atol)
+    counts = tuple(int(x) for x in lines[desired.size].split())
+    assert counts == (comp.nonfinite_count, comp.saturated_count)
+
+
+def test_the_self_sensing_loop_runs_a_core_with_creep(creep_models: dict[str, Any]) -> None:
+    """The loop's model output includes the lags: on the bench, a Preisach model with creep
+    tracks a decaying trajectory, and a replay gives the same commands."""
+    model = creep_models["preisach"]
+    hi = model.input_range_[1]
+    fs = 1000.0
+    desired = creep_trajectory(model, fs, 3.0)[2]
+    ctl = ph.SelfSensingController(model, v_min=0.0, v_max=hi, sample_rate=fs)
+    bench = ph.simulation.Bench(voltage=ctl.last_command, seed=4)
+    measured = np.empty_like(desired)
+    commands = np.empty_like(desired)
+    for k, d in enumerate(desired):
+        measured[k] = bench.reading.charge
+        commands[k] = ctl.step(float(d), measured[k])
+        bench.apply(commands[k])
+    assert np.all((commands >= 0.0) & (commands <= hi))
+    replay = ph.SelfSensingController(model, v_min=0.0, v_max=hi, sample_rate=fs)
+    np.testing.assert_array_equal(replay.process(desired, measured), commands)

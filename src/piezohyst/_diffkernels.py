@@ -400,20 +400,22 @@ def _trial(p, st, trial, v):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def core_inverse(p, st, y, lo, hi, trial):  # type: ignore[no-untyped-def]
+def core_inverse(p, st, y, lo, hi, trial, lin):  # type: ignore[no-untyped-def]
     """The input v in [lo, hi] whose step from st gives output y, or the nearer end.
 
+    The output solved for is the core's plus ``lin * v`` (``lin >= 0``: the part
+    of kept creep lags that moves with this sample's voltage; 0 without creep).
     Returns (v, clamped): ``clamped`` is True when y is out of reach inside [lo, hi];
     ``trial`` holds the state after the step to v. A step's output is strictly
-    increasing in v with slope at least ``s_min`` (c0 + min(alpha, 0) g_max for
-    Bouc-Wen, the smallest slope for Duhem), so the root lies between v0 and
-    v0 + dy / s_min: Newton's method inside that bracket, bisecting whenever a
-    step would leave it, until the output is within 1e-12 of the step's
-    change. A Duhem step on charge memory within dv_max is one Euler step:
-    its explicit inverse is exact.
+    increasing in v with slope at least ``s_min + lin`` (s_min: c0 + min(alpha, 0)
+    g_max for Bouc-Wen, the smallest slope for Duhem), so the root lies between
+    v0 and v0 + dy / (s_min + lin): Newton's method inside that bracket,
+    bisecting whenever a step would leave it, until the output is within 1e-12
+    of the step's change. A Duhem step on charge memory within dv_max is one
+    Euler step: its explicit inverse is exact (the lags' part is linear too).
     """
     v0 = st[0]
-    dy = y - core_output(p, st)
+    dy = y - core_output(p, st) - lin * v0
     if dy == 0.0:
         v = min(max(v0, lo), hi)
         _trial(p, st, trial, v)
@@ -434,6 +436,8 @@ def core_inverse(p, st, y, lo, hi, trial):  # type: ignore[no-untyped-def]
             reverse = st[RV_DIR] != 0.0 and s != st[RV_DIR]
             top = v0 if reverse else st[RV_R + int(st[RV_K]) - 1]
             slope0 = _branch_slope(p, v0, top, s > 0.0)
+    slope0 += lin
+    s_min += lin
     v = v0 + dy / slope0
     if p[0] == KIND_DUHEM and abs(v - v0) <= p[DU_DV_MAX] and lo <= v <= hi:
         _trial(p, st, trial, v)
@@ -456,7 +460,8 @@ def core_inverse(p, st, y, lo, hi, trial):  # type: ignore[no-untyped-def]
     eps = 1e-13 * (abs(a) + abs(b) + 1.0)
     for _ in range(NEWTON_MAX):
         y1, f1 = _trial(p, st, trial, v)
-        res = y1 - y
+        res = y1 + lin * v - y
+        f1 += lin
         if abs(res) <= tol:
             return v, False
         if res < 0.0:
@@ -500,7 +505,11 @@ DS_NONFINITE = -3
 DS_SATURATED = -2
 DS_OUTSIDE = -1  # commands that left the region (sent, or held when refusing)
 DS_STATUS = 4
-# input dynamics: dyn = [gain A, gain B] as in _kernels (0: absent), dstate = [after A, after B]
+# between the command and the output, beside the core: dyn = [gain A, gain B] as in _kernels
+# (the input dynamics; 0: absent), then (g_k, a_k) for each kept creep lag (its gain and
+# 1 - exp(-dt / tau_k)); dstate = [after A, after B], then each lag's state c_k (V).
+# A lag's output at this sample, c_k + a_k (u - c_k), is affine in the piezo voltage u.
+DYN_LAGS = 2
 
 
 @njit(cache=True, fastmath=FASTMATH)
@@ -532,6 +541,36 @@ def _commit(st, trial):  # type: ignore[no-untyped-def]
         st[i] = trial[i]
 
 
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _lags_affine(dyn, dstate):  # type: ignore[no-untyped-def]
+    """(slope, offset): the kept lags' output at this sample is slope * u + offset."""
+    lin = 0.0
+    base = 0.0
+    for k in range((dyn.shape[0] - DYN_LAGS) // 2):
+        g = dyn[DYN_LAGS + 2 * k]
+        a = dyn[DYN_LAGS + 2 * k + 1]
+        lin += g * a
+        base += g * (1.0 - a) * dstate[DYN_LAGS + k]
+    return lin, base
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _lags_output(dyn, dstate):  # type: ignore[no-untyped-def]
+    """The kept lags' part of the model's output in their current state."""
+    y = 0.0
+    for k in range((dyn.shape[0] - DYN_LAGS) // 2):
+        y += dyn[DYN_LAGS + 2 * k] * dstate[DYN_LAGS + k]
+    return y
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _lags_advance(dyn, dstate, u):  # type: ignore[no-untyped-def]
+    """Every kept lag after the piezo voltage u is held one sample."""
+    for k in range((dyn.shape[0] - DYN_LAGS) // 2):
+        c = dstate[DYN_LAGS + k]
+        dstate[DYN_LAGS + k] = c + dyn[DYN_LAGS + 2 * k + 1] * (u - c)
+
+
 @njit(cache=True, fastmath=FASTMATH)
 def core_step(desired, p, cfg, st, region, dyn, dstate, trial):  # type: ignore[no-untyped-def]
     """One feedforward command (V) for one desired value; ``st`` updated.
@@ -548,14 +587,16 @@ def core_step(desired, p, cfg, st, region, dyn, dstate, trial):  # type: ignore[
         if dynamic:
             _trial(p, st, trial, _advance(last, dyn, dstate))
             _commit(st, trial)
+        _lags_advance(dyn, dstate, st[0])
         return last
-    y = cfg[CC_REF] + desired * cfg[CC_INV_GAIN]
+    lin, base = _lags_affine(dyn, dstate)
+    y = cfg[CC_REF] + desired * cfg[CC_INV_GAIN] - base
     step = cfg[CC_MAX_STEP]
     a, b = lo, hi
     if not dynamic:  # the slew limit bounds the inverse itself
         a = max(lo, last - step)
         b = min(hi, last + step)
-    u, clamped = core_inverse(p, st, y, a, b, trial)
+    u, clamped = core_inverse(p, st, y, a, b, trial, lin)
     if clamped and (u <= lo or u >= hi):  # out of reach inside the limits (not the slew)
         st[end + DS_SATURATED] += 1.0
     x = u
@@ -586,6 +627,7 @@ def core_step(desired, p, cfg, st, region, dyn, dstate, trial):  # type: ignore[
                     dstate[1] = saved1
                     _trial(p, st, trial, _advance(last, dyn, dstate))
                     _commit(st, trial)
+                    _lags_advance(dyn, dstate, st[0])
                     return last
                 # stop at the region's edge: the largest move towards u that stays inside
                 edge = max(cfg[CC_TOL], d0)
@@ -602,6 +644,7 @@ def core_step(desired, p, cfg, st, region, dyn, dstate, trial):  # type: ignore[
                 x = a
                 _trial(p, st, trial, u)
     _commit(st, trial)
+    _lags_advance(dyn, dstate, st[0])
     st[end + DS_LAST] = x
     return x
 
@@ -734,7 +777,7 @@ def core_controller_step(desired, measured, p, cfg, st, region, dyn, dstate, tri
     last = st[end + DS_LAST]
     qc = K.feedback_measure_at(0, measured, last, c2, cs2)
     if math.isfinite(qc) and cs[K.CS_STARTED] == 0.0:  # the first measurement sets the frame
-        cs[K.CS_FRAME] = core_output(p, st) - qc
+        cs[K.CS_FRAME] = core_output(p, st) + _lags_output(dyn, dstate) - qc
         cs[K.CS_STARTED] = 1.0
     e = K.feedback_error_at(0, qc, cs2)
     d, integral, u = K.feedback_command_at(0, desired, e, c2, cs2)
@@ -742,7 +785,7 @@ def core_controller_step(desired, measured, p, cfg, st, region, dyn, dstate, tri
         st[end + DS_NONFINITE] += 1.0
         return last
     v = core_step(u, p, cfg, st, region, dyn, dstate, trial)
-    K.feedback_close_at(0, d, u, core_output(p, st), integral, c2, cs2)
+    K.feedback_close_at(0, d, u, core_output(p, st) + _lags_output(dyn, dstate), integral, c2, cs2)
     return v
 
 

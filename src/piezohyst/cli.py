@@ -495,7 +495,9 @@ def describe(model: HysteresisModel) -> str:
     "integral,time,abs_integral.",
 )
 @click.option(
-    "--creep", default="", help="generalized-pi: creep time constants in s, e.g. 0.1,1,10."
+    "--creep",
+    default="",
+    help="generalized-pi, preisach, duhem, bouc-wen: creep time constants in s, e.g. 0.1,1,10.",
 )
 @click.option(
     "--input-dynamics",

@@ -767,6 +767,18 @@ class CoreCompensator(Compensator):
             self.region = region.array
         if domain == "displacement":  # displacement 0 = the output in the initial state
             self.config[D.CC_REF] = core.output(core.initial_state)
+        lg = spec.lags
+        if lg is not None:  # kept creep lags: affine in each sample's voltage, solved with it
+            if sample_rate is None:
+                msg = "A model with creep needs the loop's sample_rate (Hz). Got sample_rate=None."
+                raise ParameterError(msg)
+            alphas = 1.0 - np.exp(-1.0 / (float(sample_rate) * np.asarray(lg.taus)))
+            self.lags = np.vstack([lg.taus, lg.gains, alphas])
+            pairs = np.column_stack([lg.gains, alphas]).ravel()
+            self.dyn = np.concatenate([self.dyn[: D.DYN_LAGS], pairs])
+            self.dstate = np.zeros(D.DYN_LAGS + alphas.size)
+        else:
+            self.lags = np.zeros((3, 0))
         self._ns = core.n_states
         self._state = np.zeros(self._ns + D.DS_STATUS)
         #: scratch for the kernel's trial steps (the core's state after a candidate command)
@@ -783,9 +795,9 @@ class CoreCompensator(Compensator):
         """The core's state ``[v, x, ...]`` as ``operators``, and the last command (copies)."""
         return CompensatorState(
             self._state[: self._ns].copy(),
-            np.zeros(0),
+            self.dstate[D.DYN_LAGS :].copy(),
             float(self._state[self._ns + D.DS_STATUS + D.DS_LAST]),
-            self.dstate.copy() if self.dynamic else np.zeros(0),
+            self.dstate[: D.DYN_LAGS].copy() if self.dynamic else np.zeros(0),
         )
 
     @property
@@ -878,9 +890,19 @@ class CoreCompensator(Compensator):
         self._state[:] = 0.0
         self._state[: self._ns] = z
         self._state[self._ns + D.DS_STATUS + D.DS_LAST] = last
-        self.dstate[:] = last
-        if isinstance(state, CompensatorState) and state.dynamics.size == 2 and self.dynamic:
-            self.dstate[:] = state.dynamics
+        self.dstate[:] = last  # the piezo and every creep lag settled at the last command
+        if isinstance(state, CompensatorState):
+            if state.dynamics.size == D.DYN_LAGS and self.dynamic:
+                self.dstate[: D.DYN_LAGS] = state.dynamics
+            lags = as_signal(state.lags, "state.lags", allow_empty=True)
+            if lags.size == self.lags.shape[1]:
+                self.dstate[D.DYN_LAGS :] = lags
+            elif lags.size:
+                msg = (
+                    f"'state.lags' must hold the model's {self.lags.shape[1]} creep lag "
+                    f"states. Got {lags.size}."
+                )
+                raise ShapeError(msg)
         self._mode_history[:] = np.nan
         self._last_desired = math.nan
 
@@ -898,8 +920,10 @@ class CoreCompensator(Compensator):
         """
         cycle = self._cycle(samples)
         u = np.empty_like(cycle)
+        alphas = self.lags[2]
         for k, v in enumerate(cycle):
             u[k] = K._advance_dynamics(v, self.dyn, self.dstate) if self.dynamic else v
+            self.dstate[D.DYN_LAGS :] += alphas * (u[k] - self.dstate[D.DYN_LAGS :])
         self._state[: self._ns] = self.core.propagate(u, self._state[: self._ns]).state
         self._state[self._ns + D.DS_STATUS + D.DS_LAST] = cycle[-1]
         return cycle

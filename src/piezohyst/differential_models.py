@@ -60,6 +60,7 @@ from .models import (
     InitialState,
     Rule,
     _bool,
+    _creep,
     _dynamics_kind,
     _growth_terms,
     _output_kind,
@@ -162,6 +163,7 @@ class DifferentialModel(HysteresisModel):
 
     _rules: ClassVar[dict[str, Rule]] = {
         "growth_terms": _growth_terms,
+        "creep": _creep,
         "min_slope": _fraction,
         "region_tolerance": _nonneg,
         "input_unit": _unit,
@@ -176,6 +178,7 @@ class DifferentialModel(HysteresisModel):
         self,
         *,
         growth_terms: str | Sequence[str] = ("integral",),
+        creep: Sequence[float] = (),
         min_slope: float = 0.02,
         region_tolerance: float = 0.05,
         input_unit: str = "V",
@@ -185,6 +188,7 @@ class DifferentialModel(HysteresisModel):
     ) -> None:
         # the settings every model on a differential core has; subclasses add theirs
         self.growth_terms = growth_terms
+        self.creep = creep
         self.min_slope = min_slope
         self.region_tolerance = region_tolerance
         self.input_unit = input_unit
@@ -216,15 +220,18 @@ class DifferentialModel(HysteresisModel):
             raise InsufficientDataError(msg)
         select = params["growth_terms"] is None
         names = GROWTH_TERMS if select else params["growth_terms"]
-        terms = [make_term(name).bind(sm.x_range) for name in names]
-        if any(term.rate_dependent for term in terms) and (not timed or t is None):
-            if select:
-                terms = []  # no times: no growth term to choose
-            else:
+        # kept terms first (creep: they shape the hysteresis), then the growth terms
+        fixed: list[Term] = [] if params["creep"] is None else [params["creep"]]
+        growth = [make_term(name).bind(sm.x_range) for name in names]
+        if not timed or t is None:
+            if any(term.rate_dependent for term in growth) and select:
+                growth = []  # no times: no growth term to choose
+            elif any(term.rate_dependent for term in fixed + growth):
                 as_time(None, sm.n, required=True, owner=type(self).__name__)  # raises
+        terms = fixed + growth
         proxy: list[FloatArray] | None = None
         if terms and (select or self.growth_from_proxy):
-            terms, proxy = self._proxy(x, y, t, terms, select, initial_state)
+            terms, proxy = self._proxy(x, y, t, terms, select, initial_state, len(fixed))
         core, coefs = self._identify(
             x, y, t if terms else None, terms, params, initial_state, proxy
         )
@@ -257,14 +264,16 @@ class DifferentialModel(HysteresisModel):
         terms: list[Term],
         select: bool,
         initial_state: InitialState,
+        n_fixed: int = 0,
     ) -> tuple[list[Term], list[FloatArray]]:
         """Growth terms identified jointly with Prandtl-Ishlinskii operators (a proxy core).
 
         PI loops close by construction: every drift of the charge is the
         growth terms'. A Duhem core's loops need not close, so identified
         jointly with it a leak trades against the slopes; the proxy settles the
-        growth first. With ``select`` (``growth_terms="auto"``) the proxy's
-        forward-chaining cross-validation chooses the terms (``selection_``).
+        growth (and the creep) first. With ``select`` (``growth_terms="auto"``)
+        the proxy's forward-chaining cross-validation chooses the growth terms
+        (``selection_``); the first ``n_fixed`` terms (creep) are in every subset.
         """
         sm = Summary.of(array_blocks(x, y, t))
         thr = default_thresholds(sm.x_range, PROXY_OPERATORS)
@@ -273,9 +282,10 @@ class DifferentialModel(HysteresisModel):
             z0 = periodic_state(array_blocks(x, x, None), thr, float(x[0]))
         subsets = None
         if select:
+            base = tuple(range(n_fixed))
             subsets = [
-                combo for size in range(len(terms) + 1)
-                for combo in itertools.combinations(range(len(terms)), size)
+                base + combo for size in range(len(terms) - n_fixed + 1)
+                for combo in itertools.combinations(range(n_fixed, len(terms)), size)
             ]  # fmt: skip
         sol = identify(PlayCore(thr), terms, array_blocks(x, y, t), sm, z0, min_slope=1e-3,
                        subsets=subsets)  # fmt: skip
@@ -339,10 +349,14 @@ class DifferentialModel(HysteresisModel):
     # ------------------------------------------------------- pure hysteresis
     @property
     def hysteresis_(self) -> HysteresisModel:
-        """The model without its growth terms (eq. 19's pure hysteresis), as a fitted model."""
+        """The model without its growth terms (eq. 19's pure hysteresis), as a fitted model.
+
+        Kept terms (creep) stay: they shape the hysteresis the compensator inverts.
+        """
         self._check_fitted()
         model = type(self)(**{**self.get_params(), "growth_terms": ()})
-        model.set_fitted(self.operator_, (), ())
+        kept = [(tm, c) for tm, c in zip(self.terms_, self.coefs_, strict=True) if not tm.removed]
+        model.set_fitted(self.operator_, tuple(tm for tm, _ in kept), tuple(c for _, c in kept))
         model.input_range_ = self.input_range_
         model.max_slew_rate_ = self.max_slew_rate_
         model.input_dynamics_ = self.input_dynamics_
@@ -418,6 +432,10 @@ class DuhemModel(DifferentialModel):
     growth_terms : "auto" or sequence of {"integral", "time", "abs_integral"}, default ("integral",)
         Growth terms (removed before compensating); ``"auto"`` chooses by the
         proxy's forward-chaining cross-validation (``selection_``).
+    creep : sequence of float, default ()
+        Time constants (s) of kept creep lags beside the core (as
+        :class:`GeneralizedPI`'s), identified with the growth terms by the
+        proxy; the compensator inverts them with the core, sample by sample.
     smoothing : float, default 1e-3
         Weight of the curvature penalty on the slope surfaces, relative to the
         data's (fills cells the data barely visit).
@@ -462,6 +480,7 @@ class DuhemModel(DifferentialModel):
         grid: tuple[int, int] = (8, 6),
         *,
         growth_terms: str | Sequence[str] = ("integral",),
+        creep: Sequence[float] = (),
         smoothing: float = 1e-3,
         min_slope: float = 0.02,
         refine: bool = True,
@@ -473,6 +492,7 @@ class DuhemModel(DifferentialModel):
     ) -> None:
         super().__init__(
             growth_terms=growth_terms,
+            creep=creep,
             min_slope=min_slope,
             region_tolerance=region_tolerance,
             input_unit=input_unit,
@@ -567,6 +587,11 @@ class PreisachModel(DifferentialModel):
     growth_terms : "auto" or sequence of {"integral", "time", "abs_integral"}, default ("integral",)
         Fitted jointly (its loops close: a drift can only be growth);
         ``"auto"``: the Prandtl-Ishlinskii proxy's cross-validation chooses them.
+    creep : sequence of float, default ()
+        Time constants (s) of kept creep lags beside the core, e.g.
+        ``(0.005, 0.02, 0.05, 0.2, 0.5, 2)``: first-order lags of the voltage
+        with gains ``>= 0``, fitted in the same least squares (the output stays
+        linear in every coefficient) and inverted with the core by the compensator.
     smoothing : float, default 1e-4
         Weight of the curvature penalty on the density, relative to the data's.
     min_slope : float, default 0.02
@@ -601,6 +626,7 @@ class PreisachModel(DifferentialModel):
         nodes: int = 16,
         *,
         growth_terms: str | Sequence[str] = ("integral",),
+        creep: Sequence[float] = (),
         smoothing: float = 1e-4,
         min_slope: float = 0.02,
         region_tolerance: float = 0.05,
@@ -611,6 +637,7 @@ class PreisachModel(DifferentialModel):
     ) -> None:
         super().__init__(
             growth_terms=growth_terms,
+            creep=creep,
             min_slope=min_slope,
             region_tolerance=region_tolerance,
             input_unit=input_unit,
@@ -808,6 +835,9 @@ class BoucWenModel(DifferentialModel):
     Parameters
     ----------
     growth_terms : "auto" or sequence of {"integral", "time", "abs_integral"}, default ("integral",)
+    creep : sequence of float, default ()
+        Time constants (s) of kept creep lags, fitted with c0, alpha and the
+        growth in the linear solve; inverted with the core by the compensator.
     min_slope : float, default 1e-3
         Smallest c0, as a fraction of the mean slope.
     region_tolerance : float, default 0.05
@@ -835,6 +865,7 @@ class BoucWenModel(DifferentialModel):
         self,
         growth_terms: str | Sequence[str] = ("integral",),
         *,
+        creep: Sequence[float] = (),
         min_slope: float = 1e-3,
         region_tolerance: float = 0.05,
         input_unit: str = "V",
@@ -844,6 +875,7 @@ class BoucWenModel(DifferentialModel):
     ) -> None:
         super().__init__(
             growth_terms=growth_terms,
+            creep=creep,
             min_slope=min_slope,
             region_tolerance=region_tolerance,
             input_unit=input_unit,

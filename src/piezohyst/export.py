@@ -716,6 +716,9 @@ def _core_c(comp: CoreCompensator, prefix: str, precision: Precision) -> CCode:
         fields += f"    {real} w, u;               /* input dynamics: after the fractional delay, after the lag (V) */\n"  # noqa: E501
     if comp.mode.active:
         fields += f"    {real} e1, e2;             /* output mode: the last two desired values (NaN: none) */\n"  # noqa: E501
+    n_lags = int(comp.lags.shape[1])
+    if n_lags:
+        fields += f"    {real} c[{n_lags}];              /* creep lag states (V) */\n"
     delay_note = (
         f" With the model's input delay of {comp.delay_samples} samples, pass the value\n"
         f" * desired {comp.delay_samples} samples from now (the command acts then).\n *"
@@ -762,6 +765,8 @@ void {prefix}_init({prefix}_t *s);
     if comp.dynamic:
         init += f"    s->w = {_literal(comp.dstate[0], p)};\n"
         init += f"    s->u = {_literal(comp.dstate[1], p)};\n"
+    for k in range(n_lags):
+        init += f"    s->c[{k}] = {_literal(float(comp.dstate[D.DYN_LAGS + k]), p)};\n"
     if comp.mode.active:
         for name, value in zip(("e2", "e1"), comp.mode_history, strict=True):
             v = _literal(float(value), p) if np.isfinite(value) else "not_a_number()"
@@ -809,6 +814,12 @@ void {prefix}_init({prefix}_t *s);
                 f"{_array(params[D.DU_UP + cells : D.DU_UP + 2 * cells], p)};",
             ]
         )
+    lag_c = ""
+    if n_lags:  # gains and 1 - exp(-dt / tau) at the loop's sample rate
+        lag_c = (
+            f"static const {real} LAG_G[N_LAGS] = {_array(comp.lags[1], p)};\n"
+            f"static const {real} LAG_A[N_LAGS] = {_array(comp.lags[2], p)};\n"
+        )
     region_c = ""
     if has_region:
         region_c = (
@@ -830,6 +841,7 @@ void {prefix}_init({prefix}_t *s);
 #define DYNAMIC {int(comp.dynamic)}
 #define MODE {int(comp.mode.active)}
 #define HAS_REGION {has_region}
+#define N_LAGS {n_lags} /* kept creep lags beside the core */
 #define NEWTON_MAX {D.NEWTON_MAX}
 #define REGION_BISECTIONS {D.REGION_BISECTIONS}
 #define STACK {D.STACK}
@@ -849,7 +861,7 @@ static const {real} LAST0 = {_literal(state.command, p)};
 static const {real} GAIN_A = {_literal(float(comp.dyn[0]), p)}; /* the fractional delay, as a lag */
 static const {real} GAIN_B = {_literal(float(comp.dyn[1]), p)}; /* the amplifier's lag */
 #endif
-
+{lag_c}
 {_ieee_helpers(real, precision)}
 static {real} abs_real({real} x) {{ return x < 0 ? -x : x; }}
 static {real} min_real({real} a, {real} b) {{ return a < b ? a : b; }}
@@ -1141,9 +1153,11 @@ static real_t try_move(const real_t *st, real_t *trial, real_t v, real_t *f)
 /* the input in [lo, hi] whose step from st gives y, or the nearer end (*clamped);
  * trial holds the state after the step to it */
 static real_t core_inverse(real_t *st, real_t y, real_t lo, real_t hi, int *clamped,
-                           real_t *trial)
+                           real_t *trial, real_t lin)
 {
-    real_t v0 = st[0], dy = y - core_output(st), v, far, a, b, eps, tol, f1, y1, res, vn;
+    /* the output solved for is the core's plus lin * v (the creep lags' part; 0: none) */
+    real_t v0 = st[0], dy = y - core_output(st) - lin * v0, v, far, a, b, eps, tol, f1, y1;
+    real_t res, vn;
     int it, at_hi, at_lo;
     *clamped = 0;
     if (dy == 0) {
@@ -1152,14 +1166,14 @@ static real_t core_inverse(real_t *st, real_t y, real_t lo, real_t hi, int *clam
         try_move(st, trial, v, &f1);
         return v;
     }
-    v = v0 + dy / first_slope(st, dy > 0, dy);
+    v = v0 + dy / (first_slope(st, dy > 0, dy) + lin);
 #if KIND == 0
     if (abs_real(v - v0) <= DV_MAX && lo <= v && v <= hi) {
         try_move(st, trial, v, &f1);
         return v; /* one Euler step: the explicit inverse is exact */
     }
 #endif
-    far = v0 + 1.000001 * dy / S_MIN; /* a branch as flat as S_MIN puts the root at its end */
+    far = v0 + 1.000001 * dy / (S_MIN + lin); /* as flat as S_MIN: the root at its end */
     a = max_real(min_real(v0, far), lo);
     b = min_real(max_real(v0, far), hi);
     if (a >= b) { /* at or beyond a limit and asked to go further out */
@@ -1181,7 +1195,8 @@ static real_t core_inverse(real_t *st, real_t y, real_t lo, real_t hi, int *clam
     eps = 1e-13 * (abs_real(a) + abs_real(b) + 1.0);
     for (it = 0; it < NEWTON_MAX; ++it) {
         y1 = try_move(st, trial, v, &f1);
-        res = y1 - y;
+        res = y1 + lin * v - y;
+        f1 += lin;
         if (abs_real(res) <= tol) {
             return v;
         }
@@ -1226,6 +1241,35 @@ static real_t region_distance(real_t v, real_t y)
 }
 #endif
 
+#if N_LAGS
+/* the creep lags' output at this sample is *lin * u + (returned): affine in the voltage u */
+static real_t lags_affine(const PREFIX_t *s, real_t *lin)
+{
+    real_t base = 0;
+    int k;
+    *lin = 0;
+    for (k = 0; k < N_LAGS; ++k) {
+        *lin += LAG_G[k] * LAG_A[k];
+        base += LAG_G[k] * (1 - LAG_A[k]) * s->c[k];
+    }
+    return base;
+}
+#endif
+
+/* every creep lag after the piezo voltage u is held one sample */
+static void lags_advance(PREFIX_t *s, real_t u)
+{
+#if N_LAGS
+    int k;
+    for (k = 0; k < N_LAGS; ++k) {
+        s->c[k] += LAG_A[k] * (u - s->c[k]);
+    }
+#else
+    (void)s;
+    (void)u;
+#endif
+}
+
 #if DYNAMIC
 static real_t advance(PREFIX_t *s, real_t x)
 {
@@ -1249,7 +1293,7 @@ INIT_EXTRA}
 
 STEP_SIGNATURE(PREFIX_t *s, real_t desired)
 {
-    real_t y, a = V_MIN, b = V_MAX, u, x, f, trial[NS];
+    real_t y, a = V_MIN, b = V_MAX, u, x, f, trial[NS], lin = 0;
     int clamped, i;
 #if DYNAMIC
     real_t saved_w = s->w, saved_u = s->u;
@@ -1259,14 +1303,18 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
 #if DYNAMIC
         core_move(s->st, advance(s, s->last), 1, &f);
 #endif
+        lags_advance(s, s->st[0]);
         return s->last;
     }
     y = REFERENCE + desired * SCALE;
+#if N_LAGS
+    y -= lags_affine(s, &lin);
+#endif
 #if HAS_SLEW && !DYNAMIC
     a = max_real(V_MIN, s->last - MAX_STEP);
     b = min_real(V_MAX, s->last + MAX_STEP);
 #endif
-    u = core_inverse(s->st, y, a, b, &clamped, trial);
+    u = core_inverse(s->st, y, a, b, &clamped, trial, lin);
     if (clamped && (u <= V_MIN || u >= V_MAX)) {
         s->saturated++;
     }
@@ -1298,6 +1346,7 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
         s->w = saved_w;
         s->u = saved_u;
         core_move(s->st, advance(s, s->last), 1, &f);
+        lags_advance(s, s->st[0]);
         return s->last;
 #else /* stop at the region's edge: the largest move towards u that stays inside */
         {
@@ -1325,6 +1374,7 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
     for (i = 0; i < NS; ++i) {
         s->st[i] = trial[i];
     }
+    lags_advance(s, s->st[0]);
     s->last = x;
     return x;
 }

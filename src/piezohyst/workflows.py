@@ -197,7 +197,9 @@ def fit_file(
     data_spec : DataSpec, optional
         Columns and samples (default: voltage, charge, time).
     growth_terms, creep
-        Settings of models that have them (``generalized-pi``).
+        Settings of models that have them (``growth_terms``: every model but
+        the classical and active PI; ``creep``: ``generalized-pi`` and the
+        models on a differential core).
     input_dynamics, output_dynamics : str
         Delay and lag between command and piezo, mode between hysteresis and
         output (see :class:`~piezohyst.models.HysteresisModel`).
