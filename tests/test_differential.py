@@ -464,6 +464,9 @@ def creep_models(record: Any) -> dict[str, ph.HysteresisModel]:
         "preisach": ph.PreisachModel(creep=CREEP).fit(v, q, t=t),
         "duhem": ph.DuhemModel(creep=CREEP).fit(v, q, t=t),
         "bouc-wen": ph.BoucWenModel(creep=CREEP).fit(v, q, t=t),
+        "relaxing": ph.PreisachModel(creep=CREEP, relaxation=0.1, relaxation_nodes=8).fit(
+            v, q, t=t
+        ),
     }
 
 
@@ -511,8 +514,8 @@ def test_a_preisach_core_with_creep_is_fitted_exactly() -> None:
 @pytest.mark.parametrize(
     ("name", "lag"),
     # with a lag too (the Duhem fit gives the bench's short creep to the lag: gains 0)
-    [("preisach", False), ("duhem", False), ("bouc-wen", False), ("preisach", True),
-     ("bouc-wen", True)],
+    [("preisach", False), ("duhem", False), ("bouc-wen", False), ("relaxing", False),
+     ("preisach", True), ("bouc-wen", True), ("relaxing", True)],
 )  # fmt: skip
 def test_the_compensator_inverts_core_and_creep_together(
     creep_models: dict[str, Any], record: Any, name: str, lag: bool
@@ -560,8 +563,9 @@ def test_creep_on_a_core_needs_the_loop_rate(creep_models: dict[str, Any]) -> No
 @pytest.mark.skipif(CC is None, reason="no C compiler on this machine")
 @pytest.mark.parametrize(
     ("name", "precision", "slew"),
-    [("preisach", "double", None), ("duhem", "double", 800.0), ("bouc-wen", "float", None)],
-)
+    [("preisach", "double", None), ("duhem", "double", 800.0), ("bouc-wen", "float", None),
+     ("relaxing", "double", None), ("relaxing", "float", 800.0)],
+)  # fmt: skip
 def test_exported_c_with_creep_matches_python(
     creep_models: dict[str, Any], tmp_path: Path, name: str, precision: str, slew: float | None
 ) -> None:
@@ -592,10 +596,13 @@ def test_exported_c_with_creep_matches_python(
     assert counts == (comp.nonfinite_count, comp.saturated_count)
 
 
-def test_the_self_sensing_loop_runs_a_core_with_creep(creep_models: dict[str, Any]) -> None:
-    """The loop's model output includes the lags: on the bench, a Preisach model with creep
-    tracks a decaying trajectory, and a replay gives the same commands."""
-    model = creep_models["preisach"]
+@pytest.mark.parametrize("name", ["preisach", "relaxing"])
+def test_the_self_sensing_loop_runs_a_core_with_creep(
+    creep_models: dict[str, Any], name: str
+) -> None:
+    """The loop's model output includes the lags (and the slow core): on the bench, a
+    Preisach model with creep keeps every command safe, and a replay gives the same ones."""
+    model = creep_models[name]
     hi = model.input_range_[1]
     fs = 1000.0
     desired = creep_trajectory(model, fs, 3.0)[2]
@@ -610,3 +617,90 @@ def test_the_self_sensing_loop_runs_a_core_with_creep(creep_models: dict[str, An
     assert np.all((commands >= 0.0) & (commands <= hi))
     replay = ph.SelfSensingController(model, v_min=0.0, v_max=hi, sample_rate=fs)
     np.testing.assert_array_equal(replay.process(desired, measured), commands)
+
+
+# ------------------------------------------------------ relaxing hysteresis
+def _relaxing_truth(v: np.ndarray) -> tuple[Any, np.ndarray, ph.terms.Relaxation]:
+    """A known Preisach core with a relaxing density (8 nodes, tau 0.1 s) and a leak."""
+    n = 7
+    nodes = float(v.min()) + float(np.ptp(v)) / (n - 1) * np.arange(n)
+    k, c = np.meshgrid(np.arange(n - 1.0), np.arange(n - 1.0), indexing="ij")
+    density = np.triu(2e-8 * np.exp(-((c - k - 1.0) ** 2) / 4.0) * (1.0 + 0.1 * k))
+    core = ph.PreisachHysteresis(nodes, density, ph.PreisachHysteresis(
+        nodes, density, np.zeros(D.RV_SIZE)).rest_state(float(v[0])))  # fmt: skip
+    term = ph.terms.Relaxation(0.1, 8).bind(np.array([v.min(), v.max()]))
+    m = 7
+    kk, cc = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
+    slow = 6e-9 * np.exp(-((cc - kk) ** 2) / 2.0)
+    return core, slow[np.triu_indices(m)], term
+
+
+def test_relaxation_columns_are_a_preisach_core_on_the_lagged_voltage() -> None:
+    """The term's output equals a Preisach core (independent code: the core's own step)
+    run on the voltage through the lag; blocks continue like one call."""
+    rec = ph.simulate(signal="decaying", duration=6.0, seed=2)
+    v, t = rec.voltage, rec.t
+    _, cells, term = _relaxing_truth(v)
+    state = term.rest_state(float(v[0]))
+    dt = np.concatenate([[0.0], np.diff(t)])
+    out = term.columns(v, t, dt, state.copy()) @ cells
+    # naive reference: the lag sample by sample, then the slow core as a PreisachHysteresis
+    lagged = np.empty_like(v)
+    c = float(v[0])
+    for i in range(v.size):
+        c += (1.0 - np.exp(-dt[i] / 0.1)) * (v[i] - c)
+        lagged[i] = c
+    shape = term.relaxation_shape(cells)
+    m = 7
+    mu = np.zeros((m, m))
+    mu[np.triu_indices(m)] = cells
+    nodes = np.linspace(v.min(), v.max(), 8)
+    ref_core = ph.PreisachHysteresis(nodes, mu + 1e-300 * np.eye(m), np.zeros(D.RV_SIZE))
+    ref = ref_core.predict(lagged, ref_core.rest_state(float(v[0])))
+    ref -= ref_core.rest_state(float(v[0]))[1]
+    np.testing.assert_allclose(out, ref, rtol=0, atol=1e-12 * np.ptp(ref))
+    assert np.ptp(ref) > 0
+    np.testing.assert_allclose(shape.packed[D.DU_UP :], ref_core.packed[D.DU_UP :], rtol=1e-9)
+    # in blocks, the state carried
+    st2 = term.rest_state(float(v[0]))
+    parts = [term.columns(v[a:b], t[a:b], dt[a:b], st2) @ cells
+             for a, b in ((0, 1000), (1000, 1001), (1001, v.size))]  # fmt: skip
+    np.testing.assert_allclose(np.concatenate(parts), out, rtol=0, atol=1e-15 * np.ptp(ref))
+    # the state gives the slow core's output
+    assert term.output_state(st2, cells)[1] == pytest.approx(out[-1], rel=1e-12)
+
+
+def test_a_relaxing_preisach_model_is_fitted_exactly(tmp_path: Path) -> None:
+    """Data made by a known core, relaxing density and leak are fitted exactly (one linear
+    solve), survive a file, and the relaxing part stays in the hysteresis."""
+    rec = ph.simulate(signal="decaying", duration=12.0, seed=1)
+    v, t = rec.voltage, rec.t
+    core, cells, term = _relaxing_truth(v)
+    truth = ph.PreisachModel.from_operator(
+        core, terms=(term, ph.terms.Integral()), coefficients=(cells, [5e-10])
+    )
+    q = truth.predict(v, t=t)
+    model = ph.PreisachModel(7, relaxation=0.1, relaxation_nodes=8, smoothing=0.0,
+                             min_slope=1e-3).fit(v, q, t=t)  # fmt: skip
+    assert model.nrmse_ < 1e-9
+    slow = [c for tm, c in zip(model.terms_, model.coefs_, strict=True) if tm.kind == "relaxation"]
+    # cells the lagged voltage never separates are not identifiable; the relaxing output is
+    dt = np.concatenate([[0.0], np.diff(t)])
+    cols = term.columns(v, t, dt, term.rest_state(float(v[0])))
+    np.testing.assert_allclose(cols @ slow[0], cols @ cells, rtol=0, atol=1e-7 * np.ptp(q))
+    assert [tm.kind for tm in model.hysteresis_.terms_] == ["relaxation"]
+    model.save(tmp_path / "r.json")
+    back = ph.load_model(tmp_path / "r.json")
+    np.testing.assert_array_equal(back.predict(v, t=t), model.predict(v, t=t))
+    with pytest.raises(ph.errors.ParameterError, match="relaxation"):
+        ph.PreisachModel(relaxation=-1.0).fit(v, q, t=t)
+    with pytest.raises(ph.errors.ParameterError, match="relaxation_nodes"):
+        ph.PreisachModel(relaxation=0.1, relaxation_nodes=2).fit(v, q, t=t)
+
+
+def test_a_play_operator_model_refuses_a_relaxation_term() -> None:
+    rec = ph.simulate(duration=4.0, seed=1)
+    term = ph.terms.Relaxation(0.1, 5)
+    model = ph.PIModel(8, terms=(term,)).fit(rec.voltage, rec.charge, t=rec.t)
+    with pytest.raises(ph.errors.ParameterError, match="relaxation term"):
+        ph.Compensator(model, v_min=0.0, v_max=100.0, sample_rate=1e3)

@@ -399,8 +399,27 @@ def _trial(p, st, trial, v):  # type: ignore[no-untyped-def]
     return core_move(p, trial, v, True)
 
 
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _move_all(p, cfg, st, trial, v, lin):  # type: ignore[no-untyped-def]
+    """``trial`` = the state after the piezo voltage moves from ``st`` to ``v``: the core,
+    and a slow core (if any) whose input moves along its lag; (output, slope) of the core
+    plus ``lin * v`` plus the slow core's output. The slow core adds a slope >= 0."""
+    y, f = _trial(p, st, trial, v)
+    y += lin * v
+    f += lin
+    at = int(cfg[CC_SLOW_AT])
+    if at > 0:
+        ns = int(cfg[CC_NS])
+        a = cfg[CC_SLOW_A]
+        c = st[ns]
+        ys, fs = rev_move(p[at:], trial[ns:], c + a * (v - c), True, trial[:0], False)
+        y += ys
+        f += a * fs
+    return y, f
+
+
 @njit(cache=True, fastmath=FASTMATH)
-def core_inverse(p, st, y, lo, hi, trial, lin):  # type: ignore[no-untyped-def]
+def core_inverse(p, cfg, st, y, lo, hi, trial, lin):  # type: ignore[no-untyped-def]
     """The input v in [lo, hi] whose step from st gives output y, or the nearer end.
 
     The output solved for is the core's plus ``lin * v`` (``lin >= 0``: the part
@@ -413,12 +432,19 @@ def core_inverse(p, st, y, lo, hi, trial, lin):  # type: ignore[no-untyped-def]
     bisecting whenever a step would leave it, until the output is within 1e-12
     of the step's change. A Duhem step on charge memory within dv_max is one
     Euler step: its explicit inverse is exact (the lags' part is linear too).
+    A slow core (``cfg[CC_SLOW_AT]``) adds its output, nondecreasing in v: the
+    bracket holds, Newton runs on the sum.
     """
     v0 = st[0]
-    dy = y - core_output(p, st) - lin * v0
+    slow = cfg[CC_SLOW_AT] > 0.0
+    if slow:  # the slow core moves along its lag even if the voltage stays
+        y0, _ = _move_all(p, cfg, st, trial, v0, lin)
+        dy = y - y0
+    else:
+        dy = y - core_output(p, st) - lin * v0
     if dy == 0.0:
         v = min(max(v0, lo), hi)
-        _trial(p, st, trial, v)
+        _move_all(p, cfg, st, trial, v, lin)
         return v, v0 < lo or v0 > hi
     s = 1.0 if dy > 0.0 else -1.0
     if p[0] == KIND_BOUC_WEN:
@@ -439,7 +465,7 @@ def core_inverse(p, st, y, lo, hi, trial, lin):  # type: ignore[no-untyped-def]
     slope0 += lin
     s_min += lin
     v = v0 + dy / slope0
-    if p[0] == KIND_DUHEM and abs(v - v0) <= p[DU_DV_MAX] and lo <= v <= hi:
+    if p[0] == KIND_DUHEM and not slow and abs(v - v0) <= p[DU_DV_MAX] and lo <= v <= hi:
         _trial(p, st, trial, v)
         return v, False
     far = v0 + 1.000001 * dy / s_min  # a branch as flat as s_min puts the root at its end
@@ -447,7 +473,7 @@ def core_inverse(p, st, y, lo, hi, trial, lin):  # type: ignore[no-untyped-def]
     b = min(max(v0, far), hi)
     if a >= b:  # at or beyond a limit and asked to go further out
         v = b if dy > 0.0 else a
-        _trial(p, st, trial, v)
+        _move_all(p, cfg, st, trial, v, lin)
         return v, True
     at_hi = max(v0, far) > hi  # the bracket ends at a limit: try it only if Newton heads there
     at_lo = min(v0, far) < lo
@@ -459,9 +485,8 @@ def core_inverse(p, st, y, lo, hi, trial, lin):  # type: ignore[no-untyped-def]
     tol = 1e-12 * abs(dy) + 4e-16 * abs(y)  # a residual below rounding ends it too
     eps = 1e-13 * (abs(a) + abs(b) + 1.0)
     for _ in range(NEWTON_MAX):
-        y1, f1 = _trial(p, st, trial, v)
-        res = y1 + lin * v - y
-        f1 += lin
+        y1, f1 = _move_all(p, cfg, st, trial, v, lin)
+        res = y1 - y
         if abs(res) <= tol:
             return v, False
         if res < 0.0:
@@ -483,7 +508,7 @@ def core_inverse(p, st, y, lo, hi, trial, lin):  # type: ignore[no-untyped-def]
         if abs(vn - v) <= eps or b - a <= eps:
             return v, False
         v = vn
-    _trial(p, st, trial, v)  # the iterations ran out: the state at the v returned
+    _move_all(p, cfg, st, trial, v, lin)  # the iterations ran out: the state at v returned
     return v, False
 
 
@@ -498,7 +523,10 @@ CC_REFUSE = 5  # 1: hold the last command rather than leave the region
 CC_TOL = 6  # how far outside the region's output band counts (output units; inf: no region)
 CC_RV_LO = 7  # the region's voltage range (its bins split it evenly)
 CC_RV_HI = 8
-CC_SIZE = 9
+CC_NS = 9  # values in the core's state (a slow core's state follows it in st)
+CC_SLOW_AT = 10  # where a slow (relaxing) Preisach core's packed params start in p; 0: none
+CC_SLOW_A = 11  # its lag's 1 - exp(-dt / tau)
+CC_SIZE = 12
 # state: the core's state first, then four status slots addressed from the end:
 DS_LAST = -4  # the last command (V)
 DS_NONFINITE = -3
@@ -584,8 +612,8 @@ def core_step(desired, p, cfg, st, region, dyn, dstate, trial):  # type: ignore[
     dynamic = dyn[0] > 0.0 or dyn[1] > 0.0
     if not math.isfinite(desired):  # hold the last command (the piezo keeps settling on it)
         st[end + DS_NONFINITE] += 1.0
-        if dynamic:
-            _trial(p, st, trial, _advance(last, dyn, dstate))
+        if dynamic or cfg[CC_SLOW_AT] > 0.0:
+            _move_all(p, cfg, st, trial, _advance(last, dyn, dstate) if dynamic else st[0], 0.0)
             _commit(st, trial)
         _lags_advance(dyn, dstate, st[0])
         return last
@@ -596,7 +624,7 @@ def core_step(desired, p, cfg, st, region, dyn, dstate, trial):  # type: ignore[
     if not dynamic:  # the slew limit bounds the inverse itself
         a = max(lo, last - step)
         b = min(hi, last + step)
-    u, clamped = core_inverse(p, st, y, a, b, trial, lin)
+    u, clamped = core_inverse(p, cfg, st, y, a, b, trial, lin)
     if clamped and (u <= lo or u >= hi):  # out of reach inside the limits (not the slew)
         st[end + DS_SATURATED] += 1.0
     x = u
@@ -615,7 +643,7 @@ def core_step(desired, p, cfg, st, region, dyn, dstate, trial):  # type: ignore[
         x = min(max(x, last - step), last + step)
         u = _advance(x, dyn, dstate)
         if trial[0] != u:
-            _trial(p, st, trial, u)
+            _move_all(p, cfg, st, trial, u, 0.0)
     if cfg[CC_TOL] < math.inf:  # leaving the region (moves back towards it always pass)
         d1 = region_distance(region, cfg, u, core_output(p, trial))
         d0 = region_distance(region, cfg, st[0], core_output(p, st))
@@ -625,7 +653,7 @@ def core_step(desired, p, cfg, st, region, dyn, dstate, trial):  # type: ignore[
                 if dynamic:  # hold the last command instead
                     dstate[0] = saved0
                     dstate[1] = saved1
-                    _trial(p, st, trial, _advance(last, dyn, dstate))
+                    _move_all(p, cfg, st, trial, _advance(last, dyn, dstate), 0.0)
                     _commit(st, trial)
                     _lags_advance(dyn, dstate, st[0])
                     return last
@@ -642,7 +670,7 @@ def core_step(desired, p, cfg, st, region, dyn, dstate, trial):  # type: ignore[
                         b = mid
                 u = a
                 x = a
-                _trial(p, st, trial, u)
+                _move_all(p, cfg, st, trial, u, 0.0)
     _commit(st, trial)
     _lags_advance(dyn, dstate, st[0])
     st[end + DS_LAST] = x
@@ -725,6 +753,16 @@ def rev_design(p, v, st, rows, out):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
+def rev_columns(p, v, st, acc, out):  # type: ignore[no-untyped-def]
+    """Preisach regressors along v, continuing from st: ``out[k]`` = ``acc`` after the
+    move to v[k], where ``acc`` carries d q / d(Everett nodes) since the rest state
+    (st and acc updated: the walk goes on in the next block)."""
+    for k in range(v.shape[0]):
+        rev_move(p, st, v[k], True, acc, True)
+        out[k, :] = acc
+
+
+@njit(cache=True)
 def bw_trace(p, v, h0, out):  # type: ignore[no-untyped-def]
     """The Bouc-Wen variable h at every sample of v, from h0 at v[0]; returns the last h."""
     h = h0
@@ -767,6 +805,15 @@ def duhem_cumulative(p, v, q, rows, out):  # type: ignore[no-untyped-def]
 
 
 # ---------------------------------------------------------- self-sensing loop
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _model_output(p, cfg, st, dyn, dstate):  # type: ignore[no-untyped-def]
+    """The hysteresis part's output in the current state: core, slow core, creep lags."""
+    y = core_output(p, st) + _lags_output(dyn, dstate)
+    if cfg[CC_SLOW_AT] > 0.0:
+        y += st[int(cfg[CC_NS]) + 1]
+    return y
+
+
 @njit(cache=True, fastmath=FASTMATH)
 def core_controller_step(desired, measured, p, cfg, st, region, dyn, dstate, trial, ctl, cs):  # type: ignore[no-untyped-def]
     """``_kernels.controller_step`` on a differential core: the same feedback arithmetic
@@ -777,7 +824,7 @@ def core_controller_step(desired, measured, p, cfg, st, region, dyn, dstate, tri
     last = st[end + DS_LAST]
     qc = K.feedback_measure_at(0, measured, last, c2, cs2)
     if math.isfinite(qc) and cs[K.CS_STARTED] == 0.0:  # the first measurement sets the frame
-        cs[K.CS_FRAME] = core_output(p, st) + _lags_output(dyn, dstate) - qc
+        cs[K.CS_FRAME] = _model_output(p, cfg, st, dyn, dstate) - qc
         cs[K.CS_STARTED] = 1.0
     e = K.feedback_error_at(0, qc, cs2)
     d, integral, u = K.feedback_command_at(0, desired, e, c2, cs2)
@@ -785,7 +832,7 @@ def core_controller_step(desired, measured, p, cfg, st, region, dyn, dstate, tri
         st[end + DS_NONFINITE] += 1.0
         return last
     v = core_step(u, p, cfg, st, region, dyn, dstate, trial)
-    K.feedback_close_at(0, d, u, core_output(p, st) + _lags_output(dyn, dstate), integral, c2, cs2)
+    K.feedback_close_at(0, d, u, _model_output(p, cfg, st, dyn, dstate), integral, c2, cs2)
     return v
 
 

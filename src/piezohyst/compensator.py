@@ -151,6 +151,12 @@ class Compensator:
         if not op.is_invertible:
             op.inverse()  # raises NotInvertibleError with the reason
         dyn = spec.dynamics
+        if spec.relaxation is not None:
+            msg = (
+                "a relaxation term is inverted beside a Preisach, Duhem or Bouc-Wen core only: "
+                "fit a PreisachModel(relaxation=...) instead"
+            )
+            raise ParameterError(msg)
         if spec.lags is not None and sample_rate is None:
             msg = "A model with creep needs the loop's sample_rate (Hz). Got sample_rate=None."
             raise ParameterError(msg)
@@ -779,7 +785,23 @@ class CoreCompensator(Compensator):
             self.dstate = np.zeros(D.DYN_LAGS + alphas.size)
         else:
             self.lags = np.zeros((3, 0))
-        self._ns = core.n_states
+        ns = core.n_states
+        self.config[D.CC_NS] = ns
+        slow = spec.relaxation
+        if slow is not None:  # a slow Preisach core after the main one: params and state
+            if sample_rate is None:
+                msg = (
+                    "A model with a relaxation term needs the loop's sample_rate (Hz). "
+                    "Got sample_rate=None."
+                )
+                raise ParameterError(msg)
+            self.config[D.CC_SLOW_AT] = self.params.size
+            self.config[D.CC_SLOW_A] = 1.0 - math.exp(-1.0 / (float(sample_rate) * slow.tau))
+            self.params = np.concatenate([self.params, slow.packed])
+            ns += D.RV_SIZE
+        #: the slow core's packed parameters (empty without a relaxation term)
+        self.slow = np.zeros(0) if slow is None else np.array(slow.packed)
+        self._ns = ns
         self._state = np.zeros(self._ns + D.DS_STATUS)
         #: scratch for the kernel's trial steps (the core's state after a candidate command)
         self.trial = np.zeros(self._ns)
@@ -830,6 +852,15 @@ class CoreCompensator(Compensator):
         msg = "a compensator on a differential core runs on its own arrays"
         raise ParameterError(msg)
 
+    def _with_slow(self, z: FloatArray) -> FloatArray:
+        """The core's state, then the slow core's at rest at the same voltage (if any)."""
+        if not self.slow.size:
+            return z
+        rest = np.zeros(D.RV_SIZE)
+        rest[0] = rest[D.RV_R] = float(z[0])
+        rest[D.RV_K] = 1.0
+        return np.concatenate([z, rest])
+
     def _moved(self, start: FloatArray, v: float) -> FloatArray:
         """The core's state after the voltage moves from ``start`` to ``v`` in small steps."""
         v0 = float(start[0])
@@ -876,11 +907,11 @@ class CoreCompensator(Compensator):
             )
             z = z[:ns]
         elif voltage is None:
-            z = np.array(core.initial_state)
+            z = self._with_slow(np.array(core.initial_state))
             last = float(np.clip(z[0], self.v_min, self.v_max))
         else:
             last = _finite_number(voltage, "voltage")
-            z = self._moved(np.array(core.initial_state), last)
+            z = self._with_slow(self._moved(np.array(core.initial_state), last))
         if not self.v_min <= last <= self.v_max:
             msg = (
                 f"The actuator's voltage {last!r} V is outside the limits "
@@ -921,10 +952,16 @@ class CoreCompensator(Compensator):
         cycle = self._cycle(samples)
         u = np.empty_like(cycle)
         alphas = self.lags[2]
+        ns = int(self.config[D.CC_NS])
+        slow = self._state[ns : self._ns]  # a view: the slow core moves in place
+        a = float(self.config[D.CC_SLOW_A])
         for k, v in enumerate(cycle):
             u[k] = K._advance_dynamics(v, self.dyn, self.dstate) if self.dynamic else v
             self.dstate[D.DYN_LAGS :] += alphas * (u[k] - self.dstate[D.DYN_LAGS :])
-        self._state[: self._ns] = self.core.propagate(u, self._state[: self._ns]).state
+            if slow.size:
+                c = float(slow[0])
+                D.rev_move(self.slow, slow, c + a * (u[k] - c), True, np.zeros(0), False)
+        self._state[:ns] = self.core.propagate(u, self._state[:ns]).state
         self._state[self._ns + D.DS_STATUS + D.DS_LAST] = cycle[-1]
         return cycle
 

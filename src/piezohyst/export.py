@@ -717,6 +717,8 @@ def _core_c(comp: CoreCompensator, prefix: str, precision: Precision) -> CCode:
     if comp.mode.active:
         fields += f"    {real} e1, e2;             /* output mode: the last two desired values (NaN: none) */\n"  # noqa: E501
     n_lags = int(comp.lags.shape[1])
+    has_slow = int(comp.slow.size > 0)
+    ns_main = int(comp.config[D.CC_NS])
     if n_lags:
         fields += f"    {real} c[{n_lags}];              /* creep lag states (V) */\n"
     delay_note = (
@@ -842,6 +844,8 @@ void {prefix}_init({prefix}_t *s);
 #define MODE {int(comp.mode.active)}
 #define HAS_REGION {has_region}
 #define N_LAGS {n_lags} /* kept creep lags beside the core */
+#define SLOW {has_slow} /* a slow (relaxing) Preisach core behind a lag */
+#define NS_MAIN {ns_main} /* the core's values in st; the slow core's follow */
 #define NEWTON_MAX {D.NEWTON_MAX}
 #define REGION_BISECTIONS {D.REGION_BISECTIONS}
 #define STACK {D.STACK}
@@ -880,6 +884,7 @@ static int steps({real} a, {real} b, {real} *rest)
 }}
 #endif
 {_CORE_C[kind]}
+{_slow_c(comp, real, p) if has_slow else ""}
 {_CORE_C_COMMON}"""
     source = source.replace("real_t", real).replace("PREFIX_t", f"{prefix}_t")
     source = source.replace("PREFIX_init", f"{prefix}_init").replace("INIT_EXTRA", init)
@@ -1144,11 +1149,33 @@ _CORE_C_COMMON = """
 static real_t try_move(const real_t *st, real_t *trial, real_t v, real_t *f)
 {
     int i;
+    real_t y;
     for (i = 0; i < NS; ++i) {
         trial[i] = st[i];
     }
-    return core_move(trial, v, 1, f);
+    y = core_move(trial, v, 1, f);
+#if SLOW /* the slow core's input moves along its lag: its output adds a slope >= 0 */
+    {
+        real_t fs, c = st[NS_MAIN];
+        y += slow_move(trial + NS_MAIN, c + SLOW_A * (v - c), 1, &fs);
+        *f += SLOW_A * fs;
+    }
+#endif
+    return y;
 }
+
+#if DYNAMIC || SLOW
+/* the state moves to the piezo voltage v (core and slow core) */
+static void move_to(real_t *st, real_t v)
+{
+    real_t trial[NS], f;
+    int i;
+    try_move(st, trial, v, &f);
+    for (i = 0; i < NS; ++i) {
+        st[i] = trial[i];
+    }
+}
+#endif
 
 /* the input in [lo, hi] whose step from st gives y, or the nearer end (*clamped);
  * trial holds the state after the step to it */
@@ -1156,9 +1183,14 @@ static real_t core_inverse(real_t *st, real_t y, real_t lo, real_t hi, int *clam
                            real_t *trial, real_t lin)
 {
     /* the output solved for is the core's plus lin * v (the creep lags' part; 0: none) */
-    real_t v0 = st[0], dy = y - core_output(st) - lin * v0, v, far, a, b, eps, tol, f1, y1;
+    real_t v0 = st[0], dy, v, far, a, b, eps, tol, f1, y1;
     real_t res, vn;
     int it, at_hi, at_lo;
+#if SLOW /* the slow core moves along its lag even if the voltage stays */
+    dy = y - try_move(st, trial, v0, &f1) - lin * v0;
+#else
+    dy = y - core_output(st) - lin * v0;
+#endif
     *clamped = 0;
     if (dy == 0) {
         *clamped = v0 < lo || v0 > hi;
@@ -1167,7 +1199,7 @@ static real_t core_inverse(real_t *st, real_t y, real_t lo, real_t hi, int *clam
         return v;
     }
     v = v0 + dy / (first_slope(st, dy > 0, dy) + lin);
-#if KIND == 0
+#if KIND == 0 && !SLOW
     if (abs_real(v - v0) <= DV_MAX && lo <= v && v <= hi) {
         try_move(st, trial, v, &f1);
         return v; /* one Euler step: the explicit inverse is exact */
@@ -1301,7 +1333,9 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
     if (non_finite(desired)) { /* hold the last command */
         s->nonfinite++;
 #if DYNAMIC
-        core_move(s->st, advance(s, s->last), 1, &f);
+        move_to(s->st, advance(s, s->last));
+#elif SLOW
+        move_to(s->st, s->st[0]);
 #endif
         lags_advance(s, s->st[0]);
         return s->last;
@@ -1345,7 +1379,7 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
 #if DYNAMIC /* hold the last command instead */
         s->w = saved_w;
         s->u = saved_u;
-        core_move(s->st, advance(s, s->last), 1, &f);
+        move_to(s->st, advance(s, s->last));
         lags_advance(s, s->st[0]);
         return s->last;
 #else /* stop at the region's edge: the largest move towards u that stays inside */
@@ -1353,7 +1387,8 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
             real_t edge = max_real(TOL, f), lo_v = s->st[0], hi_v = u, mid;
             for (i = 0; i < REGION_BISECTIONS; ++i) {
                 mid = 0.5 * (lo_v + hi_v);
-                if (region_distance(mid, try_move(s->st, trial, mid, &y)) <= edge) {
+                try_move(s->st, trial, mid, &y);
+                if (region_distance(mid, core_output(trial)) <= edge) {
                     lo_v = mid;
                 } else {
                     hi_v = mid;
@@ -1371,6 +1406,7 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
     (void)saved_w; /* used only when refusing to leave the region */
     (void)saved_u;
 #endif
+    (void)f;
     for (i = 0; i < NS; ++i) {
         s->st[i] = trial[i];
     }
@@ -1379,6 +1415,31 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
     return x;
 }
 """
+
+
+def _slow_c(comp: CoreCompensator, real: str, precision: Precision) -> str:
+    """The slow core: the Preisach functions again, on their own grid and Everett values."""
+    code = _CORE_C_PREISACH[: _CORE_C_PREISACH.index("static real_t core_output")]
+    names = ("cell", "node", "everett", "branch", "branch_slope", "NN", "EV", "V_LO", "H",
+             "S_MIN")  # fmt: skip
+    for name in names:
+        code = re.sub(rf"\b{name}\b", f"SLOW_{name}" if name.isupper() else f"slow_{name}", code)
+    code = code.replace("core_move", "slow_move")
+    pk = comp.slow
+    n = int(pk[D.DU_NV])
+    constants = "\n".join(
+        [
+            f"#define SLOW_NN {n}",
+            f"static const {real} SLOW_V_LO = {_literal(float(pk[D.DU_V_LO]), precision)};",
+            f"static const {real} SLOW_H = {_literal(float(pk[D.DU_V_STEP]), precision)};",
+            f"static const {real} SLOW_S_MIN = 0; /* flat beyond its grid */",
+            f"static const {real} SLOW_A = "
+            f"{_literal(float(comp.config[D.CC_SLOW_A]), precision)}; /* 1 - exp(-dt / tau) */",
+            f"static const {real} SLOW_EV[SLOW_NN * SLOW_NN] = "
+            f"{_array(pk[D.DU_UP : D.DU_UP + n * n], precision)};",
+        ]
+    )
+    return f"/* the slow (relaxing) Preisach core */\n{constants}\n{code}"
 
 
 _CORE_C = {

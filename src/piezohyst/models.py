@@ -90,6 +90,7 @@ from .terms import (
     Creep,
     Integral,
     LagShape,
+    RelaxationShape,
     StaticShape,
     Term,
     TimeTerm,
@@ -230,6 +231,8 @@ class InverseSpec:
     region_tolerance : float
         For a core that records its region (Duhem, Bouc-Wen): how far outside
         it, as a fraction of its output span, counts as extrapolating.
+    relaxation : RelaxationShape or None
+        A kept slow Preisach core behind a lag (relaxing hysteresis).
     """
 
     operator: PIHysteresis | DifferentialCore
@@ -241,11 +244,12 @@ class InverseSpec:
     dynamics: InputDynamics = field(default_factory=InputDynamics)
     output_dynamics: OutputDynamics = field(default_factory=OutputDynamics)
     region_tolerance: float = 0.05
+    relaxation: RelaxationShape | None = None
 
     @property
     def analytic(self) -> bool:
         """True when eq. 18 inverts it exactly (no kept term beside the play operators)."""
-        return self.static is None and self.lags is None
+        return self.static is None and self.lags is None and self.relaxation is None
 
 
 # ------------------------------------------------------------ parameter rules
@@ -1523,14 +1527,18 @@ class HysteresisModel:
         self._check_fitted()
         static: StaticShape | None = None
         lags: LagShape | None = None
+        relaxation: RelaxationShape | None = None
         for term, coef in zip(self.terms_, self.coefs_, strict=True):
             if term.removed:
                 continue
             s, lag = term.static_shape(coef), term.lag_shape(coef)
+            slow = term.relaxation_shape(coef)
             if s is not None and static is None:
                 static = s
             elif lag is not None and lags is None:
                 lags = lag
+            elif slow is not None and relaxation is None:
+                relaxation = slow
             else:
                 msg = (
                     f"the {term.kind!r} term shapes the hysteresis but cannot be inverted: the "
@@ -1548,6 +1556,7 @@ class HysteresisModel:
             self.input_dynamics_,
             self.output_dynamics_,
             float(getattr(self, "region_tolerance", 0.05)),
+            relaxation,
         )
 
     @property

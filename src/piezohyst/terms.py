@@ -54,8 +54,10 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from . import _diffkernels as D
 from . import _kernels
 from ._validation import FloatArray
+from .differential import everett_map, everett_nodes
 from .errors import ParameterError
 
 __all__ = [
@@ -64,6 +66,8 @@ __all__ = [
     "Creep",
     "Integral",
     "LagShape",
+    "Relaxation",
+    "RelaxationShape",
     "RunningIntegral",
     "StaticShape",
     "Term",
@@ -113,6 +117,25 @@ class LagShape:
 
     taus: FloatArray
     gains: FloatArray
+
+
+@dataclass(frozen=True)
+class RelaxationShape:
+    r"""A slow Preisach core behind a first-order lag, as the compensator's inverse needs it.
+
+    Output :math:`q_s(L_\tau[x])`: a Preisach core (density :math:`\ge 0`, flat
+    beyond its grid) driven by the input through a lag of unit DC gain.
+
+    Attributes
+    ----------
+    tau : float
+        The lag's time constant (s).
+    packed : ndarray
+        The slow core in ``_diffkernels``' Preisach layout (head, Everett nodes).
+    """
+
+    tau: float
+    packed: FloatArray
 
 
 class Term:
@@ -257,6 +280,10 @@ class Term:
 
     def lag_shape(self, coefficients: FloatArray) -> LagShape | None:
         """See :meth:`static_shape`: the term as first-order lags, if it is one."""
+        return None
+
+    def relaxation_shape(self, coefficients: FloatArray) -> RelaxationShape | None:
+        """See :meth:`static_shape`: the term as a lagged Preisach core, if it is one."""
         return None
 
     # ------------------------------------------------------------ python
@@ -558,6 +585,161 @@ class Creep(Term):
     def lag_shape(self, coefficients: FloatArray) -> LagShape:
         """See :meth:`Term.lag_shape`."""
         return LagShape(np.asarray(self.taus), coefficients.copy())
+
+
+class Relaxation(Term):
+    r"""Relaxing hysteresis: a second Preisach density acting on the voltage through a lag.
+
+    .. math::
+
+        q_s(t) = \mathcal{P}_\mu\bigl[L_\tau[x]\bigr](t), \qquad \mu \ge 0
+
+    The part of the switching that follows the field with a delay: a Preisach
+    core (:class:`~piezohyst.differential.PreisachHysteresis`, density on
+    ``nodes`` reversal points over the training range) whose input is the
+    voltage through a first-order lag of time constant ``tau``. The loop then
+    depends on the drive's rate: faster drives leave the slow part behind.
+    Linear in the density, so it is fitted in the same least squares as the
+    core beside it; the density is ``>= 0`` and the lag passes a rising voltage
+    on as a rising one, so the output stays strictly increasing in each
+    sample's voltage: the compensator inverts it with the core.
+
+    Parameters
+    ----------
+    tau : float
+        The lag's time constant (s), > 0.
+    nodes : int, default 12
+        Reversal-point grid nodes, in [3, 40]; ``nodes (nodes - 1) / 2`` cells.
+    v_range : sequence of 2 float, optional
+        The grid's voltage range; fixed by :meth:`bind` from the training input.
+    """
+
+    kind = "relaxation"
+    rate_dependent = True
+    input_degree = 0
+
+    def __init__(
+        self, tau: float = 0.1, nodes: int = 12, v_range: Sequence[float] | None = None
+    ) -> None:
+        ok = isinstance(tau, int | float) and not isinstance(tau, bool)
+        if not ok or not math.isfinite(float(tau)) or float(tau) <= 0:
+            msg = f"The 'tau' of a relaxation term must be a positive time in s. Got {tau!r}."
+            raise ParameterError(msg)
+        if isinstance(nodes, bool) or not isinstance(nodes, int) or not 3 <= nodes <= 40:
+            msg = f"The 'nodes' of a relaxation term must be an int in [3, 40]. Got {nodes!r}."
+            raise ParameterError(msg)
+        self.tau = float(tau)
+        self.nodes = nodes
+        self.v_range: tuple[float, float] | None = None
+        if v_range is not None:
+            lo, hi = (float(v) for v in v_range)
+            if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+                msg = f"A relaxation term's 'v_range' must be [lo, hi], lo < hi. Got {v_range}."
+                raise ParameterError(msg)
+            self.v_range = (lo, hi)
+        m = nodes - 1
+        self._upper = np.flatnonzero(np.triu(np.ones((m, m))).ravel())  # cells k <= l
+        self._map = everett_map(nodes)[:, self._upper]  # Everett nodes from the cells
+
+    def get_params(self) -> dict[str, Any]:
+        """See :meth:`Term.get_params`."""
+        return {
+            "tau": self.tau,
+            "nodes": self.nodes,
+            "v_range": None if self.v_range is None else list(self.v_range),
+        }
+
+    def bind(self, x_range: FloatArray) -> Relaxation:
+        """See :meth:`Term.bind`: the grid spans the training input's range."""
+        if self.v_range is not None:
+            return self
+        lo, hi = float(x_range.min()), float(x_range.max())
+        return Relaxation(self.tau, self.nodes, (lo, max(hi, lo + 1e-300)))
+
+    def _head(self) -> FloatArray:
+        if self.v_range is None:
+            msg = "Relaxation must be bound to the training data (Term.bind) before use."
+            raise ParameterError(msg)
+        lo, hi = self.v_range
+        n = self.nodes
+        # a Preisach core's packed head; beyond the grid the branches stay flat (slope 0)
+        return np.array([D.KIND_PREISACH, n, n, lo, (hi - lo) / (n - 1), 0.0, 0.0, 0.0, 0.0])
+
+    @property
+    def width(self) -> int:
+        """One coefficient per cell of the density."""
+        return int(self._upper.size)
+
+    @property
+    def state_names(self) -> tuple[str, ...]:  # type: ignore[override]
+        """The slow core's state (its first value is the lagged voltage), then the output's
+        derivatives by the Everett values at the nodes since the rest state."""
+        core = ("lagged voltage", "output", "direction", "reversals")
+        stack = tuple(f"reversal[{j}]" for j in range(D.STACK))
+        acc = tuple(f"d output/d E[{j}]" for j in range(self.nodes * self.nodes))
+        return core + stack + acc
+
+    def labels(self) -> tuple[str, ...]:
+        """See :meth:`Term.labels`: ``relaxation[k,l]`` per cell."""
+        m = self.nodes - 1
+        return tuple(f"relaxation[{c // m},{c % m}]" for c in self._upper)
+
+    def lower_bounds(self) -> FloatArray:
+        """See :meth:`Term.lower_bounds`: a density is >= 0."""
+        return np.zeros(self.width)
+
+    def coefficient_units(self, input_unit: str, output_unit: str) -> tuple[str, ...]:
+        """See :meth:`Term.coefficient_units`: output units per cell."""
+        return (output_unit,) * self.width
+
+    def rest_state(self, x0: float) -> FloatArray:
+        """See :meth:`Term.rest_state`: the lag settled at ``x0``, no reversal yet."""
+        z = np.zeros(len(self.state_names))
+        z[0], z[D.RV_K], z[D.RV_R] = float(x0), 1.0, float(x0)
+        return z
+
+    def columns(
+        self, x: FloatArray, t: FloatArray | None, dt: FloatArray | None, state: FloatArray
+    ) -> FloatArray:
+        """See :meth:`Term.columns`: the Preisach regressors of the lagged voltage."""
+        head = self._head()
+        n = self.nodes
+        lagged = np.empty((x.size, 1))
+        lag = state[0:1].copy()  # the slow core's voltage is the lag's state
+        _kernels.lag_filter(x, _needs_time(self, dt), np.array([self.tau]), lag, lagged)
+        packed = np.concatenate([head, np.zeros(n * n)])
+        core = state[: D.RV_SIZE]  # views: updated in place
+        acc = state[D.RV_SIZE :]
+        nodes_cols = np.empty((x.size, n * n))
+        D.rev_columns(packed, np.ascontiguousarray(lagged[:, 0]), core, acc, nodes_cols)
+        return np.asarray(nodes_cols @ self._map, dtype=np.float64)
+
+    def relaxation_shape(self, coefficients: FloatArray) -> RelaxationShape:
+        """See :meth:`Term.relaxation_shape`."""
+        m = self.nodes - 1
+        mu = np.zeros(m * m)
+        mu[self._upper] = np.maximum(coefficients, 0.0)
+        packed = np.concatenate([self._head(), everett_nodes(mu.reshape(m, m)).ravel()])
+        return RelaxationShape(self.tau, packed)
+
+    def output_state(self, state: FloatArray, coefficients: FloatArray) -> FloatArray:
+        """The slow core's state ``[v, q, direction, k, R...]`` from the term's state.
+
+        Parameters
+        ----------
+        state : ndarray
+            The term's state (see :attr:`state_names`).
+        coefficients : ndarray
+            The term's fitted density.
+
+        Returns
+        -------
+        ndarray, shape (_diffkernels.RV_SIZE,)
+        """
+        core = np.array(state[: D.RV_SIZE], dtype=np.float64)
+        acc = np.asarray(state[D.RV_SIZE :], dtype=np.float64)
+        core[1] = float(acc @ self._map @ coefficients)
+        return core
 
 
 def term_class(kind: str) -> type[Term]:
