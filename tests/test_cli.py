@@ -154,6 +154,41 @@ def test_models_beyond_pi_from_the_shell(workdir: Path, model: str) -> None:
     assert_clean_error(res, "'operators' setting does not apply")
 
 
+def test_a_relaxing_preisach_model_from_the_shell(workdir: Path) -> None:
+    """fit --relaxation, then compensate and export-c: the slow core travels with the model."""
+    loops = workdir / "loops.csv"
+    if not loops.exists():
+        res = run("simulate", "--signal", "decaying", "--duration", "16", "-o", loops)
+        assert res.exit_code == 0
+    out = workdir / "relaxing.json"
+    res = run("fit", loops, "--model", "preisach", "--relaxation", "0.1", "-o", out)
+    assert res.exit_code == 0, res.output
+    assert "shape terms: relaxation (66 coefficients)" in res.stdout
+    fitted = ph.load_model(out)
+    hi = fitted.input_range_[1]
+    _, shape = make_signal("decaying", amplitude=1.0, duration=3.0)
+    # from where the model (and so the compensator) starts: the slow core remembers the way
+    v0 = float(fitted.operator_.initial_state[0])
+    v = np.concatenate([np.linspace(v0, 0.2 * hi, 300, endpoint=False), hi * (0.2 + 0.6 * shape)])
+    t = np.arange(v.size) / 1000.0
+    wanted = fitted.hysteresis_.predict(v, t=t)
+    target = workdir / "relaxing-target.csv"
+    ph.io.write_table(target, {"time": t, "desired": wanted})
+    res = run("compensate", out, target, "--no-precondition", "-o", workdir / "relaxing-cmd.csv")
+    assert res.exit_code == 0, res.output
+    cmd = ph.io.read_table(workdir / "relaxing-cmd.csv").get("command")
+    assert cmd.min() >= 0.0 and cmd.max() <= hi
+    np.testing.assert_allclose(fitted.hysteresis_.predict(cmd, t=t)[500:], wanted[500:], rtol=0,
+                               atol=1e-6 * np.ptp(wanted))  # fmt: skip
+    res = run("export-c", out, "-o", workdir / "relaxing_c.c")
+    assert_clean_error(res, "needs the loop's sample_rate")
+    res = run("export-c", out, "--sample-rate", "1000", "-o", workdir / "relaxing_c.c")
+    assert res.exit_code == 0, res.output
+    assert "SLOW 1" in (workdir / "relaxing_c.c").read_text()
+    res = run("fit", loops, "--model", "duhem", "--relaxation", "0.1", "-o", workdir / "x.json")
+    assert_clean_error(res, "'relaxation' setting does not apply to duhem")
+
+
 def test_tdms_with_group_and_wf_increment(workdir: Path) -> None:
     from nptdms import ChannelObject, GroupObject, TdmsWriter
 

@@ -272,7 +272,10 @@ def _limit_options(fn: Callable[..., Any]) -> Callable[..., Any]:
         ),
         click.option("--slew-rate", type=float, default=None, help="Largest change in V/s."),
         click.option(
-            "--sample-rate", type=float, default=None, help="Loop rate in Hz (for --slew-rate)."
+            "--sample-rate",
+            type=float,
+            default=None,
+            help="Loop rate in Hz (for --slew-rate, and models with creep or relaxation).",
         ),
         click.option(
             "--allow-extrapolation",
@@ -500,6 +503,13 @@ def describe(model: HysteresisModel) -> str:
     help="generalized-pi, preisach, duhem, bouc-wen: creep time constants in s, e.g. 0.1,1,10.",
 )
 @click.option(
+    "--relaxation",
+    type=float,
+    default=None,
+    help="preisach: time constant in s of a relaxing part of the hysteresis (a second Preisach "
+    "density on the lagged voltage), e.g. 0.1.",
+)
+@click.option(
     "--input-dynamics",
     type=click.Choice(["none", "delay", "first-order", "delay+first-order", "auto"]),
     default="none",
@@ -534,6 +544,7 @@ def fit(
     operators: int,
     growth: str,
     creep: str,
+    relaxation: float | None,
     input_dynamics: str,
     output_dynamics: str,
     initial_state: str,
@@ -548,6 +559,7 @@ def fit(
       piezohyst fit run.csv --model active-pi --operators 20 -o model.json
       piezohyst fit scan.tdms --group Scan --input Ch0 --output Ch1 -o m.json
       piezohyst fit run.csv --model generalized-pi --creep 0.1,1,10 -o g.json
+      piezohyst fit run.csv --model preisach --relaxation 0.1 -o p.json
     """
     from .workflows import fit_file
 
@@ -573,6 +585,7 @@ def fit(
                 data_spec=data_spec,
                 growth_terms=terms,
                 creep=taus,
+                relaxation=relaxation,
                 input_dynamics=input_dynamics,
                 output_dynamics=output_dynamics,
                 initial_state=initial_state,

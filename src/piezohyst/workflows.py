@@ -173,6 +173,7 @@ def fit_file(
     data_spec: DataSpec | None = None,
     growth_terms: str | Sequence[str] = "auto",
     creep: Sequence[float] = (),
+    relaxation: float | None = None,
     input_dynamics: str = "none",
     output_dynamics: str = "none",
     initial_state: str = "rest",
@@ -200,6 +201,9 @@ def fit_file(
         Settings of models that have them (``growth_terms``: every model but
         the classical and active PI; ``creep``: ``generalized-pi`` and the
         models on a differential core).
+    relaxation : float, optional
+        ``preisach``: time constant (s) of a relaxing part of the hysteresis
+        (see :class:`~piezohyst.PreisachModel`).
     input_dynamics, output_dynamics : str
         Delay and lag between command and piezo, mode between hysteresis and
         output (see :class:`~piezohyst.models.HysteresisModel`).
@@ -228,6 +232,11 @@ def fit_file(
         elif (value if isinstance(value, str) else tuple(value)) != default:
             msg = f"the {name!r} setting does not apply to {model}"
             raise ParameterError(msg)
+    if relaxation is not None:
+        if "relaxation" not in accepted:
+            msg = f"the 'relaxation' setting does not apply to {model} (preisach has it)"
+            raise ParameterError(msg)
+        extra["relaxation"] = relaxation
     stream = (data_spec or DataSpec()).open(data)
     x_unit, y_unit = stream.units
     if "n_operators" not in accepted and operators != 10:
