@@ -399,7 +399,7 @@ def _trial(p, st, trial, v):  # type: ignore[no-untyped-def]
     return core_move(p, trial, v, True)
 
 
-@njit(cache=True, fastmath=FASTMATH, inline="always")
+@njit(cache=True, fastmath=FASTMATH)
 def _move_all(p, cfg, st, trial, v, lin):  # type: ignore[no-untyped-def]
     """``trial`` = the state after the piezo voltage moves from ``st`` to ``v``: the core,
     and a slow core (if any) whose input moves along its lag; (output, slope) of the core
@@ -485,7 +485,12 @@ def core_inverse(p, cfg, st, y, lo, hi, trial, lin):  # type: ignore[no-untyped-
     tol = 1e-12 * abs(dy) + 4e-16 * abs(y)  # a residual below rounding ends it too
     eps = 1e-13 * (abs(a) + abs(b) + 1.0)
     for _ in range(NEWTON_MAX):
-        y1, f1 = _move_all(p, cfg, st, trial, v, lin)
+        if slow:
+            y1, f1 = _move_all(p, cfg, st, trial, v, lin)
+        else:
+            y1, f1 = _trial(p, st, trial, v)
+            y1 += lin * v
+            f1 += lin
         res = y1 - y
         if abs(res) <= tol:
             return v, False
