@@ -324,8 +324,6 @@ def test_leaving_the_region_warns_and_the_compensator_stops_at_its_edge(
 def test_exported_c_matches_python(
     models: dict[str, Any], tmp_path: Path, name: str, precision: str, slew: float | None
 ) -> None:
-    from tests.test_export import HARNESS
-
     model = models[name]
     hi = model.input_range_[1]
     kw: dict[str, Any] = {} if slew is None else {"slew_rate": slew, "sample_rate": 1000.0}
@@ -333,11 +331,22 @@ def test_exported_c_matches_python(
     desired = inside_trajectory(model, 4.0)
     desired[::97] = np.nan
     desired[7::301] = -1.0  # unreachable: saturates
+    c_cmds = compare_c_with_python(comp, desired, tmp_path, precision, hi)
+    assert np.all((c_cmds >= 0.0) & (c_cmds <= hi))
+
+
+def compare_c_with_python(
+    comp: Any, desired: np.ndarray, tmp_path: Path, precision: str, hi: float
+) -> np.ndarray:
+    """Export ``comp`` to C, compile it strictly, run ``desired`` through both: the commands
+    agree to 1e-9 V in double (to float precision in float), and so do the counters."""
+    from tests.test_export import HARNESS
+
     c_path, _ = write_c(comp, tmp_path / "core.c", precision=precision)  # type: ignore[arg-type]
     (tmp_path / "main.c").write_text(HARNESS.replace("NAME", "core"))
     exe = tmp_path / "core"
-    cmd = [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", str(c_path),
-           str(tmp_path / "main.c"), "-o", str(exe), "-lm"]  # fmt: skip
+    cmd = [CC or "cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2",
+           str(c_path), str(tmp_path / "main.c"), "-o", str(exe), "-lm"]  # fmt: skip
     subprocess.run(cmd, check=True, capture_output=True, text=True)
     text = "\n".join(repr(float(x)) for x in desired) + "\n"
     out = subprocess.run([str(exe)], input=text, check=True, capture_output=True, text=True)
@@ -348,7 +357,7 @@ def test_exported_c_matches_python(
     np.testing.assert_allclose(c_cmds, py, rtol=0, atol=atol)
     counts = tuple(int(x) for x in lines[desired.size].split())
     assert counts == (comp.nonfinite_count, comp.saturated_count)
-    assert np.all((c_cmds >= 0.0) & (c_cmds <= hi))
+    return c_cmds
 
 
 # -------------------------------------------------------------- closed loop
@@ -569,8 +578,6 @@ def test_creep_on_a_core_needs_the_loop_rate(creep_models: dict[str, Any]) -> No
 def test_exported_c_with_creep_matches_python(
     creep_models: dict[str, Any], tmp_path: Path, name: str, precision: str, slew: float | None
 ) -> None:
-    from tests.test_export import HARNESS
-
     model = creep_models[name]
     hi = model.input_range_[1]
     kw: dict[str, Any] = {} if slew is None else {"slew_rate": slew}
@@ -578,22 +585,10 @@ def test_exported_c_with_creep_matches_python(
     desired = creep_trajectory(model, 1000.0, 3.0)[2]
     desired[::97] = np.nan  # the lags keep settling on the held command
     desired[7::301] = -1.0  # unreachable: saturates
-    c_path, _ = write_c(comp, tmp_path / "core.c", precision=precision)  # type: ignore[arg-type]
-    assert "N_LAGS 2" in c_path.read_text()
-    (tmp_path / "main.c").write_text(HARNESS.replace("NAME", "core"))
-    exe = tmp_path / "core"
-    cmd = [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", str(c_path),
-           str(tmp_path / "main.c"), "-o", str(exe), "-lm"]  # fmt: skip
-    subprocess.run(cmd, check=True, capture_output=True, text=True)
-    text = "\n".join(repr(float(x)) for x in desired) + "\n"
-    out = subprocess.run([str(exe)], input=text, check=True, capture_output=True, text=True)
-    lines = out.stdout.split("\n")
-    c_cmds = np.array([float(x) for x in lines[: desired.size]])
-    py = comp.process(desired)
-    atol = 1e-9 if precision == "double" else 1e-4 * hi
-    np.testing.assert_allclose(c_cmds, py, rtol=0, atol=atol)
-    counts = tuple(int(x) for x in lines[desired.size].split())
-    assert counts == (comp.nonfinite_count, comp.saturated_count)
+    compare_c_with_python(comp, desired, tmp_path, precision, hi)
+    source = (tmp_path / "core.c").read_text()
+    assert "N_LAGS 2" in source
+    assert ("SLOW 1" in source) == (name == "relaxing")
 
 
 @pytest.mark.parametrize("name", ["preisach", "relaxing"])

@@ -400,6 +400,20 @@ def _trial(p, st, trial, v):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, fastmath=FASTMATH)
+def _slow_move(p, cfg, st, trial, v):  # type: ignore[no-untyped-def]
+    """The slow core's part of ``trial`` after the piezo voltage moves to ``v`` (its input
+    moves along its lag from the state in ``st``); its (output, slope in v)."""
+    ns = int(cfg[CC_NS])
+    for i in range(ns, trial.shape[0]):
+        trial[i] = st[i]
+    a = cfg[CC_SLOW_A]
+    c = st[ns]
+    ys, fs = rev_move(p[int(cfg[CC_SLOW_AT]) :], trial[ns:], c + a * (v - c), True, trial[:0],
+                      False)  # fmt: skip
+    return ys, a * fs
+
+
+@njit(cache=True, fastmath=FASTMATH)
 def _move_all(p, cfg, st, trial, v, lin):  # type: ignore[no-untyped-def]
     """``trial`` = the state after the piezo voltage moves from ``st`` to ``v``: the core,
     and a slow core (if any) whose input moves along its lag; (output, slope) of the core
@@ -407,14 +421,10 @@ def _move_all(p, cfg, st, trial, v, lin):  # type: ignore[no-untyped-def]
     y, f = _trial(p, st, trial, v)
     y += lin * v
     f += lin
-    at = int(cfg[CC_SLOW_AT])
-    if at > 0:
-        ns = int(cfg[CC_NS])
-        a = cfg[CC_SLOW_A]
-        c = st[ns]
-        ys, fs = rev_move(p[at:], trial[ns:], c + a * (v - c), True, trial[:0], False)
+    if cfg[CC_SLOW_AT] > 0.0:
+        ys, fs = _slow_move(p, cfg, st, trial, v)
         y += ys
-        f += a * fs
+        f += fs
     return y, f
 
 
@@ -437,11 +447,11 @@ def core_inverse(p, cfg, st, y, lo, hi, trial, lin):  # type: ignore[no-untyped-
     """
     v0 = st[0]
     slow = cfg[CC_SLOW_AT] > 0.0
+    slow_slope = 0.0
+    dy = y - core_output(p, st) - lin * v0
     if slow:  # the slow core moves along its lag even if the voltage stays
-        y0, _ = _move_all(p, cfg, st, trial, v0, lin)
-        dy = y - y0
-    else:
-        dy = y - core_output(p, st) - lin * v0
+        ys, slow_slope = _slow_move(p, cfg, st, trial, v0)
+        dy -= ys
     if dy == 0.0:
         v = min(max(v0, lo), hi)
         _move_all(p, cfg, st, trial, v, lin)
@@ -462,7 +472,7 @@ def core_inverse(p, cfg, st, y, lo, hi, trial, lin):  # type: ignore[no-untyped-
             reverse = st[RV_DIR] != 0.0 and s != st[RV_DIR]
             top = v0 if reverse else st[RV_R + int(st[RV_K]) - 1]
             slope0 = _branch_slope(p, v0, top, s > 0.0)
-    slope0 += lin
+    slope0 += lin + slow_slope
     s_min += lin
     v = v0 + dy / slope0
     if p[0] == KIND_DUHEM and not slow and abs(v - v0) <= p[DU_DV_MAX] and lo <= v <= hi:

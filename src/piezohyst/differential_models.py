@@ -653,7 +653,12 @@ class PreisachModel(DifferentialModel):
         (density ``>= 0``). A real actuator's loop depends on the drive's rate
         partly because some switching follows the field late; ``0.1`` s took
         the SmartHysteresis actuator from 0.132 % to 0.128 % held out
-        (``docs/validation.md``). None (default): rate-independent.
+        (``docs/validation.md``). None (default): rate-independent. Use it
+        (and ``creep``) where the loop depends on the rate: on the
+        rate-independent simulated bench they cost feedforward accuracy
+        (decaying loops 0.56 % width, 0.66 % with relaxation), and fitted to
+        charge they take up leakage the growth terms miss — give them the leak
+        terms the actuator needs (the bench: ``("integral", "abs_integral")``).
     relaxation_nodes : int, default 12
         Grid nodes of the relaxing density, in [3, 40].
     smoothing : float, default 1e-4

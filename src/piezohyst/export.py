@@ -781,17 +781,7 @@ void {prefix}_init({prefix}_t *s);
                          ("DV_MAX", D.BW_DV_MAX), ("G_MAX", D.BW_G_MAX), ("S_MIN", D.BW_S_MIN))
         )  # fmt: skip
     elif kind == int(D.KIND_PREISACH):
-        n = int(params[D.DU_NV])
-        constants = "\n".join(
-            [
-                f"#define NN {n}",
-                f"static const {real} V_LO = {_literal(float(params[D.DU_V_LO]), p)};",
-                f"static const {real} H = {_literal(float(params[D.DU_V_STEP]), p)};",
-                f"static const {real} S_MIN = {_literal(float(params[D.DU_F_MIN]), p)};",
-                f"static const {real} EV[NN * NN] = "
-                f"{_array(params[D.DU_UP : D.DU_UP + n * n], p)};",
-            ]
-        )
+        constants = _preisach_constants(params, real, p)
     else:
         nv, nq = int(params[D.DU_NV]), int(params[D.DU_NQ])
         cells = nv * nq
@@ -1425,21 +1415,30 @@ def _slow_c(comp: CoreCompensator, real: str, precision: Precision) -> str:
     for name in names:
         code = re.sub(rf"\b{name}\b", f"SLOW_{name}" if name.isupper() else f"slow_{name}", code)
     code = code.replace("core_move", "slow_move")
-    pk = comp.slow
-    n = int(pk[D.DU_NV])
-    constants = "\n".join(
+    a = _literal(float(comp.config[D.CC_SLOW_A]), precision)
+    constants = _preisach_constants(comp.slow, real, precision, "SLOW_")  # flat beyond its grid
+    return (
+        f"/* the slow (relaxing) Preisach core */\n{constants}\n"
+        f"static const {real} SLOW_A = {a}; /* 1 - exp(-dt / tau) */\n{code}"
+    )
+
+
+def _preisach_constants(
+    packed: np.ndarray, real: str, precision: Precision, prefix: str = ""
+) -> str:
+    """A Preisach core's grid and Everett table as C constants (names after ``prefix``)."""
+    n = int(packed[D.DU_NV])
+    lit = [_literal(float(packed[k]), precision) for k in (D.DU_V_LO, D.DU_V_STEP, D.DU_F_MIN)]
+    return "\n".join(
         [
-            f"#define SLOW_NN {n}",
-            f"static const {real} SLOW_V_LO = {_literal(float(pk[D.DU_V_LO]), precision)};",
-            f"static const {real} SLOW_H = {_literal(float(pk[D.DU_V_STEP]), precision)};",
-            f"static const {real} SLOW_S_MIN = 0; /* flat beyond its grid */",
-            f"static const {real} SLOW_A = "
-            f"{_literal(float(comp.config[D.CC_SLOW_A]), precision)}; /* 1 - exp(-dt / tau) */",
-            f"static const {real} SLOW_EV[SLOW_NN * SLOW_NN] = "
-            f"{_array(pk[D.DU_UP : D.DU_UP + n * n], precision)};",
+            f"#define {prefix}NN {n}",
+            f"static const {real} {prefix}V_LO = {lit[0]};",
+            f"static const {real} {prefix}H = {lit[1]};",
+            f"static const {real} {prefix}S_MIN = {lit[2]};",
+            f"static const {real} {prefix}EV[{prefix}NN * {prefix}NN] = "
+            f"{_array(packed[D.DU_UP : D.DU_UP + n * n], precision)};",
         ]
     )
-    return f"/* the slow (relaxing) Preisach core */\n{constants}\n{code}"
 
 
 _CORE_C = {
