@@ -48,6 +48,15 @@ def inside_trajectory(model: ph.HysteresisModel, seconds: float = 6.0) -> np.nda
 
 
 # ------------------------------------------------------------- identification
+def known_core(v: np.ndarray, n: int) -> Any:
+    """A Preisach core on n nodes over v's range (a smooth density), at rest at v[0]."""
+    nodes = float(v.min()) + float(np.ptp(v)) / (n - 1) * np.arange(n)
+    k, c = np.meshgrid(np.arange(n - 1.0), np.arange(n - 1.0), indexing="ij")
+    density = np.triu(2e-8 * np.exp(-((c - k - 1.0) ** 2) / 4.0) * (1.0 + 0.1 * k))
+    return ph.PreisachHysteresis(nodes, density, ph.PreisachHysteresis(
+        nodes, density, np.zeros(D.RV_SIZE)).rest_state(float(v[0])))  # fmt: skip
+
+
 def test_the_preisach_fit_is_exact_output_error() -> None:
     """Data made by a known Preisach core (and a leak) are fitted exactly: the output is
     linear in the density given the input, so the bounded linear solve is the
@@ -55,11 +64,7 @@ def test_the_preisach_fit_is_exact_output_error() -> None:
     rec = ph.simulate(signal="decaying", duration=12.0, seed=1)
     v, t = rec.voltage, rec.t
     n = 7
-    nodes = float(v.min()) + float(np.ptp(v)) / (n - 1) * np.arange(n)
-    k, c = np.meshgrid(np.arange(n - 1.0), np.arange(n - 1.0), indexing="ij")
-    density = np.triu(2e-8 * np.exp(-((c - k - 1.0) ** 2) / 4.0) * (1.0 + 0.1 * k))
-    core = ph.PreisachHysteresis(nodes, density, ph.PreisachHysteresis(
-        nodes, density, np.zeros(D.RV_SIZE)).rest_state(float(v[0])))  # fmt: skip
+    core = known_core(v, n)
     truth = ph.PreisachModel.from_operator(
         core, terms=(ph.terms.Integral(),), coefficients=([5e-10],)
     )
@@ -366,9 +371,14 @@ def test_the_self_sensing_loop_runs_on_a_differential_core(
     models: dict[str, Any], name: str
 ) -> None:
     model = models[name]
+    loop_on_the_bench(model, inside_trajectory(model, 3.0))
+
+
+def loop_on_the_bench(model: ph.HysteresisModel, desired: np.ndarray) -> None:
+    """The self-sensing loop closed on the bench at 1 kHz: every command inside the limits,
+    and a replay of the recorded measurements gives the same commands."""
     hi = model.input_range_[1]
     ctl = ph.SelfSensingController(model, v_min=0.0, v_max=hi, sample_rate=1000.0)
-    desired = inside_trajectory(model, 3.0)
     bench = ph.simulation.Bench(voltage=ctl.last_command, seed=4)
     measured = np.empty_like(desired)
     commands = np.empty_like(desired)
@@ -498,11 +508,7 @@ def test_a_preisach_core_with_creep_is_fitted_exactly() -> None:
     rec = ph.simulate(signal="decaying", duration=12.0, seed=1)
     v, t = rec.voltage, rec.t
     n = 7
-    nodes = float(v.min()) + float(np.ptp(v)) / (n - 1) * np.arange(n)
-    k, c = np.meshgrid(np.arange(n - 1.0), np.arange(n - 1.0), indexing="ij")
-    density = np.triu(2e-8 * np.exp(-((c - k - 1.0) ** 2) / 4.0) * (1.0 + 0.1 * k))
-    core = ph.PreisachHysteresis(nodes, density, ph.PreisachHysteresis(
-        nodes, density, np.zeros(D.RV_SIZE)).rest_state(float(v[0])))  # fmt: skip
+    core = known_core(v, n)
     gains = [3e-9, 1e-9]
     truth = ph.PreisachModel.from_operator(
         core, terms=(ph.terms.Creep(CREEP), ph.terms.Integral()), coefficients=(gains, [5e-10])
@@ -598,31 +604,13 @@ def test_the_self_sensing_loop_runs_a_core_with_creep(
     """The loop's model output includes the lags (and the slow core): on the bench, a
     Preisach model with creep keeps every command safe, and a replay gives the same ones."""
     model = creep_models[name]
-    hi = model.input_range_[1]
-    fs = 1000.0
-    desired = creep_trajectory(model, fs, 3.0)[2]
-    ctl = ph.SelfSensingController(model, v_min=0.0, v_max=hi, sample_rate=fs)
-    bench = ph.simulation.Bench(voltage=ctl.last_command, seed=4)
-    measured = np.empty_like(desired)
-    commands = np.empty_like(desired)
-    for k, d in enumerate(desired):
-        measured[k] = bench.reading.charge
-        commands[k] = ctl.step(float(d), measured[k])
-        bench.apply(commands[k])
-    assert np.all((commands >= 0.0) & (commands <= hi))
-    replay = ph.SelfSensingController(model, v_min=0.0, v_max=hi, sample_rate=fs)
-    np.testing.assert_array_equal(replay.process(desired, measured), commands)
+    loop_on_the_bench(model, creep_trajectory(model, 1000.0, 3.0)[2])
 
 
 # ------------------------------------------------------ relaxing hysteresis
 def _relaxing_truth(v: np.ndarray) -> tuple[Any, np.ndarray, ph.terms.Relaxation]:
     """A known Preisach core with a relaxing density (8 nodes, tau 0.1 s) and a leak."""
-    n = 7
-    nodes = float(v.min()) + float(np.ptp(v)) / (n - 1) * np.arange(n)
-    k, c = np.meshgrid(np.arange(n - 1.0), np.arange(n - 1.0), indexing="ij")
-    density = np.triu(2e-8 * np.exp(-((c - k - 1.0) ** 2) / 4.0) * (1.0 + 0.1 * k))
-    core = ph.PreisachHysteresis(nodes, density, ph.PreisachHysteresis(
-        nodes, density, np.zeros(D.RV_SIZE)).rest_state(float(v[0])))  # fmt: skip
+    core = known_core(v, 7)
     term = ph.terms.Relaxation(0.1, 8).bind(np.array([v.min(), v.max()]))
     m = 7
     kk, cc = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
