@@ -24,7 +24,7 @@ from __future__ import annotations
 import itertools
 import math
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -141,42 +141,45 @@ def _picked_rows(n: int, limit: int) -> np.ndarray:
     return np.flatnonzero(h < np.uint64(((1 << 24) * limit) // n))
 
 
+def _term_blocks(
+    terms: Sequence[Term], x: FloatArray, t: FloatArray | None
+) -> Iterator[tuple[int, int, FloatArray]]:
+    """Every term's columns over the record, from rest at its start, block by block:
+    ``(start, stop, columns)`` (the columns array is reused from one block to the next)."""
+    width = sum(term.width for term in terms)
+    states = [term.rest_state(float(x[0])) for term in terms]
+    block = np.empty((min(BLOCK, x.size), width))
+    for start in range(0, x.size, BLOCK):
+        stop = min(start + BLOCK, x.size)
+        dt = block_dt(t, start, stop, None) if t is not None else None
+        ts = None if t is None else t[start:stop]
+        term_columns(terms, x[start:stop], ts, dt, states, block[: stop - start])
+        yield start, stop, block[: stop - start]
+
+
 def _growth_matrix(
     terms: Sequence[Term], x: FloatArray, t: FloatArray | None, rows: np.ndarray | None = None
 ) -> FloatArray:
     """Every term's columns over the record (or at ``rows``, increasing), from rest at its
-    start; block by block, so a wide term never holds a column per sample of a long record."""
-    width = sum(term.width for term in terms)
+    start; by blocks, so a wide term never holds a column per sample of a long record."""
     picked = np.arange(x.size) if rows is None else rows
-    out = np.zeros((picked.size, width))
-    if width:
-        states = [term.rest_state(float(x[0])) for term in terms]
-        block = np.empty((min(BLOCK, x.size), width))
-        for start in range(0, x.size, BLOCK):
-            stop = min(start + BLOCK, x.size)
-            dt = block_dt(t, start, stop, None) if t is not None else None
-            ts = None if t is None else t[start:stop]
-            term_columns(terms, x[start:stop], ts, dt, states, block[: stop - start])
+    out = np.zeros((picked.size, sum(term.width for term in terms)))
+    if out.shape[1]:
+        for start, stop, cols in _term_blocks(terms, x, t):
             lo, hi = np.searchsorted(picked, [start, stop])
-            out[lo:hi] = block[picked[lo:hi] - start]
+            out[lo:hi] = cols[picked[lo:hi] - start]
     return out
 
 
 def _terms_output(
     terms: Sequence[Term], coefs: Sequence[FloatArray], x: FloatArray, t: FloatArray | None
 ) -> FloatArray:
-    """The terms' part of the output over the record, from rest at its start (by blocks)."""
+    """The terms' part of the output over the record, from rest at its start."""
     out = np.zeros(x.size)
     if terms:
         coef = np.concatenate(list(coefs))
-        states = [term.rest_state(float(x[0])) for term in terms]
-        block = np.empty((min(BLOCK, x.size), coef.size))
-        for start in range(0, x.size, BLOCK):
-            stop = min(start + BLOCK, x.size)
-            dt = block_dt(t, start, stop, None) if t is not None else None
-            ts = None if t is None else t[start:stop]
-            term_columns(terms, x[start:stop], ts, dt, states, block[: stop - start])
-            out[start:stop] = block[: stop - start] @ coef
+        for start, stop, cols in _term_blocks(terms, x, t):
+            out[start:stop] = cols @ coef
     return out
 
 

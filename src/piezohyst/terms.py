@@ -722,25 +722,6 @@ class Relaxation(Term):
         packed = np.concatenate([self._head(), everett_nodes(mu.reshape(m, m)).ravel()])
         return RelaxationShape(self.tau, packed)
 
-    def output_state(self, state: FloatArray, coefficients: FloatArray) -> FloatArray:
-        """The slow core's state ``[v, q, direction, k, R...]`` from the term's state.
-
-        Parameters
-        ----------
-        state : ndarray
-            The term's state (see :attr:`state_names`).
-        coefficients : ndarray
-            The term's fitted density.
-
-        Returns
-        -------
-        ndarray, shape (_diffkernels.RV_SIZE,)
-        """
-        core = np.array(state[: D.RV_SIZE], dtype=np.float64)
-        acc = np.asarray(state[D.RV_SIZE :], dtype=np.float64)
-        core[1] = float(acc @ self._map @ coefficients)
-        return core
-
 
 def term_class(kind: str) -> type[Term]:
     """The term class registered under ``kind``.
