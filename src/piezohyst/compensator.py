@@ -157,9 +157,6 @@ class Compensator:
                 "fit a PreisachModel(relaxation=...) instead"
             )
             raise ParameterError(msg)
-        if spec.lags is not None and sample_rate is None:
-            msg = "A model with creep needs the loop's sample_rate (Hz). Got sample_rate=None."
-            raise ParameterError(msg)
         if dyn.active and not spec.analytic:
             msg = (
                 "A model with input dynamics is compensated with the analytic inverse only: fit "
@@ -273,12 +270,12 @@ class Compensator:
                 raise ParameterError(msg)
             inv_gain = 1.0 / g
         dyn = spec.dynamics
-        if dyn.active and sample_rate is None:
-            msg = (
-                "A model with input dynamics needs the loop's sample_rate (Hz). "
-                "Got sample_rate=None."
-            )
-            raise ParameterError(msg)
+        timed = [(dyn.active, "input dynamics"), (spec.lags is not None, "creep"),
+                 (spec.relaxation is not None, "a relaxation term")]  # fmt: skip
+        for needed, what in timed:
+            if needed and sample_rate is None:
+                msg = f"A model with {what} needs the loop's sample_rate (Hz). Got None."
+                raise ParameterError(msg)
         self.model = model
         self.spec = spec
         self.domain: Domain = domain
@@ -773,12 +770,10 @@ class CoreCompensator(Compensator):
             self.region = region.array
         if domain == "displacement":  # displacement 0 = the output in the initial state
             self.config[D.CC_REF] = core.output(core.initial_state)
+        fs = float(sample_rate or 0.0)  # given whenever lags or a slow core need it (_settings)
         lg = spec.lags
         if lg is not None:  # kept creep lags: affine in each sample's voltage, solved with it
-            if sample_rate is None:
-                msg = "A model with creep needs the loop's sample_rate (Hz). Got sample_rate=None."
-                raise ParameterError(msg)
-            alphas = 1.0 - np.exp(-1.0 / (float(sample_rate) * np.asarray(lg.taus)))
+            alphas = 1.0 - np.exp(-1.0 / (fs * np.asarray(lg.taus)))
             self.lags = np.vstack([lg.taus, lg.gains, alphas])
             pairs = np.column_stack([lg.gains, alphas]).ravel()
             self.dyn = np.concatenate([self.dyn[: D.DYN_LAGS], pairs])
@@ -789,14 +784,8 @@ class CoreCompensator(Compensator):
         self.config[D.CC_NS] = ns
         slow = spec.relaxation
         if slow is not None:  # a slow Preisach core after the main one: params and state
-            if sample_rate is None:
-                msg = (
-                    "A model with a relaxation term needs the loop's sample_rate (Hz). "
-                    "Got sample_rate=None."
-                )
-                raise ParameterError(msg)
             self.config[D.CC_SLOW_AT] = self.params.size
-            self.config[D.CC_SLOW_A] = 1.0 - math.exp(-1.0 / (float(sample_rate) * slow.tau))
+            self.config[D.CC_SLOW_A] = 1.0 - math.exp(-1.0 / (fs * slow.tau))
             self.params = np.concatenate([self.params, slow.packed])
             ns += D.RV_SIZE
         #: the slow core's packed parameters (empty without a relaxation term)
