@@ -171,13 +171,17 @@ int main(void)
 
 @pytest.mark.parametrize(
     ("flags", "refresh", "samples", "atol"),
+    # The kernels may contract and reassociate (FASTMATH), so compiled Python and C part by
+    # an ulp from the first sample, differently on each CPU (pure Python equals the C to the
+    # bit); a replay of recorded measurements (no plant to answer) integrates that rounding:
+    # measured 7.4e-9 V over 3.5 s on an AMD EPYC, under 1e-9 V on the machines before it.
+    # The bounds leave a factor of about 7; a wrong term or branch costs volts.
     [
-        (("-O2",), False, 3500, 1e-9),
-        # -ffast-math reorders the sums: the commands part by ~2e-9 V over 3.5 s
-        (("-O2", "-ffast-math"), False, 3500, 1e-8),
+        (("-O2",), False, 3500, 5e-8),
+        (("-O2", "-ffast-math"), False, 3500, 5e-8),
         # the refresh's regression turns rounding into a bias difference (~1e-10 relative)
-        # that a replay of recorded measurements (no plant to answer) then integrates
-        (("-O2",), True, 1700, 1e-9),
+        # that the replay then integrates (3.4e-10 V over 1.7 s on the EPYC)
+        (("-O2",), True, 1700, 5e-9),
     ],
 )
 def test_controller_matches_python(
