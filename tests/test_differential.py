@@ -73,6 +73,7 @@ def test_the_preisach_fit_is_exact_output_error() -> None:
     assert model.nrmse_ < 1e-9
     assert model.growth_coefficients()["integral"][0] == pytest.approx(5e-10, rel=1e-6)
     np.testing.assert_allclose(model.predict(v, t=t), q, rtol=0, atol=1e-9 * np.ptp(q))
+    assert not model.operator_.virgin  # the initial loading curve earned nothing here
 
 
 def test_everett_nodes_sum_the_density() -> None:
@@ -170,9 +171,59 @@ def test_chunks_equal_one_call(
     np.testing.assert_array_equal(np.concatenate(parts), whole)
 
 
+def test_a_preisach_rest_state_is_a_demagnetising_staircase() -> None:
+    nodes = np.linspace(0.0, 100.0, 11)
+    plain = ph.PreisachHysteresis(nodes, np.eye(10) * 1e-9, np.zeros(D.RV_SIZE))
+    assert plain.rest_state(40.0)[D.RV_K] == 1  # no reversal yet: a branch from 40 V
+    core = ph.PreisachHysteresis(nodes, np.eye(10) * 1e-9, np.zeros(D.RV_SIZE), virgin=True)
+    z = core.rest_state(40.0)
+    k = int(z[D.RV_K])
+    points = z[D.RV_R : D.RV_R + k]
+    assert k == ph.differential.DEMAG_POINTS
+    assert points[0] == 0.0  # as wide as the grid allows on the nearer side
+    gaps = points - 40.0
+    assert np.all(np.sign(gaps[1:]) == -np.sign(gaps[:-1]))  # alternating about 40 V
+    assert np.all(np.abs(gaps[1:]) < np.abs(gaps[:-1]))  # and closing in on it
+    assert z[D.RV_DIR] == -np.sign(gaps[-1])  # the last move was towards 40 V
+    edge = core.rest_state(0.0)  # no room below: the first rise is a branch from 0 V
+    assert edge[D.RV_K] == 1 and edge[D.RV_R] == 0.0
+
+
+def test_a_preisach_fit_from_rest_learns_the_initial_loading_curve(tmp_path: Path) -> None:
+    """The paper's experiment starts at rest at 0 V: the first rise is the initial loading
+    curve, half a loop's width from the branches. A grid on the training range alone
+    cannot hold it (the first 2 s were 2.8 % off, the fit 0.96 % over all); the fit from
+    rest extends the grid to the rest point's mirror image."""
+    rec = ph.simulate(duration=20.0)
+    v, q, t = rec.voltage, rec.charge, rec.t
+    model = ph.PreisachModel().fit(v, q, t=t)
+    assert model.operator_.virgin  # "auto" chose the initial loading curve
+    again = ph.PreisachModel(rest="branch").fit(v, q, t=t)
+    assert not again.operator_.virgin and again.nrmse_ > 5 * model.nrmse_
+    first = slice(0, 2000)  # the first rise and fall
+    err = q - model.predict(v, t=t)
+    assert np.sqrt(np.mean(err[first] ** 2)) / np.ptp(q) < 0.002
+    assert model.nrmse_ < 0.001
+    assert model.operator_.nodes[0] < v.min()  # the grid reaches below the record
+    assert model.input_range_ == (v.min(), v.max())  # the region is still the record's
+    assert "(+15 for the first move from rest)" in model.operator_.summary
+    path = tmp_path / "virgin.json"
+    model.save(path)
+    back = ph.load_model(path)
+    assert back.operator_.virgin
+    np.testing.assert_array_equal(back.predict(v, t=t, state="rest"), model.predict(v, t=t))
+    # the compensator starts from the same rest state: it inverts the first rise too
+    comp = ph.Compensator(model.hysteresis_, v_min=0.0, v_max=140.0)
+    target = model.hysteresis_.predict(v[:3000], state="rest")
+    achieved = model.hysteresis_.predict(comp.process(target), state="rest")
+    np.testing.assert_allclose(achieved, target, rtol=0, atol=1e-9 * np.ptp(target))
+
+
 def test_preisach_memory_wipes_out_closed_inner_loops(models: dict[str, Any]) -> None:
     core = models["preisach"].operator_
-    z = core.rest_state(10.0)
+    z = np.zeros(D.RV_SIZE)  # a branch from 10 V (no demagnetised staircase below it)
+    z[0] = z[D.RV_R] = 10.0
+    z[D.RV_K] = 1
     path = [50.0, 30.0, 45.0, 35.0, 40.0]  # nested loops: 10 up 50, down 30, up 45, ...
     for v in path:
         z = core.propagate(np.linspace(z[0], v, 20)[1:], z).state

@@ -753,15 +753,27 @@ def duhem_jacobian(p, v, q0, rows, qsim, jac):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def rev_design(p, v, st, rows, out):  # type: ignore[no-untyped-def]
-    """The Preisach core's regressors: ``out[r]`` = d(q[rows[r]] - q[0]) / d(Everett nodes)
-    (the walk of ``rev_move`` from st)."""
-    acc = np.zeros(out.shape[1])
+def rev_design(p, v, st, rows, acc, first, nmap, tmp, out):  # type: ignore[no-untyped-def]
+    """The Preisach core's regressors in parameter space: ``out[r]`` = d(q[rows[r]] - q[0])
+    / d(parameters), where ``nmap`` maps parameters to Everett nodes (E = nmap @ params).
+
+    The walk of ``rev_move`` from st, which touches a few nodes per step (``tmp``, zeros
+    of the nodes' size, collects them); ``acc`` carries the derivative since the record's
+    start. st and acc are updated, so a record can be walked in pieces; with ``first``,
+    v[0] is where st already is."""
     r = 0
     nr = rows.shape[0]
+    nn = tmp.shape[0]
+    npar = acc.shape[0]
     for k in range(v.shape[0]):
-        if k > 0:
-            rev_move(p, st, v[k], True, acc, True)
+        if k > 0 or not first:
+            rev_move(p, st, v[k], True, tmp, True)
+            for i in range(nn):
+                w = tmp[i]
+                if w != 0.0:
+                    for j in range(npar):
+                        acc[j] += w * nmap[i, j]
+                    tmp[i] = 0.0
         if r < nr and rows[r] == k:
             out[r, :] = acc
             r += 1

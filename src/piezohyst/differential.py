@@ -562,6 +562,13 @@ class DuhemHysteresis(DifferentialCore):
         )
 
 
+#: Reversal points of a Preisach core's rest state (a demagnetising staircase), of
+#: the stack's ``_diffkernels.STACK``; the rest holds the reversals of the drive
+DEMAG_POINTS = 20
+#: Ratio of successive amplitudes of that staircase (the last is 1e-3 of the first)
+DEMAG_RATIO = 0.7
+
+
 @dataclass(frozen=True, eq=False)
 class PreisachHysteresis(DifferentialCore):
     r"""The Preisach model, by its Everett function on a grid of reversal points.
@@ -588,12 +595,18 @@ class PreisachHysteresis(DifferentialCore):
     initial_state : array_like
         ``[v, q, direction, k, R[0..STACK-1]]`` (see ``_diffkernels``).
     region : Region, optional
+    virgin : bool, default False
+        What "at rest" means (:meth:`rest_state`): True, a demagnetised state,
+        from which the first move follows the initial loading curve (as play
+        operators from zero state); False, no reversal yet, the first move
+        follows a branch from the rest point (as from an extremum).
     """
 
     nodes: FloatArray
     density: FloatArray
     initial_state: FloatArray
     region: Region | None = None
+    virgin: bool = False
     packed: FloatArray = field(init=False, repr=False)
     kind: ClassVar[str] = "preisach"
     inner: ClassVar[str] = "output"
@@ -626,13 +639,38 @@ class PreisachHysteresis(DifferentialCore):
     @property
     def summary(self) -> str:
         """See :attr:`DifferentialCore.summary`."""
-        return f"Preisach, {self.nodes.size} nodes"
+        n = self.nodes.size
+        if self.region is None:
+            return f"Preisach, {n} nodes"
+        tol = 1e-9 * float(self.nodes[1] - self.nodes[0])
+        lo, hi = self.region.v_lo - tol, self.region.v_hi + tol
+        inside = int(np.count_nonzero((self.nodes >= lo) & (self.nodes <= hi)))
+        beyond = f" (+{n - inside} for the first move from rest)" if n > inside else ""
+        return f"Preisach, {inside} nodes{beyond}"
 
     def rest_state(self, x0: float) -> FloatArray:
-        """See :meth:`DifferentialCore.rest_state`: no reversal yet, the middle of the band."""
+        """See :meth:`DifferentialCore.rest_state`: at ``x0``, mid-band.
+
+        Without :attr:`virgin`, no reversal yet: the first move follows a
+        branch from ``x0``. With it, the actuator has forgotten its extremes:
+        the state an AC drive decaying to ``x0`` leaves, a staircase of
+        :data:`DEMAG_POINTS` reversal points shrinking towards ``x0`` by
+        :data:`DEMAG_RATIO`, as wide as the grid allows on both sides; the
+        first rise (or fall) then follows the initial loading curve, as a play
+        operator from zero state does (a fit from rest extends the grid to the
+        rest point's mirror image to learn it). At the grid's edge (no room
+        below or above) the first move follows a branch from ``x0`` either way.
+        """
         q = self.region.middle(x0) if self.region is not None else float(self.initial_state[1])
         z = np.zeros(D.RV_SIZE)
-        z[0], z[1], z[D.RV_K], z[D.RV_R] = float(x0), q, 1.0, float(x0)
+        x0 = float(x0)
+        z[0], z[1], z[D.RV_K], z[D.RV_R] = x0, q, 1.0, x0
+        amp = min(x0 - float(self.nodes[0]), float(self.nodes[-1]) - x0)
+        if self.virgin and amp > 0:
+            points = x0 - amp * (-DEMAG_RATIO) ** np.arange(DEMAG_POINTS)
+            z[D.RV_R : D.RV_R + DEMAG_POINTS] = points
+            z[D.RV_K] = DEMAG_POINTS
+            z[D.RV_DIR] = -1.0 if points[-1] > x0 else 1.0
         return z
 
     def everett(self, a: ArrayLike, b: ArrayLike) -> FloatArray:
@@ -674,6 +712,7 @@ class PreisachHysteresis(DifferentialCore):
             "density": self.density.tolist(),
             "initial_state": self.initial_state.tolist(),
             "region": _region_dict(self.region),
+            "rest": "virgin" if self.virgin else "branch",
         }
 
     @classmethod
@@ -688,8 +727,16 @@ class PreisachHysteresis(DifferentialCore):
         -------
         PreisachHysteresis
         """
+        rest = data.get("rest", "branch")  # files before the virgin rest state: a branch
+        if rest not in ("virgin", "branch"):
+            msg = f"the Preisach core's 'rest' must be 'virgin' or 'branch'. Got {rest!r}."
+            raise ParameterError(msg)
         return cls(
-            data["nodes"], data["density"], data["initial_state"], _region_from(data.get("region"))
+            data["nodes"],
+            data["density"],
+            data["initial_state"],
+            _region_from(data.get("region")),
+            virgin=rest == "virgin",
         )
 
 
