@@ -15,8 +15,6 @@ A unit that fails is a row of the summary with its reason; the others go on.
 
 from __future__ import annotations
 
-import csv
-import io as _stdio
 import math
 import os
 from collections.abc import Callable, Sequence
@@ -26,10 +24,9 @@ from typing import Any
 
 import numpy as np
 
-from ._version import __version__
 from .bank import model_width
 from .errors import ParameterError, PiezohystError
-from .io import MARKER, DataSpec, atomic_write, atomic_write_text
+from .io import DataSpec, write_rows
 from .workflows import fit_file, guard_outputs
 
 __all__ = ["FleetResult", "Unit", "fit_many", "units_of"]
@@ -252,33 +249,8 @@ def write_summary(path: PathLike, rows: list[dict[str, Any]]) -> Path:
     -------
     Path
     """
-    cols = _columns(rows)
-    numeric = {c for c in cols if c not in ("unit", "file", "status", "outlier",
-                                            "model_file", "error")}  # fmt: skip
-    p = Path(path)
-    if p.suffix.lower() == ".parquet":
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-
-        data = {
-            c: [float(r.get(c, math.nan)) if c in numeric else str(r.get(c, "")) for r in rows]
-            for c in cols
-        }
-        table = pa.table(data).replace_schema_metadata({"written_by": f"piezohyst {__version__}"})
-
-        def write(tmp: Path) -> None:
-            pq.write_table(table, tmp)
-
-        return atomic_write(p, write)
-    buf = _stdio.StringIO()
-    buf.write(f"{MARKER} {__version__}\n")
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(cols)
-    for r in rows:
-        w.writerow(
-            [repr(float(r.get(c, math.nan))) if c in numeric else r.get(c, "") for c in cols]
-        )
-    return atomic_write_text(p, buf.getvalue())
+    text = ("unit", "file", "status", "outlier", "model_file", "error")
+    return write_rows(path, rows, _columns(rows), text)
 
 
 def fit_many(
