@@ -311,6 +311,7 @@ LAYERS = {
     "models": 5,
     "differential_models": 5,
     "bank": 6,
+    "comparison": 6,
     "compensator": 7,
     "selfsensing": 7,
     "export": 8,

@@ -9,6 +9,7 @@ from __future__ import annotations
 from . import io, metrics, terms
 from ._version import __version__
 from .bank import ModelBank, load_bank
+from .comparison import Comparison, ComparisonRow, compare_models
 from .compensator import BankCompensator, Compensator, CompensatorState
 from .differential import BoucWenHysteresis, DuhemHysteresis, PreisachHysteresis, Region
 from .differential_models import BoucWenModel, DuhemModel, PreisachModel
@@ -52,6 +53,8 @@ __all__ = [
     "BoucWenHysteresis",
     "BoucWenModel",
     "ClassicalPI",
+    "Comparison",
+    "ComparisonRow",
     "Compensator",
     "CompensatorState",
     "ControllerState",
@@ -86,6 +89,7 @@ __all__ = [
     "TimeAxisError",
     "__version__",
     "calibrate_leakage",
+    "compare_models",
     "default_thresholds",
     "io",
     "load_bank",

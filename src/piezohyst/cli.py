@@ -20,6 +20,7 @@ from typing import Any, cast
 import click
 
 from ._version import __version__
+from .comparison import COMPARED_MODELS
 from .compensator import CompensatorSettings, Domain
 from .errors import PiezohystError
 from .io import DataSpec
@@ -598,6 +599,111 @@ def fit(
         for label, text in model.operator_.describe(model.input_unit, model.output_unit)[1:]:
             click.echo(f"{label} {text}")
     ctx.info(f"saved {out}")
+
+
+@main.command()
+@click.argument("data", type=EXISTING)
+@click.option(
+    "--models",
+    default=",".join(COMPARED_MODELS),
+    show_default=True,
+    help="Models to compare, a comma list of " + ", ".join(model_names()) + ".",
+)
+@click.option(
+    "--operators",
+    type=click.IntRange(1, 1000),
+    default=10,
+    show_default=True,
+    help="Play operators, for the models that have them.",
+)
+@click.option(
+    "--train",
+    type=click.FloatRange(0, 1, min_open=True, max_open=True),
+    default=0.7,
+    show_default=True,
+    help="Training fraction of DATA; the rest (later in time) is held out.",
+)
+@click.option(
+    "--test",
+    "test_data",
+    type=EXISTING,
+    default=None,
+    help="A separate held-out record (same columns); DATA then trains whole.",
+)
+@click.option(
+    "--input-dynamics",
+    type=click.Choice(["none", "delay", "first-order", "delay+first-order", "auto"]),
+    default="none",
+    show_default=True,
+    help="Delay/lag between the logged command and the piezo, identified with each model.",
+)
+@click.option(
+    "--initial-state",
+    type=click.Choice(["rest", "periodic"]),
+    default="rest",
+    show_default=True,
+    help="Where the training part starts (periodic: one period of a running drive).",
+)
+@_data_options
+@click.option(
+    "-o",
+    "--out",
+    "out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Also write the table: .md (Markdown), .csv or .parquet (with fit times).",
+)
+@FORCE
+@click.pass_obj
+def compare(
+    ctx: Context,
+    data: Path,
+    models: str,
+    operators: int,
+    train: float,
+    test_data: Path | None,
+    input_dynamics: str,
+    initial_state: str,
+    data_spec: DataSpec,
+    out: Path | None,
+    force: bool,
+) -> None:
+    """Fit several models on DATA and score each on data it never saw.
+
+    Prints a table, best held-out NRMSE first, with what each model absorbed
+    besides hysteresis (growth terms, creep, input lag).
+
+    \b
+    Example:
+      piezohyst compare run.csv
+      piezohyst compare run.csv --models active-pi,preisach --train 0.5 -o cmp.md
+      piezohyst compare run.csv --test run2.csv --input-dynamics auto
+    """
+    from .workflows import compare_file
+
+    names = [m.strip() for m in models.split(",") if m.strip()]
+    result = _run(
+        ctx,
+        lambda: compare_file(
+            data,
+            out,
+            models=names,
+            train=train,
+            test_data=test_data,
+            data_spec=data_spec,
+            operators=operators,
+            input_dynamics=input_dynamics,
+            initial_state=initial_state,
+            force=force,
+        ),
+    )
+    a, b = result.train
+    c, d = result.test
+    held = f"{test_data.name if test_data else data.name} samples {c}-{d}"
+    click.echo(f"trained on {data.name} samples {a}-{b}, held out: {held}")
+    click.echo(result.table())
+    if out is not None:
+        ctx.info(f"saved {out}")
 
 
 @main.command()

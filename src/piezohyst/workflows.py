@@ -25,21 +25,26 @@ from typing import Any
 import numpy as np
 
 from ._validation import FloatArray, check_float, check_int
+from ._version import __version__
+from .comparison import COMPARED_MODELS, Comparison, compare_models
 from .compensator import Compensator, CompensatorSettings
 from .differential import DifferentialCore
 from .errors import DataFileError, OverwriteError, ParameterError
 from .export import Precision, c_paths, write_c
 from .identification import Blocks, Summary, default_thresholds, history_state, periodic_state
 from .io import (
+    MD_MARKER,
     DataSpec,
     RecordingStream,
     Table,
+    atomic_write_text,
     check_finite,
     check_increasing,
     is_piezohyst_output,
     open_table,
     read_table,
     write_blocks,
+    write_rows,
     write_table,
 )
 from .leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
@@ -55,6 +60,7 @@ __all__ = [
     "LoopRun",
     "Prediction",
     "calibrate_leakage_file",
+    "compare_file",
     "compensate_file",
     "export_c_file",
     "fit_file",
@@ -277,6 +283,101 @@ def fit_file(
     if out is not None:
         fitted.save(out)
     return fitted
+
+
+def compare_file(
+    data: PathLike,
+    out: PathLike | None = None,
+    *,
+    models: Sequence[str] = COMPARED_MODELS,
+    train: float = 0.7,
+    test_data: PathLike | None = None,
+    data_spec: DataSpec | None = None,
+    operators: int = 10,
+    input_dynamics: str = "none",
+    initial_state: str = "rest",
+    force: bool = False,
+) -> Comparison:
+    """Fit several models on one record and score each on data it never saw.
+
+    See :func:`~piezohyst.comparison.compare_models`. Without ``test_data``
+    the first ``train`` fraction of the record (its window) trains and the
+    rest tests; with it, the whole record trains and ``test_data`` (read with
+    the same columns) tests, started at rest.
+
+    Parameters
+    ----------
+    data : str or os.PathLike
+        The training recording.
+    out : str or os.PathLike, optional
+        The table: ``.md`` (Markdown), ``.parquet``, or a text file (CSV).
+    models : sequence of str
+        CLI names (``piezohyst fit --model``); each with its default settings.
+    train : float
+        Training fraction of ``data`` when there is no ``test_data``.
+    test_data : str or os.PathLike, optional
+        A separate test recording.
+    data_spec : DataSpec, optional
+        Columns and window (default: voltage, charge, time).
+    operators : int
+        Play operators, for the models that have them.
+    input_dynamics : str
+        As for :func:`fit_file`, for every model.
+    initial_state : {"rest", "periodic"}
+        Where the training part starts.
+    force : bool
+        Replace an existing ``out`` that piezohyst did not write.
+
+    Returns
+    -------
+    Comparison
+    """
+    names = list(dict.fromkeys(models))
+    if not names:
+        msg = "give at least one model to compare"
+        raise ParameterError(msg)
+    classes = [model_class(name) for name in names]
+    inputs = [data] if test_data is None else [data, test_data]
+    if out is not None:
+        guard_outputs([out], inputs, force=force)
+    spec = data_spec or DataSpec()
+    rec = spec.read(data)
+    assert rec.y is not None
+    w = rec.window
+    x_unit, y_unit = rec.units
+    estimators = {}
+    for name, cls in zip(names, classes, strict=True):
+        accepted = cls().get_params()
+        estimators[name] = cls(
+            **({"n_operators": operators} if "n_operators" in accepted else {}),
+            input_unit=x_unit or "V",
+            output_unit=y_unit or _default_unit(rec.names[1]),
+            input_dynamics=input_dynamics,
+        )
+    test = None
+    if test_data is not None:
+        trec = spec.read(test_data)
+        assert trec.y is not None
+        if trec.units[1] != rec.units[1]:
+            msg = (
+                f"{test_data}: the output column is in {trec.units[1]!r}, the training "
+                f"record's in {rec.units[1]!r}"
+            )
+            raise DataFileError(msg)
+        tw = trec.window
+        test = (trec.x[tw], trec.y[tw], trec.t[tw])
+    result = compare_models(
+        estimators, rec.x[w], rec.y[w], rec.t[w], train=train, test=test,
+        initial_state=initial_state,
+    )  # fmt: skip
+    if out is not None:
+        if Path(out).suffix.lower() == ".md":
+            atomic_write_text(out, f"{MD_MARKER} {__version__} -->\n\n{result.table()}\n")
+        else:
+            rows = [r.as_dict() for r in result.rows]
+            text = ("model", "status", "absorbed", "notes", "error")
+            write_rows(out, rows, list(rows[0]), text)
+    return result
 
 
 #: A window of at most this many samples is read from the file once and kept in memory
