@@ -23,6 +23,7 @@ extrapolates.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -771,7 +772,13 @@ def everett_map(n: int) -> FloatArray:
     Returns
     -------
     ndarray, shape (n * n, (n - 1) ** 2)
+        Read-only (one copy per grid size is kept).
     """
+    return _everett_map(int(n))
+
+
+@functools.lru_cache(maxsize=8)
+def _everett_map(n: int) -> FloatArray:
     m = n - 1
     t = np.zeros((n * n, m * m))
     for k in range(m):
@@ -779,6 +786,7 @@ def everett_map(n: int) -> FloatArray:
             unit = np.zeros((m, m))
             unit[k, c] = 1.0
             t[:, k * m + c] = everett_nodes(unit).ravel()
+    t.flags.writeable = False
     return t
 
 
