@@ -206,7 +206,9 @@ def test_a_preisach_fit_from_rest_learns_the_initial_loading_curve(tmp_path: Pat
     assert model.nrmse_ < 0.001
     assert model.operator_.nodes[0] < v.min()  # the grid reaches below the record
     assert model.input_range_ == (v.min(), v.max())  # the region is still the record's
-    assert "(+15 for the first move from rest)" in model.operator_.summary
+    assert model.operator_.summary == (
+        "Preisach, 16 nodes, initial loading curve from rest (+15 nodes beyond the range)"
+    )
     path = tmp_path / "virgin.json"
     model.save(path)
     back = ph.load_model(path)

@@ -646,8 +646,10 @@ class PreisachHysteresis(DifferentialCore):
         tol = 1e-9 * float(self.nodes[1] - self.nodes[0])
         lo, hi = self.region.v_lo - tol, self.region.v_hi + tol
         inside = int(np.count_nonzero((self.nodes >= lo) & (self.nodes <= hi)))
-        beyond = f" (+{n - inside} for the first move from rest)" if n > inside else ""
-        return f"Preisach, {inside} nodes{beyond}"
+        if not self.virgin:
+            return f"Preisach, {inside} nodes"
+        beyond = f" (+{n - inside} nodes beyond the range)" if n > inside else ""
+        return f"Preisach, {inside} nodes, initial loading curve from rest{beyond}"
 
     def rest_state(self, x0: float) -> FloatArray:
         """See :meth:`DifferentialCore.rest_state`: at ``x0``, mid-band.
