@@ -763,17 +763,12 @@ def rev_design(p, v, st, rows, acc, first, nmap, tmp, out):  # type: ignore[no-u
     v[0] is where st already is."""
     r = 0
     nr = rows.shape[0]
-    nn = tmp.shape[0]
-    npar = acc.shape[0]
     for k in range(v.shape[0]):
         if k > 0 or not first:
             rev_move(p, st, v[k], True, tmp, True)
-            for i in range(nn):
-                w = tmp[i]
-                if w != 0.0:
-                    for j in range(npar):
-                        acc[j] += w * nmap[i, j]
-                    tmp[i] = 0.0
+            for i in np.flatnonzero(tmp):  # a few nodes (array operations: fast uncompiled too)
+                acc += tmp[i] * nmap[i]
+                tmp[i] = 0.0
         if r < nr and rows[r] == k:
             out[r, :] = acc
             r += 1
