@@ -27,7 +27,7 @@ lint: $(BIN)/.installed
 # at least 90 % of src/.
 test: lint
 	$(BIN)/python -m pytest
-	NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q -p no:cacheprovider \
+	NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q -p no:cacheprovider --durations=15 \
 		--cov --cov-report=term --cov-fail-under=90 tests
 
 bench: $(BIN)/.installed
