@@ -21,6 +21,8 @@ from piezohyst.differential_models import _curvature, _curvature_upper
 from piezohyst.export import write_c
 from piezohyst.simulation import make_signal
 
+from .strategies import examples
+
 CC = shutil.which("cc") or shutil.which("gcc")
 
 
@@ -154,7 +156,7 @@ def test_auto_growth_terms_are_chosen_by_the_proxy(record: Any) -> None:
 
 # ---------------------------------------------------------------------- state
 @pytest.mark.parametrize("name", ["preisach", "duhem", "bouc-wen"])
-@settings(max_examples=15, deadline=None)
+@settings(max_examples=examples(15), deadline=None)
 @given(cuts=st.lists(st.integers(1, 2999), min_size=1, max_size=5))
 def test_chunks_equal_one_call(
     models: dict[str, ph.HysteresisModel], record: Any, name: str, cuts: list[int]
@@ -304,7 +306,7 @@ def test_the_compensator_inverts_exactly_inside_the_region(
 
 
 @pytest.mark.parametrize("name", ["preisach", "bouc-wen"])
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=examples(25), deadline=None)
 @given(
     targets=st.lists(st.floats(-0.5, 1.5), min_size=1, max_size=30),
     slew=st.sampled_from([None, 500.0]),
@@ -716,12 +718,18 @@ def test_a_relaxing_preisach_model_is_fitted_exactly(tmp_path: Path) -> None:
     q = truth.predict(v, t=t)
     model = ph.PreisachModel(7, relaxation=0.1, relaxation_nodes=8, smoothing=0.0,
                              min_slope=1e-3).fit(v, q, t=t)  # fmt: skip
-    assert model.nrmse_ < 1e-9
+    # 13 of the 51 directions of the relaxing density are not identified (the lagged voltage
+    # never separates their cells) and the truth sits on the lower bounds of several: the
+    # bounded solve's minimum-norm tie-break (TIE_BREAK, 1e-10 of the largest eigenvalue)
+    # shrinks the weakest identified directions (1.5e-7 of the largest) by up to 7e-4 of
+    # their small part of the output: 1.2e-8 measured; rounding alone would leave 1e-12
+    assert model.nrmse_ < 1e-7
     slow = [c for tm, c in zip(model.terms_, model.coefs_, strict=True) if tm.kind == "relaxation"]
     # cells the lagged voltage never separates are not identifiable; the relaxing output is
     dt = np.concatenate([[0.0], np.diff(t)])
     cols = term.columns(v, t, dt, term.rest_state(float(v[0])))
-    np.testing.assert_allclose(cols @ slow[0], cols @ cells, rtol=0, atol=1e-7 * np.ptp(q))
+    # (to the tie-break's shrinkage above, 6.6e-8 of the span at most: 1e-6 bounds it)
+    np.testing.assert_allclose(cols @ slow[0], cols @ cells, rtol=0, atol=1e-6 * np.ptp(q))
     assert [tm.kind for tm in model.hysteresis_.terms_] == ["relaxation"]
     model.save(tmp_path / "r.json")
     back = ph.load_model(tmp_path / "r.json")
