@@ -428,6 +428,19 @@ def _move_all(p, cfg, st, trial, v, lin):  # type: ignore[no-untyped-def]
     return y, f
 
 
+#: Resolution of the inverse's solve, relative to the voltage (plus one unit): a move this
+#: small is a hold; Newton's bracket stops at the same width
+HOLD_RES = 1e-13
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _hold(p, cfg, st, trial, v0, lo, hi, lin):  # type: ignore[no-untyped-def]
+    """``core_inverse``'s answer when the command stays at v0 (inside [lo, hi])."""
+    v = min(max(v0, lo), hi)
+    _move_all(p, cfg, st, trial, v, lin)
+    return v, v0 < lo or v0 > hi
+
+
 @njit(cache=True, fastmath=FASTMATH)
 def core_inverse(p, cfg, st, y, lo, hi, trial, lin):  # type: ignore[no-untyped-def]
     """The input v in [lo, hi] whose step from st gives output y, or the nearer end.
@@ -453,9 +466,7 @@ def core_inverse(p, cfg, st, y, lo, hi, trial, lin):  # type: ignore[no-untyped-
         ys, slow_slope = _slow_move(p, cfg, st, trial, v0)
         dy -= ys
     if dy == 0.0:
-        v = min(max(v0, lo), hi)
-        _move_all(p, cfg, st, trial, v, lin)
-        return v, v0 < lo or v0 > hi
+        return _hold(p, cfg, st, trial, v0, lo, hi, lin)
     s = 1.0 if dy > 0.0 else -1.0
     if p[0] == KIND_BOUC_WEN:
         s_min = p[BW_S_MIN]
@@ -475,6 +486,11 @@ def core_inverse(p, cfg, st, y, lo, hi, trial, lin):  # type: ignore[no-untyped-
     slope0 += lin + slow_slope
     s_min += lin
     v = v0 + dy / slope0
+    if abs(v - v0) <= HOLD_RES * (2.0 * abs(v0) + 1.0):
+        # a move below the solve's own resolution (the output's rounding on a held
+        # target): hold, or rounding dithers the command and a Preisach core's stack fills
+        # with reversals a few ulp wide, forgetting the memory that matters
+        return _hold(p, cfg, st, trial, v0, lo, hi, lin)
     if p[0] == KIND_DUHEM and not slow and abs(v - v0) <= p[DU_DV_MAX] and lo <= v <= hi:
         _trial(p, st, trial, v)
         return v, False
@@ -493,7 +509,7 @@ def core_inverse(p, cfg, st, y, lo, hi, trial, lin):  # type: ignore[no-untyped-
         else:
             v = a if at_lo else 0.5 * (a + b)
     tol = 1e-12 * abs(dy) + 4e-16 * abs(y)  # a residual below rounding ends it too
-    eps = 1e-13 * (abs(a) + abs(b) + 1.0)
+    eps = HOLD_RES * (abs(a) + abs(b) + 1.0)
     for _ in range(NEWTON_MAX):
         if slow:
             y1, f1 = _move_all(p, cfg, st, trial, v, lin)

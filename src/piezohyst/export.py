@@ -837,6 +837,7 @@ void {prefix}_init({prefix}_t *s);
 #define SLOW {has_slow} /* a slow (relaxing) Preisach core behind a lag */
 #define NS_MAIN {ns_main} /* the core's values in st; the slow core's follow */
 #define NEWTON_MAX {D.NEWTON_MAX}
+#define HOLD_RES {D.HOLD_RES!r}
 #define REGION_BISECTIONS {D.REGION_BISECTIONS}
 #define STACK {D.STACK}
 
@@ -1182,13 +1183,15 @@ static real_t core_inverse(real_t *st, real_t y, real_t lo, real_t hi, int *clam
     dy = y - core_output(st) - lin * v0;
 #endif
     *clamped = 0;
-    if (dy == 0) {
+    v = dy == 0 ? v0 : v0 + dy / (first_slope(st, dy > 0, dy) + lin);
+    if (abs_real(v - v0) <= HOLD_RES * (2 * abs_real(v0) + 1.0)) {
+        /* below the solve's resolution (a held target's rounding): hold, or the command
+         * dithers and a Preisach stack fills with reversals a few ulp wide */
         *clamped = v0 < lo || v0 > hi;
         v = min_real(max_real(v0, lo), hi);
         try_move(st, trial, v, &f1);
         return v;
     }
-    v = v0 + dy / (first_slope(st, dy > 0, dy) + lin);
 #if KIND == 0 && !SLOW
     if (abs_real(v - v0) <= DV_MAX && lo <= v && v <= hi) {
         try_move(st, trial, v, &f1);
@@ -1214,7 +1217,7 @@ static real_t core_inverse(real_t *st, real_t y, real_t lo, real_t hi, int *clam
         }
     }
     tol = 1e-12 * abs_real(dy) + 4e-16 * abs_real(y);
-    eps = 1e-13 * (abs_real(a) + abs_real(b) + 1.0);
+    eps = HOLD_RES * (abs_real(a) + abs_real(b) + 1.0);
     for (it = 0; it < NEWTON_MAX; ++it) {
         y1 = try_move(st, trial, v, &f1);
         res = y1 + lin * v - y;
