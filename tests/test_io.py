@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import io as stdio
+import os
 import shutil
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +15,8 @@ from hypothesis import strategies as st
 
 import piezohyst as ph
 from piezohyst.errors import DataFileError
+
+from .strategies import examples
 
 SUFFIXES = [".csv", ".txt", ".npz", ".mat", ".tdms", ".h5"]
 
@@ -60,7 +64,7 @@ def valid(tmp_path_factory: pytest.TempPathFactory) -> dict[str, bytes]:
     return _valid_files(tmp_path_factory.mktemp("valid"))
 
 
-@settings(max_examples=150, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=examples(150), suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.binary(max_size=600), suffix=st.sampled_from(SUFFIXES))
 def test_random_bytes(tmp_path: Path, data: bytes, suffix: str) -> None:
     path = tmp_path / f"f{suffix}"
@@ -68,7 +72,7 @@ def test_random_bytes(tmp_path: Path, data: bytes, suffix: str) -> None:
     read_or_clean_error(path)
 
 
-@settings(max_examples=150, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=examples(150), suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(
     suffix=st.sampled_from(SUFFIXES),
     cut=st.floats(0.0, 1.0),
@@ -85,7 +89,7 @@ def test_truncated_and_corrupted_valid_files(
     read_or_clean_error(path)
 
 
-@settings(max_examples=150, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=examples(150), suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(
     rows=st.lists(
         st.lists(
@@ -158,3 +162,40 @@ def test_unused_bad_columns_do_not_block_reading(tmp_path: Path) -> None:
 
 def test_stdlib_io_not_shadowed() -> None:
     assert stdio.StringIO("x").read() == "x" and shutil.which("sh")
+
+
+def _real_part_tag(raw: bytes) -> int:
+    """Offset of the first real part's data-type tag in a MAT v5 file of doubles."""
+    import struct
+
+    return raw.index(struct.pack("<II", 9, 400))  # miDOUBLE, 50 values
+
+
+@pytest.mark.parametrize("dtype", [20, 140, 255])
+def test_a_mat_file_that_crashed_scipy_is_one_line(
+    tmp_path: Path, valid: dict[str, bytes], dtype: int
+) -> None:
+    """An unknown data type in an array's tag made SciPy's MAT reader read out of bounds
+    and kill the process (SciPy 1.17, found by the fuzz test above)."""
+    raw = bytearray(valid[".mat"])
+    raw[_real_part_tag(raw)] = dtype
+    path = tmp_path / "damaged.mat"
+    path.write_bytes(bytes(raw))
+    with pytest.raises(DataFileError, match=r"damaged\.mat") as err:
+        ph.read_table(path)
+    assert "\n" not in str(err.value)
+
+
+def _die(path: str) -> None:
+    """A parser that crashes as compiled code does."""
+    os.kill(os.getpid(), signal.SIGSEGV)
+
+
+def test_a_parser_crash_is_an_error_naming_the_file(tmp_path: Path) -> None:
+    from piezohyst._isolate import parse_isolated
+
+    path = tmp_path / "x.h5"
+    with pytest.raises(DataFileError, match=r"x\.h5: the HDF5 reader crashed .*signal 11"):
+        parse_isolated(_die, path, "HDF5")
+    with pytest.raises(FileNotFoundError):  # the parser's own errors come back as they are
+        parse_isolated(open, tmp_path / "missing.h5", "HDF5")

@@ -298,6 +298,8 @@ LAYERS = {
     "_kernels": 1,
     "_diffkernels": 1,
     "metrics": 1,
+    "_isolate": 1,
+    "_parsers": 1,
     "io": 1,
     "units": 1,
     "hysteresis": 2,

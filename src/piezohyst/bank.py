@@ -562,11 +562,10 @@ def _read_arrays(p: Path, suffix: str) -> dict[str, Any]:
             header = str(f["bank"][0])
             channels = [str(s) for s in f["channels"]]
     else:
-        import h5py
+        from . import _parsers
+        from ._isolate import parse_isolated
 
-        with h5py.File(p, "r") as f:
-            header = f["bank"].asstr()[0]
-            channels = list(f["channels"].asstr()[:])
+        header, channels = parse_isolated(_parsers.bank_hdf5, p, "HDF5")
     data: dict[str, Any] = json.loads(header)
     data["channels"] = [json.loads(s) for s in channels]
     return data

@@ -577,28 +577,17 @@ def _read_parquet(path: Path, progress: Callable[[int], None] | None = None) -> 
 
 
 def _read_mat(path: Path) -> Table:
-    from scipy.io import loadmat
+    from . import _parsers
+    from ._isolate import parse_isolated
 
-    try:
-        data = loadmat(path, squeeze_me=False)
-    except NotImplementedError:  # MATLAB v7.3 is HDF5
-        return _read_hdf5(path)
-    arrays = {k: v for k, v in data.items() if not k.startswith("__")}
-    return _table_from_arrays(path, arrays, "MAT")
+    return _table_from_arrays(path, parse_isolated(_parsers.mat_arrays, path, "MAT"), "MAT")
 
 
 def _read_hdf5(path: Path) -> Table:
-    import h5py
+    from . import _parsers
+    from ._isolate import parse_isolated
 
-    arrays: dict[str, object] = {}
-    with h5py.File(path, "r") as fh:
-
-        def visit(name: str, obj: object) -> None:
-            if isinstance(obj, h5py.Dataset) and obj.dtype.kind in "biuf" and obj.size >= 1:
-                arrays[name] = obj[()]
-
-        fh.visititems(visit)
-    return _table_from_arrays(path, arrays, "HDF5")
+    return _table_from_arrays(path, parse_isolated(_parsers.hdf5_arrays, path, "HDF5"), "HDF5")
 
 
 class _Collect(logging.Handler):
