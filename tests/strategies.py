@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
@@ -33,3 +35,9 @@ def invertible_pi(draw: st.DrawFn, max_n: int = 8) -> PIHysteresis:
     offset = draw(st.floats(-50.0, 50.0))
     start = draw(st.floats(-100.0, 100.0))
     return PIHysteresis(r, w, offset, np.full(r.size, start))
+
+
+def examples(n: int) -> int:
+    """A test's own example count, scaled with the profile: as written under ``ci``, five
+    times as many under ``dev`` (see ``conftest.py``)."""
+    return n * 5 if os.environ.get("HYPOTHESIS_PROFILE") == "dev" else n

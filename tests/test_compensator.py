@@ -86,10 +86,15 @@ def test_chunks_and_steps_equal_one_batch(
     )
     stepper = compensator(h, slew_rate=5e4, sample_rate=1e3)
     stepped = np.array([stepper.step(v) for v in d])
-    np.testing.assert_allclose(parts, whole, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(stepped, whole, rtol=0, atol=1e-12)
-    np.testing.assert_array_equal(chunked.state.operators, stepper.state.operators)
-    assert chunked.state.command == stepper.state.command
+    # the block and step kernels are compiled apart with reassociation and FMA contraction
+    # allowed (FASTMATH), so they may round differently: an ulp of the voltage range per
+    # operation, a few operations per sample, and a play state is a clamp of the input (it
+    # carries no accumulated error): 64 ulp of the range bounds every sample
+    ulp = 64 * np.spacing(V_MAX - V_MIN)
+    np.testing.assert_allclose(parts, whole, rtol=0, atol=ulp)
+    np.testing.assert_allclose(stepped, whole, rtol=0, atol=ulp)
+    np.testing.assert_allclose(chunked.state.operators, stepper.state.operators, rtol=0, atol=ulp)
+    assert abs(chunked.state.command - stepper.state.command) <= ulp
 
 
 def test_nan_holds_and_saturation_counts() -> None:

@@ -18,6 +18,8 @@ from piezohyst.export import write_c
 from piezohyst.metrics import hysteresis_width, nrmse
 from piezohyst.simulation import make_signal, simulate
 
+from .strategies import examples
+
 LAGGED = "T226-H4-203X-amp4ms"
 DT = 1e-3
 
@@ -38,7 +40,7 @@ def naive_filter(dyn: InputDynamics, x: np.ndarray, dt: np.ndarray) -> np.ndarra
     return out
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=examples(40), deadline=None)
 @given(
     st.one_of(st.just(0.0), st.floats(1e-6, 0.02)),
     st.one_of(st.just(0.0), st.floats(1e-6, 0.02)),

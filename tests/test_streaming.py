@@ -16,6 +16,8 @@ import piezohyst.workflows as wf
 from piezohyst.errors import DataFileError
 from piezohyst.identification import Summary, array_blocks, default_thresholds, history_state
 
+from .strategies import examples
+
 
 @pytest.fixture(scope="module")
 def record() -> ph.simulation.BenchRecord:
@@ -83,7 +85,7 @@ def test_fit_blocks_refuses_what_needs_memory(record: ph.simulation.BenchRecord)
         ph.ActivePI(5).fit_blocks(untimed, timed=False)
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=examples(40), deadline=None)
 @given(
     st.lists(st.floats(-1e3, 1e3), min_size=2, max_size=60),
     st.lists(st.integers(0, 100), max_size=6),
