@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 
+import pytest
 from hypothesis import HealthCheck, settings
 
 # Kernels compile on first call (numba): no per-example deadline.
@@ -18,3 +19,27 @@ _COMMON = {"deadline": None, "suppress_health_check": [HealthCheck.too_slow]}
 settings.register_profile("ci", max_examples=60, derandomize=True, database=None, **_COMMON)
 settings.register_profile("dev", max_examples=300, **_COMMON)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+
+#: Module fixtures that fit long records to measure accuracy: seconds compiled, half a minute
+#: each with numba's JIT off. Their tests are ``heavy``.
+HEAVY_FIXTURES = {"lagged_bench", "mode_models"}
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line(
+        "markers",
+        "kernels: a module whose tests run the numba kernels; make test runs them again with "
+        "the JIT off, under coverage, to measure the kernels' Python lines (a compiled kernel "
+        "is invisible to coverage), all but the heavy ones",
+    )
+    config.addinivalue_line(
+        "markers",
+        "heavy: a long fit or run that checks accuracy, not a kernel's paths: compiled only",
+    )
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        if HEAVY_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.heavy)

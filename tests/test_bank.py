@@ -15,6 +15,8 @@ from hypothesis import strategies as st
 
 import piezohyst as ph
 
+pytestmark = pytest.mark.kernels
+
 FS = 1000.0
 
 

@@ -12,6 +12,8 @@ import piezohyst as ph
 
 from .strategies import invertible_pi
 
+pytestmark = pytest.mark.kernels
+
 V_MIN, V_MAX = -20.0, 160.0
 wild = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True),

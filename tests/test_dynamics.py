@@ -20,6 +20,8 @@ from piezohyst.simulation import make_signal, simulate
 
 from .strategies import examples
 
+pytestmark = pytest.mark.kernels
+
 LAGGED = "T226-H4-203X-amp4ms"
 DT = 1e-3
 
@@ -349,6 +351,7 @@ def test_exported_c_inverts_the_mode_like_python(
          "delay+first-order"),
     ],
 )  # fmt: skip
+@pytest.mark.heavy
 def test_auto_tells_a_delay_from_a_lag(truth: InputDynamics, kind: str) -> None:
     """A rate-independent plant behind known dynamics: auto picks the kind and its values."""
     t, v = make_signal("multifreq", amplitude=140.0, frequency=0.5, duration=30.0)

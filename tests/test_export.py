@@ -13,7 +13,10 @@ import piezohyst as ph
 from piezohyst.export import export_c, write_c
 
 CC = shutil.which("cc") or shutil.which("gcc")
-pytestmark = pytest.mark.skipif(CC is None, reason="no C compiler on this machine")
+pytestmark = [
+    pytest.mark.skipif(CC is None, reason="no C compiler on this machine"),
+    pytest.mark.kernels,
+]
 
 HARNESS = r"""
 #include <stdio.h>

@@ -12,6 +12,8 @@ import piezohyst as ph
 
 from .strategies import signals
 
+pytestmark = pytest.mark.kernels
+
 
 @pytest.fixture(scope="module")
 def models() -> dict[str, ph.HysteresisModel]:

@@ -14,6 +14,8 @@ from hypothesis.extra import numpy as hnp
 import piezohyst as ph
 from piezohyst.simulation import make_signal
 
+pytestmark = pytest.mark.kernels
+
 FS = 1000.0
 
 

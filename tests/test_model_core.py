@@ -18,6 +18,8 @@ from sklearn.base import clone
 import piezohyst as ph
 from piezohyst.simulation import make_signal
 
+pytestmark = pytest.mark.kernels
+
 FS = 1000.0
 FIXTURES = Path(__file__).parent / "fixtures" / "schema1"
 
@@ -107,6 +109,7 @@ def test_unknown_and_repeated_terms() -> None:
 
 
 # -------------------------------------------------------- one model, one path
+@pytest.mark.heavy
 @given(seed=st.integers(0, 2**16))
 def test_active_equals_generalized_with_only_the_integral(seed: int) -> None:
     rng = np.random.default_rng(seed)

@@ -15,6 +15,8 @@ import piezohyst as ph
 from . import reference
 from .strategies import signals
 
+pytestmark = pytest.mark.kernels
+
 FS = 1000.0
 TRUE_R = 2.0e-9  # S, leakage conductance of the generating model
 WEIGHTS = np.array([2e-8, 3e-9, 2e-9, 1e-9, -1e-9, -2e-9, -3e-9, -1e-9, -1e-9, -5e-10])

@@ -13,6 +13,8 @@ from piezohyst import _kernels
 from . import reference
 from .strategies import invertible_pi, signals, thresholds
 
+pytestmark = pytest.mark.kernels
+
 
 @given(x=signals(), r=thresholds(), y0=st.floats(-300, 300))
 def test_play_kernel_matches_reference(x: np.ndarray, r: np.ndarray, y0: float) -> None:

@@ -17,6 +17,8 @@ from piezohyst.simulation import PRESETS, Bench, make_signal
 
 from .strategies import examples
 
+pytestmark = pytest.mark.kernels
+
 FS = 1000.0
 
 
@@ -258,6 +260,7 @@ def test_refuses_models_it_cannot_invert_analytically() -> None:
         ph.SelfSensingController(model, v_min=0.0, v_max=140.0, sample_rate=FS, ki=2.5)
 
 
+@pytest.mark.heavy
 def test_closed_loop_on_the_bench_beats_feedforward(model: ph.ActivePI) -> None:
     p = dataclasses.replace(PRESETS["T226-H4-203X"], i_bias=40e-12)  # a bias never identified
     _t_cal, v_cal = staircase([0.0, 35.0, 70.0, 105.0, 140.0], seconds=3.0)

@@ -13,6 +13,8 @@ import piezohyst as ph
 from piezohyst.metrics import hysteresis_width
 from piezohyst.simulation import PRESETS, SIGNALS, make_signal, simulate
 
+pytestmark = pytest.mark.kernels
+
 T226 = PRESETS["T226-H4-203X"]
 
 
@@ -26,6 +28,7 @@ def test_deterministic_given_a_seed() -> None:
     np.testing.assert_array_equal(a.capacitor_charge, c.capacitor_charge)  # noise only
 
 
+@pytest.mark.heavy
 def test_bench_is_not_a_pi_model() -> None:
     """Even 100 operators cannot fit the noise-free, leak-free capacitor charge."""
     rec = simulate(signal="multi", duration=20.0)

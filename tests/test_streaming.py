@@ -18,6 +18,8 @@ from piezohyst.identification import Summary, array_blocks, default_thresholds, 
 
 from .strategies import examples
 
+pytestmark = pytest.mark.kernels
+
 
 @pytest.fixture(scope="module")
 def record() -> ph.simulation.BenchRecord:
