@@ -63,6 +63,7 @@ def test_each_channel_is_the_model_of_its_column(
     assert (table["nrmse"] < 0.01).all()
     assert (table["integral"] > 0).all()  # every unit leaks
     assert ((table["width"] > 0.02) & (table["width"] < 0.5)).all()
+    # tol: the same minimum of the same numbers (approx's default only tolerates printing)
     assert table["v_min"][0] == pytest.approx(V[:, 0].min())
     # slicing and picking give banks of the same models
     assert bank[1:3][0] is bank[1]
@@ -177,6 +178,9 @@ def test_bank_compensator_is_each_channels_compensator(bank: ph.ModelBank) -> No
     expected = np.column_stack([s.process(desired[:, c]) for c, s in enumerate(singles)])
     out = np.empty(len(bank))
     stepped = np.array([comp.step(row, out=out).copy() for row in desired])
+    # tol: the fused bank kernel and each channel's own compensator are compiled apart (FASTMATH
+    # reassociation/FMA) may round apart; a play state is a clamp, so nothing accumulates: 1e-12 V
+    # is thousands of ulp of 140 V
     np.testing.assert_allclose(stepped, expected, rtol=0, atol=1e-12)
     assert ((stepped >= lows - 1e-12) & (stepped <= 130.0 + 1e-12)).all()
     np.testing.assert_array_equal(comp.nonfinite_count, [0, 3, 0, 0, 1])
@@ -185,6 +189,9 @@ def test_bank_compensator_is_each_channels_compensator(bank: ph.ModelBank) -> No
     # the channel's own compensator is live: same state as the bank
     assert comp.channel(2).last_command == stepped[-1, 2]
     comp.reset()
+    # tol: the fused bank kernel and each channel's own compensator are compiled apart (FASTMATH
+    # reassociation/FMA) may round apart; a play state is a clamp, so nothing accumulates: 1e-12 V
+    # is thousands of ulp of 140 V
     np.testing.assert_allclose(comp.process(desired), expected, rtol=0, atol=1e-12)
 
 
@@ -251,10 +258,14 @@ def test_bank_controller_is_each_channels_controller(bank: ph.ModelBank) -> None
     stepped = np.array(
         [ctl.step(d, q, out=out).copy() for d, q in zip(desired, measured, strict=True)]
     )
+    # tol: bank and single-channel controllers, compiled apart, may round apart; the integrator adds
+    # an ulp per sample: 1e-12 V bounds thousands of them
     np.testing.assert_allclose(stepped, expected, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(ctl.measurement_faults, [0, 0, 5, 0, 0])
     assert ctl.channel(3).integral == singles[3].integral
     ctl.reset()
+    # tol: bank and single-channel controllers, compiled apart, may round apart; the integrator adds
+    # an ulp per sample: 1e-12 V bounds thousands of them
     np.testing.assert_allclose(ctl.process(desired, measured), expected, rtol=0, atol=1e-12)
     with pytest.raises(ph.ShapeError, match="one value per channel"):
         ctl.step(np.zeros(5), np.zeros(4))

@@ -49,6 +49,7 @@ def test_simulate_writes_the_documented_columns(workdir: Path) -> None:
     assert len(text) == 12002
     table = ph.io.read_table(workdir / "run.csv")
     np.testing.assert_allclose(np.diff(table.get("time")), 1e-3)
+    # tol: written with repr and read back: exact; approx's default 1e-6 only tolerates printing
     assert table.get("voltage").max() == pytest.approx(140.0)
 
 
@@ -71,6 +72,7 @@ def test_predict_and_report(workdir: Path) -> None:
     assert res.exit_code == 0
     report = json.loads((workdir / "rep" / "metrics.json").read_text())
     assert report["tables"]["Model"]["class"] == "ActivePI"
+    # tol: the value is the file's own: approx only checks the shape of the entry
     assert report["metrics"]["nrmse_pct"] == {"value": pytest.approx(report["metrics"]["nrmse_pct"]
                                               ["value"]), "unit": "%"}  # fmt: skip
     assert report["metrics"]["nrmse_pct"]["value"] < 5.0
@@ -102,6 +104,8 @@ def test_compensate_respects_limits_and_inverts(workdir: Path) -> None:
               "-o", workdir / "cmd.csv")  # fmt: skip
     assert res.exit_code == 0, res.output
     cmd = ph.io.read_table(workdir / "cmd.csv")
+    # tol: the inverse of the model's own output: Newton stops at rounding, the CSV keeps 17 digits;
+    # 1e-6 V is far above both, a wrong branch is off by volts
     np.testing.assert_allclose(cmd.get("command"), v, atol=1e-6)
     # 40 % of this trajectory lies outside [5, 100] V: clipped and counted (most would be an error)
     res = run("compensate", workdir / "model.json", target, "--v-min", "5", "--v-max", "100",
@@ -207,6 +211,8 @@ def test_tdms_with_group_and_wf_increment(workdir: Path) -> None:
     assert res.exit_code == 0, res.output
     model = ph.load_model(workdir / "tdms.json")
     assert isinstance(model, ph.ActivePI)
+    # tol: a leak estimated from a noisy 12 s record (noise, ADC): it scatters by a few percent over
+    # seeds
     assert model.growth_rate_ == pytest.approx(rec.true_growth_rate, rel=0.1)
     res = run("fit", path, "--group", "Nope", "-o", workdir / "x.json")
     assert_clean_error(res, "no TDMS group 'Nope'", "'Other', 'Scan'")

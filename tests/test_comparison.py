@@ -33,8 +33,14 @@ def test_scores_equal_a_naive_fit_and_score(record: Any) -> None:
         with warnings.catch_warnings():  # the test part may leave the region: noted below
             warnings.simplefilter("ignore", ph.ExtrapolationWarning)
             pred = naive.predict(v, t=t)
+        # tol: the same fit and score done twice, the same arithmetic: 1e-9 allows BLAS threads
+        # summing apart
         assert row.test_nrmse == pytest.approx(ph.metrics.nrmse(q[stop:], pred[stop:]), rel=1e-9)
+        # tol: the same fit and score done twice, the same arithmetic: 1e-9 allows BLAS threads
+        # summing apart
         assert row.train_nrmse == pytest.approx(ph.metrics.nrmse(q[:stop], pred[:stop]), rel=1e-9)
+        # tol: the same fit and score done twice, the same arithmetic: 1e-9 allows BLAS threads
+        # summing apart
         assert row.test_rmse == pytest.approx(ph.metrics.rmse(q[stop:], pred[stop:]), rel=1e-9)
         assert 0 <= row.test_width < 0.5 and row.fit_seconds > 0
         assert row.absorbed == "growth integral"  # both took up the leak, nothing else
@@ -69,6 +75,8 @@ def test_a_separate_test_record_and_leaving_the_region() -> None:
     assert row.model is not None
     with pytest.warns(ph.ExtrapolationWarning):
         pred = row.model.predict(big.voltage, t=big.t, state="rest")
+    # tol: the same fit and score done twice, the same arithmetic: 1e-9 allows BLAS threads summing
+    # apart
     assert row.test_nrmse == pytest.approx(ph.metrics.nrmse(big.charge, pred), rel=1e-9)
 
 

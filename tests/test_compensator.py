@@ -40,6 +40,8 @@ def rest_model(draw: st.DrawFn) -> ph.PIHysteresis:
 def test_inside_limits_equals_analytic_inverse(h: ph.PIHysteresis, x: np.ndarray) -> None:
     desired = h.predict(x)
     cmd = compensator(h).process(desired)
+    # tol: the streaming kernel against eq. 18's inverse: a few roundings of |w| * range per sample;
+    # 1e-9 of the range is far above them, far below a wrong branch
     np.testing.assert_allclose(
         cmd, h.inverse().predict(desired), rtol=0, atol=1e-9 * (V_MAX - V_MIN)
     )
@@ -69,6 +71,8 @@ def test_always_safe_and_exact_where_no_limit_acts(
     if slew is not None:
         free &= np.abs(np.diff(np.concatenate([[start], cmd]))) < slew / 1000.0 * (1 - 1e-9)
     scale = np.abs(h.weights).sum() * (V_MAX - V_MIN) + 1.0
+    # tol: forward(compensate(d)) == d: rounding of the output scale |w| * range per sample, no
+    # accumulation (play states are clamps)
     np.testing.assert_allclose(achieved[free], d[free], rtol=0, atol=1e-9 * scale)
     assert comp.nonfinite_count == int(np.count_nonzero(~np.isfinite(d)))
 
@@ -93,8 +97,10 @@ def test_chunks_and_steps_equal_one_batch(
     # operation, a few operations per sample, and a play state is a clamp of the input (it
     # carries no accumulated error): 64 ulp of the range bounds every sample
     ulp = 64 * np.spacing(V_MAX - V_MIN)
+    # tol: the same 64 ulp, for every output of the three paths
     np.testing.assert_allclose(parts, whole, rtol=0, atol=ulp)
     np.testing.assert_allclose(stepped, whole, rtol=0, atol=ulp)
+    # tol: the same 64 ulp
     np.testing.assert_allclose(chunked.state.operators, stepper.state.operators, rtol=0, atol=ulp)
     assert abs(chunked.state.command - stepper.state.command) <= ulp
 
@@ -122,6 +128,8 @@ def test_active_model_drops_the_growth_and_displacement_domain() -> None:
     gain = 125.0  # m/C
     comp = ph.Compensator(act, v_min=0.0, v_max=140.0, domain="displacement", gain=gain)
     displacement = gain * (h.predict(v) - h.predict([0.0])[0])
+    # tol: a model fitted on noise-free data reproduces its record to micro-volts (the fit's
+    # conditioning); a wrong inverse is off by volts
     np.testing.assert_allclose(comp.process(displacement), v, atol=1e-6)
 
 

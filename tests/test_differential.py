@@ -84,6 +84,8 @@ def test_the_preisach_fit_is_exact_output_error() -> None:
     q = truth.predict(v, t=t)
     model = ph.PreisachModel(n, smoothing=0.0, min_slope=1e-3).fit(v, q, t=t)
     assert model.nrmse_ < 1e-9
+    # tol: an identifiable problem fitted exactly: coefficients to the solve's rounding times its
+    # conditioning (1e-6), output to 1e-9 of the span
     assert model.growth_coefficients()["integral"][0] == pytest.approx(5e-10, rel=1e-6)
     np.testing.assert_allclose(model.predict(v, t=t), q, rtol=0, atol=1e-9 * np.ptp(q))
     assert not model.operator_.virgin  # the initial loading curve earned nothing here
@@ -111,6 +113,8 @@ def test_bouc_wen_recovers_its_parameters() -> None:
     fit = model.operator_
     assert model.nrmse_ < 1e-5
     for name in ("c0", "alpha", "beta", "gamma", "n"):
+        # tol: the outer search ends at least_squares' tolerance (parameters to ~1e-3); the leak is
+        # linear in the data, found to 1e-3
         assert getattr(fit, name) == pytest.approx(getattr(core, name), rel=2e-3), name
     assert model.growth_coefficients()["integral"][0] == pytest.approx(6e-10, rel=1e-3)
 
@@ -128,6 +132,8 @@ def test_models_on_the_bench_beat_or_match_what_they_should(
     for model in models.values():
         assert model.operator_.is_invertible
         leak = model.growth_coefficients()["integral"][0]
+        # tol: the bench's leak rises with voltage: one linear growth term takes its mean, within 15
+        # %
         assert leak == pytest.approx(record.true_growth_rate, rel=0.15)
     assert models["duhem"].operator_.up.min() > 0
     assert models["preisach"].operator_.density.min() >= 0
@@ -233,6 +239,8 @@ def test_a_preisach_fit_from_rest_learns_the_initial_loading_curve(tmp_path: Pat
     comp = ph.Compensator(model.hysteresis_, v_min=0.0, v_max=140.0)
     target = model.hysteresis_.predict(v[:3000], state="rest")
     achieved = model.hysteresis_.predict(comp.process(target), state="rest")
+    # tol: Newton in a bracket stops at 1e-12 of the step or the output's rounding: 1e-9 of the span
+    # is far above, a missed target far below
     np.testing.assert_allclose(achieved, target, rtol=0, atol=1e-9 * np.ptp(target))
 
 
@@ -253,6 +261,7 @@ def test_preisach_memory_wipes_out_closed_inner_loops(models: dict[str, Any]) ->
     start = core.propagate(np.linspace(60.0, 40.0, 50), z).state
     loop = np.concatenate([np.linspace(40.0, 55.0, 80), np.linspace(55.0, 40.0, 80)])
     end = core.propagate(loop, start).state
+    # tol: return-point memory: the same Everett terms summed back, a few roundings
     assert end[1] == pytest.approx(start[1], rel=1e-13)
 
 
@@ -268,6 +277,7 @@ def test_periodic_start_repeats(models: dict[str, Any], name: str) -> None:
         again = model.predict(np.tile(v, 2), state="periodic")
         history = model.predict(v, state=ph.History(v[:500]))
     tol = 1e-9 * float(np.max(np.abs(first)))  # Bouc-Wen converges to its loop geometrically
+    # tol: (set above) the periodic state converges geometrically: 1e-9 of the output
     np.testing.assert_allclose(again[v.size :], first, rtol=0, atol=tol)
     np.testing.assert_allclose(again[: v.size], first, rtol=0, atol=tol)
     assert np.all(np.isfinite(history))
@@ -312,6 +322,8 @@ def test_the_compensator_inverts_exactly_inside_the_region(
     assert isinstance(comp, ph.compensator.CoreCompensator)
     commands = comp.process(desired)
     achieved = model.hysteresis_.predict(commands)
+    # tol: Newton in a bracket stops at 1e-12 of the step or the output's rounding: 1e-9 of the span
+    # is far above, a missed target far below
     np.testing.assert_allclose(achieved, desired, rtol=0, atol=1e-9 * np.ptp(desired))
     assert comp.outside_count == comp.saturated_count == 0
     comp.reset()
@@ -347,6 +359,7 @@ def test_every_command_is_safe(
             assert abs(v - last) <= slew / 1000.0 * (1 + 1e-12)
         if np.isfinite(d) and slew is None and 0.0 < v < hi:
             y = comp.core.predict([v], before)[0]
+            # tol: as above, one step at a time
             assert y == pytest.approx(d, abs=1e-9 * span)
         last = v
     assert comp.nonfinite_count == int(np.isnan(desired).sum())
@@ -428,6 +441,8 @@ def compare_c_with_python(
     c_cmds = np.array([float(x) for x in lines[: desired.size]])
     py = comp.process(desired)
     atol = 1e-9 if precision == "double" else 1e-4 * hi
+    # tol: C and numba round apart (FMA, order, libm); double: 1e-9 V covers a replay of ulp
+    # differences; float: its 1e-7 precision over the range
     np.testing.assert_allclose(c_cmds, py, rtol=0, atol=atol)
     counts = tuple(int(x) for x in lines[desired.size].split())
     assert counts == (comp.nonfinite_count, comp.saturated_count)
@@ -493,6 +508,7 @@ def test_curvature_penalty_vanishes_on_planes() -> None:
     penalty = _curvature(4, 3)
     i, j = np.meshgrid(np.arange(4.0), np.arange(3.0), indexing="ij")
     plane = (2.0 + 0.5 * i - 0.25 * j).ravel()
+    # tol: a plane of unit-size integers through a 12-node penalty: rounding of ~50 unit products
     assert plane @ penalty @ plane == pytest.approx(0.0, abs=1e-12)
     bump = np.zeros(12)
     bump[5] = 1.0
@@ -538,6 +554,8 @@ def test_cores_check_what_they_are_built_from(models: dict[str, Any]) -> None:
     preisach = models["preisach"].operator_
     lo, hi = preisach.nodes[0], preisach.nodes[-1]
     e = preisach.everett([lo, lo, 0.5 * (lo + hi)], [lo, hi, 0.5 * (lo + hi)])
+    # tol: E(a, a) vanishes to the rounding of interpolation (outputs ~1e-6 C: 1e-20 is 1e-14
+    # relative)
     assert e[0] == pytest.approx(0.0, abs=1e-20) and e[1] > 0 and e[2] == pytest.approx(0.0)
 
 
@@ -586,6 +604,8 @@ def test_a_preisach_core_with_creep_is_fitted_exactly() -> None:
     model = ph.PreisachModel(n, creep=CREEP, smoothing=0.0, min_slope=1e-3).fit(v, q, t=t)
     assert model.nrmse_ < 1e-9
     coefs = model.coefficients()
+    # tol: an identifiable problem fitted exactly: coefficients to the solve's rounding times its
+    # conditioning
     assert coefs["creep[0.02 s]"][0] == pytest.approx(gains[0], rel=1e-6)
     assert coefs["creep[0.2 s]"][0] == pytest.approx(gains[1], rel=1e-6)
     assert model.growth_coefficients()["integral"][0] == pytest.approx(5e-10, rel=1e-6)
@@ -620,8 +640,12 @@ def test_the_compensator_inverts_core_and_creep_together(
     comp = ph.Compensator(model, v_min=0.0, v_max=model.input_range_[1], sample_rate=fs)
     commands = comp.process(desired)
     achieved = model.hysteresis_.predict(commands, t=t)
+    # tol: Newton in a bracket stops at 1e-12 of the step or the output's rounding: 1e-9 of the span
+    # is far above, a missed target far below
     np.testing.assert_allclose(achieved, desired, rtol=0, atol=1e-9 * np.ptp(desired))
     if not lag:
+        # tol: without input lag the inverse returns the record's own voltages to Newton's stop:
+        # micro-volts cover it
         np.testing.assert_allclose(commands, volts, rtol=0, atol=1e-6)
     assert comp.outside_count == comp.saturated_count == 0
     # a state saved halfway and restored continues as if never interrupted
@@ -711,13 +735,16 @@ def test_relaxation_columns_are_a_preisach_core_on_the_lagged_voltage() -> None:
     ref_core = ph.PreisachHysteresis(nodes, mu + 1e-300 * np.eye(m), np.zeros(D.RV_SIZE))
     ref = ref_core.predict(lagged, ref_core.rest_state(float(v[0])))
     ref -= ref_core.rest_state(float(v[0]))[1]
+    # tol: the same Everett sums on the lagged voltage, two code paths: rounding
     np.testing.assert_allclose(out, ref, rtol=0, atol=1e-12 * np.ptp(ref))
     assert np.ptp(ref) > 0
+    # tol: the same density, packed two ways
     np.testing.assert_allclose(shape.packed[D.DU_UP :], ref_core.packed[D.DU_UP :], rtol=1e-9)
     # in blocks, the state carried
     st2 = term.rest_state(float(v[0]))
     parts = [term.columns(v[a:b], t[a:b], dt[a:b], st2) @ cells
              for a, b in ((0, 1000), (1000, 1001), (1001, v.size))]  # fmt: skip
+    # tol: chunks against one call: the same sums (1e-15 of the span: rounding)
     np.testing.assert_allclose(np.concatenate(parts), out, rtol=0, atol=1e-15 * np.ptp(ref))
 
 

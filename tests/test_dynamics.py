@@ -91,6 +91,7 @@ def test_the_amplifier_lag_is_found_and_predicts_other_frequencies(
 ) -> None:
     rec, model = lagged_bench
     dyn = model.input_dynamics_
+    # tol: a lag identified from noisy bench data scatters by a few percent
     assert dyn.kind == "first-order" and dyn.tau == pytest.approx(4e-3, rel=0.05)
     plain = ph.ActivePI(20).fit(rec.voltage, rec.charge, t=rec.t)
     for f in (1.0, 10.0, 40.0):
@@ -158,6 +159,8 @@ def test_compensation_inverts_the_lag_exactly(dyn: InputDynamics) -> None:
     commands = comp.process(desired)
     actual = model.hysteresis_.predict(commands, t=t)
     if comp.delay_samples == 0:  # a lag alone is inverted exactly
+        # tol: a lag alone is inverted exactly: rounding of outputs of ~1e-6 C after the 200-sample
+        # ramp
         np.testing.assert_allclose(actual[200:], desired[200:], rtol=0, atol=2e-14)
     else:  # the fractional part of a delay is inverted as a lag of its length: close
         err = np.max(np.abs(actual[200:-10] - desired[200:-10])) / np.ptp(desired)
@@ -167,6 +170,8 @@ def test_compensation_inverts_the_lag_exactly(dyn: InputDynamics) -> None:
     again = ph.Compensator(model, v_min=0.0, v_max=140.0, sample_rate=1000.0)
     m = again.delay_samples
     stepped = [again.step(desired[k], desired[k + 1 : k + 1 + m]) for k in range(500)]
+    # tol: step and block kernels compiled apart may round apart (FASTMATH); the lag's state carries
+    # an ulp per sample: 1e-12 V bounds it
     np.testing.assert_allclose(stepped, commands[:500], rtol=0, atol=1e-12)
     saved = again.state
     tail = again.process(desired[500:900])
@@ -234,6 +239,7 @@ def test_exported_c_inverts_the_lag_like_python(tmp_path: Path) -> None:
     ).stdout.split("\n")  # fmt: skip
     c_cmds = np.array([float(v) for v in out[: targets.size]])
     py = np.array([comp.step(float(v), [float(v)]) for v in targets])  # the caller's preview
+    # tol: C and numba round apart: 1e-9 V covers a replay of ulp differences
     np.testing.assert_allclose(c_cmds, py, rtol=0, atol=1e-9)
     assert tuple(int(v) for v in out[targets.size].split()) == (
         comp.nonfinite_count,
@@ -264,6 +270,8 @@ def test_a_mode_is_found_with_the_lag(
 ) -> None:
     full, lag = mode_models
     p = ph.simulation.PRESETS[MODE]
+    # tol: identified from one noisy record: the frequency to 2 %, the lag to 5 %, the damping
+    # (least determined) to 10 %
     assert full.output_dynamics_.f0 == pytest.approx(p.mech_f0, rel=0.02)
     assert full.output_dynamics_.zeta == pytest.approx(p.mech_zeta, rel=0.1)
     assert full.input_dynamics_.tau == pytest.approx(p.amp_tau, rel=0.05)
@@ -279,6 +287,7 @@ def test_a_mode_is_found_with_the_lag(
     np.testing.assert_array_equal(back.predict(v, t=t), full.predict(v, t=t))
     run = full.propagate(v[:1000], t[:1000])
     rest = full.propagate(v[1000:], t[1000:], ph.ModelState.from_dict(run.state.to_dict()))
+    # tol: chunks against one call: rounding of outputs of ~1e-6 C (1e-18 is 1e-12 relative)
     np.testing.assert_allclose(
         np.concatenate([run.output, rest.output]), full.predict(v, t=t), rtol=0, atol=1e-18
     )
@@ -335,6 +344,8 @@ def test_exported_c_inverts_the_mode_like_python(
     c_cmds = np.array([float(v) for v in out[: desired.size]])
     py = np.array([comp.step(float(d), [float(n)]) for d, n in zip(desired, nxt, strict=True)])
     tol = 1e-9 if precision == "double" else 2e-3 * (hi - lo)
+    # tol: C and numba round apart; double: a replay of ulp differences; float: its precision over
+    # the range
     np.testing.assert_allclose(c_cmds, py, rtol=0, atol=tol)
     assert tuple(int(v) for v in out[desired.size].split()) == (
         comp.nonfinite_count,
@@ -361,6 +372,7 @@ def test_auto_tells_a_delay_from_a_lag(truth: InputDynamics, kind: str) -> None:
     y = h.predict(u) + 1e-10 * np.random.default_rng(1).standard_normal(t.size)
     found = ph.ClassicalPI(8, input_dynamics="auto").fit(v, y, t=t).input_dynamics_
     assert found.kind == kind
+    # tol: a fifth of a sample at 1 kHz: the resolution of the search over delay and lag
     assert found.delay == pytest.approx(truth.delay, abs=0.2e-3)
     assert found.tau == pytest.approx(truth.tau, abs=0.2e-3)
 
@@ -380,6 +392,8 @@ def test_a_mode_behind_a_delay_steps_like_the_block(
     whole = block.process(desired)
     stepper = ph.Compensator(model, v_min=lo, v_max=hi, sample_rate=1000.0)
     stepped = [stepper.step(desired[k], desired[k + 1 : k + 4]) for k in range(590)]
+    # tol: step with preview against the block: the same arithmetic, rounding through the lag's
+    # state
     np.testing.assert_allclose(stepped, whole[:590], rtol=0, atol=1e-9)
     with pytest.raises(ph.ParameterError, match="integer input delay"):
         write_c(stepper, Path("never.c"))

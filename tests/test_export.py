@@ -99,6 +99,8 @@ def test_double_matches_python(tmp_path: Path, slew: float | None) -> None:
     values = desired_values(model)
     c_cmds, (nonfinite, saturated) = run_c(tmp_path, comp, values, "double")
     py = comp.process(values)
+    # tol: C and numba round apart (FMA, order); 1e-9 V covers a replay of ulp differences over the
+    # record
     np.testing.assert_allclose(c_cmds, py, rtol=0, atol=1e-9)
     assert (nonfinite, saturated) == (comp.nonfinite_count, comp.saturated_count)
     assert nonfinite > 0 and saturated > 0
@@ -118,6 +120,7 @@ def test_nan_guard_survives_fast_math(tmp_path: Path, precision: str) -> None:
     held = held[held > 0]
     np.testing.assert_array_equal(cmds[held], cmds[held - 1])  # the last command, not 140 V
     assert np.all(np.isfinite(cmds)) and cmds.min() >= 0.0 and cmds.max() <= 140.0
+    # tol: float's precision on commands up to 140 V, a few operations per step
     np.testing.assert_allclose(cmds, comp.process(values), rtol=0, atol=1e-3)
 
 
@@ -127,6 +130,7 @@ def test_float_matches_python(tmp_path: Path) -> None:
     values = desired_values(model)
     c_cmds, _ = run_c(tmp_path, comp, values, "float")
     py = comp.process(values)
+    # tol: float's 6e-8 relative precision, a few operations per step
     np.testing.assert_allclose(c_cmds, py, rtol=1e-4, atol=1e-4 * 140.0)
     assert np.all((c_cmds >= 0.0) & (c_cmds <= 140.0))
 
@@ -140,6 +144,8 @@ def test_displacement_domain_and_prefix(tmp_path: Path) -> None:
         model.hysteresis_.predict(np.linspace(0, 120, 50)) - model.hysteresis_.predict([0.0])[0]
     )
     c_cmds, _ = run_c(tmp_path, comp, d, "double")
+    # tol: C and numba round apart (FMA, order); 1e-9 V covers a replay of ulp differences over the
+    # record
     np.testing.assert_allclose(c_cmds, comp.process(d), rtol=0, atol=1e-9)
 
 
@@ -222,6 +228,7 @@ def test_controller_matches_python(
     out = subprocess.run([str(exe)], input=text, check=True, capture_output=True, text=True)
     lines = out.stdout.split("\n")
     c_cmds = np.array([float(x) for x in lines[: desired.size]])
+    # tol: as chosen per case above (a replay of ulp differences)
     np.testing.assert_allclose(c_cmds, py, rtol=0, atol=atol)
     counters = tuple(int(x) for x in lines[desired.size].split())
     assert counters == (

@@ -98,6 +98,7 @@ def test_the_cli_starts_with_a_slew_limited_ramp_and_precondition(lab: Path) -> 
     n = int(pre.sum())
     assert n > 0 and pre[:n].all() and not pre[n:].any()  # the preamble comes first
     assert np.all(np.diff(t) > 0) and t[n] == 0.0
+    # tol: the preamble reaches the limits exactly (approx's default only tolerates printing)
     assert cmd[:n].max() == pytest.approx(hi) and cmd[:n].min() == pytest.approx(lo)
     steps = np.abs(np.diff(np.concatenate([[30.0], cmd])))
     assert steps[0] <= model.max_slew_rate_ / 1000.0 * (1 + 1e-9)  # no jump from 30 V
@@ -169,6 +170,7 @@ def test_the_training_slew_rate_is_recorded_and_saved(lab: Path) -> None:
     model = ph.load_model(lab / "model.json")
     rec = ph.io.read_table(lab / "run.csv")
     v, t = rec.get("voltage"), rec.get("time")
+    # tol: the same computation on the same file's numbers
     assert model.max_slew_rate_ == pytest.approx(np.max(np.abs(np.diff(v)) / np.diff(t)))
 
 
@@ -195,6 +197,8 @@ def test_time_in_ms_gives_the_same_leakage(lab: Path) -> None:
         assert res.exit_code == 0, res.output
         model = ph.load_model(out)
         assert isinstance(model, ph.ActivePI) and model.output_unit == "C"
+        # tol: the same data through the CLI and the API: the same arithmetic, 1e-9 allows BLAS
+        # threads
         assert model.growth_rate_ == pytest.approx(ref.growth_rate_, rel=1e-9)
     # undeclared milliseconds at 1 kHz look like 1 s steps: only the unit can say; undeclared
     # microseconds (1000 "s" per sample) are called out
@@ -297,11 +301,13 @@ def test_aixacct_exports_are_read_by_table(tmp_path: Path) -> None:
     aixacct_like(tmp_path / "loops.dat", rec)
     first = ph.io.read_recording(tmp_path / "loops.dat", input_column="V+", output_column="P1",
                                  time_column="Time")  # fmt: skip
+    # tol: values printed with 7 significant digits in the file, scaled by the unit
     np.testing.assert_allclose(first.x, rec.voltage[:400], rtol=1e-6)
     np.testing.assert_allclose(first.y, rec.charge[:400], rtol=1e-6)  # µC -> C
     assert first.units == ("V", "C")
     second = ph.io.read_recording(tmp_path / "loops.dat", input_column="V+", output_column="P1",
                                   time_column="Time", group="2")  # fmt: skip
+    # tol: the same printed precision
     np.testing.assert_allclose(second.x, rec.voltage[:400] / 2, rtol=1e-6)
     table = ph.io.read_table(tmp_path / "loops.dat", group="Summary")
     assert table.columns[:2] == ["Table No", "Vc+"] and table.groups[0] == "Summary"

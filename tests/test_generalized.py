@@ -62,7 +62,11 @@ def test_recovers_a_known_generalized_model(levels: tuple) -> None:
     fit = ph.GeneralizedPI(thresholds=true.thresholds_, growth_terms=("integral", "abs_integral"),
                            asymmetry=3, creep=(0.2, 2.0)).fit(v, y, t=t)  # fmt: skip
     assert fit.nrmse_ < 1e-6
+    # tol: an identifiable model fitted exactly: growth coefficients to 1e-4 (they trade with the
+    # creep gains below)
     np.testing.assert_allclose(fit.growth_coefs_, true.growth_coefs_, rtol=1e-4)
+    # tol: an identifiable model fitted exactly: coefficients to the solve's conditioning (the creep
+    # gains, seen through slow lags, are the least determined)
     np.testing.assert_allclose(fit.creep_gains_, true.creep_gains_, rtol=1e-3)
     # The asymmetry coefficients themselves are not identifiable: raising up[j] and down[j]
     # together adds (x - k_j)^2, and differences of those are linear in x, which the play
@@ -113,6 +117,7 @@ def test_propagate_in_chunks(cut: int) -> None:
                                rtol=1e-12, atol=1e-20)  # fmt: skip
     np.testing.assert_allclose(b.state.operators, whole.state.operators, rtol=1e-12)
     for got, want in zip(b.state.terms, whole.state.terms, strict=True):
+        # tol: chunks against one call: rounding of the carried state
         np.testing.assert_allclose(got, want, rtol=1e-12)
     assert b.state.t_last == whole.state.t_last == t[-1]
 
@@ -127,6 +132,7 @@ def test_compensator_inverts_exactly(levels: tuple) -> None:
     desired = hysteresis_part(m, v, t)
     comp = ph.Compensator(m, v_min=0.0, v_max=140.0, sample_rate=FS)
     cmd = comp.process(desired)
+    # tol: the compensator inverts its own model: Newton's stop, far below 1e-9 of the range
     np.testing.assert_allclose(cmd, v, rtol=0, atol=1e-9 * 140)
     assert comp.saturated_count == 0
 
@@ -158,6 +164,8 @@ def test_compensator_safe_exact_and_chunkable(d: np.ndarray, cuts: list[int]) ->
     achieved = m.propagate(cmd, t=tt, state=state).output
     steps = np.abs(np.diff(np.concatenate([[start], cmd])))
     free = np.isfinite(d) & (cmd > 0.0) & (cmd < 140.0) & (steps < 50.0 * (1 - 1e-9))
+    # tol: achieved against desired outputs of ~1e-6 C: the inverse's stop (1e-12 absolute is 1e-6
+    # relative)
     np.testing.assert_allclose(achieved[free], d[free], rtol=0, atol=1e-12)
 
 

@@ -75,8 +75,11 @@ def test_a_term_written_in_a_test_file_fits_saves_and_loads(record: Any, tmp_pat
     )
     assert model.nrmse_ < 1e-9
     value, unit = model.coefficients()["time_squared_test"]
+    # tol: an identifiable problem fitted exactly: coefficients to the solve's rounding times its
+    # conditioning
     assert value == pytest.approx(3e-10, rel=1e-6) and unit == "C/s^2"
     assert model.growth_coefficients().keys() == {"integral", "time_squared_test"}
+    # tol: the fitted growth against the truth: the coefficients' 1e-6, on outputs of ~1e-6 C
     np.testing.assert_allclose(model.growth(v, t=t), truth.growth(v, t=t), rtol=1e-6, atol=1e-16)
     path = tmp_path / "custom.json"
     model.save(path)
@@ -156,8 +159,11 @@ def test_selection_scores_from_matrices_equal_refits(record: Any, which: str) ->
                 v[:a], q[:a], t=t[:a]
             )
             r = refit.predict(v, t=t)[a:b] - q[a:b]
+            # tol: the refit's smallest-slope bound comes from its own part of the record, the
+            # matrices' from the whole: where the bound is active the scores part by a few percent
             assert folds[f] == pytest.approx(float(np.sqrt(np.mean(r**2))), rel=3e-2), label
             sse += float(r @ r)
+        # tol: the pooled score, as the folds above
         assert score == pytest.approx(np.sqrt(sse / (n - first)), rel=3e-2), label
     best = min(auto.selection_, key=auto.selection_.__getitem__)
     assert auto.selection_["+".join(auto.growth_terms_) or "none"] <= 1.001 * auto.selection_[best]
@@ -178,6 +184,7 @@ def test_named_state_round_trips_and_continues(record: Any) -> None:
     saved = ph.ModelState.from_dict(json.loads(json.dumps(first.state.to_dict())))
     assert saved.t_last == t[k - 1]
     rest = model.predict(v[k:], t=t[k:], state=saved)
+    # tol: the state through JSON is exact (repr); the split only reorders rounding
     np.testing.assert_allclose(rest, model.predict(v, t=t)[k:], rtol=1e-12, atol=1e-18)
     after = model.state_after(v[:k], t=t[:k])
     np.testing.assert_array_equal(after.operators, first.state.operators)
@@ -198,6 +205,7 @@ def test_a_model_at_rest_stays_at_rest(name: str, record: Any) -> None:
         out = model.predict(np.full(n, x0), t=t, state=state) - model.growth(
             np.full(n, x0), t=t, state=state
         )
+        # tol: a hold: the output changes by its rounding only
         np.testing.assert_allclose(out, out[0], rtol=0, atol=1e-12 * abs(out[0]) + 1e-24)
 
 
@@ -255,10 +263,12 @@ def test_score_is_r2() -> None:
     h = ph.PIHysteresis([0.0, 30.0], [1.0, 0.5])
     y = h.predict(v)
     model = ph.ClassicalPI(thresholds=[0.0, 30.0]).fit(v, y)
+    # tol: the same formula as scikit-learn's R^2, summed in another order
     assert model.score(v, y) == pytest.approx(1.0, abs=1e-12)
     noise = np.random.default_rng(0).standard_normal(v.size)
     noisy = y + noise
     expected = 1 - np.sum((noisy - model.predict(v)) ** 2) / np.sum((noisy - noisy.mean()) ** 2)
+    # tol: the same formula as scikit-learn's R^2, summed in another order
     assert model.score(v, noisy) == pytest.approx(expected, rel=1e-12)
 
 
@@ -270,10 +280,12 @@ def test_files_written_by_0_1_0_load_and_predict_identically(name: str) -> None:
     model = ph.load_model(FIXTURES / f"{name}.json")
     assert type(model).__name__ == json.loads((FIXTURES / f"{name}.json").read_text())["model"]
     want = np.array(expected[name])
+    # tol: files written by 0.1.0: predictions to rounding, which another CPU or BLAS may do apart
     np.testing.assert_allclose(model.predict(v, t=t), want, rtol=0, atol=1e-12 * np.ptp(want))
     p = model.predict(v, t=t)
     comp = ph.Compensator(model, v_min=0.0, v_max=140.0, sample_rate=250.0)
     commands = comp.process(p * 0.95 + 0.05 * p.mean())
+    # tol: commands to Newton's stop and rounding, replayed over the record
     np.testing.assert_allclose(commands, expected[name + "_commands"], rtol=0, atol=1e-9)
 
 

@@ -52,6 +52,8 @@ def test_recovers_known_active_pi_noise_free(bench: tuple) -> None:
     assert model.nrmse_ < 1e-6
     assert abs(model.growth_rate_ / TRUE_R - 1.0) < 1e-4
     np.testing.assert_allclose(model.thresholds_, h.thresholds)
+    # tol: noise-free fit: the nearly collinear play columns fix each weight to ~1e-6 (the slopes,
+    # their sums, much better)
     np.testing.assert_allclose(model.weights_, h.weights, rtol=0, atol=1e-6 * WEIGHTS[0])
     pred = model.predict(v, t=t)
     assert np.sqrt(np.mean((pred - q) ** 2)) / np.ptp(q) < 1e-6
@@ -80,6 +82,7 @@ def test_remove_growth_gives_the_pure_hysteresis(bench: tuple) -> None:
     t, v, q, h = bench
     model = ph.ActivePI(10).fit(v, q, t=t)
     pure = model.remove_growth(v, q, t=t)
+    # tol: noise-free fit: the growth removed to the fit's precision, 1e-6 of the span
     np.testing.assert_allclose(pure, h.predict(v), rtol=0, atol=1e-6 * np.ptp(q))
     np.testing.assert_allclose(model.hysteresis_.predict(v), pure, rtol=0, atol=1e-6 * np.ptp(q))
 
@@ -90,6 +93,7 @@ def test_hysteresis_inverse_linearises(bench: tuple) -> None:
     inv = model.hysteresis_.inverse()
     desired = h.predict(v)
     command = inv.predict(desired)
+    # tol: the identified inverse on its own data: the fit's precision, 1e-6 of the range
     np.testing.assert_allclose(command, v, rtol=0, atol=1e-6 * np.ptp(v))
     np.testing.assert_allclose(model.inverse().predict(desired), command)
 
@@ -104,6 +108,7 @@ def test_saturating_curve_needs_negative_weights_and_stays_invertible() -> None:
     assert model.operator_.is_invertible
     assert np.all(model.operator_.loading_slopes > 0)
     back = model.inverse().predict(model.predict(v))
+    # tol: inverse of forward: rounding of weight products, far below 1e-9 of the range
     np.testing.assert_allclose(back, v, rtol=0, atol=1e-9 * np.ptp(v))
 
 
@@ -146,6 +151,7 @@ def test_non_uniform_time_stamps() -> None:
         model.offset_,
         model.growth_rate_,
     )
+    # tol: kernel against the pure-Python reference: the same sums in another order
     np.testing.assert_allclose(model.predict(v, t=t), expected, rtol=1e-10, atol=1e-18)
 
 
@@ -172,8 +178,11 @@ def test_active_pi_chunks_equal_one_call(cuts: list[int]) -> None:
         res = model.propagate(vc, t=tc, state=state)
         parts.append(res.output)
         state = res.state
+    # tol: chunks against one call: the integral's carried state adds an ulp per chunk (outputs
+    # ~1e-6 C)
     np.testing.assert_allclose(np.concatenate(parts), whole.output, rtol=0, atol=1e-12 * 1e-6)
     assert state is not None
+    # tol: the carried states: the same clamps and sums, rounding
     np.testing.assert_allclose(state.operators, whole.state.operators, rtol=1e-12)
     np.testing.assert_allclose(state.terms[0], whole.state.terms[0], rtol=1e-12)
     assert state.t_last == whole.state.t_last == t[-1]
@@ -215,6 +224,8 @@ def test_matches_dense_least_squares_when_unconstrained(bench: tuple) -> None:
     cols = [reference.play(v.tolist(), ri, v[0]) for ri in r]
     a = np.column_stack([*cols, np.ones_like(v), integral(v, t)])
     sol, *_ = np.linalg.lstsq(a, noisy, rcond=None)
+    # tol: both solve the same least squares; the nearly collinear play columns (condition ~1e6)
+    # amplify rounding to 1e-6
     np.testing.assert_allclose(model.weights_, sol[:-2], rtol=1e-6, atol=1e-6 * WEIGHTS[0])
     np.testing.assert_allclose(model.growth_rate_, sol[-1], rtol=1e-6)
 
@@ -409,6 +420,7 @@ def test_a_record_that_starts_mid_cycle_fits_from_its_periodic_state() -> None:
     periodic = ph.ClassicalPI(3, **kw).fit(v, q, initial_state="periodic")  # type: ignore[arg-type]
     rest = ph.ClassicalPI(3, **kw).fit(v, q)  # type: ignore[arg-type]
     assert periodic.nrmse_ < 1e-10 < 1e-3 < rest.nrmse_
+    # tol: the periodic state lets an exact fit recover the weights to the solve's conditioning
     np.testing.assert_allclose(periodic.weights_, truth.weights, rtol=1e-8)
     # the same period again, predicted from its periodic state
     np.testing.assert_allclose(periodic.predict(v, state="periodic"), q, rtol=0, atol=1e-15)
@@ -433,9 +445,12 @@ def test_periodic_start_with_growth_and_dynamics() -> None:
     truth, t, v, q = _mid_cycle_record()
     q = q + 2e-10 * np.cumsum(v) / 1e3
     active = ph.ActivePI(3, thresholds=truth.thresholds).fit(v, q, t=t, initial_state="periodic")
+    # tol: an identifiable problem fitted exactly: coefficients to the solve's rounding times its
+    # conditioning
     assert active.growth_rate_ == pytest.approx(2e-10, rel=1e-6)
     lagged = ph.ClassicalPI(3, thresholds=truth.thresholds, input_dynamics="first-order")
     lagged.fit(v, truth.predict(v), t=t)
     out = lagged.predict(v, t=t, state="periodic")
     again = lagged.predict(np.concatenate([v, v]), t=np.arange(2000) / 1e3, state="periodic")
+    # tol: the periodic state found twice from the same arithmetic: rounding
     np.testing.assert_allclose(out, again[:1000], rtol=0, atol=1e-12)

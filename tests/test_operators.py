@@ -31,6 +31,8 @@ def test_pi_kernel_matches_reference(x: np.ndarray, h: ph.PIHysteresis) -> None:
     expected = reference.classical_pi(
         x.tolist(), h.thresholds.tolist(), h.weights.tolist(), h.initial_state.tolist(), h.offset
     )
+    # tol: the kernel against the pure-Python reference sums the same terms in another order (values
+    # up to ~1e4)
     np.testing.assert_allclose(h.predict(x), expected, rtol=1e-12, atol=1e-9)
 
 
@@ -54,11 +56,13 @@ def test_classical_pi_is_rate_independent(
     counts = np.resize(np.asarray(reps), x.size)
     slow = np.repeat(x, counts)
     keep = np.cumsum(counts) - 1
+    # tol: repeated samples repeat the same clamps on the same values: rounding of the weighted sum
     np.testing.assert_allclose(h.predict(slow)[keep], h.predict(x), rtol=0, atol=1e-12)
     # and inserting monotone intermediate points between samples changes nothing either
     mid = np.empty(2 * x.size - 1)
     mid[0::2] = x
     mid[1::2] = 0.5 * (x[:-1] + x[1:])
+    # tol: a midpoint adds one rounding of the input per sample, weighted by |w|: 1e-9
     np.testing.assert_allclose(h.predict(mid)[0::2], h.predict(x), rtol=0, atol=1e-9)
 
 
@@ -74,6 +78,7 @@ def test_wiping_out(x: np.ndarray, h: ph.PIHysteresis, lo: float, hi: float) -> 
     tail = np.linspace(lo, hi, 7)
     ya = h.predict(np.concatenate([x, swing, tail]))[-tail.size :]
     yb = h.predict(np.concatenate([other, swing, tail]))[-tail.size :]
+    # tol: after the swing both runs hold the same states up to rounding of the clamps
     np.testing.assert_allclose(ya, yb, rtol=0, atol=1e-9)
 
 
@@ -86,6 +91,7 @@ def test_chunks_equal_one_call(x: np.ndarray, h: ph.PIHysteresis, cut: list[int]
         res = h.propagate(chunk, state)
         parts.append(res.output)
         state = res.state
+    # tol: chunks against one call: the same clamps, rounding only in the weighted sum
     np.testing.assert_allclose(np.concatenate(parts), whole.output, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(state, whole.state)
 
@@ -96,12 +102,15 @@ def test_inverse_identity(x: np.ndarray, h: ph.PIHysteresis) -> None:
     y = h.predict(x)
     back = h.inverse().predict(y)
     scale = max(float(np.ptp(x)), 1.0)
+    # tol: eq. 18's inverse composed with the forward: rounding of weight products (weights to 5,
+    # thresholds to 280)
     np.testing.assert_allclose(back, x, rtol=0, atol=1e-9 * scale)
 
 
 @given(h=invertible_pi())
 def test_inverse_of_inverse_is_original(h: ph.PIHysteresis) -> None:
     again = h.inverse().inverse()
+    # tol: eq. 18 applied twice: rounding of its sums and ratios
     np.testing.assert_allclose(again.thresholds, h.thresholds, atol=1e-9)
     np.testing.assert_allclose(again.weights, h.weights, atol=1e-9)
     np.testing.assert_allclose(again.offset, h.offset, atol=1e-9)
@@ -114,6 +123,7 @@ def test_inverse_state_continues_mid_signal(x: np.ndarray, h: ph.PIHysteresis, k
     first = h.propagate(x[:k])
     y = h.predict(x[k:], first.state)
     back = h.inverse().predict(y, h.inverse_state(first.state))
+    # tol: as test_inverse_identity, from a state mid-signal
     np.testing.assert_allclose(back, x[k:], rtol=0, atol=1e-9 * max(float(np.ptp(x)), 1.0))
 
 
@@ -121,6 +131,7 @@ def test_inverse_state_continues_mid_signal(x: np.ndarray, h: ph.PIHysteresis, k
 def test_inverse_parameters_match_paper_eq18(h: ph.PIHysteresis) -> None:
     r_inv, w_inv = reference.inverse_parameters(h.thresholds.tolist(), h.weights.tolist())
     inv = h.inverse()
+    # tol: eq. 18 written out by hand in Python: the same formula, summed apart
     np.testing.assert_allclose(inv.thresholds, r_inv, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(inv.weights, w_inv, rtol=1e-12, atol=1e-15)
 

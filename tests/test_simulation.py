@@ -40,6 +40,8 @@ def test_capacitor_is_rate_independent_and_leakage_is_not() -> None:
     t, v = make_signal("fixed", duration=4.0)
     fast = simulate(v, t)
     slow = simulate(v, 3.0 * t)
+    # tol: the relays switch at the same voltages whatever the time axis: rounding of charges of
+    # ~1e-6 C; the leak integrates time exactly 3x
     np.testing.assert_allclose(slow.capacitor_charge, fast.capacitor_charge, rtol=0, atol=1e-18)
     np.testing.assert_allclose(slow.leak_charge, 3.0 * fast.leak_charge, rtol=1e-9)
 
@@ -49,6 +51,7 @@ def test_leakage_at_constant_voltage_is_ohmic() -> None:
     v = np.full(t.size, 100.0)
     rec = simulate(v, t)
     conductance = T226.g_leak * (1 + T226.leak_voltage_coeff * 100.0 / T226.v_max)
+    # tol: a constant current integrated over time: rounding of the running sum
     np.testing.assert_allclose(rec.leak_charge, conductance * 100.0 * t, rtol=1e-12)
     assert rec.true_growth_rate == pytest.approx(conductance, rel=1e-9)
 
@@ -59,10 +62,12 @@ def test_ideal_charge_amplifier_measures_the_capacitor_charge() -> None:
     )
     rec = simulate(preset=ideal, signal="fixed", duration=4.0)
     lsb = 2 * ideal.adc_range / 2**ideal.adc_bits * ideal.c_ref
+    # tol: an ideal bench: the ADC's quantisation, half an LSB (plus rounding)
     np.testing.assert_allclose(
         rec.charge, rec.capacitor_charge - rec.capacitor_charge[0], rtol=0, atol=0.51 * lsb
     )
     s = ideal.gain * (rec.capacitor_charge - rec.capacitor_charge[0])
+    # tol: the laser's quantisation: half its resolution (plus rounding)
     np.testing.assert_allclose(rec.displacement, s, rtol=0, atol=0.51 * ideal.laser_resolution)
 
 
@@ -71,6 +76,7 @@ def test_bias_current_integrates_on_the_reference_capacitor() -> None:
     t = np.arange(3000) / 1000.0
     rec = simulate(np.zeros_like(t), t, preset=quiet)
     lsb = 2 * quiet.adc_range / 2**quiet.adc_bits * quiet.c_ref
+    # tol: the ADC's quantisation: half an LSB (plus rounding)
     np.testing.assert_allclose(rec.charge, 1e-9 * t, rtol=0, atol=0.51 * lsb)
 
 
@@ -95,6 +101,7 @@ def test_voltage_limits_are_enforced() -> None:
 @given(name=st.sampled_from(sorted(SIGNALS)), amp=st.floats(1.0, 140.0), f=st.floats(0.1, 5.0))
 def test_signals_stay_in_range(name: str, amp: float, f: float) -> None:
     t, v = make_signal(name, amplitude=amp, frequency=f, duration=3.0, rate=500.0)
+    # tol: every signal starts at rest: rounding of its first sample's formula
     assert t.size == 1500 and v[0] == pytest.approx(0.0, abs=1e-9)
     low = -amp if name == "bipolar" else 0.0
     assert v.min() >= low - 1e-9 and v.max() <= amp + 1e-9
@@ -109,4 +116,5 @@ def test_signal_errors() -> None:
 
 def test_hysteresis_width_of_a_line_is_zero() -> None:
     x = np.concatenate([np.linspace(0, 1, 100), np.linspace(1, 0, 100)])
+    # tol: a straight line: the branches coincide to rounding
     assert hysteresis_width(x, 3 * x + 1) == pytest.approx(0.0, abs=1e-12)

@@ -48,10 +48,13 @@ def split_blocks(
 
 def assert_same_model(a: ph.HysteresisModel, b: ph.HysteresisModel, x, t) -> None:  # type: ignore[no-untyped-def]
     out = b.predict(x, t=t)
+    # tol: streamed against whole: the Gram matrix summed in another block order, amplified by the
+    # play columns' conditioning (~1e6) on single weights; outputs to 1e-9 of the span
     np.testing.assert_allclose(a.predict(x, t=t), out, rtol=0, atol=1e-9 * np.ptp(out))
     np.testing.assert_allclose(np.cumsum(a.weights_), np.cumsum(b.weights_), rtol=1e-6)
     assert [t.kind for t in a.terms_] == [t.kind for t in b.terms_]
     for ca, cb in zip(a.coefs_, b.coefs_, strict=True):
+        # tol: as the weights above: coefficients to 1e-6, the RMSE to 1e-6
         np.testing.assert_allclose(ca, cb, rtol=1e-6, atol=1e-9 * np.max(np.abs(cb)))
     assert a.rmse_ == pytest.approx(b.rmse_, rel=1e-6)
 
@@ -73,8 +76,10 @@ def test_fit_blocks_equals_fit(record: ph.simulation.BenchRecord, model) -> None
     assert_same_model(parts, whole, x, t)
     assert parts.selection_.keys() == whole.selection_.keys()
     for key, err in whole.selection_.items():
+        # tol: the selection scores, as the weights above
         assert parts.selection_[key] == pytest.approx(err, rel=1e-6)
     assert parts.input_range_ == whole.input_range_
+    # tol: the same maximum over the same differences
     assert parts.max_slew_rate_ == pytest.approx(whole.max_slew_rate_, rel=1e-12)
 
 
@@ -99,6 +104,7 @@ def test_summary_is_the_same_however_split(values: list[float], cuts: list[int])
     s = Summary.of(split_blocks(x, y, t, cuts))
     assert (s.n, s.x_first, s.y_first) == (x.size, x[0], y[0])
     assert (s.x_min, s.x_max, s.y_min, s.y_max) == (x.min(), x.max(), y.min(), y.max())
+    # tol: the same maximum of |dx| / dt: rounding of one division
     assert s.max_slew_rate == pytest.approx(np.max(np.abs(np.diff(x)) / 0.5), rel=1e-12, abs=0)
 
 
@@ -146,6 +152,7 @@ def test_windowed_fit_starts_from_the_history(
         initial_state=history_state(record.voltage[:start], thr),
     )
     assert_same_model(model, ref, record.voltage[w], t[w])
+    # tol: the history's state: the same clamps, rounding
     np.testing.assert_allclose(model.initial_state_, ref.initial_state_, rtol=1e-12)
     with pytest.raises(DataFileError, match=r"no samples in the time window \[9, inf\)"):
         wf.fit_file(path, data_spec=pio.DataSpec(t_start=9.0))
@@ -168,9 +175,11 @@ def test_predict_file_streams_with_state_carried(
     expected = model.predict(record.voltage, t=record.t)
     w = record.t >= 1.0
     back = ph.read_table(tmp_path / "p.csv")
+    # tol: written with repr and read back: exact to the last ulp
     np.testing.assert_allclose(back.get("predicted"), expected[w], rtol=1e-15, atol=0)
     np.testing.assert_array_equal(back.get("time"), record.t[w])
     assert res.samples == int(w.sum())
+    # tol: the same NRMSE formula on the same numbers
     assert res.nrmse == pytest.approx(ph.metrics.nrmse(record.charge[w], expected[w]), rel=1e-9)
 
 
@@ -185,6 +194,7 @@ def test_compensate_file_streams_like_one_call(
     ph.write_table(tmp_path / "target.csv", {"time": t, "desired": desired})
     res = wf.compensate_file(tmp_path / "m.json", tmp_path / "target.csv", tmp_path / "cmd.csv")
     fs = res.sample_rate  # from the time column
+    # tol: the rate from the time column's mean step: rounding of the sum
     assert fs == pytest.approx(1000.0, rel=1e-9)
     comp = wf.CompensatorSettings(slew_rate=model.max_slew_rate_, sample_rate=fs).build(model)
     comp.reset(voltage=float(np.clip(model.initial_state_[0], comp.v_min, comp.v_max)))
