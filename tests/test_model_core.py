@@ -6,6 +6,7 @@ import ast
 import itertools
 import json
 import os
+import warnings
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -287,6 +288,42 @@ def test_files_written_by_0_1_0_load_and_predict_identically(name: str) -> None:
     commands = comp.process(p * 0.95 + 0.05 * p.mean())
     # tol: commands to Newton's stop and rounding, replayed over the record
     np.testing.assert_allclose(commands, expected[name + "_commands"], rtol=0, atol=1e-9)
+
+
+SCHEMA2 = FIXTURES.parent / "schema2"
+KINDS_OF_TODAY = sorted(p.stem for p in SCHEMA2.glob("*.json") if p.stem != "expected")
+
+
+@pytest.mark.parametrize("name", KINDS_OF_TODAY)
+def test_files_of_every_kind_load_predict_and_compensate_as_written(
+    name: str, tmp_path: Path
+) -> None:
+    """Model files of every kind, written before the core protocol's rewrite
+    (``schema2/make_fixtures.py``), mean what they meant: the same predictions, the same
+    compensator commands, and a file round trip that changes nothing."""
+    expected = json.loads((SCHEMA2 / "expected.json").read_text())[name]
+    v = np.array(expected["v"])
+    t = np.arange(v.size) / 250.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ph.ExtrapolationWarning)
+        model = ph.load_model(SCHEMA2 / f"{name}.json")
+        want = np.array(expected["predicted"])
+        # tol: the file's numbers, predicted again: rounding, which another CPU or BLAS may do
+        # apart (1e-12 of the span)
+        np.testing.assert_allclose(model.predict(v, t=t), want, rtol=0, atol=1e-12 * np.ptp(want))
+        lo, hi = model.input_range_
+        comp = ph.Compensator(model, v_min=lo, v_max=hi, sample_rate=250.0)
+        # tol: commands to Newton's stop (1e-12 of a step) and rounding, replayed over the
+        # trajectory: 1e-9 of the voltage range
+        np.testing.assert_allclose(
+            comp.process(np.array(expected["desired"])),
+            expected["commands"],
+            rtol=0,
+            atol=1e-9 * (hi - lo),
+        )
+        model.save(tmp_path / "again.json")
+        back = ph.load_model(tmp_path / "again.json")
+        np.testing.assert_array_equal(back.predict(v, t=t), model.predict(v, t=t))
 
 
 def test_files_honour_the_umask(record: Any, tmp_path: Path) -> None:
