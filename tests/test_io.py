@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import io as stdio
-import os
 import shutil
-import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -186,16 +186,38 @@ def test_a_mat_file_that_crashed_scipy_is_one_line(
     assert "\n" not in str(err.value)
 
 
-def _die(path: str) -> None:
-    """A parser that crashes as compiled code does."""
-    os.kill(os.getpid(), signal.SIGSEGV)
-
-
 def test_a_parser_crash_is_an_error_naming_the_file(tmp_path: Path) -> None:
     from piezohyst._isolate import parse_isolated
 
     path = tmp_path / "x.h5"
     with pytest.raises(DataFileError, match=r"x\.h5: the HDF5 reader crashed .*signal 11"):
-        parse_isolated(_die, path, "HDF5")
+        parse_isolated("crash", path, "HDF5")
     with pytest.raises(FileNotFoundError):  # the parser's own errors come back as they are
-        parse_isolated(open, tmp_path / "missing.h5", "HDF5")
+        parse_isolated("hdf5_arrays", tmp_path / "missing.h5", "HDF5")
+    # and the next read starts a new helper
+    ph.write_table(tmp_path / "ok.npz", {"v": np.arange(3.0)})
+    import h5py
+
+    with h5py.File(tmp_path / "ok.h5", "w") as fh:
+        fh["v"] = np.arange(3.0)
+    np.testing.assert_array_equal(ph.read_table(tmp_path / "ok.h5").get("v"), [0.0, 1.0, 2.0])
+
+
+def test_the_parser_helper_runs_none_of_the_callers_code(tmp_path: Path) -> None:
+    """A script without a main guard that reads a MAT file runs once: the helper is a fresh
+    interpreter that loads the parsers by path, not the caller's script, not piezohyst."""
+    from scipy.io import savemat
+
+    savemat(tmp_path / "a.mat", {"voltage": np.linspace(0.0, 1.0, 5)})
+    script = tmp_path / "lab.py"
+    script.write_text(
+        "import sys\n"
+        "import piezohyst as ph\n"
+        "print('ran', flush=True)\n"
+        "print(ph.read_table(sys.argv[1]).get('voltage').tolist(), flush=True)\n"
+    )
+    res = subprocess.run(
+        [sys.executable, str(script), str(tmp_path / "a.mat")],
+        capture_output=True, text=True, check=True, cwd=tmp_path,
+    )  # fmt: skip
+    assert res.stdout.splitlines() == ["ran", "[0.0, 0.25, 0.5, 0.75, 1.0]"]

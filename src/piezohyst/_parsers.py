@@ -1,22 +1,42 @@
-"""Parsers of binary containers, run by :mod:`piezohyst._isolate` in a child process.
+"""Parsers of binary containers, run by :mod:`piezohyst._isolate` in a helper process.
 
-Each takes a path and returns plain data (arrays, strings) that pickle; the libraries
-are imported here at the top, so the server process that forks the children has
-them loaded once.
+The helper is a fresh interpreter that loads this file by its path, not the package: it
+imports NumPy, then SciPy's MAT reader or h5py as a request needs them, and nothing of
+piezohyst (so neither numba nor the user's own script). It answers requests on its
+standard input and output, each message an 8-byte little-endian length and a pickle: a
+request ``(parser name, path)``, an answer ``(True, result)`` or ``(False, exception)``.
+Every result is plain data. The caller imports this module for :func:`send` and
+:func:`receive` alone, so nothing heavy is imported at its top.
 """
 
 from __future__ import annotations
 
-from typing import Any
+import os
+import pickle
+import signal
+import struct
+import sys
+from collections.abc import Callable
+from typing import IO, Any
 
-import h5py
 import numpy as np
-from scipy.io import loadmat
+
+
+def _numeric(arrays: dict[str, Any]) -> dict[str, np.ndarray]:
+    """The numeric arrays holding at least one value (structs, cells and text left out)."""
+    out = {}
+    for name, value in arrays.items():
+        arr = np.asarray(value) if isinstance(value, np.ndarray) else None
+        if arr is not None and arr.dtype.kind in "biuf" and arr.size >= 1:
+            out[name] = arr
+    return out
 
 
 def hdf5_arrays(path: str) -> dict[str, np.ndarray]:
     """Every numeric dataset of an HDF5 file holding at least one value, by its path."""
-    arrays: dict[str, np.ndarray] = {}
+    import h5py
+
+    arrays: dict[str, Any] = {}
     with h5py.File(path, "r") as fh:
 
         def visit(name: str, obj: object) -> None:
@@ -24,19 +44,75 @@ def hdf5_arrays(path: str) -> dict[str, np.ndarray]:
                 arrays[name] = np.asarray(obj[()])
 
         fh.visititems(visit)
-    return arrays
+    return _numeric(arrays)
 
 
-def mat_arrays(path: str) -> dict[str, Any]:
-    """The variables of a MAT file (v4 to v7; v7.3 is HDF5 and read as such)."""
+def mat_arrays(path: str) -> dict[str, np.ndarray]:
+    """The numeric variables of a MAT file (v4 to v7; v7.3 is HDF5 and read as such)."""
+    from scipy.io import loadmat
+
     try:
         data = loadmat(path, squeeze_me=False)
     except NotImplementedError:  # MATLAB v7.3 is HDF5
         return hdf5_arrays(path)
-    return {k: v for k, v in data.items() if not k.startswith("__")}
+    return _numeric({k: v for k, v in data.items() if not k.startswith("__")})
 
 
 def bank_hdf5(path: str) -> tuple[str, list[str]]:
     """A model bank's HDF5 file: its JSON header and one JSON text per channel."""
+    import h5py
+
     with h5py.File(path, "r") as f:
         return str(f["bank"].asstr()[0]), [str(s) for s in f["channels"].asstr()[:]]
+
+
+def crash(path: str) -> None:
+    """Dies as compiled code does on a damaged file (the tests check it is reported)."""
+    os.kill(os.getpid(), signal.SIGSEGV)
+
+
+PARSERS: dict[str, Callable[[str], Any]] = {
+    "hdf5_arrays": hdf5_arrays,
+    "mat_arrays": mat_arrays,
+    "bank_hdf5": bank_hdf5,
+    "crash": crash,
+}
+
+
+def send(stream: IO[bytes], obj: object) -> None:
+    """One message: its length, then its pickle."""
+    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    stream.write(struct.pack("<Q", len(data)))
+    stream.write(data)
+    stream.flush()
+
+
+def receive(stream: IO[bytes]) -> Any:
+    """One message; EOFError when the other side has gone."""
+    head = stream.read(8)
+    if len(head) < 8:
+        raise EOFError
+    (size,) = struct.unpack("<Q", head)
+    data = stream.read(size)
+    if len(data) < size:
+        raise EOFError
+    return pickle.loads(data)
+
+
+def serve() -> None:
+    """Answer requests until the standard input closes (the caller has gone)."""
+    inp, out = sys.stdin.buffer, sys.stdout.buffer
+    sys.stdout = sys.stderr  # a stray print must not corrupt the answers
+    while True:
+        try:
+            name, path = receive(inp)
+        except EOFError:
+            return
+        try:
+            answer: tuple[bool, Any] = (True, PARSERS[name](path))
+        except Exception as exc:  # raised again in the caller
+            answer = (False, exc)
+        try:
+            send(out, answer)
+        except Exception as exc:  # an exception that does not pickle: its text
+            send(out, (False, RuntimeError(f"{type(exc).__name__}: {exc}")))

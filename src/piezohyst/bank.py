@@ -562,10 +562,9 @@ def _read_arrays(p: Path, suffix: str) -> dict[str, Any]:
             header = str(f["bank"][0])
             channels = [str(s) for s in f["channels"]]
     else:
-        from . import _parsers
         from ._isolate import parse_isolated
 
-        header, channels = parse_isolated(_parsers.bank_hdf5, p, "HDF5")
+        header, channels = parse_isolated("bank_hdf5", p, "HDF5")
     data: dict[str, Any] = json.loads(header)
     data["channels"] = [json.loads(s) for s in channels]
     return data

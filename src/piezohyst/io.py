@@ -577,17 +577,15 @@ def _read_parquet(path: Path, progress: Callable[[int], None] | None = None) -> 
 
 
 def _read_mat(path: Path) -> Table:
-    from . import _parsers
     from ._isolate import parse_isolated
 
-    return _table_from_arrays(path, parse_isolated(_parsers.mat_arrays, path, "MAT"), "MAT")
+    return _table_from_arrays(path, parse_isolated("mat_arrays", path, "MAT"), "MAT")
 
 
 def _read_hdf5(path: Path) -> Table:
-    from . import _parsers
     from ._isolate import parse_isolated
 
-    return _table_from_arrays(path, parse_isolated(_parsers.hdf5_arrays, path, "HDF5"), "HDF5")
+    return _table_from_arrays(path, parse_isolated("hdf5_arrays", path, "HDF5"), "HDF5")
 
 
 class _Collect(logging.Handler):
