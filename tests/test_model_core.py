@@ -6,6 +6,8 @@ import ast
 import itertools
 import json
 import os
+import subprocess
+import sys
 import warnings
 from pathlib import Path
 from typing import Any, ClassVar
@@ -347,6 +349,7 @@ LAYERS = {
     "errors": 0,
     "_validation": 0,
     "_version": 0,
+    "_lazy": 0,
     "_kernels": 1,
     "_diffkernels": 1,
     "metrics": 1,
@@ -449,3 +452,20 @@ def test_an_active_model_built_without_its_integral_has_no_leakage() -> None:
     model = ph.ActivePI.from_operator(ph.PIHysteresis([0.0, 10.0], [1.0, 0.5]))
     assert model.growth_rate_ == 0.0
     np.testing.assert_array_equal(model.growth([1.0, 2.0], t=[0.0, 1.0]), [0.0, 0.0])
+
+
+def test_import_loads_no_heavy_library() -> None:
+    """``import piezohyst`` stays light: numba loads when a model first runs, the file,
+    plotting, cluster and CLI libraries when a feature needs them."""
+    heavy = ["numba", "scipy", "matplotlib", "dask", "pyarrow", "pint", "h5py", "nptdms",
+             "click", "rich"]  # fmt: skip
+    probe = f"import sys, piezohyst; print([m for m in {heavy!r} if m in sys.modules])"
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+    # and the first model run loads the kernels it needs
+    run = (
+        "import sys, numpy as np, piezohyst as ph; "
+        "ph.PIHysteresis([0.0], [1.0]).predict(np.zeros(3)); print('numba' in sys.modules)"
+    )
+    out = subprocess.run([sys.executable, "-c", run], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "True"

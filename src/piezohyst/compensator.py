@@ -22,19 +22,25 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass, field, replace
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import _diffkernels as D
-from . import _kernels as K
+from ._lazy import LazyModule
 from ._validation import FloatArray, as_signal
 from .bank import ModelBank
 from .differential import DifferentialCore
 from .errors import ParameterError, ShapeError
 from .hysteresis import PIHysteresis
 from .models import HysteresisModel, InverseSpec
+
+if TYPE_CHECKING:
+    from . import _diffkernels as D
+    from . import _kernels as K
+else:  # numba loads when a model first runs (see _lazy)
+    D = LazyModule("piezohyst._diffkernels", globals(), "D")
+    K = LazyModule("piezohyst._kernels", globals(), "K")
 
 __all__ = ["BankCompensator", "Compensator", "CompensatorState", "CoreCompensator"]
 

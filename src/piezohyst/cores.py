@@ -9,12 +9,19 @@ operators of eq. 9-12 with an output offset.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import numpy.typing as npt
 
-from . import _kernels
+from ._lazy import LazyModule
 from ._validation import FloatArray
 from .hysteresis import PIHysteresis
+
+if TYPE_CHECKING:
+    from . import _kernels
+else:  # numba loads when a model first runs (see _lazy)
+    _kernels = LazyModule("piezohyst._kernels", globals(), "_kernels")
 
 __all__ = ["PlayCore"]
 

@@ -26,15 +26,20 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from . import _diffkernels as D
+from ._lazy import LazyModule
 from ._validation import FloatArray, as_signal
 from .errors import NumericRangeError, ParameterError, ShapeError
 from .hysteresis import Propagation
+
+if TYPE_CHECKING:
+    from . import _diffkernels as D
+else:  # numba loads when a model first runs (see _lazy)
+    D = LazyModule("piezohyst._diffkernels", globals(), "D")
 
 __all__ = [
     "BoucWenHysteresis",

@@ -26,11 +26,11 @@ import math
 import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from . import _diffkernels as D
+from ._lazy import LazyModule
 from ._validation import FloatArray, as_signal, as_time, check_float
 from .cores import PlayCore
 from .differential import (
@@ -69,6 +69,11 @@ from .models import (
     _unit,
 )
 from .terms import Relaxation, Term, make_term
+
+if TYPE_CHECKING:
+    from . import _diffkernels as D
+else:  # numba loads when a model first runs (see _lazy)
+    D = LazyModule("piezohyst._diffkernels", globals(), "D")
 
 __all__ = ["BoucWenModel", "DifferentialModel", "DuhemModel", "PreisachModel"]
 

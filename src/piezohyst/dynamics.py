@@ -15,13 +15,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import _kernels
+from ._lazy import LazyModule
 from ._validation import FloatArray
 from .errors import ParameterError
+
+if TYPE_CHECKING:
+    from . import _kernels
+else:  # numba loads when a model first runs (see _lazy)
+    _kernels = LazyModule("piezohyst._kernels", globals(), "_kernels")
 
 __all__ = ["KINDS", "InputDynamics", "OutputDynamics"]
 

@@ -15,16 +15,22 @@ import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
-from . import _diffkernels as D
-from . import _kernels as K
+from ._lazy import LazyModule
 from .compensator import Compensator, CoreCompensator
 from .errors import ParameterError
 from .io import atomic_write_text
 from .selfsensing import SelfSensingController
+
+if TYPE_CHECKING:
+    from . import _diffkernels as D
+    from . import _kernels as K
+else:  # numba loads when a model first runs (see _lazy)
+    D = LazyModule("piezohyst._diffkernels", globals(), "D")
+    K = LazyModule("piezohyst._kernels", globals(), "K")
 
 __all__ = ["CCode", "c_paths", "export_c", "write_c"]
 
@@ -874,7 +880,7 @@ static int steps({real} a, {real} b, {real} *rest)
     return full;
 }}
 #endif
-{_CORE_C[kind]}
+{_core_c_source(kind)}
 {_slow_c(comp, real, p) if has_slow else ""}
 {_CORE_C_COMMON}"""
     source = source.replace("real_t", real).replace("PREFIX_t", f"{prefix}_t")
@@ -1444,8 +1450,10 @@ def _preisach_constants(
     )
 
 
-_CORE_C = {
-    int(D.KIND_DUHEM): _CORE_C_DUHEM,
-    int(D.KIND_BOUC_WEN): _CORE_C_BW,
-    int(D.KIND_PREISACH): _CORE_C_PREISACH,
-}
+def _core_c_source(kind: int) -> str:
+    """The C functions of a core kind (looked up when used: the kernels load lazily)."""
+    return {
+        int(D.KIND_DUHEM): _CORE_C_DUHEM,
+        int(D.KIND_BOUC_WEN): _CORE_C_BW,
+        int(D.KIND_PREISACH): _CORE_C_PREISACH,
+    }[kind]

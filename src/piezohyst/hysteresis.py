@@ -9,14 +9,19 @@ estimators in :mod:`piezohyst.models` produce these.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Generic, NamedTuple, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, NamedTuple, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from . import _kernels
+from ._lazy import LazyModule
 from ._validation import FloatArray, as_signal
 from .errors import NotInvertibleError, ParameterError, ShapeError
+
+if TYPE_CHECKING:
+    from . import _kernels
+else:  # numba loads when a model first runs (see _lazy)
+    _kernels = LazyModule("piezohyst._kernels", globals(), "_kernels")
 
 __all__ = ["PIHysteresis", "Propagation"]
 

@@ -35,17 +35,23 @@ import math
 import operator
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 from numpy.typing import ArrayLike
 
-from . import _kernels
+from ._lazy import LazyModule
 from ._validation import FloatArray, as_signal, check_int
 from .cores import PlayCore
 from .dynamics import OutputDynamics
 from .errors import InsufficientDataError
 from .terms import Term
+
+if TYPE_CHECKING:
+    from . import _kernels
+else:  # numba loads when a model first runs (see _lazy)
+    _kernels = LazyModule("piezohyst._kernels", globals(), "_kernels")
 
 __all__ = [
     "BLOCK",

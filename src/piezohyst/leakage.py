@@ -30,14 +30,19 @@ import os
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from . import _kernels
+from ._lazy import LazyModule
 from ._validation import FloatArray, as_signal, as_time, same_length
 from .errors import InsufficientDataError, ModelFileError, ParameterError
+
+if TYPE_CHECKING:
+    from . import _kernels
+else:  # numba loads when a model first runs (see _lazy)
+    _kernels = LazyModule("piezohyst._kernels", globals(), "_kernels")
 
 __all__ = ["LEAKAGE_TERMS", "Hold", "Leakage", "calibrate_leakage", "find_holds"]
 

@@ -40,12 +40,12 @@ import os
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Self
+from typing import TYPE_CHECKING, Any, ClassVar, Self
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from . import _kernels as K
+from ._lazy import LazyModule
 from ._validation import FloatArray, as_signal, as_time, check_float, check_int, same_length
 from .cores import PlayCore
 from .differential import DifferentialCore
@@ -96,6 +96,11 @@ from .terms import (
     TimeTerm,
     make_term,
 )
+
+if TYPE_CHECKING:
+    from . import _kernels as K
+else:  # numba loads when a model first runs (see _lazy)
+    K = LazyModule("piezohyst._kernels", globals(), "K")
 
 __all__ = [
     "GROWTH_TERMS",

@@ -21,13 +21,12 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import _diffkernels as D
-from . import _kernels as K
+from ._lazy import LazyModule
 from ._validation import FloatArray
 from .bank import ModelBank
 from .compensator import (
@@ -40,6 +39,13 @@ from .compensator import (
 from .errors import ParameterError, ShapeError
 from .leakage import Leakage
 from .models import HysteresisModel
+
+if TYPE_CHECKING:
+    from . import _diffkernels as D
+    from . import _kernels as K
+else:  # numba loads when a model first runs (see _lazy)
+    D = LazyModule("piezohyst._diffkernels", globals(), "D")
+    K = LazyModule("piezohyst._kernels", globals(), "K")
 
 __all__ = [
     "BankController",

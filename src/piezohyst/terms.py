@@ -50,15 +50,21 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from . import _diffkernels as D
-from . import _kernels
+from ._lazy import LazyModule
 from ._validation import FloatArray
 from .differential import everett_map, everett_nodes
 from .errors import ParameterError
+
+if TYPE_CHECKING:
+    from . import _diffkernels as D
+    from . import _kernels
+else:  # numba loads when a model first runs (see _lazy)
+    D = LazyModule("piezohyst._diffkernels", globals(), "D")
+    _kernels = LazyModule("piezohyst._kernels", globals(), "_kernels")
 
 __all__ = [
     "AbsIntegral",

@@ -21,16 +21,21 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .._lazy import LazyModule
 from .._validation import FloatArray, as_signal, as_time, same_length
 from ..dynamics import OutputDynamics
 from ..errors import ParameterError
-from . import _plant
 from .signals import make_signal
+
+if TYPE_CHECKING:
+    from . import _plant
+else:  # numba loads when the bench first runs (see piezohyst._lazy)
+    _plant = LazyModule("piezohyst.simulation._plant", globals(), "_plant")
 
 __all__ = ["PRESETS", "Bench", "BenchPreset", "BenchRecord", "Reading", "simulate"]
 
