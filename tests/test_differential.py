@@ -265,6 +265,28 @@ def test_preisach_memory_wipes_out_closed_inner_loops(models: dict[str, Any]) ->
     assert end[1] == pytest.approx(start[1], rel=1e-13)
 
 
+def test_a_drive_that_returns_exactly_to_its_extremes_keeps_the_older_memory() -> None:
+    """A DAQ waveform repeats its extremes to the bit. Reaching a previous extremum exactly
+    closes the loop (it is wiped out): the stack does not grow period after period, so it
+    never fills and forgets the older, larger loop (it did: 2.2 % of the span off after 40
+    periods of a fitted model)."""
+    v = np.linspace(0.0, 140.0, 50)
+    core = known_core(v, 12)
+    z = core.rest_state(0.0)
+    z = core.propagate(np.linspace(0.0, 135.0, 200)[1:], z).state
+    q_top = z[1]
+    z = core.propagate(np.linspace(135.0, 5.0, 200)[1:], z).state
+    period = np.concatenate([np.linspace(5.0, 100.0, 81)[1:], np.linspace(100.0, 5.0, 81)[1:]])
+    depths = []
+    for _ in range(40):
+        z = core.propagate(period, z).state
+        depths.append(int(z[D.RV_K]))
+    assert len(set(depths)) == 1 and depths[0] < D.STACK
+    z = core.propagate(np.linspace(5.0, 135.0, 200)[1:], z).state
+    # tol: return-point memory of the outer loop: the same Everett terms summed back
+    assert z[1] == pytest.approx(q_top, rel=1e-12)
+
+
 # (on the kernel run's short record the Preisach fit has no periodic steady state: heavy)
 @pytest.mark.parametrize("name", [pytest.param("preisach", marks=pytest.mark.heavy), "bouc-wen"])
 def test_periodic_start_repeats(models: dict[str, Any], name: str) -> None:

@@ -321,7 +321,7 @@ def rev_move(p, st, v1, commit, acc, track):  # type: ignore[no-untyped-def]
         popped = False
         if kk >= 3:  # the previous extremum of this direction (R[0], the rest point, stays)
             prev = v0 if (push and kk - 2 == k) else st[RV_R + kk - 2]
-            if (up and prev < v1 and prev >= u) or (not up and prev > v1 and prev <= u):
+            if (up and prev <= v1 and prev >= u) or (not up and prev >= v1 and prev <= u):
                 end = prev
                 popped = True
         q += _branch(p, u, end, top, up, acc, track)

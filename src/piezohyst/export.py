@@ -1048,7 +1048,7 @@ static real_t core_move(real_t *st, real_t v1, int commit, real_t *f)
         int popped = 0;
         if (kk >= 3) {
             prev = (push && kk - 2 == k) ? v0 : st[4 + kk - 2];
-            if ((up && prev < v1 && prev >= u) || (!up && prev > v1 && prev <= u)) {
+            if ((up && prev <= v1 && prev >= u) || (!up && prev >= v1 && prev <= u)) {
                 end = prev;
                 popped = 1;
             }
