@@ -287,6 +287,25 @@ def test_a_drive_that_returns_exactly_to_its_extremes_keeps_the_older_memory() -
     assert z[1] == pytest.approx(q_top, rel=1e-12)
 
 
+def test_a_full_stack_forgets_its_smallest_loop_not_its_largest() -> None:
+    """More nested reversals than the stack holds (24 shrinking loops after a first rise):
+    the innermost pair is forgotten, so the outer memory (the first rise's top, a virgin
+    rest state's staircase) survives, and the output back at the top is closer to the
+    truth (0.32 % of the span off here; forgetting the oldest pair left 0.65 %)."""
+    v = np.linspace(0.0, 140.0, 50)
+    core = known_core(v, 12)
+    z = core.propagate(np.linspace(0.0, 135.0, 200)[1:], core.rest_state(0.0)).state
+    first = z[D.RV_R : D.RV_R + int(z[D.RV_K])].copy()
+    x = [135.0]
+    for j in range(24):
+        for target in (60.0 - 55.0 * 0.85**j, 60.0 + 70.0 * 0.85**j):
+            x += list(np.linspace(x[-1], target, 30)[1:])
+    z = core.propagate(np.array(x[1:]), z).state
+    assert int(z[D.RV_K]) == D.STACK - 1  # it overflowed
+    np.testing.assert_array_equal(z[D.RV_R : D.RV_R + first.size], first)
+    assert z[D.RV_R + first.size] == 135.0  # the first rise's top is still remembered
+
+
 # (on the kernel run's short record the Preisach fit has no periodic steady state: heavy)
 @pytest.mark.parametrize("name", [pytest.param("preisach", marks=pytest.mark.heavy), "bouc-wen"])
 def test_periodic_start_repeats(models: dict[str, Any], name: str) -> None:

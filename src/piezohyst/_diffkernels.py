@@ -333,9 +333,8 @@ def rev_move(p, st, v1, commit, acc, track):  # type: ignore[no-untyped-def]
     f = _branch_slope(p, v1, top, up)
     if commit:
         if push and kk == k + 1:
-            if k >= STACK:  # full: forget the oldest pair after the rest point
-                for i in range(1, STACK - 2):
-                    st[RV_R + i] = st[RV_R + i + 2]
+            if k >= STACK:  # full: forget the innermost pair before this reversal, the
+                # smallest loop the stack remembers (the outer ones matter most)
                 kk -= 2
                 k -= 2
             st[RV_R + k] = v0

@@ -1029,7 +1029,7 @@ static real_t branch_slope(real_t v, real_t top, int up)
 static real_t core_move(real_t *st, real_t v1, int commit, real_t *f)
 {
     real_t v0 = st[0], q = st[1], dv = v1 - v0, top, u, sd;
-    int k = (int)st[3], kk, push, up, i;
+    int k = (int)st[3], kk, push, up;
     top = st[4 + k - 1];
     if (dv == 0) {
         *f = branch_slope(v0, top, st[2] >= 0);
@@ -1064,10 +1064,7 @@ static real_t core_move(real_t *st, real_t v1, int commit, real_t *f)
     *f = branch_slope(v1, top, up);
     if (commit) {
         if (push && kk == k + 1) {
-            if (k >= STACK) { /* full: forget the oldest pair after the rest point */
-                for (i = 1; i < STACK - 2; ++i) {
-                    st[4 + i] = st[4 + i + 2];
-                }
+            if (k >= STACK) { /* full: forget the innermost pair, the smallest loop */
                 kk -= 2;
                 k -= 2;
             }
