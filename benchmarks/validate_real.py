@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 
 import piezohyst as ph
-from piezohyst.identification import default_thresholds, history_state
+from piezohyst.cores.play import history_state
+from piezohyst.identification import default_thresholds
 
 Factory = Callable[[], ph.HysteresisModel]
 

@@ -332,7 +332,7 @@ def test_console_script_runs_as_a_subprocess(tmp_path: Path) -> None:
 
 def test_time_windows_carry_the_input_history(workdir: Path) -> None:
     """Fit on [4, 9) s and predict from 9 s: both start from the state the earlier input left."""
-    from piezohyst.identification import history_state
+    from piezohyst.cores.play import history_state
 
     data = workdir / "run.csv"
     res = run("fit", data, "--operators", "8", "--t-start", "4", "--t-stop", "9",

@@ -18,7 +18,9 @@ from sklearn.base import clone
 
 import piezohyst as ph
 from piezohyst import _diffkernels as D
-from piezohyst.differential_models import _curvature, _curvature_upper
+from piezohyst.cores import preisach
+from piezohyst.cores.duhem import _curvature
+from piezohyst.cores.preisach import _curvature_upper
 from piezohyst.export import write_c
 from piezohyst.simulation import make_signal
 
@@ -94,11 +96,11 @@ def test_the_preisach_fit_is_exact_output_error() -> None:
 def test_everett_nodes_sum_the_density() -> None:
     rng = np.random.default_rng(0)
     mu = np.triu(rng.random((4, 4)))
-    e = ph.differential.everett_nodes(mu)
+    e = D.everett_nodes(mu)
     brute = np.array([[sum(mu[k, c] for k in range(4) for c in range(4) if i <= k <= c < j)
                        for j in range(5)] for i in range(5)])  # fmt: skip
     np.testing.assert_allclose(e, brute)
-    np.testing.assert_allclose(ph.differential.everett_map(5) @ mu.ravel(), e.ravel())
+    np.testing.assert_allclose(D.everett_map(5) @ mu.ravel(), e.ravel())
 
 
 def test_bouc_wen_recovers_its_parameters() -> None:
@@ -200,7 +202,7 @@ def test_a_preisach_rest_state_is_a_demagnetising_staircase() -> None:
     z = core.rest_state(40.0)
     k = int(z[D.RV_K])
     points = z[D.RV_R : D.RV_R + k]
-    assert k == ph.differential.DEMAG_POINTS
+    assert k == preisach.DEMAG_POINTS
     assert points[0] == 0.0  # as wide as the grid allows on the nearer side
     gaps = points - 40.0
     assert np.all(np.sign(gaps[1:]) == -np.sign(gaps[:-1]))  # alternating about 40 V

@@ -13,8 +13,9 @@ from hypothesis import strategies as st
 import piezohyst as ph
 import piezohyst.io as pio
 import piezohyst.workflows as wf
+from piezohyst.cores.play import history_state
 from piezohyst.errors import DataFileError
-from piezohyst.identification import Summary, array_blocks, default_thresholds, history_state
+from piezohyst.identification import Summary, array_blocks, default_thresholds
 
 from .strategies import examples
 

@@ -11,8 +11,11 @@ from ._version import __version__
 from .bank import ModelBank, load_bank
 from .comparison import Comparison, ComparisonRow, compare_models
 from .compensator import BankCompensator, Compensator, CompensatorState
-from .differential import BoucWenHysteresis, DuhemHysteresis, PreisachHysteresis, Region
-from .differential_models import BoucWenModel, DuhemModel, PreisachModel
+from .cores.base import Core, Propagation, Region
+from .cores.boucwen import BoucWenHysteresis
+from .cores.duhem import DuhemHysteresis
+from .cores.play import PIHysteresis
+from .cores.preisach import PreisachHysteresis
 from .errors import (
     DataFileError,
     ExtrapolationWarning,
@@ -27,19 +30,18 @@ from .errors import (
     ShapeError,
     TimeAxisError,
 )
-from .hysteresis import PIHysteresis, Propagation
 from .identification import default_thresholds
 from .io import read_recording, read_table, write_table
 from .leakage import Leakage, calibrate_leakage
+from .model import History, HysteresisModel, InverseSpec, ModelState
 from .models import (
     ActivePI,
+    BoucWenModel,
     ClassicalPI,
+    DuhemModel,
     GeneralizedPI,
-    History,
-    HysteresisModel,
-    InverseSpec,
-    ModelState,
     PIModel,
+    PreisachModel,
 )
 from .persistence import load_model
 from .selfsensing import BankController, ControllerState, SelfSensingController
@@ -58,6 +60,7 @@ __all__ = [
     "Compensator",
     "CompensatorState",
     "ControllerState",
+    "Core",
     "DataFileError",
     "DuhemHysteresis",
     "DuhemModel",

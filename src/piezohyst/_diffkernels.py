@@ -4,7 +4,7 @@ A core's state starts ``[v, x]``: the last input ``v`` (V) and one internal
 variable ``x`` — the output ``q`` itself for Duhem and Preisach, the
 Bouc-Wen variable ``h`` (V) for Bouc-Wen; Preisach adds its stack of
 reversal points. A core's parameters are one packed array ``p`` whose first
-slot names its kind; nothing outside :mod:`piezohyst.differential` and the
+slot names its kind; nothing outside :mod:`piezohyst.cores` and the
 compensator builds one. Every core's step is strictly increasing in the new
 input, so the compensator inverts it by Newton's method in a bracket (or
 explicitly, for a Duhem step within ``dv_max``).
@@ -38,6 +38,7 @@ differences (no integration), linear in the Everett function's node values.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -45,6 +46,7 @@ from numba import njit
 
 from . import _kernels as K
 from ._kernels import FASTMATH
+from ._validation import FloatArray
 
 KIND_DUHEM = 0.0  # slopes over (voltage, output): the classical Duhem form
 KIND_BOUC_WEN = 1.0
@@ -880,3 +882,53 @@ def core_controller_process(des, meas, p, cfg, st, region, dyn, dstate, trial, c
         out[k] = core_controller_step(
             des[k], meas[k], p, cfg, st, region, dyn, dstate, trial, ctl, cs
         )
+
+
+# ------------------------------------------- Everett maps (plain NumPy, cached)
+def everett_nodes(density: FloatArray) -> FloatArray:
+    """Everett values at the nodes from a density on the cells: E[i, j] = sum of mu[k, l]
+    over i <= k <= l < j (0 on and below the diagonal).
+
+    Parameters
+    ----------
+    density : ndarray, shape (n - 1, n - 1)
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+    """
+    mu = np.triu(density)
+    m = mu.shape[0]
+    e = np.zeros((m + 1, m + 1))
+    # E[i, j] = sum over k >= i, l < j of mu[k, l] (mu is upper triangular)
+    tail = np.cumsum(mu[::-1], axis=0)[::-1]  # rows k >= i
+    e[:m, 1:] = np.cumsum(tail, axis=1)
+    return np.triu(e, 1)
+
+
+def everett_map(n: int) -> FloatArray:
+    """The matrix T with E.ravel() = T @ mu.ravel() (n nodes, (n-1)^2 cells).
+
+    Parameters
+    ----------
+    n : int
+
+    Returns
+    -------
+    ndarray, shape (n * n, (n - 1) ** 2)
+        Read-only (one copy per grid size is kept).
+    """
+    return _everett_map(int(n))
+
+
+@functools.lru_cache(maxsize=8)
+def _everett_map(n: int) -> FloatArray:
+    m = n - 1
+    t = np.zeros((n * n, m * m))
+    for k in range(m):
+        for c in range(k, m):
+            unit = np.zeros((m, m))
+            unit[k, c] = 1.0
+            t[:, k * m + c] = everett_nodes(unit).ravel()
+    t.flags.writeable = False
+    return t

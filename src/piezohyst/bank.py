@@ -38,7 +38,7 @@ from .errors import (
 )
 from .io import atomic_write, atomic_write_text
 from .metrics import hysteresis_width
-from .models import HysteresisModel
+from .model import HysteresisModel
 from .persistence import model_from_dict, model_to_dict
 
 __all__ = ["BANK_FORMAT", "ModelBank", "load_bank"]
@@ -452,17 +452,21 @@ class ModelBank:
             ),
         }
         models = self._check_fitted()
-        if "n_operators" in self.template.get_params():  # play operators: their arrays too
-            n = self.template.n_operators
-            nan_rows = np.full(n, np.nan)
-            arrays["thresholds"] = np.array(
-                [nan_rows if m is None else m.thresholds_ for m in models]
-            )
-            arrays["weights"] = np.array([nan_rows if m is None else m.weights_ for m in models])
-            arrays["initial_state"] = np.array(
-                [nan_rows if m is None else m.initial_state_ for m in models]
-            )
-            arrays["offset"] = np.array([math.nan if m is None else m.offset_ for m in models])
+        first = next((m for m in models if m is not None), None)
+        numeric = {} if first is None else {
+            name.rstrip("_"): np.asarray(value) for name, value in
+            first.operator_.fitted_attributes().items() if isinstance(value, np.ndarray | float)
+        }  # fmt: skip
+        if numeric:  # the core's own arrays too (play operators), one row per channel
+            numeric["initial_state"] = np.asarray(first.initial_state_)  # type: ignore[union-attr]
+            for name, value in numeric.items():
+                blank = np.full(value.shape, np.nan)
+                arrays[name] = np.array([
+                    blank if m is None else np.asarray(
+                        m.initial_state_ if name == "initial_state"
+                        else m.operator_.fitted_attributes()[name + "_"])
+                    for m in models
+                ])  # fmt: skip
         arrays["rmse"] = np.array([math.nan if m is None else m.rmse_ for m in models])
         arrays["nrmse"] = np.array([math.nan if m is None else m.nrmse_ for m in models])
         return arrays

@@ -34,7 +34,7 @@ from numpy.typing import ArrayLike
 from ._validation import FloatArray, as_signal, same_length
 from .errors import ExtrapolationWarning, ParameterError, PiezohystError
 from .metrics import hysteresis_width, nrmse, rmse
-from .models import HysteresisModel, InitialState
+from .model import HysteresisModel, InitialState
 
 __all__ = ["COMPARED_MODELS", "Comparison", "ComparisonRow", "compare_models"]
 

@@ -30,10 +30,10 @@ from numpy.typing import ArrayLike, NDArray
 from ._lazy import LazyModule
 from ._validation import FloatArray, as_signal
 from .bank import ModelBank
-from .differential import DifferentialCore
+from .cores.base import PackedCore
+from .cores.play import PIHysteresis
 from .errors import ParameterError, ShapeError
-from .hysteresis import PIHysteresis
-from .models import HysteresisModel, InverseSpec
+from .model import HysteresisModel, InverseSpec
 
 if TYPE_CHECKING:
     from . import _diffkernels as D
@@ -708,7 +708,7 @@ def _play(spec: InverseSpec) -> PIHysteresis:
 
 def _differential(model: object) -> bool:
     inversion = getattr(model, "inversion", None)
-    return callable(inversion) and isinstance(inversion().operator, DifferentialCore)
+    return callable(inversion) and inversion().operator.inverse_plan().engine == "packed"
 
 
 class CoreCompensator(Compensator):
@@ -754,7 +754,7 @@ class CoreCompensator(Compensator):
             model, v_min, v_max, slew_rate, sample_rate, domain, gain, allow_extrapolation
         )
         core = spec.operator
-        assert isinstance(core, DifferentialCore)
+        assert isinstance(core, PackedCore)
         self.core = core
         self.analytic = False
         self._plain = False

@@ -25,12 +25,19 @@ import numpy as np
 from ._validation import FloatArray, check_int
 from ._version import __version__
 from .compensator import Compensator
-from .differential_models import BoucWenModel, DuhemModel, PreisachModel
 from .errors import ExtrapolationWarning
 from .io import atomic_write_text
 from .leakage import Leakage, calibrate_leakage
 from .metrics import hysteresis_width, nrmse, rmse
-from .models import ActivePI, ClassicalPI, GeneralizedPI, HysteresisModel
+from .models import (
+    ActivePI,
+    BoucWenModel,
+    ClassicalPI,
+    DuhemModel,
+    GeneralizedPI,
+    HysteresisModel,
+    PreisachModel,
+)
 from .plotting import save_grid, save_panels
 from .selfsensing import SelfSensingController
 from .simulation import (

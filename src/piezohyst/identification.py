@@ -43,13 +43,13 @@ from numpy.typing import ArrayLike
 
 from ._lazy import LazyModule
 from ._validation import FloatArray, as_signal, check_int
-from .cores import PlayCore
 from .dynamics import OutputDynamics
 from .errors import InsufficientDataError
 from .terms import Term
 
 if TYPE_CHECKING:
     from . import _kernels
+    from .cores.play import PlayCore
 else:  # numba loads when a model first runs (see _lazy)
     _kernels = LazyModule("piezohyst._kernels", globals(), "_kernels")
 
@@ -61,7 +61,6 @@ __all__ = [
     "array_blocks",
     "block_dt",
     "default_thresholds",
-    "history_state",
     "identify",
     "term_columns",
     "without_time",
@@ -254,86 +253,6 @@ def default_thresholds(x: ArrayLike, n_operators: int) -> FloatArray:
     if span <= 0.0:
         return np.arange(n, dtype=np.float64)  # any increasing set: the input never moves
     return np.arange(n, dtype=np.float64) * (span / (2.0 * n))
-
-
-def history_state(
-    history: ArrayLike, thresholds: ArrayLike, state: ArrayLike | None = None
-) -> FloatArray:
-    """Play-operator states (input units) after ``history``, starting at rest at its first sample.
-
-    To fit or predict a later part of a record, the operators must start where
-    the earlier input left them, not at rest.
-
-    Parameters
-    ----------
-    history : array_like
-        The earlier input (V).
-    thresholds : array_like
-        The play thresholds (V).
-    state : array_like, optional
-        The states before ``history`` when it continues earlier blocks.
-
-    Returns
-    -------
-    ndarray
-        One state per threshold (V).
-
-    Examples
-    --------
-    >>> history_state([0.0, 10.0, 4.0], [0.0, 2.0, 5.0]).tolist()
-    [4.0, 6.0, 5.0]
-    """
-    h = as_signal(history, "history")
-    thr = as_signal(thresholds, "thresholds")
-    z = np.full(thr.size, h[0]) if state is None else np.array(state, dtype=np.float64)
-    _kernels.pi_forward(h, thr, np.zeros(thr.size), z, np.empty_like(h))
-    return z
-
-
-#: Passes over a period before its operator states must repeat (play operators settle
-#: within two passes once the period reaches its extremes; more covers rounding)
-PERIODIC_PASSES = 10
-
-
-def periodic_state(blocks: Blocks, thresholds: ArrayLike, x_first: float) -> FloatArray:
-    """Play-operator states at the start of a record that is one period of a periodic drive.
-
-    The record is run again and again from rest at ``x_first`` until the
-    states at its end repeat (a play operator forgets its start once the
-    input has passed both its extremes): the periodic steady state, where an
-    actuator driven by this signal for a while sits when the record starts.
-
-    Parameters
-    ----------
-    blocks : Blocks
-        The record (only the input is read).
-    thresholds : array_like
-        The play thresholds (V).
-    x_first : float
-        The record's first input.
-
-    Returns
-    -------
-    ndarray
-        One state per threshold (V).
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> x = 5.0 + 5.0 * np.sin(np.linspace(0.0, 2 * np.pi, 101))  # starts mid-cycle, rising
-    >>> periodic_state(array_blocks(x, x, None), [0.0, 2.0], float(x[0])).round(3).tolist()
-    [5.0, 3.0]
-    """
-    thr = as_signal(thresholds, "thresholds")
-    z = np.full(thr.size, float(x_first))
-    for _ in range(PERIODIC_PASSES):
-        before = z.copy()
-        for xb, _, _ in blocks():
-            if xb.size:
-                z = history_state(xb, thr, z)
-        if np.array_equal(z, before):
-            break
-    return z
 
 
 def block_dt(

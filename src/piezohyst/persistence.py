@@ -24,10 +24,9 @@ from typing import Any
 import numpy as np
 
 from ._version import __version__
-from .differential import CORES, DifferentialCore
+from .cores.base import BUILTIN, CORES, Core, core_class
 from .dynamics import InputDynamics, OutputDynamics
 from .errors import ModelFileError, NotFittedError, ParameterError, PiezohystError
-from .hysteresis import PIHysteresis
 from .io import atomic_write_text
 from .terms import Term, make_term
 
@@ -238,33 +237,25 @@ def _range(fitted: _Reader) -> tuple[float, float]:
     return lo, hi
 
 
-def _core(reader: _Reader) -> PIHysteresis | DifferentialCore:
-    kind = reader.data.get("kind", "play")
-    if kind != "play":
-        if kind not in CORES:
-            msg = (
-                f"field '{reader.name('kind')}' names an unknown core {kind!r} "
-                f"(known: {['play', *CORES]})"
-            )
-            raise ModelFileError(msg)
-        try:
-            return CORES[str(kind)].from_dict(reader.data)  # type: ignore[attr-defined,no-any-return]
-        except KeyError as exc:
-            msg = f"missing field '{reader.name(str(exc.args[0]))}'"
-            raise ModelFileError(msg) from None
-        except (PiezohystError, TypeError, ValueError) as exc:
-            msg = f"field '{reader.where}': {exc}"
-            raise ModelFileError(msg) from None
-    try:
-        return PIHysteresis(
-            thresholds=reader.numbers("thresholds"),
-            weights=reader.numbers("weights"),
-            offset=reader.number("offset"),
-            initial_state=reader.numbers("initial_state"),
+def _core(reader: _Reader) -> Core:
+    """The core a file's ``core`` (or schema-1 ``fitted``) object describes, by its kind."""
+    kind = str(reader.data.get("kind", "play"))
+    cls = core_class(kind)
+    if cls is None:
+        msg = (
+            f"field '{reader.name('kind')}' names an unknown core {kind!r} "
+            f"(known: {sorted(set(BUILTIN) | set(CORES))})"
         )
-    except ModelFileError:
-        raise
-    except PiezohystError as exc:
+        raise ModelFileError(msg)
+    data = dict(reader.data)
+    for key, form in cls.file_fields.items():  # the fields it declares, checked by name
+        data[key] = reader.number(key) if form == "number" else reader.numbers(key)
+    try:
+        return cls.from_dict(data)
+    except KeyError as exc:
+        msg = f"missing field '{reader.name(str(exc.args[0]))}'"
+        raise ModelFileError(msg) from None
+    except (PiezohystError, TypeError, ValueError) as exc:
         msg = f"field '{reader.where or 'fitted'}': {exc}"
         raise ModelFileError(msg) from None
 

@@ -38,7 +38,7 @@ from .compensator import (
 )
 from .errors import ParameterError, ShapeError
 from .leakage import Leakage
-from .models import HysteresisModel
+from .model import HysteresisModel
 
 if TYPE_CHECKING:
     from . import _diffkernels as D

@@ -56,7 +56,6 @@ import numpy as np
 
 from ._lazy import LazyModule
 from ._validation import FloatArray
-from .differential import everett_map, everett_nodes
 from .errors import ParameterError
 
 if TYPE_CHECKING:
@@ -601,7 +600,7 @@ class Relaxation(Term):
         q_s(t) = \mathcal{P}_\mu\bigl[L_\tau[x]\bigr](t), \qquad \mu \ge 0
 
     The part of the switching that follows the field with a delay: a Preisach
-    core (:class:`~piezohyst.differential.PreisachHysteresis`, density on
+    core (:class:`~piezohyst.cores.preisach.PreisachHysteresis`, density on
     ``nodes`` reversal points over the training range) whose input is the
     voltage through a first-order lag of time constant ``tau``. The loop then
     depends on the drive's rate: faster drives leave the slow part behind.
@@ -645,7 +644,7 @@ class Relaxation(Term):
             self.v_range = (lo, hi)
         m = nodes - 1
         self._upper = np.flatnonzero(np.triu(np.ones((m, m))).ravel())  # cells k <= l
-        self._map = everett_map(nodes)[:, self._upper]  # Everett nodes from the cells
+        self._map = D.everett_map(nodes)[:, self._upper]  # Everett nodes from the cells
 
     def get_params(self) -> dict[str, Any]:
         """See :meth:`Term.get_params`."""
@@ -725,7 +724,7 @@ class Relaxation(Term):
         m = self.nodes - 1
         mu = np.zeros(m * m)
         mu[self._upper] = np.maximum(coefficients, 0.0)
-        packed = np.concatenate([self._head(), everett_nodes(mu.reshape(m, m)).ravel()])
+        packed = np.concatenate([self._head(), D.everett_nodes(mu.reshape(m, m)).ravel()])
         return RelaxationShape(self.tau, packed)
 
 

@@ -28,10 +28,10 @@ from ._validation import FloatArray, check_float, check_int
 from ._version import __version__
 from .comparison import COMPARED_MODELS, Comparison, compare_models
 from .compensator import Compensator, CompensatorSettings
-from .differential import DifferentialCore
+from .cores.play import history_state
 from .errors import DataFileError, OverwriteError, ParameterError
 from .export import Precision, c_paths, write_c
-from .identification import Blocks, Summary, default_thresholds, history_state, periodic_state
+from .identification import Blocks, Summary, default_thresholds
 from .io import (
     MD_MARKER,
     DataSpec,
@@ -49,8 +49,8 @@ from .io import (
 )
 from .leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
 from .metrics import hysteresis_width, nrmse, rmse
-from .models import History, HysteresisModel, InitialState, ModelState, model_class
-from .persistence import load_model
+from .model import History, HysteresisModel, InitialState, ModelState
+from .persistence import load_model, model_class
 from .selfsensing import LoopSettings
 from .simulation import DEFAULT_PRESET, PRESETS, Bench, BenchRecord, run_loop, simulate
 from .units import to_standard
@@ -566,14 +566,8 @@ def predict_file(
         core = model.operator_
         if initial_state == "rest":
             start = core.rest_state(float(first_x))
-        elif isinstance(core, DifferentialCore):  # its periodic state needs the input in memory
+        else:  # the periodic state needs the input in memory (one value per sample)
             start = core.periodic_state(np.concatenate([b.x for b in stream.blocks()]))
-        else:
-            start = periodic_state(
-                lambda: ((b.x, b.x, None) for b in stream.blocks()),
-                model.operator_.thresholds,
-                float(first_x),
-            )
 
     def rows() -> Iterator[dict[str, FloatArray]]:
         nonlocal sse, lo, hi

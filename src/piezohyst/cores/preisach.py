@@ -1,0 +1,467 @@
+r"""The Preisach core: hysteresis by its Everett function on a grid of reversal points.
+
+The output rising from a minimum :math:`a` is :math:`q(a) + E(a, v)`, with
+wiping-out and return-point memory (a stack of reversal points). Linear in
+its density, so identified by one bounded least squares (density >= 0) joint
+with the growth terms and a relaxation term; inverted by the packed cores'
+bracketed Newton solve. Kernels in :mod:`piezohyst._diffkernels`
+(``everett``, ``rev_move``, ``rev_design``); the compensator step in C is
+``c/packed.c``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from .._lazy import LazyModule
+from .._validation import FloatArray, as_signal
+from ..errors import InsufficientDataError, ParameterError, ShapeError
+from ..identification import _bounded_lstsq
+from ..terms import Relaxation, Term
+from ._inmemory import (
+    FIT_ROWS,
+    _growth_matrix,
+    _picked_rows,
+    _split,
+    _start_inner,
+    _terms_output,
+    fit_in_memory,
+)
+from .base import (
+    CoreFit,
+    FitJob,
+    PackedCore,
+    Region,
+    _frozen,
+    _nodes,
+    _region_dict,
+    _region_from,
+)
+
+if TYPE_CHECKING:
+    from .. import _diffkernels as D
+else:  # numba loads when a model first runs (see _lazy)
+    D = LazyModule("piezohyst._diffkernels", globals(), "D")
+
+__all__ = ["PreisachHysteresis"]
+
+
+#: Reversal points of a Preisach core's rest state (a demagnetising staircase), of
+#: the stack's ``_diffkernels.STACK``; the rest holds the reversals of the drive
+DEMAG_POINTS = 20
+
+
+#: Ratio of successive amplitudes of that staircase (the last is 1e-3 of the first)
+DEMAG_RATIO = 0.7
+
+
+@dataclass(frozen=True, eq=False)
+class PreisachHysteresis(PackedCore):
+    r"""The Preisach model, by its Everett function on a grid of reversal points.
+
+    Rising from a minimum :math:`a`: :math:`q(v) = q(a) + E(a, v)`; falling
+    from a maximum :math:`b`: :math:`q(v) = q(b) - E(v, b)`. The reversal
+    points form a stack with the wiping-out rule (passing the previous
+    extremum of the same direction closes the inner loop and resumes the
+    outer branch), so every minor loop closes and returns to its starting
+    point (return-point memory), and minor loops have the shape their place
+    in the major loop gives them — not PI's congruent copies. :math:`E` is
+    bilinear between the nodes, built from a Preisach density
+    :math:`\mu \ge 0` on the grid's cells,
+    :math:`E(a_i, b_j) = \sum_{i \le k \le l < j} \mu_{kl}`, so every branch
+    is increasing; beyond the grid it continues with the smallest slope.
+
+    Parameters
+    ----------
+    nodes : array_like, shape (n,)
+        Equally spaced voltages (V), at least 2.
+    density : array_like, shape (n - 1, n - 1)
+        :math:`\mu_{kl}` (output units) for cells ``k <= l``; ``>= 0``, the
+        diagonal ``> 0``; the lower half is ignored.
+    initial_state : array_like
+        ``[v, q, direction, k, R[0..STACK-1]]`` (see ``_diffkernels``).
+    region : Region, optional
+    virgin : bool, default False
+        What "at rest" means (:meth:`rest_state`): True, a demagnetised state,
+        from which the first move follows the initial loading curve (as play
+        operators from zero state); False, no reversal yet, the first move
+        follows a branch from the rest point (as from an extremum).
+    """
+
+    nodes: FloatArray
+    density: FloatArray
+    initial_state: FloatArray
+    region: Region | None = None
+    virgin: bool = False
+    packed: FloatArray = field(init=False, repr=False)
+    kind: ClassVar[str] = "preisach"
+    inner: ClassVar[str] = "output"
+
+    def __post_init__(self) -> None:
+        nodes = _nodes(self.nodes, "nodes")
+        n = nodes.size
+        mu = np.triu(np.array(self.density, dtype=np.float64))
+        if mu.shape != (n - 1, n - 1):
+            msg = f"'density' must have shape {(n - 1, n - 1)} (cells). Got {mu.shape}."
+            raise ShapeError(msg)
+        if not np.all(np.isfinite(mu)) or np.any(mu < 0) or np.any(np.diag(mu) <= 0):
+            msg = "the Preisach density must be finite and >= 0, its diagonal > 0"
+            raise ParameterError(msg)
+        mu.flags.writeable = False
+        z0 = _frozen(self.initial_state, "initial_state")
+        if z0.size != D.RV_SIZE:
+            msg = f"'initial_state' of a Preisach core holds {D.RV_SIZE} values. Got {z0.size}."
+            raise ShapeError(msg)
+        object.__setattr__(self, "nodes", nodes)
+        object.__setattr__(self, "density", mu)
+        object.__setattr__(self, "initial_state", z0)
+        h = (nodes[-1] - nodes[0]) / (n - 1)
+        s_min = float(np.diag(mu).min()) / h
+        head = [D.KIND_PREISACH, n, n, nodes[0], h, 0.0, 0.0, 0.0, s_min]
+        packed = np.concatenate([head, D.everett_nodes(mu).ravel()])
+        packed.flags.writeable = False
+        object.__setattr__(self, "packed", packed)
+
+    @property
+    def summary(self) -> str:
+        """See :attr:`DifferentialCore.summary`."""
+        n = self.nodes.size
+        if self.region is None:
+            return f"Preisach, {n} nodes"
+        tol = 1e-9 * float(self.nodes[1] - self.nodes[0])
+        lo, hi = self.region.v_lo - tol, self.region.v_hi + tol
+        inside = int(np.count_nonzero((self.nodes >= lo) & (self.nodes <= hi)))
+        if not self.virgin:
+            return f"Preisach, {inside} nodes"
+        beyond = f" (+{n - inside} nodes beyond the range)" if n > inside else ""
+        return f"Preisach, {inside} nodes, initial loading curve from rest{beyond}"
+
+    def rest_state(self, x0: float) -> FloatArray:
+        """See :meth:`DifferentialCore.rest_state`: at ``x0``, mid-band.
+
+        Without :attr:`virgin`, no reversal yet: the first move follows a
+        branch from ``x0``. With it, the actuator has forgotten its extremes:
+        the state an AC drive decaying to ``x0`` leaves, a staircase of
+        :data:`DEMAG_POINTS` reversal points shrinking towards ``x0`` by
+        :data:`DEMAG_RATIO`, as wide as the grid allows on both sides; the
+        first rise (or fall) then follows the initial loading curve, as a play
+        operator from zero state does (a fit from rest extends the grid to the
+        rest point's mirror image to learn it). At the grid's edge (no room
+        below or above) the first move follows a branch from ``x0`` either way.
+        """
+        q = self.region.middle(x0) if self.region is not None else float(self.initial_state[1])
+        z = np.zeros(D.RV_SIZE)
+        x0 = float(x0)
+        z[0], z[1], z[D.RV_K], z[D.RV_R] = x0, q, 1.0, x0
+        amp = min(x0 - float(self.nodes[0]), float(self.nodes[-1]) - x0)
+        if self.virgin and amp > 0:
+            points = x0 - amp * (-DEMAG_RATIO) ** np.arange(DEMAG_POINTS)
+            z[D.RV_R : D.RV_R + DEMAG_POINTS] = points
+            z[D.RV_K] = DEMAG_POINTS
+            z[D.RV_DIR] = -1.0 if points[-1] > x0 else 1.0
+        return z
+
+    def everett(self, a: ArrayLike, b: ArrayLike) -> FloatArray:
+        """The Everett function :math:`E(a, b)` (output units).
+
+        Parameters
+        ----------
+        a, b : array_like
+            Lower and upper reversal points (V).
+
+        Returns
+        -------
+        ndarray
+        """
+        aa, bb = np.broadcast_arrays(
+            np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+        )
+        out = np.array(
+            [D.everett(self.packed, x, y)[0] for x, y in zip(aa.ravel(), bb.ravel(), strict=True)]
+        )
+        return out.reshape(aa.shape)
+
+    def describe(self, input_unit: str, output_unit: str) -> list[tuple[str, str]]:
+        """See :meth:`DifferentialCore.describe`."""
+        mu = self.density
+        return [
+            ("core", "Preisach, Everett function on a grid, wiping-out memory"),
+            ("grid", f"{self.nodes.size} nodes over [{self.nodes[0]:.6g}, "
+                     f"{self.nodes[-1]:.6g}] {input_unit}"),
+            ("density", f"{mu.sum():.4g} {output_unit} in all, "
+                        f"{np.trace(mu) / mu.sum():.1%} on the diagonal (reversible)"),
+            ("smallest slope", f"{self.packed[D.DU_F_MIN]:.4g} {output_unit}/{input_unit}"),
+        ]  # fmt: skip
+
+    def to_dict(self) -> dict[str, Any]:
+        """See :meth:`DifferentialCore.to_dict`."""
+        return {
+            "nodes": self.nodes.tolist(),
+            "density": self.density.tolist(),
+            "initial_state": self.initial_state.tolist(),
+            "region": _region_dict(self.region),
+            "rest": "virgin" if self.virgin else "branch",
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> PreisachHysteresis:
+        """Inverse of :meth:`to_dict`.
+
+        Parameters
+        ----------
+        data : dict
+
+        Returns
+        -------
+        PreisachHysteresis
+        """
+        rest = data.get("rest", "branch")  # files before the virgin rest state: a branch
+        if rest not in ("virgin", "branch"):
+            msg = f"the Preisach core's 'rest' must be 'virgin' or 'branch'. Got {rest!r}."
+            raise ParameterError(msg)
+        return cls(
+            data["nodes"],
+            data["density"],
+            data["initial_state"],
+            _region_from(data.get("region")),
+            virgin=rest == "virgin",
+        )
+
+    @classmethod
+    def identify(cls, job: FitJob) -> CoreFit:
+        """One bounded least squares in the density (>= 0), joint with the growth terms;
+        from rest twice (a branch, the initial loading curve), the better kept.
+
+        Parameters
+        ----------
+        job : FitJob
+
+        Returns
+        -------
+        CoreFit
+        """
+        return fit_in_memory(cls, job, _solve)
+
+
+def _solve(
+    x: FloatArray,
+    y: FloatArray,
+    t: FloatArray | None,
+    terms: list[Term],
+    params: dict[str, Any],
+    initial_state: Any,
+    growth: list[FloatArray] | None,
+) -> tuple[PreisachHysteresis, list[FloatArray]]:
+    rest = _rest_point(x, initial_state)
+    choice = str(params["rest"])
+    kinds = ["branch"] if rest is None else (
+        ["virgin", "branch"] if choice == "auto" else [choice])  # fmt: skip
+    rows = _picked_rows(x.size, FIT_ROWS)
+    g_mat = _growth_matrix(terms, x, t, rows)
+    fits = [
+        _solve_density(x, y, t, terms, params, initial_state, rows, g_mat, k == "virgin")
+        for k in kinds
+    ]
+    if len(fits) == 2 and not (  # the initial loading curve must earn its extra cells
+        fits[0][2] < VIRGIN_GAIN * fits[1][2] and fits[1][2] > 1e-6 * float(np.ptp(y))
+    ):
+        fits = fits[1:]
+    core, coefs, _ = fits[0]
+    return core, coefs
+
+
+def _solve_density(
+    x: FloatArray,
+    y: FloatArray,
+    t: FloatArray | None,
+    terms: list[Term],
+    params: dict[str, Any],
+    initial_state: Any,
+    rows: np.ndarray,
+    g_mat: FloatArray,
+    virgin: bool,
+) -> tuple[PreisachHysteresis, list[FloatArray], float]:
+    """One bounded least squares: (core, term coefficients, RMSE on the picked rows);
+    ``virgin``: from rest the first move follows the initial loading curve."""
+    n_in = int(params["nodes"])
+    lo, hi = float(x.min()), float(x.max())
+    span = hi - lo
+    s_min = float(params["min_slope"]) * max(float(np.ptp(y)), 1e-300) / span
+    grid = _preisach_grid(lo, hi, n_in, _rest_point(x, initial_state) if virgin else None)
+    nodes, tie, n_par = grid.nodes, grid.tie, grid.params
+    n, m, h = nodes.size, nodes.size - 1, grid.step
+    upper = np.flatnonzero(np.triu(np.ones((m, m))).ravel())  # cells k <= l
+    if x.size < n_par + 2:
+        msg = f"{x.size} samples cannot identify {n_par} Preisach cells"
+        raise InsufficientDataError(msg)
+    ng = g_mat.shape[1]
+    lower_g = np.concatenate([term.lower_bounds() for term in terms]) if terms else np.zeros(0)
+    packed = np.concatenate([[D.KIND_PREISACH, n, n, nodes[0], h, 0.0, 0.0, 0.0, s_min],
+                             np.zeros(n * n)])  # fmt: skip
+    probe = PreisachHysteresis(nodes, np.eye(m), np.zeros(D.RV_SIZE), virgin=virgin)
+    start = _start_inner(probe, x, initial_state)  # the reversal stack before the record
+    z0 = probe.rest_state(float(x[0])) if start is None else start
+    # Everett nodes from the parameters (cells, tied where the data only see a width)
+    to_nodes = np.ascontiguousarray(D.everett_map(n)[:, upper] @ _tie_matrix(tie, n_par))
+    extra = np.hstack([g_mat, np.ones((rows.size, 1))])
+    width = n_par + ng + 1
+    gram = np.zeros((width, width))
+    rhs = np.zeros(width)
+    yy = 0.0
+    st, acc, tmp = z0.copy(), np.zeros(n_par), np.zeros(n * n)
+    for s0 in range(0, rows.size, DESIGN_ROWS):  # the walk in pieces: memory stays flat
+        picked = rows[s0 : s0 + DESIGN_ROWS]
+        stop = int(picked[-1]) + 1
+        begin = 0 if s0 == 0 else int(rows[s0 - 1]) + 1
+        design = np.empty((picked.size, n_par))
+        D.rev_design(
+            packed, x[begin:stop], st, picked - begin, acc, begin == 0, to_nodes, tmp, design
+        )
+        a = np.hstack([design, extra[s0 : s0 + picked.size]])
+        gram += a.T @ a
+        rhs += a.T @ y[picked]
+        yy += float(y[picked] @ y[picked])
+    data_gram = gram.copy()
+    inside = np.diag(gram)[: grid.inside]  # the smoothing's scale: the range's own cells
+    weight = float(params["smoothing"]) * max(float(np.mean(inside)), 1e-300)
+    gram[:n_par, :n_par] += weight * _curvature_tied(m, upper, tie, n_par, grid.inside)
+    col = n_par
+    for term in terms:  # a relaxing density is smoothed like the core's
+        if isinstance(term, Relaxation):
+            blk = slice(col, col + term.width)
+            w = float(params["smoothing"]) * max(float(np.mean(np.diag(gram)[blk])), 1e-300)
+            gram[blk, blk] += w * _curvature_upper(term.nodes - 1)
+        col += term.width
+    lower = np.concatenate([np.where(grid.diagonal, s_min * h, 0.0), lower_g, [-np.inf]])
+    sol = _bounded_lstsq(gram, rhs, lower)
+    sol[:n_par] = np.maximum(sol[:n_par], lower[:n_par])
+    sse = max(yy - 2.0 * float(sol @ rhs) + float(sol @ data_gram @ sol), 0.0)
+    mu = np.zeros(m * m)
+    mu[upper] = sol[:n_par][tie]
+    g = sol[n_par : n_par + ng]
+    z0 = np.array(z0)
+    z0[1] = float(sol[-1])
+    coefs = _split(g, terms)
+    qh = y - _terms_output(terms, coefs, x, t) if ng else y
+    core = PreisachHysteresis(nodes, mu.reshape(m, m), z0, Region.of(x, qh), virgin=virgin)
+    return core, coefs, math.sqrt(sse / rows.size)
+
+
+def _rest_point(x: FloatArray, initial_state: Any) -> float | None:
+    """Where a fit's record (or its history) starts from rest; None for other starts."""
+    history = getattr(initial_state, "input", None)
+    if history is not None:  # a History
+        return float(as_signal(history, "history")[0])
+    if initial_state is None or (isinstance(initial_state, str) and initial_state == "rest"):
+        return float(x[0])
+    return None
+
+
+#: A Preisach fit from rest takes the initial loading curve (a demagnetised rest state) only
+#: where its RMSE is below this fraction of the fit whose first move follows a branch: on one
+#: record both fit the first rise, and the plainer rest state predicts other records better
+#: when the curve adds little (the simulated Preisach capacitor: 0.1291 against 0.1293 %)
+VIRGIN_GAIN = 0.9
+
+
+#: Rows of the Preisach design formed at a time (memory: this many x its parameters)
+DESIGN_ROWS = 8192
+
+
+#: Nodes of a Preisach grid at most, with the reach a fit from rest adds (its spacing grows
+#: beyond it)
+MAX_GRID = 47
+
+
+@dataclass(frozen=True)
+class _PreisachGrid:
+    """A Preisach fit's grid: nodes, and which parameter each upper cell takes.
+
+    Cells inside the training range each have their own density. Cells the
+    record reaches only through the initial loading curve from rest (beyond
+    the range, up to the rest point's mirror image) are seen through one
+    function of the loop width alone, as in a play-operator model: they share
+    one parameter per width ``l - k``.
+    """
+
+    nodes: FloatArray
+    step: float
+    tie: np.ndarray  # parameter index of each upper cell (row-major k <= l)
+    params: int
+    inside: int  # parameters of the range's own cells (the first ones)
+    diagonal: np.ndarray  # per parameter: a diagonal cell (bounded below by the slope)
+
+
+def _preisach_grid(lo: float, hi: float, n_in: int, rest: float | None) -> _PreisachGrid:
+    h = (hi - lo) / (n_in - 1)
+    first, last = lo, hi
+    if rest is not None:  # the first rise and fall from rest reach the rest point's mirror
+        first, last = min(lo, 2 * rest - hi), max(hi, 2 * rest - lo)
+    below = math.ceil((lo - first) / h - 1e-9)
+    above = math.ceil((last - hi) / h - 1e-9)
+    n = n_in + below + above
+    if n > max(MAX_GRID, n_in):  # coarser, to keep the solve small
+        n = max(MAX_GRID, n_in)
+        h = (last - first) / (n - 1)
+        below = round((lo - first) / h)
+    nodes = (lo - below * h) + h * np.arange(n)
+    k_lo, k_hi = below, round((hi - nodes[0]) / h)  # the training range's first and last node
+    m = n - 1
+    ks, ls = np.triu_indices(m)
+    inside = (ks >= k_lo) & (ls < k_hi)
+    tie = np.empty(ks.size, dtype=np.int64)
+    n_inside = int(inside.sum())
+    tie[inside] = np.arange(n_inside)
+    widths = ls - ks
+    tie[~inside] = n_inside + widths[~inside]
+    tied = m if n_inside < ks.size else 0  # one per width, when any cell lies beyond
+    diagonal = np.concatenate([(ks == ls)[inside], np.arange(tied) == 0])
+    return _PreisachGrid(
+        np.asarray(nodes, dtype=np.float64), h, tie, n_inside + tied, n_inside, diagonal
+    )
+
+
+def _tie_matrix(tie: np.ndarray, n_par: int) -> FloatArray:
+    out = np.zeros((tie.size, n_par))
+    out[np.arange(tie.size), tie] = 1.0
+    return out
+
+
+def _curvature_tied(
+    m: int, upper: np.ndarray, tie: np.ndarray, n_par: int, split: int | None = None
+) -> FloatArray:
+    """The curvature penalty of an (m, m) grid's upper triangle (k <= l): second
+    differences whose three cells all lie there, on the parameters ``tie`` maps the
+    cells (row-major ``upper``) to; with ``split``, only those whose three parameters lie
+    on one side of it (the range's own cells, or the tied ones beyond it: the initial
+    loading curve need not continue the loops' density)."""
+    index = np.full(m * m, -1)
+    index[upper] = tie
+    grid = index.reshape(m, m)
+    out = np.zeros((n_par, n_par))
+    coef = np.array([1.0, -2.0, 1.0])
+    for first, second, third in (
+        (grid[:-2, :], grid[1:-1, :], grid[2:, :]),
+        (grid[:, :-2], grid[:, 1:-1], grid[:, 2:]),
+    ):
+        ok = (first >= 0) & (second >= 0) & (third >= 0)
+        if split is not None:
+            side = first < split
+            ok &= (side == (second < split)) & (side == (third < split))
+        trip = np.stack([first[ok], second[ok], third[ok]], axis=1)
+        for a in range(3):
+            for b in range(3):
+                np.add.at(out, (trip[:, a], trip[:, b]), coef[a] * coef[b])
+    return out
+
+
+def _curvature_upper(m: int) -> FloatArray:
+    """The curvature penalty of an (m, m) grid restricted to its upper triangle (k <= l)."""
+    cells = m * (m + 1) // 2
+    return _curvature_tied(m, np.flatnonzero(np.triu(np.ones((m, m))).ravel()),
+                           np.arange(cells), cells)  # fmt: skip
