@@ -20,7 +20,6 @@ from typing import Any, cast
 import click
 
 from ._version import __version__
-from .comparison import COMPARED_MODELS
 from .compensator import CompensatorSettings, Domain
 from .errors import PiezohystError
 from .io import DataSpec
@@ -605,7 +604,7 @@ def fit(
 @click.argument("data", type=EXISTING)
 @click.option(
     "--models",
-    default=",".join(COMPARED_MODELS),
+    default=",".join(model_names()),
     show_default=True,
     help="Models to compare, a comma list of " + ", ".join(model_names()) + ".",
 )

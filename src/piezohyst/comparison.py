@@ -36,10 +36,7 @@ from .errors import ExtrapolationWarning, ParameterError, PiezohystError
 from .metrics import hysteresis_width, nrmse, rmse
 from .model import HysteresisModel, InitialState
 
-__all__ = ["COMPARED_MODELS", "Comparison", "ComparisonRow", "compare_models"]
-
-#: What ``piezohyst compare`` fits when not told: the paper's models and the cores beyond them
-COMPARED_MODELS = ("classical-pi", "active-pi", "generalized-pi", "preisach", "duhem", "bouc-wen")
+__all__ = ["Comparison", "ComparisonRow", "compare_models"]
 
 
 @dataclass(frozen=True)

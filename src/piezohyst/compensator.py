@@ -32,7 +32,7 @@ from ._validation import FloatArray, as_signal
 from .bank import ModelBank
 from .cores.base import PackedCore
 from .cores.play import PIHysteresis
-from .errors import ParameterError, ShapeError
+from .errors import NotInvertibleError, ParameterError, ShapeError
 from .model import HysteresisModel, InverseSpec
 
 if TYPE_CHECKING:
@@ -153,6 +153,13 @@ class Compensator:
         spec, max_step, inv_gain = self._settings(
             model, v_min, v_max, slew_rate, sample_rate, domain, gain, allow_extrapolation
         )
+        plan = spec.operator.inverse_plan()
+        if plan.engine != "play":  # a core with no compiled inverse step (defined elsewhere)
+            msg = (
+                f"a {type(spec.operator).__name__} core has no compiled inverse step: the "
+                "compensator inverts play operators and the Preisach, Duhem and Bouc-Wen cores"
+            )
+            raise NotInvertibleError(msg)
         op = _play(spec)
         if not op.is_invertible:
             op.inverse()  # raises NotInvertibleError with the reason

@@ -1430,6 +1430,9 @@ class HysteresisModel:
         save_model(self, path)
 
 
+register(HysteresisModel)  # files of a model built on any core name this class
+
+
 def _same(a: object, b: object) -> bool:
     try:
         return bool(a == b) if not isinstance(a, np.ndarray) else False

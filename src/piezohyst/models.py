@@ -512,107 +512,6 @@ def _packed_terms(
     return _growth(fixed, params["growth_terms"], x_range)
 
 
-class DuhemModel(HysteresisModel):
-    r"""Rate-independent Duhem hysteresis, identified from data, plus growth terms.
-
-    .. math::
-
-        \frac{dq}{dv} = f_\pm(v, q), \qquad y = q + \sum_j c_j g_j(t)
-
-    ``f+`` while the voltage rises, ``f-`` while it falls: positive bilinear
-    surfaces on a ``grid`` over the (voltage, output) region the training
-    record covered. The slopes see the output they produce, so the fit is an
-    integrated regression on the measured path (linear in the slopes; noise
-    enters through the path, not through differences of the output), refined
-    on the simulated output with the exact sensitivities of the simulation
-    (``refine``). A Duhem model's loops need not close by themselves, so a
-    drift of the charge could trade against the slopes: the growth terms come
-    from a Prandtl-Ishlinskii proxy first, whose loops close by construction.
-    Minor loops are not congruent, but they converge to a steady loop over a
-    few cycles rather than closing at once (no return-point memory; see
-    :class:`PreisachModel` for a model that has it).
-
-    Its state is the output itself, which the fit estimates at the record's
-    first sample: ``initial_state`` (a history, or ``"periodic"``) has
-    nothing to add and is ignored. Outside the region the training record
-    covered the slopes are held at the grid's edge: predictions warn
-    (:class:`~piezohyst.ExtrapolationWarning`) and the compensator stops at
-    the region's edge unless allowed to extrapolate.
-
-    Parameters
-    ----------
-    grid : (int, int), default (8, 6)
-        Nodes along the voltage and the output, each in [2, 40].
-    growth_terms : "auto" or sequence of {"integral", "time", "abs_integral"}, default ("integral",)
-        Growth terms (removed before compensating); ``"auto"`` chooses by the
-        proxy's forward-chaining cross-validation (``selection_``).
-    creep : sequence of float, default ()
-        Time constants (s) of kept creep lags beside the core (as
-        :class:`GeneralizedPI`'s), identified with the growth terms by the
-        proxy; the compensator inverts them with the core, sample by sample.
-    smoothing : float, default 1e-3
-        Weight of the curvature penalty on the slope surfaces, relative to the
-        data's (fills cells the data barely visit).
-    min_slope : float, default 0.02
-        Smallest slope, as a fraction of the mean slope: strictly increasing
-        branches, so an exact inverse.
-    refine : bool, default True
-        Refine the integrated regression on the output error.
-    region_tolerance : float, default 0.05
-        How far outside the recorded band (fraction of the output span)
-        counts as extrapolating.
-    input_unit, output_unit : str
-    input_dynamics, output_dynamics : str
-        As for :class:`~piezohyst.models.HysteresisModel`.
-
-    Attributes
-    ----------
-    operator_ : DuhemHysteresis
-        The core (slopes, grid, initial state, region).
-    region_ : Region
-        Where the training data lay.
-
-    Examples
-    --------
-    >>> import piezohyst as ph
-    >>> rec = ph.simulate(signal="decaying", duration=20.0)
-    >>> model = ph.DuhemModel().fit(rec.voltage, rec.charge, t=rec.t)
-    >>> bool(model.nrmse_ < 0.005)
-    True
-    """
-
-    cli_name = "duhem"
-    core = DuhemHysteresis
-    _rules: ClassVar[dict[str, Rule]] = {
-        **PACKED_RULES,
-        "grid": _grid,
-        "smoothing": _nonneg,
-        "refine": _bool,
-    }
-
-    def __init__(
-        self,
-        grid: tuple[int, int] = (8, 6),
-        *,
-        growth_terms: str | Sequence[str] = ("integral",),
-        creep: Sequence[float] = (),
-        smoothing: float = 1e-3,
-        min_slope: float = 0.02,
-        refine: bool = True,
-        region_tolerance: float = 0.05,
-        input_unit: str = "V",
-        output_unit: str = "C",
-        input_dynamics: str = "none",
-        output_dynamics: str = "none",
-    ) -> None:
-        _store(self, locals())
-
-    def _terms_to_fit(
-        self, x_range: FloatArray, params: dict[str, Any]
-    ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
-        return _packed_terms(params, x_range)
-
-
 class PreisachModel(HysteresisModel):
     r"""The Preisach model, identified from data as an Everett function, plus growth terms.
 
@@ -734,6 +633,107 @@ class PreisachModel(HysteresisModel):
             return _packed_terms(params, x_range)
         slow = Relaxation(tau, params["relaxation_nodes"]).bind(x_range)
         return _packed_terms(params, x_range, slow)
+
+
+class DuhemModel(HysteresisModel):
+    r"""Rate-independent Duhem hysteresis, identified from data, plus growth terms.
+
+    .. math::
+
+        \frac{dq}{dv} = f_\pm(v, q), \qquad y = q + \sum_j c_j g_j(t)
+
+    ``f+`` while the voltage rises, ``f-`` while it falls: positive bilinear
+    surfaces on a ``grid`` over the (voltage, output) region the training
+    record covered. The slopes see the output they produce, so the fit is an
+    integrated regression on the measured path (linear in the slopes; noise
+    enters through the path, not through differences of the output), refined
+    on the simulated output with the exact sensitivities of the simulation
+    (``refine``). A Duhem model's loops need not close by themselves, so a
+    drift of the charge could trade against the slopes: the growth terms come
+    from a Prandtl-Ishlinskii proxy first, whose loops close by construction.
+    Minor loops are not congruent, but they converge to a steady loop over a
+    few cycles rather than closing at once (no return-point memory; see
+    :class:`PreisachModel` for a model that has it).
+
+    Its state is the output itself, which the fit estimates at the record's
+    first sample: ``initial_state`` (a history, or ``"periodic"``) has
+    nothing to add and is ignored. Outside the region the training record
+    covered the slopes are held at the grid's edge: predictions warn
+    (:class:`~piezohyst.ExtrapolationWarning`) and the compensator stops at
+    the region's edge unless allowed to extrapolate.
+
+    Parameters
+    ----------
+    grid : (int, int), default (8, 6)
+        Nodes along the voltage and the output, each in [2, 40].
+    growth_terms : "auto" or sequence of {"integral", "time", "abs_integral"}, default ("integral",)
+        Growth terms (removed before compensating); ``"auto"`` chooses by the
+        proxy's forward-chaining cross-validation (``selection_``).
+    creep : sequence of float, default ()
+        Time constants (s) of kept creep lags beside the core (as
+        :class:`GeneralizedPI`'s), identified with the growth terms by the
+        proxy; the compensator inverts them with the core, sample by sample.
+    smoothing : float, default 1e-3
+        Weight of the curvature penalty on the slope surfaces, relative to the
+        data's (fills cells the data barely visit).
+    min_slope : float, default 0.02
+        Smallest slope, as a fraction of the mean slope: strictly increasing
+        branches, so an exact inverse.
+    refine : bool, default True
+        Refine the integrated regression on the output error.
+    region_tolerance : float, default 0.05
+        How far outside the recorded band (fraction of the output span)
+        counts as extrapolating.
+    input_unit, output_unit : str
+    input_dynamics, output_dynamics : str
+        As for :class:`~piezohyst.models.HysteresisModel`.
+
+    Attributes
+    ----------
+    operator_ : DuhemHysteresis
+        The core (slopes, grid, initial state, region).
+    region_ : Region
+        Where the training data lay.
+
+    Examples
+    --------
+    >>> import piezohyst as ph
+    >>> rec = ph.simulate(signal="decaying", duration=20.0)
+    >>> model = ph.DuhemModel().fit(rec.voltage, rec.charge, t=rec.t)
+    >>> bool(model.nrmse_ < 0.005)
+    True
+    """
+
+    cli_name = "duhem"
+    core = DuhemHysteresis
+    _rules: ClassVar[dict[str, Rule]] = {
+        **PACKED_RULES,
+        "grid": _grid,
+        "smoothing": _nonneg,
+        "refine": _bool,
+    }
+
+    def __init__(
+        self,
+        grid: tuple[int, int] = (8, 6),
+        *,
+        growth_terms: str | Sequence[str] = ("integral",),
+        creep: Sequence[float] = (),
+        smoothing: float = 1e-3,
+        min_slope: float = 0.02,
+        refine: bool = True,
+        region_tolerance: float = 0.05,
+        input_unit: str = "V",
+        output_unit: str = "C",
+        input_dynamics: str = "none",
+        output_dynamics: str = "none",
+    ) -> None:
+        _store(self, locals())
+
+    def _terms_to_fit(
+        self, x_range: FloatArray, params: dict[str, Any]
+    ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
+        return _packed_terms(params, x_range)
 
 
 class BoucWenModel(HysteresisModel):

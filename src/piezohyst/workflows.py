@@ -26,7 +26,7 @@ import numpy as np
 
 from ._validation import FloatArray, check_float, check_int
 from ._version import __version__
-from .comparison import COMPARED_MODELS, Comparison, compare_models
+from .comparison import Comparison, compare_models
 from .compensator import Compensator, CompensatorSettings
 from .cores.play import history_state
 from .errors import DataFileError, OverwriteError, ParameterError
@@ -50,7 +50,7 @@ from .io import (
 from .leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
 from .metrics import hysteresis_width, nrmse, rmse
 from .model import History, HysteresisModel, InitialState, ModelState
-from .persistence import load_model, model_class
+from .persistence import load_model, model_class, model_names
 from .selfsensing import LoopSettings
 from .simulation import DEFAULT_PRESET, PRESETS, Bench, BenchRecord, run_loop, simulate
 from .units import to_standard
@@ -289,7 +289,7 @@ def compare_file(
     data: PathLike,
     out: PathLike | None = None,
     *,
-    models: Sequence[str] = COMPARED_MODELS,
+    models: Sequence[str] | None = None,
     train: float = 0.7,
     test_data: PathLike | None = None,
     data_spec: DataSpec | None = None,
@@ -311,8 +311,9 @@ def compare_file(
         The training recording.
     out : str or os.PathLike, optional
         The table: ``.md`` (Markdown), ``.parquet``, or a text file (CSV).
-    models : sequence of str
+    models : sequence of str, optional
         CLI names (``piezohyst fit --model``); each with its default settings.
+        Default: every registered model (:func:`~piezohyst.models.model_names`).
     train : float
         Training fraction of ``data`` when there is no ``test_data``.
     test_data : str or os.PathLike, optional
@@ -332,7 +333,7 @@ def compare_file(
     -------
     Comparison
     """
-    names = list(dict.fromkeys(models))
+    names = list(dict.fromkeys(model_names() if models is None else models))
     if not names:
         msg = "give at least one model to compare"
         raise ParameterError(msg)
