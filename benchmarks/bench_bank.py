@@ -71,7 +71,7 @@ def best(fn, repeats: int) -> float:  # type: ignore[no-untyped-def]
 
 def bench_step(channels: int, operators: int) -> None:
     bank = units(channels, operators)
-    comp = ph.Compensator(bank, v_min=0.0, v_max=140.0)
+    comp = ph.BankCompensator(bank, v_min=0.0, v_max=140.0)
     steps = 2000
     t = np.arange(steps) / 1e4
     amp = np.linspace(0.3, 1.0, channels)
@@ -135,7 +135,7 @@ def bench_step(channels: int, operators: int) -> None:
         f"bank process {op_proc / 1e6:.0f} M = {op_proc / op_single:.2f}x single"
     )
     # the self-sensing controller over the same bank: measured charge fed back per channel
-    ctl = ph.SelfSensingController(bank, v_min=0.0, v_max=140.0, sample_rate=1e4)
+    ctl = ph.BankController(bank, v_min=0.0, v_max=140.0, sample_rate=1e4)
     measured = qs * 1.02
     ctl.step(qs[0], measured[0], out=out)
 

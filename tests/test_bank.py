@@ -103,10 +103,10 @@ def test_a_dead_channel_is_named_or_skipped(fleet: tuple[np.ndarray, ...]) -> No
     with pytest.raises(ph.NotFittedError, match="channel 1 was not fitted"):
         bank[1]
     with pytest.raises(ph.NotFittedError, match=r"channels \[1\] have no model"):
-        ph.Compensator(bank, v_min=1.0, v_max=130.0)
+        ph.BankCompensator(bank, v_min=1.0, v_max=130.0)
     good = bank[bank.fitted_channels]
     assert len(good) == 4 and not good.failed_
-    comp = ph.Compensator(good, v_min=1.0, v_max=130.0)
+    comp = ph.BankCompensator(good, v_min=1.0, v_max=130.0)
     assert comp.step(np.zeros(4)).shape == (4,)
 
 
@@ -172,7 +172,7 @@ def test_bank_compensator_is_each_channels_compensator(bank: ph.ModelBank) -> No
     desired = _desired(bank, t)
     lows = np.array([1.0, 5.0, 1.0, 10.0, 1.0])
     settings = {"v_min": lows, "v_max": 130.0, "slew_rate": 2e4, "sample_rate": FS}
-    comp = ph.Compensator(bank, **settings)  # type: ignore[arg-type]
+    comp = ph.BankCompensator(bank, **settings)  # type: ignore[arg-type]
     assert isinstance(comp, ph.BankCompensator) and comp.fused
     singles = _singles(bank, **settings)
     expected = np.column_stack([s.process(desired[:, c]) for c, s in enumerate(singles)])
@@ -199,7 +199,7 @@ def test_bank_compensator_is_each_channels_compensator(bank: ph.ModelBank) -> No
 def test_bank_process_in_any_chunks(bank: ph.ModelBank, cuts: list[int]) -> None:
     t = np.arange(600) / FS
     desired = _desired(bank, t)
-    comp = ph.Compensator(bank, v_min=1.0, v_max=130.0)
+    comp = ph.BankCompensator(bank, v_min=1.0, v_max=130.0)
     whole = comp.process(desired)
     comp.reset()
     edges = [0, *sorted(cuts), 600]
@@ -211,7 +211,7 @@ def test_unfused_channels_run_their_own_compensators(fleet: tuple[np.ndarray, ..
     t, V, Q = fleet
     bank = ph.ModelBank(ph.GeneralizedPI(n_operators=6, growth_terms=("integral",), asymmetry=3))
     bank.fit(V[:, :3], Q[:, :3], t=t)
-    comp = ph.Compensator(bank, v_min=1.0, v_max=130.0)
+    comp = ph.BankCompensator(bank, v_min=1.0, v_max=130.0)
     assert not comp.fused  # asymmetry: a Newton solve per sample
     desired = _desired(bank, t[:500])
     singles = _singles(bank, v_min=1.0, v_max=130.0)
@@ -221,17 +221,17 @@ def test_unfused_channels_run_their_own_compensators(fleet: tuple[np.ndarray, ..
 
 def test_bank_compensator_limits_and_inputs(bank: ph.ModelBank) -> None:
     with pytest.warns(UserWarning, match="narrowed on 5 of 5 channels"):
-        comp = ph.Compensator(bank, v_min=-50.0, v_max=200.0)
+        comp = ph.BankCompensator(bank, v_min=-50.0, v_max=200.0)
     assert (comp.v_min >= 0.0 - 1.0).all() and (comp.v_max <= 141.0).all()
     with pytest.raises(ph.ShapeError, match=r"shape \(5,\)"):
         comp.step(np.zeros(4))
     with pytest.raises(ph.ShapeError, match=r"\(samples, 5\)"):
         comp.process(np.zeros(5))
     with pytest.raises(ph.ShapeError, match="one value per channel"):
-        ph.Compensator(bank, v_min=np.zeros(3), v_max=130.0)
+        ph.BankCompensator(bank, v_min=np.zeros(3), v_max=130.0)
     with pytest.raises(ph.ParameterError, match=r"channel 0: .*v_min < v_max"):
-        ph.Compensator(bank, v_min=100.0, v_max=100.0)
-    comp = ph.Compensator(bank, v_min=1.0, v_max=130.0)
+        ph.BankCompensator(bank, v_min=100.0, v_max=100.0)
+    comp = ph.BankCompensator(bank, v_min=1.0, v_max=130.0)
     cycle = comp.precondition(200)
     assert cycle.shape[1] == 5 and np.allclose(cycle.max(axis=0), comp.v_max)
     comp.reset(voltage=np.linspace(10.0, 50.0, 5))
@@ -248,7 +248,7 @@ def test_bank_controller_is_each_channels_controller(bank: ph.ModelBank) -> None
     ) + rng.normal(0.0, 1e-10, desired.shape)
     measured[300:305, 2] = np.nan
     settings = {"v_min": 1.0, "v_max": 130.0, "sample_rate": FS, "ki": 0.4, "kp": 0.1}
-    ctl = ph.SelfSensingController(bank, **settings)  # type: ignore[arg-type]
+    ctl = ph.BankController(bank, **settings)  # type: ignore[arg-type]
     assert isinstance(ctl, ph.BankController) and len(ctl) == 5
     singles = [ph.SelfSensingController(m, **settings) for m in bank]  # type: ignore[arg-type]
     expected = np.column_stack(
@@ -270,4 +270,4 @@ def test_bank_controller_is_each_channels_controller(bank: ph.ModelBank) -> None
     with pytest.raises(ph.ShapeError, match="one value per channel"):
         ctl.step(np.zeros(5), np.zeros(4))
     with pytest.raises(ph.ShapeError, match="one Leakage or one per channel"):
-        ph.SelfSensingController(bank, leakage=[ph.Leakage()], **settings)  # type: ignore[arg-type]
+        ph.BankController(bank, leakage=[ph.Leakage()], **settings)  # type: ignore[arg-type]

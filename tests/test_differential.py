@@ -362,7 +362,7 @@ def test_the_compensator_inverts_exactly_inside_the_region(
     model = models[name]
     desired = inside_trajectory(model)
     comp = ph.Compensator(model, v_min=0.0, v_max=model.input_range_[1])
-    assert isinstance(comp, ph.compensator.CoreCompensator)
+    assert comp.inverse.name == "packed"  # the compiled bracketed Newton step
     commands = comp.process(desired)
     achieved = model.hysteresis_.predict(commands)
     # tol: Newton in a bracket stops at 1e-12 of the step or the output's rounding: 1e-9 of the span
@@ -527,8 +527,8 @@ def test_banks_of_preisach_models_compensate_and_close_the_loop(
     bank = ph.ModelBank(ph.PreisachModel(10)).fit(v, q, t=record.t[:8000])
     hi = [m.input_range_[1] for m in bank]
     desired = np.column_stack([inside_trajectory(m, 1.0) for m in bank])
-    comp = ph.Compensator(bank, v_min=0.0, v_max=hi)
-    ctl = ph.SelfSensingController(bank, v_min=0.0, v_max=hi, sample_rate=1000.0)
+    comp = ph.BankCompensator(bank, v_min=0.0, v_max=hi)
+    ctl = ph.BankController(bank, v_min=0.0, v_max=hi, sample_rate=1000.0)
     assert not comp.fused and not ctl.fused
     for suffix in (".json", ".h5", ".npz"):  # one file for the bank, every channel exact
         path = tmp_path / f"bank{suffix}"

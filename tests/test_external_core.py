@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import piezohyst as ph
+from piezohyst.export import export_c
 
 from .external_core import BacklashCore
 
@@ -44,11 +45,31 @@ def test_an_outside_core_is_compared_beside_the_built_in_ones() -> None:
     assert scores["backlash"] < 1e-12 < scores["classical"]
 
 
+def test_the_one_compensator_inverts_an_outside_core() -> None:
+    """No compiled step: the Python engine finds each command by a root search on the core."""
+    v, q = _record()
+    model = ph.HysteresisModel(BacklashCore).fit(v, q)
+    comp = ph.Compensator(model, v_min=10.0, v_max=130.0)
+    assert comp.inverse.name == "python"
+    wanted = 20.0 + 100.0 * (0.5 - 0.5 * np.cos(np.linspace(0.0, 4.0 * np.pi, 400)))
+    target = model.predict(wanted)
+    commands = comp.process(target)
+    # tol: Brent's method stops at 1e-12 of the reachable interval (120 V)
+    np.testing.assert_allclose(commands, wanted, rtol=0, atol=1e-9)
+    assert comp.saturated_count == 0
+    assert comp.step(float("nan")) == commands[-1] and comp.nonfinite_count == 1
+    assert comp.step(1.0) == 130.0 and comp.saturated_count == 1  # out of reach: the limit
+    slow = ph.Compensator(model, v_min=10.0, v_max=130.0, slew_rate=1000.0, sample_rate=1000.0)
+    assert np.all(np.abs(np.diff(slow.process(target))) <= 1.0 + 1e-12)
+
+
 def test_what_an_outside_core_lacks_is_refused_in_one_line() -> None:
     v, q = _record()
     model = ph.HysteresisModel(BacklashCore).fit(v, q)
-    with pytest.raises(ph.NotInvertibleError, match="no compiled inverse step"):
-        ph.Compensator(model, v_min=10.0, v_max=130.0)
+    with pytest.raises(ph.ParameterError, match="runs in Python"):
+        export_c(ph.Compensator(model, v_min=10.0, v_max=130.0))
+    with pytest.raises(ph.ParameterError, match="SelfSensingController"):
+        ph.SelfSensingController(model, v_min=10.0, v_max=130.0, sample_rate=1000.0)
     with pytest.raises(ph.NotInvertibleError, match="closed-form inverse"):
         model.inverse()
     with pytest.raises(ph.ParameterError, match="must be a registered core"):

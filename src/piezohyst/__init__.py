@@ -9,8 +9,9 @@ from __future__ import annotations
 from . import io, metrics, terms
 from ._version import __version__
 from .bank import ModelBank, load_bank
+from .channels import BankCompensator, BankController
 from .comparison import Comparison, ComparisonRow, compare_models
-from .compensator import BankCompensator, Compensator, CompensatorState
+from .compensator import Compensator, CompensatorState
 from .cores.base import Core, Propagation, Region
 from .cores.boucwen import BoucWenHysteresis
 from .cores.duhem import DuhemHysteresis
@@ -44,7 +45,7 @@ from .models import (
     PreisachModel,
 )
 from .persistence import load_model
-from .selfsensing import BankController, ControllerState, SelfSensingController
+from .selfsensing import ControllerState, SelfSensingController
 from .simulation import simulate
 from .terms import Term
 

@@ -10,7 +10,7 @@ Every channel is identified exactly as a single model fitted to that column
 alone would be (``bank[i]`` *is* that model), so everything a model does,
 ``bank[i]`` does; the bank adds batch prediction, a per-channel summary, one
 file for all channels, and the multi-channel compensator
-(``ph.Compensator(bank, ...)``).
+(``ph.BankCompensator(bank, ...)``).
 """
 
 from __future__ import annotations

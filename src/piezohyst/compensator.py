@@ -21,18 +21,16 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from ._lazy import LazyModule
-from ._validation import FloatArray, as_signal
-from .bank import ModelBank
-from .cores.base import PackedCore
-from .cores.play import PIHysteresis
-from .errors import NotInvertibleError, ParameterError, ShapeError
+from ._validation import FloatArray
+from .errors import ParameterError, ShapeError
+from .inverses import INVERSES, CompensatorState, Inverse, _finite_number
 from .model import HysteresisModel, InverseSpec
 
 if TYPE_CHECKING:
@@ -42,42 +40,9 @@ else:  # numba loads when a model first runs (see _lazy)
     D = LazyModule("piezohyst._diffkernels", globals(), "D")
     K = LazyModule("piezohyst._kernels", globals(), "K")
 
-__all__ = ["BankCompensator", "Compensator", "CompensatorState", "CoreCompensator"]
+__all__ = ["Compensator", "CompensatorSettings", "CompensatorState"]
 
 Domain = Literal["charge", "displacement"]
-
-
-def _finite_number(value: object, name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
-        msg = f"The '{name}' parameter of Compensator must be a number. Got {value!r} instead."
-        raise ParameterError(msg)
-    v = float(value)
-    if not math.isfinite(v):
-        msg = f"The '{name}' parameter of Compensator must be finite. Got {value!r} instead."
-        raise ParameterError(msg)
-    return v
-
-
-@dataclass(frozen=True)
-class CompensatorState:
-    """The actuator's condition as a compensator sees it (forward states only).
-
-    Attributes
-    ----------
-    operators : ndarray, shape (n,)
-        Play-operator states (V) after the commands sent so far.
-    lags : ndarray, shape (m,)
-        Creep lag states (V); empty without creep.
-    command : float
-        The last command sent (V).
-    dynamics : ndarray
-        The input dynamics' state (V; empty without input dynamics).
-    """
-
-    operators: FloatArray
-    lags: FloatArray
-    command: float
-    dynamics: FloatArray = field(default_factory=lambda: np.zeros(0))
 
 
 class Compensator:
@@ -127,16 +92,29 @@ class Compensator:
     >>> comp.step(1.0)          # far beyond what 140 V gives: saturates
     140.0
 
-    Given a :class:`~piezohyst.ModelBank`, it builds a
-    :class:`BankCompensator` (one command per channel per step).
+    The inverse follows the core's plan (:meth:`~piezohyst.cores.base.Core.inverse_plan`):
+    eq. 18 for play operators, the compiled bracketed Newton step for the
+    Preisach, Duhem and Bouc-Wen cores, a root search on the core for any
+    other (:mod:`piezohyst.inverses`). A :class:`~piezohyst.ModelBank` has its
+    own :class:`BankCompensator`.
     """
 
-    def __new__(cls, model: HysteresisModel | ModelBank, **kwargs: Any) -> Compensator:
-        if isinstance(model, ModelBank):  # many channels: the bank's compensator
-            return BankCompensator(model, **kwargs)  # type: ignore[return-value]
-        if cls is Compensator and _differential(model):  # a Duhem or Bouc-Wen core
-            return super().__new__(CoreCompensator)
-        return super().__new__(cls)
+    # the kernel arrays the engine lays out (``setup``, :mod:`piezohyst.inverses`)
+    inverse: Inverse
+    analytic: bool
+    _plain: bool
+    tables: FloatArray
+    config: FloatArray
+    _state: FloatArray
+    static: FloatArray
+    lags: FloatArray
+    params: FloatArray
+    region: FloatArray
+    trial: FloatArray
+    slow: FloatArray
+    core: Any
+    _n_aux: int
+    _ns: int
 
     def __init__(
         self,
@@ -153,74 +131,9 @@ class Compensator:
         spec, max_step, inv_gain = self._settings(
             model, v_min, v_max, slew_rate, sample_rate, domain, gain, allow_extrapolation
         )
-        plan = spec.operator.inverse_plan()
-        if plan.engine != "play":  # a core with no compiled inverse step (defined elsewhere)
-            msg = (
-                f"a {type(spec.operator).__name__} core has no compiled inverse step: the "
-                "compensator inverts play operators and the Preisach, Duhem and Bouc-Wen cores"
-            )
-            raise NotInvertibleError(msg)
-        op = _play(spec)
-        if not op.is_invertible:
-            op.inverse()  # raises NotInvertibleError with the reason
-        dyn = spec.dynamics
-        if spec.relaxation is not None:
-            msg = (
-                "a relaxation term is inverted beside a Preisach, Duhem or Bouc-Wen core only: "
-                "fit a PreisachModel(relaxation=...) instead"
-            )
-            raise ParameterError(msg)
-        if dyn.active and not spec.analytic:
-            msg = (
-                "A model with input dynamics is compensated with the analytic inverse only: fit "
-                "it without asymmetry or creep terms."
-            )
-            raise ParameterError(msg)
-        #: True when eq. 18's analytic inverse runs (no Newton solve); fixed by the model
-        self.analytic = spec.analytic
-        self._plain = spec.analytic and not dyn.active and not self.mode.active
-        n = op.n_operators
-        self.tables = np.zeros((5, n))
-        self.tables[K.TAB_R] = op.thresholds
-        self.tables[K.TAB_W] = op.weights
-        self.config = np.zeros(K.CONFIG_SIZE)
-        self.config[K.CFG_OFFSET] = op.offset
-        self.config[K.CFG_V_MIN] = self.v_min
-        self.config[K.CFG_V_MAX] = self.v_max
-        self.config[K.CFG_MAX_STEP] = max_step
-        self.config[K.CFG_INV_GAIN] = inv_gain
-        self.config[K.CFG_STATIC_SCALE] = 1.0
-        if spec.analytic:
-            inv = op.inverse()
-            self.tables[K.TAB_S] = op.loading_slopes
-            self.tables[K.TAB_RI] = inv.thresholds
-            self.tables[K.TAB_WI] = inv.weights
-            self.config[K.CFG_INV_OFFSET] = inv.offset
-            reach = max(abs(self.v_min), abs(self.v_max)) + float(op.thresholds[-1])
-            self.config[K.CFG_BOUND] = 2.0 * float(np.abs(op.weights).sum()) * reach + 1.0
-            self.static = np.zeros((3, 0))
-            self.lags = np.zeros((3, 0))
-            n_aux = n
-        else:
-            st = spec.static
-            self.static = np.zeros((3, 0)) if st is None else np.vstack([st.knots, st.up, st.down])
-            if st is not None:
-                self.config[K.CFG_STATIC_SCALE] = st.scale
-            lg = spec.lags
-            if lg is None:
-                self.lags = np.zeros((3, 0))
-            else:
-                dt = 1.0 / float(sample_rate)  # type: ignore[arg-type]
-                self.lags = np.vstack([lg.taus, lg.gains, 1.0 - np.exp(-dt / lg.taus)])
-            n_aux = self.lags.shape[1]
-        self._state = np.zeros(n + n_aux + 3)
-        self._n_aux = n_aux
-        if domain == "displacement":  # displacement 0 = output at rest in the initial state
-            if spec.analytic:
-                self.config[K.CFG_REFERENCE] = op.offset + float(op.weights @ op.initial_state)
-            else:
-                self._set_forward(self._initial_forward())
-                self.config[K.CFG_REFERENCE] = self._output_now(float(op.initial_state[0]))
+        #: the engine the core's inverse plan names (play, packed, python)
+        self.inverse = INVERSES[spec.operator.inverse_plan().engine]()
+        self.inverse.setup(self, spec, max_step, inv_gain)
         self.reset()
 
     def _settings(
@@ -238,7 +151,8 @@ class Compensator:
         inversion = getattr(model, "inversion", None)
         if not callable(inversion):
             msg = (
-                "The 'model' parameter of Compensator must be a fitted piezohyst model. "
+                "The 'model' parameter of Compensator must be a fitted piezohyst model (a "
+                "ModelBank has ph.BankCompensator and ph.BankController). "
                 f"Got {type(model).__name__} instead."
             )
             raise ParameterError(msg)
@@ -347,38 +261,13 @@ class Compensator:
     # ----------------------------------------------------------------- state
     @property
     def n_operators(self) -> int:
-        """Number of play operators of the inverted model."""
-        return int(self.tables.shape[1])
-
-    def _initial_forward(self) -> tuple[FloatArray, FloatArray]:
-        op = _play(self.spec)
-        x0 = float(op.initial_state[0])
-        return op.initial_state.copy(), np.full(self.lags.shape[1], x0)
-
-    def _set_forward(self, forward: tuple[FloatArray, FloatArray]) -> None:
-        n = self.n_operators
-        self._state[:n] = forward[0]
-        if not self.analytic:
-            self._state[n : n + self._n_aux] = forward[1]
-        else:
-            K.inverse_states(self.tables, self.config, self._state)
-
-    def _output_now(self, v: float) -> float:
-        """The hysteresis part's output (model units) if ``v`` were sent from the current state."""
-        y, _ = K.hysteresis_output(v, self.tables, self.static, self.lags, self.config, self._state)
-        return float(y)
+        """Values in the core's state (play operators: their number)."""
+        return int(self.inverse.n_operators(self))
 
     @property
     def state(self) -> CompensatorState:
         """The forward states and the last command (copies; see :meth:`reset`)."""
-        n = self.n_operators
-        lags = self._state[n : n + self._n_aux] if not self.analytic else np.zeros(0)
-        return CompensatorState(
-            self._state[:n].copy(),
-            lags.copy(),
-            float(self._state[K.ST_LAST]),
-            self.dstate.copy() if self.dynamic else np.zeros(0),
-        )
+        return self.inverse.state(self)
 
     @property
     def mode_history(self) -> FloatArray:
@@ -391,33 +280,23 @@ class Compensator:
         return self._plain
 
     def share(self, tables: FloatArray, config: FloatArray, state: FloatArray) -> None:
-        """Run on arrays owned by a multi-channel container (views of its rows).
-
-        The arrays must hold this compensator's current values (the bank
-        stacks them first); from then on both see every update.
+        """Run on arrays owned by a multi-channel container (views of its rows; play only).
 
         Parameters
         ----------
         tables, config, state : ndarray
             Views of the container's rows, laid out as this compensator's own.
         """
-        if not (
-            np.array_equal(tables, self.tables)
-            and np.array_equal(config, self.config)
-            and np.array_equal(state, self._state)
-        ):
-            msg = "shared arrays must hold the compensator's current tables, config and state"
-            raise ParameterError(msg)
-        self.tables, self.config, self._state = tables, config, state
+        self.inverse.share(self, tables, config, state)
 
     @property
     def last_command(self) -> float:
         """The command sent last (V): where the actuator sits now."""
-        return float(self._state[K.ST_LAST])
+        return float(self.inverse.last_command(self))
 
     @property
     def kernel_state(self) -> FloatArray:
-        """The live state array the kernels update (layout ``ST_*`` in ``_kernels``; no copy).
+        """The live state array the kernels update (no copy).
 
         For loops built on this compensator's kernel (the self-sensing
         controller); use :attr:`state` and :meth:`reset` otherwise.
@@ -427,12 +306,17 @@ class Compensator:
     @property
     def nonfinite_count(self) -> int:
         """Desired values that were NaN or infinite (the last command was held)."""
-        return int(self._state[K.ST_NONFINITE])
+        return int(self.inverse.nonfinite_count(self))
 
     @property
     def saturated_count(self) -> int:
-        """Samples whose command was clipped to ``[v_min, v_max]``."""
-        return int(self._state[K.ST_SATURATED])
+        """Samples whose command was clipped to ``[v_min, v_max]`` (out of reach)."""
+        return int(self.inverse.saturated_count(self))
+
+    @property
+    def outside_count(self) -> int:
+        """Commands that would have left the identified region (held unless extrapolating)."""
+        return int(self.inverse.outside_count(self))
 
     def reset(
         self, state: CompensatorState | ArrayLike | None = None, *, voltage: float | None = None
@@ -443,13 +327,12 @@ class Compensator:
         ----------
         state : CompensatorState or array_like, optional
             Explicit forward states, e.g. a :attr:`state` saved earlier; or an
-            array of the operator states (V), optionally followed by the last
-            command.
+            array of the core's states, optionally followed by the last command.
         voltage : float, optional
-            The actuator now sits at ``voltage`` (V): the model's initial state
-            is projected onto it (eq. 10: each operator clamped into
-            ``[v - r_i, v + r_i]``), lags settled there. Use this after an
-            unknown history only with :meth:`precondition`, which erases it.
+            The actuator now sits at ``voltage`` (V): the model's initial
+            state moved there (play operators: clamped into
+            ``[v - r_i, v + r_i]``, eq. 10), lags settled there. Use this after
+            an unknown history only with :meth:`precondition`, which erases it.
 
         Notes
         -----
@@ -461,52 +344,7 @@ class Compensator:
         ParameterError
             If the last command would lie outside the limits.
         """
-        n = self.n_operators
-        m = self.lags.shape[1]
-        op = _play(self.spec)
-        if isinstance(state, CompensatorState):
-            ops = as_signal(state.operators, "state.operators")
-            lags = as_signal(state.lags, "state.lags", allow_empty=True)
-            if ops.size != n or lags.size != m:
-                msg = (
-                    f"'state' must hold {n} operator and {m} lag states. "
-                    f"Got {ops.size}, {lags.size}."
-                )
-                raise ShapeError(msg)
-            last = float(state.command)
-        elif state is not None:
-            z = as_signal(state, "state")
-            if z.size not in (n, n + 1):
-                msg = f"'state' must hold {n} operator states (and the last command). Got {z.size}."
-                raise ShapeError(msg)
-            ops = z[:n]
-            lags = np.full(m, float(ops[0]))
-            last = (
-                float(z[-1]) if z.size == n + 1 else float(np.clip(ops[0], self.v_min, self.v_max))
-            )
-        elif voltage is None:
-            ops, lags = self._initial_forward()
-            last = float(np.clip(ops[0], self.v_min, self.v_max))
-        else:
-            v = _finite_number(voltage, "voltage")
-            ops = np.clip(op.initial_state, v - op.thresholds, v + op.thresholds)
-            lags = np.full(m, v)
-            last = v
-        if not self.v_min <= last <= self.v_max:
-            msg = (
-                f"The actuator's voltage {last!r} V is outside the limits "
-                f"[{self.v_min}, {self.v_max}] V."
-            )
-            raise ParameterError(msg)
-        self._set_forward((np.array(ops, dtype=np.float64), np.array(lags, dtype=np.float64)))
-        self.dstate[:] = last  # the piezo settled at the last command
-        self._mode_history[:] = np.nan
-        if isinstance(state, CompensatorState) and state.dynamics.size == 2 and self.dynamic:
-            self.dstate[:] = state.dynamics
-        self._last_desired = math.nan
-        self._state[K.ST_LAST] = last
-        self._state[K.ST_NONFINITE] = 0.0
-        self._state[K.ST_SATURATED] = 0.0
+        self.inverse.reset(self, state, voltage=voltage)
 
     def precondition(self, samples: int = 1000) -> FloatArray:
         """The preconditioning cycle to send first: last command → v_max → v_min → back.
@@ -528,25 +366,7 @@ class Compensator:
         ndarray
             The voltages (V) to send.
         """
-        cycle = self._cycle(samples)
-        n = self.n_operators
-        r = self.tables[K.TAB_R]
-        z = self._state[:n]
-        lag = self._state[n : n + self._n_aux] if not self.analytic else np.empty(0)
-        alpha = self.lags[2]
-        out = np.empty_like(cycle)
-        last = self.last_command
-        step = self._max_step
-        for k, v_target in enumerate(cycle):
-            v = min(max(v_target, last - step), last + step)
-            u = K._advance_dynamics(v, self.dyn, self.dstate) if self.dynamic else v
-            z[:] = np.clip(z, u - r, u + r)
-            lag += alpha * (u - lag)
-            out[k] = last = v
-        self._state[K.ST_LAST] = last
-        if self.analytic:
-            K.inverse_states(self.tables, self.config, self._state)
-        return out
+        return self.inverse.precondition(self, self._cycle(samples))
 
     def _cycle(self, samples: int) -> FloatArray:
         """last command -> v_max -> v_min -> back, each extreme reached exactly (and held
@@ -631,16 +451,8 @@ class Compensator:
         return self._inner_step(float(desired))
 
     def _inner_step(self, target: float) -> float:
-        """The kernel's command for the hysteresis output ``target`` (after mode and delay)."""
-        if self.dynamic:
-            return float(
-                K.dynamic_step(target, self.tables, self.config, self._state, self.dyn, self.dstate)
-            )
-        if self.analytic:
-            return float(K.compensator_step(target, self.tables, self.config, self._state))
-        return float(
-            K.numeric_step(target, self.tables, self.static, self.lags, self.config, self._state)
-        )
+        """The engine's command for the hysteresis output ``target`` (after mode and delay)."""
+        return float(self.inverse.inner_step(self, target))
 
     def _step_mode_delayed(self, d: float, preview: ArrayLike | None) -> float:
         """A mode and an integer delay: the command now acts ``m`` samples later, so the
@@ -689,301 +501,8 @@ class Compensator:
         return out
 
     def _inner_process(self, d: FloatArray, out: FloatArray) -> None:
-        """The kernel over a block of hysteresis outputs (after the mode)."""
-        if self.dynamic:
-            K.dynamic_process(
-                d,
-                self.delay_samples,
-                self.tables,
-                self.config,
-                self._state,
-                self.dyn,
-                self.dstate,
-                out,
-            )
-        elif self.analytic:
-            K.compensator_process(d, self.tables, self.config, self._state, out)
-        else:
-            K.numeric_process(d, self.tables, self.static, self.lags, self.config, self._state, out)
-
-
-def _play(spec: InverseSpec) -> PIHysteresis:
-    """The play operators of a spec (every model the base class compensates has them)."""
-    assert isinstance(spec.operator, PIHysteresis)
-    return spec.operator
-
-
-def _differential(model: object) -> bool:
-    inversion = getattr(model, "inversion", None)
-    return callable(inversion) and inversion().operator.inverse_plan().engine == "packed"
-
-
-class CoreCompensator(Compensator):
-    r"""The :class:`Compensator` of a model on a differential core (Duhem, Bouc-Wen).
-
-    Built by ``ph.Compensator(model, ...)`` for such a model: the same
-    parameters, limits, slew limit, NaN handling, counters, input dynamics
-    (lags inverted per sample, an integer delay by preview) and output mode.
-    Each sample inverts the core's step from the actuator's state: explicitly
-    for Duhem, by a safeguarded Newton solve (at most
-    ``_diffkernels.NEWTON_MAX`` iterations) for Bouc-Wen; the state then
-    advances with the command actually sent.
-
-    Beyond the (voltage, output) region the model was identified on (its
-    ``region_tolerance``), a command that would move the actuator further
-    out is not sent: the command stops at the region's edge (with input
-    dynamics: the last command is held) and is counted in
-    :attr:`outside_count`, unless ``allow_extrapolation=True`` (then it is
-    sent and counted). Moves back towards the region always pass.
-
-    Parameters
-    ----------
-    model : HysteresisModel
-        A fitted model on a differential core.
-    v_min, v_max, slew_rate, sample_rate, domain, gain, allow_extrapolation
-        As for :class:`Compensator`; ``allow_extrapolation`` also lets
-        commands leave the identified region.
-    """
-
-    def __init__(
-        self,
-        model: HysteresisModel,
-        *,
-        v_min: float,
-        v_max: float,
-        slew_rate: float | None = None,
-        sample_rate: float | None = None,
-        domain: Domain = "charge",
-        gain: float | None = None,
-        allow_extrapolation: bool = False,
-    ) -> None:
-        spec, max_step, inv_gain = self._settings(
-            model, v_min, v_max, slew_rate, sample_rate, domain, gain, allow_extrapolation
-        )
-        core = spec.operator
-        assert isinstance(core, PackedCore)
-        self.core = core
-        self.analytic = False
-        self._plain = False
-        self.params = np.array(core.packed)
-        self.config = np.zeros(D.CC_SIZE)
-        self.config[D.CC_V_MIN] = self.v_min
-        self.config[D.CC_V_MAX] = self.v_max
-        self.config[D.CC_MAX_STEP] = max_step
-        self.config[D.CC_INV_GAIN] = inv_gain
-        self.config[D.CC_REFUSE] = 0.0 if allow_extrapolation else 1.0
-        region = core.region
-        if region is None:
-            self.config[D.CC_TOL] = math.inf
-            self.region = np.zeros((2, 0))
-        else:
-            self.config[D.CC_TOL] = spec.region_tolerance * region.span
-            self.config[D.CC_RV_LO] = region.v_lo
-            self.config[D.CC_RV_HI] = region.v_hi
-            self.region = region.array
-        if domain == "displacement":  # displacement 0 = the output in the initial state
-            self.config[D.CC_REF] = core.output(core.initial_state)
-        fs = float(sample_rate or 0.0)  # given whenever lags or a slow core need it (_settings)
-        lg = spec.lags
-        if lg is not None:  # kept creep lags: affine in each sample's voltage, solved with it
-            alphas = 1.0 - np.exp(-1.0 / (fs * np.asarray(lg.taus)))
-            self.lags = np.vstack([lg.taus, lg.gains, alphas])
-            pairs = np.column_stack([lg.gains, alphas]).ravel()
-            self.dyn = np.concatenate([self.dyn[: D.DYN_LAGS], pairs])
-            self.dstate = np.zeros(D.DYN_LAGS + alphas.size)
-        else:
-            self.lags = np.zeros((3, 0))
-        ns = core.n_states
-        self.config[D.CC_NS] = ns
-        slow = spec.relaxation
-        if slow is not None:  # a slow Preisach core after the main one: params and state
-            self.config[D.CC_SLOW_AT] = self.params.size
-            self.config[D.CC_SLOW_A] = 1.0 - math.exp(-1.0 / (fs * slow.tau))
-            self.params = np.concatenate([self.params, slow.packed])
-            ns += D.RV_SIZE
-        #: the slow core's packed parameters (empty without a relaxation term)
-        self.slow = np.zeros(0) if slow is None else np.array(slow.packed)
-        self._ns = ns
-        self._state = np.zeros(self._ns + D.DS_STATUS)
-        #: scratch for the kernel's trial steps (the core's state after a candidate command)
-        self.trial = np.zeros(self._ns)
-        self.reset()
-
-    @property
-    def n_operators(self) -> int:
-        """Values in the core's state (the last voltage, the internal variable, ...)."""
-        return self._ns
-
-    @property
-    def state(self) -> CompensatorState:
-        """The core's state ``[v, x, ...]`` as ``operators``, and the last command (copies)."""
-        return CompensatorState(
-            self._state[: self._ns].copy(),
-            self.dstate[D.DYN_LAGS :].copy(),
-            float(self._state[self._ns + D.DS_STATUS + D.DS_LAST]),
-            self.dstate[: D.DYN_LAGS].copy() if self.dynamic else np.zeros(0),
-        )
-
-    @property
-    def last_command(self) -> float:
-        """The command sent last (V)."""
-        return float(self._state[self._ns + D.DS_STATUS + D.DS_LAST])
-
-    @property
-    def nonfinite_count(self) -> int:
-        """Desired values that were NaN or infinite (the last command was held)."""
-        return int(self._state[self._ns + D.DS_STATUS + D.DS_NONFINITE])
-
-    @property
-    def saturated_count(self) -> int:
-        """Desired values out of reach within ``[v_min, v_max]`` (the nearer limit was sent)."""
-        return int(self._state[self._ns + D.DS_STATUS + D.DS_SATURATED])
-
-    @property
-    def outside_count(self) -> int:
-        """Commands that would have left the identified region (held unless extrapolating)."""
-        return int(self._state[self._ns + D.DS_STATUS + D.DS_OUTSIDE])
-
-    def share(self, tables: FloatArray, config: FloatArray, state: FloatArray) -> None:
-        """Not available: a bank runs these channels one by one.
-
-        Parameters
-        ----------
-        tables, config, state : ndarray
-        """
-        msg = "a compensator on a differential core runs on its own arrays"
-        raise ParameterError(msg)
-
-    def _with_slow(self, z: FloatArray) -> FloatArray:
-        """The core's state, then the slow core's at rest at the same voltage (if any)."""
-        if not self.slow.size:
-            return z
-        rest = np.zeros(D.RV_SIZE)
-        rest[0] = rest[D.RV_R] = float(z[0])
-        rest[D.RV_K] = 1.0
-        return np.concatenate([z, rest])
-
-    def _moved(self, start: FloatArray, v: float) -> FloatArray:
-        """The core's state after the voltage moves from ``start`` to ``v`` in small steps."""
-        v0 = float(start[0])
-        span = max(self.v_max - self.v_min, 1e-300)
-        steps = max(2, math.ceil(abs(v - v0) / (span / 400.0)) + 1)
-        return self.core.propagate(np.linspace(v0, v, steps), start).state
-
-    def reset(
-        self, state: CompensatorState | ArrayLike | None = None, *, voltage: float | None = None
-    ) -> None:
-        """Start again from a known condition; counters back to 0.
-
-        Parameters
-        ----------
-        state : CompensatorState or array_like, optional
-            ``[v, x]`` (the core's state), optionally followed by the last command.
-        voltage : float, optional
-            The actuator now sits at ``voltage``: the model's initial state moved
-            there along a ramp.
-
-        Raises
-        ------
-        ParameterError
-            If the last command would lie outside the limits.
-        """
-        core = self.core
-        if isinstance(state, CompensatorState):
-            z = as_signal(state.operators, "state.operators")
-            if z.size != self._ns:
-                msg = f"'state' must hold the core's {self._ns} values [v, x, ...]. Got {z.size}."
-                raise ShapeError(msg)
-            last = float(state.command)
-        elif state is not None:
-            z = as_signal(state, "state")
-            ns = self._ns
-            if z.size not in (ns, ns + 1):
-                msg = (
-                    f"'state' must hold the core's {ns} values and optionally the last "
-                    f"command. Got {z.size}."
-                )
-                raise ShapeError(msg)
-            last = (
-                float(z[ns]) if z.size == ns + 1 else float(np.clip(z[0], self.v_min, self.v_max))
-            )
-            z = z[:ns]
-        elif voltage is None:
-            z = self._with_slow(np.array(core.initial_state))
-            last = float(np.clip(z[0], self.v_min, self.v_max))
-        else:
-            last = _finite_number(voltage, "voltage")
-            z = self._with_slow(self._moved(np.array(core.initial_state), last))
-        if not self.v_min <= last <= self.v_max:
-            msg = (
-                f"The actuator's voltage {last!r} V is outside the limits "
-                f"[{self.v_min}, {self.v_max}] V."
-            )
-            raise ParameterError(msg)
-        self._state[:] = 0.0
-        self._state[: self._ns] = z
-        self._state[self._ns + D.DS_STATUS + D.DS_LAST] = last
-        self.dstate[:] = last  # the piezo and every creep lag settled at the last command
-        if isinstance(state, CompensatorState):
-            if state.dynamics.size == D.DYN_LAGS and self.dynamic:
-                self.dstate[: D.DYN_LAGS] = state.dynamics
-            lags = as_signal(state.lags, "state.lags", allow_empty=True)
-            if lags.size == self.lags.shape[1]:
-                self.dstate[D.DYN_LAGS :] = lags
-            elif lags.size:
-                msg = (
-                    f"'state.lags' must hold the model's {self.lags.shape[1]} creep lag "
-                    f"states. Got {lags.size}."
-                )
-                raise ShapeError(msg)
-        self._mode_history[:] = np.nan
-        self._last_desired = math.nan
-
-    def precondition(self, samples: int = 1000) -> FloatArray:
-        """The preconditioning cycle to send first (see :meth:`Compensator.precondition`).
-
-        Parameters
-        ----------
-        samples : int, default 1000
-
-        Returns
-        -------
-        ndarray
-            The voltages (V) to send; the state advanced as if they had been.
-        """
-        cycle = self._cycle(samples)
-        u = np.empty_like(cycle)
-        alphas = self.lags[2]
-        ns = int(self.config[D.CC_NS])
-        slow = self._state[ns : self._ns]  # a view: the slow core moves in place
-        a = float(self.config[D.CC_SLOW_A])
-        for k, v in enumerate(cycle):
-            u[k] = K._advance_dynamics(v, self.dyn, self.dstate) if self.dynamic else v
-            self.dstate[D.DYN_LAGS :] += alphas * (u[k] - self.dstate[D.DYN_LAGS :])
-            if slow.size:
-                c = float(slow[0])
-                D.rev_move(self.slow, slow, c + a * (u[k] - c), True, np.zeros(0), False)
-        self._state[:ns] = self.core.propagate(u, self._state[:ns]).state
-        self._state[self._ns + D.DS_STATUS + D.DS_LAST] = cycle[-1]
-        return cycle
-
-    def _inner_step(self, target: float) -> float:
-        return float(
-            D.core_step(
-                target,
-                self.params,
-                self.config,
-                self._state,
-                self.region,
-                self.dyn,
-                self.dstate,
-                self.trial,
-            )
-        )
-
-    def _inner_process(self, d: FloatArray, out: FloatArray) -> None:
-        D.core_process(d, self.delay_samples, self.params, self.config, self._state, self.region,
-                       self.dyn, self.dstate, self.trial, out)  # fmt: skip
+        """The engine over a block of hysteresis outputs (after the mode)."""
+        self.inverse.inner_process(self, d, out)
 
 
 @dataclass(frozen=True)
@@ -1058,262 +577,3 @@ class CompensatorSettings:
             sample_rate=self.sample_rate,
             allow_extrapolation=self.allow_extrapolation,
         )
-
-
-def per_channel(value: object, c: int, name: str) -> list[Any]:
-    """A setting for each of ``c`` channels: a scalar (or None) repeated, or ``c`` values.
-
-    Parameters
-    ----------
-    value : float, None or array_like
-    c : int
-        Channels.
-    name : str
-        The setting, named in the error.
-
-    Returns
-    -------
-    list
-        ``c`` values.
-    """
-    if value is None or isinstance(value, int | float | np.integer | np.floating):
-        return [value] * c
-    arr = np.asarray(value, dtype=np.float64).reshape(-1)
-    if arr.size != c:
-        msg = f"'{name}' must be a number or one value per channel ({c}). Got {arr.size} values."
-        raise ShapeError(msg)
-    return [float(a) for a in arr]
-
-
-class BankCompensator:
-    r"""Feedforward compensation of every channel of a :class:`~piezohyst.ModelBank`.
-
-    Channel ``c`` is exactly the :class:`Compensator` of ``bank[c]`` (same
-    inverse, limits, slew limit, NaN handling and counters; :meth:`channel`
-    returns it, live): :meth:`step` takes one desired value per channel and
-    returns one command per channel. When every channel inverts analytically
-    without input dynamics (play operators and removed growth terms), all
-    channels run in one numba kernel, in parallel across cores, allocating
-    nothing; otherwise the channels' own compensators run one after another.
-
-    Usually built as ``ph.Compensator(bank, v_min=..., v_max=...)``.
-
-    Parameters
-    ----------
-    bank : ModelBank
-        A fitted bank (every channel fitted).
-    v_min, v_max : float or array_like of C
-        Voltage limits (V), shared or one per channel.
-    slew_rate, gain : float or array_like of C, optional
-        As for :class:`Compensator`, shared or per channel.
-    sample_rate : float, optional
-        The loop rate (Hz), shared.
-    domain : {"charge", "displacement"}
-    allow_extrapolation : bool, default False
-        Limits beyond a channel's identified range are narrowed to it, with
-        one warning naming how many channels were narrowed.
-
-    Examples
-    --------
-    >>> import numpy as np, piezohyst as ph
-    >>> units = [ph.PIHysteresis([0.0, 20.0], [g * 1e-8, 5e-9]) for g in (1.0, 2.0)]
-    >>> bank = ph.ModelBank.from_models([ph.ClassicalPI.from_operator(u) for u in units])
-    >>> comp = ph.Compensator(bank, v_min=0.0, v_max=140.0)
-    >>> desired = np.array([units[0].predict([50.0])[0], units[1].predict([80.0])[0]])
-    >>> np.round(comp.step(desired), 9).tolist()
-    [50.0, 80.0]
-    """
-
-    def __init__(
-        self,
-        bank: ModelBank,
-        *,
-        v_min: float | ArrayLike,
-        v_max: float | ArrayLike,
-        slew_rate: float | ArrayLike | None = None,
-        sample_rate: float | None = None,
-        domain: Domain = "charge",
-        gain: float | ArrayLike | None = None,
-        allow_extrapolation: bool = False,
-    ) -> None:
-        if not isinstance(bank, ModelBank):
-            msg = f"BankCompensator needs a fitted ModelBank. Got {type(bank).__name__}."
-            raise ParameterError(msg)
-        models = bank.complete_models()
-        c = len(models)
-        lows = per_channel(v_min, c, "v_min")
-        highs = per_channel(v_max, c, "v_max")
-        slews = per_channel(slew_rate, c, "slew_rate")
-        gains = per_channel(gain, c, "gain")
-        channels: list[Compensator] = []
-        narrowed = 0
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)
-            for i, m in enumerate(models):
-                try:
-                    comp = Compensator(
-                        m,
-                        v_min=lows[i],
-                        v_max=highs[i],
-                        slew_rate=slews[i],
-                        sample_rate=sample_rate,
-                        domain=domain,
-                        gain=gains[i],
-                        allow_extrapolation=allow_extrapolation,
-                    )
-                except ParameterError as exc:
-                    raise ParameterError(f"channel {i}: {exc}") from None
-                narrowed += comp.requested_limits is not None
-                channels.append(comp)
-        if narrowed:
-            warnings.warn(
-                f"Compensator limits narrowed on {narrowed} of {c} channels to the voltages "
-                "each was identified on (pass allow_extrapolation=True to keep them; "
-                "v_min/v_max show the limits in force).",
-                UserWarning,
-                stacklevel=3,
-            )
-        self.bank = bank
-        self._channels = channels
-        #: True when all channels run in the one parallel kernel
-        self.fused = all(ch.plain for ch in channels)
-        if self.fused:
-            # one array per quantity; each channel's compensator keeps views of its row,
-            # so channel(i) stays live and identical to the bank's state
-            self.tables = np.ascontiguousarray(np.stack([ch.tables for ch in channels]))
-            self.config = np.ascontiguousarray(np.stack([ch.config for ch in channels]))
-            self._state = np.ascontiguousarray(np.stack([ch.kernel_state for ch in channels]))
-            for i, ch in enumerate(channels):
-                ch.share(self.tables[i], self.config[i], self._state[i])
-
-    def __len__(self) -> int:
-        return len(self._channels)
-
-    def channel(self, index: int) -> Compensator:
-        """Channel ``index``'s compensator: live, sharing the bank's state.
-
-        Parameters
-        ----------
-        index : int
-
-        Returns
-        -------
-        Compensator
-        """
-        return self._channels[index]
-
-    @property
-    def v_min(self) -> FloatArray:
-        """Lower limits in force, per channel (V)."""
-        return np.array([ch.v_min for ch in self._channels])
-
-    @property
-    def v_max(self) -> FloatArray:
-        """Upper limits in force, per channel (V)."""
-        return np.array([ch.v_max for ch in self._channels])
-
-    @property
-    def last_command(self) -> FloatArray:
-        """The last command of every channel (V)."""
-        return np.array([ch.last_command for ch in self._channels])
-
-    @property
-    def nonfinite_count(self) -> NDArray[np.int64]:
-        """Per channel: desired values that were NaN or infinite (the last command held)."""
-        return np.array([ch.nonfinite_count for ch in self._channels], dtype=np.int64)
-
-    @property
-    def saturated_count(self) -> NDArray[np.int64]:
-        """Per channel: commands clipped to the limits."""
-        return np.array([ch.saturated_count for ch in self._channels], dtype=np.int64)
-
-    def reset(self, *, voltage: float | ArrayLike | None = None) -> None:
-        """Every channel back to its model's initial state, or settled at ``voltage`` (per channel).
-
-        Parameters
-        ----------
-        voltage : float or array_like of C, optional
-        """
-        volts = per_channel(voltage, len(self), "voltage")
-        for ch, v in zip(self._channels, volts, strict=True):
-            ch.reset(voltage=v)
-
-    def precondition(self, samples: int = 1000) -> FloatArray:
-        """Every channel's preconditioning cycle (see :meth:`Compensator.precondition`).
-
-        Parameters
-        ----------
-        samples : int, default 1000
-            Samples in each channel's cycle (more where a slew limit needs them).
-
-        Returns
-        -------
-        ndarray, shape (samples', C)
-            Commands to send first; a channel whose cycle is shorter (wider
-            slew limit) holds its last command to the end.
-        """
-        cycles = [ch.precondition(samples) for ch in self._channels]
-        m = max(cy.size for cy in cycles)
-        out = np.empty((m, len(cycles)))
-        for c, cy in enumerate(cycles):
-            out[: cy.size, c] = cy
-            out[cy.size :, c] = cy[-1]
-        return out
-
-    def _desired(self, desired: ArrayLike, ndim: int) -> FloatArray:
-        d = np.ascontiguousarray(desired, dtype=np.float64)
-        c = len(self._channels)
-        if d.ndim != ndim or d.shape[-1] != c:
-            want = f"({c},)" if ndim == 1 else f"(samples, {c})"
-            msg = f"'desired' must have shape {want}, one value per channel. Got {d.shape}."
-            raise ShapeError(msg)
-        return d
-
-    def step(self, desired: ArrayLike, out: FloatArray | None = None) -> FloatArray:
-        """One command per channel.
-
-        Parameters
-        ----------
-        desired : array_like, shape (C,)
-            Desired output per channel; NaN or infinity holds that channel's
-            last command (counted).
-        out : ndarray, shape (C,), optional
-            Written in place (a float64 array): nothing is allocated.
-
-        Returns
-        -------
-        ndarray, shape (C,)
-            Commands (V), each inside its channel's limits.
-        """
-        d = self._desired(desired, 1)
-        if out is None:
-            out = np.empty(d.shape[0])
-        elif out.shape != d.shape or out.dtype != np.float64:
-            msg = f"'out' must be a float64 array of shape {d.shape}. Got {out.dtype} {out.shape}."
-            raise ShapeError(msg)
-        if self.fused:
-            K.bank_step(d, self.tables, self.config, self._state, out)
-        else:
-            for i, ch in enumerate(self._channels):
-                out[i] = ch.step(float(d[i]))
-        return out
-
-    def process(self, desired: ArrayLike) -> FloatArray:
-        """Commands for a block: equal to :meth:`step` on each row.
-
-        Parameters
-        ----------
-        desired : array_like, shape (samples, C)
-
-        Returns
-        -------
-        ndarray, shape (samples, C)
-        """
-        d = self._desired(desired, 2)
-        out = np.empty_like(d)
-        if self.fused:
-            K.bank_process(d, self.tables, self.config, self._state, out)
-        else:
-            for i, ch in enumerate(self._channels):
-                out[:, i] = ch.process(np.ascontiguousarray(d[:, i]))
-        return out

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 
 from ._lazy import LazyModule
-from .compensator import Compensator, CoreCompensator
+from .compensator import Compensator
 from .errors import ParameterError
 from .io import atomic_write_text
 from .selfsensing import SelfSensingController
@@ -119,8 +119,15 @@ def export_c(
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", prefix):
         msg = f"prefix must be a C identifier. Got {prefix!r}."
         raise ParameterError(msg)
-    if isinstance(comp, CoreCompensator):  # Duhem, Bouc-Wen: a Newton inverse in C
+    engine = comp.inverse.name
+    if engine == "packed":  # Preisach, Duhem, Bouc-Wen: the bracketed Newton step in C
         return _core_c(comp, prefix, precision)
+    if engine != "play":
+        msg = (
+            f"C export covers play operators and the Preisach, Duhem and Bouc-Wen cores; a "
+            f"{type(comp.spec.operator).__name__} core runs in Python (ph.Compensator) only."
+        )
+        raise ParameterError(msg)
     if not comp.analytic:
         msg = (
             "C export covers the analytic inverse (play operators and growth terms) and the "
@@ -697,7 +704,7 @@ def write_c(
     return c_path, h_path
 
 
-def _core_c(comp: CoreCompensator, prefix: str, precision: Precision) -> CCode:
+def _core_c(comp: Compensator, prefix: str, precision: Precision) -> CCode:
     """C99 for a compensator on a differential core: ``_diffkernels.core_step`` in C.
 
     The same arithmetic as the kernel: the step's output is monotone in the
@@ -1413,7 +1420,7 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
 """
 
 
-def _slow_c(comp: CoreCompensator, real: str, precision: Precision) -> str:
+def _slow_c(comp: Compensator, real: str, precision: Precision) -> str:
     """The slow core: the Preisach functions again, on their own grid and Everett values."""
     code = _CORE_C_PREISACH[: _CORE_C_PREISACH.index("static real_t core_output")]
     names = ("cell", "node", "everett", "branch", "branch_slope", "NN", "EV", "V_LO", "H",

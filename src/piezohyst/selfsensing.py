@@ -21,20 +21,17 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from ._lazy import LazyModule
 from ._validation import FloatArray
-from .bank import ModelBank
 from .compensator import (
     Compensator,
     CompensatorSettings,
     CompensatorState,
-    CoreCompensator,
-    per_channel,
 )
 from .errors import ParameterError, ShapeError
 from .leakage import Leakage
@@ -48,7 +45,6 @@ else:  # numba loads when a model first runs (see _lazy)
     K = LazyModule("piezohyst._kernels", globals(), "K")
 
 __all__ = [
-    "BankController",
     "ControllerState",
     "LoopSettings",
     "SelfSensingController",
@@ -155,13 +151,8 @@ class SelfSensingController:
     >>> all(0.0 <= v <= 140.0 for v in commands)
     True
 
-    Given a :class:`~piezohyst.ModelBank`, it builds a :class:`BankController`.
+    A :class:`~piezohyst.ModelBank` has its own :class:`BankController`.
     """
-
-    def __new__(cls, model: HysteresisModel | ModelBank, **kwargs: Any) -> SelfSensingController:
-        if isinstance(model, ModelBank):  # many channels: the bank's controller
-            return BankController(model, **kwargs)  # type: ignore[return-value]
-        return super().__new__(cls)
 
     def __init__(
         self,
@@ -193,13 +184,11 @@ class SelfSensingController:
             gain=gain,
             allow_extrapolation=allow_extrapolation,
         )
-        #: True on a differential core (Duhem, Bouc-Wen): its inverse runs in the loop
-        self.core = isinstance(comp, CoreCompensator)
-        if not comp.analytic and not self.core:
+        if not comp.inverse.closed_loop(comp):
             msg = (
-                "SelfSensingController inverts play operators analytically (eq. 18); this "
-                f"{type(model).__name__} keeps terms besides them (asymmetry, creep): fit it "
-                "without them"
+                "SelfSensingController runs a compiled inverse: play operators alone (eq. 18) "
+                f"or a Preisach, Duhem or Bouc-Wen core; this {type(model).__name__} keeps "
+                "asymmetry or creep beside play operators, or its core has no compiled step"
             )
             raise ParameterError(msg)
         if comp.dynamic or comp.mode.active:
@@ -224,10 +213,9 @@ class SelfSensingController:
         self.kp = _gain(kp, "kp", 0.0, 1.0)
         self.refresh_leakage = refresh_leakage
         sweep = np.concatenate([np.linspace(comp.v_min, comp.v_max, 200), [comp.v_min]])
-        h = comp.spec.operator.predict(sweep if self.core else sweep[[0, -2, -1]])
+        h = comp.spec.operator.predict(sweep)
         span = float(np.ptp(h)) or 1.0  # model output over the limits
-        ref_slot, gain_slot = (D.CC_REF, D.CC_INV_GAIN) if self.core else (
-            K.CFG_REFERENCE, K.CFG_INV_GAIN)  # fmt: skip
+        ref_slot, gain_slot = comp.inverse.slots()
         self.ctl = np.zeros(K.CTL_SIZE)
         self.ctl[K.CTL_KP] = self.kp
         self.ctl[K.CTL_KI] = self.ki
@@ -373,32 +361,8 @@ class SelfSensingController:
             The command (V): finite, inside ``[v_min, v_max]``.
         """
         comp = self.compensator
-        if isinstance(comp, CoreCompensator):
-            return float(
-                D.core_controller_step(
-                    float(desired),
-                    float(measured),
-                    comp.params,
-                    self.config,
-                    comp.kernel_state,
-                    comp.region,
-                    comp.dyn,
-                    comp.dstate,
-                    comp.trial,
-                    self.ctl,
-                    self.feedback,
-                )
-            )
-        return float(
-            K.controller_step(
-                float(desired),
-                float(measured),
-                comp.tables,
-                self.config,
-                comp.kernel_state,
-                self.ctl,
-                self.feedback,
-            )
+        return comp.inverse.controller_step(
+            comp, float(desired), float(measured), self.config, self.ctl, self.feedback
         )
 
     def process(self, desired: ArrayLike, measured: ArrayLike) -> FloatArray:
@@ -423,215 +387,7 @@ class SelfSensingController:
             raise ShapeError(msg)
         out = np.empty_like(d)
         comp = self.compensator
-        if isinstance(comp, CoreCompensator):
-            D.core_controller_process(d, m, comp.params, self.config, comp.kernel_state,
-                                      comp.region, comp.dyn, comp.dstate, comp.trial, self.ctl,
-                                      self.feedback, out)  # fmt: skip
-            return out
-        K.controller_process(
-            d, m, comp.tables, self.config, comp.kernel_state, self.ctl, self.feedback, out
-        )
-        return out
-
-
-class BankController:
-    """The self-sensing controller of every channel of a :class:`~piezohyst.ModelBank`.
-
-    Channel ``c`` is exactly the :class:`SelfSensingController` of ``bank[c]``
-    (:meth:`channel` returns it, live); :meth:`step` takes one desired value
-    and one measured charge per channel, and all channels run in one numba
-    kernel across cores. Usually built as
-    ``ph.SelfSensingController(bank, v_min=..., v_max=..., sample_rate=...)``.
-
-    Parameters
-    ----------
-    bank : ModelBank
-        A fitted bank (every channel fitted). Play-operator channels run in one
-        parallel kernel; Preisach, Duhem or Bouc-Wen channels one after another.
-    v_min, v_max : float or array_like of C
-        Voltage limits (V).
-    sample_rate : float
-        The loop rate (Hz), shared.
-    leakage : Leakage or sequence of Leakage, optional
-        One calibration for all channels, or one per channel (default: each
-        channel's identified leakage).
-    **settings
-        The other settings of :class:`SelfSensingController` (``ki``, ``kp``,
-        ``slew_rate``, ``domain``, ``gain``...), shared; ``slew_rate`` and
-        ``gain`` may be one per channel.
-
-    Examples
-    --------
-    >>> import numpy as np, piezohyst as ph
-    >>> units = [ph.PIHysteresis([0.0, 20.0], [g * 1e-8, 5e-9]) for g in (1.0, 2.0)]
-    >>> bank = ph.ModelBank.from_models([ph.ClassicalPI.from_operator(u) for u in units])
-    >>> ctl = ph.SelfSensingController(bank, v_min=0.0, v_max=140.0, sample_rate=1000.0)
-    >>> ctl.step(np.array([2e-7, 4e-7]), np.array([0.0, 0.0])).shape
-    (2,)
-    """
-
-    def __init__(
-        self,
-        bank: ModelBank,
-        *,
-        v_min: float | ArrayLike,
-        v_max: float | ArrayLike,
-        sample_rate: float,
-        leakage: Leakage | list[Leakage] | tuple[Leakage, ...] | None = None,
-        **settings: Any,
-    ) -> None:
-        if not isinstance(bank, ModelBank):
-            msg = f"BankController needs a fitted ModelBank. Got {type(bank).__name__}."
-            raise ParameterError(msg)
-        models = bank.complete_models()
-        c = len(models)
-        lows = per_channel(v_min, c, "v_min")
-        highs = per_channel(v_max, c, "v_max")
-        per = {k: per_channel(settings.pop(k, None), c, k) for k in ("slew_rate", "gain")}
-        if leakage is None or isinstance(leakage, Leakage):
-            leaks: list[Leakage | None] = [leakage] * c
-        else:
-            leaks = list(leakage)
-            if len(leaks) != c:
-                msg = f"'leakage' must be one Leakage or one per channel ({c}). Got {len(leaks)}."
-                raise ShapeError(msg)
-        channels: list[SelfSensingController] = []
-        for i, m in enumerate(models):
-            try:
-                channels.append(
-                    SelfSensingController(
-                        m,
-                        v_min=lows[i],
-                        v_max=highs[i],
-                        sample_rate=sample_rate,
-                        leakage=leaks[i],
-                        slew_rate=per["slew_rate"][i],
-                        gain=per["gain"][i],
-                        **settings,
-                    )
-                )
-            except (ParameterError, ShapeError) as exc:
-                raise type(exc)(f"channel {i}: {exc}") from None
-        self.bank = bank
-        self._channels = channels
-        #: True when all channels run in the one parallel kernel (play operators); a bank
-        #: of Preisach, Duhem or Bouc-Wen models runs its channels' controllers in turn
-        self.fused = not any(ch.core for ch in channels)
-        if not self.fused:
-            return
-        comps = [ch.compensator for ch in channels]
-        self.tables = np.ascontiguousarray(np.stack([cp.tables for cp in comps]))
-        comp_config = np.ascontiguousarray(np.stack([cp.config for cp in comps]))
-        self.state_array = np.ascontiguousarray(np.stack([cp.kernel_state for cp in comps]))
-        self.config = np.ascontiguousarray(np.stack([ch.config for ch in channels]))
-        self.ctl = np.ascontiguousarray(np.stack([ch.ctl for ch in channels]))
-        self.feedback = np.ascontiguousarray(np.stack([ch.feedback for ch in channels]))
-        for i, ch in enumerate(channels):  # each channel keeps views of its rows: live
-            ch.compensator.share(self.tables[i], comp_config[i], self.state_array[i])
-            ch.config, ch.ctl, ch.feedback = self.config[i], self.ctl[i], self.feedback[i]
-
-    def __len__(self) -> int:
-        return len(self._channels)
-
-    def channel(self, index: int) -> SelfSensingController:
-        """Channel ``index``'s controller: live, sharing the bank's state.
-
-        Parameters
-        ----------
-        index : int
-
-        Returns
-        -------
-        SelfSensingController
-        """
-        return self._channels[index]
-
-    @property
-    def last_command(self) -> FloatArray:
-        """The last command of every channel (V)."""
-        return np.array([ch.last_command for ch in self._channels])
-
-    @property
-    def measurement_faults(self) -> NDArray[np.int64]:
-        """Per channel: non-finite measurements (feedforward used)."""
-        return np.array([ch.measurement_faults for ch in self._channels], dtype=np.int64)
-
-    @property
-    def saturated_count(self) -> NDArray[np.int64]:
-        """Per channel: commands clipped to the limits."""
-        return np.array([ch.saturated_count for ch in self._channels], dtype=np.int64)
-
-    def reset(self) -> None:
-        """Every channel back to its initial state, feedback cleared."""
-        for ch in self._channels:
-            ch.reset()
-
-    def _pair(self, desired: ArrayLike, measured: ArrayLike, ndim: int) -> tuple[FloatArray, ...]:
-        d = np.ascontiguousarray(desired, dtype=np.float64)
-        m = np.ascontiguousarray(measured, dtype=np.float64)
-        c = len(self._channels)
-        if d.ndim != ndim or d.shape[-1] != c or d.shape != m.shape:
-            want = f"({c},)" if ndim == 1 else f"(samples, {c})"
-            msg = (
-                f"'desired' and 'measured' must both have shape {want}, one value per channel. "
-                f"Got {d.shape} and {m.shape}."
-            )
-            raise ShapeError(msg)
-        return d, m
-
-    def step(
-        self, desired: ArrayLike, measured: ArrayLike, out: FloatArray | None = None
-    ) -> FloatArray:
-        """One command per channel.
-
-        Parameters
-        ----------
-        desired, measured : array_like, shape (C,)
-            Desired output and the charge read at this sample, per channel
-            (NaN: hold / feedforward alone for that channel).
-        out : ndarray, shape (C,), optional
-            Written in place.
-
-        Returns
-        -------
-        ndarray, shape (C,)
-            Commands (V).
-        """
-        d, m = self._pair(desired, measured, 1)
-        if out is None:
-            out = np.empty(d.shape[0])
-        elif out.shape != d.shape or out.dtype != np.float64:
-            msg = f"'out' must be a float64 array of shape {d.shape}. Got {out.dtype} {out.shape}."
-            raise ShapeError(msg)
-        if not self.fused:
-            for i, ch in enumerate(self._channels):
-                out[i] = ch.step(float(d[i]), float(m[i]))
-            return out
-        K.bank_controller_step(
-            d, m, self.tables, self.config, self.state_array, self.ctl, self.feedback, out
-        )
-        return out
-
-    def process(self, desired: ArrayLike, measured: ArrayLike) -> FloatArray:
-        """Commands for recorded blocks (samples, C); equal to :meth:`step` on each row.
-
-        Parameters
-        ----------
-        desired, measured : array_like, shape (samples, C)
-
-        Returns
-        -------
-        ndarray, shape (samples, C)
-        """
-        d, m = self._pair(desired, measured, 2)
-        out = np.empty_like(d)
-        if not self.fused:
-            for i, ch in enumerate(self._channels):
-                out[:, i] = ch.process(np.ascontiguousarray(d[:, i]), np.ascontiguousarray(m[:, i]))
-            return out
-        K.bank_controller_process(
-            d, m, self.tables, self.config, self.state_array, self.ctl, self.feedback, out
-        )
+        comp.inverse.controller_process(comp, d, m, self.config, self.ctl, self.feedback, out)
         return out
 
 
