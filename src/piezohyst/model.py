@@ -33,11 +33,9 @@ blocks; :meth:`~HysteresisModel.rest_state` and
 
 from __future__ import annotations
 
-import inspect
 import math
 import os
-import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar, Self
 
@@ -45,24 +43,33 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._lazy import LazyModule
-from ._validation import FloatArray, as_signal, as_time, check_float, check_int, same_length
-from .cores.base import Core, CoreFit, FitJob, Propagation, core_class
-from .dynamics import KINDS as DYNAMICS_KINDS
+from ._validation import FloatArray, as_signal, same_length
+from .cores.base import Core, Propagation
 from .dynamics import InputDynamics, OutputDynamics
-from .dynamics_fit import search_dynamics
 from .errors import (
-    ExtrapolationWarning,
-    InsufficientDataError,
     NotFittedError,
     NotInvertibleError,
     ParameterError,
-    ShapeError,
     TimeAxisError,
 )
-from .identification import BLOCK, Blocks, Summary, array_blocks, block_dt, term_columns
+from .estimator import (
+    GROWTH_TERMS,
+    Estimator,
+    Rule,
+    _core_rule,
+    _dynamics_kind,
+    _min_slope,
+    _output_kind,
+    _settings_rule,
+    _terms,
+    _unit,
+)
+from .fitting import fit_arrays, fit_stream, set_fitted
+from .identification import Blocks, Summary
 from .leakage import Leakage
 from .persistence import model_from_dict, model_to_dict, register, save_model
-from .terms import Creep, LagShape, RelaxationShape, StaticShape, Term, make_term
+from .state import History, InitialState, ModelState, rest_state, run_model
+from .terms import LagShape, RelaxationShape, StaticShape, Term, coefficient_arrays
 
 if TYPE_CHECKING:
     from . import _kernels as K
@@ -77,103 +84,6 @@ __all__ = [
     "InverseSpec",
     "ModelState",
 ]
-
-GROWTH_TERMS = ("integral", "time", "abs_integral")
-
-
-@dataclass(frozen=True)
-class History:
-    """The input an actuator saw before a record: its operators start where it left them.
-
-    Attributes
-    ----------
-    input : ndarray
-        The earlier input (V), from rest at its first sample.
-
-    Examples
-    --------
-    >>> import numpy as np, piezohyst as ph
-    >>> before = np.array([0.0, 100.0, 40.0])
-    >>> h = ph.PIHysteresis([0.0, 20.0], [1e-8, 5e-9])
-    >>> model = ph.ClassicalPI.from_operator(h)
-    >>> x = np.array([40.0, 60.0])
-    >>> model.predict(x, state=ph.History(before)).tolist() == h.predict(
-    ...     np.concatenate([before, x]))[3:].tolist()
-    True
-    """
-
-    input: FloatArray
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "input", as_signal(self.input, "History.input"))
-
-
-#: What a fit or a prediction may start from: "rest" (None), "periodic", a History, or states
-InitialState = str | History | ArrayLike | None
-
-
-@dataclass(frozen=True)
-class ModelState:
-    """The state of a model between two blocks of samples.
-
-    Attributes
-    ----------
-    operators : ndarray, shape (n,)
-        Play-operator states (input units, e.g. V).
-    terms : tuple of ndarray
-        One state per term of the fitted model (see the model's
-        :meth:`~HysteresisModel.state_names`): integrals in input unit x s,
-        elapsed time in s, creep lags in input units.
-    t_last : float or None
-        Time (s) of the last sample run, None before any (or for a
-        rate-independent model run without times).
-    input : ndarray
-        The input dynamics' state (delay buffer and lag; empty without them).
-    output : ndarray
-        The output mode's state (position, velocity; empty without it).
-    """
-
-    operators: FloatArray
-    terms: tuple[FloatArray, ...] = ()
-    t_last: float | None = None
-    input: FloatArray = field(default_factory=lambda: np.zeros(0))
-    output: FloatArray = field(default_factory=lambda: np.zeros(0))
-
-    def to_dict(self) -> dict[str, Any]:
-        """Plain JSON data.
-
-        Returns
-        -------
-        dict
-        """
-        return {
-            "operators": self.operators.tolist(),
-            "terms": [s.tolist() for s in self.terms],
-            "t_last": self.t_last,
-            "input": self.input.tolist(),
-            "output": self.output.tolist(),
-        }
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> ModelState:
-        """Inverse of :meth:`to_dict`.
-
-        Parameters
-        ----------
-        data : dict
-
-        Returns
-        -------
-        ModelState
-        """
-        t_last = data.get("t_last")
-        return cls(
-            as_signal(data["operators"], "operators").copy(),
-            tuple(as_signal(s, "terms", allow_empty=True).copy() for s in data.get("terms", [])),
-            None if t_last is None else float(t_last),
-            as_signal(data.get("input", []), "input", allow_empty=True).copy(),
-            as_signal(data.get("output", []), "output", allow_empty=True).copy(),
-        )
 
 
 @dataclass(frozen=True)
@@ -219,156 +129,59 @@ class InverseSpec:
         """True when eq. 18 inverts it exactly (no kept term beside the play operators)."""
         return self.static is None and self.lags is None and self.relaxation is None
 
+    @classmethod
+    def of(cls, model: Any) -> InverseSpec:
+        """The spec of a fitted model: its core and kept terms, growth terms dropped.
 
-# ------------------------------------------------------------ parameter rules
-# A rule checks one constructor argument and returns the value to use; every
-# model declares its rules once (``_rules``), merged along the class hierarchy,
-# and ``fit`` applies all of them before any work. A test requires a rule for
-# every constructor argument.
-Rule = Callable[[Any, str, str], Any]
+        Parameters
+        ----------
+        model : HysteresisModel
 
+        Returns
+        -------
+        InverseSpec
 
-def _unit(value: object, name: str, owner: str) -> str:
-    if not isinstance(value, str) or not value:
-        msg = f"The '{name}' parameter of {owner} must be a non-empty str. Got {value!r} instead."
-        raise ParameterError(msg)
-    return value
-
-
-def _int_in(low: int, high: int) -> Rule:
-    def rule(value: object, name: str, owner: str) -> int:
-        return check_int(value, name, owner, low, high)
-
-    return rule
-
-
-def _min_slope(value: object, name: str, owner: str) -> float:
-    return check_float(value, name, owner, 0.0, 1.0, low_open=True)
-
-
-def _bool(value: object, name: str, owner: str) -> bool:
-    if not isinstance(value, bool):
-        msg = f"The '{name}' parameter of {owner} must be True or False. Got {value!r} instead."
-        raise ParameterError(msg)
-    return value
-
-
-def _thresholds(value: object, name: str, owner: str) -> FloatArray | None:
-    if value is None:
-        return None
-    try:
-        thr = as_signal(value, name)  # type: ignore[arg-type]
-    except ValueError:
-        thr = np.array([np.nan])
-    if (
-        thr.size > 1000
-        or not np.all(np.isfinite(thr))
-        or thr[0] != 0.0
-        or (thr.size > 1 and np.any(np.diff(thr) <= 0))
-    ):
-        msg = (
-            f"The '{name}' parameter of {owner} must be 1 to 1000 strictly increasing "
-            f"values starting at 0. Got {thr.tolist()[:8]}{'...' if thr.size > 8 else ''}."
+        Raises
+        ------
+        ParameterError
+            If a kept term is neither a static shape nor lags (nothing can invert it).
+        """
+        static: StaticShape | None = None
+        lags: LagShape | None = None
+        relaxation: RelaxationShape | None = None
+        for term, coef in zip(model.terms_, model.coefs_, strict=True):
+            if term.removed:
+                continue
+            s, lag = term.static_shape(coef), term.lag_shape(coef)
+            slow = term.relaxation_shape(coef)
+            if s is not None and static is None:
+                static = s
+            elif lag is not None and lags is None:
+                lags = lag
+            elif slow is not None and relaxation is None:
+                relaxation = slow
+            else:
+                msg = (
+                    f"the {term.kind!r} term shapes the hysteresis but cannot be inverted: the "
+                    "compensator inverts play operators plus at most one static shape and one "
+                    "set of lags"
+                )
+                raise ParameterError(msg)
+        return cls(
+            model.operator_,
+            static,
+            lags,
+            model.input_range_,
+            model.input_unit,
+            model.output_unit,
+            model.input_dynamics_,
+            model.output_dynamics_,
+            float(getattr(model, "region_tolerance", 0.05)),
+            relaxation,
         )
-        raise ParameterError(msg)
-    return thr
 
 
-def _growth_terms(value: object, name: str, owner: str) -> tuple[str, ...] | None:
-    """None for 'auto' (choose), else the distinct terms in GROWTH_TERMS order."""
-    if isinstance(value, str):
-        if value != "auto":
-            msg = (
-                f"The '{name}' parameter of {owner} must be 'auto' or a sequence "
-                f"of {list(GROWTH_TERMS)}. Got {value!r} instead."
-            )
-            raise ParameterError(msg)
-        return None
-    terms = tuple(value) if isinstance(value, Sequence) else (value,)
-    if any(term not in GROWTH_TERMS for term in terms) or len(set(terms)) != len(terms):
-        msg = (
-            f"The '{name}' parameter of {owner} must hold distinct terms from "
-            f"{list(GROWTH_TERMS)}. Got {list(terms)!r} instead."
-        )
-        raise ParameterError(msg)
-    return tuple(t for t in GROWTH_TERMS if t in terms)
-
-
-def _creep(value: object, name: str, owner: str) -> Creep | None:
-    if isinstance(value, Sequence) and not isinstance(value, str):
-        if len(value) == 0:
-            return None
-        try:
-            return Creep(value)
-        except ParameterError:
-            pass
-    msg = (
-        f"The '{name}' parameter of {owner} must be up to 20 positive time "
-        f"constants in s. Got {value!r} instead."
-    )
-    raise ParameterError(msg)
-
-
-def _dynamics_kind(value: object, name: str, owner: str) -> str:
-    choices = (*DYNAMICS_KINDS, "auto")
-    if value not in choices:
-        msg = f"The '{name}' parameter of {owner} must be one of {choices}. Got {value!r} instead."
-        raise ParameterError(msg)
-    return str(value)
-
-
-def _output_kind(value: object, name: str, owner: str) -> str:
-    if value not in ("none", "second-order"):
-        msg = (
-            f"The '{name}' parameter of {owner} must be 'none' or 'second-order'. "
-            f"Got {value!r} instead."
-        )
-        raise ParameterError(msg)
-    return str(value)
-
-
-def _terms(value: object, name: str, owner: str) -> tuple[Term, ...]:
-    if isinstance(value, str | Term) or not isinstance(value, Sequence):
-        msg = (
-            f"The '{name}' parameter of {owner} must be a sequence of term kinds or Term "
-            f"instances. Got {value!r} instead."
-        )
-        raise ParameterError(msg)
-    terms = tuple(make_term(spec) for spec in value)
-    kinds = [term.kind for term in terms]
-    if len(set(kinds)) != len(kinds):
-        msg = f"The '{name}' parameter of {owner} must not repeat a kind. Got {kinds!r}."
-        raise ParameterError(msg)
-    return terms
-
-
-def _core_rule(value: object, name: str, owner: str) -> type[Core]:
-    if isinstance(value, str):
-        found = core_class(value)
-        if found is not None:
-            return found
-    elif isinstance(value, type) and issubclass(value, Core) and value.kind:
-        return value
-    msg = (
-        f"The '{name}' parameter of {owner} must be a registered core (a Core subclass with a "
-        f"kind, or one of its names). Got {value!r} instead."
-    )
-    raise ParameterError(msg)
-
-
-def _settings_rule(value: object, name: str, owner: str) -> dict[str, Any]:
-    if value is None:
-        return {}
-    if isinstance(value, dict) and all(isinstance(k, str) for k in value):
-        return dict(value)
-    msg = f"The '{name}' parameter of {owner} must be None or a dict of settings. Got {value!r}."
-    raise ParameterError(msg)
-
-
-SCORE_PIECE = 1 << 16  # samples per piece when scoring a fit (2 MB of temporaries)
-
-
-class HysteresisModel:
+class HysteresisModel(Estimator):
     """A hysteresis core plus terms and dynamics: fit, run, inverse and files (see the module).
 
     Parameters
@@ -409,6 +222,15 @@ class HysteresisModel:
         "input_dynamics": _dynamics_kind,
         "output_dynamics": _output_kind,
     }
+    # fitted attributes (``fitting.set_fitted``)
+    operator_: Core
+    initial_state_: FloatArray
+    terms_: tuple[Term, ...]
+    coefs_: tuple[FloatArray, ...]
+    rmse_: float
+    nrmse_: float
+    input_range_: tuple[float, float]
+    max_slew_rate_: float
     selection_: dict[str, float]
     selection_folds_: dict[str, list[float]]
     selection_splits_: list[int]
@@ -444,92 +266,6 @@ class HysteresisModel:
     def _core_class(self) -> type[Core]:
         """The core class this model fits (a preset's class attribute, or the ``core`` setting)."""
         return _core_rule(self.core, "core", type(self).__name__)
-
-    @classmethod
-    def _param_names(cls) -> list[str]:
-        sig = inspect.signature(cls.__init__)
-        return [p.name for p in sig.parameters.values() if p.name != "self"]
-
-    def get_params(self, deep: bool = True) -> dict[str, Any]:
-        """The constructor arguments, as given (scikit-learn's contract).
-
-        Parameters
-        ----------
-        deep : bool, default True
-            Accepted for scikit-learn; a model holds no sub-estimators.
-
-        Returns
-        -------
-        dict
-            Name to value, read from ``__init__``'s signature.
-        """
-        return {name: getattr(self, name) for name in self._param_names()}
-
-    def set_params(self, **params: Any) -> Self:
-        """Set constructor arguments (scikit-learn's contract); checked at the next ``fit``.
-
-        Parameters
-        ----------
-        **params
-            Names from :meth:`get_params`; any other name raises.
-
-        Returns
-        -------
-        HysteresisModel
-            ``self``.
-        """
-        valid = self._param_names()
-        for name, value in params.items():
-            if name not in valid:
-                msg = (
-                    f"Invalid parameter {name!r} for {type(self).__name__}. "
-                    f"Valid parameters are: {valid}."
-                )
-                raise ParameterError(msg)
-            setattr(self, name, value)
-        return self
-
-    def __repr__(self) -> str:
-        sig = inspect.signature(type(self).__init__)
-        shown = [
-            f"{k}={v!r}"
-            for k, v in self.get_params().items()
-            if not _same(v, sig.parameters[k].default)
-        ]
-        return f"{type(self).__name__}({', '.join(shown)})"
-
-    @classmethod
-    def parameter_rules(cls) -> dict[str, Rule]:
-        """Every constructor argument's rule, declared once per class along its hierarchy.
-
-        Returns
-        -------
-        dict
-            Argument name to a function ``rule(value, name, owner)`` that
-            returns the checked value or raises :class:`ParameterError`.
-        """
-        rules: dict[str, Rule] = {}
-        for klass in reversed(cls.__mro__):
-            rules.update(vars(klass).get("_rules", {}))
-        names = set(cls._param_names())
-        return {name: rule for name, rule in rules.items() if name in names}
-
-    def check_params(self) -> dict[str, Any]:
-        """Apply every parameter rule (in ``__init__`` order), as ``fit`` does first.
-
-        Returns
-        -------
-        dict
-            The checked values by name.
-
-        Raises
-        ------
-        ParameterError
-            Naming the first argument that breaks its rule.
-        """
-        rules = self.parameter_rules()
-        owner = type(self).__name__
-        return {name: rules[name](value, name, owner) for name, value in self.get_params().items()}
 
     def _terms_to_fit(
         self, x_range: FloatArray, params: dict[str, Any]
@@ -578,40 +314,7 @@ class HysteresisModel:
         InsufficientDataError
             Fewer samples than parameters.
         """
-        xs = as_signal(x, "x")
-        ys = as_signal(y, "y")
-        same_length(xs, ys, "x", "y")
-        ts = as_time(t, xs.size, required=False, owner=type(self).__name__)
-        dyn = InputDynamics()
-        us = xs
-        owner = type(self).__name__
-        kind = _dynamics_kind(self.input_dynamics, "input_dynamics", owner)
-        out_kind = _output_kind(self.output_dynamics, "output_dynamics", owner)
-        if kind != "none" or out_kind != "none":
-            if ts is None:
-                msg = (
-                    f"{owner}(input_dynamics={kind!r}, output_dynamics={out_kind!r}) needs the "
-                    "sample times: pass t= (s)"
-                )
-                raise TimeAxisError(msg)
-            seed_mode = OutputDynamics() if out_kind != "none" else None
-            dyn, mode = search_dynamics(self, xs, ys, ts, kind, seed_mode)
-            us, _ = dyn.apply(xs, block_dt(ts, 0, ts.size, None))
-            if mode is not None:  # the solve filters its columns through it; set_fitted keeps it
-                self._fitting_output = mode
-        blocks = array_blocks(us, ys, ts)
-        try:
-            summary = self._fit(blocks, initial_state, ts is not None)
-            if self._refine(us, ys, ts, summary, initial_state):
-                self._score(blocks, summary)  # the refinement changed the model
-        finally:
-            self.__dict__.pop("_fitting_output", None)
-        if dyn.active:  # commands, their range and slew are the logged input's
-            self.input_range_ = (float(xs.min()), float(xs.max()))
-            assert ts is not None
-            self.max_slew_rate_ = Summary.of(array_blocks(xs, ys, ts)).max_slew_rate
-        self.input_dynamics_ = dyn
-        return self
+        return fit_arrays(self, x, y, t, initial_state=initial_state)  # type: ignore[no-any-return]
 
     def fit_blocks(
         self, blocks: Blocks, *, timed: bool = True, initial_state: InitialState = None
@@ -648,99 +351,12 @@ class HysteresisModel:
         InsufficientDataError
             A record without excitation, or with fewer samples than parameters.
         """
-        if self.get_params().get("optimize_thresholds"):
-            msg = (
-                f"{type(self).__name__}(optimize_thresholds=True) searches the thresholds over "
-                "the record in memory: use fit"
-            )
-            raise ParameterError(msg)
-        if (
-            self.get_params().get("input_dynamics", "none") != "none"
-            or self.get_params().get("output_dynamics", "none") != "none"
-        ):
-            msg = (
-                f"{type(self).__name__} with input or output dynamics searches them over the "
-                "record in memory: use fit"
-            )
-            raise ParameterError(msg)
-        self._fit(blocks, initial_state, timed)
-        self.input_dynamics_ = InputDynamics()
-        return self
-
-    def _fit(self, blocks: Blocks, initial_state: InitialState, timed: bool) -> Summary:
-        params = self.check_params()
-        sm = Summary.of(blocks)
-        if not sm.x_max - sm.x_min > 1e-12 * max(abs(sm.x_min), abs(sm.x_max), 1e-300):
-            msg = (
-                f"the input never moves (constant at {sm.x_first:g} {self.input_unit}): "
-                "a record without excitation holds no hysteresis to identify"
-            )
-            raise InsufficientDataError(msg)
-        terms, subsets = self._terms_to_fit(sm.x_range, params)
-        if not timed and any(term.rate_dependent for term in terms):
-            as_time(None, sm.n, required=True, owner=type(self).__name__)  # raises
-        job = FitJob(blocks, sm, terms, subsets, initial_state,
-                     {**params, **(params.get("settings") or {})}, type(self).__name__,
-                     self.input_unit, self.output_unit,
-                     self.__dict__.get("_fitting_output"))  # fmt: skip
-        self._set_fit(self._core_class().identify(job))
-        self.input_range_ = (sm.x_min, sm.x_max)
-        self.max_slew_rate_ = sm.max_slew_rate
-        self._score(blocks, sm)
-        return sm
-
-    def _set_fit(self, fit: CoreFit) -> None:
-        """Make this model the identification's result (core, terms, selection scores)."""
-        self.set_fitted(fit.core, fit.terms, fit.coefs)
-        if fit.selection is not None:
-            self.selection_, self.selection_folds_, splits = fit.selection
-            self.selection_splits_ = list(splits)
-
-    def _score(self, blocks: Blocks, sm: Summary) -> None:
-        """Fit quality over the record (one pass, state carried) and the leakage check."""
-        sse = 0.0
-        state: ModelState | None = None
-        rate = self.rate_dependent_
-        with warnings.catch_warnings():  # its own record: no extrapolation warning
-            warnings.simplefilter("ignore", ExtrapolationWarning)
-            for x_blk, y_blk, t_blk in blocks():
-                for a in range(0, x_blk.size, SCORE_PIECE):  # memory O(piece), not O(record)
-                    x, y = x_blk[a : a + SCORE_PIECE], y_blk[a : a + SCORE_PIECE]
-                    t = t_blk[a : a + SCORE_PIECE] if rate and t_blk is not None else None
-                    run = self.propagate(x, t, state)
-                    state = run.state
-                    r = run.output - y
-                    sse += float(np.sum(r * r))  # not BLAS: no thread pool woken for a sum
-        self.rmse_ = math.sqrt(sse / sm.n)
-        self.nrmse_ = self.rmse_ / max(sm.y_max - sm.y_min, 1e-300)
-        self._check_leakage(sm)
-
-    def _check_leakage(self, sm: Summary) -> None:
-        """Warn when the identified leakage drains the capacitance faster than one sample."""
-        growth = self.growth_coefficients()
-        if math.isnan(sm.t_first) or sm.n < 2 or "integral" not in growth:
-            return
-        conductance = growth["integral"][0]
-        capacitance = (sm.y_max - sm.y_min) / (sm.x_max - sm.x_min)  # mean slope, output per input
-        dt = (sm.t_last - sm.t_first) / (sm.n - 1)  # mean interval
-        if conductance > 0 and capacitance / conductance < dt:
-            warnings.warn(
-                f"the identified leakage {conductance:.3g} {self.output_unit}/"
-                f"({self.input_unit}*s) would discharge the actuator in "
-                f"{capacitance / conductance:.3g} s, less than one sample ({dt:.3g} s): check "
-                "the time unit",
-                UserWarning,
-                stacklevel=4,
-            )
+        return fit_stream(self, blocks, timed=timed, initial_state=initial_state)  # type: ignore[no-any-return]
 
     def _refine(
-        self,
-        x: FloatArray,
-        y: FloatArray,
-        t: FloatArray | None,
-        summary: Summary,
+        self, x: FloatArray, y: FloatArray, t: FloatArray | None, summary: Summary,
         initial_state: InitialState,
-    ) -> bool:
+    ) -> bool:  # fmt: skip
         """Optional nonlinear refinement after the linear solve; True if it changed the model."""
         return False
 
@@ -760,24 +376,7 @@ class HysteresisModel:
         coefs : tuple of ndarray
             One coefficient array per term.
         """
-        self._set_core(core)
-        self.terms_ = terms
-        self.coefs_ = coefs
-        self.selection_ = {}
-        self.selection_folds_ = {}
-        self.selection_splits_ = []
-        self.rmse_ = self.nrmse_ = math.nan  # set by fit; unknown for a model built by hand
-        self.input_range_ = (math.nan, math.nan)
-        self.max_slew_rate_ = math.nan
-        self.input_dynamics_ = InputDynamics()
-        self.output_dynamics_ = getattr(self, "_fitting_output", OutputDynamics())
-
-    def _set_core(self, core: Core) -> None:
-        """The core and the fitted attributes that describe it."""
-        self.operator_ = core
-        self.initial_state_ = core.initial_state
-        for name, value in core.fitted_attributes().items():
-            setattr(self, name, value)
+        set_fitted(self, core, terms, coefs)
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "operator_"):
@@ -850,14 +449,7 @@ class HysteresisModel:
             Growth integrals at 0, ``t_last`` None.
         """
         self._check_fitted()
-        dyn = self.input_dynamics_
-        return ModelState(
-            self.operator_.rest_state(float(x0)),
-            tuple(term.rest_state(float(x0)) for term in self.terms_),
-            None,
-            dyn.rest_state(float(x0)) if dyn.active else np.zeros(0),
-            np.full(2, np.nan) if self.output_dynamics_.active else np.zeros(0),
-        )
+        return rest_state(self, float(x0))
 
     def state_after(self, history: ArrayLike, t: ArrayLike | None = None) -> ModelState:
         """The state after running ``history`` from the model's initial state.
@@ -874,92 +466,6 @@ class HysteresisModel:
         ModelState
         """
         return self.propagate(history, t).state
-
-    def _named_start(
-        self, state: str | History, xs: FloatArray, ts: FloatArray | None
-    ) -> ModelState | None:
-        """ "rest", "periodic" or a History as a start state for the input ``xs``.
-
-        Growth terms start at rest (their integrals count from the record's
-        start); input dynamics, when the model has them, settle over the same
-        passes as the operators.
-        """
-        x0 = float(xs[0])
-        dyn = self.input_dynamics_
-        if isinstance(state, History):
-            z = self.operator_.history_state(as_signal(state.input, "history"))
-        elif state == "rest":
-            return None
-        elif state == "periodic":
-            if dyn.active:
-                assert ts is not None
-                dt = block_dt(ts, 0, ts.size, None)
-                assert dt is not None
-                dt[0] = float(np.median(np.diff(ts))) if ts.size > 1 else 0.0  # the wrap
-                inner = dyn.rest_state(x0)
-                u = xs
-                for _ in range(2):  # the lag settles into the period, then the operators
-                    u, inner = dyn.apply(xs, dt, inner)
-                z = self.operator_.periodic_state(u)
-                terms = tuple(term.rest_state(x0) for term in self.terms_)
-                out = np.full(2, np.nan) if self.output_dynamics_.active else np.zeros(0)
-                return ModelState(z, terms, None, inner, out)
-            z = self.operator_.periodic_state(xs)
-        else:
-            msg = (
-                "'state' must be a ModelState, operator states, 'rest', 'periodic' or a "
-                f"History. Got {state!r}."
-            )
-            raise ParameterError(msg)
-        return self._start(z, x0)
-
-    def _start(self, state: ModelState | ArrayLike | None, x0: float) -> ModelState:
-        n = self.operator_.initial_state.size
-        dyn = self.input_dynamics_
-        if state is None:
-            return ModelState(
-                self.operator_.initial_state.copy(),
-                tuple(term.rest_state(x0) for term in self.terms_),
-                None,
-                dyn.rest_state(x0) if dyn.active else np.zeros(0),
-                np.full(2, np.nan) if self.output_dynamics_.active else np.zeros(0),
-            )
-        if not isinstance(state, ModelState):  # operator states only
-            z = as_signal(state, "state").copy()
-            if z.size != n:
-                msg = (
-                    f"'state' must be a ModelState or {n} operator states (V). Got {z.size} values."
-                )
-                raise ShapeError(msg)
-            rest = dyn.rest_state(x0) if dyn.active else np.zeros(0)
-            out = np.full(2, np.nan) if self.output_dynamics_.active else np.zeros(0)
-            return ModelState(
-                z, tuple(term.rest_state(x0) for term in self.terms_), None, rest, out
-            )
-        z = as_signal(state.operators, "state.operators").copy()
-        if z.size != n or len(state.terms) != len(self.terms_):
-            msg = (
-                f"'state' does not match this model: {n} operators and {len(self.terms_)} "
-                f"term states expected, got {z.size} and {len(state.terms)}."
-            )
-            raise ShapeError(msg)
-        terms = []
-        for term, s in zip(self.terms_, state.terms, strict=True):
-            arr = as_signal(s, "state.terms", allow_empty=True).copy()
-            if arr.size != len(term.state_names):
-                msg = f"the state of term {term.kind!r} needs {len(term.state_names)} values."
-                raise ShapeError(msg)
-            terms.append(arr)
-        inp = np.array(state.input, dtype=np.float64)
-        expected = dyn.rest_state(x0).size if dyn.active else 0
-        if inp.size != expected:
-            msg = f"the input dynamics state needs {expected} values. Got {inp.size}."
-            raise ShapeError(msg)
-        outp = np.array(state.output, dtype=np.float64)
-        if outp.size != (2 if self.output_dynamics_.active else 0):
-            msg = f"the output mode's state needs 2 values. Got {outp.size}."
-            raise ShapeError(msg)
-        return ModelState(z, tuple(terms), state.t_last, inp, outp)
 
     def propagate(
         self,
@@ -999,90 +505,20 @@ class HysteresisModel:
         *,
         removed_only: bool,
     ) -> Propagation[ModelState]:
-        self._check_fitted()
-        xs = as_signal(x, "x", allow_empty=True)
-        rate = self.rate_dependent_
-        ts = as_time(t, xs.size, required=rate and xs.size > 0, owner=type(self).__name__)
-        start: ModelState | ArrayLike | None
-        if isinstance(state, History | str):
-            start = self._named_start(state, xs, ts) if xs.size else None
-        else:
-            start = state
-        st = self._start(start, float(xs[0]) if xs.size else 0.0)
-        if xs.size == 0:
-            return Propagation(xs.copy(), st)
-        if rate and ts is not None and st.t_last is not None and ts[0] <= st.t_last:
-            msg = (
-                f"'t' must continue after the state's last time {st.t_last!r}. "
-                f"Got t[0]={float(ts[0])!r}."
-            )
-            raise TimeAxisError(msg)
-        if self.input_dynamics_.active:  # the command becomes the voltage on the piezo
-            assert ts is not None
-            xs, _ = self.input_dynamics_.apply(xs, block_dt(ts, 0, ts.size, st.t_last), st.input)
-        if removed_only:
-            out = np.zeros_like(xs)
-            z = st.operators
-        else:
-            out, z = self.operator_.propagate(xs, st.operators)
-            self._check_region(xs, out)
-        use = [j for j, term in enumerate(self.terms_) if term.removed or not removed_only]
-        terms = [self.terms_[j] for j in use]
-        states = [st.terms[j] for j in use]
-        if terms:
-            coef = np.concatenate([self.coefs_[j] for j in use])
-            t_run = ts if rate else None
-            cols = np.empty((min(BLOCK, xs.size), coef.size))
-            for start in range(0, xs.size, BLOCK):
-                stop = min(start + BLOCK, xs.size)
-                block = cols[: stop - start]
-                dt = block_dt(t_run, start, stop, st.t_last)
-                ts_b = None if t_run is None else t_run[start:stop]
-                term_columns(terms, xs[start:stop], ts_b, dt, states, block)
-                out[start:stop] += block @ coef
-        t_last = float(ts[-1]) if (rate and ts is not None) else st.t_last
-        mode = self.output_dynamics_
-        if mode.active:  # the mechanical mode between the hysteresis and the displacement
-            if removed_only:  # the growth alone, through the mode from rest at its start
-                out = mode.apply(out)[0]
-            else:
-                ms = st.output.reshape(2, 1)
-                if np.isnan(ms).any():  # not started yet: at rest at the first output
-                    ms[:] = mode.rest_state([out[0]])
-                out = mode.apply(out, ms)[0]
-        return Propagation(out, ModelState(z, st.terms, t_last, st.input, st.output))
-
-    def _check_region(self, x: FloatArray, core_output: FloatArray) -> None:
-        """Warn when a run leaves the (voltage, output) region the core was identified on."""
-        region = self.operator_.region
-        if region is None or x.size == 0:
-            return
-        d = region.distance(x, core_output)
-        tol = float(getattr(self, "region_tolerance", 0.05)) * region.span
-        outside = d > tol
-        if outside.any():
-            k = int(np.argmax(outside))
-            warnings.warn(
-                f"{int(outside.sum())} of {x.size} samples (first: sample {k}, "
-                f"{x[k]:.4g} {self.input_unit}) lie outside the (voltage, output) region the "
-                f"{type(self).__name__} was identified on, by up to {float(d.max()):.3g} "
-                f"{self.output_unit}: the model extrapolates there",
-                ExtrapolationWarning,
-                stacklevel=4,
-            )
+        return run_model(self, x, t, state, removed_only=removed_only)
 
     def __setattr__(self, name: str, value: Any) -> None:
         if name.endswith("_"):  # a fitted attribute changed: the fast path is rebuilt
             self.__dict__.pop("_fast", None)
         object.__setattr__(self, name, value)
 
-    def _fast_plan(self) -> tuple[Any, ...] | None:
+    def _fast_plan(self) -> Any:
         """What :meth:`predict` runs in one kernel call, or None (the general path).
 
         The core decides (play operators plus at most one integral or time
         term); never with input dynamics or an output mode.
         """
-        plan: tuple[Any, ...] | None = None
+        plan = None
         if not (self.input_dynamics_.active or self.output_dynamics_.active):
             plan = self.operator_.fast_plan(self.terms_, self.coefs_)
         self.__dict__["_fast"] = plan
@@ -1120,15 +556,9 @@ class HysteresisModel:
             except KeyError:
                 plan = self._fast_plan() if self.is_fitted else None
             if plan is not None and x.size:
-                r, w, z0, offset, kind, coef = plan
-                timed = t is not None
-                if (not timed and kind == K.FAST_NONE) or (
-                    type(t) is np.ndarray and t.dtype == np.float64 and t.shape == x.shape
-                ):
-                    out = np.empty(x.size)
-                    tt = t if timed else x
-                    if K.fast_predict(x, tt, timed, r, w, z0, offset, kind, coef, out) < 0:
-                        return out
+                out = plan(x, t)
+                if out is not None:
+                    return out  # type: ignore[no-any-return]
         return self.propagate(x, t, state).output
 
     def growth(
@@ -1229,39 +659,7 @@ class HysteresisModel:
             If a kept term is neither a static shape nor lags (nothing can invert it).
         """
         self._check_fitted()
-        static: StaticShape | None = None
-        lags: LagShape | None = None
-        relaxation: RelaxationShape | None = None
-        for term, coef in zip(self.terms_, self.coefs_, strict=True):
-            if term.removed:
-                continue
-            s, lag = term.static_shape(coef), term.lag_shape(coef)
-            slow = term.relaxation_shape(coef)
-            if s is not None and static is None:
-                static = s
-            elif lag is not None and lags is None:
-                lags = lag
-            elif slow is not None and relaxation is None:
-                relaxation = slow
-            else:
-                msg = (
-                    f"the {term.kind!r} term shapes the hysteresis but cannot be inverted: the "
-                    "compensator inverts play operators plus at most one static shape and one "
-                    "set of lags"
-                )
-                raise ParameterError(msg)
-        return InverseSpec(
-            self.operator_,
-            static,
-            lags,
-            self.input_range_,
-            self.input_unit,
-            self.output_unit,
-            self.input_dynamics_,
-            self.output_dynamics_,
-            float(getattr(self, "region_tolerance", 0.05)),
-            relaxation,
-        )
+        return InverseSpec.of(self)
 
     @property
     def hysteresis_(self) -> HysteresisModel:
@@ -1341,60 +739,12 @@ class HysteresisModel:
         HysteresisModel
             An instance of ``cls``.
         """
-        if len(terms) != len(coefficients):
-            msg = f"one coefficient array per term: got {len(terms)} terms, {len(coefficients)}."
-            raise ShapeError(msg)
-        coefs = tuple(np.array(c, dtype=np.float64).reshape(-1) for c in coefficients)
-        for term, c in zip(terms, coefs, strict=True):
-            if c.size != term.width:
-                msg = f"the {term.kind!r} term takes {term.width} coefficients. Got {c.size}."
-                raise ShapeError(msg)
+        coefs = coefficient_arrays(terms, coefficients)
         model = cls._bare(input_unit, output_unit, getattr(op, "n_operators", None))
         if "core" in model.get_params():
             model.core = type(op)
         model.set_fitted(op, tuple(terms), coefs)
         return model
-
-    @classmethod
-    def _bare(
-        cls, input_unit: str, output_unit: str, n_operators: int | None = None
-    ) -> HysteresisModel:
-        """An unfitted instance with default settings and these units (and operator count)."""
-        model = cls.__new__(cls)
-        for p in inspect.signature(cls.__init__).parameters.values():
-            if p.name != "self":
-                setattr(model, p.name, p.default)
-        model.input_unit = input_unit
-        model.output_unit = output_unit
-        if n_operators is not None and "n_operators" in model.get_params():
-            model.n_operators = n_operators
-        return model
-
-    def params_to_json(self) -> dict[str, Any]:
-        """The constructor arguments as plain JSON data (separate from :meth:`get_params`).
-
-        Returns
-        -------
-        dict
-        """
-        return {name: _to_json(value) for name, value in self.get_params().items()}
-
-    @classmethod
-    def params_from_json(cls, data: dict[str, Any]) -> dict[str, Any]:
-        """Constructor arguments from :meth:`params_to_json` data.
-
-        Parameters
-        ----------
-        data : dict
-
-        Returns
-        -------
-        dict
-        """
-        out = dict(data)
-        if "terms" in out:
-            out["terms"] = tuple(_term_from_json(v) for v in out["terms"])
-        return out
 
     def to_dict(self) -> dict[str, Any]:
         """The fitted model as plain JSON data, with schema version and checksum.
@@ -1431,33 +781,3 @@ class HysteresisModel:
 
 
 register(HysteresisModel)  # files of a model built on any core name this class
-
-
-def _same(a: object, b: object) -> bool:
-    try:
-        return bool(a == b) if not isinstance(a, np.ndarray) else False
-    except (ValueError, TypeError):
-        return False
-
-
-def _to_json(value: object) -> Any:
-    if isinstance(value, type) and issubclass(value, Core):
-        return value.kind
-    if isinstance(value, Term):
-        return {"kind": value.kind, "params": value.get_params()}
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, tuple | list):
-        return [_to_json(v) for v in value]
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
-
-
-def _term_from_json(value: object) -> str | Term:
-    if isinstance(value, dict):
-        return make_term(str(value.get("kind")), value.get("params") or {})
-    if isinstance(value, str):
-        return value
-    msg = f"a term must be a kind name or {{'kind', 'params'}}, got {value!r}"
-    raise ParameterError(msg)

@@ -32,15 +32,8 @@ from .cores.duhem import DuhemHysteresis
 from .cores.play import PIHysteresis
 from .cores.preisach import PreisachHysteresis
 from .errors import ParameterError
-from .identification import Summary, array_blocks
-from .metrics import rmse
-from .model import (
+from .estimator import (
     GROWTH_TERMS,
-    History,
-    HysteresisModel,
-    InitialState,
-    InverseSpec,
-    ModelState,
     Rule,
     _bool,
     _creep,
@@ -50,7 +43,12 @@ from .model import (
     _terms,
     _thresholds,
 )
+from .fitting import apply_fit
+from .identification import Summary, array_blocks
+from .metrics import rmse
+from .model import HysteresisModel, InverseSpec
 from .persistence import model_class, model_names
+from .state import History, InitialState, ModelState
 from .terms import Asymmetry, LagShape, Relaxation, StaticShape, Term, make_term
 
 __all__ = [
@@ -407,7 +405,7 @@ class GeneralizedPI(_PlayModel):
             job = FitJob(blocks, summary, terms, None, initial_state, {**params, "thresholds": thr},
                          type(self).__name__, self.input_unit, self.output_unit,
                          self.__dict__.get("_fitting_output"))  # fmt: skip
-            self._set_fit(PIHysteresis.identify(job))
+            apply_fit(self, PIHysteresis.identify(job))
             return rmse(self.predict(x, t=t_fit), y) / span
 
         before = objective(start)

@@ -53,10 +53,11 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ._lazy import LazyModule
 from ._validation import FloatArray
-from .errors import ParameterError
+from .errors import ParameterError, ShapeError
 
 if TYPE_CHECKING:
     from . import _diffkernels as D
@@ -77,6 +78,7 @@ __all__ = [
     "StaticShape",
     "Term",
     "TimeTerm",
+    "coefficient_arrays",
     "make_term",
     "term_class",
 ]
@@ -786,3 +788,33 @@ def make_term(spec: str | Term, params: Mapping[str, Any] | None = None) -> Term
     except TypeError as exc:
         msg = f"bad settings {settings!r} for the {spec!r} term: {exc}"
         raise ParameterError(msg) from None
+
+
+def coefficient_arrays(
+    terms: Sequence[Term], coefficients: Sequence[ArrayLike]
+) -> tuple[FloatArray, ...]:
+    """One float array per term, each of the term's width (checked).
+
+    Parameters
+    ----------
+    terms : sequence of Term
+    coefficients : sequence of array_like
+
+    Returns
+    -------
+    tuple of ndarray
+
+    Raises
+    ------
+    ShapeError
+        A count or a width does not match.
+    """
+    if len(terms) != len(coefficients):
+        msg = f"one coefficient array per term: got {len(terms)} terms, {len(coefficients)}."
+        raise ShapeError(msg)
+    coefs = tuple(np.array(c, dtype=np.float64).reshape(-1) for c in coefficients)
+    for term, c in zip(terms, coefs, strict=True):
+        if c.size != term.width:
+            msg = f"the {term.kind!r} term takes {term.width} coefficients. Got {c.size}."
+            raise ShapeError(msg)
+    return coefs

@@ -512,7 +512,9 @@ class Core:
         """
         return {"region_": self.region}
 
-    def fast_plan(self, terms: tuple[Any, ...], coefs: tuple[FloatArray, ...]) -> Any:
+    def fast_plan(
+        self, terms: tuple[Any, ...], coefs: tuple[FloatArray, ...]
+    ) -> Callable[[FloatArray, Any], FloatArray | None] | None:
         """A one-call compiled prediction of the core with these terms, or None.
 
         Parameters
@@ -522,7 +524,9 @@ class Core:
 
         Returns
         -------
-        tuple or None
+        callable or None
+            ``plan(x, t)``: the output from the initial state (None: take the
+            general path for these arguments).
         """
         return None
 

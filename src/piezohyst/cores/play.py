@@ -12,7 +12,7 @@ kernels in :mod:`piezohyst._kernels`.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -395,7 +395,9 @@ class PIHysteresis(Core):
         """
         return {"thresholds_": self.thresholds, "weights_": self.weights, "offset_": self.offset}
 
-    def fast_plan(self, terms: tuple[Any, ...], coefs: tuple[FloatArray, ...]) -> Any:
+    def fast_plan(
+        self, terms: tuple[Any, ...], coefs: tuple[FloatArray, ...]
+    ) -> Callable[[FloatArray, Any], FloatArray | None] | None:
         """One compiled call for play operators plus at most one integral or time term.
 
         Parameters
@@ -405,16 +407,31 @@ class PIHysteresis(Core):
 
         Returns
         -------
-        tuple or None
+        callable or None
+            ``plan(x, t)``: the output from the initial state, or None when
+            the arguments need the general path (``t`` not a float64 array).
         """
         if not terms:
-            plan = (_kernels.FAST_NONE, 0.0)
+            kind, coef = _kernels.FAST_NONE, 0.0
         elif len(terms) == 1 and type(terms[0]) in (Integral, TimeTerm):
             kind = _kernels.FAST_INTEGRAL if terms[0].kind == "integral" else _kernels.FAST_TIME
-            plan = (kind, float(coefs[0][0]))
+            coef = float(coefs[0][0])
         else:
             return None
-        return (self.thresholds, self.weights, self.initial_state, float(self.offset), *plan)
+        r, w, z0, offset = self.thresholds, self.weights, self.initial_state, float(self.offset)
+
+        def plan(x: FloatArray, t: Any) -> FloatArray | None:
+            timed = t is not None
+            if (not timed and kind == _kernels.FAST_NONE) or (
+                type(t) is np.ndarray and t.dtype == np.float64 and t.shape == x.shape
+            ):
+                out = np.empty(x.size)
+                if _kernels.fast_predict(x, t if timed else x, timed, r, w, z0, offset, kind,
+                                         coef, out) < 0:  # fmt: skip
+                    return out
+            return None
+
+        return plan
 
     def inverse_plan(self) -> InversePlan:
         """Eq. 18 through the play kernels (Newton beside kept terms).
