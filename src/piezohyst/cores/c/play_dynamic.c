@@ -1,0 +1,63 @@
+/* The play compensator step with the input lags inverted: _kernels.dynamic_step in C. */
+
+static real_t advance(PREFIX_t *s, real_t x)
+{
+    s->w = GAIN_A > 0 ? s->w + GAIN_A * (x - s->w) : x;
+    s->u = GAIN_B > 0 ? s->u + GAIN_B * (s->w - s->u) : s->w;
+    return s->u;
+}
+
+static real_t abs_real(real_t x)
+{
+    return x < 0 ? -x : x;
+}
+
+STEP_SIGNATURE(PREFIX_t *s, real_t desired)
+{
+    real_t q, target, w_target, x, u;
+    int i;
+    if (non_finite(desired)) { /* hold: the piezo keeps settling on the last command */
+        s->nonfinite++;
+        u = advance(s, s->last);
+        for (i = 0; i < N; ++i) {
+            s->z[i] = clamp(s->z[i], u - R[i], u + R[i]);
+        }
+        inverse_states(s);
+        return s->last;
+    }
+    q = clamp(REFERENCE + desired * SCALE, OFFSET - BOUND, OFFSET + BOUND);
+    target = INV_OFFSET;
+    for (i = 0; i < N; ++i) {
+        s->zeta[i] = clamp(s->zeta[i], q - RI[i], q + RI[i]);
+        target += WI[i] * s->zeta[i];
+    }
+    w_target = GAIN_B > 0 ? s->u + (target - s->u) / GAIN_B : target;
+    x = GAIN_A > 0 ? s->w + (w_target - s->w) / GAIN_A : w_target;
+    if (non_finite(x)) {
+        s->nonfinite++;
+        inverse_states(s);
+        return s->last;
+    }
+    if (x < V_MIN || x > V_MAX) {
+        if (x < V_MIN - SAT_TOL || x > V_MAX + SAT_TOL) {
+            s->saturated++;
+        }
+        x = clamp(x, V_MIN, V_MAX);
+    }
+#if HAS_SLEW
+    if (x > s->last + MAX_STEP) {
+        x = s->last + MAX_STEP;
+    } else if (x < s->last - MAX_STEP) {
+        x = s->last - MAX_STEP;
+    }
+#endif
+    u = advance(s, x);
+    for (i = 0; i < N; ++i) {
+        s->z[i] = clamp(s->z[i], u - R[i], u + R[i]);
+    }
+    if (abs_real(u - target) > 1e-12 * (V_MAX - V_MIN)) {
+        inverse_states(s);
+    }
+    s->last = x;
+    return x;
+}

@@ -1,0 +1,84 @@
+"""The exported C is C: shipped files, compiled on their own, every configuration."""
+
+from __future__ import annotations
+
+import ast
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import piezohyst as ph
+from piezohyst.export import export_c
+from piezohyst.simulation import make_signal
+
+SRC = Path(ph.__file__).parent
+C_DIR = SRC / "cores" / "c"
+COMPILERS = [c for c in (shutil.which("gcc"), shutil.which("clang")) if c]
+FLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-c"]
+#: a C function definition or a C for loop inside a Python string: C source that should
+#: live in a .c file (the generated preamble holds declarations and data only)
+C_IN_STRING = re.compile(
+    r"\b(static|void|real_t|int|double|float|unsigned)\s+\**\w+\s*\([^)]*\)\s*\{"
+    r"|\bfor\s*\([^;)]*;[^;)]*;"
+)
+
+
+def test_no_python_module_holds_c_source() -> None:
+    found = []
+    for path in sorted(SRC.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Constant) and isinstance(node.value, str):
+                if C_IN_STRING.search(node.value):
+                    found.append(f"{path.relative_to(SRC)}:{node.lineno}")
+    assert not found, found
+
+
+def test_the_c_files_ship_with_the_package() -> None:
+    names = {p.name for p in C_DIR.iterdir()}
+    assert {"play.c", "play.h", "packed.c", "packed.h", "ieee.c", "mode.c", "duhem.c",
+            "preisach.c", "preisach_grid.c", "boucwen.c"} <= names  # fmt: skip
+    text = (SRC.parent.parent / "pyproject.toml").read_text()
+    assert '"cores/c/*.c", "cores/c/*.h"' in text
+
+
+def _record() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    t, v = make_signal("decaying", duration=6.0, rate=1000.0)
+    rec = ph.simulate(v, t)
+    return rec.voltage, rec.charge, rec.t
+
+
+def _configurations() -> dict[str, object]:
+    v, q, t = _record()
+    lo, hi = float(v.min()), float(v.max())
+    active = ph.ActivePI(6).fit(v, q, t=t)
+    pre = ph.PreisachModel(nodes=8, creep=(0.05,), relaxation=0.2, relaxation_nodes=5)
+    cfg: dict[str, object] = {
+        "play": ph.Compensator(active, v_min=lo, v_max=hi),
+        "play-slew": ph.Compensator(active, v_min=lo, v_max=hi, slew_rate=1e4, sample_rate=1e3),
+        "play-controller": ph.SelfSensingController(active, v_min=lo, v_max=hi, sample_rate=1e3),
+        "duhem": ph.Compensator(ph.DuhemModel(grid=(4, 3)).fit(v, q, t=t), v_min=lo, v_max=hi),
+        "bouc-wen": ph.Compensator(ph.BoucWenModel().fit(v, q, t=t), v_min=lo, v_max=hi),
+        "preisach-relaxing-creep": ph.Compensator(
+            pre.fit(v, q, t=t), v_min=lo, v_max=hi, sample_rate=1e3
+        ),
+    }
+    return cfg
+
+
+@pytest.mark.skipif(not COMPILERS, reason="no C compiler on this machine")
+@pytest.mark.parametrize("precision", ["double", "float"])
+def test_every_configuration_compiles_warning_free(tmp_path: Path, precision: str) -> None:
+    """Each exported configuration, with gcc (and clang where present), -Werror."""
+    for name, comp in _configurations().items():
+        code = export_c(comp, precision=precision, prefix="ph_x")  # type: ignore[arg-type]
+        (tmp_path / "ph_x.h").write_text(code.header)
+        source = tmp_path / "ph_x.c"
+        source.write_text(code.source)
+        for cc in COMPILERS:
+            run = subprocess.run([cc, *FLAGS, str(source), "-o", str(tmp_path / "ph_x.o")],
+                                 capture_output=True, text=True, check=False)  # fmt: skip
+            assert run.returncode == 0, f"{name} {precision} {cc}: {run.stderr}"
