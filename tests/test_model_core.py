@@ -353,10 +353,13 @@ LAYERS = {
     "cores": 0,  # the package itself: a docstring
     "_kernels": 1,
     "_diffkernels": 1,
+    "_signalkernels": 1,
     "metrics": 1,
     "_isolate": 1,
     "_parsers": 1,
     "io": 1,
+    "_formats": 1,
+    "_writers": 1,
     "units": 1,
     "dynamics": 1,
     "cores.base": 2,

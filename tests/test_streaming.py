@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import piezohyst as ph
+import piezohyst._formats as formats
 import piezohyst.io as pio
 import piezohyst.workflows as wf
 from piezohyst.cores.play import history_state
@@ -30,7 +31,8 @@ def record() -> ph.simulation.BenchRecord:
 @pytest.fixture
 def small_batches(monkeypatch: pytest.MonkeyPatch) -> None:
     """pyarrow parses 16 kB at a time: a few hundred rows per batch, many batches per file."""
-    monkeypatch.setattr(pio, "CSV_BLOCK_BYTES", 1 << 14)
+    monkeypatch.setattr(formats, "CSV_BLOCK_BYTES", 1 << 14)
+    monkeypatch.setattr(formats, "BATCH_ROWS", 700)
     monkeypatch.setattr(pio, "BATCH_ROWS", 700)
     monkeypatch.setattr(wf, "KEEP_ROWS", 1000)  # fits stream every pass, as for a huge file
 

@@ -25,8 +25,10 @@ from .errors import ParameterError
 
 if TYPE_CHECKING:
     from . import _kernels
+    from . import _signalkernels as _signals
 else:  # numba loads when a model first runs (see _lazy)
     _kernels = LazyModule("piezohyst._kernels", globals(), "_kernels")
+    _signals = LazyModule("piezohyst._signalkernels", globals(), "_signals")
 
 __all__ = ["KINDS", "InputDynamics", "OutputDynamics"]
 
@@ -139,7 +141,7 @@ class InputDynamics:
         if st.size != 3 + whole + 2:
             msg = f"the input dynamics state must hold {3 + whole + 2} values. Got {st.size}."
             raise ParameterError(msg)
-        _kernels.input_filter(
+        _signals.input_filter(
             xs, ds, whole, frac, float(self.tau), float(self.sample_interval), st, out
         )
         return out, st
@@ -269,7 +271,7 @@ class OutputDynamics:
         """
         ad, bd = self._cached()
         out = np.empty_like(u)
-        _kernels.mode_filter(np.ascontiguousarray(u), ad, bd, state, out)
+        _signals.mode_filter(np.ascontiguousarray(u), ad, bd, state, out)
         return out
 
     def apply(self, y: Any, state: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:

@@ -49,9 +49,11 @@ from .terms import Term
 
 if TYPE_CHECKING:
     from . import _kernels
+    from . import _signalkernels as _signals
     from .cores.play import PlayCore
 else:  # numba loads when a model first runs (see _lazy)
     _kernels = LazyModule("piezohyst._kernels", globals(), "_kernels")
+    _signals = LazyModule("piezohyst._signalkernels", globals(), "_signals")
 
 __all__ = [
     "BLOCK",
@@ -420,7 +422,7 @@ def _accumulate(
             m = stop - k
             xs = x_blk[k:stop]
             if reversal_band is not None:
-                turns[seg] += int(_kernels.reversals(xs, reversal_band, turn_state))
+                turns[seg] += int(_signals.reversals(xs, reversal_band, turn_state))
             ts = None if t_blk is None else t_blk[k:stop]
             dt = None
             if terms and ts is not None:

@@ -41,8 +41,10 @@ from .errors import InsufficientDataError, ModelFileError, ParameterError
 
 if TYPE_CHECKING:
     from . import _kernels
+    from . import _signalkernels as _signals
 else:  # numba loads when a model first runs (see _lazy)
     _kernels = LazyModule("piezohyst._kernels", globals(), "_kernels")
+    _signals = LazyModule("piezohyst._signalkernels", globals(), "_signals")
 
 __all__ = ["LEAKAGE_TERMS", "Hold", "Leakage", "calibrate_leakage", "find_holds"]
 
@@ -378,7 +380,7 @@ def find_holds(
         msg = f"'settle' must be a fraction in [0, 1). Got {settle!r}."
         raise ParameterError(msg)
     edges = np.empty(x.size + 1, dtype=np.int64)
-    count = _kernels.constant_runs(x, tol, edges)
+    count = _signals.constant_runs(x, tol, edges)
     holds = []
     for k, j in itertools.pairwise(edges[: count + 1]):
         if j - k >= 3:

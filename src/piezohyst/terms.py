@@ -62,9 +62,11 @@ from .errors import ParameterError, ShapeError
 if TYPE_CHECKING:
     from . import _diffkernels as D
     from . import _kernels
+    from . import _signalkernels as _signals
 else:  # numba loads when a model first runs (see _lazy)
     D = LazyModule("piezohyst._diffkernels", globals(), "D")
     _kernels = LazyModule("piezohyst._kernels", globals(), "_kernels")
+    _signals = LazyModule("piezohyst._signalkernels", globals(), "_signals")
 
 __all__ = [
     "AbsIntegral",
@@ -346,7 +348,7 @@ class RunningIntegral(Term):
     ) -> FloatArray:
         """See :meth:`Term.columns`: the running integral."""
         out = np.empty((x.size, 1))
-        state[0] = _kernels.running_integral(
+        state[0] = _signals.running_integral(
             self.integrand(x), _needs_time(self, dt), state[0], out[:, 0]
         )
         return out
@@ -586,7 +588,7 @@ class Creep(Term):
     ) -> FloatArray:
         """See :meth:`Term.columns`: the lag outputs (input units)."""
         out = np.empty((x.size, self.width))
-        _kernels.lag_filter(x, _needs_time(self, dt), np.asarray(self.taus), state, out)
+        _signals.lag_filter(x, _needs_time(self, dt), np.asarray(self.taus), state, out)
         return out
 
     def lag_shape(self, coefficients: FloatArray) -> LagShape:
@@ -713,7 +715,7 @@ class Relaxation(Term):
         n = self.nodes
         lagged = np.empty((x.size, 1))
         lag = state[0:1].copy()  # the slow core's voltage is the lag's state
-        _kernels.lag_filter(x, _needs_time(self, dt), np.array([self.tau]), lag, lagged)
+        _signals.lag_filter(x, _needs_time(self, dt), np.array([self.tau]), lag, lagged)
         packed = np.concatenate([head, np.zeros(n * n)])
         core = state[: D.RV_SIZE]  # views: updated in place
         acc = state[D.RV_SIZE :]

@@ -1,0 +1,320 @@
+"""Writing results: atomically (a temporary file renamed into place, the umask's
+permissions), CSV and NPZ tables, streamed blocks, and the marker that says piezohyst
+wrote a file. The public entry points are re-exported by :mod:`piezohyst.io`.
+"""
+
+from __future__ import annotations
+
+import csv
+import io as _io
+import itertools
+import math
+import os
+import tempfile
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._formats import MARKER, MD_MARKER, Table
+from ._validation import FloatArray
+from ._version import __version__
+from .errors import DataFileError
+
+
+# ------------------------------------------------------------------ writers
+def _umask() -> int:
+    """The process umask (read without changing it where the OS tells it)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)  # elsewhere: read it by setting it, and put it back at once
+    os.umask(mask)
+    return mask
+
+
+def atomic_write(path: str | os.PathLike[str], write: Callable[[Path], None]) -> Path:
+    """Write a file through ``write(tmp)`` on a temporary beside it, then rename it into place.
+
+    A failure leaves no partial file. The file gets the permissions any new
+    file would get (0666 less the umask), not the temporary file's 0600, so
+    colleagues on a shared drive can read it.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The destination.
+    write : callable
+        Writes the content to the temporary path it is given.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=p.suffix, dir=p.parent)
+    os.close(fd)
+    try:
+        write(Path(tmp))
+        os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, p)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return p
+
+
+def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
+    """Write ``text`` (UTF-8) atomically; see :func:`atomic_write`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    text : str
+
+    Returns
+    -------
+    Path
+    """
+
+    def write(tmp: Path) -> None:
+        tmp.write_text(text, encoding="utf-8")
+
+    return atomic_write(path, write)
+
+
+def write_rows(
+    path: str | os.PathLike[str],
+    rows: Sequence[Mapping[str, object]],
+    columns: Sequence[str],
+    text_columns: Iterable[str],
+) -> Path:
+    """Write records (one dict per row) as CSV (marked as piezohyst's) or Parquet.
+
+    Numeric columns are written at full precision (a missing value as NaN);
+    text columns as given (a missing value as "").
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.parquet``, or a text file (CSV).
+    rows : sequence of mapping
+        Column name to value, per row.
+    columns : sequence of str
+        The columns, in order.
+    text_columns : iterable of str
+        Those of ``columns`` that hold text; the others are numbers.
+
+    Returns
+    -------
+    Path
+    """
+    text = set(text_columns)
+
+    def cell(row: Mapping[str, object], c: str) -> object:
+        value = row.get(c, "" if c in text else math.nan)
+        return str(value) if c in text else float(value)  # type: ignore[arg-type]
+
+    p = Path(path)
+    if p.suffix.lower() == ".parquet":
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        data = {c: [cell(r, c) for r in rows] for c in columns}
+        table = pa.table(data).replace_schema_metadata({"written_by": f"piezohyst {__version__}"})
+
+        def write(tmp: Path) -> None:
+            pq.write_table(table, tmp)
+
+        return atomic_write(p, write)
+    buf = _io.StringIO()
+    buf.write(f"{MARKER} {__version__}\n")
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(columns)
+    for r in rows:
+        w.writerow([repr(v) if isinstance(v, float) else v for v in (cell(r, c) for c in columns)])
+    return atomic_write_text(p, buf.getvalue())
+
+
+def write_table(
+    path: str | os.PathLike[str],
+    columns: Mapping[str, ArrayLike],
+    units: Mapping[str, str | None] | None = None,
+) -> Path:
+    """Write equal-length columns as CSV (header row, full precision), Parquet or ``.npz``.
+
+    The file appears only when complete (temporary file, then rename).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.npz``, ``.parquet``, or a text file (CSV).
+    columns : mapping
+        Column name to values, all of one length.
+    units : mapping, optional
+        Column name to unit: a CSV header then reads ``name [unit]``, which
+        :func:`read_table` reads back.
+
+    Returns
+    -------
+    Path
+    """
+    write_blocks(path, [columns], units)
+    return Path(path)
+
+
+def write_blocks(
+    path: str | os.PathLike[str],
+    blocks: Iterable[Mapping[str, ArrayLike]],
+    units: Mapping[str, str | None] | None = None,
+) -> int:
+    """Write columns that arrive block by block; CSV and Parquet never hold more than one block.
+
+    The column names are those of the first block. The file appears only when
+    complete: an exception raised while the blocks are made (a bad row found
+    halfway) leaves no file. ``.npz`` cannot be appended to, so its blocks are
+    gathered in memory first.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.npz``, ``.parquet``, or a text file (CSV).
+    blocks : iterable of mapping
+        Column name to values; within a block all of one length.
+    units : mapping, optional
+        Column name to unit (see :func:`write_table`).
+
+    Returns
+    -------
+    int
+        Rows written.
+    """
+    p = Path(path)
+    suffix = p.suffix.lower()
+    named = units or {}
+    rows = [0]
+
+    def arrays_of(block: Mapping[str, ArrayLike], names: list[str]) -> list[FloatArray]:
+        if list(block) != names:
+            msg = f"a block to write has columns {list(block)}, the first had {names}"
+            raise DataFileError(msg)
+        arrays = [np.asarray(v, dtype=np.float64).reshape(-1) for v in block.values()]
+        sizes = {a.size for a in arrays}
+        if len(sizes) > 1:
+            msg = f"columns to write have different lengths: {sorted(sizes)}"
+            raise DataFileError(msg)
+        rows[0] += arrays[0].size if arrays else 0
+        return arrays
+
+    it = iter(blocks)
+    first = next(it, None)
+    names = [] if first is None else list(first)
+    labels = [f"{k} [{named[k]}]" if named.get(k) else k for k in names]
+    chain = itertools.chain([] if first is None else [first], it)
+
+    def write_npz(tmp: Path) -> None:
+        parts = [arrays_of(b, names) for b in chain]
+        arrays = {
+            k: np.concatenate([part[j] for part in parts]) if parts else np.empty(0)
+            for j, k in enumerate(names)
+        }
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays, __piezohyst__=np.array(__version__))  # type: ignore[arg-type]
+
+    def write_parquet(tmp: Path) -> None:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        schema = pa.schema([(label, pa.float64()) for label in labels])
+        schema = schema.with_metadata({"written_by": f"piezohyst {__version__}"})
+        with pq.ParquetWriter(tmp, schema) as writer:
+            for block in chain:
+                columns = arrays_of(block, names)
+                writer.write_table(pa.Table.from_arrays(columns, schema=schema))
+
+    def write_csv(tmp: Path) -> None:
+        import pyarrow as pa
+        import pyarrow.csv as pacsv
+
+        with open(tmp, "wb") as fh:
+            fh.write(f"{MARKER} {__version__}\n{io_csv_line(labels)}".encode())
+            schema = pa.schema([(f"c{i}", pa.float64()) for i in range(len(names))])
+            options = pacsv.WriteOptions(include_header=False, batch_size=1 << 16)
+            with pacsv.CSVWriter(fh, schema, write_options=options) as writer:
+                for block in chain:
+                    columns = arrays_of(block, names)
+                    # shortest round-trip decimal text, written in batches by pyarrow
+                    writer.write_table(pa.Table.from_arrays(columns, schema=schema))
+
+    writers = {".npz": write_npz, ".parquet": write_parquet}
+    atomic_write(p, writers.get(suffix, write_csv))
+    return rows[0]
+
+
+def iter_columns(table: Table) -> Iterator[tuple[str, FloatArray]]:
+    """Every column that converts to finite numbers (others are skipped)."""
+    for name in table.columns:
+        try:
+            yield name, table.get(name)
+        except DataFileError:
+            continue
+
+
+def io_csv_line(cells: Sequence[str]) -> str:
+    """One CSV line (quoted where needed), newline included."""
+    buf = _io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerow(cells)
+    return buf.getvalue()
+
+
+def is_piezohyst_output(path: str | os.PathLike[str]) -> bool:
+    """True for a file (or report folder) piezohyst wrote, which it may overwrite.
+
+    Recognised: CSV whose first line is :data:`MARKER`, Markdown whose first
+    line is :data:`MD_MARKER`, ``.npz`` with a
+    ``__piezohyst__`` entry, Parquet with ``written_by`` metadata, model JSON
+    (``"format": "piezohyst-model"``), C sources generated by piezohyst, and
+    report folders holding a
+    ``metrics.json`` that names a piezohyst version.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    bool
+        False for anything else, unreadable files included.
+    """
+    p = Path(path)
+    try:
+        if p.is_dir():
+            metrics = p / "metrics.json"
+            return metrics.is_file() and '"piezohyst_version"' in metrics.read_text("utf-8")
+        suffix = p.suffix.lower()
+        if suffix == ".npz":
+            with np.load(p, allow_pickle=False) as data:
+                return "__piezohyst__" in data.files
+        if suffix == ".parquet":
+            import pyarrow.parquet as pq
+
+            meta = pq.read_schema(p).metadata or {}
+            return bool(meta.get(b"written_by", b"").startswith(b"piezohyst"))
+        with open(p, "rb") as fh:
+            head = fh.read(4096).decode("utf-8", errors="replace")
+        if suffix == ".json":
+            return '"format": "piezohyst-model"' in head or '"format": "piezohyst-bank"' in head
+        if suffix in (".c", ".h"):
+            return "generated by piezohyst" in head.splitlines()[0] if head else False
+        if suffix == ".md":
+            return head.startswith(MD_MARKER)
+        return head.startswith(MARKER)
+    except (OSError, ValueError):
+        return False
