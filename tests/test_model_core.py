@@ -388,6 +388,8 @@ LAYERS = {
     "plotting": 11,
     "report": 11,
     "simulation": 11,
+    "_workflow_base": 12,
+    "control_files": 12,
     "workflows": 12,
     "fleet": 12,
     "demo": 12,

@@ -1,0 +1,595 @@
+"""File workflows around a fitted model: compensate, export C, calibrate leakage, run the
+closed loop on the bench, report. Each is one call of a CLI command (see
+:mod:`piezohyst.workflows`, which re-exports them).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import json
+import math
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ._validation import FloatArray, check_float, check_int
+from ._workflow_base import (
+    _DEFAULT_SETTINGS,
+    PathLike,
+    Progress,
+    _check_measured_unit,
+    _default_unit,
+    _load,
+    guard_outputs,
+)
+from .compensator import Compensator, CompensatorSettings
+from .errors import DataFileError, ParameterError
+from .export import Precision, c_paths, write_c
+from .io import (
+    DataSpec,
+    Table,
+    check_finite,
+    check_increasing,
+    open_table,
+    read_table,
+    write_blocks,
+    write_table,
+)
+from .leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
+from .metrics import hysteresis_width, nrmse, rmse
+from .model import HysteresisModel
+from .selfsensing import LoopSettings
+from .simulation import DEFAULT_PRESET, PRESETS, Bench, BenchRecord, run_loop
+from .units import to_standard
+
+__all__ = [
+    "Compensation",
+    "LoopRun",
+    "ReportResult",
+    "calibrate_leakage_file",
+    "compensate_file",
+    "export_c_file",
+    "model_report",
+    "simulate_loop_file",
+]
+
+
+@dataclass(frozen=True)
+class Compensation:
+    """What :func:`compensate_file` did.
+
+    Attributes
+    ----------
+    compensator : Compensator
+        After the run: limits used, counters of saturated and non-finite samples.
+    preamble : int
+        Samples of ramp-in and preconditioning written before the trajectory.
+    sample_rate : float
+        Samples per second of the written commands (Hz).
+    """
+
+    compensator: Compensator
+    preamble: int
+    sample_rate: float
+
+
+def compensate_file(
+    model_path: PathLike,
+    target: PathLike,
+    out: PathLike,
+    *,
+    column: str | None = None,
+    settings: CompensatorSettings = _DEFAULT_SETTINGS,
+    precondition: bool = True,
+    present_voltage: float | None = None,
+    force: bool = False,
+    progress: Progress = None,
+) -> Compensation:
+    """Feedforward voltage for a desired trajectory; writes ``time,command,desired``.
+
+    Safe by default, as a lab running an amplifier needs:
+
+    * commands stay inside the limits, which default to the voltages the model
+      was identified on; limits beyond them are refused unless
+      ``settings.allow_extrapolation``;
+    * the slew limit defaults to the fastest change of the training record
+      (``model.max_slew_rate_``);
+    * the file starts with a ramp from the actuator's present voltage
+      (default: where the training record started) and a full-range
+      precondition cycle that wipes out the unknown history (rows with an
+      empty ``desired``); ``precondition=False`` keeps only the ramp;
+    * NaN or infinite desired values hold the last command and are counted;
+    * a trajectory that saturates most samples (out of reach: units, or the
+      sign of the gain) is an error, and nothing is written.
+
+    Parameters
+    ----------
+    model_path : str or os.PathLike
+        A saved model.
+    target : str or os.PathLike
+        The desired trajectory with its ``time`` column (s), or give
+        ``settings.sample_rate``.
+    out : str or os.PathLike
+        Where to write the commands.
+    column : str, optional
+        The desired column (default ``desired``, or the only one besides ``time``).
+    settings : CompensatorSettings
+        Limits, domain, gain, slew rate, sample rate, extrapolation.
+    precondition : bool, default True
+        Write the precondition cycle before the trajectory.
+    present_voltage : float, optional
+        The actuator's voltage now (V).
+    force : bool, default False
+        Replace an existing ``out`` that piezohyst did not write.
+    progress : callable, optional
+        Called with the rows of the target read so far.
+
+    Returns
+    -------
+    Compensation
+    """
+    guard_outputs([out], [model_path, target], force=force)
+    model = _load(model_path)
+    table = open_table(target)
+    name = _desired_column(table, column, target)
+    expected = "m" if settings.domain == "displacement" else model.output_unit
+    where = f"{target}: column {name!r}"
+    unit = to_standard(np.empty(0), table.unit(name), "output", where)[1]
+    if unit is not None and unit != expected:
+        msg = f"{target}: the desired column is in {unit!r}, the compensator expects {expected!r}"
+        raise DataFileError(msg)
+    timed = "time" in table
+    if not timed and settings.sample_rate is None:
+        msg = (
+            f"{target}: no time column; the commands need their sample times: add a 'time' "
+            "column (s) or give the sample rate"
+        )
+        raise DataFileError(msg)
+    keys = [name, "time"] if timed else [name]
+    batches = table.batches(keys)
+    head = next(batches)  # the sample rate comes from the first batch
+    t_unit = table.unit("time") if timed else None
+    fs = settings.sample_rate
+    if fs is None:
+        steps = np.diff(to_standard(head["time"], t_unit, "time", f"{target}: column 'time'")[0])
+        fs = 1.0 / float(np.median(steps)) if steps.size and np.all(steps > 0) else 1.0
+    slew = settings.slew_rate
+    if slew is None and math.isfinite(model.max_slew_rate_) and model.max_slew_rate_ > 0:
+        slew = model.max_slew_rate_
+    comp = dataclasses.replace(settings, slew_rate=slew, sample_rate=fs).build(model)
+    start = present_voltage
+    if start is None:
+        start = float(np.clip(model.initial_state_[0], comp.v_min, comp.v_max))
+    comp.reset(voltage=start)
+    preamble = comp.precondition(max(3, round(fs))) if precondition else np.empty(0)
+    finite = 0
+
+    def rows() -> Iterator[dict[str, FloatArray]]:
+        nonlocal finite
+        row = 0
+        t_last: float | None = None
+        for batch in itertools.chain([head], batches):
+            desired = to_standard(batch[name], table.unit(name), "output", where)[0]
+            if timed:
+                check_finite(batch["time"], row, f"{target}", "time")
+                check_increasing(batch["time"], t_last, row, f"{target}", "time")
+                t_last = float(batch["time"][-1])
+                t = to_standard(batch["time"], t_unit, "time", f"{target}: column 'time'")[0]
+            else:
+                t = (row + np.arange(desired.size, dtype=np.float64)) / fs
+            if row == 0 and preamble.size:
+                n = preamble.size
+                yield {
+                    "time": t[0] - np.arange(n, 0, -1) / fs,
+                    "command": preamble,
+                    "desired": np.full(n, np.nan),
+                }
+            finite += int(np.count_nonzero(np.isfinite(desired)))
+            yield {"time": t, "command": comp.process(desired), "desired": desired}
+            row += desired.size
+            if progress is not None:
+                progress(row)
+        if finite and comp.saturated_count > 0.5 * finite:  # before the file is renamed into place
+            lo, hi = _reachable(model, comp, settings)
+            unit = "m" if settings.domain == "displacement" else model.output_unit
+            msg = (
+                f"{target}: {comp.saturated_count} of {finite} desired values "
+                f"({100 * comp.saturated_count / finite:.0f} %) are out of reach of "
+                f"[{comp.v_min:g}, {comp.v_max:g}] V, which reaches about [{lo:.4g}, {hi:.4g}] "
+                f"{unit}; check the units and the sign of the gain"
+            )
+            raise ParameterError(msg)
+
+    write_blocks(out, rows(), units={"time": "s", "command": "V", "desired": expected})
+    return Compensation(comp, preamble.size, fs)
+
+
+def _desired_column(table: Table, column: str | None, target: PathLike) -> str:
+    """The desired trajectory's column: as named, else ``desired``, else the only one but time."""
+    if column is None:
+        others = [c for c in table.columns if c != "time"]
+        column = "desired" if "desired" in table else (others[0] if len(others) == 1 else None)
+        if column is None:
+            msg = (
+                f"{target}: which column is the desired trajectory? Name it 'desired' or name "
+                f"the column (columns: {', '.join(map(repr, table.columns))})"
+            )
+            raise DataFileError(msg)
+    return table.resolve(column)
+
+
+def _reachable(
+    model: HysteresisModel, comp: Compensator, settings: CompensatorSettings
+) -> tuple[float, float]:
+    """Roughly the desired values the limits reach: the outputs at v_min and v_max from rest."""
+    h = model.hysteresis_
+    x0 = float(model.initial_state_[0])
+    rest, low, high = h.predict(np.array([x0, comp.v_min, comp.v_max]))
+    values = np.array([low, high])
+    if settings.domain == "displacement" and settings.gain is not None:
+        values = settings.gain * (values - rest)
+    return float(values.min()), float(values.max())
+
+
+def export_c_file(
+    model_path: PathLike,
+    out: PathLike,
+    *,
+    settings: CompensatorSettings = _DEFAULT_SETTINGS,
+    precision: Precision = "double",
+    controller: LoopSettings | None = None,
+    force: bool = False,
+) -> tuple[Path, Path]:
+    """Write ``NAME.c`` and ``NAME.h`` for the model's compensator (see :mod:`piezohyst.export`).
+
+    Parameters
+    ----------
+    model_path : str or os.PathLike
+        A saved model.
+    out : str or os.PathLike
+        The ``.c`` file.
+    settings : CompensatorSettings
+        Limits, domain, gain, slew rate (and the sample rate a controller needs).
+    precision : {"double", "float"}
+        The C type of every real.
+    controller : LoopSettings, optional
+        Export the self-sensing controller instead of the feedforward compensator.
+    force : bool, default False
+        Replace existing files piezohyst did not write.
+
+    Returns
+    -------
+    tuple of Path
+    """
+    c_path, h_path, _ = c_paths(out)
+    inputs: list[PathLike] = [model_path]
+    if controller is not None and controller.leakage is not None:
+        inputs.append(controller.leakage)
+    guard_outputs([c_path, h_path], inputs, force=force)
+    model = _load(model_path)
+    built = settings.build(model) if controller is None else controller.build(settings, model)
+    return write_c(built, out, precision=precision)
+
+
+def calibrate_leakage_file(
+    data: PathLike,
+    out: PathLike | None = None,
+    *,
+    data_spec: DataSpec | None = None,
+    terms: Sequence[str] = LEAKAGE_TERMS,
+    min_duration: float = 1.0,
+    settle: float = 0.25,
+    force: bool = False,
+) -> Leakage:
+    """Calibrate the leakage from the holds of a record and save it (JSON) to ``out``.
+
+    Parameters
+    ----------
+    data : str or os.PathLike
+        A record with constant-voltage holds (voltage, charge, time).
+    out : str or os.PathLike, optional
+        Where to save the leakage.
+    data_spec : DataSpec, optional
+        Columns, units and window.
+    terms : sequence of str
+        Leakage terms to fit (see :func:`~piezohyst.leakage.calibrate_leakage`).
+    min_duration, settle
+        Hold detection (see :func:`~piezohyst.leakage.find_holds`).
+    force : bool
+        Replace an existing ``out`` that piezohyst did not write.
+
+    Returns
+    -------
+    Leakage
+    """
+    if out is not None:
+        guard_outputs([out], [data], force=force)
+    rec = (data_spec or DataSpec()).read(data)
+    assert rec.y is not None
+    w = rec.window
+    x_unit, y_unit = rec.units
+    leak = calibrate_leakage(
+        rec.t[w],
+        rec.x[w],
+        rec.y[w],
+        terms=terms,
+        min_duration=min_duration,
+        settle=settle,
+        input_unit=x_unit or "V",
+        output_unit=y_unit or _default_unit(rec.names[1]),
+    )
+    if out is not None:
+        leak.save(out)
+    return leak
+
+
+@dataclass(frozen=True)
+class LoopRun:
+    """What :func:`simulate_loop_file` did.
+
+    Attributes
+    ----------
+    record : BenchRecord
+        Commands, readings and the bench's hidden truth.
+    desired : ndarray
+        The desired trajectory.
+    width : float
+        Hysteresis width desired → laser displacement (fraction of the span).
+    nrmse : float
+        Tracking NRMSE desired → laser displacement (displacement domain; else NaN).
+    saturated : int
+        Commands clipped to the limits.
+    """
+
+    record: BenchRecord
+    desired: FloatArray
+    width: float
+    nrmse: float
+    saturated: int
+
+
+def simulate_loop_file(
+    model_path: PathLike,
+    target: PathLike,
+    out: PathLike,
+    *,
+    column: str | None = None,
+    settings: CompensatorSettings = _DEFAULT_SETTINGS,
+    loop: LoopSettings | None = None,
+    preset: str = DEFAULT_PRESET,
+    extra_bias: float = 0.0,
+    seed: int = 0,
+    force: bool = False,
+) -> LoopRun:
+    """Run a desired trajectory through a controller against the simulated bench.
+
+    Writes ``time, desired, command, charge, displacement`` (s, desired
+    units, V, C, m): what the bench read after each command. ``loop=None``
+    runs the feedforward compensator alone, otherwise the self-sensing
+    controller. ``extra_bias`` (A) adds to the preset's amplifier bias
+    current, a change the model never saw.
+
+    Parameters
+    ----------
+    model_path, target, out : path
+        A saved model, the desired trajectory (``time`` and ``desired``), the output.
+    column : str, optional
+        The desired column.
+    settings : CompensatorSettings
+        Limits, domain, gain, slew; the sample rate defaults to the preset's.
+    loop : LoopSettings, optional
+        The controller's settings; None: feedforward alone.
+    preset : str
+        Bench preset.
+    extra_bias : float
+        A (added to the preset's bias current).
+    seed : int
+        Noise seed.
+    force : bool
+        Replace an existing ``out`` that piezohyst did not write.
+
+    Returns
+    -------
+    LoopRun
+    """
+    inputs: list[PathLike] = [model_path, target]
+    if loop is not None and loop.leakage is not None:
+        inputs.append(loop.leakage)
+    guard_outputs([out], inputs, force=force)
+    if preset not in PRESETS:
+        msg = f"unknown preset {preset!r}; available: {', '.join(PRESETS)}"
+        raise ParameterError(msg)
+    p = PRESETS[preset]
+    p = dataclasses.replace(
+        p, i_bias=p.i_bias + check_float(extra_bias, "extra_bias", "simulate-loop", -1e-6, 1e-6)
+    )
+    model = _load(model_path)
+    table = read_table(target)
+    name = _desired_column(table, column, target)
+    desired = table.get(name, finite=False)
+    fs = settings.sample_rate or p.rate
+    if abs(fs - p.rate) > 1e-9 * p.rate:
+        msg = f"the bench {preset} samples at {p.rate:g} Hz; the loop rate must be the same"
+        raise ParameterError(msg)
+    settings = dataclasses.replace(settings, sample_rate=fs)
+    ctl = settings.build(model) if loop is None else loop.build(settings, model)
+    bench = Bench(
+        p, voltage=ctl.last_command, seed=check_int(seed, "seed", "simulate-loop", 0, 2**32 - 1)
+    )
+    rec = run_loop(ctl, desired, bench)
+    write_table(
+        out,
+        {
+            "time": rec.t,
+            "desired": desired,
+            "command": rec.voltage,
+            "charge": rec.charge,
+            "displacement": rec.displacement,
+        },
+        units={
+            "time": "s",
+            "desired": "m" if settings.domain == "displacement" else model.output_unit,
+            "command": "V",
+            "charge": "C",
+            "displacement": "m",
+        },
+    )
+    ok = np.isfinite(desired)
+    width = hysteresis_width(desired[ok], rec.displacement[ok])
+    err = (
+        nrmse(desired[ok], rec.displacement[ok]) if settings.domain == "displacement" else math.nan
+    )
+    return LoopRun(rec, desired, width, err, ctl.saturated_count)
+
+
+@dataclass(frozen=True)
+class ReportResult:
+    """Metrics and files written by :func:`model_report`.
+
+    Attributes
+    ----------
+    metrics : dict
+        Metric key to value (units in ``metrics.json``).
+    files : list of Path
+        Figures, ``metrics.json``, ``report.md`` and ``report.html``.
+    """
+
+    metrics: dict[str, Any]
+    files: list[Path]
+
+
+def model_report(
+    model_path: PathLike,
+    data: PathLike,
+    out: PathLike,
+    *,
+    data_spec: DataSpec | None = None,
+    command: str | None = None,
+    force: bool = False,
+    progress: Progress = None,
+) -> ReportResult:
+    """A report a lab can file on a model and a data file (HTML, Markdown, JSON, figures).
+
+    Parameters
+    ----------
+    model_path : str or os.PathLike
+        A saved model.
+    data : str or os.PathLike
+        The recording to check it on.
+    out : str or os.PathLike
+        The report folder; an existing one that does not hold a piezohyst
+        report is refused unless ``force`` (see :func:`guard_outputs`).
+    data_spec : DataSpec, optional
+        Columns, units and time window.
+    command : str, optional
+        The command line that made the report, recorded in it.
+    force : bool, default False
+        Replace an existing folder piezohyst did not write.
+    progress : callable, optional
+        Called with the rows read so far.
+
+    Returns
+    -------
+    ReportResult
+    """
+    from .report import Report, file_facts
+
+    guard_outputs([out], [model_path, data], force=force)
+    spec = data_spec or DataSpec()
+    model = _load(model_path)
+    rec = spec.read(data, progress=progress)
+    w = rec.window  # the model runs over the whole record: the window's start has a history
+    pred = model.predict(rec.x, t=rec.t)[w]
+    assert rec.y is not None
+    _check_measured_unit(rec.units[1], model, data)
+    x, y, t = rec.x[w], rec.y[w], rec.t[w]
+    out_dir = Path(out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    in_u, out_u = model.input_unit, model.output_unit
+    rep = Report(f"{type(model).__name__} on {Path(data).name}", out_dir)
+    rep.metadata = {
+        "written": datetime.now(UTC).isoformat(timespec="seconds"),
+        "command": command or "(called from Python)",
+        "data_file": file_facts(data),
+        "model_file": file_facts(model_path),
+        "columns": dict(zip(("input", "output", "time"), rec.names, strict=True)),
+        "time_window_s": [float(t[0]), float(t[-1])],
+        "units": {"input": in_u, "output": out_u, "time": "s"},
+    }
+    rep.tables["Model"] = [
+        ("class", type(model).__name__),
+        *[(f"setting {k}", json.dumps(v)) for k, v in model.params_to_json().items()],
+        *model.operator_.describe(in_u, out_u),
+        (
+            "training input range",
+            f"{model.input_range_[0]:.6g} to {model.input_range_[1]:.6g} {in_u}",
+        ),
+        *[(k, f"{v:.6g} {u}") for k, (v, u) in model.coefficients().items()],
+        (
+            "input dynamics",
+            "none"
+            if not model.input_dynamics_.active
+            else f"{model.input_dynamics_.kind}: lag {model.input_dynamics_.tau * 1e3:.4g} ms, "
+            f"delay {model.input_dynamics_.delay * 1e3:.4g} ms",
+        ),
+    ]
+    if model.output_dynamics_.active:
+        rep.add("output_mode_hz", "output mode: resonance", model.output_dynamics_.f0, "Hz")
+        rep.add("output_mode_zeta", "output mode: damping ratio", model.output_dynamics_.zeta, "")
+    if model.input_dynamics_.active:
+        rep.add("input_lag_s", "input dynamics: lag", model.input_dynamics_.tau, "s")
+        rep.add("input_delay_s", "input dynamics: delay", model.input_dynamics_.delay, "s")
+    err = y - pred
+    rep.add("samples", "samples", int(x.size))
+    nrmse_pct = 100 * nrmse(y, pred)
+    rep.add("nrmse_pct", "NRMSE (RMSE / output span)", nrmse_pct, "%")
+    rep.add("rmse", "RMSE", rmse(y, pred), out_u)
+    rep.add("max_abs_error", "largest error", float(np.max(np.abs(err))), out_u)
+    rep.add("hysteresis_width_measured_pct", "hysteresis width, measured",
+            100 * hysteresis_width(x, y), "%")  # fmt: skip
+    lo, hi = model.input_range_
+    if not math.isnan(lo):
+        outside = int(np.count_nonzero((x < lo - 1e-9) | (x > hi + 1e-9)))
+        rep.add("samples_outside_training_range", "samples outside the training range", outside)
+    measured = {"color": "0.55", "lw": 1.6}
+    model_line = {"color": "C0", "lw": 1.0, "ls": "--"}
+    rep.figure("loop.png", "input-output loop: data (grey) and model (dashed)", [
+        {"curves": [(x, y, "measured", measured), (x, pred, "model", model_line)],
+         "xlabel": "input", "xunit": in_u, "ylabel": "output", "yunit": out_u, "title": ""},
+    ])  # fmt: skip
+    caption = f"output over time, and the residual (NRMSE {nrmse_pct:.3g} %)"
+    rep.figure("fit.png", caption, [
+        {"curves": [(t, y, "measured", measured), (t, pred, "model", model_line)],
+         "xlabel": "time", "xunit": "s", "ylabel": "output", "yunit": out_u},
+        {"curves": [(t, err, "measured - model", {"lw": 0.7, "color": "C3"})],
+         "xlabel": "time", "xunit": "s", "ylabel": "residual", "yunit": out_u},
+    ], stacked=True)  # fmt: skip
+    growth = model.growth_coefficients()
+    if growth:
+        pure = y - model.growth(rec.x, t=rec.t)[w]
+        for k, (v, u) in growth.items():
+            rep.add(f"growth_{k}", f"growth term {k}", v, u)
+        rep.add("hysteresis_width_growth_removed_pct", "hysteresis width, growth removed",
+                100 * hysteresis_width(x, pure), "%")  # fmt: skip
+        rep.figure("growth_removed.png", "identified growth removed (eq. 19)", [
+            {"curves": [(x, y, "measured", {"lw": 0.7, "color": "0.55"}),
+                        (x, pure, "growth removed", {"lw": 1.1, "color": "C1"})],
+             "xlabel": "input", "xunit": in_u, "ylabel": "output", "yunit": out_u},
+        ])  # fmt: skip
+    chosen = "+".join(k for k in growth) or "none"
+    for label, score in model.selection_.items():  # the term selection, fold by fold
+        folds = ", ".join(f"{f:.4g}" for f in model.selection_folds_.get(label, []))
+        mark = " (chosen)" if label == chosen else ""
+        rep.add(f"selection_{label}", f"held-out RMSE, growth {label}{mark}",
+                f"{score:.4g} {out_u}; per fold: {folds}")  # fmt: skip
+    files = rep.write()
+    return ReportResult({m.key: m.value for m in rep.metrics}, files)
+
+
+def _fmt(values: FloatArray) -> str:
+    return ", ".join(f"{v:.6g}" for v in values)
