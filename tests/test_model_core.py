@@ -393,6 +393,7 @@ LAYERS = {
     "workflows": 12,
     "fleet": 12,
     "demo": 12,
+    "_cli_support": 13,
     "cli": 13,
     "__init__": 14,
 }

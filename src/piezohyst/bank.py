@@ -38,7 +38,7 @@ from .errors import (
 )
 from .io import atomic_write, atomic_write_text
 from .metrics import hysteresis_width
-from .model import HysteresisModel
+from .model import HysteresisModel, is_model
 from .persistence import model_from_dict, model_to_dict
 
 __all__ = ["BANK_FORMAT", "ModelBank", "load_bank"]
@@ -146,7 +146,7 @@ class ModelBank:
     """
 
     def __init__(self, template: HysteresisModel) -> None:
-        if not isinstance(template, HysteresisModel):
+        if not is_model(template):
             msg = (
                 "The 'template' of ModelBank must be a piezohyst model such as "
                 f"ph.ActivePI(n_operators=20). Got {type(template).__name__} instead."
@@ -173,7 +173,7 @@ class ModelBank:
             raise ParameterError(msg)
         first = models[0]
         for i, m in enumerate(models):
-            if not isinstance(m, HysteresisModel) or not m.is_fitted:
+            if not is_model(m) or not m.is_fitted:
                 msg = f"channel {i} of the bank is not a fitted piezohyst model."
                 raise ParameterError(msg)
             size, size0 = m.operator_.initial_state.size, first.operator_.initial_state.size

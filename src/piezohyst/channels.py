@@ -86,11 +86,8 @@ class ChannelBank(Generic[C]):
     """One live object per channel of a fitted bank (see the module documentation)."""
 
     def __init__(self, bank: ModelBank, build: Callable[[int, HysteresisModel], C]) -> None:
-        if not isinstance(bank, ModelBank):
-            msg = f"{type(self).__name__} needs a fitted ModelBank. Got {type(bank).__name__}."
-            raise ParameterError(msg)
         channels: list[C] = []
-        for i, m in enumerate(bank.complete_models()):
+        for i, m in enumerate(self._models(bank)):
             try:
                 channels.append(build(i, m))
             except (ParameterError, ShapeError) as exc:
@@ -100,6 +97,14 @@ class ChannelBank(Generic[C]):
 
     def __len__(self) -> int:
         return len(self._channels)
+
+    @classmethod
+    def _models(cls, bank: ModelBank) -> list[HysteresisModel]:
+        """The bank's models, one per channel (every channel fitted)."""
+        if not isinstance(bank, ModelBank):
+            msg = f"{cls.__name__} needs a fitted ModelBank. Got {type(bank).__name__}."
+            raise ParameterError(msg)
+        return bank.complete_models()
 
     def channel(self, index: int) -> C:
         """Channel ``index``'s object: live, sharing the bank's state.
@@ -216,7 +221,7 @@ class BankCompensator(ChannelBank[Compensator]):
         gain: float | ArrayLike | None = None,
         allow_extrapolation: bool = False,
     ) -> None:
-        c = len(bank.complete_models()) if isinstance(bank, ModelBank) else 0
+        c = len(self._models(bank))
         lows, highs = per_channel(v_min, c, "v_min"), per_channel(v_max, c, "v_max")
         slews, gains = per_channel(slew_rate, c, "slew_rate"), per_channel(gain, c, "gain")
 
@@ -374,7 +379,7 @@ class BankController(ChannelBank[SelfSensingController]):
         leakage: Leakage | list[Leakage] | tuple[Leakage, ...] | None = None,
         **settings: Any,
     ) -> None:
-        c = len(bank.complete_models()) if isinstance(bank, ModelBank) else 0
+        c = len(self._models(bank))
         lows, highs = per_channel(v_min, c, "v_min"), per_channel(v_max, c, "v_max")
         per = {k: per_channel(settings.pop(k, None), c, k) for k in ("slew_rate", "gain")}
         if leakage is None or isinstance(leakage, Leakage):

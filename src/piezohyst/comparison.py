@@ -34,7 +34,7 @@ from numpy.typing import ArrayLike
 from ._validation import FloatArray, as_signal, same_length
 from .errors import ExtrapolationWarning, ParameterError, PiezohystError
 from .metrics import hysteresis_width, nrmse, rmse
-from .model import HysteresisModel, InitialState
+from .model import HysteresisModel, InitialState, is_model
 
 __all__ = ["Comparison", "ComparisonRow", "compare_models"]
 
@@ -216,7 +216,7 @@ def _named(
         msg = "compare_models needs at least one model."
         raise ParameterError(msg)
     for name, m in items:
-        if not isinstance(m, HysteresisModel):
+        if not is_model(m):
             msg = f"compare_models: {name!r} is not a piezohyst model (got {type(m).__name__})."
             raise ParameterError(msg)
     return items

@@ -313,8 +313,8 @@ def _same(a: object, b: object) -> bool:
 
 
 def _to_json(value: object) -> Any:
-    if isinstance(value, type) and issubclass(value, Core):
-        return value.kind
+    if isinstance(value, type):  # a core class: its registry name
+        return getattr(value, "kind", value.__name__)
     if isinstance(value, Term):
         return {"kind": value.kind, "params": value.get_params()}
     if isinstance(value, np.ndarray):

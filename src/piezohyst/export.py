@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from string import Template
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Literal, cast
 
 import numpy as np
 
@@ -107,12 +107,8 @@ def export_c(
     -------
     CCode
     """
-    controller: SelfSensingController | None = None
-    comp: Compensator
-    if isinstance(compensator, SelfSensingController):
-        controller, comp = compensator, compensator.compensator
-    else:
-        comp = compensator
+    comp = cast(Compensator, getattr(compensator, "compensator", compensator))  # a controller's
+    controller = cast("SelfSensingController", compensator) if comp is not compensator else None
     if controller is not None and comp.dynamic:  # pragma: no cover - the controller refuses it
         msg = "the self-sensing controller does not invert input dynamics"
         raise ParameterError(msg)

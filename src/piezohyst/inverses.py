@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -78,8 +78,7 @@ class CompensatorState:
 
 def _play(spec: InverseSpec) -> PIHysteresis:
     """The play operators of a spec (the play engine inverts nothing else)."""
-    assert isinstance(spec.operator, PIHysteresis)
-    return spec.operator
+    return cast(PIHysteresis, spec.operator)
 
 
 class Inverse:
@@ -509,8 +508,7 @@ class PackedInverse(Inverse):
 
     def setup(self, comp: Compensator, spec: InverseSpec, max_step: float, inv_gain: float) -> None:
         sample_rate, domain = comp.sample_rate, comp.domain
-        core = spec.operator
-        assert isinstance(core, PackedCore)
+        core = cast(PackedCore, spec.operator)
         comp.core = core
         comp.analytic = False
         comp._plain = False

@@ -781,3 +781,18 @@ class HysteresisModel(Estimator):
 
 
 register(HysteresisModel)  # files of a model built on any core name this class
+
+
+def is_model(value: object) -> bool:
+    """Whether ``value`` is a piezohyst model (the check at the API edge of banks and
+    comparisons; behaviour never depends on which model it is).
+
+    Parameters
+    ----------
+    value : object
+
+    Returns
+    -------
+    bool
+    """
+    return isinstance(value, HysteresisModel)

@@ -1,0 +1,382 @@
+"""What the ``piezohyst`` commands share: the context, progress, one-line errors, and the
+option bundles (data columns and window, voltage limits, the loop, the model's settings).
+"""
+
+from __future__ import annotations
+
+import functools
+import shlex
+import sys
+import warnings
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, cast
+
+import click
+
+from .compensator import CompensatorSettings, Domain
+from .errors import PiezohystError
+from .io import DataSpec
+from .models import model_names
+from .selfsensing import LoopSettings
+
+
+class Context:
+    """Options shared by every command."""
+
+    def __init__(self, quiet: bool, verbose: bool, debug: bool) -> None:
+        self.quiet = quiet
+        self.verbose = verbose
+        self.debug = debug
+
+    def info(self, message: str) -> None:
+        if not self.quiet:
+            click.echo(message, err=True)
+
+
+@contextmanager
+def progress_steps(ctx: Context, total: int) -> Iterator[Callable[[str], None]]:
+    """A rich progress bar on a terminal; silent when piped or quiet (steps still logged
+    with --verbose)."""
+    if ctx.quiet or not sys.stderr.isatty():
+        if ctx.verbose and not ctx.quiet:
+            yield lambda msg: click.echo(f"... {msg}", err=True)
+        else:
+            yield lambda _msg: None
+        return
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total}"),
+        TimeElapsedColumn(),
+        console=Console(stderr=True),
+        transient=False,
+    ) as bar:
+        task = bar.add_task("starting", total=total)
+        started = [False]
+
+        def rich_step(msg: str) -> None:
+            if started[0]:
+                bar.advance(task)
+            started[0] = True
+            bar.update(task, description=msg)
+
+        yield rich_step
+        bar.update(task, completed=total, description="done")
+
+
+@contextmanager
+def rows_progress(ctx: Context, label: str) -> Iterator[Callable[[int], None]]:
+    """A live count of the rows read, on a terminal only (silent when piped or quiet)."""
+    if ctx.quiet or not sys.stderr.isatty():
+        yield lambda _rows: None
+        return
+    from rich.console import Console
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    with Progress(
+        SpinnerColumn(),
+        TextColumn("{task.description}"),
+        TextColumn("{task.completed:,} rows"),
+        TimeElapsedColumn(),
+        console=Console(stderr=True),
+        transient=True,
+    ) as bar:
+        task = bar.add_task(label, total=None)
+        yield lambda rows: bar.update(task, completed=rows)
+
+
+def _command_line() -> str:
+    """The command as typed (recorded in reports), or the parsed command when embedded."""
+    if Path(sys.argv[0]).name == "piezohyst":
+        return shlex.join(["piezohyst", *sys.argv[1:]])
+    ctx = click.get_current_context()
+    words = ["piezohyst", *ctx.command_path.split()[1:]]  # the root's name is the program's
+    return " ".join(words + [f"--{k}={v}" for k, v in ctx.params.items() if v not in (None, False)])
+
+
+def _run(ctx: Context, fn: Callable[[], Any]) -> Any:
+    """Run a command body: errors become one line on stderr and exit 1 (traceback: --debug).
+
+    Warnings (an implausible sample interval, narrowed limits...) become one
+    ``warning:`` line each on stderr.
+    """
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            result = fn()
+        for w in caught:
+            click.echo(f"warning: {w.message}", err=True)
+        return result
+    except (PiezohystError, OSError) as exc:
+        if ctx.debug:
+            raise
+        hint = " (--force replaces it)" if getattr(exc, "replaceable", False) else ""
+        click.echo(f"error: {exc}{hint}", err=True)
+        sys.exit(1)
+    except Exception as exc:  # a bug of ours: still one line, with the way to see more
+        if ctx.debug:
+            raise
+        click.echo(
+            f"error: unexpected {type(exc).__name__}: {exc} (rerun with --debug for the "
+            "traceback, and please report it)",
+            err=True,
+        )
+        sys.exit(1)
+
+
+# ---------------------------------------------------------------- shared options
+def _data_options(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """--input/--output/--time/--rate/--group/--t-start/--t-stop, gathered into one DataSpec."""
+    options = [
+        click.option(
+            "--input",
+            "input_column",
+            default="voltage",
+            show_default=True,
+            help="Input column (name or 0-based index).",
+        ),
+        click.option(
+            "--output",
+            "output_column",
+            default="charge",
+            show_default=True,
+            help="Output column (name or 0-based index).",
+        ),
+        click.option(
+            "--time",
+            "time_column",
+            default="time",
+            show_default=True,
+            help="Time column in s (used when present).",
+        ),
+        click.option(
+            "--rate",
+            type=float,
+            default=None,
+            help="Sample rate in Hz, when the file has no time column.",
+        ),
+        click.option(
+            "--group", default=None, help="TDMS group (default: the first with channels)."
+        ),
+        click.option("--t-start", type=float, default=None, help="Use samples from this time (s)."),
+        click.option(
+            "--t-stop", type=float, default=None, help="Use samples before this time (s)."
+        ),
+        click.option(
+            "--input-unit",
+            default=None,
+            help="Unit of the input column (default: its header's, or V).",
+        ),
+        click.option(
+            "--output-unit",
+            default=None,
+            help="Unit of the output column, e.g. C, uC, um (default: its header's).",
+        ),
+        click.option(
+            "--time-unit",
+            default=None,
+            help="Unit of the time column (default: its header's, or s).",
+        ),
+    ]
+
+    @functools.wraps(fn)
+    def with_spec(
+        *args: Any,
+        input_column: str,
+        output_column: str,
+        time_column: str,
+        rate: float | None,
+        group: str | None,
+        t_start: float | None,
+        t_stop: float | None,
+        input_unit: str | None,
+        output_unit: str | None,
+        time_unit: str | None,
+        **kwargs: Any,
+    ) -> Any:
+        spec = DataSpec(
+            input_column,
+            output_column,
+            time_column,
+            rate,
+            group,
+            t_start,
+            t_stop,
+            input_unit,
+            output_unit,
+            time_unit,
+        )
+        return fn(*args, data_spec=spec, **kwargs)
+
+    wrapped: Callable[..., Any] = with_spec
+    for option in reversed(options):
+        wrapped = option(wrapped)
+    return wrapped
+
+
+def _limit_options(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """--v-min/--v-max/--domain/--gain/--slew-rate/--sample-rate, gathered into one settings."""
+    options = [
+        click.option(
+            "--v-min",
+            type=float,
+            default=None,
+            help="Lowest command in V (default: the model's training minimum).",
+        ),
+        click.option(
+            "--v-max",
+            type=float,
+            default=None,
+            help="Highest command in V (default: the model's training maximum).",
+        ),
+        click.option(
+            "--domain",
+            type=click.Choice(["charge", "displacement"]),
+            default="charge",
+            show_default=True,
+            help="Units of the desired values.",
+        ),
+        click.option(
+            "--gain",
+            type=float,
+            default=None,
+            help="Displacement per charge in m/C (for --domain displacement).",
+        ),
+        click.option("--slew-rate", type=float, default=None, help="Largest change in V/s."),
+        click.option(
+            "--sample-rate",
+            type=float,
+            default=None,
+            help="Loop rate in Hz (for --slew-rate, and models with creep or relaxation).",
+        ),
+        click.option(
+            "--allow-extrapolation",
+            is_flag=True,
+            help="Allow limits beyond the voltages the model was identified on.",
+        ),
+    ]
+
+    @functools.wraps(fn)
+    def with_settings(
+        *args: Any,
+        v_min: float | None,
+        v_max: float | None,
+        domain: str,
+        gain: float | None,
+        slew_rate: float | None,
+        sample_rate: float | None,
+        allow_extrapolation: bool,
+        **kwargs: Any,
+    ) -> Any:
+        settings = CompensatorSettings(
+            v_min, v_max, cast(Domain, domain), gain, slew_rate, sample_rate, allow_extrapolation
+        )
+        return fn(*args, settings=settings, **kwargs)
+
+    wrapped: Callable[..., Any] = with_settings
+    for option in reversed(options):
+        wrapped = option(wrapped)
+    return wrapped
+
+
+def _loop_options(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """--leakage/--ki/--kp/--refresh-leakage, gathered into one LoopSettings."""
+    options = [
+        click.option(
+            "--leakage",
+            type=click.Path(dir_okay=False, path_type=Path),
+            default=None,
+            help="Leakage file from calibrate-leakage (default: the model's growth terms).",
+        ),
+        click.option(
+            "--ki",
+            type=click.FloatRange(0.0, 1.9),
+            default=0.5,
+            show_default=True,
+            help="Integral gain per sample.",
+        ),
+        click.option(
+            "--kp",
+            type=click.FloatRange(0.0, 1.0),
+            default=0.0,
+            show_default=True,
+            help="Proportional gain.",
+        ),
+        click.option(
+            "--refresh-leakage",
+            is_flag=True,
+            help="Refine the bias current online from holds of the desired value.",
+        ),
+    ]
+
+    @functools.wraps(fn)
+    def with_loop(
+        *args: Any,
+        leakage: Path | None,
+        ki: float,
+        kp: float,
+        refresh_leakage: bool,
+        **kwargs: Any,
+    ) -> Any:
+        return fn(*args, loop=LoopSettings(leakage, ki, kp, refresh_leakage), **kwargs)
+
+    wrapped: Callable[..., Any] = with_loop
+    for option in reversed(options):
+        wrapped = option(wrapped)
+    return wrapped
+
+
+FORCE = click.option(
+    "--force", is_flag=True, help="Replace an existing output that piezohyst did not write."
+)
+
+
+OUT_FILE = click.option(
+    "-o",
+    "--out",
+    "out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="Output file (.csv or .npz).",
+)
+
+
+OUT_FILE_JSON = click.option(
+    "-o",
+    "--out",
+    "out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="Output file (.json).",
+)
+
+
+EXISTING = click.Path(exists=False, dir_okay=False, path_type=Path)
+
+
+def _model_options(model_help: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """--model and --operators, shared by fit and fit-many."""
+
+    def decorate(fn: Callable[..., Any]) -> Callable[..., Any]:
+        fn = click.option(
+            "--operators",
+            type=click.IntRange(1, 1000),
+            default=10,
+            show_default=True,
+            help="Play operators, the linear one included.",
+        )(fn)
+        return click.option(
+            "--model",
+            "model_name",
+            type=click.Choice(model_names()),
+            default="active-pi",
+            show_default=True,
+            help=model_help,
+        )(fn)
+
+    return decorate
