@@ -359,17 +359,35 @@ OUT_FILE_JSON = click.option(
 EXISTING = click.Path(exists=False, dir_okay=False, path_type=Path)
 
 
+Decorator = Callable[[Callable[..., Any]], Callable[..., Any]]
+
+
+def operators_option(
+    default: int = 10, help: str = "Play operators, the linear one included."
+) -> Decorator:
+    """--operators: play operators of the models that have them."""
+    return click.option("--operators", type=click.IntRange(1, 1000), default=default,
+                        show_default=True, help=help)  # fmt: skip
+
+
+def input_dynamics_option(help: str) -> Decorator:
+    """--input-dynamics: the delay/lag between the logged command and the piezo."""
+    kinds = ["none", "delay", "first-order", "delay+first-order", "auto"]
+    return click.option("--input-dynamics", type=click.Choice(kinds), default="none",
+                        show_default=True, help=help)  # fmt: skip
+
+
+def initial_state_option(choices: list[str], help: str) -> Decorator:
+    """--initial-state: where a model starts (the first choice is the default)."""
+    return click.option("--initial-state", type=click.Choice(choices), default=choices[0],
+                        show_default=True, help=help)  # fmt: skip
+
+
 def _model_options(model_help: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """--model and --operators, shared by fit and fit-many."""
 
     def decorate(fn: Callable[..., Any]) -> Callable[..., Any]:
-        fn = click.option(
-            "--operators",
-            type=click.IntRange(1, 1000),
-            default=10,
-            show_default=True,
-            help="Play operators, the linear one included.",
-        )(fn)
+        fn = operators_option()(fn)
         return click.option(
             "--model",
             "model_name",

@@ -25,6 +25,9 @@ from ._cli_support import (
     _loop_options,
     _model_options,
     _run,
+    initial_state_option,
+    input_dynamics_option,
+    operators_option,
     progress_steps,
     rows_progress,
 )
@@ -163,13 +166,9 @@ def describe(model: HysteresisModel) -> str:
     help="preisach: time constant in s of a relaxing part of the hysteresis (a second Preisach "
     "density on the lagged voltage), e.g. 0.1.",
 )
-@click.option(
-    "--input-dynamics",
-    type=click.Choice(["none", "delay", "first-order", "delay+first-order", "auto"]),
-    default="none",
-    show_default=True,
-    help="Delay/lag between the logged command and the piezo, identified with the model "
-    "(record several drive frequencies).",
+@input_dynamics_option(
+    "Delay/lag between the logged command and the piezo, identified with the model "
+    "(record several drive frequencies)."
 )
 @click.option(
     "--output-dynamics",
@@ -179,12 +178,9 @@ def describe(model: HysteresisModel) -> str:
     help="A mechanical mode between the hysteresis and a displacement output "
     "(record up to near the resonance).",
 )
-@click.option(
-    "--initial-state",
-    type=click.Choice(["rest", "periodic"]),
-    default="rest",
-    show_default=True,
-    help="periodic: the record is one period of a drive that was already running (it "
+@initial_state_option(
+    ["rest", "periodic"],
+    "periodic: the record is one period of a drive that was already running (it "
     "starts mid-cycle); the operators start in the periodic steady state.",
 )
 @_data_options
@@ -262,13 +258,7 @@ def fit(
     show_default=True,
     help="Models to compare, a comma list of " + ", ".join(model_names()) + ".",
 )
-@click.option(
-    "--operators",
-    type=click.IntRange(1, 1000),
-    default=10,
-    show_default=True,
-    help="Play operators, for the models that have them.",
-)
+@operators_option(help="Play operators, for the models that have them.")
 @click.option(
     "--train",
     type=click.FloatRange(0, 1, min_open=True, max_open=True),
@@ -283,19 +273,12 @@ def fit(
     default=None,
     help="A separate held-out record (same columns); DATA then trains whole.",
 )
-@click.option(
-    "--input-dynamics",
-    type=click.Choice(["none", "delay", "first-order", "delay+first-order", "auto"]),
-    default="none",
-    show_default=True,
-    help="Delay/lag between the logged command and the piezo, identified with each model.",
+@input_dynamics_option(
+    "Delay/lag between the logged command and the piezo, identified with each model."
 )
-@click.option(
-    "--initial-state",
-    type=click.Choice(["rest", "periodic"]),
-    default="rest",
-    show_default=True,
-    help="Where the training part starts (periodic: one period of a running drive).",
+@initial_state_option(
+    ["rest", "periodic"],
+    "Where the training part starts (periodic: one period of a running drive).",
 )
 @_data_options
 @click.option(
@@ -362,12 +345,9 @@ def compare(
 @main.command()
 @click.argument("model", type=EXISTING)
 @click.argument("data", type=EXISTING)
-@click.option(
-    "--initial-state",
-    type=click.Choice(["model", "rest", "periodic"]),
-    default="model",
-    show_default=True,
-    help="Where the model starts: its training record's start, at rest, or (DATA is one "
+@initial_state_option(
+    ["model", "rest", "periodic"],
+    "Where the model starts: its training record's start, at rest, or (DATA is one "
     "period of a drive already running) the periodic steady state.",
 )
 @_data_options
@@ -839,13 +819,7 @@ def simulate_loop(
     show_default=True,
     help="Folder for figures, metrics.json and report.md.",
 )
-@click.option(
-    "--operators",
-    type=click.IntRange(1, 1000),
-    default=20,
-    show_default=True,
-    help="Play operators of both models.",
-)
+@operators_option(20, "Play operators of both models.")
 @click.option(
     "--seed",
     type=click.IntRange(0, 2**32 - 1),

@@ -344,7 +344,7 @@ class Compensator:
         ParameterError
             If the last command would lie outside the limits.
         """
-        self.inverse.reset(self, state, voltage=voltage)
+        self.inverse.reset(self, state, voltage)
 
     def precondition(self, samples: int = 1000) -> FloatArray:
         """The preconditioning cycle to send first: last command → v_max → v_min → back.

@@ -20,10 +20,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from ._lazy import LazyModule
 from ._validation import FloatArray, as_signal
@@ -41,6 +40,12 @@ else:  # numba loads when a model first runs (see _lazy)
     K = LazyModule("piezohyst._kernels", globals(), "K")
 
 __all__ = ["INVERSES", "CompensatorState", "Inverse"]
+
+#: What a compensator can be reset to: a saved state, the core's states (and last command)
+State = Any
+#: The self-sensing loop's arrays: the compensator's config seen by the loop, its settings
+#: (``_kernels.CTL_*``) and its feedback state (``CS_*``)
+Loop = tuple[FloatArray, FloatArray, FloatArray]
 
 
 def _finite_number(value: object, name: str) -> float:
@@ -102,25 +107,24 @@ class Inverse:
         """The forward states and the last command (copies)."""
         raise NotImplementedError
 
+    def _slot(self, comp: Compensator, name: str) -> int:
+        """Where a status value lives in the state array (play and Python engines: its end,
+        as ``_kernels.ST_*``)."""
+        return {"last": -3, "nonfinite": -2, "saturated": -1}[name]
+
     def last_command(self, comp: Compensator) -> float:
         """The command sent last (V)."""
-        raise NotImplementedError
+        return float(comp._state[self._slot(comp, "last")])
 
     def nonfinite_count(self, comp: Compensator) -> int:
-        """Desired values that were NaN or infinite."""
-        raise NotImplementedError
+        """Desired values that were NaN or infinite (the last command held)."""
+        return int(comp._state[self._slot(comp, "nonfinite")])
 
     def saturated_count(self, comp: Compensator) -> int:
         """Desired values out of reach (the nearer limit sent)."""
-        raise NotImplementedError
+        return int(comp._state[self._slot(comp, "saturated")])
 
-    def reset(
-        self,
-        comp: Compensator,
-        state: CompensatorState | ArrayLike | None = None,
-        *,
-        voltage: float | None = None,
-    ) -> None:
+    def reset(self, comp: Compensator, state: State, voltage: float | None) -> None:
         """Start again from a known condition (see :meth:`Compensator.reset`)."""
         raise NotImplementedError
 
@@ -151,27 +155,12 @@ class Inverse:
         """Where ``config`` holds the displacement reference and the inverse gain."""
         raise NotImplementedError
 
-    def controller_step(
-        self,
-        comp: Compensator,
-        desired: float,
-        measured: float,
-        config: FloatArray,
-        ctl: FloatArray,
-        feedback: FloatArray,
-    ) -> float:
+    def controller_step(self, comp: Compensator, d: float, m: float, loop: Loop) -> float:
         """One sample of the self-sensing loop around this inverse."""
         raise NotImplementedError
 
     def controller_process(
-        self,
-        comp: Compensator,
-        d: FloatArray,
-        m: FloatArray,
-        config: FloatArray,
-        ctl: FloatArray,
-        feedback: FloatArray,
-        out: FloatArray,
+        self, comp: Compensator, d: FloatArray, m: FloatArray, loop: Loop, out: FloatArray
     ) -> None:
         """The self-sensing loop over a block."""
         raise NotImplementedError
@@ -279,49 +268,8 @@ class PlayInverse(Inverse):
             comp.dstate.copy() if comp.dynamic else np.zeros(0),
         )
 
-    def last_command(self, comp: Compensator) -> float:
-        """The command sent last (V): where the actuator sits now."""
-        return float(comp._state[K.ST_LAST])
-
-    def nonfinite_count(self, comp: Compensator) -> int:
-        """Desired values that were NaN or infinite (the last command was held)."""
-        return int(comp._state[K.ST_NONFINITE])
-
-    def saturated_count(self, comp: Compensator) -> int:
-        """Samples whose command was clipped to ``[v_min, v_max]``."""
-        return int(comp._state[K.ST_SATURATED])
-
-    def reset(
-        self,
-        comp: Compensator,
-        state: CompensatorState | ArrayLike | None = None,
-        *,
-        voltage: float | None = None,
-    ) -> None:
-        """Start again from a known actuator condition; counters go back to 0.
-
-        Parameters
-        ----------
-        state : CompensatorState or array_like, optional
-            Explicit forward states, e.g. a :attr:`state` saved earlier; or an
-            array of the operator states (V), optionally followed by the last
-            command.
-        voltage : float, optional
-            The actuator now sits at ``voltage`` (V): the model's initial state
-            is projected onto it (eq. 10: each operator clamped into
-            ``[v - r_i, v + r_i]``), lags settled there. Use this after an
-            unknown history only with :meth:`precondition`, which erases it.
-
-        Notes
-        -----
-        Without arguments: the model's initial state (the training record's
-        start); if the limits exclude that voltage, the first command steps in.
-
-        Raises
-        ------
-        ParameterError
-            If the last command would lie outside the limits.
-        """
+    def reset(self, comp: Compensator, state: State, voltage: float | None) -> None:
+        """See :meth:`~piezohyst.inverses.Inverse.reset`."""
         n = comp.n_operators
         m = comp.lags.shape[1]
         op = _play(comp.spec)
@@ -370,25 +318,7 @@ class PlayInverse(Inverse):
         comp._state[K.ST_SATURATED] = 0.0
 
     def precondition(self, comp: Compensator, cycle: FloatArray) -> FloatArray:
-        """The preconditioning cycle to send first: last command → v_max → v_min → back.
-
-        A full-amplitude cycle wipes out the actuator's unknown history (the
-        remanence problem: a fresh model assumes a known state). The returned
-        voltages must be sent to the amplifier before the first :meth:`step`;
-        the compensator's state is advanced as if they had been. With a
-        slew-rate limit the cycle gets as many samples as it needs to reach
-        both limits.
-
-        Parameters
-        ----------
-        samples : int, default 1000
-            Samples in the cycle (at least 3).
-
-        Returns
-        -------
-        ndarray
-            The voltages (V) to send.
-        """
+        """See :meth:`~piezohyst.inverses.Inverse.precondition`."""
         n = comp.n_operators
         r = comp.tables[K.TAB_R]
         z = comp._state[:n]
@@ -444,11 +374,7 @@ class PlayInverse(Inverse):
     def share(
         self, comp: Compensator, tables: FloatArray, config: FloatArray, state: FloatArray
     ) -> None:
-        """Run on arrays owned by a multi-channel container (views of its rows).
-
-        The arrays must hold this compensator's current values (the bank
-        stacks them first); from then on both see every update.
-        """
+        """See :meth:`~piezohyst.inverses.Inverse.share`."""
         if not (
             np.array_equal(tables, comp.tables)
             and np.array_equal(config, comp.config)
@@ -461,29 +387,14 @@ class PlayInverse(Inverse):
     def slots(self) -> tuple[int, int]:
         return int(K.CFG_REFERENCE), int(K.CFG_INV_GAIN)
 
-    def controller_step(
-        self,
-        comp: Compensator,
-        desired: float,
-        measured: float,
-        config: FloatArray,
-        ctl: FloatArray,
-        feedback: FloatArray,
-    ) -> float:
-        return float(K.controller_step(desired, measured, comp.tables, config, comp._state, ctl,
-                                       feedback))  # fmt: skip
+    def controller_step(self, comp: Compensator, d: float, m: float, loop: Loop) -> float:
+        return float(K.controller_step(d, m, comp.tables, loop[0], comp._state,
+                                       loop[1], loop[2]))  # fmt: skip
 
     def controller_process(
-        self,
-        comp: Compensator,
-        d: FloatArray,
-        m: FloatArray,
-        config: FloatArray,
-        ctl: FloatArray,
-        feedback: FloatArray,
-        out: FloatArray,
+        self, comp: Compensator, d: FloatArray, m: FloatArray, loop: Loop, out: FloatArray
     ) -> None:
-        K.controller_process(d, m, comp.tables, config, comp._state, ctl, feedback, out)
+        K.controller_process(d, m, comp.tables, loop[0], comp._state, loop[1], loop[2], out)
 
 
 class PackedInverse(Inverse):
@@ -568,21 +479,15 @@ class PackedInverse(Inverse):
             comp.dstate[: D.DYN_LAGS].copy() if comp.dynamic else np.zeros(0),
         )
 
-    def last_command(self, comp: Compensator) -> float:
-        """The command sent last (V)."""
-        return float(comp._state[comp._ns + D.DS_STATUS + D.DS_LAST])
-
-    def nonfinite_count(self, comp: Compensator) -> int:
-        """Desired values that were NaN or infinite (the last command was held)."""
-        return int(comp._state[comp._ns + D.DS_STATUS + D.DS_NONFINITE])
-
-    def saturated_count(self, comp: Compensator) -> int:
-        """Desired values out of reach within ``[v_min, v_max]`` (the nearer limit was sent)."""
-        return int(comp._state[comp._ns + D.DS_STATUS + D.DS_SATURATED])
+    def _slot(self, comp: Compensator, name: str) -> int:
+        """The status values follow the core's state (``_diffkernels.DS_*``)."""
+        at = {"last": D.DS_LAST, "nonfinite": D.DS_NONFINITE, "saturated": D.DS_SATURATED,
+              "outside": D.DS_OUTSIDE}[name]  # fmt: skip
+        return int(comp._ns + D.DS_STATUS + at)
 
     def outside_count(self, comp: Compensator) -> int:
         """Commands that would have left the identified region (held unless extrapolating)."""
-        return int(comp._state[comp._ns + D.DS_STATUS + D.DS_OUTSIDE])
+        return int(comp._state[self._slot(comp, "outside")])
 
     def _with_slow(self, comp: Compensator, z: FloatArray) -> FloatArray:
         """The core's state, then the slow core's at rest at the same voltage (if any)."""
@@ -600,28 +505,8 @@ class PackedInverse(Inverse):
         steps = max(2, math.ceil(abs(v - v0) / (span / 400.0)) + 1)
         return np.asarray(comp.core.propagate(np.linspace(v0, v, steps), start).state)
 
-    def reset(
-        self,
-        comp: Compensator,
-        state: CompensatorState | ArrayLike | None = None,
-        *,
-        voltage: float | None = None,
-    ) -> None:
-        """Start again from a known condition; counters back to 0.
-
-        Parameters
-        ----------
-        state : CompensatorState or array_like, optional
-            ``[v, x]`` (the core's state), optionally followed by the last command.
-        voltage : float, optional
-            The actuator now sits at ``voltage``: the model's initial state moved
-            there along a ramp.
-
-        Raises
-        ------
-        ParameterError
-            If the last command would lie outside the limits.
-        """
+    def reset(self, comp: Compensator, state: State, voltage: float | None) -> None:
+        """See :meth:`~piezohyst.inverses.Inverse.reset`."""
         core = comp.core
         if isinstance(state, CompensatorState):
             z = as_signal(state.operators, "state.operators")
@@ -674,17 +559,7 @@ class PackedInverse(Inverse):
         comp._last_desired = math.nan
 
     def precondition(self, comp: Compensator, cycle: FloatArray) -> FloatArray:
-        """The preconditioning cycle to send first (see :meth:`Compensator.precondition`).
-
-        Parameters
-        ----------
-        samples : int, default 1000
-
-        Returns
-        -------
-        ndarray
-            The voltages (V) to send; the state advanced as if they had been.
-        """
+        """See :meth:`~piezohyst.inverses.Inverse.precondition`."""
         u = np.empty_like(cycle)
         alphas = comp.lags[2]
         ns = int(comp.config[D.CC_NS])
@@ -724,31 +599,16 @@ class PackedInverse(Inverse):
     def slots(self) -> tuple[int, int]:
         return int(D.CC_REF), int(D.CC_INV_GAIN)
 
-    def controller_step(
-        self,
-        comp: Compensator,
-        desired: float,
-        measured: float,
-        config: FloatArray,
-        ctl: FloatArray,
-        feedback: FloatArray,
-    ) -> float:
-        return float(D.core_controller_step(desired, measured, comp.params, config, comp._state,
-                                            comp.region, comp.dyn, comp.dstate, comp.trial, ctl,
-                                            feedback))  # fmt: skip
+    def controller_step(self, comp: Compensator, d: float, m: float, loop: Loop) -> float:
+        return float(D.core_controller_step(d, m, comp.params, loop[0], comp._state,
+                                            comp.region, comp.dyn, comp.dstate, comp.trial,
+                                            loop[1], loop[2]))  # fmt: skip
 
     def controller_process(
-        self,
-        comp: Compensator,
-        d: FloatArray,
-        m: FloatArray,
-        config: FloatArray,
-        ctl: FloatArray,
-        feedback: FloatArray,
-        out: FloatArray,
+        self, comp: Compensator, d: FloatArray, m: FloatArray, loop: Loop, out: FloatArray
     ) -> None:
-        D.core_controller_process(d, m, comp.params, config, comp._state, comp.region, comp.dyn,
-                                  comp.dstate, comp.trial, ctl, feedback, out)  # fmt: skip
+        a = (comp.params, loop[0], comp._state, comp.region, comp.dyn, comp.dstate, comp.trial)
+        D.core_controller_process(d, m, *a, loop[1], loop[2], out)
 
 
 class PythonInverse(Inverse):
@@ -790,22 +650,7 @@ class PythonInverse(Inverse):
         n = self.n_operators(comp)
         return CompensatorState(comp._state[:n].copy(), np.zeros(0), self.last_command(comp))
 
-    def last_command(self, comp: Compensator) -> float:
-        return float(comp._state[self._LAST])
-
-    def nonfinite_count(self, comp: Compensator) -> int:
-        return int(comp._state[self._NONFINITE])
-
-    def saturated_count(self, comp: Compensator) -> int:
-        return int(comp._state[self._SATURATED])
-
-    def reset(
-        self,
-        comp: Compensator,
-        state: CompensatorState | ArrayLike | None = None,
-        *,
-        voltage: float | None = None,
-    ) -> None:
+    def reset(self, comp: Compensator, state: State, voltage: float | None) -> None:
         core: Core = comp.core
         n = self.n_operators(comp)
         if isinstance(state, CompensatorState):

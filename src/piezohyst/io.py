@@ -17,6 +17,7 @@ import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -534,32 +535,23 @@ def open_recording(
 
 
 def read_recording(
-    path: str | os.PathLike[str],
-    *,
-    input_column: str = "voltage",
-    output_column: str | None = "charge",
-    time_column: str | None = "time",
-    rate: float | None = None,
-    group: str | None = None,
-    output_required: bool = True,
-    t_start: float | None = None,
-    t_stop: float | None = None,
-    input_unit: str | None = None,
-    output_unit: str | None = None,
-    time_unit: str | None = None,
-    progress: Callable[[int], None] | None = None,
+    path: str | os.PathLike[str], *, progress: Callable[[int], None] | None = None, **options: Any
 ) -> Recording:
     """Input, output and time columns of a data file, in seconds and (where known) V, C or m.
 
     Time comes from ``time_column`` when the file has it, else from
     ``rate`` (Hz), else from the file's own sample interval (TDMS); the time
     must be strictly increasing. ``output_column=None`` reads no output.
-    :func:`open_recording` reads the same block by block.
+    :func:`open_recording` reads the same block by block (the same options).
 
     Parameters
     ----------
     path : str or os.PathLike
         The data file (see :func:`read_table` for the formats).
+    progress : callable, optional
+        Called with the rows read so far (see :func:`read_table`).
+    **options
+        Keyword options of :func:`open_recording`:
     input_column, output_column, time_column : str or None
         Column names, or 0-based indices as digits.
     rate : float, optional
@@ -574,8 +566,6 @@ def read_recording(
         Units of the columns, for files whose headers name none (a header's
         ``name [unit]`` or ``name (unit)`` counts; naming both differently
         is an error). Converted by :func:`piezohyst.units.to_standard`.
-    progress : callable, optional
-        Called with the rows read so far (see :func:`read_table`).
 
     Returns
     -------
@@ -587,20 +577,7 @@ def read_recording(
         A missing or misnamed column, a time column together with a sample
         rate, a bad or non-increasing time, or units that contradict the file.
     """
-    stream = open_recording(
-        path,
-        input_column=input_column,
-        output_column=output_column,
-        time_column=time_column,
-        rate=rate,
-        group=group,
-        output_required=output_required,
-        t_start=t_start,
-        t_stop=t_stop,
-        input_unit=input_unit,
-        output_unit=output_unit,
-        time_unit=time_unit,
-    )
+    stream = open_recording(path, **options)
     return collect(stream, progress)
 
 

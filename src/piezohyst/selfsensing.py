@@ -362,7 +362,7 @@ class SelfSensingController:
         """
         comp = self.compensator
         return comp.inverse.controller_step(
-            comp, float(desired), float(measured), self.config, self.ctl, self.feedback
+            comp, float(desired), float(measured), (self.config, self.ctl, self.feedback)
         )
 
     def process(self, desired: ArrayLike, measured: ArrayLike) -> FloatArray:
@@ -387,7 +387,7 @@ class SelfSensingController:
             raise ShapeError(msg)
         out = np.empty_like(d)
         comp = self.compensator
-        comp.inverse.controller_process(comp, d, m, self.config, self.ctl, self.feedback, out)
+        comp.inverse.controller_process(comp, d, m, (self.config, self.ctl, self.feedback), out)
         return out
 
 

@@ -9,7 +9,7 @@ the core's solve. The helpers build the terms' columns over the record.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -19,20 +19,28 @@ from ..terms import Term
 from .base import Core, CoreFit, FitJob
 from .play import growth_proxy
 
-__all__ = ["fit_in_memory"]
+__all__ = ["Solving", "fit_in_memory"]
 
 REFINE_ROWS = 8000  # output-error refinement: residual rows (hashed picks)
 REFINE_EVALS = 25  # and evaluations
 FIT_ROWS = 40_000  # linear solves and residuals use at most this many samples (hashed picks)
 SEARCH_ROWS = 5_000  # Bouc-Wen's shape search runs on a copy decimated to about this many
 
-#: A core's own solve: (x, y, t, terms, settings, initial state, growth coefficients fixed by
-#: the proxy or None) -> (core, one coefficient array per term)
-Solve = Callable[
-    [FloatArray, FloatArray, FloatArray | None, list[Term], dict[str, Any], Any,
-     list[FloatArray] | None],
-    tuple[Core, list[FloatArray]],
-]  # fmt: skip
+
+class Solving(NamedTuple):
+    """What a core's own solve gets: the record, the terms, the settings, the start."""
+
+    x: FloatArray
+    y: FloatArray
+    t: FloatArray | None
+    terms: list[Term]
+    params: dict[str, Any]
+    initial_state: Any
+    growth: list[FloatArray] | None  # coefficients fixed by the proxy, or None
+
+
+#: A core's own solve: (core, one coefficient array per term)
+Solve = Callable[[Solving], tuple[Core, list[FloatArray]]]
 
 
 def fit_in_memory(core: type[Core], job: FitJob, solve: Solve) -> CoreFit:
@@ -60,7 +68,8 @@ def fit_in_memory(core: type[Core], job: FitJob, solve: Solve) -> CoreFit:
         n_fixed = len(job.subsets[0]) if job.subsets else 0  # the kept terms: in every subset
         terms, proxy, selection = growth_proxy(x, y, t, terms, select, job.initial_state,
                                                n_fixed)  # fmt: skip
-    fitted, coefs = solve(x, y, t if terms else None, terms, job.params, job.initial_state, proxy)
+    fitted, coefs = solve(Solving(x, y, t if terms else None, terms, job.params,
+                                  job.initial_state, proxy))  # fmt: skip
     return CoreFit(fitted, tuple(terms), tuple(coefs), selection)
 
 

@@ -658,20 +658,7 @@ class PackedCore(Core):
         return z
 
     def propagate(self, x: ArrayLike, state: ArrayLike | None = None) -> Propagation[FloatArray]:
-        """Run the core over ``x`` from ``state`` (default :attr:`initial_state`).
-
-        Parameters
-        ----------
-        x : array_like, shape (N,)
-            Input (V).
-        state : array_like, optional
-            ``[last input, internal variable, ...]``.
-
-        Returns
-        -------
-        Propagation
-            ``output`` (N,) and the final state; chunks equal one call.
-        """
+        """See :meth:`~piezohyst.cores.base.Core.propagate`."""
         xs = as_signal(x, "x", allow_empty=True)
         z = self._state(state)
         y = np.empty_like(xs)
@@ -679,16 +666,7 @@ class PackedCore(Core):
         return Propagation(y, z)
 
     def output(self, state: ArrayLike) -> float:
-        """The output at a state (no input applied).
-
-        Parameters
-        ----------
-        state : array_like
-
-        Returns
-        -------
-        float
-        """
+        """See :meth:`~piezohyst.cores.base.Core.output`."""
         z = self._state(state)
         return float(D.core_output(self.packed, z))
 
@@ -696,19 +674,15 @@ class PackedCore(Core):
         # the voltage and the memory repeat; the output is compared in output units
         return bool(z[0] == before[0] and np.array_equal(z[2:], before[2:]))
 
+    def region_json(self) -> dict[str, Any] | None:
+        """The region in a file (None: none recorded)."""
+        return None if self.region is None else self.region.to_dict()
+
+    @staticmethod
+    def region_from(data: Any) -> Region | None:
+        """The region a file records (None: none)."""
+        return None if data is None else Region.from_dict(dict(data))
+
     def inverse_plan(self) -> InversePlan:
-        """The compiled bracketed Newton solve of ``_diffkernels`` (also in the C export).
-
-        Returns
-        -------
-        InversePlan
-        """
+        """See :meth:`~piezohyst.cores.base.Core.inverse_plan`."""
         return InversePlan("packed", self.min_slope)
-
-
-def _region_dict(region: Region | None) -> dict[str, Any] | None:
-    return None if region is None else region.to_dict()
-
-
-def _region_from(data: Any) -> Region | None:
-    return None if data is None else Region.from_dict(dict(data))

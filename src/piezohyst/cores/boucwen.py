@@ -21,10 +21,10 @@ from .._lazy import LazyModule
 from .._validation import FloatArray
 from ..errors import InsufficientDataError, ParameterError, ShapeError
 from ..identification import _bounded_lstsq
-from ..terms import Term
 from ._inmemory import (
     FIT_ROWS,
     SEARCH_ROWS,
+    Solving,
     _growth_matrix,
     _picked_rows,
     _split,
@@ -38,8 +38,6 @@ from .base import (
     Region,
     _finite,
     _frozen,
-    _region_dict,
-    _region_from,
 )
 
 if TYPE_CHECKING:
@@ -177,21 +175,12 @@ class BoucWenHysteresis(PackedCore):
             "offset": self.offset,
             "dv_max": self.dv_max,
             "initial_state": self.initial_state.tolist(),
-            "region": _region_dict(self.region),
+            "region": self.region_json(),
         }
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> BoucWenHysteresis:
-        """Inverse of :meth:`to_dict`.
-
-        Parameters
-        ----------
-        data : dict
-
-        Returns
-        -------
-        BoucWenHysteresis
-        """
+        """Inverse of :meth:`to_dict` (see :meth:`~piezohyst.cores.base.Core.from_dict`)."""
         return cls(
             data["c0"],
             data["alpha"],
@@ -201,35 +190,19 @@ class BoucWenHysteresis(PackedCore):
             data["offset"],
             data["initial_state"],
             data.get("dv_max"),
-            _region_from(data.get("region")),
+            cls.region_from(data.get("region")),
         )
 
     @classmethod
     def identify(cls, job: FitJob) -> CoreFit:
-        """An outer search over the three shape parameters around a bounded linear solve
-        of c0, alpha, the offset and the growth terms (jointly: its loops close).
-
-        Parameters
-        ----------
-        job : FitJob
-
-        Returns
-        -------
-        CoreFit
-        """
+        """See :meth:`~piezohyst.cores.base.Core.identify`."""
         return fit_in_memory(cls, job, _solve)
 
 
-def _solve(
-    x: FloatArray,
-    y: FloatArray,
-    t: FloatArray | None,
-    terms: list[Term],
-    params: dict[str, Any],
-    initial_state: Any,
-    growth: list[FloatArray] | None,
-) -> tuple[BoucWenHysteresis, list[FloatArray]]:
+def _solve(job: Solving) -> tuple[BoucWenHysteresis, list[FloatArray]]:
     from scipy.optimize import least_squares
+
+    x, y, t, terms, params, initial_state, _ = job
 
     n = x.size
     g_mat = _growth_matrix(terms, x, t)

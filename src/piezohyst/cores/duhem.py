@@ -22,11 +22,11 @@ from .._lazy import LazyModule
 from .._validation import FloatArray
 from ..errors import InsufficientDataError, ParameterError, ShapeError
 from ..identification import _bounded_lstsq
-from ..terms import Term
 from ._inmemory import (
     FIT_ROWS,
     REFINE_EVALS,
     REFINE_ROWS,
+    Solving,
     _growth_matrix,
     _picked_rows,
     fit_in_memory,
@@ -39,8 +39,6 @@ from .base import (
     _finite,
     _frozen,
     _nodes,
-    _region_dict,
-    _region_from,
     _slopes,
 )
 
@@ -146,10 +144,7 @@ class DuhemHysteresis(PackedCore):
         return f"Duhem, {self.v_nodes.size} × {self.q_nodes.size} grid"
 
     def rest_state(self, x0: float) -> FloatArray:
-        """See :meth:`DifferentialCore.rest_state`: the middle of the recorded band at ``x0``.
-
-        Without a region: the initial state's output, moved to ``x0``.
-        """
+        """See :meth:`~piezohyst.cores.base.Core.rest_state`."""
         q = self.region.middle(x0) if self.region is not None else float(self.initial_state[1])
         return np.array([float(x0), q])
 
@@ -192,56 +187,30 @@ class DuhemHysteresis(PackedCore):
             "down": self.down.tolist(),
             "initial_state": self.initial_state.tolist(),
             "dv_max": self.dv_max,
-            "region": _region_dict(self.region),
+            "region": self.region_json(),
         }
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> DuhemHysteresis:
-        """Inverse of :meth:`to_dict`.
-
-        Parameters
-        ----------
-        data : dict
-
-        Returns
-        -------
-        DuhemHysteresis
-        """
+        """Inverse of :meth:`to_dict` (see :meth:`~piezohyst.cores.base.Core.from_dict`)."""
         return cls(
             data["v_nodes"],
             data["q_nodes"],
             data["up"],
             data["down"],
             data["initial_state"],
-            _region_from(data.get("region")),
+            cls.region_from(data.get("region")),
             data.get("dv_max"),
         )
 
     @classmethod
     def identify(cls, job: FitJob) -> CoreFit:
-        """The integrated regression on the measured path, refined on the output error;
-        growth terms from a play-operator proxy first (its loops need not close).
-
-        Parameters
-        ----------
-        job : FitJob
-
-        Returns
-        -------
-        CoreFit
-        """
+        """See :meth:`~piezohyst.cores.base.Core.identify`."""
         return fit_in_memory(cls, job, _solve)
 
 
-def _solve(
-    x: FloatArray,
-    y: FloatArray,
-    t: FloatArray | None,
-    terms: list[Term],
-    params: dict[str, Any],
-    initial_state: Any,
-    growth: list[FloatArray] | None,
-) -> tuple[DuhemHysteresis, list[FloatArray]]:
+def _solve(job: Solving) -> tuple[DuhemHysteresis, list[FloatArray]]:
+    x, y, t, terms, params, _, growth = job
     smoothing = float(params["smoothing"])
     nv, nq = params["grid"]
     if x.size < 4 * nv * nq + 2:

@@ -149,17 +149,7 @@ class PIHysteresis(Core):
         return bool(np.all(self.loading_slopes > 0.0))
 
     def rest_state(self, x0: float) -> FloatArray:
-        """Operator states of an actuator resting at input ``x0`` with its memory wiped.
-
-        Parameters
-        ----------
-        x0 : float
-            Input (V).
-
-        Returns
-        -------
-        ndarray, shape (n,)
-        """
+        """See :meth:`~piezohyst.cores.base.Core.rest_state`."""
         return np.full(self.n_operators, float(x0))
 
     def loading_curve(self, s: ArrayLike) -> FloatArray:
@@ -180,21 +170,7 @@ class PIHysteresis(Core):
 
     # ------------------------------------------------------------- evaluation
     def propagate(self, x: ArrayLike, state: ArrayLike | None = None) -> Propagation[FloatArray]:
-        """Run the operator over ``x`` from ``state`` (default :attr:`initial_state`).
-
-        Parameters
-        ----------
-        x : array_like, shape (N,)
-            Input samples (V).
-        state : array_like, shape (n,), optional
-            Operator states before the first sample.
-
-        Returns
-        -------
-        Propagation
-            ``output`` (N,) and the final ``state``; running a signal in chunks,
-            passing each final state on, equals one call.
-        """
+        """See :meth:`~piezohyst.cores.base.Core.propagate`."""
         xs = as_signal(x, "x", allow_empty=True)
         z = self._state(state)
         y = np.empty_like(xs)
@@ -288,16 +264,7 @@ class PIHysteresis(Core):
         return f"{self.n_operators} operators"
 
     def describe(self, input_unit: str, output_unit: str) -> list[tuple[str, str]]:
-        """Labelled parameters with units, for reports.
-
-        Parameters
-        ----------
-        input_unit, output_unit : str
-
-        Returns
-        -------
-        list of (str, str)
-        """
+        """See :meth:`~piezohyst.cores.base.Core.describe`."""
         fmt = ", ".join
         return [
             ("core", f"Prandtl-Ishlinskii, {self.n_operators} play operators"),
@@ -307,13 +274,7 @@ class PIHysteresis(Core):
 
     # ------------------------------------------------------------ persistence
     def to_dict(self) -> dict[str, Any]:
-        """Plain-JSON parameters (lists of floats).
-
-        Returns
-        -------
-        dict
-            ``thresholds``, ``weights``, ``offset``, ``initial_state``.
-        """
+        """See :meth:`~piezohyst.cores.base.Core.to_dict`."""
         return {
             "thresholds": self.thresholds.tolist(),
             "weights": self.weights.tolist(),
@@ -323,16 +284,7 @@ class PIHysteresis(Core):
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> PIHysteresis:
-        """Inverse of :meth:`to_dict`; raises on missing or malformed fields.
-
-        Parameters
-        ----------
-        data : dict
-
-        Returns
-        -------
-        PIHysteresis
-        """
+        """See :meth:`~piezohyst.cores.base.Core.from_dict`."""
         return cls(
             thresholds=data["thresholds"],
             weights=data["weights"],
@@ -342,43 +294,16 @@ class PIHysteresis(Core):
 
     # ------------------------------------------------------ the core contract
     def history_state(self, history: ArrayLike) -> FloatArray:
-        """Operator states after ``history``, from rest at its first sample.
-
-        Parameters
-        ----------
-        history : array_like
-
-        Returns
-        -------
-        ndarray
-        """
+        """See :meth:`~piezohyst.cores.base.Core.history_state`."""
         return history_state(history, self.thresholds)
 
     def periodic_state(self, x: ArrayLike) -> FloatArray:
-        """Operator states before ``x`` run as one period of a periodic drive.
-
-        Parameters
-        ----------
-        x : array_like
-
-        Returns
-        -------
-        ndarray
-        """
+        """See :meth:`~piezohyst.cores.base.Core.periodic_state`."""
         xs = as_signal(x, "x")
         return periodic_state(_array_blocks(xs), self.thresholds, float(xs[0]))
 
     def output(self, state: ArrayLike) -> float:
-        """The output at operator states ``state`` (no input applied).
-
-        Parameters
-        ----------
-        state : array_like
-
-        Returns
-        -------
-        float
-        """
+        """See :meth:`~piezohyst.cores.base.Core.output`."""
         return float(self.offset + self.weights @ self._state(state))
 
     @property
@@ -387,30 +312,13 @@ class PIHysteresis(Core):
         return float(self.loading_slopes.min())
 
     def fitted_attributes(self) -> dict[str, Any]:
-        """``thresholds_``, ``weights_`` and ``offset_`` of the model.
-
-        Returns
-        -------
-        dict
-        """
+        """See :meth:`~piezohyst.cores.base.Core.fitted_attributes`."""
         return {"thresholds_": self.thresholds, "weights_": self.weights, "offset_": self.offset}
 
     def fast_plan(
         self, terms: tuple[Any, ...], coefs: tuple[FloatArray, ...]
     ) -> Callable[[FloatArray, Any], FloatArray | None] | None:
-        """One compiled call for play operators plus at most one integral or time term.
-
-        Parameters
-        ----------
-        terms : tuple of Term
-        coefs : tuple of ndarray
-
-        Returns
-        -------
-        callable or None
-            ``plan(x, t)``: the output from the initial state, or None when
-            the arguments need the general path (``t`` not a float64 array).
-        """
+        """See :meth:`~piezohyst.cores.base.Core.fast_plan`."""
         if not terms:
             kind, coef = _kernels.FAST_NONE, 0.0
         elif len(terms) == 1 and type(terms[0]) in (Integral, TimeTerm):
@@ -434,31 +342,14 @@ class PIHysteresis(Core):
         return plan
 
     def inverse_plan(self) -> InversePlan:
-        """Eq. 18 through the play kernels (Newton beside kept terms).
-
-        Returns
-        -------
-        InversePlan
-        """
+        """See :meth:`~piezohyst.cores.base.Core.inverse_plan`."""
         if not self.is_invertible:
             self.inverse()  # raises NotInvertibleError with the reason
         return InversePlan("play", self.min_slope)
 
     @classmethod
     def identify(cls, job: FitJob) -> CoreFit:
-        """The one bounded linear solve: play weights, offset and every term jointly.
-
-        Streams the record (three passes). ``job.params`` holds ``thresholds``
-        (or ``n_operators``) and ``min_slope``.
-
-        Parameters
-        ----------
-        job : FitJob
-
-        Returns
-        -------
-        CoreFit
-        """
+        """See :meth:`~piezohyst.cores.base.Core.identify`."""
         params, sm = job.params, job.summary
         thr = params.get("thresholds")
         if thr is None:

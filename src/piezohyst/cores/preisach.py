@@ -22,9 +22,10 @@ from .._lazy import LazyModule
 from .._validation import FloatArray, as_signal
 from ..errors import InsufficientDataError, ParameterError, ShapeError
 from ..identification import _bounded_lstsq
-from ..terms import Relaxation, Term
+from ..terms import Relaxation
 from ._inmemory import (
     FIT_ROWS,
+    Solving,
     _growth_matrix,
     _picked_rows,
     _split,
@@ -39,8 +40,6 @@ from .base import (
     Region,
     _frozen,
     _nodes,
-    _region_dict,
-    _region_from,
 )
 
 if TYPE_CHECKING:
@@ -142,18 +141,7 @@ class PreisachHysteresis(PackedCore):
         return f"Preisach, {inside} nodes, initial loading curve from rest{beyond}"
 
     def rest_state(self, x0: float) -> FloatArray:
-        """See :meth:`DifferentialCore.rest_state`: at ``x0``, mid-band.
-
-        Without :attr:`virgin`, no reversal yet: the first move follows a
-        branch from ``x0``. With it, the actuator has forgotten its extremes:
-        the state an AC drive decaying to ``x0`` leaves, a staircase of
-        :data:`DEMAG_POINTS` reversal points shrinking towards ``x0`` by
-        :data:`DEMAG_RATIO`, as wide as the grid allows on both sides; the
-        first rise (or fall) then follows the initial loading curve, as a play
-        operator from zero state does (a fit from rest extends the grid to the
-        rest point's mirror image to learn it). At the grid's edge (no room
-        below or above) the first move follows a branch from ``x0`` either way.
-        """
+        """See :meth:`~piezohyst.cores.base.Core.rest_state`."""
         q = self.region.middle(x0) if self.region is not None else float(self.initial_state[1])
         z = np.zeros(D.RV_SIZE)
         x0 = float(x0)
@@ -204,22 +192,13 @@ class PreisachHysteresis(PackedCore):
             "nodes": self.nodes.tolist(),
             "density": self.density.tolist(),
             "initial_state": self.initial_state.tolist(),
-            "region": _region_dict(self.region),
+            "region": self.region_json(),
             "rest": "virgin" if self.virgin else "branch",
         }
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> PreisachHysteresis:
-        """Inverse of :meth:`to_dict`.
-
-        Parameters
-        ----------
-        data : dict
-
-        Returns
-        -------
-        PreisachHysteresis
-        """
+        """Inverse of :meth:`to_dict` (see :meth:`~piezohyst.cores.base.Core.from_dict`)."""
         rest = data.get("rest", "branch")  # files before the virgin rest state: a branch
         if rest not in ("virgin", "branch"):
             msg = f"the Preisach core's 'rest' must be 'virgin' or 'branch'. Got {rest!r}."
@@ -228,45 +207,25 @@ class PreisachHysteresis(PackedCore):
             data["nodes"],
             data["density"],
             data["initial_state"],
-            _region_from(data.get("region")),
+            cls.region_from(data.get("region")),
             virgin=rest == "virgin",
         )
 
     @classmethod
     def identify(cls, job: FitJob) -> CoreFit:
-        """One bounded least squares in the density (>= 0), joint with the growth terms;
-        from rest twice (a branch, the initial loading curve), the better kept.
-
-        Parameters
-        ----------
-        job : FitJob
-
-        Returns
-        -------
-        CoreFit
-        """
+        """See :meth:`~piezohyst.cores.base.Core.identify`."""
         return fit_in_memory(cls, job, _solve)
 
 
-def _solve(
-    x: FloatArray,
-    y: FloatArray,
-    t: FloatArray | None,
-    terms: list[Term],
-    params: dict[str, Any],
-    initial_state: Any,
-    growth: list[FloatArray] | None,
-) -> tuple[PreisachHysteresis, list[FloatArray]]:
+def _solve(job: Solving) -> tuple[PreisachHysteresis, list[FloatArray]]:
+    x, y, t, terms, params, initial_state, _ = job
     rest = _rest_point(x, initial_state)
     choice = str(params["rest"])
     kinds = ["branch"] if rest is None else (
         ["virgin", "branch"] if choice == "auto" else [choice])  # fmt: skip
     rows = _picked_rows(x.size, FIT_ROWS)
     g_mat = _growth_matrix(terms, x, t, rows)
-    fits = [
-        _solve_density(x, y, t, terms, params, initial_state, rows, g_mat, k == "virgin")
-        for k in kinds
-    ]
+    fits = [_solve_density(job, rows, g_mat, k == "virgin") for k in kinds]
     if len(fits) == 2 and not (  # the initial loading curve must earn its extra cells
         fits[0][2] < VIRGIN_GAIN * fits[1][2] and fits[1][2] > 1e-6 * float(np.ptp(y))
     ):
@@ -276,18 +235,11 @@ def _solve(
 
 
 def _solve_density(
-    x: FloatArray,
-    y: FloatArray,
-    t: FloatArray | None,
-    terms: list[Term],
-    params: dict[str, Any],
-    initial_state: Any,
-    rows: np.ndarray,
-    g_mat: FloatArray,
-    virgin: bool,
+    job: Solving, rows: np.ndarray, g_mat: FloatArray, virgin: bool
 ) -> tuple[PreisachHysteresis, list[FloatArray], float]:
     """One bounded least squares: (core, term coefficients, RMSE on the picked rows);
     ``virgin``: from rest the first move follows the initial loading curve."""
+    x, y, t, terms, params, initial_state, _ = job
     n_in = int(params["nodes"])
     lo, hi = float(x.min()), float(x.max())
     span = hi - lo
