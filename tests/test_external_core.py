@@ -74,3 +74,39 @@ def test_what_an_outside_core_lacks_is_refused_in_one_line() -> None:
         model.inverse()
     with pytest.raises(ph.ParameterError, match="must be a registered core"):
         ph.HysteresisModel("no-such-core").fit(v, q)
+
+
+class _TimeSquared(ph.Term):
+    """A growth term defined outside the library (a bias that ramps)."""
+
+    kind = "test_time_squared"
+    removed = True
+    rate_dependent = True
+    state_names = ("elapsed",)
+
+    def columns(self, x: np.ndarray, t: np.ndarray | None, dt: np.ndarray | None,
+                state: np.ndarray) -> np.ndarray:  # fmt: skip
+        assert dt is not None
+        elapsed = state[0] + np.cumsum(dt)
+        state[0] = elapsed[-1]
+        return np.asarray((elapsed**2)[:, None])
+
+    def coefficient_units(self, input_unit: str, output_unit: str) -> tuple[str, ...]:
+        return (f"{output_unit}/s^2",)
+
+
+def test_a_term_registered_once_is_a_growth_choice_everywhere() -> None:
+    """Defining the term makes it a named growth choice of every model with growth terms;
+    the self-sensing loop, which removes leakage currents only, refuses it by name."""
+    t = np.arange(4000) / 1000.0
+    v = 70.0 - 70.0 * np.cos(2.0 * np.pi * t)
+    q = 1e-8 * v + 2e-9 * t**2
+    for model in (ph.GeneralizedPI(6, growth_terms=("integral", "test_time_squared")),
+                  ph.PreisachModel(nodes=8, growth_terms=("test_time_squared",)),
+                  ph.BoucWenModel(growth_terms=("test_time_squared",))):  # fmt: skip
+        model.fit(v, q, t=t)
+        assert "test_time_squared" in model.growth_coefficients(), type(model).__name__
+    with pytest.raises(ph.ParameterError, match="'test_time_squared' is not a leakage current"):
+        ph.SelfSensingController(model, v_min=10.0, v_max=130.0, sample_rate=1000.0)
+    with pytest.raises(ph.ParameterError, match="test_time_squared"):
+        ph.GeneralizedPI(growth_terms=("no_such_term",)).fit(v, q, t=t)

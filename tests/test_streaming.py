@@ -199,7 +199,9 @@ def test_compensate_file_streams_like_one_call(
     fs = res.sample_rate  # from the time column
     # tol: the rate from the time column's mean step: rounding of the sum
     assert fs == pytest.approx(1000.0, rel=1e-9)
-    comp = ph.compensator.CompensatorSettings(slew_rate=model.max_slew_rate_, sample_rate=fs).build(model)
+    comp = ph.compensator.CompensatorSettings(slew_rate=model.max_slew_rate_, sample_rate=fs).build(
+        model
+    )
     comp.reset(voltage=float(np.clip(model.initial_state_[0], comp.v_min, comp.v_max)))
     pre = comp.precondition(1000)
     cmd = comp.process(desired)

@@ -21,10 +21,11 @@ from ._validation import FloatArray, as_signal, check_float, check_int
 from .cores.base import Core, core_class
 from .dynamics import KINDS as DYNAMICS_KINDS
 from .errors import ParameterError
-from .terms import Creep, Term, make_term
+from .terms import Creep, Term, growth_kinds, make_term
 
 __all__ = ["GROWTH_TERMS", "Estimator", "Rule"]
 
+#: The growth terms "auto" chooses among (any registered growth term can be named)
 GROWTH_TERMS = ("integral", "time", "abs_integral")
 
 
@@ -83,23 +84,25 @@ def _thresholds(value: object, name: str, owner: str) -> FloatArray | None:
 
 
 def _growth_terms(value: object, name: str, owner: str) -> tuple[str, ...] | None:
-    """None for 'auto' (choose), else the distinct terms in GROWTH_TERMS order."""
+    """None for 'auto' (choose among the built-in ones), else distinct registered growth
+    terms, in the registry's order (:func:`~piezohyst.terms.growth_kinds`)."""
+    kinds = growth_kinds()
     if isinstance(value, str):
         if value != "auto":
             msg = (
                 f"The '{name}' parameter of {owner} must be 'auto' or a sequence "
-                f"of {list(GROWTH_TERMS)}. Got {value!r} instead."
+                f"of {list(kinds)}. Got {value!r} instead."
             )
             raise ParameterError(msg)
         return None
     terms = tuple(value) if isinstance(value, Sequence) else (value,)
-    if any(term not in GROWTH_TERMS for term in terms) or len(set(terms)) != len(terms):
+    if any(term not in kinds for term in terms) or len(set(terms)) != len(terms):
         msg = (
             f"The '{name}' parameter of {owner} must hold distinct terms from "
-            f"{list(GROWTH_TERMS)}. Got {list(terms)!r} instead."
+            f"{list(kinds)}. Got {list(terms)!r} instead."
         )
         raise ParameterError(msg)
-    return tuple(t for t in GROWTH_TERMS if t in terms)
+    return tuple(t for t in kinds if t in terms)
 
 
 def _creep(value: object, name: str, owner: str) -> Creep | None:

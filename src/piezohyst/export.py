@@ -128,7 +128,7 @@ def export_c(
     engine = comp.inverse.name
     if engine == "packed":  # Preisach, Duhem, Bouc-Wen: the bracketed Newton step in C
         return _packed_c(comp, prefix, precision)
-    if engine != "play":
+    if engine != "play":  # only the compiled engines have C (C_FILES)
         msg = (
             f"C export covers play operators and the Preisach, Duhem and Bouc-Wen cores; a "
             f"{type(comp.spec.operator).__name__} core runs in Python (ph.Compensator) only."

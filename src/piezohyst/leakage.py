@@ -229,7 +229,11 @@ class Leakage:
             if not term.removed:
                 continue
             if term.kind not in values:
-                msg = f"the growth term {term.kind!r} is not a leakage current"
+                msg = (
+                    f"the growth term {term.kind!r} is not a leakage current the self-sensing "
+                    "loop can remove (it knows integral, abs_integral and time): pass a "
+                    "Leakage calibrated from holds (calibrate_leakage)"
+                )
                 raise ParameterError(msg)
             values[term.kind] = float(coef[0])
             if term.kind == "abs_integral":

@@ -81,6 +81,7 @@ __all__ = [
     "Term",
     "TimeTerm",
     "coefficient_arrays",
+    "growth_kinds",
     "make_term",
     "term_class",
 ]
@@ -757,6 +758,20 @@ def term_class(kind: str) -> type[Term]:
         )
         raise ParameterError(msg)
     return _TERMS[kind]
+
+
+def growth_kinds() -> tuple[str, ...]:
+    """Every registered growth term (removed before compensating) a model can name.
+
+    The built-in ``integral``, ``time`` and ``abs_integral`` first, then any
+    term registered since (a :class:`Term` subclass with ``removed = True``).
+
+    Returns
+    -------
+    tuple of str
+    """
+    builtin = ("integral", "time", "abs_integral")
+    return builtin + tuple(k for k, cls in _TERMS.items() if cls.removed and k not in builtin)
 
 
 def make_term(spec: str | Term, params: Mapping[str, Any] | None = None) -> Term:
