@@ -125,10 +125,10 @@ def export_c(
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", prefix):
         msg = f"prefix must be a C identifier. Got {prefix!r}."
         raise ParameterError(msg)
-    engine = comp.inverse.name
-    if engine == "packed":  # Preisach, Duhem, Bouc-Wen: the bracketed Newton step in C
+    source = comp.spec.operator.c_source  # the core's step in C, or None
+    if source == "packed.c":  # Preisach, Duhem, Bouc-Wen: the bracketed Newton step in C
         return _packed_c(comp, prefix, precision)
-    if engine != "play":  # only the compiled engines have C (C_FILES)
+    if source != "play.c":
         msg = (
             f"C export covers play operators and the Preisach, Duhem and Bouc-Wen cores; a "
             f"{type(comp.spec.operator).__name__} core runs in Python (ph.Compensator) only."

@@ -370,7 +370,7 @@ class Core:
 
     #: registry name (in files and messages); set by every concrete core
     kind: ClassVar[str] = ""
-    #: the C source of its compensator step, a file beside the core's module (None: no C)
+    #: the C file of its compensator step in ``cores/c`` (None: no C export)
     c_source: ClassVar[str | None] = None
     #: the growth terms come from a play-operator proxy first (cores whose loops need not close)
     growth_from_proxy: ClassVar[bool] = False
@@ -628,6 +628,7 @@ class PackedCore(Core):
 
     packed: FloatArray
     inner: ClassVar[str] = "x"
+    c_source: ClassVar[str | None] = "packed.c"
 
     @property
     def n_states(self) -> int:

@@ -97,6 +97,7 @@ class PIHysteresis(Core):
     offset: float = 0.0
     initial_state: FloatArray = field(default=None)  # type: ignore[arg-type]
     kind: ClassVar[str] = "play"  # the core's name in model files
+    c_source: ClassVar[str | None] = "play.c"
     file_fields: ClassVar[dict[str, str]] = {
         "thresholds": "numbers", "weights": "numbers", "offset": "number",
         "initial_state": "numbers",
