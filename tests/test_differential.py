@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from sklearn.base import clone
 
 import piezohyst as ph
-from piezohyst import _diffkernels as D
+from piezohyst import _packedkernels as D
 from piezohyst.cores import preisach
 from piezohyst.cores.duhem import _curvature
 from piezohyst.cores.preisach import _curvature_upper

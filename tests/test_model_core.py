@@ -352,7 +352,7 @@ LAYERS = {
     "_lazy": 0,
     "cores": 0,  # the package itself: a docstring
     "_kernels": 1,
-    "_diffkernels": 1,
+    "_packedkernels": 1,
     "_signalkernels": 1,
     "metrics": 1,
     "_isolate": 1,

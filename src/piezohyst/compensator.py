@@ -34,10 +34,10 @@ from .inverses import INVERSES, CompensatorState, Inverse, _finite_number
 from .model import HysteresisModel, InverseSpec
 
 if TYPE_CHECKING:
-    from . import _diffkernels as D
     from . import _kernels as K
+    from . import _packedkernels as D
 else:  # numba loads when a model first runs (see _lazy)
-    D = LazyModule("piezohyst._diffkernels", globals(), "D")
+    D = LazyModule("piezohyst._packedkernels", globals(), "D")
     K = LazyModule("piezohyst._kernels", globals(), "K")
 
 __all__ = ["Compensator", "CompensatorSettings", "CompensatorState"]

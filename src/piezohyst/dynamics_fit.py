@@ -43,7 +43,7 @@ def _scorer(
     if model._core_class() is not PIHysteresis:  # shape terms belong to a core the proxy lacks
         terms = [term for term in terms if term.removed]
     rate = any(term.rate_dependent for term in terms)
-    # the proxy of every model (differential cores too): up to 8 play operators
+    # the proxy of every model (the other cores too): up to 8 play operators
     n_proxy = min(int(params.get("n_operators", 8)), 8)
     core = PlayCore(default_thresholds(x_range, n_proxy))
     stride = max(1, x.size // 5000)

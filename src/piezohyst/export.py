@@ -36,10 +36,10 @@ from .io import atomic_write_text
 from .selfsensing import SelfSensingController
 
 if TYPE_CHECKING:
-    from . import _diffkernels as D
     from . import _kernels as K
+    from . import _packedkernels as D
 else:  # numba loads when a model first runs (see _lazy)
-    D = LazyModule("piezohyst._diffkernels", globals(), "D")
+    D = LazyModule("piezohyst._packedkernels", globals(), "D")
     K = LazyModule("piezohyst._kernels", globals(), "K")
 
 __all__ = ["CCode", "c_paths", "export_c", "write_c"]
@@ -271,7 +271,7 @@ def _source(prefix: str, precision: Precision, lines: list[str], files: list[str
 
 
 def _packed_c(comp: Compensator, prefix: str, precision: Precision) -> CCode:
-    """C99 for a compensator on a packed core: ``_diffkernels.core_step`` in C.
+    """C99 for a compensator on a packed core: ``_packedkernels.core_step`` in C.
 
     The same arithmetic as the kernel: the step's output is monotone in the
     voltage, so the inverse is Newton's method inside a bracket (bisecting

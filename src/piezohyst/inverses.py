@@ -10,7 +10,7 @@ compensator's kernel arrays (``setup``), runs the compiled step
 * ``"play"``: eq. 18 on play operators (Newton beside kept static or creep
   terms), the play kernels of :mod:`piezohyst._kernels`;
 * ``"packed"``: the Preisach, Duhem and Bouc-Wen cores' bracketed Newton step
-  (:mod:`piezohyst._diffkernels`), with creep lags and a relaxing core;
+  (:mod:`piezohyst._packedkernels`), with creep lags and a relaxing core;
 * ``"python"``: any core, by a bracketed root search on
   :meth:`~piezohyst.cores.base.Core.propagate` (a core defined outside the
   library: no compiled step, no C).
@@ -32,11 +32,11 @@ from .errors import ParameterError, ShapeError
 from .model import InverseSpec
 
 if TYPE_CHECKING:
-    from . import _diffkernels as D
     from . import _kernels as K
+    from . import _packedkernels as D
     from .compensator import Compensator
 else:  # numba loads when a model first runs (see _lazy)
-    D = LazyModule("piezohyst._diffkernels", globals(), "D")
+    D = LazyModule("piezohyst._packedkernels", globals(), "D")
     K = LazyModule("piezohyst._kernels", globals(), "K")
 
 __all__ = ["INVERSES", "CompensatorState", "Inverse"]
@@ -404,7 +404,7 @@ class PackedInverse(Inverse):
     inverted per sample, an integer delay by preview) and output mode as the
     play engine. Each sample inverts the core's step from the actuator's
     state: explicitly for Duhem within a step, by a safeguarded Newton solve
-    (at most ``_diffkernels.NEWTON_MAX`` iterations) otherwise; the state then
+    (at most ``_packedkernels.NEWTON_MAX`` iterations) otherwise; the state then
     advances with the command actually sent.
 
     Beyond the (voltage, output) region the model was identified on (its
@@ -480,7 +480,7 @@ class PackedInverse(Inverse):
         )
 
     def _slot(self, comp: Compensator, name: str) -> int:
-        """The status values follow the core's state (``_diffkernels.DS_*``)."""
+        """The status values follow the core's state (``_packedkernels.DS_*``)."""
         at = {"last": D.DS_LAST, "nonfinite": D.DS_NONFINITE, "saturated": D.DS_SATURATED,
               "outside": D.DS_OUTSIDE}[name]  # fmt: skip
         return int(comp._ns + D.DS_STATUS + at)

@@ -38,10 +38,10 @@ from .leakage import Leakage
 from .model import HysteresisModel
 
 if TYPE_CHECKING:
-    from . import _diffkernels as D
     from . import _kernels as K
+    from . import _packedkernels as D
 else:  # numba loads when a model first runs (see _lazy)
-    D = LazyModule("piezohyst._diffkernels", globals(), "D")
+    D = LazyModule("piezohyst._packedkernels", globals(), "D")
     K = LazyModule("piezohyst._kernels", globals(), "K")
 
 __all__ = [

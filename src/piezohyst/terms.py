@@ -60,11 +60,11 @@ from ._validation import FloatArray
 from .errors import ParameterError, ShapeError
 
 if TYPE_CHECKING:
-    from . import _diffkernels as D
     from . import _kernels
+    from . import _packedkernels as D
     from . import _signalkernels as _signals
 else:  # numba loads when a model first runs (see _lazy)
-    D = LazyModule("piezohyst._diffkernels", globals(), "D")
+    D = LazyModule("piezohyst._packedkernels", globals(), "D")
     _kernels = LazyModule("piezohyst._kernels", globals(), "_kernels")
     _signals = LazyModule("piezohyst._signalkernels", globals(), "_signals")
 
@@ -141,7 +141,7 @@ class RelaxationShape:
     tau : float
         The lag's time constant (s).
     packed : ndarray
-        The slow core in ``_diffkernels``' Preisach layout (head, Everett nodes).
+        The slow core in ``_packedkernels``' Preisach layout (head, Everett nodes).
     """
 
     tau: float

@@ -154,7 +154,7 @@ def fit_file(
     growth_terms, creep
         Settings of models that have them (``growth_terms``: every model but
         the classical and active PI; ``creep``: ``generalized-pi`` and the
-        models on a differential core).
+        models on a packed core: Preisach, Duhem, Bouc-Wen).
     relaxation : float, optional
         ``preisach``: time constant (s) of a relaxing part of the hysteresis
         (see :class:`~piezohyst.PreisachModel`).
@@ -219,7 +219,7 @@ def fit_file(
     window = _window_blocks(stream, passes)
     start: InitialState = initial_state
     if math.isfinite(stream.t_start) and "n_operators" not in accepted:
-        before = _history_input(stream, passes.tick())  # a differential core runs it
+        before = _history_input(stream, passes.tick())  # a core other than play operators runs it
         start = History(before) if before is not None else initial_state
     elif math.isfinite(stream.t_start):  # the window continues a known input history
         thresholds = default_thresholds(

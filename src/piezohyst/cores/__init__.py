@@ -13,5 +13,5 @@
 ==============  ==========================================================
 
 The per-sample loops are numba kernels: play operators in
-:mod:`piezohyst._kernels`, the packed cores in :mod:`piezohyst._diffkernels`.
+:mod:`piezohyst._kernels`, the packed cores in :mod:`piezohyst._packedkernels`.
 """

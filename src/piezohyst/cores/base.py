@@ -39,9 +39,9 @@ from .._validation import FloatArray, as_signal
 from ..errors import NotInvertibleError, NumericRangeError, ParameterError, ShapeError
 
 if TYPE_CHECKING:
-    from .. import _diffkernels as D
+    from .. import _packedkernels as D
 else:  # numba loads when a model first runs (see _lazy)
-    D = LazyModule("piezohyst._diffkernels", globals(), "D")
+    D = LazyModule("piezohyst._packedkernels", globals(), "D")
 
 __all__ = [
     "CORES",
@@ -621,7 +621,7 @@ class Core:
 
 class PackedCore(Core):
     """A core whose parameters are one packed array run by the compiled kernels
-    (``_diffkernels``): Preisach, Duhem and Bouc-Wen; the first slot names its kernel.
+    (``_packedkernels``): Preisach, Duhem and Bouc-Wen; the first slot names its kernel.
 
     Subclasses build ``packed`` (the kernels' layout) and set ``kind``.
     """

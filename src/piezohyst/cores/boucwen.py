@@ -4,7 +4,7 @@ r"""The Bouc-Wen core: :math:`y = c_0 v + \alpha h + c`,
 Five physical parameters, the model most papers on piezo stacks fit;
 identified by a search over its shape around a bounded linear solve, run by
 RK4 in small voltage steps, inverted by a safeguarded Newton solve per
-sample. Kernels in :mod:`piezohyst._diffkernels`; the compensator step in C
+sample. Kernels in :mod:`piezohyst._packedkernels`; the compensator step in C
 is ``c/packed.c``.
 """
 
@@ -41,9 +41,9 @@ from .base import (
 )
 
 if TYPE_CHECKING:
-    from .. import _diffkernels as D
+    from .. import _packedkernels as D
 else:  # numba loads when a model first runs (see _lazy)
-    D = LazyModule("piezohyst._diffkernels", globals(), "D")
+    D = LazyModule("piezohyst._packedkernels", globals(), "D")
 
 __all__ = ["BoucWenHysteresis"]
 

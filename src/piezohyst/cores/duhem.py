@@ -6,7 +6,7 @@ data covered. Linear in its coefficients, so identified by one bounded least
 squares on the record's path (an integrated regression), then refined on the
 output error with the exact sensitivities of the simulation. Its kernels (the
 Euler step, the fit's regressors and Jacobian) are in
-:mod:`piezohyst._diffkernels`; its compensator step in C is ``c/packed.c``.
+:mod:`piezohyst._packedkernels`; its compensator step in C is ``c/packed.c``.
 """
 
 from __future__ import annotations
@@ -43,9 +43,9 @@ from .base import (
 )
 
 if TYPE_CHECKING:
-    from .. import _diffkernels as D
+    from .. import _packedkernels as D
 else:  # numba loads when a model first runs (see _lazy)
-    D = LazyModule("piezohyst._diffkernels", globals(), "D")
+    D = LazyModule("piezohyst._packedkernels", globals(), "D")
 
 __all__ = ["DuhemHysteresis"]
 

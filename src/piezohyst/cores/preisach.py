@@ -4,7 +4,7 @@ The output rising from a minimum :math:`a` is :math:`q(a) + E(a, v)`, with
 wiping-out and return-point memory (a stack of reversal points). Linear in
 its density, so identified by one bounded least squares (density >= 0) joint
 with the growth terms and a relaxation term; inverted by the packed cores'
-bracketed Newton solve. Kernels in :mod:`piezohyst._diffkernels`
+bracketed Newton solve. Kernels in :mod:`piezohyst._packedkernels`
 (``everett``, ``rev_move``, ``rev_design``); the compensator step in C is
 ``c/packed.c``.
 """
@@ -43,15 +43,15 @@ from .base import (
 )
 
 if TYPE_CHECKING:
-    from .. import _diffkernels as D
+    from .. import _packedkernels as D
 else:  # numba loads when a model first runs (see _lazy)
-    D = LazyModule("piezohyst._diffkernels", globals(), "D")
+    D = LazyModule("piezohyst._packedkernels", globals(), "D")
 
 __all__ = ["PreisachHysteresis"]
 
 
 #: Reversal points of a Preisach core's rest state (a demagnetising staircase), of
-#: the stack's ``_diffkernels.STACK``; the rest holds the reversals of the drive
+#: the stack's ``_packedkernels.STACK``; the rest holds the reversals of the drive
 DEMAG_POINTS = 20
 
 
@@ -83,7 +83,7 @@ class PreisachHysteresis(PackedCore):
         :math:`\mu_{kl}` (output units) for cells ``k <= l``; ``>= 0``, the
         diagonal ``> 0``; the lower half is ignored.
     initial_state : array_like
-        ``[v, q, direction, k, R[0..STACK-1]]`` (see ``_diffkernels``).
+        ``[v, q, direction, k, R[0..STACK-1]]`` (see ``_packedkernels``).
     region : Region, optional
     virgin : bool, default False
         What "at rest" means (:meth:`rest_state`): True, a demagnetised state,

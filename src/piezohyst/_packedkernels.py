@@ -855,7 +855,7 @@ def _model_output(p, cfg, st, dyn, dstate):  # type: ignore[no-untyped-def]
 
 @njit(cache=True, fastmath=FASTMATH)
 def core_controller_step(desired, measured, p, cfg, st, region, dyn, dstate, trial, ctl, cs):  # type: ignore[no-untyped-def]
-    """``_kernels.controller_step`` on a differential core: the same feedback arithmetic
+    """``_kernels.controller_step`` on a packed core: the same feedback arithmetic
     (shared helpers), the core's inverse in place of eq. 18. ``cfg`` takes model units."""
     c2 = ctl[np.newaxis]
     cs2 = cs[np.newaxis]
