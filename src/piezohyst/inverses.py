@@ -81,6 +81,16 @@ class CompensatorState:
     dynamics: FloatArray = field(default_factory=lambda: np.zeros(0))
 
 
+def _inside(comp: Compensator, last: float) -> None:
+    """A reset's last command must lie inside the limits."""
+    if not comp.v_min <= last <= comp.v_max:
+        msg = (
+            f"The actuator's voltage {last!r} V is outside the limits "
+            f"[{comp.v_min}, {comp.v_max}] V."
+        )
+        raise ParameterError(msg)
+
+
 def _play(spec: InverseSpec) -> PIHysteresis:
     """The play operators of a spec (the play engine inverts nothing else)."""
     return cast(PIHysteresis, spec.operator)
@@ -301,12 +311,7 @@ class PlayInverse(Inverse):
             ops = np.clip(op.initial_state, v - op.thresholds, v + op.thresholds)
             lags = np.full(m, v)
             last = v
-        if not comp.v_min <= last <= comp.v_max:
-            msg = (
-                f"The actuator's voltage {last!r} V is outside the limits "
-                f"[{comp.v_min}, {comp.v_max}] V."
-            )
-            raise ParameterError(msg)
+        _inside(comp, last)
         self._set_forward(comp, (np.array(ops, dtype=np.float64), np.array(lags, dtype=np.float64)))
         comp.dstate[:] = last  # the piezo settled at the last command
         comp._mode_history[:] = np.nan
@@ -533,12 +538,7 @@ class PackedInverse(Inverse):
         else:
             last = _finite_number(voltage, "voltage")
             z = self._with_slow(comp, self._moved(comp, np.array(core.initial_state), last))
-        if not comp.v_min <= last <= comp.v_max:
-            msg = (
-                f"The actuator's voltage {last!r} V is outside the limits "
-                f"[{comp.v_min}, {comp.v_max}] V."
-            )
-            raise ParameterError(msg)
+        _inside(comp, last)
         comp._state[:] = 0.0
         comp._state[: comp._ns] = z
         comp._state[comp._ns + D.DS_STATUS + D.DS_LAST] = last
@@ -668,12 +668,7 @@ class PythonInverse(Inverse):
         if z.size != n:
             msg = f"'state' must hold the core's {n} values (and the last command). Got {z.size}."
             raise ShapeError(msg)
-        if not comp.v_min <= last <= comp.v_max:
-            msg = (
-                f"The actuator's voltage {last!r} V is outside the limits "
-                f"[{comp.v_min}, {comp.v_max}] V."
-            )
-            raise ParameterError(msg)
+        _inside(comp, last)
         comp._state[:] = 0.0
         comp._state[:n] = z
         comp._state[self._LAST] = last
