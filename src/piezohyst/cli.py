@@ -387,8 +387,9 @@ def predict(
     if math.isfinite(cols.rmse):
         click.echo(
             f"NRMSE {100 * cols.nrmse:.4g} % (RMSE {cols.rmse:.4g} {cols.unit}) "
-            f"over {cols.samples} samples"
+            f"over {cols.samples} samples, t = {cols.scored[0]:.6g}-{cols.scored[1]:.6g} s"
         )
+    ctx.info(f"run from {cols.start}")
     ctx.info(f"saved {out}")
 
 

@@ -45,6 +45,7 @@ from .metrics import hysteresis_width, nrmse, rmse
 from .model import HysteresisModel
 from .selfsensing import LoopSettings
 from .simulation import DEFAULT_PRESET, PRESETS, Bench, BenchRecord, run_loop
+from .state import predict_record
 from .units import to_standard
 
 __all__ = [
@@ -504,7 +505,7 @@ def model_report(
     model = _load(model_path)
     rec = spec.read(data, progress=progress)
     w = rec.window  # the model runs over the whole record: the window's start has a history
-    pred = model.predict(rec.x, t=rec.t)[w]
+    pred = predict_record(model, rec.x, rec.t)[w]
     assert rec.y is not None
     _check_measured_unit(rec.units[1], model, data)
     x, y, t = rec.x[w], rec.y[w], rec.t[w]

@@ -65,6 +65,7 @@ def fit_arrays(
     try:
         summary = identify_model(model, blocks, initial_state, ts is not None)
         if model._refine(us, ys, ts, summary, initial_state):
+            _training_facts(model, summary)  # each refit reset them
             score_model(model, blocks, summary)  # the refinement changed the model
     finally:
         model.__dict__.pop("_fitting_output", None)
@@ -116,8 +117,7 @@ def identify_model(model: Any, blocks: Blocks, initial_state: InitialState, time
                  model.input_unit, model.output_unit,
                  model.__dict__.get("_fitting_output"))  # fmt: skip
     apply_fit(model, model._core_class().identify(job))
-    model.input_range_ = (sm.x_min, sm.x_max)
-    model.max_slew_rate_ = sm.max_slew_rate
+    _training_facts(model, sm)
     score_model(model, blocks, sm)
     return sm
 
@@ -177,6 +177,7 @@ def set_fitted(
     model.rmse_ = model.nrmse_ = math.nan  # set by fit; unknown for a model built by hand
     model.input_range_ = (math.nan, math.nan)
     model.max_slew_rate_ = math.nan
+    model.train_window_ = (math.nan, math.nan)
     model.input_dynamics_ = InputDynamics()
     model.output_dynamics_ = getattr(model, "_fitting_output", OutputDynamics())
 
@@ -187,3 +188,11 @@ def apply_fit(model: Any, fit: CoreFit) -> None:
     if fit.selection is not None:
         model.selection_, model.selection_folds_, splits = fit.selection
         model.selection_splits_ = list(splits)
+
+
+def _training_facts(model: Any, sm: Summary) -> None:
+    """What the fit learns of its record beside the parameters: its voltages, fastest slew
+    and the times of its first and last samples."""
+    model.input_range_ = (sm.x_min, sm.x_max)
+    model.max_slew_rate_ = sm.max_slew_rate
+    model.train_window_ = (sm.t_first, sm.t_last)

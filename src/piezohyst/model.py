@@ -231,6 +231,8 @@ class HysteresisModel(Estimator):
     nrmse_: float
     input_range_: tuple[float, float]
     max_slew_rate_: float
+    #: times (s) of the first and last training samples (NaN without times)
+    train_window_: tuple[float, float]
     selection_: dict[str, float]
     selection_folds_: dict[str, list[float]]
     selection_splits_: list[int]
@@ -674,6 +676,7 @@ class HysteresisModel(Estimator):
         model.set_fitted(self.operator_, tuple(tm for tm, _ in kept), tuple(c for _, c in kept))
         model.input_range_ = self.input_range_
         model.max_slew_rate_ = self.max_slew_rate_
+        model.train_window_ = self.train_window_
         model.input_dynamics_ = self.input_dynamics_  # the lag sits before the hysteresis
         model.output_dynamics_ = self.output_dynamics_  # and the mode after it
         return model

@@ -152,6 +152,7 @@ def model_to_dict(model: Model) -> dict[str, Any]:
             "nrmse": _nullable(model.nrmse_),
             "input_range": None if math.isnan(lo) else [lo, hi],
             "max_slew_rate": _nullable(model.max_slew_rate_),
+            "train_window": [_nullable(v) for v in model.train_window_],
             "input_dynamics": model.input_dynamics_.to_dict(),
             "output_dynamics": model.output_dynamics_.to_dict(),
         },
@@ -395,6 +396,7 @@ def model_from_dict(data: Any, expected: type | None = None) -> Model:
     model.nrmse_ = fitted.number("nrmse", optional=True)
     model.input_range_ = _range(fitted)
     model.max_slew_rate_ = fitted.number("max_slew_rate", optional=True)
+    model.train_window_ = _window(fitted)
     for name, kind in (("input_dynamics", InputDynamics), ("output_dynamics", OutputDynamics)):
         data = fitted.data.get(name)  # absent from older files: none
         if data is None:
@@ -405,6 +407,24 @@ def model_from_dict(data: Any, expected: type | None = None) -> Model:
             msg = f"field '{fitted.name(name)}': {exc}"
             raise ModelFileError(msg) from None
     return model
+
+
+def _window(fitted: _Reader) -> tuple[float, float]:
+    """The times (s) of the first and last training samples (NaN: unknown, older files)."""
+    window = fitted.data.get("train_window")
+    if window is None:
+        return (math.nan, math.nan)
+    if (
+        not isinstance(window, list)
+        or len(window) != 2
+        or not all(
+            v is None or (isinstance(v, int | float) and not isinstance(v, bool)) for v in window
+        )
+    ):
+        msg = f"field '{fitted.name('train_window')}' must be [first, last] times (s) or nulls"
+        raise ModelFileError(msg)
+    first, last = (math.nan if v is None else float(v) for v in window)
+    return first, last
 
 
 def _reject_constant(name: str) -> float:

@@ -27,6 +27,7 @@ __all__ = [
     "InitialState",
     "ModelState",
     "named_start",
+    "predict_record",
     "rest_state",
     "run_model",
     "start_state",
@@ -306,3 +307,31 @@ def region_warning(model: Any, x: FloatArray, core_output: FloatArray) -> None:
             ExtrapolationWarning,
             stacklevel=5,
         )
+
+
+def predict_record(model: Any, x: FloatArray, t: FloatArray | None) -> FloatArray:
+    """A fitted model over a whole record it may have been identified on a window of.
+
+    From the model's training window's start (``train_window_``) the model runs from its
+    own initial state, where its fit started (the history's state, the growth at rest),
+    so that window's numbers equal the fit's and a later window continues it; samples
+    before the training window run from rest at the record's start.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+    x : ndarray
+        Input (V).
+    t : ndarray or None
+        Times (s).
+
+    Returns
+    -------
+    ndarray
+    """
+    t_w = float(model.train_window_[0])
+    if t is None or not np.isfinite(t_w) or t[0] >= t_w:
+        return np.asarray(model.predict(x, t))
+    k = int(np.searchsorted(t, t_w, "left"))
+    before = model.predict(x[:k], t[:k], state=model.rest_state(float(x[0])))
+    return np.concatenate([before, model.predict(x[k:], t[k:])])

@@ -209,8 +209,11 @@ def fit_file(
         rec = (data_spec or DataSpec()).read(data, progress=progress)
         w = rec.window
         assert rec.y is not None
+        start_dyn: InitialState = initial_state
+        if w.start and initial_state == "rest":  # the window continues the record's input
+            start_dyn = History(rec.x[: w.start])
         fitted_dyn: HysteresisModel = estimator.fit(
-            rec.x[w], rec.y[w], t=rec.t[w], initial_state=initial_state
+            rec.x[w], rec.y[w], t=rec.t[w], initial_state=start_dyn
         )
         if out is not None:
             fitted_dyn.save(out)
@@ -438,12 +441,18 @@ class Prediction:
         fraction of its span); NaN when the file has no output column.
     unit : str
         The output unit.
+    scored : (float, float)
+        Times (s) of the first and last scored sample.
+    start : str
+        From which state the model ran, in words.
     """
 
     samples: int
     rmse: float
     nrmse: float
     unit: str
+    scored: tuple[float, float] = (math.nan, math.nan)
+    start: str = ""
 
 
 def predict_file(
@@ -494,25 +503,58 @@ def predict_file(
         else:  # the periodic state needs the input in memory (one value per sample)
             start = core.periodic_state(np.concatenate([b.x for b in stream.blocks()]))
 
+    # a model identified on a window of this record runs from its own initial state at the
+    # window's start (where its fit started: the history's state, the growth at rest); a
+    # sample before the window, if asked for, runs from rest at the record's start
+    t_w = model.train_window_[0]
+    first_block = next(iter(stream.blocks()))
+    warm = initial_state == "model" and math.isfinite(t_w) and float(first_block.t[0]) < t_w
+    said = "the model's initial state at the record's start"
+    if initial_state != "model":
+        said = f"{initial_state} at the record's start"
+    elif warm:
+        said = (
+            f"the model's own state at its training window's start ({t_w:.6g} s; before it, "
+            "from rest at the record's start)"
+        )
+    scored = [math.inf, -math.inf]
+
     def rows() -> Iterator[dict[str, FloatArray]]:
         nonlocal sse, lo, hi
         state: ModelState | FloatArray | None = start
+        if warm:
+            state = model.rest_state(float(first_block.x[0]))
         first = last = math.nan
         written = 0
         for b in stream.blocks(progress):
-            run = model.propagate(b.x, b.t, state)
-            state = run.state
             first = float(b.t[0]) if b.start == 0 else first
             last = float(b.t[-1])
-            i0, i1 = np.searchsorted(b.t, [stream.t_start, stream.t_stop], "left")
-            if i1 <= i0:
+            end = int(np.searchsorted(b.t, stream.t_stop, "left"))  # later: nothing to score
+            if end == 0:
+                break
+            xb, tb = b.x[:end], b.t[:end]
+            if warm and tb[0] < t_w:  # samples before the training window
+                k = int(np.searchsorted(tb, t_w, "left"))
+                output = np.full(k, np.nan)
+                if tb[k - 1] >= stream.t_start:  # some are asked for
+                    run = model.propagate(xb[:k], tb[:k], state)
+                    output, state = run.output, run.state
+                if k < tb.size:  # the training window starts in this block
+                    run = model.propagate(xb[k:], tb[k:])
+                    output, state = np.concatenate([output, run.output]), run.state
+            else:
+                run = model.propagate(xb, tb, state)
+                output, state = run.output, run.state
+            i0 = int(np.searchsorted(tb, stream.t_start, "left"))
+            if end <= i0:
                 continue
-            cols = {"time": b.t[i0:i1], "predicted": run.output[i0:i1]}
+            cols = {"time": tb[i0:], "predicted": output[i0:]}
+            scored[0], scored[1] = min(scored[0], float(tb[i0])), float(tb[-1])
             if b.y is not None:
-                cols["measured"] = y = b.y[i0:i1]
+                cols["measured"] = y = b.y[i0:end]
                 sse += float(np.sum((cols["predicted"] - y) ** 2))
                 lo, hi = min(lo, float(y.min())), max(hi, float(y.max()))
-            written += i1 - i0
+            written += end - i0
             yield cols
         if not written:  # raised before the file is renamed into place: nothing is written
             raise stream.empty_window(first, last)
@@ -520,4 +562,5 @@ def predict_file(
     unit = model.output_unit
     n = write_blocks(out, rows(), units={"time": "s", "predicted": unit, "measured": unit})
     err = math.sqrt(sse / n) if measured else math.nan
-    return Prediction(n, err, err / (hi - lo) if hi > lo else math.nan, unit)
+    nrmse = err / (hi - lo) if hi > lo else math.nan
+    return Prediction(n, err, nrmse, unit, (scored[0], scored[1]), said)
