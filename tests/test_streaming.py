@@ -202,11 +202,13 @@ def test_compensate_file_streams_like_one_call(
     comp = ph.compensator.CompensatorSettings(slew_rate=model.max_slew_rate_, sample_rate=fs).build(
         model
     )
-    comp.reset(voltage=float(np.clip(model.initial_state_[0], comp.v_min, comp.v_max)))
-    pre = comp.precondition(1000)
-    cmd = comp.process(desired)
+    comp.reset(voltage=float(np.clip(0.0, comp.v_min, comp.v_max)))  # at rest by default
     back = ph.read_table(tmp_path / "cmd.csv").get("command")
+    written = back[: res.preamble]  # the cycle over what the trajectory needs
+    pre = comp.precondition(1000, (float(written.min()), float(written.max())))
+    cmd = comp.process(desired)
     np.testing.assert_array_equal(back, np.concatenate([pre, cmd]))
+    assert pre.min() <= cmd.min() and pre.max() >= cmd.max()
     assert res.compensator.nonfinite_count == comp.nonfinite_count == 1
 
 

@@ -402,7 +402,7 @@ def predict(
     "--present-voltage",
     type=float,
     default=None,
-    help="The actuator's voltage now, V (default: where the training record started).",
+    help="The actuator's voltage now, V (default: at rest, 0 V or the nearer limit).",
 )
 @click.option(
     "--no-precondition",
@@ -428,8 +428,9 @@ def compensate(
     Safe by default: commands stay in [--v-min, --v-max], which default to the
     voltages the model was identified on (wider limits need
     --allow-extrapolation); the slew limit defaults to the training record's
-    fastest change; the file starts with a ramp from the present voltage and a
-    full-range precondition cycle (rows with an empty 'desired'); NaN targets
+    fastest change; the file starts with a ramp from the present voltage (at
+    rest, 0 V, unless --present-voltage) and a precondition cycle over the
+    voltages the trajectory needs (rows with an empty 'desired'); NaN targets
     hold the last command; a trajectory that saturates most samples is an
     error. TARGET needs a time column (s), or give --sample-rate.
 

@@ -346,36 +346,48 @@ class Compensator:
         """
         self.inverse.reset(self, state, voltage)
 
-    def precondition(self, samples: int = 1000) -> FloatArray:
-        """The preconditioning cycle to send first: last command → v_max → v_min → back.
+    def precondition(
+        self, samples: int = 1000, span: tuple[float, float] | None = None
+    ) -> FloatArray:
+        """The preconditioning cycle to send first: last command → high → low → back.
 
         A full-amplitude cycle wipes out the actuator's unknown history (the
         remanence problem: a fresh model assumes a known state). The returned
         voltages must be sent to the amplifier before the first :meth:`step`;
         the compensator's state is advanced as if they had been. With a
         slew-rate limit the cycle gets as many samples as it needs to reach
-        both limits.
+        both ends.
 
         Parameters
         ----------
         samples : int, default 1000
             Samples in the cycle (at least 3).
+        span : (float, float), optional
+            The voltages (V) the cycle reaches, inside the limits: what a
+            trajectory needs (its commands, with a margin). Default: the limits.
 
         Returns
         -------
         ndarray
             The voltages (V) to send.
         """
-        return self.inverse.precondition(self, self._cycle(samples))
+        return self.inverse.precondition(self, self._cycle(samples, span))
 
-    def _cycle(self, samples: int) -> FloatArray:
+    def _cycle(self, samples: int, span: tuple[float, float] | None = None) -> FloatArray:
         """last command -> v_max -> v_min -> back, each extreme reached exactly (and held
         until a lagging piezo voltage reached it)."""
         if isinstance(samples, bool) or not isinstance(samples, int) or samples < 3:
             msg = f"'samples' must be an int >= 3. Got {samples!r}."
             raise ParameterError(msg)
         start = self.last_command
-        knots = [start, self.v_max, self.v_min, start]
+        low, high = (self.v_min, self.v_max) if span is None else span
+        if not self.v_min <= low < high <= self.v_max:
+            msg = (
+                f"'span' must lie inside the limits [{self.v_min:g}, {self.v_max:g}] V with "
+                f"low < high. Got {span!r}."
+            )
+            raise ParameterError(msg)
+        knots = [start, high, low, start]
         legs = np.abs(np.diff(knots))
         step = self._max_step
         # every leg ends exactly on its knot: reaching v_max and v_min is what wipes history

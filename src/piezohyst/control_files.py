@@ -5,6 +5,7 @@ closed loop on the bench, report. Each is one call of a CLI command (see
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import itertools
 import json
@@ -101,9 +102,10 @@ def compensate_file(
     * the slew limit defaults to the fastest change of the training record
       (``model.max_slew_rate_``);
     * the file starts with a ramp from the actuator's present voltage
-      (default: where the training record started) and a full-range
-      precondition cycle that wipes out the unknown history (rows with an
-      empty ``desired``); ``precondition=False`` keeps only the ramp;
+      (default: at rest, 0 V or the nearer limit) and a precondition cycle
+      over the voltages the trajectory needs, 10 % beyond them (inside the
+      limits), that wipes out the unknown history (rows with an empty
+      ``desired``); ``precondition=False`` keeps only the ramp;
     * NaN or infinite desired values hold the last command and are counted;
     * a trajectory that saturates most samples (out of reach: units, or the
       sign of the gain) is an error, and nothing is written.
@@ -124,7 +126,7 @@ def compensate_file(
     precondition : bool, default True
         Write the precondition cycle before the trajectory.
     present_voltage : float, optional
-        The actuator's voltage now (V).
+        The actuator's voltage now (V); default at rest: 0 V, or the nearer limit.
     force : bool, default False
         Replace an existing ``out`` that piezohyst did not write.
     progress : callable, optional
@@ -164,10 +166,13 @@ def compensate_file(
         slew = model.max_slew_rate_
     comp = dataclasses.replace(settings, slew_rate=slew, sample_rate=fs).build(model)
     start = present_voltage
-    if start is None:
-        start = float(np.clip(model.initial_state_[0], comp.v_min, comp.v_max))
+    if start is None:  # at rest: 0 V, or the nearer limit
+        start = float(np.clip(0.0, comp.v_min, comp.v_max))
     comp.reset(voltage=start)
-    preamble = comp.precondition(max(3, round(fs))) if precondition else np.empty(0)
+    preamble = np.empty(0)
+    if precondition:  # a cycle over what the trajectory needs, with a margin
+        span = _needed_span(comp, table.batches(keys), name, table.unit(name), where)
+        preamble = comp.precondition(max(3, round(fs)), span)
     finite = 0
 
     def rows() -> Iterator[dict[str, FloatArray]]:
@@ -208,6 +213,31 @@ def compensate_file(
 
     write_blocks(out, rows(), units={"time": "s", "command": "V", "desired": expected})
     return Compensation(comp, preamble.size, fs)
+
+
+#: The precondition cycle reaches this fraction of the trajectory's own voltage span beyond it
+PRECONDITION_MARGIN = 0.1
+
+
+def _needed_span(
+    comp: Compensator,
+    batches: Iterator[dict[str, FloatArray]],
+    name: str,
+    unit: str | None,
+    where: str,
+) -> tuple[float, float]:
+    """The voltages a trajectory's commands cover (a dry run on a copy), with a margin,
+    inside the limits; the whole limits when it has no finite command."""
+    probe = copy.deepcopy(comp)
+    probe.precondition(3)  # from a preconditioned state, as the commands will be
+    lo, hi = math.inf, -math.inf
+    for batch in batches:
+        commands = probe.process(to_standard(batch[name], unit, "output", where)[0])
+        lo, hi = min(lo, float(commands.min())), max(hi, float(commands.max()))
+    if not lo < hi:
+        return comp.v_min, comp.v_max
+    margin = PRECONDITION_MARGIN * (hi - lo)
+    return max(comp.v_min, lo - margin), min(comp.v_max, hi + margin)
 
 
 def _desired_column(table: Table, column: str | None, target: PathLike) -> str:
