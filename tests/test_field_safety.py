@@ -10,6 +10,7 @@ import pytest
 from click.testing import CliRunner, Result
 
 import piezohyst as ph
+import piezohyst.workflows as wf
 from piezohyst.cli import main
 
 
@@ -366,3 +367,31 @@ def test_large_csv_streams_with_progress(tmp_path: Path) -> None:
     back = ph.io.read_table(tmp_path / "big.parquet", progress=seen.append)
     assert len(seen) > 1 and seen[-1] == n  # Parquet in batches too
     np.testing.assert_array_equal(back.get("voltage"), v)
+
+
+def test_an_interrupted_report_leaves_nothing_and_the_rerun_works(
+    lab: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Ctrl-C while the report is written: no folder (not even hidden staging), and the
+    same command then succeeds; an earlier report stays until a new one is complete."""
+    import piezohyst.report as report_module
+
+    written = report_module.Report.write
+
+    def interrupted(self: object) -> list[Path]:
+        written(self)  # every file is on disk by now, in the staging folder
+        raise KeyboardInterrupt
+
+    args = ["report", lab / "model.json", lab / "run.csv", "--out", lab / "rep"]
+    monkeypatch.setattr(report_module.Report, "write", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        wf.model_report(lab / "model.json", lab / "run.csv", lab / "rep")
+    assert not (lab / "rep").exists()
+    assert not [p for p in lab.iterdir() if p.name.startswith(".rep.")]
+    monkeypatch.setattr(report_module.Report, "write", written)
+    assert run(*args).exit_code == 0
+    first = (lab / "rep" / "metrics.json").read_text()
+    monkeypatch.setattr(report_module.Report, "write", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        wf.model_report(lab / "model.json", lab / "run.csv", lab / "rep")
+    assert (lab / "rep" / "metrics.json").read_text() == first  # the earlier one intact

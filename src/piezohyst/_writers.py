@@ -5,11 +5,13 @@ wrote a file. The public entry points are re-exported by :mod:`piezohyst.io`.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io as _io
 import itertools
 import math
 import os
+import shutil
 import tempfile
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
@@ -69,6 +71,40 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[Path], None]) ->
         Path(tmp).unlink(missing_ok=True)
         raise
     return p
+
+
+@contextlib.contextmanager
+def atomic_folder(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """A folder of files written as a whole: they go into a hidden folder beside ``path``,
+    renamed into place when the block ends; an error or an interrupt (Ctrl-C) leaves
+    nothing, and an earlier folder at ``path`` stays until the new one is complete.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The folder to write.
+
+    Yields
+    ------
+    Path
+        The folder to write the files into.
+    """
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{p.name}.", dir=p.parent))
+    try:
+        yield staging
+        os.chmod(staging, 0o777 & ~_umask())
+        old = None
+        if p.exists():  # the earlier folder steps aside, then goes
+            old = Path(tempfile.mkdtemp(prefix=f".{p.name}.old.", dir=p.parent))
+            os.replace(p, old / p.name)
+        os.replace(staging, p)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:

@@ -34,6 +34,7 @@ from .export import Precision, c_paths, write_c
 from .io import (
     DataSpec,
     Table,
+    atomic_folder,
     check_finite,
     check_increasing,
     open_table,
@@ -528,7 +529,7 @@ def model_report(
     -------
     ReportResult
     """
-    from .report import Report, file_facts
+    from .report import Report
 
     guard_outputs([out], [model_path, data], force=force)
     spec = data_spec or DataSpec()
@@ -539,10 +540,28 @@ def model_report(
     assert rec.y is not None
     _check_measured_unit(rec.units[1], model, data)
     x, y, t = rec.x[w], rec.y[w], rec.t[w]
-    out_dir = Path(out)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    with atomic_folder(out) as folder:  # all or nothing: Ctrl-C leaves no partial folder
+        rep = _report(model, rec, pred, Report(f"{type(model).__name__} on {Path(data).name}",
+                      folder), (x, y, t), (model_path, data, command))  # fmt: skip
+        files = [Path(out) / f.name for f in rep.write()]
+    return ReportResult({m.key: m.value for m in rep.metrics}, files)
+
+
+def _report(
+    model: HysteresisModel,
+    rec: Any,
+    pred: FloatArray,
+    rep: Any,
+    xyt: tuple[FloatArray, FloatArray, FloatArray],
+    sources: tuple[PathLike, PathLike, str | None],
+) -> Any:
+    """The report's metadata, tables, metrics and figures (written by the caller)."""
+    from .report import file_facts
+
+    x, y, t = xyt
+    model_path, data, command = sources
+    w = rec.window
     in_u, out_u = model.input_unit, model.output_unit
-    rep = Report(f"{type(model).__name__} on {Path(data).name}", out_dir)
     rep.metadata = {
         "written": datetime.now(UTC).isoformat(timespec="seconds"),
         "command": command or "(called from Python)",
@@ -618,8 +637,7 @@ def model_report(
         mark = " (chosen)" if label == chosen else ""
         rep.add(f"selection_{label}", f"held-out RMSE, growth {label}{mark}",
                 f"{score:.4g} {out_u}; per fold: {folds}")  # fmt: skip
-    files = rep.write()
-    return ReportResult({m.key: m.value for m in rep.metrics}, files)
+    return rep
 
 
 def _fmt(values: FloatArray) -> str:

@@ -42,6 +42,7 @@ from ._formats import (
 )
 from ._validation import FloatArray
 from ._writers import (
+    atomic_folder,
     atomic_write,
     atomic_write_text,
     is_piezohyst_output,
@@ -60,6 +61,7 @@ __all__ = [
     "Recording",
     "RecordingStream",
     "Table",
+    "atomic_folder",
     "atomic_write",
     "atomic_write_text",
     "check_finite",
