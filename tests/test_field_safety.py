@@ -382,16 +382,16 @@ def test_an_interrupted_report_leaves_nothing_and_the_rerun_works(
         written(self)  # every file is on disk by now, in the staging folder
         raise KeyboardInterrupt
 
-    args = ["report", lab / "model.json", lab / "run.csv", "--out", lab / "rep"]
+    args = ["report", lab / "model.json", lab / "run.csv", "--out", lab / "rep-interrupted"]
     monkeypatch.setattr(report_module.Report, "write", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        wf.model_report(lab / "model.json", lab / "run.csv", lab / "rep")
-    assert not (lab / "rep").exists()
-    assert not [p for p in lab.iterdir() if p.name.startswith(".rep.")]
+        wf.model_report(lab / "model.json", lab / "run.csv", lab / "rep-interrupted")
+    assert not (lab / "rep-interrupted").exists()
+    assert not [p for p in lab.iterdir() if p.name.startswith(".rep-interrupted.")]
     monkeypatch.setattr(report_module.Report, "write", written)
     assert run(*args).exit_code == 0
-    first = (lab / "rep" / "metrics.json").read_text()
+    first = (lab / "rep-interrupted" / "metrics.json").read_text()
     monkeypatch.setattr(report_module.Report, "write", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        wf.model_report(lab / "model.json", lab / "run.csv", lab / "rep")
-    assert (lab / "rep" / "metrics.json").read_text() == first  # the earlier one intact
+        wf.model_report(lab / "model.json", lab / "run.csv", lab / "rep-interrupted")
+    assert (lab / "rep-interrupted" / "metrics.json").read_text() == first  # the earlier one intact
