@@ -50,7 +50,6 @@ from .errors import (
     NotFittedError,
     NotInvertibleError,
     ParameterError,
-    TimeAxisError,
 )
 from .estimator import (
     GROWTH_TERMS,
@@ -66,9 +65,16 @@ from .estimator import (
 )
 from .fitting import fit_arrays, fit_stream, set_fitted
 from .identification import Blocks, Summary
-from .leakage import Leakage
 from .persistence import model_from_dict, model_to_dict, register, save_model
-from .state import History, InitialState, ModelState, rest_state, run_model
+from .state import (
+    History,
+    InitialState,
+    ModelState,
+    model_table,
+    remove_growth,
+    rest_state,
+    run_model,
+)
 from .terms import LagShape, RelaxationShape, StaticShape, Term, coefficient_arrays
 
 if TYPE_CHECKING:
@@ -181,6 +187,19 @@ class InverseSpec:
         )
 
 
+#: The settings of the one model class, one rule each (presets add theirs)
+MODEL_RULES: dict[str, Rule] = {
+    "core": _core_rule,
+    "settings": _settings_rule,
+    "terms": _terms,
+    "min_slope": _min_slope,
+    "input_unit": _unit,
+    "output_unit": _unit,
+    "input_dynamics": _dynamics_kind,
+    "output_dynamics": _output_kind,
+}
+
+
 class HysteresisModel(Estimator):
     """A hysteresis core plus terms and dynamics: fit, run, inverse and files (see the module).
 
@@ -212,16 +231,7 @@ class HysteresisModel(Estimator):
     """
 
     cli_name: ClassVar[str] = ""
-    _rules: ClassVar[dict[str, Rule]] = {
-        "core": _core_rule,
-        "settings": _settings_rule,
-        "terms": _terms,
-        "min_slope": _min_slope,
-        "input_unit": _unit,
-        "output_unit": _unit,
-        "input_dynamics": _dynamics_kind,
-        "output_dynamics": _output_kind,
-    }
+    _rules: ClassVar[dict[str, Rule]] = MODEL_RULES
     # fitted attributes (``fitting.set_fitted``)
     operator_: Core
     initial_state_: FloatArray
@@ -563,6 +573,28 @@ class HysteresisModel(Estimator):
                     return out  # type: ignore[no-any-return]
         return self.propagate(x, t, state).output
 
+    def plot(self, x: ArrayLike, y: ArrayLike, t: ArrayLike | None = None) -> Any:
+        """The model against a record: loop, output over time and residual.
+
+        Parameters
+        ----------
+        x, y : array_like, shape (N,)
+            Input (V) and measured output; ``t`` (s) for rate-dependent models.
+        t : array_like, optional
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+            A notebook shows it; ``fig.savefig("fit.png")`` writes it.
+        """
+        from .plotting import model_figure  # matplotlib loads when a figure is asked for
+
+        return model_figure(self, x, y, t)
+
+    def _repr_html_(self) -> str:
+        """A table of the model for notebooks: kind, settings, fit quality, range, terms."""
+        return model_table(self)
+
     def growth(
         self, x: ArrayLike, t: ArrayLike | None = None, state: ModelState | ArrayLike | None = None
     ) -> FloatArray:
@@ -587,12 +619,7 @@ class HysteresisModel(Estimator):
         return self._run(x, t, state, removed_only=True).output
 
     def remove_growth(
-        self,
-        x: ArrayLike,
-        y: ArrayLike,
-        t: ArrayLike | None = None,
-        *,
-        leakage: Leakage | None = None,
+        self, x: ArrayLike, y: ArrayLike, t: ArrayLike | None = None, *, leakage: Any = None
     ) -> FloatArray:
         r"""Eq. 19: the measured output minus the identified growth, :math:`y - R y_2`.
 
@@ -615,16 +642,7 @@ class HysteresisModel(Estimator):
         -------
         ndarray, shape (N,)
         """
-        ys = as_signal(y, "y")
-        if leakage is not None:
-            if t is None:
-                msg = "remove_growth with a leakage needs the sample times t (s). Got t=None."
-                raise TimeAxisError(msg)
-            g = leakage.charge(x, t, ys if leakage.discharge else None)
-        else:
-            g = self.growth(x, t)
-        same_length(g, ys, "x", "y")
-        return np.asarray(ys - g)
+        return remove_growth(self, x, y, t, leakage)
 
     def score(self, x: ArrayLike, y: ArrayLike, t: ArrayLike | None = None) -> float:
         """Coefficient of determination R² of the prediction (scikit-learn's ``score``).

@@ -7,14 +7,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from numpy.typing import ArrayLike
 
-from ._validation import FloatArray
+from ._validation import FloatArray, as_signal
 
-__all__ = ["Curve", "loop_figure", "save_grid", "save_panels"]
+__all__ = ["Curve", "fit_figure", "loop_figure", "model_figure", "save_grid", "save_panels"]
 
 Curve = tuple[FloatArray, FloatArray, str, dict[str, object]]
 
@@ -88,3 +90,75 @@ def save_grid(
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     return path
+
+
+def fit_figure(
+    x: FloatArray,
+    y: FloatArray,
+    predicted: FloatArray,
+    t: FloatArray | None,
+    *,
+    units: tuple[str, str] = ("V", "C"),
+    title: str = "",
+) -> Figure:
+    """A model against a record: the loop, the output over time, the residual.
+
+    Parameters
+    ----------
+    x, y, predicted : ndarray
+        Input, measured and modelled output.
+    t : ndarray or None
+        Times (s); sample numbers without them.
+    units : (str, str)
+        Input and output units, for the labels.
+    title : str
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Not shown, not saved: ``fig.savefig(...)``, or a notebook displays it.
+    """
+    time = np.arange(x.size, dtype=np.float64) if t is None else t
+    tlabel = "sample" if t is None else "time (s)"
+    in_u, out_u = units
+    measured = {"color": "0.55", "lw": 1.6}
+    model = {"color": "C0", "lw": 1.0, "ls": "--"}
+    fig = Figure(figsize=(11.0, 4.6))
+    grid = fig.add_gridspec(2, 2, height_ratios=[2.0, 1.0])
+    loop_figure(fig.add_subplot(grid[:, 0]),
+                [(x, y, "measured", measured), (x, predicted, "model", model)],
+                xlabel=f"input ({in_u})", ylabel=f"output ({out_u})", title="loop")  # fmt: skip
+    err = y - predicted
+    loop_figure(fig.add_subplot(grid[0, 1]),
+                [(time, y, "measured", measured), (time, predicted, "model", model)],
+                xlabel=tlabel, ylabel=f"output ({out_u})", title="over time")  # fmt: skip
+    span = max(float(np.ptp(y)), 1e-300)
+    nrmse = float(np.sqrt(np.mean(err * err))) / span
+    loop_figure(fig.add_subplot(grid[1, 1]),
+                [(time, err, "measured - model", {"lw": 0.7, "color": "C3"})],
+                xlabel=tlabel, ylabel=f"residual ({out_u})",
+                title=f"residual, NRMSE {100 * nrmse:.3g} %")  # fmt: skip
+    if title:
+        fig.suptitle(title, fontsize=11)
+    fig.tight_layout()
+    return fig
+
+
+def model_figure(model: Any, x: ArrayLike, y: ArrayLike, t: ArrayLike | None = None) -> Figure:
+    """A fitted model against a record (``model.plot``): see :func:`fit_figure`.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+    x, y : array_like
+    t : array_like, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    xs, ys = as_signal(x, "x"), as_signal(y, "y")
+    ts = None if t is None else as_signal(t, "t")
+    return fit_figure(xs, ys, model.predict(xs, ts), ts,
+                      units=(model.input_unit, model.output_unit),
+                      title=f"{type(model).__name__}: {model.operator_.summary}")  # fmt: skip

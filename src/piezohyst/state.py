@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import FloatArray, as_signal, as_time
+from ._validation import FloatArray, as_signal, as_time, same_length
 from .cores.base import Propagation
 from .errors import ExtrapolationWarning, ParameterError, ShapeError, TimeAxisError
 from .identification import BLOCK, block_dt, term_columns
@@ -26,8 +26,10 @@ __all__ = [
     "History",
     "InitialState",
     "ModelState",
+    "model_table",
     "named_start",
     "predict_record",
+    "remove_growth",
     "rest_state",
     "run_model",
     "start_state",
@@ -335,3 +337,47 @@ def predict_record(model: Any, x: FloatArray, t: FloatArray | None) -> FloatArra
     k = int(np.searchsorted(t, t_w, "left"))
     before = model.predict(x[:k], t[:k], state=model.rest_state(float(x[0])))
     return np.concatenate([before, model.predict(x[k:], t[k:])])
+
+
+def model_table(model: Any) -> str:
+    """A model as an HTML table (its ``_repr_html_``): kind, settings, fit quality, training
+    range and window, coefficients with units, input dynamics."""
+    from html import escape
+
+    rows = [("model", type(model).__name__)]
+    rows += [(f"setting {k}", repr(v)) for k, v in model.params_to_json().items()]
+    if model.is_fitted:
+        (lo, hi), (t0, t1) = model.input_range_, model.train_window_
+        rows += [("core", model.operator_.summary),
+                 ("fit NRMSE", f"{100 * model.nrmse_:.4g} %"),
+                 ("fit RMSE", f"{model.rmse_:.4g} {model.output_unit}"),
+                 ("training input", f"{lo:.6g} to {hi:.6g} {model.input_unit}"),
+                 ("training window", f"{t0:.6g} to {t1:.6g} s")]  # fmt: skip
+        rows += [(k, f"{v:.6g} {u}") for k, (v, u) in model.coefficients().items()]
+        dyn = model.input_dynamics_
+        if dyn.active:
+            rows.append(
+                ("input dynamics", f"lag {dyn.tau * 1e3:.4g} ms, delay {dyn.delay * 1e3:.4g} ms")
+            )
+    else:
+        rows.append(("fitted", "no"))
+    body = "".join(f"<tr><th style='text-align:left'>{escape(k)}</th><td>{escape(v)}</td></tr>"
+                   for k, v in rows)  # fmt: skip
+    return f"<table>{body}</table>"
+
+
+def remove_growth(
+    model: Any, x: ArrayLike, y: ArrayLike, t: ArrayLike | None, leakage: Any
+) -> FloatArray:
+    """Eq. 19 (``model.remove_growth``): the output minus the model's growth, or minus a
+    calibrated leakage's charge."""
+    ys = as_signal(y, "y")
+    if leakage is not None:
+        if t is None:
+            msg = "remove_growth with a leakage needs the sample times t (s). Got t=None."
+            raise TimeAxisError(msg)
+        g = leakage.charge(x, t, ys if leakage.discharge else None)
+    else:
+        g = model.growth(x, t)
+    same_length(g, ys, "x", "y")
+    return np.asarray(ys - g)
