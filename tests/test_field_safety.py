@@ -395,3 +395,25 @@ def test_an_interrupted_report_leaves_nothing_and_the_rerun_works(
     with pytest.raises(KeyboardInterrupt):
         wf.model_report(lab / "model.json", lab / "run.csv", lab / "rep-interrupted")
     assert (lab / "rep-interrupted" / "metrics.json").read_text() == first  # the earlier one intact
+
+
+def test_a_clipped_charge_is_reported_by_fit_predict_and_report(lab: Path) -> None:
+    """A charge flat at its top on 20 % of the record (an ADC at full scale) is named,
+    with its share, by every command that reads it; a clean record is not."""
+    table = ph.io.read_table(lab / "run.csv")
+    q = table.get("charge").copy()
+    top = float(np.quantile(q, 0.8))
+    ph.write_table(lab / "clipped.csv",
+                   {"time": table.get("time"), "voltage": table.get("voltage"),
+                    "charge": np.minimum(q, top)}, units={"time": "s", "voltage": "V",
+                                                          "charge": "C"})  # fmt: skip
+    for args in (
+        ["fit", lab / "clipped.csv", "-o", lab / "clipped.json"],
+        ["predict", lab / "model.json", lab / "clipped.csv", "-o", lab / "cp.csv"],
+        ["report", lab / "model.json", lab / "clipped.csv", "--out", lab / "crep"],
+    ):
+        res = run(*args)
+        assert res.exit_code == 0, res.output
+        assert "'charge' sits at its top" in res.stderr and "(20.0 %" in res.stderr, res.stderr
+    clean = run("predict", lab / "model.json", lab / "run.csv", "-o", lab / "clean.csv")
+    assert clean.exit_code == 0 and "clipped" not in clean.stderr

@@ -4,14 +4,16 @@ from __future__ import annotations
 
 import os
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 
+from ._validation import FloatArray
 from .compensator import CompensatorSettings
 from .errors import DataFileError, OverwriteError
 from .io import (
     is_piezohyst_output,
 )
+from .metrics import clipped
 from .model import HysteresisModel
 from .persistence import load_model
 
@@ -92,3 +94,24 @@ def _check_measured_unit(unit: str | None, model: HysteresisModel, data: PathLik
 def _load(model_path: PathLike) -> HysteresisModel:
     model: HysteresisModel = load_model(model_path)
     return model
+
+
+#: A measured channel flat at its extreme on this share of the samples or more is reported
+CLIP_SHARE = 0.01
+
+
+def warn_clipped(
+    chunks: Iterable[FloatArray], column: str | None, unit: str | None, data: PathLike
+) -> None:
+    """Warn when a measured channel sits at its top or bottom in flat runs (clipped)."""
+    count, which, level, first, n = clipped(chunks)
+    if n and count >= CLIP_SHARE * n:
+        warnings.warn(
+            f"{data}: column {column!r} sits at its {which} ({level:.6g} {unit or ''}) on "
+            f"{count} of {n} samples ({100 * count / n:.1f} %, the first at sample {first} of "
+            "the window) in flat runs: the recording clipped there (a sensor or an ADC at "
+            "its full scale) and those samples say nothing of the actuator; record with a "
+            "wider range, or use a window that does not clip",
+            UserWarning,
+            stacklevel=3,
+        )

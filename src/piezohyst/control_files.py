@@ -27,6 +27,7 @@ from ._workflow_base import (
     _default_unit,
     _load,
     guard_outputs,
+    warn_clipped,
 )
 from .compensator import Compensator, CompensatorSettings
 from .errors import DataFileError, ParameterError
@@ -540,6 +541,7 @@ def model_report(
     assert rec.y is not None
     _check_measured_unit(rec.units[1], model, data)
     x, y, t = rec.x[w], rec.y[w], rec.t[w]
+    warn_clipped([y], rec.names[1], rec.units[1], data)
     with atomic_folder(out) as folder:  # all or nothing: Ctrl-C leaves no partial folder
         rep = _report(model, rec, pred, Report(f"{type(model).__name__} on {Path(data).name}",
                       folder), (x, y, t), (model_path, data, command))  # fmt: skip

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import math
+from collections.abc import Iterable
+
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._validation import as_signal, same_length
+from ._validation import FloatArray, as_signal, same_length
 
-__all__ = ["hysteresis_width", "nrmse", "rmse"]
+__all__ = ["CLIP_RUN", "clipped", "hysteresis_width", "nrmse", "rmse"]
 
 
 def rmse(measured: ArrayLike, predicted: ArrayLike) -> float:
@@ -116,3 +119,79 @@ def hysteresis_width(x: ArrayLike, y: ArrayLike, *, levels: int = 200) -> float:
         return 0.0
     gap = np.abs(sums[1, both] / counts[1, both] - sums[0, both] / counts[0, both])
     return float(gap.max() / span_y)
+
+
+#: Samples in a row at a channel's extreme, exactly equal, that count as a clipped run
+CLIP_RUN = 3
+
+
+def clipped(chunks: Iterable[FloatArray]) -> tuple[int, str, float, int, int]:
+    """Samples of a channel that sit at its top or bottom in flat runs (a clipped recording).
+
+    A sensor or an ADC at its full scale returns the same value sample after sample; a
+    real signal at its extreme does not stay bit-for-bit equal. Counts the samples equal
+    to the channel's maximum (or minimum) in runs of at least :data:`CLIP_RUN`, in one
+    pass (a new extreme starts the count again).
+
+    Parameters
+    ----------
+    chunks : iterable of ndarray
+        The channel's values in order, chunk by chunk.
+
+    Returns
+    -------
+    (int, str, float, int, int)
+        The larger count (top or bottom), which (``"top"``/``"bottom"``), the level, the
+        first such sample (-1 when none) and the number of samples.
+    """
+    top, bottom = _Runs(-math.inf), _Runs(math.inf)
+    row = 0
+    for c in chunks:
+        if not c.size:
+            continue
+        hi, lo = float(np.max(c)), float(np.min(c))
+        if hi > top.level:
+            top = _Runs(hi)
+        if lo < bottom.level:
+            bottom = _Runs(lo)
+        top.feed(c, row)
+        bottom.feed(c, row)
+        row += c.size
+    t, b = top.total(), bottom.total()
+    if b[0] > t[0]:
+        return b[0], "bottom", bottom.level, b[1], row
+    return t[0], "top", top.level, t[1], row
+
+
+class _Runs:
+    """Runs of samples equal to ``level``, fed chunk by chunk (a run may span chunks)."""
+
+    def __init__(self, level: float) -> None:
+        self.level = level
+        self.count, self.first, self.run, self.run_start = 0, -1, 0, 0
+
+    def _close(self, start: int, length: int) -> None:
+        if length >= CLIP_RUN:
+            self.count += length
+            self.first = start if self.first < 0 else self.first
+
+    def feed(self, c: FloatArray, row: int) -> None:
+        edges = np.diff(np.concatenate([[0], (c == self.level).astype(np.int8), [0]]))
+        starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+        if self.run and not (starts.size and starts[0] == 0):  # the carried run ended
+            self._close(self.run_start, self.run)
+            self.run = 0
+        for a, b in zip(starts.tolist(), stops.tolist(), strict=True):
+            carried = a == 0 and self.run
+            start, length = (self.run_start, self.run + b) if carried else (row + a, b - a)
+            self.run = 0
+            if b == c.size:  # it may go on in the next chunk
+                self.run, self.run_start = length, start
+            else:
+                self._close(start, length)
+
+    def total(self) -> tuple[int, int]:
+        if self.run:
+            self._close(self.run_start, self.run)
+            self.run = 0
+        return self.count, self.first

@@ -28,6 +28,7 @@ from ._workflow_base import (
     _default_unit,
     _load,
     guard_outputs,
+    warn_clipped,
 )
 from .comparison import Comparison, compare_models
 from .control_files import (
@@ -209,6 +210,8 @@ def fit_file(
         rec = (data_spec or DataSpec()).read(data, progress=progress)
         w = rec.window
         assert rec.y is not None
+        y_win = rec.y[w]
+        warn_clipped([y_win], rec.names[1], rec.units[1], data)
         start_dyn: InitialState = initial_state
         if w.start and initial_state == "rest":  # the window continues the record's input
             start_dyn = History(rec.x[: w.start])
@@ -220,6 +223,7 @@ def fit_file(
         return fitted_dyn
     passes = _Passes(progress)
     window = _window_blocks(stream, passes)
+    warn_clipped(_window_output(stream), stream.names[1], stream.units[1], data)
     start: InitialState = initial_state
     if math.isfinite(stream.t_start) and "n_operators" not in accepted:
         before = _history_input(stream, passes.tick())  # a core other than play operators runs it
@@ -414,6 +418,14 @@ def _history_input(
     return x if x.size else None
 
 
+def _window_output(stream: RecordingStream) -> Iterator[FloatArray]:
+    """The measured output inside the record's window, block by block."""
+    for b in stream.blocks():
+        i0, i1 = np.searchsorted(b.t, [stream.t_start, stream.t_stop], "left")
+        if i1 > i0 and b.y is not None:
+            yield b.y[i0:i1]
+
+
 def _history(
     stream: RecordingStream, thresholds: FloatArray, progress: Callable[[int], None] | None
 ) -> FloatArray | None:
@@ -486,6 +498,7 @@ def predict_file(
     measured = stream.names[1] is not None
     if measured:
         _check_measured_unit(stream.units[1], model, data)
+        warn_clipped(_window_output(stream), stream.names[1], stream.units[1], data)
     sse, lo, hi = 0.0, math.inf, -math.inf
 
     start: ModelState | FloatArray | None = None
