@@ -417,3 +417,13 @@ def test_a_clipped_charge_is_reported_by_fit_predict_and_report(lab: Path) -> No
         assert "'charge' sits at its top" in res.stderr and "(20.0 %" in res.stderr, res.stderr
     clean = run("predict", lab / "model.json", lab / "run.csv", "-o", lab / "clean.csv")
     assert clean.exit_code == 0 and "clipped" not in clean.stderr
+
+
+def test_fit_names_its_output_a_json_file_and_the_report_its_version(lab: Path) -> None:
+    res = run("fit", lab / "run.csv", "-o", lab / "model.txt")
+    assert res.exit_code == 2 and "name it .json" in res.output
+    assert not (lab / "model.txt").exists()
+    assert "Output file (.json)" in run("fit", "--help").output
+    assert run("report", lab / "model.json", lab / "run.csv", "--out", lab / "vrep").exit_code == 0
+    md = (lab / "vrep" / "report.md").read_text()
+    assert f"| piezohyst version | {ph.__version__} |" in md

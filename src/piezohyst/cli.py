@@ -184,7 +184,7 @@ def describe(model: HysteresisModel) -> str:
     "starts mid-cycle); the operators start in the periodic steady state.",
 )
 @_data_options
-@OUT_FILE
+@OUT_FILE_JSON
 @FORCE
 @click.pass_obj
 def fit(
@@ -213,6 +213,9 @@ def fit(
     """
     from .workflows import fit_file
 
+    if out.suffix.lower() != ".json":
+        raise click.BadParameter(f"a model file is JSON: name it .json (got {out.name!r})",
+                                 param_hint="-o/--out")  # fmt: skip
     try:
         taus = tuple(float(c) for c in creep.split(",") if c.strip())
     except ValueError:

@@ -269,7 +269,8 @@ class Report:
         return [*(f.path for f in self.figures), json_path, md_path, html_path]
 
     def _rows(self) -> list[tuple[str, list[tuple[str, str]]]]:
-        meta = [(k.replace("_", " "), _plain(v)) for k, v in self.metadata.items()]
+        meta = [("piezohyst version", __version__)]
+        meta += [(k.replace("_", " "), _plain(v)) for k, v in self.metadata.items()]
         sections = [("Results", [(m.label, m.text()) for m in self.metrics]), ("Provenance", meta)]
         return sections + list(self.tables.items())
 
