@@ -428,3 +428,21 @@ def test_fit_names_its_output_a_json_file_and_the_report_its_version(lab: Path) 
     assert run("report", lab / "model.json", lab / "run.csv", "--out", lab / "vrep").exit_code == 0
     md = (lab / "vrep" / "report.md").read_text()
     assert f"| piezohyst version | {ph.__version__} |" in md
+
+
+def test_an_output_in_a_unit_of_another_quantity_and_an_absurd_value_are_named(
+    tmp_path: Path,
+) -> None:
+    t = np.arange(400) / 1000.0
+    v = 70 - 70 * np.cos(2 * np.pi * 5 * t)
+    q = 1e-8 * v
+    rows = "".join(f"{a},{b},{c * 1e3}\n" for a, b, c in zip(t, v, q, strict=True))
+    (tmp_path / "ma.csv").write_text("time,voltage,charge [mA]\n" + rows)
+    one_line_error(run("fit", tmp_path / "ma.csv", "-o", tmp_path / "ma.json"),
+                   "'mA', a unit of [current], not a charge (C) or a displacement (m)")  # fmt: skip
+    q[123] = 1e300
+    rows = "".join(f"{a},{b},{c}\n" for a, b, c in zip(t, v, q, strict=True))
+    (tmp_path / "big.csv").write_text("time,voltage,charge\n" + rows)
+    one_line_error(run("fit", tmp_path / "big.csv", "-o", tmp_path / "big.json"),
+                   "1e+300 at row 124, column 'charge'")  # fmt: skip
+    assert not (tmp_path / "big.json").exists()

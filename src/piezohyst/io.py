@@ -380,6 +380,10 @@ class RecordingStream:
             )
 
 
+#: Magnitudes beyond this in a data file are logging errors, not measurements (1e100 C, V, s)
+MAX_VALUE = 1e100
+
+
 def check_finite(values: FloatArray, start: int, where: str, column: str) -> None:
     """Raise naming the first NaN or infinite value of a block, by its row in the file.
 
@@ -396,13 +400,12 @@ def check_finite(values: FloatArray, start: int, where: str, column: str) -> Non
     ------
     DataFileError
     """
-    bad = ~np.isfinite(values)
+    bad = ~(np.abs(values) <= MAX_VALUE)  # NaN, infinite, or beyond any measurement
     if bad.any():
         i = int(np.argmax(bad))
-        msg = (
-            f"{where}: {values[i]} at row {start + i + 1}, column {column!r} "
-            "(values must be finite)"
-        )
+        why = "values must be finite" if not np.isfinite(values[i]) else (
+            f"no measurement reaches {MAX_VALUE:g} in any unit: a logging error")  # fmt: skip
+        msg = f"{where}: {values[i]} at row {start + i + 1}, column {column!r} ({why})"
         raise DataFileError(msg)
 
 

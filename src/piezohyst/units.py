@@ -106,4 +106,11 @@ def to_standard(
     if role == "time":
         msg = f"{where} is in {unit!r}, which is not a unit of time"
         raise DataFileError(msg)
+    if not quantity.dimensionless:  # a physical unit of another quantity (mA for a charge)
+        wanted = {"input": "a voltage (V)", "output": "a charge (C) or a displacement (m)"}[role]
+        msg = (
+            f"{where} is in {unit!r}, a unit of {quantity.dimensionality}, not {wanted}: "
+            "check the column or its unit"
+        )
+        raise DataFileError(msg)
     return values, unit
