@@ -446,3 +446,18 @@ def test_an_output_in_a_unit_of_another_quantity_and_an_absurd_value_are_named(
     one_line_error(run("fit", tmp_path / "big.csv", "-o", tmp_path / "big.json"),
                    "1e+300 at row 124, column 'charge'")  # fmt: skip
     assert not (tmp_path / "big.json").exists()
+
+
+def test_an_aixacct_table_finds_its_time_column(tmp_path: Path) -> None:
+    """aixACCT tables name their time 'Time [s]': found without --time."""
+    t = np.arange(400) / 1000.0
+    v = 700 * np.sin(2 * np.pi * 5 * t)
+    p = 20 * np.tanh(v / 300) + 0.01 * v
+    body = "".join(f"{a:e}\t{b:e}\t{c:e}\t\n" for a, b, c in zip(t, v, p, strict=True))
+    (tmp_path / "trap.dat").write_text(
+        "PiezoResult\n\nTable 1\nTableVersion: 4.11.0\n\nTime [s]\tV+ [V]\tP1 [uC/cm2]\t\n" + body
+    )
+    res = run("fit", tmp_path / "trap.dat", "--input", "V+", "--output", "P1", "--model",
+              "classical-pi", "-o", tmp_path / "trap.json")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert ph.load_model(tmp_path / "trap.json").train_window_ == (0.0, 0.399)

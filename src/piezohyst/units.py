@@ -106,11 +106,15 @@ def to_standard(
     if role == "time":
         msg = f"{where} is in {unit!r}, which is not a unit of time"
         raise DataFileError(msg)
-    if not quantity.dimensionless:  # a physical unit of another quantity (mA for a charge)
-        wanted = {"input": "a voltage (V)", "output": "a charge (C) or a displacement (m)"}[role]
-        msg = (
-            f"{where} is in {unit!r}, a unit of {quantity.dimensionality}, not {wanted}: "
-            "check the column or its unit"
-        )
-        raise DataFileError(msg)
+    # a unit of a quantity the column cannot be (mA for a charge, C for a voltage) is an
+    # error; other labels (a.u., counts, a polarization, a field) pass unchanged
+    wrong = {"input": ("A", "C", "s", "m"), "output": ("A", "s")}[role]  # (a sensor's V is fine)
+    for other in wrong:
+        if quantity.dimensionality == ureg.Quantity(1.0, other).dimensionality:
+            wanted = {"input": "a voltage (V)", "output": "a charge (C) or a displacement (m)"}
+            msg = (
+                f"{where} is in {unit!r}, a unit of {quantity.dimensionality}, not "
+                f"{wanted[role]}: check the column or its unit"
+            )
+            raise DataFileError(msg)
     return values, unit
