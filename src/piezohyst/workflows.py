@@ -520,8 +520,9 @@ def predict_file(
     # window's start (where its fit started: the history's state, the growth at rest); a
     # sample before the window, if asked for, runs from rest at the record's start
     t_w = model.train_window_[0]
-    first_block = next(iter(stream.blocks()))
-    warm = initial_state == "model" and math.isfinite(t_w) and float(first_block.t[0]) < t_w
+    warm = initial_state == "model" and math.isfinite(t_w)
+    first_block = next(iter(stream.blocks())) if warm else None  # read only when needed
+    warm = first_block is not None and float(first_block.t[0]) < t_w
     said = "the model's initial state at the record's start"
     if initial_state != "model":
         said = f"{initial_state} at the record's start"
@@ -536,6 +537,7 @@ def predict_file(
         nonlocal sse, lo, hi
         state: ModelState | FloatArray | None = start
         if warm:
+            assert first_block is not None
             state = model.rest_state(float(first_block.x[0]))
         first = last = math.nan
         written = 0

@@ -468,11 +468,12 @@ class Core:
         z = self.rest_state(float(xs[0]))
         span = 0.0
         moved = 0.0
+        end = math.nan  # the output at the end of the previous pass
         for _ in range(PERIODIC_PASSES):
             before = z.copy()
             y, z = self.propagate(xs, z)
             span = max(span, float(np.ptp(y)), 1e-300)
-            moved = abs(self.output(z) - self.output(before))  # in output units, like span
+            moved, end = abs(float(y[-1]) - end), float(y[-1])  # in output units, like span
             if self._repeats(z, before) and moved <= 1e-12 * span:
                 return z
         if not moved <= 1e-6 * span:  # (NaN too)
