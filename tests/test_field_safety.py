@@ -46,10 +46,15 @@ def test_an_output_that_is_an_input_is_refused(lab: Path) -> None:
         res = run("fit", lab / "run.csv", "-o", lab / "run.csv", *extra)
         assert res.exit_code == 2 and "name it .json" in res.output
     assert (lab / "run.csv").read_bytes() == before
-    model = (lab / "model.json").read_bytes()
-    one_line_error(
-        run("predict", lab / "model.json", lab / "run.csv", "-o", lab / "model.json"), "is an input"
-    )
+    for extra in ([], ["--force"]):  # the data read is an input, forced or not
+        one_line_error(
+            run("predict", lab / "model.json", lab / "run.csv", "-o", lab / "run.csv", *extra),
+            "is an input",
+        )
+    assert (lab / "run.csv").read_bytes() == before
+    model = (lab / "model.json").read_bytes()  # nor is a model written over as a table
+    res = run("predict", lab / "model.json", lab / "run.csv", "-o", lab / "model.json")
+    assert res.exit_code == 2 and "name it .csv, .npz or .parquet" in res.output
     assert (lab / "model.json").read_bytes() == model
 
 

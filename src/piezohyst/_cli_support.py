@@ -131,7 +131,8 @@ def _run(ctx: Context, fn: Callable[[], Any]) -> Any:
 
 # ---------------------------------------------------------------- shared options
 def _data_options(fn: Callable[..., Any]) -> Callable[..., Any]:
-    """--input/--output/--time/--rate/--group/--t-start/--t-stop, gathered into one DataSpec."""
+    """--input/--output/--time/--rate/--group/--skip-rows/--output-file/--t-start/--t-stop and
+    the units, gathered into one DataSpec."""
     options = [
         click.option(
             "--input",
@@ -161,7 +162,23 @@ def _data_options(fn: Callable[..., Any]) -> Callable[..., Any]:
             help="Sample rate in Hz, when the file has no time column.",
         ),
         click.option(
-            "--group", default=None, help="TDMS group (default: the first with channels)."
+            "--group",
+            default=None,
+            help="Group (TDMS, HDF5) or table (aixACCT) to read (default: the first holding "
+            "the columns, else the first with a time column).",
+        ),
+        click.option(
+            "--skip-rows",
+            type=click.IntRange(min=0),
+            default=0,
+            help="Text files: lines to skip before the table (a 'Key: value' preamble is "
+            "found without it).",
+        ),
+        click.option(
+            "--output-file",
+            type=click.Path(dir_okay=False, path_type=str),
+            default=None,
+            help="A second file holding the output column, row for row with the first.",
         ),
         click.option("--t-start", type=float, default=None, help="Use samples from this time (s)."),
         click.option(
@@ -192,6 +209,8 @@ def _data_options(fn: Callable[..., Any]) -> Callable[..., Any]:
         time_column: str,
         rate: float | None,
         group: str | None,
+        skip_rows: int,
+        output_file: str | None,
         t_start: float | None,
         t_stop: float | None,
         input_unit: str | None,
@@ -210,6 +229,8 @@ def _data_options(fn: Callable[..., Any]) -> Callable[..., Any]:
             input_unit,
             output_unit,
             time_unit,
+            skip_rows,
+            output_file,
         )
         return fn(*args, data_spec=spec, **kwargs)
 
@@ -336,13 +357,29 @@ FORCE = click.option(
 )
 
 
+def _suffix(*allowed: str, what: str) -> Callable[[click.Context, click.Parameter, Any], Any]:
+    """A click callback refusing a file name whose suffix ``what`` cannot be written as."""
+
+    def check(_ctx: click.Context, param: click.Parameter, value: Any) -> Any:
+        if value is not None and Path(value).suffix.lower() not in allowed:
+            names = " or ".join([", ".join(allowed[:-1]), allowed[-1]] if allowed[1:] else allowed)
+            msg = f"{what}: name it {names} (got {Path(value).name!r})"
+            raise click.BadParameter(msg, param=param)
+        return value
+
+    return check
+
+
+TABLE_SUFFIXES = (".csv", ".npz", ".parquet")
+
 OUT_FILE = click.option(
     "-o",
     "--out",
     "out",
     type=click.Path(dir_okay=False, path_type=Path),
     required=True,
-    help="Output file (.csv or .npz).",
+    callback=_suffix(*TABLE_SUFFIXES, what="a table is written as CSV, NPZ or Parquet"),
+    help="Output file (.csv, .npz or .parquet).",
 )
 
 
@@ -352,6 +389,7 @@ OUT_FILE_JSON = click.option(
     "out",
     type=click.Path(dir_okay=False, path_type=Path),
     required=True,
+    callback=_suffix(".json", what="this file is JSON"),
     help="Output file (.json).",
 )
 

@@ -11,7 +11,7 @@ import dataclasses
 import io as _io
 import logging
 import re
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -221,11 +221,12 @@ def _sniff_delimiter(sample: str) -> str | None:
     """The delimiter most lines agree on with the first line; None means whitespace.
 
     Agreement, not unanimity: one ragged row must not hide the delimiter (it is
-    then reported as a ragged row).
+    then reported as a ragged row). On a tie the comma comes last: ``1,5;2,25``
+    is two numbers with decimal commas.
     """
     lines = [ln for ln in sample.splitlines() if ln.strip()][:50]
     best, best_score = None, 0.0
-    for delim in (",", "\t", ";", "|"):
+    for delim in ("\t", ";", "|", ","):
         first = lines[0].count(delim)
         if first == 0:
             continue
@@ -240,18 +241,21 @@ def _read_text(
     group: str | None = None,
     channels: Sequence[str] = (),
     progress: Callable[[int], None] | None = None,
+    skip_rows: int = 0,
 ) -> Table:
     head = _read_head(path)
     if b"\x00" in head and head[:2] not in (b"\xff\xfe", b"\xfe\xff"):
         msg = f"{path}: not a text file (binary content); expected CSV or text columns"
         raise DataFileError(msg)
-    fast = _read_csv_arrow(path, head, progress)
+    fast = _read_csv_arrow(path, head, progress, skip_rows)
     if fast is not None:
         return fast
-    return _read_text_careful(path, group, channels)
+    return _read_text_careful(path, group, channels, skip_rows)
 
 
-def _read_text_careful(path: Path, group: str | None, channels: Sequence[str]) -> Table:
+def _read_text_careful(
+    path: Path, group: str | None, channels: Sequence[str], skip_rows: int = 0
+) -> Table:
     """Every text file pyarrow does not read cleanly, in memory, with exact messages."""
     raw = path.read_bytes()
     text = _decode(raw, path)
@@ -263,9 +267,73 @@ def _read_text_careful(path: Path, group: str | None, channels: Sequence[str]) -
     lines = [
         (n + 1, ln)
         for n, ln in enumerate(text.splitlines())
-        if ln.strip() and not ln.lstrip().startswith(("#", "%"))
+        if n >= skip_rows and ln.strip() and not ln.lstrip().startswith(("#", "%"))
     ]
-    return _table_from_lines(path, lines)
+    start = _table_start(lines)
+    table = _table_from_lines(path, lines[start:])
+    return dataclasses.replace(table, time_step=_stated_step(ln for _, ln in lines[:start]))
+
+
+# a preamble line: 'Key: value' or 'Key = value' (device, operator, date, sample rate)
+_KEY_VALUE = re.compile(r"^\s*[^\W\d][^:=]{0,60}[:=]")
+_STATED_RATE = re.compile(
+    r"(?:sample|sampling|scan)\s*(?:rate|frequency)\s*(?:\[\s*(k?Hz)\s*\])?\s*[:=;,\t]\s*"
+    r"([0-9]+(?:[.,][0-9]*)?(?:[eE][+-]?[0-9]+)?)\s*(k?Hz|S/s)?",
+    re.IGNORECASE,
+)
+
+
+def _stated_step(preamble: Iterable[str]) -> float | None:
+    """The sample interval (s) a preamble states ('Sample rate: 1000 Hz', '... [kHz]: 1,5')."""
+    for line in preamble:
+        found = _STATED_RATE.search(line)
+        if found:
+            rate = float(found.group(2).replace(",", "."))
+            unit = (found.group(1) or found.group(3) or "Hz").lower()
+            rate *= 1e3 if unit == "khz" else 1.0
+            if rate > 0:
+                return 1.0 / rate
+    return None
+
+
+def _cells(line: str, delim: str | None) -> list[str]:
+    return line.split() if delim is None else next(csv.reader([line], delimiter=delim))
+
+
+def _numeric_row(cells: list[str]) -> bool:
+    filled = [c.strip() for c in cells if c.strip()]
+    return bool(filled) and all(_is_number(c) or _DECIMAL_COMMA.match(c) for c in filled)
+
+
+def _table_start(lines: list[tuple[int, str]], look: int = 200) -> int:
+    """Index of a table's first line (its header, else its first row) after a preamble.
+
+    DAQ exports open with ``Key: value`` lines (device, operator, date, sample rate)
+    before the table. The delimiter and the field count are the ones the last lines
+    agree on; the first row is the first all-numeric line with that count (within
+    ``look`` lines); the line before it is the header, unless it is a ``Key: value``
+    line. A numeric line above that row keeps every line (a ragged or broken row is
+    then reported as such), as does a table with one column.
+    """
+    if len(lines) < 3:
+        return 0
+    tail = [ln for _, ln in lines[-50:]]
+    delim = _sniff_delimiter("\n".join(tail))
+    counts = [len(_cells(ln, delim)) for ln in tail]
+    width = max(set(counts), key=counts.count)
+    if width < 2:
+        return 0
+    top = [_cells(ln, delim) for _, ln in lines[:look]]
+    first = next(
+        (i for i, cells in enumerate(top) if len(cells) == width and _numeric_row(cells)), 0
+    )
+    if first == 0 or any(_numeric_row(cells) for cells in top[:first]):
+        return 0
+    above = top[first - 1]
+    key_value = _KEY_VALUE.match(lines[first - 1][1]) is not None
+    if key_value and (len(above) != width or above[0].rstrip().endswith((":", "="))):
+        return first  # no header: the preamble runs up to the data
+    return first - 1
 
 
 def _read_head(path: Path, size: int = 1 << 16) -> bytes:
@@ -277,20 +345,22 @@ def _read_head(path: Path, size: int = 1 << 16) -> bytes:
 class _CsvPlan:
     """How pyarrow reads a delimited file, decided from its head as the careful reader would."""
 
-    skip: int  # lines before the data (comments, header)
+    skip: int  # lines before the data (comments, preamble, header)
     names: list[str]
     units: Mapping[str, str]
     delimiter: str
     decimal_comma: bool
     encoding: str
+    time_step: float | None = None  # the preamble's stated sample interval
 
 
 class _Fallback(Exception):
     """pyarrow cannot read this file cleanly: the careful reader must (and names the row)."""
 
 
-def _csv_plan(path: Path, head: bytes) -> _CsvPlan | None:
-    """Delimiter, leading comment lines, header, units and decimal commas from the head of a file.
+def _csv_plan(path: Path, head: bytes, skip_rows: int = 0) -> _CsvPlan | None:
+    """Delimiter, leading comment and preamble lines, header, units and decimal commas from
+    the head of a file (after ``skip_rows`` lines).
 
     None where the careful reader must read: whitespace columns, aixACCT
     tables, UTF-16, a head that is not a clean numeric table.
@@ -305,7 +375,7 @@ def _csv_plan(path: Path, head: bytes) -> _CsvPlan | None:
     lines = text.splitlines()
     if len(head) == 1 << 16:
         lines = lines[:-1]  # the last line of the head may be cut
-    skip = 0
+    skip = skip_rows
     while skip < len(lines) and (
         not lines[skip].strip() or lines[skip].lstrip().startswith(("#", "%"))
     ):
@@ -313,6 +383,8 @@ def _csv_plan(path: Path, head: bytes) -> _CsvPlan | None:
     body = [(n + 1, ln) for n, ln in enumerate(lines[skip:], start=skip) if ln.strip()]
     if len(body) < 2 or any(_AIXACCT_TABLE.match(ln) for _, ln in body[:50]):
         return None
+    start = _table_start(body)
+    preamble, body = body[:start], body[start:]
     delim = _sniff_delimiter("\n".join(ln for _, ln in body[:50]))
     if delim is None:
         return None
@@ -326,7 +398,13 @@ def _csv_plan(path: Path, head: bytes) -> _CsvPlan | None:
         [(n, next(csv.reader([ln], delimiter=delim))) for n, ln in body[:50]]
     )
     return _CsvPlan(
-        skip + int(has_header), sample.columns, sample.units, delim, decimal_comma, encoding
+        body[0][0] - 1 + int(has_header),
+        sample.columns,
+        sample.units,
+        delim,
+        decimal_comma,
+        encoding,
+        _stated_step(ln for _, ln in preamble),
     )
 
 
@@ -381,13 +459,13 @@ def _csv_batches(
 
 
 def _read_csv_arrow(
-    path: Path, head: bytes, progress: Callable[[int], None] | None
+    path: Path, head: bytes, progress: Callable[[int], None] | None, skip_rows: int = 0
 ) -> Table | None:
     """Delimited numeric columns read by pyarrow in batches; None where the careful path must read.
 
     ``progress`` is called with the rows read so far.
     """
-    plan = _csv_plan(path, head)
+    plan = _csv_plan(path, head, skip_rows)
     if plan is None:
         return None
     parts: dict[str, list[FloatArray]] = {name: [] for name in plan.names}
@@ -404,7 +482,8 @@ def _read_csv_arrow(
     if rows == 0:
         return None
     columns = {name: np.concatenate(v) for name, v in parts.items()}
-    return Table(path, plan.names, {k: _constant(v) for k, v in columns.items()}, units=plan.units)
+    getters = {k: _constant(v) for k, v in columns.items()}
+    return Table(path, plan.names, getters, plan.time_step, plan.units)
 
 
 _DECIMAL_COMMA = re.compile(r"^[+-]?\d*,\d+(?:[eE][+-]?\d+)?$")
@@ -543,16 +622,84 @@ def _read_parquet(path: Path, progress: Callable[[int], None] | None = None) -> 
     return dataclasses.replace(_table_from_arrays(path, arrays, "Parquet"), units=units)
 
 
-def _read_mat(path: Path) -> Table:
+def _read_mat(path: Path, group: str | None, channels: Sequence[str]) -> Table:
     from ._isolate import parse_isolated
 
-    return _table_from_arrays(path, parse_isolated("mat_arrays", path, "MAT"), "MAT")
+    return _grouped(path, parse_isolated("mat_arrays", path, "MAT"), "MAT", group, channels)
 
 
-def _read_hdf5(path: Path) -> Table:
+def _read_hdf5(path: Path, group: str | None, channels: Sequence[str]) -> Table:
     from ._isolate import parse_isolated
 
-    return _table_from_arrays(path, parse_isolated("hdf5_arrays", path, "HDF5"), "HDF5")
+    return _grouped(path, parse_isolated("hdf5_arrays", path, "HDF5"), "HDF5", group, channels)
+
+
+#: Names under which files state their sample rate (Hz) or sample interval (s)
+RATE_NAMES = ("fs", "rate", "sample_rate", "sampling_rate", "samplerate", "sampling_frequency")
+STEP_NAMES = ("dt", "ts", "sample_interval", "sampling_interval", "wf_increment")
+
+
+def _grouped(
+    path: Path, found: Mapping[str, object], kind: str, group: str | None, channels: Sequence[str]
+) -> Table:
+    """A Table of a container's 1-D arrays (HDF5 paths ``group/name``; a MAT file is one
+    group), with the sample interval stated beside them (:func:`_stated_interval`).
+
+    With ``group``, its own arrays by their short names. Without, every array by its
+    path, and the interval is that of the group of the columns asked for (or of the
+    only group).
+    """
+    columns = {k: v for k, v in found.items() if "@" not in k and _as_column(v) is not None}
+    groups = sorted({c.rpartition("/")[0] for c in columns})
+    home: str | None
+    if group is not None:
+        home = group.strip("/")
+        if home not in groups:
+            listing = ", ".join(repr(g or "/") for g in groups)
+            msg = f"{path}: no {kind} group {group!r}; available: {listing}"
+            raise DataFileError(msg)
+        picked = {
+            k.rpartition("/")[2]: v for k, v in columns.items() if k.rpartition("/")[0] == home
+        }
+    else:
+        picked = dict(columns)
+        asked = [c.rpartition("/")[0] for c in channels if c in columns]
+        home = asked[0] if asked else (groups[0] if len(groups) == 1 else None)
+    table = _table_from_arrays(path, picked, kind)
+    return dataclasses.replace(
+        table,
+        time_step=None if home is None else _stated_interval(found, set(columns), home),
+        group=group,
+        groups=tuple(g or "/" for g in groups) if len(groups) > 1 else (),
+    )
+
+
+def _stated_interval(found: Mapping[str, object], datasets: set[str], home: str) -> float | None:
+    """The sample interval (s) a group or one of its parents states, nearest first: a
+    scalar dataset or attribute named as in :data:`RATE_NAMES` (Hz) or :data:`STEP_NAMES` (s).
+    Attributes come as ``owner@name``; a dataset's attributes count for its group."""
+    stated: dict[str, float] = {}  # 'group/leaf' -> interval
+    for key, value in found.items():
+        owner, at, leaf = key.partition("@")
+        if at:
+            place = owner.rpartition("/")[0] if owner in datasets else owner
+        else:
+            place, _, leaf = key.rpartition("/")
+        arr = np.asarray(value)
+        if arr.size != 1 or arr.dtype.kind not in "biuf":
+            continue
+        v = float(arr.reshape(-1)[0])
+        name = leaf.lower()
+        if v > 0 and name in RATE_NAMES:
+            stated.setdefault(place, 1.0 / v)
+        elif v > 0 and name in STEP_NAMES:
+            stated.setdefault(place, v)
+    parts = home.split("/") if home else []
+    for depth in range(len(parts), -1, -1):
+        place = "/".join(parts[:depth])
+        if place in stated:
+            return stated[place]
+    return None
 
 
 class _Collect(logging.Handler):
@@ -607,7 +754,8 @@ def _choose_group(
     channels: Sequence[str],
     kind: str,
 ) -> str:
-    """The group to read: the one named, else the first holding every named channel."""
+    """The group to read: the one named, else the first holding every named channel, else
+    the first with a time column (a measurement, not aixACCT's ``Summary``), else the first."""
     names = list(groups)
     listing = ", ".join(map(repr, names))
     if group is not None:
@@ -624,7 +772,8 @@ def _choose_group(
             bare = {split_unit(c)[0] for c in columns} | set(columns)
             if columns and need and all(c in bare or split_unit(c)[0] in bare for c in need):
                 return name
-    return next((n for n, cols in groups.items() if cols), names[0])
+    timed = (n for n, c in groups.items() if any(split_unit(k)[0].lower() == "time" for k in c))
+    return next(timed, next((n for n, cols in groups.items() if cols), names[0]))
 
 
 def _read_tdms(path: Path, group: str | None, channels: Sequence[str] = ()) -> Table:

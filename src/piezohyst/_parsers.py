@@ -33,16 +33,23 @@ def _numeric(arrays: dict[str, Any]) -> dict[str, np.ndarray]:
 
 
 def hdf5_arrays(path: str) -> dict[str, np.ndarray]:
-    """Every numeric dataset of an HDF5 file holding at least one value, by its path."""
+    """Every numeric dataset of an HDF5 file holding at least one value, by its path, and
+    every numeric attribute as ``path@name`` (``@name`` for the file's own)."""
     import h5py
 
     arrays: dict[str, Any] = {}
     with h5py.File(path, "r") as fh:
 
+        def attributes(name: str, obj: Any) -> None:
+            for key, value in obj.attrs.items():
+                arrays[f"{name}@{key}"] = np.asarray(value) if np.isscalar(value) else value
+
         def visit(name: str, obj: object) -> None:
             if isinstance(obj, h5py.Dataset) and obj.dtype.kind in "biuf" and obj.size >= 1:
                 arrays[name] = np.asarray(obj[()])
+            attributes(name, obj)
 
+        attributes("", fh)
         fh.visititems(visit)
     return _numeric(arrays)
 

@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike
 from ._formats import MARKER, MD_MARKER, Table
 from ._validation import FloatArray
 from ._version import __version__
-from .errors import DataFileError
+from .errors import DataFileError, OutputError
 
 
 # ------------------------------------------------------------------ writers
@@ -60,17 +60,35 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[Path], None]) ->
         ``path``.
     """
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=p.suffix, dir=p.parent)
+    with _writing(p):
+        p.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=p.suffix, dir=p.parent)
     os.close(fd)
     try:
         write(Path(tmp))
         os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, p)
+        with _writing(p):
+            os.replace(tmp, p)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
     return p
+
+
+@contextlib.contextmanager
+def _writing(p: Path) -> Iterator[None]:
+    """An OS error while placing ``p`` becomes one naming ``p``, not our temporary file."""
+    try:
+        yield
+    except OSError as exc:
+        if isinstance(exc, OutputError):
+            raise
+        reason = (exc.strerror or type(exc).__name__).lower()
+        blocking = next((q for q in p.parents if q.is_file()), None)
+        if blocking is not None:
+            reason = f"{blocking} is a file, not a folder"
+        msg = f"{p}: cannot write here ({reason})"
+        raise OutputError(msg) from None
 
 
 @contextlib.contextmanager
@@ -90,16 +108,18 @@ def atomic_folder(path: str | os.PathLike[str]) -> Iterator[Path]:
         The folder to write the files into.
     """
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{p.name}.", dir=p.parent))
+    with _writing(p):
+        p.parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=f".{p.name}.", dir=p.parent))
     try:
         yield staging
         os.chmod(staging, 0o777 & ~_umask())
         old = None
-        if p.exists():  # the earlier folder steps aside, then goes
-            old = Path(tempfile.mkdtemp(prefix=f".{p.name}.old.", dir=p.parent))
-            os.replace(p, old / p.name)
-        os.replace(staging, p)
+        with _writing(p):
+            if p.exists():  # the earlier folder steps aside, then goes
+                old = Path(tempfile.mkdtemp(prefix=f".{p.name}.old.", dir=p.parent))
+                os.replace(p, old / p.name)
+            os.replace(staging, p)
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
     except BaseException:

@@ -25,6 +25,7 @@ from ._cli_support import (
     _loop_options,
     _model_options,
     _run,
+    _suffix,
     initial_state_option,
     input_dynamics_option,
     operators_option,
@@ -213,9 +214,6 @@ def fit(
     """
     from .workflows import fit_file
 
-    if out.suffix.lower() != ".json":
-        raise click.BadParameter(f"a model file is JSON: name it .json (got {out.name!r})",
-                                 param_hint="-o/--out")  # fmt: skip
     try:
         taus = tuple(float(c) for c in creep.split(",") if c.strip())
     except ValueError:
@@ -412,6 +410,18 @@ def predict(
     is_flag=True,
     help="Skip the precondition cycle (the ramp-in from the present voltage stays).",
 )
+@click.option(
+    "--target-unit",
+    default=None,
+    help="Unit of the desired column, e.g. um, nm, uC (default: its header's).",
+)
+@click.option(
+    "--target-offset",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Added to every desired value, in the target's unit (a target relative to another zero).",
+)
 @OUT_FILE
 @FORCE
 @click.pass_obj
@@ -423,6 +433,8 @@ def compensate(
     settings: CompensatorSettings,
     present_voltage: float | None,
     no_precondition: bool,
+    target_unit: str | None,
+    target_offset: float,
     out: Path,
     force: bool,
 ) -> None:
@@ -455,6 +467,8 @@ def compensate(
                 settings=settings,
                 precondition=not no_precondition,
                 present_voltage=present_voltage,
+                target_unit=target_unit,
+                target_offset=target_offset,
                 force=force,
                 progress=progress,
             ),
@@ -534,6 +548,7 @@ def report(
     "--summary",
     type=click.Path(dir_okay=False, path_type=Path),
     default=None,
+    callback=_suffix(".csv", ".parquet", what="the summary is a CSV or Parquet table"),
     help="Summary table (.csv or .parquet). Default: OUT_DIR/summary.csv.",
 )
 @click.option(
@@ -628,6 +643,7 @@ def fit_many_cmd(
     type=click.Path(dir_okay=False, path_type=Path),
     default=Path("ph_comp.c"),
     show_default=True,
+    callback=_suffix(".c", what="the compensator is C source"),
     help="C file (the .h goes beside it).",
 )
 @click.option(

@@ -91,6 +91,8 @@ def compensate_file(
     settings: CompensatorSettings = _DEFAULT_SETTINGS,
     precondition: bool = True,
     present_voltage: float | None = None,
+    target_unit: str | None = None,
+    target_offset: float = 0.0,
     force: bool = False,
     progress: Progress = None,
 ) -> Compensation:
@@ -129,6 +131,12 @@ def compensate_file(
         Write the precondition cycle before the trajectory.
     present_voltage : float, optional
         The actuator's voltage now (V); default at rest: 0 V, or the nearer limit.
+    target_unit : str, optional
+        The desired column's unit (``um``, ``nm``, ``uC``) when its header names
+        none; a header naming another is an error.
+    target_offset : float, default 0
+        Added to every desired value, in the target's unit: a target written
+        relative to another zero (the written ``desired`` column includes it).
     force : bool, default False
         Replace an existing ``out`` that piezohyst did not write.
     progress : callable, optional
@@ -144,7 +152,21 @@ def compensate_file(
     name = _desired_column(table, column, target)
     expected = "m" if settings.domain == "displacement" else model.output_unit
     where = f"{target}: column {name!r}"
-    unit = to_standard(np.empty(0), table.unit(name), "output", where)[1]
+    source_unit = table.unit(name) or target_unit
+    if table.unit(name) is not None and target_unit is not None and table.unit(name) != target_unit:
+        msg = (
+            f"{target}: column {name!r} is marked {table.unit(name)!r} in the file, but the "
+            f"target's unit was given as {target_unit!r}"
+        )
+        raise DataFileError(msg)
+    if not math.isfinite(target_offset):
+        msg = f"the target offset must be finite. Got {target_offset}."
+        raise ParameterError(msg)
+
+    def desired_of(values: FloatArray) -> FloatArray:
+        return to_standard(values + target_offset, source_unit, "output", where)[0]
+
+    unit = to_standard(np.empty(0), source_unit, "output", where)[1]
     if unit is not None and unit != expected:
         msg = f"{target}: the desired column is in {unit!r}, the compensator expects {expected!r}"
         raise DataFileError(msg)
@@ -173,7 +195,7 @@ def compensate_file(
     comp.reset(voltage=start)
     preamble = np.empty(0)
     if precondition:  # a cycle over what the trajectory needs, with a margin
-        span = _needed_span(comp, table.batches(keys), name, table.unit(name), where)
+        span = _needed_span(comp, (desired_of(b[name]) for b in table.batches(keys)))
         preamble = comp.precondition(max(3, round(fs)), span)
     finite = 0
 
@@ -182,7 +204,7 @@ def compensate_file(
         row = 0
         t_last: float | None = None
         for batch in itertools.chain([head], batches):
-            desired = to_standard(batch[name], table.unit(name), "output", where)[0]
+            desired = desired_of(batch[name])
             if timed:
                 check_finite(batch["time"], row, f"{target}", "time")
                 check_increasing(batch["time"], t_last, row, f"{target}", "time")
@@ -221,20 +243,14 @@ def compensate_file(
 PRECONDITION_MARGIN = 0.1
 
 
-def _needed_span(
-    comp: Compensator,
-    batches: Iterator[dict[str, FloatArray]],
-    name: str,
-    unit: str | None,
-    where: str,
-) -> tuple[float, float]:
+def _needed_span(comp: Compensator, desired: Iterator[FloatArray]) -> tuple[float, float]:
     """The voltages a trajectory's commands cover (a dry run on a copy), with a margin,
     inside the limits; the whole limits when it has no finite command."""
     probe = copy.deepcopy(comp)
     probe.precondition(3)  # from a preconditioned state, as the commands will be
     lo, hi = math.inf, -math.inf
-    for batch in batches:
-        commands = probe.process(to_standard(batch[name], unit, "output", where)[0])
+    for values in desired:
+        commands = probe.process(values)
         lo, hi = min(lo, float(commands.min())), max(hi, float(commands.max()))
     if not lo < hi:
         return comp.v_min, comp.v_max

@@ -16,6 +16,7 @@ __all__ = [
     "NotFittedError",
     "NotInvertibleError",
     "NumericRangeError",
+    "OutputError",
     "OverwriteError",
     "ParameterError",
     "PiezohystError",
@@ -77,6 +78,10 @@ class OverwriteError(DataFileError):
     def __init__(self, message: str, *, replaceable: bool) -> None:
         super().__init__(message)
         self.replaceable = replaceable
+
+
+class OutputError(PiezohystError, OSError):
+    """A file or folder cannot be written where asked (a read-only folder, a full disk)."""
 
 
 class ExtrapolationWarning(UserWarning):

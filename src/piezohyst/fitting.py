@@ -109,6 +109,12 @@ def identify_model(model: Any, blocks: Blocks, initial_state: InitialState, time
             "a record without excitation holds no hysteresis to identify"
         )
         raise InsufficientDataError(msg)
+    if not sm.y_max - sm.y_min > 1e-12 * max(abs(sm.y_min), abs(sm.y_max), 1e-300):
+        msg = (
+            f"the output never moves (constant at {sm.y_min:g} {model.output_unit}): "
+            "nothing to identify; is it the right column?"
+        )
+        raise InsufficientDataError(msg)
     terms, subsets = model._terms_to_fit(sm.x_range, params)
     if not timed and any(term.rate_dependent for term in terms):
         as_time(None, sm.n, required=True, owner=type(model).__name__)  # raises

@@ -84,6 +84,7 @@ def read_table(
     group: str | None = None,
     channels: Sequence[str] = (),
     progress: Callable[[int], None] | None = None,
+    skip_rows: int = 0,
 ) -> Table:
     """Read a data file into a :class:`Table` (format chosen by the file's suffix).
 
@@ -100,6 +101,9 @@ def read_table(
         all of them is read (else the first with data).
     progress : callable, optional
         Called with the number of rows read so far, as a large CSV streams in.
+    skip_rows : int, default 0
+        Text files: lines to skip before the table. A preamble of ``Key: value``
+        lines is found without it (and a stated ``Sample rate: 1000 Hz`` read).
 
     Returns
     -------
@@ -112,15 +116,27 @@ def read_table(
     """
     p = _existing(path)
     suffix = p.suffix.lower()
+    _check_skip(p, skip_rows)
     readers: dict[str, Callable[[], Table]] = {
         ".npz": lambda: _read_npz(p),
-        ".mat": lambda: _read_mat(p),
+        ".mat": lambda: _read_mat(p, group, channels),
         ".tdms": lambda: _read_tdms(p, group, channels),
         ".parquet": lambda: _read_parquet(p, progress),
-        ".h5": lambda: _read_hdf5(p),
-        ".hdf5": lambda: _read_hdf5(p),
+        ".h5": lambda: _read_hdf5(p, group, channels),
+        ".hdf5": lambda: _read_hdf5(p, group, channels),
     }
-    return _reading(p, readers.get(suffix, lambda: _read_text(p, group, channels, progress)))
+    return _reading(
+        p, readers.get(suffix, lambda: _read_text(p, group, channels, progress, skip_rows))
+    )
+
+
+def _check_skip(p: Path, skip_rows: int) -> None:
+    if skip_rows < 0:
+        msg = f"the rows to skip must be 0 or more. Got {skip_rows}."
+        raise DataFileError(msg)
+    if skip_rows and p.suffix.lower() not in CSV_SUFFIXES:
+        msg = f"{p}: rows can be skipped in text files only, not in {p.suffix} files"
+        raise DataFileError(msg)
 
 
 def _existing(path: str | os.PathLike[str]) -> Path:
@@ -151,7 +167,11 @@ def _reading(p: Path, reader: Callable[[], Table]) -> Table:
 
 
 def open_table(
-    path: str | os.PathLike[str], *, group: str | None = None, channels: Sequence[str] = ()
+    path: str | os.PathLike[str],
+    *,
+    group: str | None = None,
+    channels: Sequence[str] = (),
+    skip_rows: int = 0,
 ) -> Table:
     """A :class:`Table` whose columns are read from the file only when asked for.
 
@@ -163,7 +183,7 @@ def open_table(
     ----------
     path : path
         The data file (formats as :func:`read_table`).
-    group, channels
+    group, channels, skip_rows
         As for :func:`read_table`.
 
     Returns
@@ -172,17 +192,20 @@ def open_table(
     """
     p = _existing(path)
     suffix = p.suffix.lower()
+    _check_skip(p, skip_rows)
     if suffix == ".parquet":
         return _reading(p, lambda: _lazy_parquet(p))
     if suffix in CSV_SUFFIXES:
         head = _read_head(p)
-        plan = None if b"\x00" in head else _csv_plan(p, head)
+        plan = None if b"\x00" in head else _csv_plan(p, head, skip_rows)
         if plan is not None:
-            return _lazy_csv(p, plan, group, channels)
-    return read_table(p, group=group, channels=channels)
+            return _lazy_csv(p, plan, group, channels, skip_rows)
+    return read_table(p, group=group, channels=channels, skip_rows=skip_rows)
 
 
-def _lazy_csv(path: Path, plan: _CsvPlan, group: str | None, channels: Sequence[str]) -> Table:
+def _lazy_csv(
+    path: Path, plan: _CsvPlan, group: str | None, channels: Sequence[str], skip_rows: int
+) -> Table:
     def stream(names: Sequence[str]) -> Iterator[dict[str, FloatArray]]:
         done = 0
         try:
@@ -191,7 +214,7 @@ def _lazy_csv(path: Path, plan: _CsvPlan, group: str | None, channels: Sequence[
                 yield batch
         except _Fallback:
             # the careful reader raises naming the row, or reads what pyarrow could not
-            careful = _read_text_careful(path, group, channels)
+            careful = _read_text_careful(path, group, channels, skip_rows)
             arrays = [careful.get(n, finite=False) for n in names]
             for lo in range(done, arrays[0].size, BATCH_ROWS):
                 yield {n: a[lo : lo + BATCH_ROWS] for n, a in zip(names, arrays, strict=True)}
@@ -199,9 +222,8 @@ def _lazy_csv(path: Path, plan: _CsvPlan, group: str | None, channels: Sequence[
     def getter(name: str) -> Callable[[], FloatArray]:
         return lambda: np.concatenate([b[name] for b in stream([name])])
 
-    return Table(
-        path, plan.names, {n: getter(n) for n in plan.names}, units=plan.units, _stream=stream
-    )
+    getters = {n: getter(n) for n in plan.names}
+    return Table(path, plan.names, getters, plan.time_step, plan.units, _stream=stream)
 
 
 def _lazy_parquet(path: Path) -> Table:
@@ -460,6 +482,8 @@ def open_recording(
     input_unit: str | None = None,
     output_unit: str | None = None,
     time_unit: str | None = None,
+    skip_rows: int = 0,
+    output_file: str | os.PathLike[str] | None = None,
 ) -> RecordingStream:
     """A recording to read block by block (arguments as :func:`read_recording`).
 
@@ -470,7 +494,7 @@ def open_recording(
     ----------
     path : str or os.PathLike
     input_column, output_column, time_column, rate, group, output_required
-    t_start, t_stop, input_unit, output_unit, time_unit
+    t_start, t_stop, input_unit, output_unit, time_unit, skip_rows, output_file
         See :func:`read_recording`.
 
     Returns
@@ -478,13 +502,19 @@ def open_recording(
     RecordingStream
     """
     # the default time name may be absent (TDMS states its sample interval instead)
-    wanted = [c for c in (input_column, output_column) if c is not None]
+    output = output_column
+    wanted = [c for c in (input_column, None if output_file else output) if c is not None]
     if time_column is not None and time_column != "time":
         wanted.append(time_column)
-    table = open_table(path, group=group, channels=wanted)
+    table = open_table(path, group=group, channels=wanted, skip_rows=skip_rows)
+    if output_file is not None:  # the output in a file of its own, row for row
+        if output is None:
+            msg = f"{output_file}: an output file needs the output column named"
+            raise DataFileError(msg)
+        other = open_table(output_file, group=group, channels=[output], skip_rows=skip_rows)
+        table, output = _joined(table, other, other.resolve(output))
     x_name = table.resolve(input_column)
     y_name: str | None = None
-    output = output_column
     # the default output may be absent (predicting needs no output); a named one may not
     if output is not None and (output_required or output in table or output != "charge"):
         y_name = table.resolve(output)
@@ -541,6 +571,63 @@ def open_recording(
     )
 
 
+def _joined(table: Table, other: Table, name: str) -> tuple[Table, str]:
+    """``table`` with the column ``name`` of ``other`` beside it (the two files row for row),
+    and that column's name in the joined table."""
+    label = name if name not in table else f"{name} ({other.path.name})"
+
+    def stream(names: Sequence[str]) -> Iterator[dict[str, FloatArray]]:
+        own = [n for n in names if n != label]
+        theirs = ({label: b[name]} for b in other.batches([name]))
+        if label not in names:
+            yield from table.batches(own)
+            return
+        if not own:
+            yield from theirs
+            return
+        sources = [table.batches(own), theirs]
+        held: list[dict[str, FloatArray]] = [{}, {}]
+        rows = [0, 0]
+        while True:
+            for i, source in enumerate(sources):
+                if not held[i] or next(iter(held[i].values())).size == 0:
+                    got = next(source, None)
+                    held[i] = {} if got is None else got
+                    rows[i] += 0 if got is None else next(iter(got.values())).size
+            if not held[0] or not held[1]:
+                break
+            m = min(next(iter(h.values())).size for h in held)
+            yield {k: v[:m] for h in held for k, v in h.items()}
+            held = [{k: v[m:] for k, v in h.items()} for h in held]
+        if held[0] or held[1]:  # one file ended first: count the other's rows for the message
+            for i, source in enumerate(sources):
+                rows[i] += sum(next(iter(b.values())).size for b in source)
+            msg = (
+                f"{other.path}: {rows[1]} rows, but {table.path} has {rows[0]}; the input "
+                "and output files must hold the same samples, row for row"
+            )
+            raise DataFileError(msg)
+
+    def getter(key: str) -> Callable[[], FloatArray]:
+        return lambda: np.concatenate([b[key] for b in stream([key])])
+
+    columns = [*table.columns, label]
+    units = dict(table.units)
+    if other.unit(name) is not None:
+        units[label] = other.units[name]
+    joined = Table(
+        table.path,
+        columns,
+        {c: getter(c) for c in columns},
+        table.time_step or other.time_step,
+        units,
+        table.group,
+        table.groups,
+        _stream=stream,
+    )
+    return joined, label
+
+
 def read_recording(
     path: str | os.PathLike[str], *, progress: Callable[[int], None] | None = None, **options: Any
 ) -> Recording:
@@ -573,6 +660,12 @@ def read_recording(
         Units of the columns, for files whose headers name none (a header's
         ``name [unit]`` or ``name (unit)`` counts; naming both differently
         is an error). Converted by :func:`piezohyst.units.to_standard`.
+    skip_rows : int, default 0
+        Text files: lines to skip before the table (a ``Key: value``
+        preamble is found without it).
+    output_file : str or os.PathLike, optional
+        The output column is in this file, row for row with ``path``
+        (the Bouc-Wen benchmark's ``uval``/``yval`` files).
 
     Returns
     -------
@@ -649,6 +742,10 @@ class DataSpec:
         The window (s): ``t_start <= t < t_stop``.
     input_unit, output_unit, time_unit : str or None
         Units of the columns when the file's headers name none.
+    skip_rows : int
+        Text files: lines to skip before the table.
+    output_file : str or None
+        A second file holding the output column, row for row.
     """
 
     input_column: str = "voltage"
@@ -661,6 +758,8 @@ class DataSpec:
     input_unit: str | None = None
     output_unit: str | None = None
     time_unit: str | None = None
+    skip_rows: int = 0
+    output_file: str | None = None
 
     def open(
         self, path: str | os.PathLike[str], *, output_required: bool = True
@@ -691,6 +790,8 @@ class DataSpec:
             input_unit=self.input_unit,
             output_unit=self.output_unit,
             time_unit=self.time_unit,
+            skip_rows=self.skip_rows,
+            output_file=self.output_file,
         )
 
     def read(

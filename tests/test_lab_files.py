@@ -1,0 +1,232 @@
+"""Files as labs write them: DAQ preambles, decimal commas, HDF5 with a stated rate,
+input and output in two files, targets in their own unit, outputs that cannot be written."""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner, Result
+
+import piezohyst as ph
+from piezohyst.cli import main
+
+
+def run(*args: str | Path) -> Result:
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def one_line_error(res: Result, *fragments: str) -> str:
+    assert res.exit_code == 1, res.output
+    err = res.stderr.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in res.output, err
+    for fragment in fragments:
+        assert fragment in err, err
+    return err
+
+
+@pytest.fixture(scope="module")
+def rec() -> ph.simulation.Recording:
+    return ph.simulate(duration=3.0, seed=4)
+
+
+def european(path: Path, rec: ph.simulation.Recording, *, preamble: str, time: bool) -> None:
+    """A DAQ export: a preamble, ';' between fields, decimal commas, charge in µC."""
+    header = ("time [s];" if time else "") + "voltage [V];charge [uC]\n"
+    rows = "".join(
+        (f"{t:.4f};" if time else "") + f"{v:.6f};{q * 1e6:.8f}\n"
+        for t, v, q in zip(rec.t, rec.voltage, rec.charge, strict=True)
+    )
+    path.write_text(preamble + header + rows.replace(".", ","), encoding="utf-8")
+
+
+PREAMBLE = "Device: P-885.11\nOperator: A. Lab\nDate: 2026-11-20 14:02\nSample rate: 1000 Hz\n\n"
+
+
+def test_a_daq_preamble_and_decimal_commas_are_read_without_options(
+    tmp_path: Path, rec: ph.simulation.Recording
+) -> None:
+    european(tmp_path / "run.csv", rec, preamble=PREAMBLE, time=True)
+    european(tmp_path / "untimed.csv", rec, preamble=PREAMBLE, time=False)
+    for name in ("run.csv", "untimed.csv"):
+        for read in (ph.io.read_table, ph.io.open_table):  # in memory, and streamed
+            table = read(tmp_path / name)
+            assert table.units["charge"] == "uC"
+            # tol: the file prints 6 decimals of volts and 8 of µC
+            np.testing.assert_allclose(table.get("voltage"), rec.voltage, atol=5e-7)
+            np.testing.assert_allclose(table.get("charge"), rec.charge * 1e6, atol=5e-9)
+    # the untimed file's time comes from the preamble's 'Sample rate: 1000 Hz'
+    got = ph.io.read_recording(tmp_path / "untimed.csv")
+    # tol: n/1000 computed two ways, a few ulp apart
+    np.testing.assert_allclose(got.t, rec.t, atol=1e-12)
+    res = run("fit", tmp_path / "untimed.csv", "--operators", "8", "-o", tmp_path / "m.json")
+    assert res.exit_code == 0, res.output
+    assert ph.load_model(tmp_path / "m.json").train_window_ == (0.0, 2.999)
+
+
+def test_skip_rows_skips_what_is_not_a_preamble(
+    tmp_path: Path, rec: ph.simulation.Recording
+) -> None:
+    """A preamble line of numbers (a date as '2026 11 20') looks like data: --skip-rows says
+    where the table starts."""
+    rows = "".join(
+        f"{t:.4f} {v:.6f} {q:.6e}\n" for t, v, q in zip(rec.t, rec.voltage, rec.charge, strict=True)
+    )
+    path = tmp_path / "run.txt"
+    path.write_text("bench run three\n2026 11 20\ntime voltage charge\n" + rows)
+    one_line_error(run("fit", path, "-o", tmp_path / "m.json"), "available: 'bench'")
+    res = run("fit", path, "--skip-rows", "2", "--operators", "8", "-o", tmp_path / "m.json")
+    assert res.exit_code == 0, res.output
+    np.savez(tmp_path / "run.npz", voltage=rec.voltage)
+    with pytest.raises(ph.DataFileError, match="rows can be skipped in text files only"):
+        ph.io.read_table(tmp_path / "run.npz", skip_rows=1)
+
+
+def test_an_aixacct_export_defaults_to_its_first_measurement(
+    tmp_path: Path, rec: ph.simulation.Recording
+) -> None:
+    """Columns named by number: the table read is the first with a time column, not 'Summary'."""
+    from .test_field_safety import aixacct_like
+
+    aixacct_like(tmp_path / "loops.dat", rec)
+    got = ph.io.read_recording(tmp_path / "loops.dat", input_column="1", output_column="3")
+    assert got.names == ("V+", "P1", "Time")
+    # tol: values printed with 7 significant digits in the file
+    np.testing.assert_allclose(got.y, rec.charge[:400], rtol=1e-6)
+    res = run("fit", tmp_path / "loops.dat", "--input", "1", "--output", "3", "--operators",
+              "6", "-o", tmp_path / "m.json")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    one_line_error(run("fit", tmp_path / "loops.dat", "--input", "1", "--output", "2",
+                       "-o", tmp_path / "v.json"), "the output never moves")  # fmt: skip
+
+
+def test_hdf5_groups_and_their_stated_rate(tmp_path: Path, rec: ph.simulation.Recording) -> None:
+    """The Bouc-Wen benchmark's layout: /group/u, /group/y and a scalar /group/fs."""
+    import h5py
+
+    with h5py.File(tmp_path / "bench.h5", "w") as f:
+        f["slow/u"] = rec.voltage[:, None]
+        f["slow/y"] = rec.charge[:, None]
+        f["slow/fs"] = np.array([[1000.0]])
+        f["fast/u"] = rec.voltage[::2]
+        f["fast/y"] = rec.charge[::2]
+        f["fast"].attrs["sample_rate"] = 500.0
+        f.attrs["fs"] = 7.0  # the file's own, below the groups': not used where a group states one
+    for group, n, step in (("slow", 3000, 1e-3), ("fast", 1500, 2e-3)):
+        got = ph.io.read_recording(tmp_path / "bench.h5", group=group, input_column="u",
+                                   output_column="y")  # fmt: skip
+        assert got.t.size == n and got.t[-1] == pytest.approx((n - 1) * step)  # tol: n*dt, ulp
+    by_path = ph.io.read_recording(
+        tmp_path / "bench.h5", input_column="fast/u", output_column="fast/y"
+    )
+    assert by_path.t[1] == pytest.approx(2e-3)  # tol: 1/500 Hz, ulp
+    res = run("fit", tmp_path / "bench.h5", "--group", "slow", "--input", "u", "--output", "y",
+              "--operators", "8", "-o", tmp_path / "m.json")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert ph.load_model(tmp_path / "m.json").train_window_ == (0.0, 2.999)
+    one_line_error(run("fit", tmp_path / "bench.h5", "--group", "mid", "--input", "u", "--output",
+                       "y", "-o", tmp_path / "x.json"),
+                   "no HDF5 group 'mid'; available: 'fast', 'slow'")  # fmt: skip
+
+
+def test_input_and_output_in_two_files(tmp_path: Path, rec: ph.simulation.Recording) -> None:
+    """The Bouc-Wen benchmark's uval/yval .mat pair, and two CSV files streamed row for row."""
+    from scipy.io import savemat
+
+    savemat(tmp_path / "uval_test.mat", {"uval_test": rec.voltage[None, :]})
+    savemat(tmp_path / "yval_test.mat", {"yval_test": rec.charge[None, :]})
+    savemat(tmp_path / "yval_short.mat", {"yval_short": rec.charge[None, :-5]})
+    both = ph.io.read_recording(tmp_path / "uval_test.mat", input_column="uval_test",
+                                output_file=tmp_path / "yval_test.mat",
+                                output_column="yval_test", rate=1000.0)  # fmt: skip
+    np.testing.assert_array_equal(both.y, rec.charge)
+    np.testing.assert_array_equal(both.x, rec.voltage)
+    res = run("fit", tmp_path / "uval_test.mat", "--input", "uval_test", "--output-file",
+              tmp_path / "yval_test.mat", "--output", "yval_test", "--rate", "1000",
+              "--operators", "8", "-o", tmp_path / "m.json")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    one_line_error(run("fit", tmp_path / "uval_test.mat", "--input", "uval_test",
+                       "--output-file", tmp_path / "yval_short.mat", "--output", "yval_short",
+                       "--rate", "1000", "-o", tmp_path / "x.json"),
+                   "2995 rows, but", "has 3000")  # fmt: skip
+    # two CSV files, read in batches of different sizes, joined row for row
+    ph.write_table(tmp_path / "in.csv", {"time": rec.t, "voltage": rec.voltage})
+    ph.write_table(tmp_path / "out.csv", {"time": rec.t, "charge": rec.charge})
+    spec = ph.io.DataSpec(output_file=str(tmp_path / "out.csv"))
+    stream = spec.open(tmp_path / "in.csv")
+    blocks = list(stream.blocks())
+    np.testing.assert_array_equal(np.concatenate([b.y for b in blocks]), rec.charge)
+    np.testing.assert_array_equal(np.concatenate([b.t for b in blocks]), rec.t)
+
+
+def test_a_target_in_its_own_unit_and_zero(tmp_path: Path, rec: ph.simulation.Recording) -> None:
+    """A target in µm relative to another zero: --target-unit and --target-offset."""
+    ph.write_table(tmp_path / "run.csv", {"time": rec.t, "voltage": rec.voltage,
+                                          "charge": rec.charge})  # fmt: skip
+    assert (
+        run("fit", tmp_path / "run.csv", "--operators", "8", "-o", tmp_path / "m.json").exit_code
+        == 0
+    )
+    model = ph.load_model(tmp_path / "m.json")
+    t = np.arange(1500) / 1000.0
+    desired = model.hysteresis_.predict(60 - 40 * np.cos(2 * np.pi * t))  # C
+    offset_uc = -3.0
+    ph.write_table(tmp_path / "abs.csv", {"time": t, "desired": desired})
+    relative = (desired * 1e6 - offset_uc).tolist()
+    (tmp_path / "rel.csv").write_text(
+        "time,desired\n"
+        + "".join(f"{a!r},{d!r}\n" for a, d in zip(t.tolist(), relative, strict=True))
+    )
+    assert run("compensate", tmp_path / "m.json", tmp_path / "abs.csv",
+               "-o", tmp_path / "a.csv").exit_code == 0  # fmt: skip
+    res = run("compensate", tmp_path / "m.json", tmp_path / "rel.csv", "--target-unit", "uC",
+              "--target-offset", str(offset_uc), "-o", tmp_path / "b.csv")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    a, b = ph.io.read_table(tmp_path / "a.csv"), ph.io.read_table(tmp_path / "b.csv")
+    # tol: µC written as shortest decimals, converted and offset: a few ulp of 1e-5 C; the
+    # commands then agree to the inverse's rounding
+    np.testing.assert_allclose(b.get("command"), a.get("command"), atol=1e-9)
+    one_line_error(run("compensate", tmp_path / "m.json", tmp_path / "a.csv", "--column",
+                       "command", "--target-unit", "uC", "-o", tmp_path / "c.csv"),
+                   "marked 'V' in the file")  # fmt: skip
+
+
+def test_outputs_that_cannot_be_written_are_named(
+    tmp_path: Path, rec: ph.simulation.Recording, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    ph.write_table(tmp_path / "run.csv", {"time": rec.t, "voltage": rec.voltage,
+                                          "charge": rec.charge})  # fmt: skip
+    (tmp_path / "afile").write_text("x")
+    one_line_error(run("fit", tmp_path / "run.csv", "-o", tmp_path / "afile" / "m.json"),
+                   "m.json: cannot write here", "afile is a file, not a folder")  # fmt: skip
+
+    def refused(*args: object, **kwargs: object) -> None:
+        raise PermissionError(13, "Permission denied", str(tmp_path / ".m.json.abc123.json"))
+
+    monkeypatch.setattr(tempfile, "mkstemp", refused)  # a read-only folder, even as root
+    res = run("fit", tmp_path / "run.csv", "--operators", "6", "-o", tmp_path / "m.json")
+    err = one_line_error(res, "m.json: cannot write here (permission denied)")
+    assert ".m.json." not in err
+    with pytest.raises(ph.OutputError):
+        ph.io.atomic_write_text(tmp_path / "x.txt", "x")
+
+
+@pytest.mark.parametrize(
+    ("command", "out", "expected"),
+    [
+        (["predict", "M", "D"], "p.txt", "name it .csv, .npz or .parquet"),
+        (["fit", "D"], "m.csv", "name it .json"),
+        (["calibrate-leakage", "D"], "leak.csv", "name it .json"),
+        (["export-c", "M"], "comp.h", "name it .c"),
+    ],
+)
+def test_output_names_say_what_is_written(
+    tmp_path: Path, command: list[str], out: str, expected: str
+) -> None:
+    (tmp_path / "d.csv").write_text("time,voltage,charge\n0,0,0\n0.001,1,1e-9\n")
+    args = [{"M": "m.json", "D": str(tmp_path / "d.csv")}.get(a, a) for a in command]
+    res = run(*args, "-o", tmp_path / out)
+    assert res.exit_code == 2 and expected in res.output, res.output
+    assert not (tmp_path / out).exists()
