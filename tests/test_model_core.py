@@ -362,6 +362,7 @@ LAYERS = {
     "_writers": 1,
     "units": 1,
     "dynamics": 1,
+    "excitation": 1,
     "cores.base": 2,
     "plotting": 2,
     "terms": 3,

@@ -666,8 +666,14 @@ def _grouped(
         asked = [c.rpartition("/")[0] for c in channels if c in columns]
         home = asked[0] if asked else (groups[0] if len(groups) == 1 else None)
     table = _table_from_arrays(path, picked, kind)
+    units = {
+        k[: -len("_unit")]: v
+        for k, v in found.items()
+        if isinstance(v, str) and k.endswith("_unit") and k[: -len("_unit")] in table
+    }
     return dataclasses.replace(
         table,
+        units=units,
         time_step=None if home is None else _stated_interval(found, set(columns), home),
         group=group,
         groups=tuple(g or "/" for g in groups) if len(groups) > 1 else (),
@@ -809,11 +815,17 @@ def _read_tdms(path: Path, group: str | None, channels: Sequence[str] = ()) -> T
         )
     ]
     arrays: dict[str, object] = {}
+    units: dict[str, str] = {}
     step: float | None = None
     for channel in chosen.channels():
         arrays[channel.name] = channel[:]
+        if str(channel.properties.get("unit_string", "")).strip():
+            units[channel.name] = str(channel.properties["unit_string"]).strip()
         inc = channel.properties.get("wf_increment")
         if step is None and inc is not None and float(inc) > 0:
             step = float(inc)
     table = _table_from_arrays(path, arrays, "TDMS")
-    return dataclasses.replace(table, time_step=step, group=chosen.name, groups=tuple(names))
+    units = {k: u for k, u in units.items() if k in table}
+    return dataclasses.replace(
+        table, time_step=step, units=units, group=chosen.name, groups=tuple(names)
+    )

@@ -54,15 +54,22 @@ def hdf5_arrays(path: str) -> dict[str, np.ndarray]:
     return _numeric(arrays)
 
 
-def mat_arrays(path: str) -> dict[str, np.ndarray]:
-    """The numeric variables of a MAT file (v4 to v7; v7.3 is HDF5 and read as such)."""
+def mat_arrays(path: str) -> dict[str, Any]:
+    """The numeric variables of a MAT file (v4 to v7; v7.3 is HDF5 and read as such), and
+    each text ``NAME_unit`` variable as a string."""
     from scipy.io import loadmat
 
     try:
         data = loadmat(path, squeeze_me=False)
     except NotImplementedError:  # MATLAB v7.3 is HDF5
         return hdf5_arrays(path)
-    return _numeric({k: v for k, v in data.items() if not k.startswith("__")})
+    variables = {k: v for k, v in data.items() if not k.startswith("__")}
+    units = {  # 'voltage_unit': 'V', as piezohyst writes them
+        k: str(np.asarray(v).reshape(-1)[0])
+        for k, v in variables.items()
+        if k.endswith("_unit") and isinstance(v, np.ndarray) and v.dtype.kind == "U" and v.size
+    }
+    return {**_numeric(variables), **units}
 
 
 def bank_hdf5(path: str) -> tuple[str, list[str]]:

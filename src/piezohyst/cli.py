@@ -34,6 +34,7 @@ from ._cli_support import (
 )
 from ._version import __version__
 from .compensator import CompensatorSettings
+from .excitation import KINDS
 from .io import DataSpec
 from .leakage import LEAKAGE_TERMS
 from .models import HysteresisModel, model_names
@@ -142,6 +143,79 @@ def describe(model: HysteresisModel) -> str:
             f"delay {1e3 * dyn.delay:.4g} ms"
         )
     return text
+
+
+@main.command()
+@click.option(
+    "--kind",
+    type=click.Choice(KINDS),
+    default="identification",
+    show_default=True,
+    help="identification: holds, then loops at two frequencies; holds: the leakage "
+    "staircase; multifreq: loops at 1, 10 and 40 times --frequency.",
+)
+@click.option("--v-min", type=float, required=True, help="Lowest voltage, V.")
+@click.option("--v-max", type=float, required=True, help="Highest voltage, V.")
+@click.option("--sample-rate", type=float, required=True, help="The DAQ's output rate, Hz.")
+@click.option(
+    "--slew-rate", type=float, default=None, help="Fastest change allowed, V/s (default: none)."
+)
+@click.option(
+    "--frequency", type=float, default=1.0, show_default=True, help="Base loop frequency, Hz."
+)
+@click.option("--hold", type=float, default=5.0, show_default=True, help="Each hold's length, s.")
+@click.option(
+    "-o",
+    "--out",
+    "out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    callback=_suffix(".csv", ".mat", ".tdms", ".npz", ".parquet", what="an excitation file"),
+    help="Output file (.csv, .mat, .tdms, .npz or .parquet).",
+)
+@FORCE
+@click.pass_obj
+def excite(
+    ctx: Context,
+    kind: str,
+    v_min: float,
+    v_max: float,
+    sample_rate: float,
+    slew_rate: float | None,
+    frequency: float,
+    hold: float,
+    out: Path,
+    force: bool,
+) -> None:
+    """Write a voltage excitation to play on the rig: time,voltage (s, V).
+
+    It starts and ends at rest (0 V or the nearer limit), stays in [--v-min,
+    --v-max] and under --slew-rate, and holds long enough for a leakage
+    calibration. Load it into your DAQ software, record the charge (or
+    position) it gives, then fit that record.
+
+    \b
+    Example:
+      piezohyst excite --v-min 0 --v-max 140 --sample-rate 1000 -o excite.csv
+    """
+    from .workflows import excite_file
+
+    exc = _run(
+        ctx,
+        lambda: excite_file(
+            out,
+            kind,
+            v_min=v_min,
+            v_max=v_max,
+            sample_rate=sample_rate,
+            slew_rate=slew_rate,
+            frequency=frequency,
+            hold=hold,
+            force=force,
+        ),
+    )
+    click.echo(exc.summary())
+    ctx.info(f"saved {out}")
 
 
 @main.command()

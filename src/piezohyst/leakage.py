@@ -259,7 +259,7 @@ class Leakage:
         out = asdict(self)
         out["holds"] = [asdict(h) for h in self.holds]
         out["residual"] = None if math.isnan(self.residual) else self.residual
-        return {"kind": "leakage", **out}
+        return {"format": "piezohyst-leakage", "kind": "leakage", **out}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], where: str = "leakage") -> Leakage:
@@ -282,7 +282,7 @@ class Leakage:
         if not isinstance(data, dict) or data.get("kind") != "leakage":
             msg = f'{where}: not a piezohyst leakage file (no "kind": "leakage")'
             raise ModelFileError(msg)
-        fields = {k: v for k, v in data.items() if k != "kind"}
+        fields = {k: v for k, v in data.items() if k not in ("kind", "format")}
         known = {
             "conductance",
             "quadratic",

@@ -42,6 +42,7 @@ from .control_files import (
 )
 from .cores.play import history_state
 from .errors import DataFileError, ParameterError
+from .excitation import Excitation, excitation
 from .identification import Blocks, Summary, default_thresholds
 from .io import (
     MD_MARKER,
@@ -63,6 +64,7 @@ __all__ = [
     "calibrate_leakage_file",
     "compare_file",
     "compensate_file",
+    "excite_file",
     "export_c_file",
     "fit_file",
     "guard_outputs",
@@ -117,6 +119,37 @@ def simulate_file(
         units={"time": "s", "voltage": "V", "charge": "C", "displacement": "m"},
     )
     return rec
+
+
+def excite_file(
+    out: PathLike,
+    kind: str = "identification",
+    *,
+    v_min: float,
+    v_max: float,
+    sample_rate: float,
+    slew_rate: float | None = None,
+    frequency: float = 1.0,
+    hold: float = 5.0,
+    force: bool = False,
+) -> Excitation:
+    """Write an excitation to play on the rig: ``time,voltage`` (s, V) as CSV, MAT, TDMS,
+    NPZ or Parquet (see :func:`piezohyst.excitation.excitation` for the arguments).
+
+    ``force`` replaces an existing file piezohyst did not write (see :func:`guard_outputs`).
+    """
+    guard_outputs([out], [], force=force)
+    exc = excitation(
+        kind,
+        v_min=v_min,
+        v_max=v_max,
+        sample_rate=sample_rate,
+        slew_rate=slew_rate,
+        frequency=frequency,
+        hold=hold,
+    )
+    write_table(out, {"time": exc.t, "voltage": exc.voltage}, units={"time": "s", "voltage": "V"})
+    return exc
 
 
 def fit_file(
