@@ -361,7 +361,7 @@ def test_the_compensator_inverts_exactly_inside_the_region(
 ) -> None:
     model = models[name]
     desired = inside_trajectory(model)
-    comp = ph.Compensator(model, v_min=0.0, v_max=model.input_range_[1])
+    comp = ph.Compensator(model, slew_rate=None, v_min=0.0, v_max=model.input_range_[1])
     assert comp.inverse.name == "packed"  # the compiled bracketed Newton step
     commands = comp.process(desired)
     achieved = model.hysteresis_.predict(commands)
@@ -387,7 +387,7 @@ def test_every_command_is_safe(
     limit; reachable targets are met, the others saturate at the nearer limit."""
     model = models[name]
     hi = model.input_range_[1]
-    kw: dict[str, Any] = {} if slew is None else {"slew_rate": slew, "sample_rate": 1000.0}
+    kw: dict[str, Any] = {"slew_rate": slew, "sample_rate": 1000.0}
     comp = ph.Compensator(model, v_min=0.0, v_max=hi, allow_extrapolation=True, **kw)
     span = float(np.ptp(model.hysteresis_.predict(np.linspace(0.0, hi, 100))))
     base = float(model.hysteresis_.predict([0.0])[0])
@@ -419,8 +419,8 @@ def test_leaving_the_region_warns_and_the_compensator_stops_at_its_edge(
     wanted = model.hysteresis_.predict(np.linspace(0, hi, 400))
     bottom, top = float(wanted[0]), float(wanted[-1])
     desired = np.concatenate([np.linspace(bottom, top, 400), np.linspace(top, bottom, 400)])
-    strict = ph.Compensator(model, v_min=0.0, v_max=hi)
-    free = ph.Compensator(model, v_min=0.0, v_max=hi, allow_extrapolation=True)
+    strict = ph.Compensator(model, slew_rate=None, v_min=0.0, v_max=hi)
+    free = ph.Compensator(model, slew_rate=None, v_min=0.0, v_max=hi, allow_extrapolation=True)
     region, config = strict.region, strict.config
     tol = float(config[D.CC_TOL])
 
@@ -505,7 +505,7 @@ def loop_on_the_bench(model: ph.HysteresisModel, desired: np.ndarray) -> None:
     """The self-sensing loop closed on the bench at 1 kHz: every command inside the limits,
     and a replay of the recorded measurements gives the same commands."""
     hi = model.input_range_[1]
-    ctl = ph.SelfSensingController(model, v_min=0.0, v_max=hi, sample_rate=1000.0)
+    ctl = ph.SelfSensingController(model, slew_rate=None, v_min=0.0, v_max=hi, sample_rate=1000.0)
     bench = ph.simulation.Bench(voltage=ctl.last_command, seed=4)
     measured = np.empty_like(desired)
     commands = np.empty_like(desired)
@@ -514,7 +514,9 @@ def loop_on_the_bench(model: ph.HysteresisModel, desired: np.ndarray) -> None:
         commands[k] = ctl.step(float(d), measured[k])
         bench.apply(commands[k])
     assert np.all((commands >= 0.0) & (commands <= hi))
-    replay = ph.SelfSensingController(model, v_min=0.0, v_max=hi, sample_rate=1000.0)
+    replay = ph.SelfSensingController(
+        model, slew_rate=None, v_min=0.0, v_max=hi, sample_rate=1000.0
+    )
     np.testing.assert_array_equal(replay.process(desired, measured), commands)
 
 
@@ -527,8 +529,8 @@ def test_banks_of_preisach_models_compensate_and_close_the_loop(
     bank = ph.ModelBank(ph.PreisachModel(10)).fit(v, q, t=record.t[:8000])
     hi = [m.input_range_[1] for m in bank]
     desired = np.column_stack([inside_trajectory(m, 1.0) for m in bank])
-    comp = ph.BankCompensator(bank, v_min=0.0, v_max=hi)
-    ctl = ph.BankController(bank, v_min=0.0, v_max=hi, sample_rate=1000.0)
+    comp = ph.BankCompensator(bank, slew_rate=None, v_min=0.0, v_max=hi)
+    ctl = ph.BankController(bank, slew_rate=None, v_min=0.0, v_max=hi, sample_rate=1000.0)
     assert not comp.fused and not ctl.fused
     for suffix in (".json", ".h5", ".npz"):  # one file for the bank, every channel exact
         path = tmp_path / f"bank{suffix}"
@@ -539,9 +541,11 @@ def test_banks_of_preisach_models_compensate_and_close_the_loop(
     commands = comp.process(desired)
     loop = ctl.process(desired, q[: desired.shape[0]])
     for i, model in enumerate(bank):
-        alone = ph.Compensator(model, v_min=0.0, v_max=hi[i]).process(desired[:, i])
+        alone = ph.Compensator(model, slew_rate=None, v_min=0.0, v_max=hi[i]).process(desired[:, i])
         np.testing.assert_array_equal(commands[:, i], alone)
-        own = ph.SelfSensingController(model, v_min=0.0, v_max=hi[i], sample_rate=1000.0)
+        own = ph.SelfSensingController(
+            model, slew_rate=None, v_min=0.0, v_max=hi[i], sample_rate=1000.0
+        )
         np.testing.assert_array_equal(
             loop[:, i], own.process(desired[:, i], q[: desired.shape[0], i])
         )

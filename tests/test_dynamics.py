@@ -187,14 +187,16 @@ def test_compensation_at_40_hz_on_the_lagged_bench(
     top, bottom = (float(q) for q in model.operator_.predict(np.array([140.0, 0.0])))
     desired = bottom + (top - bottom) * (0.25 + 0.5 * shape)
     lo, hi = model.input_range_  # the voltages it was identified on
-    comp = ph.Compensator(model, v_min=lo, v_max=hi, sample_rate=1000.0)
+    comp = ph.Compensator(model, slew_rate=3e4, v_min=lo, v_max=hi, sample_rate=1000.0)
     run = simulate(comp.process(desired), t, preset=LAGGED, seed=3)
     keep = t >= 1.0
     width = hysteresis_width(desired[keep], run.true_displacement[keep])
     assert width <= 0.02
     slow = simulate(signal="hold", duration=20.0, preset=LAGGED, seed=1)  # identified at 0.5 Hz
     static = ph.ActivePI(20).fit(slow.voltage, slow.charge, t=slow.t)
-    blind = ph.Compensator(static, v_min=lo, v_max=hi, allow_extrapolation=True)
+    blind = ph.Compensator(
+        static, slew_rate=3e4, sample_rate=1000.0, v_min=lo, v_max=hi, allow_extrapolation=True
+    )
     blind_run = simulate(blind.process(desired), t, preset=LAGGED, seed=3)
     assert hysteresis_width(desired[keep], blind_run.true_displacement[keep]) > 5 * width
 

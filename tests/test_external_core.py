@@ -49,7 +49,7 @@ def test_the_one_compensator_inverts_an_outside_core() -> None:
     """No compiled step: the Python engine finds each command by a root search on the core."""
     v, q = _record()
     model = ph.HysteresisModel(BacklashCore).fit(v, q)
-    comp = ph.Compensator(model, v_min=10.0, v_max=130.0)
+    comp = ph.Compensator(model, slew_rate=None, v_min=10.0, v_max=130.0)
     assert comp.inverse.name == "python"
     wanted = 20.0 + 100.0 * (0.5 - 0.5 * np.cos(np.linspace(0.0, 4.0 * np.pi, 400)))
     target = model.predict(wanted)

@@ -126,6 +126,37 @@ def test_compensate_starts_at_rest_unless_told(lab: Path) -> None:
     assert abs(cmd[0]) <= 2.0 and abs(cmd[0]) <= model.max_slew_rate_ / 1000.0 * (1 + 1e-9)
 
 
+def test_python_and_the_cli_share_one_slew_default(lab: Path) -> None:
+    """The Python Compensator never jumps further than the training record did: per second
+    with a sample rate, per sample without one; None lifts it. The CLI's commands are the
+    Python compensator's with the same settings, sample for sample."""
+    model = ph.load_model(lab / "model.json")
+    hi = model.input_range_[1]
+    top = float(model.hysteresis_.predict([0.0, hi])[1])
+    jump = np.full(50, top)  # from rest to the top in one sample
+    per_sample = ph.Compensator(model, v_min=0.0, v_max=hi).process(jump)
+    # tol: 1e-9 relative for the rounding of the clamp
+    assert per_sample[0] <= model.max_step_ * (1 + 1e-9) < 0.05 * hi
+    assert np.abs(np.diff(per_sample)).max() <= model.max_step_ * (1 + 1e-9)
+    timed = ph.Compensator(model, v_min=0.0, v_max=hi, sample_rate=1000.0)
+    assert timed.max_step == model.max_slew_rate_ / 1000.0
+    free = ph.Compensator(model, v_min=0.0, v_max=hi, slew_rate=None).process(jump)
+    assert free[0] == pytest.approx(hi, rel=1e-6)  # tol: the inverse's rounding at the top
+    with pytest.raises(ph.ParameterError, match="'trained' or None"):
+        ph.Compensator(model, v_min=0.0, v_max=hi, slew_rate="fast")  # type: ignore[arg-type]
+    res = run("compensate", lab / "model.json", lab / "target.csv", "--v-min", "0",
+              "--v-max", str(hi), "--no-precondition", "-o", lab / "same.csv")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    written = ph.io.read_table(lab / "same.csv")
+    comp = ph.Compensator(model, v_min=0.0, v_max=hi, sample_rate=1000.0)  # defaults alone
+    comp.reset(voltage=0.0)  # at rest, as the CLI takes it
+    expected = comp.process(ph.io.read_table(lab / "target.csv").get("desired"))
+    # tol: the CLI's rate is 1/median(dt) of the file's times, an ulp off 1000 Hz, so each
+    # slew-limited step may differ by ulps; 1e-9 V bounds thousands of them
+    np.testing.assert_allclose(written.get("command"), expected, rtol=0, atol=1e-9)
+    assert np.abs(np.diff(expected)).max() <= model.max_slew_rate_ / 1000.0 * (1 + 1e-9)
+
+
 def test_nan_targets_are_held_and_counted(lab: Path) -> None:
     table = ph.io.read_table(lab / "target.csv")
     t, d = table.get("time"), table.get("desired").copy()

@@ -11,7 +11,7 @@ import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, cast
+from typing import Any, Literal, cast
 
 import click
 
@@ -268,7 +268,13 @@ def _limit_options(fn: Callable[..., Any]) -> Callable[..., Any]:
             default=None,
             help="Displacement per charge in m/C (for --domain displacement).",
         ),
-        click.option("--slew-rate", type=float, default=None, help="Largest change in V/s."),
+        click.option(
+            "--slew-rate",
+            type=float,
+            default=None,
+            help="Largest change in V/s (default: the training record's fastest; per sample "
+            "without --sample-rate).",
+        ),
         click.option(
             "--sample-rate",
             type=float,
@@ -294,8 +300,9 @@ def _limit_options(fn: Callable[..., Any]) -> Callable[..., Any]:
         allow_extrapolation: bool,
         **kwargs: Any,
     ) -> Any:
+        slew: float | Literal["trained"] = "trained" if slew_rate is None else slew_rate
         settings = CompensatorSettings(
-            v_min, v_max, cast(Domain, domain), gain, slew_rate, sample_rate, allow_extrapolation
+            v_min, v_max, cast(Domain, domain), gain, slew, sample_rate, allow_extrapolation
         )
         return fn(*args, settings=settings, **kwargs)
 

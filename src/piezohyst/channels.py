@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any, Generic, Protocol, TypeVar
+from typing import TYPE_CHECKING, Any, Generic, Literal, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -73,7 +73,7 @@ def per_channel(value: object, c: int, name: str) -> list[Any]:
     list
         ``c`` values.
     """
-    if value is None or isinstance(value, int | float | np.integer | np.floating):
+    if value is None or isinstance(value, str | int | float | np.integer | np.floating):
         return [value] * c
     arr = np.asarray(value, dtype=np.float64).reshape(-1)
     if arr.size != c:
@@ -190,7 +190,8 @@ class BankCompensator(ChannelBank[Compensator]):
     v_min, v_max : float or array_like of C
         Voltage limits (V), shared or one per channel.
     slew_rate, gain : float or array_like of C, optional
-        As for :class:`Compensator`, shared or per channel.
+        As for :class:`Compensator`, shared or per channel (the slew limit's
+        default, "trained": each channel's training record's fastest change).
     sample_rate : float, optional
         The loop rate (Hz), shared.
     domain : {"charge", "displacement"}
@@ -215,7 +216,7 @@ class BankCompensator(ChannelBank[Compensator]):
         *,
         v_min: float | ArrayLike,
         v_max: float | ArrayLike,
-        slew_rate: float | ArrayLike | None = None,
+        slew_rate: float | ArrayLike | Literal["trained"] | None = "trained",
         sample_rate: float | None = None,
         domain: Domain = "charge",
         gain: float | ArrayLike | None = None,
@@ -381,7 +382,10 @@ class BankController(ChannelBank[SelfSensingController]):
     ) -> None:
         c = len(self._models(bank))
         lows, highs = per_channel(v_min, c, "v_min"), per_channel(v_max, c, "v_max")
-        per = {k: per_channel(settings.pop(k, None), c, k) for k in ("slew_rate", "gain")}
+        per = {
+            k: per_channel(settings.pop(k, default), c, k)
+            for k, default in (("slew_rate", "trained"), ("gain", None))
+        }
         if leakage is None or isinstance(leakage, Leakage):
             leaks: list[Leakage | None] = [leakage] * c
         else:

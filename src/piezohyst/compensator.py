@@ -61,8 +61,12 @@ class Compensator:
         an :class:`~piezohyst.models.InverseSpec`).
     v_min, v_max : float
         The actuator's voltage limits (V). Every command lies inside them.
-    slew_rate : float, optional
-        Largest command change in V/s; needs ``sample_rate``.
+    slew_rate : float, "trained" or None, default "trained"
+        Largest command change in V/s; needs ``sample_rate``. The default is
+        the training record's fastest change: ``model.max_slew_rate_`` per
+        second when ``sample_rate`` is given, else ``model.max_step_`` per
+        sample (a model that does not record them has no limit). None: no
+        limit. The same default as ``piezohyst compensate``.
     sample_rate : float, optional
         Samples per second (Hz) of the control loop, for ``slew_rate`` and for
         models with creep.
@@ -122,7 +126,7 @@ class Compensator:
         *,
         v_min: float,
         v_max: float,
-        slew_rate: float | None = None,
+        slew_rate: float | Literal["trained"] | None = "trained",
         sample_rate: float | None = None,
         domain: Domain = "charge",
         gain: float | None = None,
@@ -141,7 +145,7 @@ class Compensator:
         model: HysteresisModel,
         v_min: float,
         v_max: float,
-        slew_rate: float | None,
+        slew_rate: float | Literal["trained"] | None,
         sample_rate: float | None,
         domain: Domain,
         gain: float | None,
@@ -170,6 +174,11 @@ class Compensator:
         self.requested_limits: tuple[float, float] | None = None
         self._narrow_to(spec.input_range)
         max_step = math.inf
+        if isinstance(slew_rate, str):
+            if slew_rate != "trained":
+                msg = f"slew_rate must be a number in V/s, 'trained' or None. Got {slew_rate!r}."
+                raise ParameterError(msg)
+            slew_rate, max_step = _trained_limit(model, sample_rate)
         if slew_rate is not None:
             rate = _finite_number(slew_rate, "slew_rate")
             if sample_rate is None:
@@ -232,6 +241,11 @@ class Compensator:
                 self.dyn[K.DYN_GAIN_B] = 1.0 - math.exp(-dt / dyn.tau)
         self._max_step = max_step
         return spec, max_step, inv_gain
+
+    @property
+    def max_step(self) -> float:
+        """The largest command change per sample (V; inf: no slew limit)."""
+        return self._max_step
 
     def _narrow_to(self, trained: tuple[float, float]) -> None:
         """Keep every command inside the voltages the model was identified on."""
@@ -517,6 +531,21 @@ class Compensator:
         self.inverse.inner_process(self, d, out)
 
 
+def _trained_limit(model: Any, sample_rate: float | None) -> tuple[float | None, float]:
+    """The default slew limit: the training record's fastest change, as (V/s, V per sample).
+
+    Per second when the loop's rate is known; else per sample; none when the model
+    does not record it (built by hand, or an older file).
+    """
+    per_second = float(getattr(model, "max_slew_rate_", math.nan))
+    per_sample = float(getattr(model, "max_step_", math.nan))
+    if sample_rate is not None and math.isfinite(per_second) and per_second > 0:
+        return per_second, math.inf
+    if math.isfinite(per_sample) and per_sample > 0:
+        return None, per_sample
+    return None, math.inf
+
+
 @dataclass(frozen=True)
 class CompensatorSettings:
     """How to build a :class:`~piezohyst.Compensator` from a model file.
@@ -529,8 +558,9 @@ class CompensatorSettings:
         Units of the desired values.
     gain : float or None
         m per model output unit, for ``domain="displacement"``.
-    slew_rate : float or None
-        Largest change in V/s (needs ``sample_rate``).
+    slew_rate : float, "trained" or None
+        Largest change in V/s (needs ``sample_rate``); "trained": the training
+        record's fastest (see :class:`Compensator`); None: no limit.
     sample_rate : float or None
         Loop rate (Hz).
     allow_extrapolation : bool
@@ -542,7 +572,7 @@ class CompensatorSettings:
     v_max: float | None = None
     domain: Domain = "charge"
     gain: float | None = None
-    slew_rate: float | None = None
+    slew_rate: float | Literal["trained"] | None = "trained"
     sample_rate: float | None = None
     allow_extrapolation: bool = False
 

@@ -185,10 +185,7 @@ def compensate_file(
     if fs is None:
         steps = np.diff(to_standard(head["time"], t_unit, "time", f"{target}: column 'time'")[0])
         fs = 1.0 / float(np.median(steps)) if steps.size and np.all(steps > 0) else 1.0
-    slew = settings.slew_rate
-    if slew is None and math.isfinite(model.max_slew_rate_) and model.max_slew_rate_ > 0:
-        slew = model.max_slew_rate_
-    comp = dataclasses.replace(settings, slew_rate=slew, sample_rate=fs).build(model)
+    comp = dataclasses.replace(settings, sample_rate=fs).build(model)  # slew: "trained"
     start = present_voltage
     if start is None:  # at rest: 0 V, or the nearer limit
         start = float(np.clip(0.0, comp.v_min, comp.v_max))

@@ -137,6 +137,9 @@ def _compensation_run(
 LOOP_EXTRA_BIAS = 40e-12  # A: the charge amplifier's bias on the day of the loop, never identified
 CALIBRATION_LEVELS = (0.0, 35.0, 70.0, 105.0, 140.0, 105.0, 70.0, 35.0, 0.0)  # V, up and down
 CALIBRATION_HOLD = 20.0  # s per level
+#: V/s: the amplifier's slew rate, said where commands start from rest with a jump or run
+#: faster than any training record (the compensator's default is the training's fastest)
+AMP_SLEW = 30e3
 
 
 def _closed_loop_study(
@@ -159,7 +162,7 @@ def _closed_loop_study(
     q0, q_top, q_rem = (float(q) for q in h.predict(np.array([0.0, p.v_max, 0.0])))
     lo, hi = q_rem + 0.03 * (q_top - q_rem), q_top - 0.03 * (q_top - q_rem)
     d_des = gain * (lo + (hi - lo) * shape - q0)
-    settings: dict[str, Any] = {"domain": "displacement", "gain": gain}
+    settings: dict[str, Any] = {"domain": "displacement", "gain": gain, "slew_rate": AMP_SLEW}
     runs: dict[str, Any] = {}
     identified = Leakage.from_model(model)
     cases: list[tuple[str, Leakage | None]] = [
@@ -172,7 +175,7 @@ def _closed_loop_study(
     for name, leakage in cases:
         ctl: Compensator | SelfSensingController
         if leakage is None:
-            ctl = Compensator(model, v_min=0.0, v_max=p.v_max, **settings)
+            ctl = Compensator(model, v_min=0.0, v_max=p.v_max, sample_rate=p.rate, **settings)
         else:
             ctl = SelfSensingController(
                 model,
@@ -239,7 +242,10 @@ def _rate_study(seed: int, n_operators: int) -> dict[str, Any]:
     for name, model in (("identified at 1 Hz", slow), ("rate-aware, 0.5-20 Hz", aware)):
         predicted = model.predict(check.voltage, t=check.t)
         lo, hi = aware.input_range_
-        comp = Compensator(model, v_min=lo, v_max=hi, sample_rate=1000.0, allow_extrapolation=True)
+        # 40 Hz asks for faster commands than the training records had (the default
+        # limit): the amplifier's own slew rate, 30 V/ms, is said instead
+        comp = Compensator(model, v_min=lo, v_max=hi, sample_rate=1000.0, slew_rate=AMP_SLEW,
+                           allow_extrapolation=True)  # fmt: skip
         run = simulate(comp.process(desired), ts, preset=RATE_PRESET, seed=seed + 3)
         rows[name] = {
             "predicted": predicted,

@@ -72,7 +72,8 @@ def fit_arrays(
     if dyn.active:  # commands, their range and slew are the logged input's
         model.input_range_ = (float(xs.min()), float(xs.max()))
         assert ts is not None
-        model.max_slew_rate_ = Summary.of(array_blocks(xs, ys, ts)).max_slew_rate
+        logged = Summary.of(array_blocks(xs, ys, ts))
+        model.max_slew_rate_, model.max_step_ = logged.max_slew_rate, logged.max_step
     model.input_dynamics_ = dyn
     return model
 
@@ -182,7 +183,7 @@ def set_fitted(
     model.selection_splits_ = []
     model.rmse_ = model.nrmse_ = math.nan  # set by fit; unknown for a model built by hand
     model.input_range_ = (math.nan, math.nan)
-    model.max_slew_rate_ = math.nan
+    model.max_slew_rate_ = model.max_step_ = math.nan
     model.train_window_ = (math.nan, math.nan)
     model.input_dynamics_ = InputDynamics()
     model.output_dynamics_ = getattr(model, "_fitting_output", OutputDynamics())
@@ -201,4 +202,5 @@ def _training_facts(model: Any, sm: Summary) -> None:
     and the times of its first and last samples."""
     model.input_range_ = (sm.x_min, sm.x_max)
     model.max_slew_rate_ = sm.max_slew_rate
+    model.max_step_ = sm.max_step
     model.train_window_ = (sm.t_first, sm.t_last)

@@ -160,6 +160,8 @@ class Summary:
         First and last time (s); NaN without times.
     max_slew_rate : float
         Fastest input change (input units per s); NaN without times.
+    max_step : float
+        Largest input change from one sample to the next (input units).
     """
 
     n: int
@@ -172,6 +174,7 @@ class Summary:
     t_first: float = float("nan")
     t_last: float = float("nan")
     max_slew_rate: float = float("nan")
+    max_step: float = float("nan")
 
     @classmethod
     def of(cls, blocks: Blocks) -> Summary:
@@ -195,6 +198,7 @@ class Summary:
         x_lo = y_lo = np.inf
         x_hi = y_hi = -np.inf
         slew = np.nan
+        jump = 0.0
         for x, y, t in blocks():
             if x.size == 0:
                 continue
@@ -202,6 +206,10 @@ class Summary:
                 x0, y0 = float(x[0]), float(y[0])
                 t0 = np.nan if t is None else float(t[0])
             x_lo, x_hi = min(x_lo, float(x.min())), max(x_hi, float(x.max()))
+            if x.size > 1:
+                jump = max(jump, float(np.max(np.abs(np.diff(x)))))
+            if n > 0:
+                jump = max(jump, abs(float(x[0]) - x_last))
             y_lo, y_hi = min(y_lo, float(y.min())), max(y_hi, float(y.max()))
             if t is not None:
                 steps = [np.abs(np.diff(x)) / np.diff(t)] if x.size > 1 else []
@@ -216,7 +224,7 @@ class Summary:
         if n == 0:
             msg = "the record holds no samples"
             raise InsufficientDataError(msg)
-        return cls(n, x0, x_lo, x_hi, y0, y_lo, y_hi, t0, t1, slew)
+        return cls(n, x0, x_lo, x_hi, y0, y_lo, y_hi, t0, t1, slew, jump if n > 1 else np.nan)
 
     @property
     def x_range(self) -> FloatArray:

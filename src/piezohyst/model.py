@@ -241,6 +241,7 @@ class HysteresisModel(Estimator):
     nrmse_: float
     input_range_: tuple[float, float]
     max_slew_rate_: float
+    max_step_: float  # largest input change from one training sample to the next (V)
     #: times (s) of the first and last training samples (NaN without times)
     train_window_: tuple[float, float]
     selection_: dict[str, float]
@@ -693,7 +694,7 @@ class HysteresisModel(Estimator):
         model = type(self)(**self.get_params())
         model.set_fitted(self.operator_, tuple(tm for tm, _ in kept), tuple(c for _, c in kept))
         model.input_range_ = self.input_range_
-        model.max_slew_rate_ = self.max_slew_rate_
+        model.max_slew_rate_, model.max_step_ = self.max_slew_rate_, self.max_step_
         model.train_window_ = self.train_window_
         model.input_dynamics_ = self.input_dynamics_  # the lag sits before the hysteresis
         model.output_dynamics_ = self.output_dynamics_  # and the mode after it

@@ -215,7 +215,11 @@ class ClassicalPI(_PlayModel):
         working, and the default voltage limits of the compensator commands.
     max_slew_rate_ : float
         Fastest input change in the training record (V/s; NaN without times):
-        the default slew limit of ``piezohyst compensate``.
+        the default slew limit of a :class:`~piezohyst.Compensator` that knows
+        its sample rate, and of ``piezohyst compensate``.
+    max_step_ : float
+        Largest input change from one training sample to the next (V): the
+        default limit per sample of a compensator that does not.
 
     Examples
     --------

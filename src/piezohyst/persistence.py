@@ -152,6 +152,7 @@ def model_to_dict(model: Model) -> dict[str, Any]:
             "nrmse": _nullable(model.nrmse_),
             "input_range": None if math.isnan(lo) else [lo, hi],
             "max_slew_rate": _nullable(model.max_slew_rate_),
+            "max_step": _nullable(model.max_step_),
             "train_window": [_nullable(v) for v in model.train_window_],
             "input_dynamics": model.input_dynamics_.to_dict(),
             "output_dynamics": model.output_dynamics_.to_dict(),
@@ -396,6 +397,7 @@ def model_from_dict(data: Any, expected: type | None = None) -> Model:
     model.nrmse_ = fitted.number("nrmse", optional=True)
     model.input_range_ = _range(fitted)
     model.max_slew_rate_ = fitted.number("max_slew_rate", optional=True)
+    model.max_step_ = fitted.number("max_step", optional=True)  # older files lack it
     model.train_window_ = _window(fitted)
     for name, kind in (("input_dynamics", InputDynamics), ("output_dynamics", OutputDynamics)):
         data = fitted.data.get(name)  # absent from older files: none

@@ -115,8 +115,9 @@ class SelfSensingController:
         about ``ki * sample_rate / (2 pi)`` (see ``docs/realtime.md``).
     kp : float, default 0.0
         Proportional gain, in [0, 1].
-    slew_rate : float, optional
-        Largest command change (V/s).
+    slew_rate : float, "trained" or None, default "trained"
+        Largest command change (V/s); the default is the training record's
+        fastest change, as for :class:`~piezohyst.Compensator`.
     domain : {"charge", "displacement"}
         Units of the desired values (the measured values are always charge,
         in the model's output units).
@@ -164,7 +165,7 @@ class SelfSensingController:
         leakage: Leakage | None = None,
         ki: float = 0.5,
         kp: float = 0.0,
-        slew_rate: float | None = None,
+        slew_rate: float | Literal["trained"] | None = "trained",
         domain: Domain = "charge",
         gain: float | None = None,
         allow_extrapolation: bool = False,
