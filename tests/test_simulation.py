@@ -118,3 +118,61 @@ def test_hysteresis_width_of_a_line_is_zero() -> None:
     x = np.concatenate([np.linspace(0, 1, 100), np.linspace(1, 0, 100)])
     # tol: a straight line: the branches coincide to rounding
     assert hysteresis_width(x, 3 * x + 1) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_a_long_record_never_clips_the_charge() -> None:
+    """300 s of drive leak about 1e-5 C: past the ADC's 10 V on the 1 uF reference. The
+    bench picks the next E6 capacitor, as a lab would, and nothing clips; without it the
+    charge is flat at full scale for the last 20 s, and the clipping check says so."""
+    from piezohyst.metrics import clipped
+
+    ranged = simulate(signal="multi", duration=300.0, seed=1)
+    fixed = simulate(signal="multi", duration=300.0, seed=1, auto_range=False)
+    assert fixed.preset.c_ref == 1e-6 and ranged.preset.c_ref in (1.5e-6, 2.2e-6)
+    assert clipped([ranged.charge])[0] == 0
+    assert np.abs(ranged.charge).max() <= 0.8 * 10.0 * ranged.preset.c_ref  # under 80 % of scale
+    rows, side, level, _, _ = clipped([fixed.charge])
+    assert rows > 0.03 * fixed.charge.size and side == "top"
+    assert level == pytest.approx(10.0 * 1e-6, rel=1e-4)  # tol: full scale, one 16-bit LSB
+    # the piezo is the same: the capacitor's charge does not depend on the reference
+    # tol: the reference's discharge (r_ref c_ref = 5e4 s or more) shifts it by ~1e-3
+    np.testing.assert_allclose(ranged.capacitor_charge, fixed.capacitor_charge, rtol=1e-3)
+    model = ph.ActivePI(10).fit(ranged.voltage, ranged.charge, t=ranged.t)
+    ((rate, _),) = model.growth_coefficients().values()
+    # tol: one growth rate for a leak that grows with voltage, as on shorter records (5 %)
+    assert rate == pytest.approx(ranged.true_growth_rate, rel=0.05)
+
+
+def test_units_of_a_batch_differ_and_are_repeatable() -> None:
+    from piezohyst.simulation import batch_unit
+
+    base = PRESETS["T226-H4-203X"]
+    assert batch_unit(base, 0) is base
+    units = [batch_unit("T226-H4-203X", u) for u in range(1, 9)]
+    assert units[0] == batch_unit(base, 1)  # the same unit is the same actuator
+    leaks = np.array([u.g_leak for u in units])
+    assert np.ptp(leaks) > 0.2 * base.g_leak and np.all(np.abs(leaks / base.g_leak - 1) <= 0.75)
+    assert all(u.v_max == base.v_max and u.adc_range == base.adc_range for u in units)
+    runs = [simulate(signal="hold", duration=4.0, preset=u, seed=0) for u in units[:3]]
+    assert len({round(r.true_growth_rate, 14) for r in runs}) == 3
+    with pytest.raises(ph.ParameterError, match="integer 0 or more"):
+        batch_unit(base, -1)
+
+
+def test_simulate_unit_from_the_shell(tmp_path: object) -> None:
+    """`--unit` changes the actuator, `--seed` only the noise."""
+    from pathlib import Path
+
+    from click.testing import CliRunner
+
+    from piezohyst.cli import main
+
+    d = Path(str(tmp_path))
+    said = {}
+    for seed, unit in ((1, 0), (2, 0), (1, 1), (1, 2)):
+        args = ["--seed", str(seed), "--unit", str(unit), "-o", str(d / f"{seed}{unit}.csv")]
+        res = CliRunner().invoke(main, ["simulate", "--duration", "2", *args])
+        assert res.exit_code == 0, res.output
+        said[seed, unit] = res.stderr.split("true leakage")[1].split()[0]
+    assert said[1, 0] == said[2, 0]  # the same actuator, other noise
+    assert len({said[1, 0], said[1, 1], said[1, 2]}) == 3

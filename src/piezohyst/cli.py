@@ -75,6 +75,14 @@ def main(click_ctx: click.Context, quiet: bool, verbose: bool, debug: bool) -> N
 @click.option(
     "--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True, help="Noise seed."
 )
+@click.option(
+    "--unit",
+    type=click.IntRange(0, 2**32 - 1),
+    default=0,
+    show_default=True,
+    help="Which actuator of a production batch: its leakage, capacitance and loop differ "
+    "(0: the preset).",
+)
 @OUT_FILE
 @FORCE
 @click.pass_obj
@@ -87,6 +95,7 @@ def simulate(
     duration: float,
     rate: float | None,
     seed: int,
+    unit: int,
     out: Path,
     force: bool,
 ) -> None:
@@ -96,6 +105,7 @@ def simulate(
     Example:
       piezohyst simulate --signal multi --duration 12 -o run.csv
     """
+    from .simulation import PRESETS
     from .workflows import simulate_file
 
     rec = _run(
@@ -109,12 +119,17 @@ def simulate(
             duration=duration,
             rate=rate,
             seed=seed,
+            unit=unit,
             force=force,
         ),
     )
     ctx.info(
         f"{rec.t.size} samples at {rec.preset.rate:g} Hz, true leakage {rec.true_growth_rate:.4g} S"
     )
+    if (
+        preset in PRESETS and rec.preset.c_ref != PRESETS[preset].c_ref
+    ):  # the leaked charge would clip the ADC
+        ctx.info(f"reference capacitor {rec.preset.c_ref * 1e6:.3g} uF, so the charge never clips")
     click.echo(str(out))
 
 

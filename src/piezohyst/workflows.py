@@ -55,7 +55,7 @@ from .io import (
 )
 from .model import History, HysteresisModel, InitialState, ModelState
 from .persistence import model_class, model_names
-from .simulation import DEFAULT_PRESET, PRESETS, BenchRecord, simulate
+from .simulation import DEFAULT_PRESET, PRESETS, BenchRecord, batch_unit, simulate
 
 __all__ = [
     "Compensation",
@@ -85,17 +85,20 @@ def simulate_file(
     duration: float = 20.0,
     rate: float | None = None,
     seed: int = 0,
+    unit: int = 0,
     force: bool = False,
 ) -> BenchRecord:
     """Run the simulated bench and write ``time,voltage,charge,displacement`` (s, V, C, m).
 
-    ``force`` replaces an existing file piezohyst did not write (see :func:`guard_outputs`).
+    ``seed`` seeds the noise; ``unit`` picks an actuator of a production batch (0: the
+    preset; see :func:`piezohyst.simulation.batch_unit`). ``force`` replaces an existing
+    file piezohyst did not write (see :func:`guard_outputs`).
     """
     guard_outputs([out], [], force=force)
     if preset not in PRESETS:
         msg = f"unknown preset {preset!r}; available: {', '.join(PRESETS)}"
         raise ParameterError(msg)
-    p = PRESETS[preset]
+    p = batch_unit(preset, check_int(unit, "unit", "simulate", 0, 2**32 - 1))
     if rate is not None:
         p = dataclasses.replace(
             p, rate=check_float(rate, "rate", "simulate", 0.0, 1e7, low_open=True)

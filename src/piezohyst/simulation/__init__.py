@@ -2,7 +2,16 @@
 
 from __future__ import annotations
 
-from .bench import DEFAULT_PRESET, PRESETS, Bench, BenchPreset, BenchRecord, Reading, simulate
+from .bench import (
+    DEFAULT_PRESET,
+    PRESETS,
+    Bench,
+    BenchPreset,
+    BenchRecord,
+    Reading,
+    batch_unit,
+    simulate,
+)
 from .loop import run_loop
 from .signals import SIGNALS, make_signal
 
@@ -14,6 +23,7 @@ __all__ = [
     "BenchPreset",
     "BenchRecord",
     "Reading",
+    "batch_unit",
     "make_signal",
     "run_loop",
     "simulate",

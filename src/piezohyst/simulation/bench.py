@@ -160,6 +160,49 @@ PRESETS["T226-H4-203X-mode"] = replace(
 
 DEFAULT_PRESET = "T226-H4-203X"
 
+#: Relative spreads of a unit off one production line (assumption: datasheet tolerances
+#: of PZT benders are +-10-20 % for capacitance; leakage varies more, +-30 %)
+UNIT_SPREAD = {
+    "c0": 0.1,
+    "q_irr": 0.1,
+    "g_leak": 0.3,
+    "leak_voltage_coeff": 0.3,
+    "i_bias": 0.5,
+    "coercive_scale": 0.1,
+}
+
+
+def batch_unit(preset: str | BenchPreset, unit: int) -> BenchPreset:
+    """Unit ``unit`` of a production batch of ``preset``; unit 0 is the preset itself.
+
+    Each other unit draws its capacitance, loop, leakage and bias current from
+    :data:`UNIT_SPREAD` (normal, clipped at 2.5 standard deviations), seeded by
+    ``unit``: the same unit is the same actuator on every run. Limits, rate and
+    sensors are the bench's, shared by every unit.
+
+    Parameters
+    ----------
+    preset : str or BenchPreset
+    unit : int
+        0 or more.
+
+    Returns
+    -------
+    BenchPreset
+    """
+    p = _preset(preset)
+    if not isinstance(unit, int | np.integer) or isinstance(unit, bool) or unit < 0:
+        msg = f"The 'unit' must be an integer 0 or more. Got {unit!r}."
+        raise ParameterError(msg)
+    if unit == 0:
+        return p
+    rng = np.random.default_rng([0x5EED, int(unit)])
+    drawn = {
+        name: getattr(p, name) * (1.0 + spread * float(np.clip(rng.standard_normal(), -2.5, 2.5)))
+        for name, spread in UNIT_SPREAD.items()
+    }
+    return replace(p, name=f"{p.name} unit {unit}", **drawn)
+
 
 @dataclass(frozen=True)
 class BenchRecord:
@@ -212,6 +255,15 @@ def _preisach_plane(p: BenchPreset, n: int = 120) -> tuple[FloatArray, FloatArra
     w *= np.exp(-0.5 * (cc / p.coercive_scale) ** 2)
     w *= p.q_irr / w.sum()
     return (hh + cc).ravel(), (hh - cc).ravel(), w.ravel()
+
+
+def _e6_above(value: float) -> float:
+    """The smallest E6 capacitor value (1, 1.5, 2.2, 3.3, 4.7, 6.8 per decade) >= ``value``."""
+    decade = 10.0 ** math.floor(math.log10(value))
+    for mantissa in (1.0, 1.5, 2.2, 3.3, 4.7, 6.8, 10.0):
+        if mantissa * decade >= value * (1 - 1e-12):
+            return mantissa * decade
+    raise AssertionError  # pragma: no cover - 10 * decade > value
 
 
 class _Plant:
@@ -458,6 +510,7 @@ def simulate(
     frequency: float = 0.5,
     duration: float = 20.0,
     seed: int = 0,
+    auto_range: bool = True,
 ) -> BenchRecord:
     """Run the simulated bench on a voltage command.
 
@@ -474,6 +527,12 @@ def simulate(
         best (see ``docs/bench.md``).
     seed : int
         Seeds the measurement noise; equal seeds give equal records.
+    auto_range : bool, default True
+        Choose the Sawyer-Tower reference capacitor as a lab would: when the
+        preset's would take the charge amplifier's output beyond 90 % of the
+        ADC's full scale (long records accumulate leaked charge), the next
+        E6 value that keeps it under 80 % is used (``record.preset.c_ref``).
+        False keeps the preset's, and the charge clips at full scale.
 
     Returns
     -------
@@ -511,6 +570,11 @@ def simulate(
         raise ParameterError(msg)
     plant = _Plant(p, float(v[0]))
     q_c, q_r, v_amp = plant.run(ts, v)
+    peak = float(np.abs(v_amp).max())
+    if auto_range and peak > 0.9 * p.adc_range:
+        p = replace(p, c_ref=_e6_above(p.c_ref * peak / (0.8 * p.adc_range)))
+        plant = _Plant(p, float(v[0]))
+        q_c, q_r, v_amp = plant.run(ts, v)
 
     rng = np.random.default_rng(seed)
     charge = plant.adc(v_amp + p.amp_noise * rng.standard_normal(v.size))
