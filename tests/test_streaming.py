@@ -215,7 +215,7 @@ def test_compensate_file_streams_like_one_call(
 def test_errors_in_later_batches_name_the_row(tmp_path: Path, small_batches: None) -> None:
     n = 6000
     t = np.arange(n) / 1000.0
-    v = 50 + 50 * np.sin(t * 7)
+    v = 50 - 50 * np.cos(t * 7)  # from rest at 0 V
     q = v * 1e-6
     t_bad = t.copy()
     t_bad[4321] = t_bad[4320]  # row 4322 repeats a time

@@ -427,6 +427,8 @@ def compare(
     c, d = result.test
     held = f"{test_data.name if test_data else data.name} samples {c}-{d}"
     click.echo(f"trained on {data.name} samples {a}-{b}, held out: {held}")
+    if a > 0 and initial_state == "rest":
+        ctx.info(f"the training part starts from the state the input before sample {a} left")
     click.echo(result.table())
     if out is not None:
         ctx.info(f"saved {out}")
