@@ -399,3 +399,36 @@ def test_fit_from_the_periodic_state(tmp_path: Path) -> None:
     res = run("predict", tmp_path / "rest.json", data, "--initial-state", "periodic",
               "-o", tmp_path / "p3.csv")  # fmt: skip
     assert res.exit_code == 0, res.output
+
+
+def test_long_work_says_so_once_when_piped(tmp_path: Path) -> None:
+    """Piped (no terminal), a long fit logs one line when it starts, with the rows it
+    expects, and one when done; a short one and --quiet log nothing."""
+    from piezohyst._formats import estimated_rows
+
+    exe = Path(sys.executable).with_name("piezohyst")
+    n = 150_000
+    t = np.arange(n) / 1000.0
+    v = 70 - 70 * np.cos(2 * np.pi * 0.5 * t)
+    ph.write_table(tmp_path / "long.csv", {"time": t, "voltage": v, "charge": 1e-8 * v})
+    ph.write_table(tmp_path / "long.parquet", {"time": t, "voltage": v, "charge": 1e-8 * v})
+    est = estimated_rows(tmp_path / "long.csv")
+    assert est is not None and abs(est - n) <= 0.05 * n  # from the head's line lengths
+    assert estimated_rows(tmp_path / "long.parquet") == n
+    fit = [str(exe), "fit", str(tmp_path / "long.csv"), "--operators", "5"]
+    proc = subprocess.run([*fit, "-o", str(tmp_path / "m.json")],
+                          capture_output=True, text=True, check=False)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stderr.splitlines()
+    assert lines[0].startswith("fitting active-pi to long.csv: about ")
+    assert lines[0].endswith(" rows") and lines[1].startswith(
+        "fitting active-pi to long.csv: done in"
+    )
+    quiet = subprocess.run([str(exe), "--quiet", *fit[1:], "-o", str(tmp_path / "q.json")],
+                           capture_output=True, text=True, check=False)  # fmt: skip
+    assert quiet.returncode == 0 and quiet.stderr == ""
+    ph.write_table(tmp_path / "short.csv", {"time": t[:2000], "voltage": v[:2000],
+                                            "charge": 1e-8 * v[:2000]})  # fmt: skip
+    args = [str(exe), "fit", str(tmp_path / "short.csv"), "-o", str(tmp_path / "s.json")]
+    short = subprocess.run(args, capture_output=True, text=True, check=False)
+    assert "about" not in short.stderr and "done in" not in short.stderr

@@ -7,6 +7,7 @@ from __future__ import annotations
 import functools
 import shlex
 import sys
+import time
 import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -15,6 +16,7 @@ from typing import Any, Literal, cast
 
 import click
 
+from ._formats import estimated_rows
 from .compensator import CompensatorSettings, Domain
 from .errors import PiezohystError
 from .io import DataSpec
@@ -69,25 +71,63 @@ def progress_steps(ctx: Context, total: int) -> Iterator[Callable[[str], None]]:
         bar.update(task, completed=total, description="done")
 
 
+#: Records shorter than this read in moments: no progress line when the output is piped
+QUIET_ROWS = 100_000
+
+
 @contextmanager
-def rows_progress(ctx: Context, label: str) -> Iterator[Callable[[int], None]]:
-    """A live count of the rows read, on a terminal only (silent when piped or quiet)."""
-    if ctx.quiet or not sys.stderr.isatty():
+def rows_progress(
+    ctx: Context, label: str, path: Path | None = None, passes: int = 1
+) -> Iterator[Callable[[int], None]]:
+    """Progress over the rows read: on a terminal a bar with percentage and time left when
+    the file's length can be estimated (a count of rows otherwise); piped, one line when a
+    long record starts and one when it is done. ``passes``: how often the rows are read."""
+    rows = None if path is None else estimated_rows(path)
+    total = None if rows is None else rows * passes
+    if ctx.quiet:
         yield lambda _rows: None
         return
+    if not sys.stderr.isatty():
+        if total is None or rows is None or rows < QUIET_ROWS:
+            yield lambda _rows: None
+            return
+        click.echo(f"{label}: about {rows:,} rows", err=True)
+        began = time.perf_counter()
+        yield lambda _rows: None
+        click.echo(f"{label}: done in {time.perf_counter() - began:.1f} s", err=True)
+        return
     from rich.console import Console
-    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+    from rich.progress import (
+        BarColumn,
+        Progress,
+        SpinnerColumn,
+        TaskProgressColumn,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
+    columns = (
+        [SpinnerColumn(), TextColumn("{task.description}"), TextColumn("{task.completed:,} rows")]
+        if total is None
+        else [
+            TextColumn("{task.description}"),
+            BarColumn(),
+            TaskProgressColumn(),
+            TimeRemainingColumn(),
+        ]
+    )
     with Progress(
-        SpinnerColumn(),
-        TextColumn("{task.description}"),
-        TextColumn("{task.completed:,} rows"),
-        TimeElapsedColumn(),
-        console=Console(stderr=True),
-        transient=True,
+        *columns, TimeElapsedColumn(), console=Console(stderr=True), transient=True
     ) as bar:
-        task = bar.add_task(label, total=None)
-        yield lambda rows: bar.update(task, completed=rows)
+        task = bar.add_task(label, total=total)
+
+        def update(done: int) -> None:
+            if total is not None and done > (bar.tasks[0].total or 0):
+                bar.update(task, total=1.05 * done)  # more than estimated: never past 100 %
+            bar.update(task, completed=done)
+
+        yield update
 
 
 def _command_line() -> str:

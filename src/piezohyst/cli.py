@@ -314,7 +314,13 @@ def fit(
 
     # up to three passes over the file (extremes, normal equations, fit quality), rows counted
     # on; a window of up to 2e6 samples is read once and kept
-    with rows_progress(ctx, f"fitting {model_name} to {data.name}") as progress:
+    from ._formats import estimated_rows
+    from .workflows import KEEP_ROWS
+
+    # a window of up to KEEP_ROWS rows is read once and kept; a longer one streams 3 passes
+    passes = 1 if (estimated_rows(data) or 0) <= KEEP_ROWS else 3
+    label = f"fitting {model_name} to {data.name}"
+    with rows_progress(ctx, label, data, passes) as progress:
         model = _run(
             ctx,
             lambda: fit_file(
@@ -463,7 +469,7 @@ def predict(
     """
     from .workflows import Prediction, predict_file
 
-    with rows_progress(ctx, f"reading {data.name}") as progress:
+    with rows_progress(ctx, f"reading {data.name}", data) as progress:
         cols: Prediction = _run(
             ctx,
             lambda: predict_file(
@@ -547,7 +553,7 @@ def compensate(
     """
     from .workflows import compensate_file
 
-    with rows_progress(ctx, f"reading {target.name}") as progress:
+    with rows_progress(ctx, f"reading {target.name}", target) as progress:
         result = _run(
             ctx,
             lambda: compensate_file(
@@ -601,7 +607,7 @@ def report(
     from .workflows import model_report
 
     command = _command_line()
-    with rows_progress(ctx, f"reading {data.name}, then drawing the report") as progress:
+    with rows_progress(ctx, f"reading {data.name}, then drawing the report", data) as progress:
         res = _run(
             ctx,
             lambda: model_report(
