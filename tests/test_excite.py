@@ -87,11 +87,18 @@ def test_holds_are_long_enough_for_the_leakage_calibration() -> None:
     rec = ph.simulate(exc.voltage, exc.t, seed=1)
     leak = ph.calibrate_leakage(rec.t, rec.voltage, rec.charge)
     assert len(leak.holds) == 9
+    p = rec.preset
     for h in leak.holds:
         s = slice(h.start, h.stop)
-        true = np.polyfit(rec.t[s], rec.leak_charge[s], 1)[0]
-        # tol: the slope's noise is ~1.5e-11 A per hold (its stderr); 1 % of the smallest
-        # current (2e-8 A at 35 V) is 13 stderr; at 0 V, 4 stderr
+        # what flows on a hold: the piezo's leakage, the amplifier's bias current, and the
+        # reference capacitor discharging the measured charge
+        true = (
+            np.polyfit(rec.t[s], rec.leak_charge[s], 1)[0]
+            + p.i_bias
+            - h.charge / (p.r_ref * p.c_ref)
+        )
+        # tol: the slope's noise is ~1e-11 A per hold (its stderr); 1 % of the smallest
+        # current (2e-8 A at 35 V) is 20 stderr; at 0 V, 4 stderr
         assert abs(h.current - true) <= max(0.01 * abs(true), 4 * h.stderr)
 
 

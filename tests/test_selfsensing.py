@@ -103,7 +103,10 @@ def test_discharge_needs_holds_reached_from_both_sides() -> None:
     t, v = staircase([0.0, 50.0, 100.0, 25.0])
     q = 1e-8 * v + np.cumsum(1e-13 * v) / FS  # the charge almost a function of the voltage
     with pytest.raises(ph.InsufficientDataError, match="once on the way up and once on the way"):
-        ph.calibrate_leakage(t, v, q)
+        ph.calibrate_leakage(t, v, q, select=False)  # all four asked for, as they are
+    with pytest.warns(UserWarning, match="cannot determine the discharge term .* from above"):
+        chosen = ph.calibrate_leakage(t, v, q)  # chosen by evidence: discharge left out
+    assert chosen.discharge == 0.0
     leak = ph.calibrate_leakage(t, v, q, terms=("conductance", "bias"))
     # tol: noise-free data: a linear solve, exact to rounding times its conditioning
     assert leak.conductance == pytest.approx(1e-13, rel=1e-6)

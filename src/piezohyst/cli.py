@@ -850,8 +850,10 @@ def calibrate_leakage(
             force=force,
         ),
     )
+    errors = leak.stderr()
     for name, (value, unit) in leak.coefficients().items():
-        click.echo(f"{name:12s} {value:.4g} {unit}")
+        sure = f" ± {errors[name]:.2g}" if errors.get(name) else ""
+        click.echo(f"{name:12s} {value:.4g}{sure} {unit}")
     click.echo(
         f"from {len(leak.holds)} holds at "
         f"{', '.join(f'{h.voltage:.4g}' for h in leak.holds)} {leak.input_unit}; "

@@ -955,8 +955,9 @@ def render_report(m: dict[str, Any]) -> str:
         "",
         f"Leakage identified by the model from cycling: {ci['conductance'][0]:.4g} S, no bias "
         f"term; calibrated from the holds: {cc['conductance'][0]:.4g} S + "
-        f"{cc['quadratic'][0]:.4g} S·v|v|/s + {cc['bias'][0] * 1e12:.1f} pA - "
-        f"q/{1 / cc['discharge'][0]:.3g} s (the bench: {cl['leakage_true_at_0V_S']:.3g} S at 0 V "
+        f"{cc['quadratic'][0]:.4g} S·v|v|/s + {cc['bias'][0] * 1e12:.1f} pA"
+        + (f" - q/{1 / cc['discharge'][0]:.3g} s" if cc["discharge"][0] > 0 else ", no discharge")
+        + f" (the bench: {cl['leakage_true_at_0V_S']:.3g} S at 0 V "
         f"+ {cl['leakage_true_quadratic_S']:.3g} S·v|v|/s, {cl['bias_A'] * 1e12:.0f} pA bias, "
         f"reference capacitor discharging in {cl['true_tau_s']:.3g} s). With the identified "
         "leakage the loop holds the "

@@ -27,6 +27,7 @@ import itertools
 import json
 import math
 import os
+import warnings
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -107,6 +108,9 @@ class Leakage:
         The holds it was calibrated on (empty when not calibrated).
     residual : float
         RMS misfit of the hold currents (output units per s); NaN when not calibrated.
+    covariance : tuple of tuple of float
+        Covariance of (conductance, quadratic, bias, discharge) from the calibration
+        (zero rows for terms it did not fit); empty when not calibrated.
     """
 
     conductance: float = 0.0
@@ -118,6 +122,7 @@ class Leakage:
     output_unit: str = "C"
     holds: tuple[Hold, ...] = field(default=(), compare=False)
     residual: float = field(default=math.nan, compare=False)
+    covariance: tuple[tuple[float, ...], ...] = field(default=(), compare=False)
 
     def __post_init__(self) -> None:
         for name in ("conductance", "quadratic", "bias", "scale", "discharge"):
@@ -153,6 +158,42 @@ class Leakage:
             + self.bias
             - self.discharge * np.asarray(q, dtype=np.float64)
         )
+
+    def stderr(self) -> dict[str, float]:
+        """Each term's standard error from the calibration (0 for a term left out; empty
+        when the leakage was not calibrated from holds).
+
+        Returns
+        -------
+        dict
+        """
+        if not self.covariance:
+            return {}
+        diag = np.diag(np.asarray(self.covariance, dtype=np.float64))
+        return {n: float(math.sqrt(max(d, 0.0))) for n, d in zip(LEAKAGE_TERMS, diag, strict=True)}
+
+    def current_stderr(self, v: ArrayLike, q: ArrayLike | float = 0.0) -> FloatArray:
+        """Standard error of :meth:`current` at ``v`` (and ``q``), from the calibration's
+        covariance (NaN when the leakage was not calibrated from holds).
+
+        Parameters
+        ----------
+        v : array_like
+            Voltages (input units).
+        q : array_like or float, default 0
+            Measured charge (output units).
+
+        Returns
+        -------
+        ndarray
+        """
+        x = np.asarray(v, dtype=np.float64)
+        if not self.covariance:
+            return np.full(x.shape, np.nan)
+        qq = np.broadcast_to(np.asarray(q, dtype=np.float64), x.shape)
+        g = np.stack([x, x * np.abs(x) / self.scale, np.ones_like(x), -qq], axis=-1)
+        cov = np.asarray(self.covariance, dtype=np.float64)
+        return np.asarray(np.sqrt(np.maximum(np.einsum("...i,ij,...j->...", g, cov, g), 0.0)))
 
     def charge(self, v: ArrayLike, t: ArrayLike, q: ArrayLike | None = None) -> FloatArray:
         """Charge leaked since the first sample: the paper's backward-rectangle integral (eq. 13).
@@ -259,6 +300,7 @@ class Leakage:
         out = asdict(self)
         out["holds"] = [asdict(h) for h in self.holds]
         out["residual"] = None if math.isnan(self.residual) else self.residual
+        out["covariance"] = [list(row) for row in self.covariance]
         return {"format": "piezohyst-leakage", "kind": "leakage", **out}
 
     @classmethod
@@ -292,17 +334,19 @@ class Leakage:
             "input_unit",
             "output_unit",
         }
-        extra = set(fields) - known - {"holds", "residual"}
+        extra = set(fields) - known - {"holds", "residual", "covariance"}
         if extra:
             msg = f"{where}: unknown field {sorted(extra)[0]!r}"
             raise ModelFileError(msg)
         try:
             holds = tuple(Hold(**h) for h in fields.get("holds") or ())
             residual = fields.get("residual")
+            cov = tuple(tuple(float(c) for c in row) for row in fields.get("covariance") or ())
             return cls(
                 **{k: fields[k] for k in known if k in fields},
                 holds=holds,
                 residual=math.nan if residual is None else float(residual),
+                covariance=cov,
             )
         except (TypeError, ParameterError) as exc:
             msg = f"{where}: {exc}"
@@ -394,16 +438,25 @@ def find_holds(
     return holds
 
 
+#: Trims tried at a hold's start (fractions), shortest first: the first whose slope agrees
+#: with the hold's last 40 % is kept, so a hold still settling loses more
+TRIMS = (0.05, 0.1, 0.2, 0.3, 0.4, 0.5)
+#: The calibrated current's relative standard error above which a warning names longer holds
+#: (and beyond 10 %, the calibration refuses)
+CURRENT_RTOL = 0.03
+
+
 def calibrate_leakage(
     t: ArrayLike,
     v: ArrayLike,
     q: ArrayLike,
     *,
     terms: Sequence[str] = LEAKAGE_TERMS,
+    select: bool = True,
     holds: Sequence[tuple[int, int]] | None = None,
     tolerance: float | None = None,
     min_duration: float = 1.0,
-    settle: float = 0.25,
+    settle: float | str = "auto",
     scale: float | None = None,
     input_unit: str = "V",
     output_unit: str = "C",
@@ -411,13 +464,20 @@ def calibrate_leakage(
     r"""Fit the leakage current from the charge's slope on constant-voltage holds.
 
     On each hold the slope of a straight line through the charge is the
-    current there; the selected terms of
-    :math:`G_0 v + G_1 v|v|/s + i_b - q/\tau` are then fitted to those
-    currents, each hold weighted by its duration. The discharge term needs
-    holds at one voltage with different charges (reached from below and from
-    above); the others need as many voltage levels as terms. A hold's slope
-    is uncertain by about ``noise * sqrt(12 / samples) / duration``, so a few
-    long holds beat many short ones.
+    current there, with its standard error; the terms of
+    :math:`G_0 v + G_1 v|v|/s + i_b - q/\tau` are fitted to those currents,
+    each weighted by its precision. The physics is kept: a conductance (at 0 V
+    and at the top, :math:`G_0 + G_1`) or a discharge is never negative.
+    With ``select`` the terms are chosen by evidence: of every subset the holds
+    can determine, the one that predicts each hold best from the others
+    (leave-one-hold-out), the smallest within 10 % of the best. The result
+    carries the coefficients' covariance (:meth:`Leakage.current_stderr`); a
+    current less sure than 3 % at the top voltage gets a warning naming the
+    hold length that would do, and beyond 10 % the calibration refuses. The
+    discharge term needs holds at one voltage with different charges (reached
+    from below and from above); the others need as many voltage levels as
+    terms. A hold's slope is uncertain by about ``noise * sqrt(12 / samples) /
+    duration``: a few long holds beat many short ones.
 
     Parameters
     ----------
@@ -425,10 +485,16 @@ def calibrate_leakage(
         Times (s), voltages and measured charge.
     terms : sequence of str, default all
         Of ``"conductance"``, ``"quadratic"``, ``"bias"``, ``"discharge"``.
+    select : bool, default True
+        Choose among ``terms`` by evidence; False fits them all.
     holds : sequence of (start, stop), optional
         The holds as sample ranges; default found by :func:`find_holds`.
-    tolerance, min_duration, settle
+    tolerance, min_duration
         Passed to :func:`find_holds`.
+    settle : float or "auto", default "auto"
+        The fraction of each hold dropped at its start, where creep and the
+        amplifier still settle; "auto" chooses it per hold from
+        :data:`TRIMS`: the shortest whose slope agrees with the hold's last 40 %.
     scale : float, optional
         :math:`s`; default the largest |v| of the record.
     input_unit, output_unit : str
@@ -437,7 +503,7 @@ def calibrate_leakage(
     Returns
     -------
     Leakage
-        With the holds used and the fit's RMS residual.
+        With the holds used, the fit's RMS residual and the covariance.
 
     Raises
     ------
@@ -445,7 +511,7 @@ def calibrate_leakage(
         Unknown terms.
     InsufficientDataError
         Too few holds, or holds at too few distinct voltages, to determine
-        the requested terms.
+        the requested terms; or a current too uncertain to stand behind.
 
     Examples
     --------
@@ -453,7 +519,7 @@ def calibrate_leakage(
     >>> t = np.arange(12000) / 1000.0
     >>> v = np.repeat([0.0, 50.0, 100.0], 4000)
     >>> q = np.cumsum((2e-9 * v + 1e-11) * 1e-3)
-    >>> leak = calibrate_leakage(t, v, q, terms=("conductance", "bias"))  # 3 levels, no way down
+    >>> leak = calibrate_leakage(t, v, q, terms=("conductance", "bias"), select=False)
     >>> round(leak.conductance / 1e-9, 6), round(leak.bias / 1e-11, 6), len(leak.holds)
     (2.0, 1.0, 3)
     """
@@ -469,37 +535,41 @@ def calibrate_leakage(
     assert ts is not None
     s = float(np.max(np.abs(x))) if scale is None else float(scale)
     s = s if s > 0 else 1.0
-    ranges = (
-        find_holds(ts, x, tolerance=tolerance, min_duration=min_duration, settle=settle)
-        if holds is None
-        else [(int(a), int(b)) for a, b in holds]
-    )
+    auto = isinstance(settle, str)
+    if auto and settle != "auto":
+        msg = f"'settle' must be a fraction in [0, 1) or 'auto'. Got {settle!r}."
+        raise ParameterError(msg)
+    if holds is None:
+        ranges = find_holds(ts, x, tolerance=tolerance, min_duration=min_duration,
+                            settle=0.0 if auto else float(settle))  # fmt: skip
+    else:
+        ranges = [(int(a), int(b)) for a, b in holds]
     found = []
+    settling = 0  # holds whose charge had not settled when they ended
     for a, b in ranges:
         if not 0 <= a < b <= x.size or b - a < 3:
             msg = f"a hold must be a range start:stop of at least 3 samples. Got {a}:{b}."
             raise ParameterError(msg)
-        tt = ts[a:b] - ts[a:b].mean()
-        qq = y[a:b] - y[a:b].mean()
-        sxx = float(tt @ tt)
-        slope = float(tt @ qq) / sxx
-        resid = qq - slope * tt
-        stderr = math.sqrt(float(resid @ resid) / max(b - a - 2, 1) / sxx)
-        found.append(
-            Hold(
-                a,
-                b,
-                float(x[a:b].mean()),
-                float(y[a:b].mean()),
-                slope,
-                stderr,
-                float(ts[b - 1] - ts[a]),
-            )
-        )
+        gap = 0.0
+        if auto and holds is None:
+            a, gap = _settled_start(ts, y, a, b)
+        if gap > 0.0:  # a charge still settling: its end slope, and what may be left of it
+            slope, stderr = _steady_slope(ts, y, a, b)
+            # what is left after the hold: for a relaxation slower than the hold, more than
+            # it moved within it; twice that (measured on the relaxing plants of
+            # piezohyst.simulation.PLANTS: it then holds the truth to 3 standard errors)
+            stderr = math.hypot(stderr, 2.0 * gap)
+        else:
+            slope, stderr = _slope(ts, y, a, b)
+        settling += gap > 0.0
+        found.append(Hold(a, b, float(x[a:b].mean()), float(y[a:b].mean()), slope, stderr,
+                          float(ts[b - 1] - ts[a])))  # fmt: skip
     span = float(np.ptp(x)) or 1.0
     levels = _distinct([h.voltage for h in found], 0.02 * span)
     by_voltage = [name for name in chosen if name != "discharge"]
-    if len(levels) < len(by_voltage) or len(found) < len(chosen):
+    choosing = select and len(chosen) > 1
+    need_levels, need_holds = (1, 2) if choosing else (len(by_voltage), len(chosen))
+    if len(levels) < need_levels or len(found) < need_holds:
         where = ", ".join(f"{lv:.4g}" for lv in levels) or "none"
         msg = (
             f"{len(found)} hold(s) at {len(levels)} distinct voltage(s) ({where} {input_unit}) "
@@ -508,20 +578,30 @@ def calibrate_leakage(
             "100, 75, 50, 25, 0 % of the range), or ask for fewer terms"
         )
         raise InsufficientDataError(msg)
-    volts = np.array([h.voltage for h in found])
-    columns = {
-        "conductance": volts,
-        "quadratic": volts * np.abs(volts) / s,
-        "bias": np.ones_like(volts),
-        "discharge": -np.array([h.charge for h in found]),
-    }
-    a_mat = np.column_stack([columns[name] for name in chosen])
-    rhs = np.array([h.current for h in found])
-    w = np.sqrt(np.array([h.duration for h in found]))
-    design = a_mat * w[:, None]
-    norms = np.linalg.norm(design, axis=0)
-    sv = np.linalg.svd(design / np.where(norms > 0, norms, 1.0), compute_uv=False)
-    if norms.min() == 0 or sv[-1] < 1e-3 * sv[0]:
+    if settling and holds is None:
+        _both_ways(found, ranges, x, settling, input_unit)
+    system = _HoldSystem(found, s)
+    subsets = [chosen]
+    pool = chosen
+    if choosing:
+        # a relaxation after each step leaves the charge higher on a hold reached from above,
+        # flowing out: a discharge to the fit. While holds still settle, none is chosen, and
+        # the currents (settling holds weighed by what may be left of it) are too uncertain
+        # to drop a voltage term on: all of them are fitted, their uncertainty reported.
+        pool = tuple(n for n in chosen if not (settling and n == "discharge")) or chosen
+        subsets = [c for k in range(1, len(pool) + 1) for c in itertools.combinations(pool, k)]
+        if settling and system.determines(pool, levels):
+            subsets = [pool]
+    if len(subsets) == 1:  # nothing to choose: fitted as asked, no hold left out
+        ok = system.determines(subsets[0], levels, spare=0)
+        scored = [(0.0, subsets[0])] if ok and system.physical(subsets[0]) else []
+    else:
+        scored = [(system.bic(c), c) for c in subsets if system.determines(c, levels)]
+        scored = [(score, c) for score, c in scored if math.isfinite(score)]
+        able = {n for _, c in scored for n in c}
+        if scored and able != set(pool):
+            _undetermined([n for n in pool if n not in able], found, input_unit)
+    if not scored:
         msg = (
             f"the {len(found)} holds cannot tell the terms {', '.join(chosen)} apart"
             + (
@@ -533,21 +613,255 @@ def calibrate_leakage(
             + "; or ask for fewer terms"
         )
         raise InsufficientDataError(msg)
-    coef, *_ = np.linalg.lstsq(design, rhs * w, rcond=None)
+    pick = min(scored, key=lambda sc: (sc[0], len(sc[1])))[1]
+    coef, cov, misfit = system.fit(pick)
     values = dict.fromkeys(LEAKAGE_TERMS, 0.0)
-    values.update({name: float(c) for name, c in zip(chosen, coef, strict=True)})
-    misfit = rhs - a_mat @ coef
-    return Leakage(
-        values["conductance"],
-        values["quadratic"],
-        values["bias"],
-        s,
-        values["discharge"],
-        input_unit,
-        output_unit,
-        holds=tuple(found),
-        residual=float(np.sqrt(np.mean(misfit**2))),
+    values.update(dict(zip(pick, coef, strict=True)))
+    full = np.zeros((4, 4))
+    index = [LEAKAGE_TERMS.index(name) for name in pick]
+    full[np.ix_(index, index)] = cov
+    leak = Leakage(values["conductance"], values["quadratic"], values["bias"], s,
+                   values["discharge"], input_unit, output_unit, holds=tuple(found),
+                   residual=float(np.sqrt(np.mean(misfit**2))),
+                   covariance=tuple(tuple(float(c) for c in row) for row in full))  # fmt: skip
+    _check_sure(leak, found, input_unit, settling)
+    return leak
+
+
+def _slope(ts: FloatArray, y: FloatArray, a: int, b: int) -> tuple[float, float]:
+    """The least-squares slope of ``y`` over samples ``a:b`` and its standard error."""
+    tt = ts[a:b] - ts[a:b].mean()
+    qq = y[a:b] - y[a:b].mean()
+    sxx = float(tt @ tt)
+    slope = float(tt @ qq) / sxx
+    resid = qq - slope * tt
+    return slope, math.sqrt(float(resid @ resid) / max(b - a - 2, 1) / sxx)
+
+
+def _steady_slope(ts: FloatArray, y: FloatArray, a: int, b: int) -> tuple[float, float]:
+    """A hold's current and its standard error. A charge still relaxing (creep, dielectric
+    relaxation, dipoles switching) curves: when a quadratic's curvature is significant
+    (3 standard errors) the current is the slope at the hold's end, and its error grows
+    by what the relaxation may still change after it (the curvature times half the hold)."""
+    slope, stderr = _slope(ts, y, a, b)
+    if b - a < 10:
+        return slope, stderr
+    tt = ts[a:b] - ts[a:b].mean()
+    basis = np.column_stack([np.ones_like(tt), tt, tt**2 - float(np.mean(tt**2))])
+    coef, res, *_ = np.linalg.lstsq(basis, y[a:b], rcond=None)
+    dof = max(b - a - 3, 1)
+    sigma2 = float(res[0]) / dof if res.size else 0.0
+    cov = np.linalg.pinv(basis.T @ basis) * sigma2
+    c2, e2 = float(coef[2]), math.sqrt(max(float(cov[2, 2]), 0.0))
+    if not abs(c2) > 3.0 * e2:
+        return slope, stderr
+    half = float(tt[-1])
+    g = np.array([0.0, 1.0, 2.0 * half])  # d/dt at the end
+    end_slope = float(g @ coef)
+    end_err = math.sqrt(max(float(g @ cov @ g), 0.0))
+    return end_slope, math.hypot(end_err, abs(c2) * half)
+
+
+#: A hold counts as still settling when its slope moved by more than this share of the
+#: current within it (and beyond its noise): a sixth of the 3 % a calibration aims for
+SETTLING_SHARE = 0.005
+
+
+def _settled_start(ts: FloatArray, y: FloatArray, a: int, b: int) -> tuple[int, float]:
+    """The first sample of a hold to use: the shortest trim (:data:`TRIMS`) whose slope
+    agrees, within two standard errors, with the slope of the hold's last 40 %. And when
+    the charge was still settling (no trim under a fifth of the hold agreed, and the slope
+    moved by more than :data:`SETTLING_SHARE` of the current), how far the slope moved
+    within the hold (the shortest trim's against the tail's; else 0): what is left of the
+    settling after the hold may be as large."""
+    n = b - a
+    tail = a + math.ceil(0.6 * n)
+    if b - tail < 3:
+        return a + math.ceil(TRIMS[2] * n), 0.0
+    s_tail, e_tail = _slope(ts, y, tail, b)
+    start, moved, noise = a, 0.0, 0.0
+    for i, f in enumerate(TRIMS):
+        start = a + math.ceil(f * n)
+        s_f, e_f = _slope(ts, y, start, b)
+        if i == 0:
+            moved, noise = abs(s_f - s_tail), 3.0 * math.hypot(e_f, e_tail)
+        if abs(s_f - s_tail) <= 2.0 * math.hypot(e_f, e_tail):
+            break
+    settling = start >= a + math.ceil(0.2 * n) and moved > max(noise, SETTLING_SHARE * abs(s_tail))
+    return start, moved if settling else 0.0
+
+
+class _HoldSystem:
+    """The hold currents as a weighted linear system in the leakage terms."""
+
+    def __init__(self, found: list[Hold], s: float) -> None:
+        volts = np.array([h.voltage for h in found])
+        self.columns = {
+            "conductance": volts,
+            "quadratic": volts * np.abs(volts) / s,
+            "bias": np.ones_like(volts),
+            "discharge": -np.array([h.charge for h in found]),
+        }
+        self.rhs = np.array([h.current for h in found])
+        err = np.array([h.stderr for h in found])
+        floor = 1e-6 * float(np.max(np.abs(self.rhs))) or 1e-300
+        self.w = 1.0 / np.maximum(err, floor)
+
+    def determines(self, names: Sequence[str], levels: list[float], spare: int = 1) -> bool:
+        """Whether the holds fix these terms (with ``spare`` holds to leave one out)."""
+        by_voltage = [n for n in names if n != "discharge"]
+        if len(levels) < len(by_voltage) or self.rhs.size < len(names) + spare:
+            return False
+        design = np.column_stack([self.columns[n] for n in names]) * self.w[:, None]
+        norms = np.linalg.norm(design, axis=0)
+        if norms.min() == 0:
+            return False
+        sv = np.linalg.svd(design / norms, compute_uv=False)
+        return bool(sv[-1] >= 1e-3 * sv[0])
+
+    def _solve(self, names: Sequence[str], rows: np.ndarray) -> FloatArray | None:
+        """Bounded weighted least squares on ``rows``; None when a physical bound binds
+        (that subset is then a smaller one, scored on its own)."""
+        from scipy.optimize import lsq_linear
+
+        a_mat = np.column_stack([self.columns[n] for n in names])[rows] * self.w[rows, None]
+        lower = [0.0 if n in ("conductance", "discharge") else -np.inf for n in names]
+        scale = np.linalg.norm(a_mat, axis=0)
+        scale[scale == 0] = 1.0
+        res = lsq_linear(a_mat / scale, self.rhs[rows] * self.w[rows],
+                         bounds=(np.array(lower), np.full(len(names), np.inf)))  # fmt: skip
+        coef = np.asarray(res.x / scale)
+        values = dict(zip(names, coef, strict=True))
+        at_top = values.get("conductance", 0.0) + values.get("quadratic", 0.0)
+        bound = bool(np.any(res.active_mask != 0)) or any(
+            values[n] <= 0.0 for n in names if n in ("conductance", "discharge")
+        )
+        if bound or at_top < 0.0:
+            return None
+        return coef
+
+    def physical(self, names: Sequence[str]) -> bool:
+        """Whether the fit on every hold keeps the physics (no negative conductance or
+        discharge)."""
+        return self._solve(names, np.arange(self.rhs.size)) is not None
+
+    def bic(self, names: Sequence[str]) -> float:
+        """The Bayesian information criterion of a subset on the hold currents: chi-squared
+        in the holds' standard errors plus ln(holds) per term (inf: unphysical)."""
+        coef = self._solve(names, np.arange(self.rhs.size))
+        if coef is None:
+            return math.inf
+        a_mat = np.column_stack([self.columns[n] for n in names])
+        chi2 = float(np.sum(((self.rhs - a_mat @ coef) * self.w) ** 2))
+        return chi2 + len(names) * math.log(self.rhs.size)
+
+    def loo(self, names: Sequence[str]) -> float:
+        """Leave-one-hold-out: the mean squared error in standard errors (inf: unphysical)."""
+        n = self.rhs.size
+        if self._solve(names, np.arange(n)) is None:
+            return math.inf
+        errs = []
+        for i in range(n):
+            coef = self._solve(names, np.delete(np.arange(n), i))
+            if coef is None:
+                return math.inf
+            pred = sum(c * self.columns[m][i] for c, m in zip(coef, names, strict=True))
+            errs.append(((pred - self.rhs[i]) * self.w[i]) ** 2)
+        return float(np.mean(errs))
+
+    def fit(self, names: Sequence[str]) -> tuple[list[float], FloatArray, FloatArray]:
+        """Coefficients, their covariance (scaled by the misfit when it exceeds the
+        standard errors) and the misfit of every hold."""
+        rows = np.arange(self.rhs.size)
+        coef = self._solve(names, rows)
+        assert coef is not None
+        a_mat = np.column_stack([self.columns[n] for n in names])
+        misfit = self.rhs - a_mat @ coef
+        chi2 = float(np.sum((misfit * self.w) ** 2)) / max(self.rhs.size - len(names), 1)
+        weighted = a_mat * self.w[:, None]
+        cov = np.linalg.pinv(weighted.T @ weighted) * max(chi2, 1.0)
+        return [float(c) for c in coef], cov, misfit
+
+
+def _undetermined(names: list[str], found: list[Hold], unit: str) -> None:
+    """Warn that terms asked for were left out because the holds cannot fix them (or fix
+    them only with an unphysical sign), and say which holds would."""
+    advice = {
+        "discharge": "holds at one voltage reached from below and from above, with "
+        "different charges",
+        "quadratic": "holds at three or more voltages, the highest near the top",
+        "bias": "a hold at 0 V or holds at several voltages",
+        "conductance": "holds at two or more voltages",
+    }
+    levels = ", ".join(f"{v:.4g}" for v in _distinct([h.voltage for h in found], 1e-9))
+    warnings.warn(
+        f"the {len(found)} holds (at {levels} {unit}) cannot determine "
+        + "; ".join(f"the {n} term (it needs {advice[n]})" for n in names)
+        + ": left out",
+        UserWarning,
+        stacklevel=3,
     )
+
+
+def _both_ways(
+    found: list[Hold], ranges: list[tuple[int, int]], x: FloatArray, settling: int, unit: str
+) -> None:
+    """Refuse when holds still settling were all approached from one side: a relaxation
+    after each step (creep, dielectric relaxation, switching dipoles) then flows the same
+    way on every hold and cannot be told from leakage; approached from above it flows the
+    other way, and the fit averages it out."""
+    reach = max(abs(h.voltage) for h in found)
+    sides = set()
+    for h, (a, _) in zip(found, ranges, strict=True):
+        before = x[max(a - 1, 0) :: -1]  # the voltage before the hold's run began
+        moved = before[np.abs(before - h.voltage) > 0.02 * reach]
+        if abs(h.voltage) >= 0.1 * reach and moved.size:
+            sides.add(bool(moved[0] < h.voltage))
+    if len(sides) == 2:
+        return
+    length = float(np.mean([h.duration for h in found]))
+    msg = (
+        f"{settling} of {len(found)} holds were still settling when they ended (creep, "
+        "relaxation), and every hold was reached from the same side, so that settling cannot "
+        f"be told from leakage ({length:.3g} s used per hold): hold each level at least "
+        f"{math.ceil(3 * length)} s, once on the way up and once on the way down (e.g. 0, 25, "
+        f"50, 75, 100, 75, 50, 25, 0 % of the range, in {unit})"
+    )
+    raise InsufficientDataError(msg)
+
+
+def _check_sure(leak: Leakage, found: list[Hold], unit: str, settling: int) -> None:
+    """Warn (beyond 3 %) or refuse (beyond 10 %) when the current at a hold's voltage (away
+    from 0 V) is uncertain, naming the hold length that would bring it under 3 %: for
+    noise, the slope's error falls as duration^-3/2; for holds still settling, no rule
+    holds, and several times longer is asked for."""
+    reach = max(abs(h.voltage) for h in found)
+    worst, rel = found[0], 0.0
+    for h in found:  # where a current flows: away from 0 V
+        if abs(h.voltage) < 0.1 * reach:
+            continue
+        current = float(leak.current(h.voltage, h.charge))
+        err = float(leak.current_stderr(h.voltage, h.charge))
+        if current and err / abs(current) > rel:
+            worst, rel = h, err / abs(current)
+    if not rel > CURRENT_RTOL:
+        return
+    length = float(np.mean([h.duration for h in found]))
+    if settling:
+        advice = (
+            f"{settling} of them still settling (creep, relaxation): hold each level several "
+            f"times longer, {math.ceil(3 * length)} s or more, up and down"
+        )
+    else:
+        needed = length * (rel / CURRENT_RTOL) ** (2.0 / 3.0)
+        advice = f"holds of {math.ceil(needed)} s or more would bring it under 3 %"
+    msg = (
+        f"the leakage current at {worst.voltage:.4g} {unit} is uncertain by {100 * rel:.2g} % "
+        f"from {len(found)} holds of {length:.3g} s; {advice}"
+    )
+    if rel > 0.1:
+        raise InsufficientDataError(msg)
+    warnings.warn(msg, UserWarning, stacklevel=3)
 
 
 def _distinct(values: Sequence[float], gap: float) -> list[float]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from .bench import (
     DEFAULT_PRESET,
+    PLANTS,
     PRESETS,
     Bench,
     BenchPreset,
@@ -17,6 +18,7 @@ from .signals import SIGNALS, make_signal
 
 __all__ = [
     "DEFAULT_PRESET",
+    "PLANTS",
     "PRESETS",
     "SIGNALS",
     "Bench",

@@ -1,0 +1,144 @@
+"""Plants of other physics than the bench (issue 26): each is what its docs say, and the
+leakage calibration on them returns only numbers it can stand behind."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import piezohyst as ph
+from piezohyst.excitation import excitation
+from piezohyst.metrics import hysteresis_width
+from piezohyst.simulation import PLANTS, make_signal
+
+ZOO = [name for name in PLANTS if name != "preisach"]
+RELAXING = {"two-state", "bouc-wen-creep-lag"}  # the charge keeps moving on a hold
+
+
+def loop(name: str, frequency: float) -> float:
+    """The capacitor's loop width at a frequency (no leakage, no noise: the hidden truth)."""
+    t, v = make_signal("fixed", amplitude=140.0, frequency=frequency, duration=3 / frequency)
+    rec = ph.simulate(v, t, plant=name)
+    keep = t >= 1 / frequency  # after the first cycle
+    return hysteresis_width(rec.voltage[keep], rec.capacitor_charge[keep])
+
+
+def test_there_are_four_plants_besides_the_bench_each_documented() -> None:
+    assert len(ZOO) >= 4 and PLANTS["preisach"] is ph.simulation.PRESETS["T226-H4-203X"]
+    for name in ZOO:
+        p = PLANTS[name]
+        assert p.name == name and p.law != "preisach" and "law" in p.sources
+        assert p.i_bias != 0 and p.leak_voltage_coeff > 0  # voltage-dependent leakage, bias
+    with pytest.raises(ph.ParameterError, match="unknown plant 'kp'"):
+        ph.simulate(plant="kp")
+
+
+@pytest.mark.parametrize("name", ZOO)
+def test_each_plant_has_a_plausible_loop_and_its_own_rate_dependence(name: str) -> None:
+    slow, fast = loop(name, 0.5), loop(name, 20.0)
+    assert 0.05 < slow < 0.3  # a piezo's loop: 5-30 % of the charge span
+    if name == "two-state":  # thermally activated dipoles cannot follow a fast drive
+        assert fast < 0.85 * slow
+    elif name == "bouc-wen-creep-lag":  # relaxation and the amplifier's lag: rate matters
+        assert abs(fast - slow) > 0.05 * slow
+    else:  # Bouc-Wen and Duhem capacitors are rate-independent
+        # tol: the same loop sampled at 2000 and 50 points per cycle: 2 % of its width
+        assert fast == pytest.approx(slow, rel=0.02)
+
+
+def test_a_relaxing_plant_keeps_moving_on_a_hold_and_the_others_do_not() -> None:
+    t = np.arange(6000) / 1000.0
+    v = np.minimum(t / 0.2, 1.0) * 100.0  # a ramp to 100 V, then 5.8 s held
+    hold = t > 1.0
+    for name in ZOO:
+        q = ph.simulate(v, t, plant=name).capacitor_charge
+        moved = abs(q[-1] - q[hold][0]) / np.ptp(q)
+        if name in RELAXING:
+            assert moved > 1e-3
+        else:
+            assert moved < 1e-9
+
+
+def ascending_holds(seconds: float) -> tuple[np.ndarray, np.ndarray]:
+    """Six holds at 20-140 V, reached from below, as issue 26's lab recorded them."""
+    fs, parts, last = 1000.0, [np.zeros(1000)], 0.0
+    for level in np.linspace(20.0, 140.0, 6):
+        ramp = last + (level - last) * 0.5 * (1 - np.cos(np.pi * np.arange(1, 201) / 200))
+        parts += [ramp, np.full(round(seconds * fs), level)]
+        last = level
+    v = np.concatenate(parts)
+    return np.arange(v.size) / fs, v
+
+
+def true_current(p: ph.simulation.BenchPreset, v: np.ndarray) -> np.ndarray:
+    return p.g_leak * (1 + p.leak_voltage_coeff * np.abs(v) / p.v_max) * v + p.i_bias
+
+
+@pytest.mark.parametrize("name", list(PLANTS))
+def test_six_short_holds_give_the_current_or_a_refusal_that_says_how_to_hold(name: str) -> None:
+    t, v = ascending_holds(3.0)
+    rec = ph.simulate(v, t, plant=name, seed=3)
+    at = np.array([20.0, 80.0, 140.0])
+    if name in RELAXING:
+        with pytest.raises(ph.InsufficientDataError, match=r"hold each level at least \d+ s, "
+                           "once on the way up and once on the way down"):  # fmt: skip
+            ph.calibrate_leakage(rec.t, rec.voltage, rec.charge)
+        return
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # nothing to warn about on a plant that settles
+        leak = ph.calibrate_leakage(rec.t, rec.voltage, rec.charge)
+    # tol: issue 26's bound (3 %); the estimate's own error here is 0.2 % or less
+    np.testing.assert_allclose(leak.current(at), true_current(rec.preset, at), rtol=0.03)
+    assert np.all(leak.current_stderr(at) < 0.01 * np.abs(leak.current(at)))
+
+
+@pytest.mark.parametrize("seconds", [3.0, 10.0])
+@pytest.mark.parametrize("name", list(PLANTS))
+def test_up_and_down_holds_calibrate_every_plant_and_no_sign_is_unphysical(
+    name: str, seconds: float
+) -> None:
+    """The staircase of piezohyst excite --kind holds: reached from both sides, a relaxation
+    averages out; every coefficient keeps its physics, every warning names a hold length."""
+    exc = excitation("holds", v_min=0.0, v_max=140.0, sample_rate=1000.0, hold=seconds)
+    rec = ph.simulate(exc.voltage, exc.t, plant=name, seed=3)
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        try:
+            leak = ph.calibrate_leakage(rec.t, rec.voltage, rec.charge)
+        except ph.InsufficientDataError as exc:  # only where the charge keeps relaxing
+            assert name in RELAXING and "hold each level several times longer" in str(exc)
+            return
+    assert leak.conductance >= 0 and leak.discharge >= 0
+    assert leak.conductance + leak.quadratic >= 0  # the conductance at the top
+    for w in said:
+        assert "uncertain by" in str(w.message) and " s or more" in str(w.message)
+    at = np.array([80.0, 140.0])
+    truth, got = true_current(rec.preset, at), leak.current(at)
+    if name not in RELAXING:
+        assert not said  # sure of itself, and right: 3 % at 80 and 140 V (issue 26's bound)
+        np.testing.assert_allclose(got, truth, rtol=0.03)
+    else:  # within 3 %, or it said it was not sure, and how sure it was holds the truth
+        close = np.allclose(got, truth, rtol=0.03)
+        assert close or said
+        # tol: five of its own standard errors: the settling left after a hold is estimated,
+        # not measured (docs/validation.md: 2-4 standard errors on these plants)
+        assert np.all(np.abs(got - truth) <= 5 * leak.current_stderr(at))
+    err = leak.stderr()
+    assert set(err) == {"conductance", "quadratic", "bias", "discharge"}
+    assert all(e >= 0 for e in err.values())
+
+
+def test_a_leakage_file_keeps_its_uncertainty(tmp_path: object) -> None:
+    from pathlib import Path
+
+    exc = excitation("holds", v_min=0.0, v_max=140.0, sample_rate=1000.0, hold=4.0)
+    rec = ph.simulate(exc.voltage, exc.t, seed=1)
+    leak = ph.calibrate_leakage(rec.t, rec.voltage, rec.charge)
+    path = Path(str(tmp_path)) / "leak.json"
+    leak.save(path)
+    back = ph.Leakage.load(path)
+    assert back.covariance == leak.covariance and back.stderr() == leak.stderr()
+    np.testing.assert_array_equal(back.current_stderr([70.0]), leak.current_stderr([70.0]))
+    assert np.isnan(ph.Leakage(1e-9).current_stderr([70.0])).all()  # not calibrated: unknown
