@@ -106,7 +106,9 @@ def test_the_compare_command(tmp_path: Path) -> None:
     assert res.exit_code == 0, res.output
     lines = res.output.splitlines()
     assert lines[0] == "trained on run.csv samples 0-5000, held out: run.csv samples 5000-10000"
-    assert {lines[3].split(" | ")[0], lines[4].split(" | ")[0]} == {"| active-pi", "| preisach"}
+    names = {lines[k].split(" | ")[0].removesuffix(" (recommended)") for k in (3, 4)}
+    assert names == {"| active-pi", "| preisach"}
+    assert sum("(recommended)" in lines[k] for k in (3, 4)) == 1  # one, chosen in training
     assert md.read_text().splitlines()[2:] == lines[1:5]
     assert ph.io.is_piezohyst_output(md)  # so a second run may replace it
     out_csv = tmp_path / "cmp.csv"

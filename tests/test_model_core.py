@@ -382,6 +382,7 @@ LAYERS = {
     "models": 8,
     "bank": 9,
     "comparison": 9,
+    "selection": 10,
     "inverses": 10,
     "compensator": 10,
     "selfsensing": 10,

@@ -46,6 +46,7 @@ from .models import (
     PreisachModel,
 )
 from .persistence import load_model
+from .selection import Selection, select_model
 from .selfsensing import ControllerState, SelfSensingController
 from .simulation import simulate
 from .terms import Term
@@ -89,6 +90,7 @@ __all__ = [
     "PreisachModel",
     "Propagation",
     "Region",
+    "Selection",
     "SelfSensingController",
     "ShapeError",
     "Term",
@@ -103,6 +105,7 @@ __all__ = [
     "metrics",
     "read_recording",
     "read_table",
+    "select_model",
     "simulate",
     "terms",
     "write_table",

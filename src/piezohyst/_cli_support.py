@@ -468,18 +468,52 @@ def initial_state_option(choices: list[str], help: str) -> Decorator:
                         show_default=True, help=help)  # fmt: skip
 
 
-def _model_options(model_help: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    """--model and --operators, shared by fit and fit-many."""
+def _model_options(
+    model_help: str, auto: bool = False
+) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """--model and --operators, shared by fit and fit-many (``auto``: choose one)."""
 
     def decorate(fn: Callable[..., Any]) -> Callable[..., Any]:
         fn = operators_option()(fn)
         return click.option(
             "--model",
             "model_name",
-            type=click.Choice(model_names()),
+            type=click.Choice([*model_names(), *(["auto"] if auto else [])]),
             default="active-pi",
             show_default=True,
             help=model_help,
         )(fn)
 
     return decorate
+
+
+def _fit_auto(
+    ctx: Context,
+    data: Path,
+    operators: int,
+    initial_state: str,
+    data_spec: DataSpec,
+    out: Path,
+    force: bool,
+) -> None:
+    """fit --model auto: every model scored inside the record, the best saved."""
+    from .workflows import select_file
+
+    with rows_progress(ctx, f"choosing a model for {data.name}", data) as progress:
+        sel = _run(
+            ctx,
+            lambda: select_file(
+                data,
+                out,
+                data_spec=data_spec,
+                operators=operators,
+                initial_state=initial_state,
+                force=force,
+                progress=progress,
+            ),
+        )
+    click.echo(sel.table())
+    from .cli import describe
+
+    click.echo(describe(sel.model))
+    ctx.info(f"saved {out}")

@@ -21,6 +21,7 @@ from ._cli_support import (
     Context,
     _command_line,
     _data_options,
+    _fit_auto,
     _limit_options,
     _loop_options,
     _model_options,
@@ -235,7 +236,9 @@ def excite(
 
 @main.command()
 @click.argument("data", type=EXISTING)
-@_model_options("Model to identify.")
+@_model_options(
+    "Model to identify (auto: each scored inside the record, the best kept).", auto=True
+)
 @click.option(
     "--growth",
     default="auto",
@@ -312,8 +315,9 @@ def fit(
     if growth != "auto":
         terms = () if growth == "none" else tuple(g.strip() for g in growth.split(",") if g.strip())
 
-    # up to three passes over the file (extremes, normal equations, fit quality), rows counted
-    # on; a window of up to 2e6 samples is read once and kept
+    if model_name == "auto":
+        _fit_auto(ctx, data, operators, initial_state, data_spec, out, force)
+        return
     from ._formats import estimated_rows
     from .workflows import KEEP_ROWS
 

@@ -119,6 +119,9 @@ class Comparison:
         Whether the test part is a record of its own.
     output_unit : str
         Unit of the RMSE columns.
+    recommended : str
+        The model chosen by forward chaining inside the training part alone
+        (:func:`~piezohyst.selection.forward_scores`; "" when not asked for).
     """
 
     rows: tuple[ComparisonRow, ...]
@@ -126,6 +129,7 @@ class Comparison:
     test: tuple[int, int]
     separate_test: bool = False
     output_unit: str = ""
+    recommended: str = ""
 
     def best(self) -> ComparisonRow:
         """The row with the smallest held-out NRMSE.
@@ -165,8 +169,9 @@ class Comparison:
             if r.error:
                 lines.append(f"| {r.name} | failed | | | | | {r.error} |")
                 continue
+            name = f"{r.name} (recommended)" if r.name == self.recommended else r.name
             lines.append(
-                f"| {r.name} | {100 * r.train_nrmse:.4g} % | **{100 * r.test_nrmse:.4g} %** "
+                f"| {name} | {100 * r.train_nrmse:.4g} % | **{100 * r.test_nrmse:.4g} %** "
                 f"| {r.test_rmse:.4g} | {100 * r.test_width:.3g} % | {r.absorbed or '-'} "
                 f"| {r.notes} |"
             )

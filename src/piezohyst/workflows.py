@@ -56,6 +56,7 @@ from .io import (
 )
 from .model import History, HysteresisModel, InitialState, ModelState
 from .persistence import model_class, model_names
+from .selection import CANDIDATES, Selection, chosen, forward_scores, select_model
 from .simulation import DEFAULT_PRESET, PRESETS, BenchRecord, batch_unit, simulate
 
 __all__ = [
@@ -71,6 +72,7 @@ __all__ = [
     "guard_outputs",
     "model_report",
     "predict_file",
+    "select_file",
     "simulate_file",
     "simulate_loop_file",
 ]
@@ -154,6 +156,62 @@ def excite_file(
     )
     write_table(out, {"time": exc.t, "voltage": exc.voltage}, units={"time": "s", "voltage": "V"})
     return exc
+
+
+def select_file(
+    data: PathLike,
+    out: PathLike | None = None,
+    *,
+    data_spec: DataSpec | None = None,
+    operators: int = 10,
+    initial_state: str = "rest",
+    candidates: Sequence[str] = CANDIDATES,
+    force: bool = False,
+    progress: Progress = None,
+) -> Selection:
+    """Choose a model for a record (:func:`~piezohyst.selection.select_model`) and save
+    the winner, fitted on the record (its window, started from the earlier input).
+
+    Parameters
+    ----------
+    data : str or os.PathLike
+        The recording.
+    out : str or os.PathLike, optional
+        Where to save the chosen model (JSON).
+    data_spec : DataSpec, optional
+        Columns and window.
+    operators : int
+        Play operators, for the candidates that have them.
+    initial_state : {"rest", "periodic"}
+        Where the record (or its window) starts.
+    candidates : sequence of str
+        Model names to choose among.
+    force : bool
+        Replace an existing ``out`` piezohyst did not write.
+    progress : callable, optional
+        Called with the rows read so far.
+
+    Returns
+    -------
+    Selection
+    """
+    if out is not None:
+        guard_outputs([out], [data], force=force)
+    rec = (data_spec or DataSpec()).read(data, progress=progress)
+    assert rec.y is not None
+    w = rec.window
+    warn_clipped([rec.y[w]], rec.names[1], rec.units[1], data)
+    start: InitialState = initial_state
+    if w.start and initial_state == "rest":  # the window continues the record's input
+        start = History(rec.x[: w.start])
+    sel = select_model(
+        rec.x[w], rec.y[w], rec.t[w], candidates=candidates, operators=operators,
+        initial_state=start, input_unit=rec.units[0] or "V",
+        output_unit=rec.units[1] or _default_unit(rec.names[1]),
+    )  # fmt: skip
+    if out is not None:
+        sel.model.save(out)
+    return sel
 
 
 def fit_file(
@@ -371,6 +429,10 @@ def compare_file(
         estimators, rec.x[w], rec.y[w], rec.t[w], train=train, test=test,
         initial_state=start,
     )  # fmt: skip
+    a, b = result.train
+    inner = forward_scores(estimators, rec.x[w][a:b], rec.y[w][a:b], rec.t[w][a:b], start)
+    if any(math.isfinite(r.score) for r in inner):  # chosen inside the training part alone
+        result = dataclasses.replace(result, recommended=chosen(inner).name)
     if w.start:  # the samples scored, as rows of the record
         (a, b), (c, d) = result.train, result.test
         shift = 0 if result.separate_test else w.start
