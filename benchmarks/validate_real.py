@@ -538,6 +538,117 @@ def rate(data: Path) -> str:
     return "\n".join(lines)
 
 
+MATRIX_UNITS = (1, 2, 3)
+
+
+def _matrix_row(
+    candidates: tuple[str, ...],
+    train: tuple[np.ndarray, np.ndarray, np.ndarray],
+    test: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+    unit: str,
+) -> dict[str, float | str]:
+    """Held-out NRMSE of every default and of select_model's choice on one split.
+
+    ``test`` None: the record's last 30 % is held out, predicted on from the fit's start;
+    else a record of its own, started at rest."""
+    from piezohyst.selection import _candidate
+
+    x, y, t = train
+    if test is None:
+        stop = round(0.7 * x.size)
+        fit_part, (xt, yt, tt) = slice(0, stop), (x, y, t)
+    else:
+        fit_part, (xt, yt, tt) = slice(0, x.size), test
+    row: dict[str, float | str] = {}
+    for name in candidates:
+        model = _candidate(name, 10, ("V", unit))
+        try:
+            model.fit(x[fit_part], y[fit_part], t=t[fit_part])
+            pred = model.predict(xt, t=tt)
+            scored = slice(stop, None) if test is None else slice(None)
+            err = ph.metrics.nrmse(yt[scored], pred[scored])
+            row[name] = err if np.isfinite(err) else np.inf
+        except ph.PiezohystError:
+            row[name] = np.inf
+    sel = ph.select_model(x[fit_part], y[fit_part], t[fit_part], candidates=candidates,
+                          output_unit=unit)  # fmt: skip
+    row["chosen"] = sel.name
+    row["select_model"] = row[sel.name]  # the same defaults, fitted on the same part
+    return row
+
+
+def matrix(data: Path) -> str:
+    """Every model's defaults and select_model, held out, on every plant and measured set."""
+    from piezohyst.selection import CANDIDATES
+    from piezohyst.simulation import PLANTS, batch_unit
+
+    print("matrix: defaults and select_model on plants and measured sets")
+    rows: list[tuple[str, list[dict[str, float | str]]]] = []
+    for plant in PLANTS:
+        runs = []
+        for unit in MATRIX_UNITS:  # actuators of one batch: their physics differ, not only noise
+            p = batch_unit(PLANTS[plant], unit)
+            tr = ph.simulate(preset=p, signal="decaying", duration=40.0, seed=unit)
+            te = ph.simulate(preset=p, signal="multi", duration=12.0, seed=unit + 100)
+            runs.append(_matrix_row(CANDIDATES, (tr.voltage, tr.charge, tr.t),
+                                    (te.voltage, te.charge, te.t), "C"))  # fmt: skip
+        rows.append((f"plant `{plant}` (decaying 40 s -> multi 12 s)", runs))
+        print(f"  {plant}: chosen {[r['chosen'] for r in runs]}")
+    act = ph.read_table(data / "piezo_actuator_smarthysteresis" / "hysteresis_v_150_1hz.csv")
+    t, d, v = act.get("col1"), act.get("col2") * 1e-6, act.get("col3")
+    a = int(np.searchsorted(t, 3.3))
+    rows.append(("SmartHysteresis actuator (3.3-10 s, last 30 %)",
+                 [_matrix_row(CANDIDATES, (v[a:], d[a:], t[a:]), None, "m")]))  # fmt: skip
+    folder = data / "piezo_micromanipulator_dbo"
+    mm, nr = np.loadtxt(folder / "Model_Vi_Do.dat"), np.loadtxt(folder / "Test_Vi_Do_Di.dat")
+    tm, tn = np.arange(mm.shape[0]) / 200.0, np.arange(nr.shape[0]) / 200.0
+    train = (mm[:, 0], mm[:, 4] * 1e-6, tm)
+    test = (nr[:, 0], nr[:, 4] * 1e-6, tn)
+    rows.append(("micromanipulator, Model run -> Test runs (from rest)",
+                 [_matrix_row(CANDIDATES, train, test, "m")]))  # fmt: skip
+    names = [*CANDIDATES, "select_model"]
+    lines = [
+        "## The matrix: every default and `select_model`, held out (issue 26)\n",
+        "Each model with its defaults (10 operators where it has them), fitted on a training "
+        "record and scored on data it never saw; `select_model` chooses among the same "
+        "defaults by forward chaining inside the training record alone. Plants: trained on "
+        "40 s of decaying loops, tested on 12 s of the `multi` signal from rest, on units "
+        f"{', '.join(map(str, MATRIX_UNITS))} of a batch of each (`batch_unit`: capacitance, "
+        "loop, leakage and bias drawn around the plant's): the mean held-out NRMSE and, in "
+        "brackets, the range over the units. Measured sets: the last 30 % held out, "
+        "predicted on from the fit's start (the micromanipulator: its Model run trains, its "
+        "Test runs, started at rest, test). Bold: the best in the row; 'ratio' is "
+        "select_model's error over it.\n",
+        "| record | " + " | ".join(names) + " | chosen | ratio |",
+        "|---" * (len(names) + 3) + "|",
+    ]
+    ratios, worst_default = [], []
+    for label, runs in rows:
+        cells = []
+        means = {n: float(np.mean([float(r[n]) for r in runs])) for n in names}
+        best = min(means[n] for n in CANDIDATES)
+        for n in names:
+            vals = [float(r[n]) for r in runs]
+            text = "fails" if not np.isfinite(means[n]) else f"{100 * means[n]:.3g} %"
+            if len(vals) > 1 and np.all(np.isfinite(vals)):
+                text += f" [{100 * min(vals):.3g}-{100 * max(vals):.3g}]"
+            cells.append(f"**{text}**" if means[n] == best else text)
+        chosen = ", ".join(sorted({str(r["chosen"]) for r in runs}))
+        ratio = means["select_model"] / best
+        ratios.append(ratio)
+        worst_default.append(max(means[n] for n in CANDIDATES if n != "classical-pi") / best)
+        lines.append(f"| {label} | " + " | ".join(cells) + f" | {chosen} | {ratio:.2f} |")
+    lines += [
+        "",
+        f"`select_model` within 1.25x the best on {sum(r <= 1.25 for r in ratios)} of "
+        f"{len(ratios)} rows (worst {max(ratios):.2f}x). The worst default besides classical "
+        f"PI is {max(worst_default):.1f}x the best of its row (issue 26 asks at most 3x). "
+        "Nothing here was tuned on these rows: the defaults predate the plants, and the "
+        "plants' parameters were set before any model was fitted to them.\n",
+    ]
+    return "\n".join(lines)
+
+
 def _cli(*args: str | Path) -> tuple[str, str]:
     """A piezohyst command as a user types it: its stdout and stderr."""
     import subprocess
@@ -606,6 +717,7 @@ def main() -> None:
         pzt_periodic(args.data),
         boucwen(args.data),
         rate(args.data),
+        matrix(args.data),
     ]
     header = (
         "# Validation on measured data\n\n"
