@@ -8,23 +8,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner, Result
 
 import piezohyst as ph
-from piezohyst.cli import main
-
-
-def run(*args: str | Path) -> Result:
-    return CliRunner().invoke(main, [str(a) for a in args])
-
-
-def one_line_error(res: Result, *fragments: str) -> str:
-    assert res.exit_code == 1, res.output
-    err = res.stderr.strip()
-    assert len(err.splitlines()) == 1 and "Traceback" not in res.output, err
-    for fragment in fragments:
-        assert fragment in err, err
-    return err
+from .test_field_safety import one_line_error, run
 
 
 @pytest.fixture(scope="module")
