@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import piezohyst as ph
+
 from .test_field_safety import one_line_error, run
 
 
