@@ -74,6 +74,8 @@ BLOCK = 4096  # samples per block when accumulating or streaming
 # predicted by a fit on everything before it
 SELECT_START = 0.4
 SELECT_FOLDS = 4
+#: Growth terms each larger than this many times their sum cancel: a subset not chosen
+CANCEL = 3.0
 SELECT_PIECES = 20  # the tested part is accumulated in pieces, grouped into folds after
 
 
@@ -722,12 +724,36 @@ def identify(
         g = eqs.gram[np.ix_(cols, cols)]
         return np.asarray(m @ _bounded_lstsq(m.T @ g @ m, m.T @ eqs.rhs[cols], lower))
 
+    def cancelling(subset: tuple[int, ...]) -> bool:
+        """Growth terms that mostly cancel each other on the record (each larger than
+        :data:`CANCEL` times their sum) fit its drift by a difference of large terms, which
+        a record with another voltage history does not repeat: not a choice to make."""
+        growth = [j for j in subset if terms[j].removed]
+        if len(growth) < 2:
+            return False
+        try:
+            beta = solve(whole, subset)
+        except InsufficientDataError:
+            return False
+        cols = list(columns_of(subset))
+        own = [np.array([cols.index(c) for c in term_cols[j]]) for j in growth]
+        every = np.concatenate([term_cols[j] for j in growth])
+        b = np.concatenate([beta[i] for i in own])
+        total = float(b @ whole.gram[np.ix_(every, every)] @ b)
+        sizes = [
+            float(beta[i] @ whole.gram[np.ix_(term_cols[j], term_cols[j])] @ beta[i])
+            for j, i in zip(growth, own, strict=True)
+        ]
+        return max(sizes) > CANCEL**2 * max(total, 1e-300)
+
     scores: dict[tuple[int, ...], float] = {}
     fold_scores: dict[tuple[int, ...], list[float]] = {}
     best = candidates[0]
     if (selecting or validate) and len(parts) >= 2:
         best_err = np.inf
         for subset in candidates:
+            if selecting and cancelling(subset):
+                continue
             sse = 0.0
             count = 0
             folds: list[float] = []
