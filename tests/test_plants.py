@@ -159,3 +159,28 @@ def test_every_plant_runs_block_by_block_as_in_one_call(name: str) -> None:
         got = np.concatenate([getattr(p, field) for p in parts])
         # tol: the same arithmetic in the same order: equal to the last bit
         np.testing.assert_array_equal(got, getattr(whole, field))
+
+
+def test_the_command_line_calibrates_as_the_api(tmp_path: object) -> None:
+    """calibrate-leakage trims each hold as calibrate_leakage does (auto), or as told."""
+    from pathlib import Path
+
+    from click.testing import CliRunner
+
+    from piezohyst.cli import main
+
+    d = Path(str(tmp_path))
+    exc = excitation("holds", v_min=0.0, v_max=140.0, sample_rate=1000.0, hold=4.0)
+    rec = ph.simulate(exc.voltage, exc.t, plant="bouc-wen", seed=5)
+    ph.write_table(d / "holds.csv", {"time": rec.t, "voltage": rec.voltage,
+                                     "charge": rec.charge})  # fmt: skip
+    res = CliRunner().invoke(main, ["calibrate-leakage", str(d / "holds.csv"), "-o",
+                                    str(d / "leak.json")])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    api = ph.calibrate_leakage(rec.t, rec.voltage, rec.charge)
+    # tol: the file's shortest round-trip decimals read back: the same fit
+    assert ph.Leakage.load(d / "leak.json").conductance == pytest.approx(api.conductance, rel=1e-9)
+    assert "±" in res.stdout
+    bad = CliRunner().invoke(main, ["calibrate-leakage", str(d / "holds.csv"), "--settle", "2",
+                                    "-o", str(d / "x.json")])  # fmt: skip
+    assert bad.exit_code == 2 and "expected auto or a fraction in [0, 1)" in bad.output

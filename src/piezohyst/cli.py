@@ -587,6 +587,20 @@ def compensate(
     ctx.info(f"saved {out}")
 
 
+def _settle(value: str) -> float | str:
+    """--settle: "auto" or a fraction in [0, 1)."""
+    if value == "auto":
+        return value
+    try:
+        fraction = float(value)
+    except ValueError:
+        fraction = -1.0
+    if not 0.0 <= fraction < 1.0:
+        msg = f"expected auto or a fraction in [0, 1), got {value!r}"
+        raise click.BadParameter(msg, param_hint="--settle")
+    return fraction
+
+
 @main.command()
 @click.argument("model", type=EXISTING)
 @click.argument("data", type=EXISTING)
@@ -810,10 +824,11 @@ def export_c(
 )
 @click.option(
     "--settle",
-    type=click.FloatRange(0.0, 1.0, max_open=True),
-    default=0.25,
+    default="auto",
     show_default=True,
-    help="Fraction of each hold skipped at its start.",
+    callback=lambda _c, _p, value: _settle(value),
+    help="Fraction of each hold skipped at its start, or auto: per hold, until its slope "
+    "agrees with its end (a hold still settling is then named).",
 )
 @OUT_FILE_JSON
 @FORCE
@@ -824,7 +839,7 @@ def calibrate_leakage(
     data_spec: DataSpec,
     terms: str,
     min_hold: float,
-    settle: float,
+    settle: float | str,
     out: Path,
     force: bool,
 ) -> None:

@@ -329,7 +329,7 @@ def calibrate_leakage_file(
     data_spec: DataSpec | None = None,
     terms: Sequence[str] = LEAKAGE_TERMS,
     min_duration: float = 1.0,
-    settle: float = 0.25,
+    settle: float | str = "auto",
     force: bool = False,
 ) -> Leakage:
     """Calibrate the leakage from the holds of a record and save it (JSON) to ``out``.
@@ -345,7 +345,7 @@ def calibrate_leakage_file(
     terms : sequence of str
         Leakage terms to fit (see :func:`~piezohyst.leakage.calibrate_leakage`).
     min_duration, settle
-        Hold detection (see :func:`~piezohyst.leakage.find_holds`).
+        Hold detection and trim (see :func:`~piezohyst.leakage.calibrate_leakage`).
     force : bool
         Replace an existing ``out`` that piezohyst did not write.
 

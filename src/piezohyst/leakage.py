@@ -704,7 +704,10 @@ class _HoldSystem:
         }
         self.rhs = np.array([h.current for h in found])
         err = np.array([h.stderr for h in found])
-        floor = 1e-6 * float(np.max(np.abs(self.rhs))) or 1e-300
+        # a hold whose charge sat on one ADC code has a slope error of 0 on paper: no hold is
+        # trusted more than ten times the typical one
+        typical = float(np.median(err[err > 0])) if np.any(err > 0) else 0.0
+        floor = max(1e-6 * float(np.max(np.abs(self.rhs))), 0.1 * typical) or 1e-300
         self.w = 1.0 / np.maximum(err, floor)
 
     def determines(self, names: Sequence[str], levels: list[float], spare: int = 1) -> bool:
@@ -779,7 +782,10 @@ class _HoldSystem:
         misfit = self.rhs - a_mat @ coef
         chi2 = float(np.sum((misfit * self.w) ** 2)) / max(self.rhs.size - len(names), 1)
         weighted = a_mat * self.w[:, None]
-        cov = np.linalg.pinv(weighted.T @ weighted) * max(chi2, 1.0)
+        norms = np.linalg.norm(weighted, axis=0)  # columns of volts and of coulombs: scaled
+        norms[norms == 0] = 1.0
+        scaled = weighted / norms
+        cov = np.linalg.pinv(scaled.T @ scaled) / np.outer(norms, norms) * max(chi2, 1.0)
         return [float(c) for c in coef], cov, misfit
 
 
