@@ -469,11 +469,14 @@ def calibrate_leakage(
     each weighted by its precision. The physics is kept: a conductance (at 0 V
     and at the top, :math:`G_0 + G_1`) or a discharge is never negative.
     With ``select`` the terms are chosen by evidence: of every subset the holds
-    can determine, the one that predicts each hold best from the others
-    (leave-one-hold-out), the smallest within 10 % of the best. The result
-    carries the coefficients' covariance (:meth:`Leakage.current_stderr`); a
-    current less sure than 3 % at the top voltage gets a warning naming the
-    hold length that would do, and beyond 10 % the calibration refuses. The
+    can determine, the one with the lowest Bayesian information criterion (the
+    misfit in the holds' standard errors, plus ln(holds) per term); while holds
+    still settle, every voltage term is kept and no discharge is chosen. The
+    result carries the coefficients' covariance (:meth:`Leakage.stderr`,
+    :meth:`Leakage.current_stderr`); a current less sure than 3 % at a hold's
+    voltage gets a warning naming the hold length that would do, and beyond
+    10 % the calibration refuses, as it does for settling holds all reached
+    from one side. The
     discharge term needs holds at one voltage with different charges (reached
     from below and from above); the others need as many voltage levels as
     terms. A hold's slope is uncertain by about ``noise * sqrt(12 / samples) /
@@ -757,20 +760,6 @@ class _HoldSystem:
         a_mat = np.column_stack([self.columns[n] for n in names])
         chi2 = float(np.sum(((self.rhs - a_mat @ coef) * self.w) ** 2))
         return chi2 + len(names) * math.log(self.rhs.size)
-
-    def loo(self, names: Sequence[str]) -> float:
-        """Leave-one-hold-out: the mean squared error in standard errors (inf: unphysical)."""
-        n = self.rhs.size
-        if self._solve(names, np.arange(n)) is None:
-            return math.inf
-        errs = []
-        for i in range(n):
-            coef = self._solve(names, np.delete(np.arange(n), i))
-            if coef is None:
-                return math.inf
-            pred = sum(c * self.columns[m][i] for c, m in zip(coef, names, strict=True))
-            errs.append(((pred - self.rhs[i]) * self.w[i]) ** 2)
-        return float(np.mean(errs))
 
     def fit(self, names: Sequence[str]) -> tuple[list[float], FloatArray, FloatArray]:
         """Coefficients, their covariance (scaled by the misfit when it exceeds the
