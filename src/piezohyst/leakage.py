@@ -808,10 +808,9 @@ def _both_ways(
     reach = max(abs(h.voltage) for h in found)
     sides = set()
     for h, (a, _) in zip(found, ranges, strict=True):
-        before = x[max(a - 1, 0) :: -1]  # the voltage before the hold's run began
-        moved = before[np.abs(before - h.voltage) > 0.02 * reach]
-        if abs(h.voltage) >= 0.1 * reach and moved.size:
-            sides.add(bool(moved[0] < h.voltage))
+        # ranges start where find_holds' constant run starts: the sample before is the approach
+        if abs(h.voltage) >= 0.1 * reach and a > 0:
+            sides.add(bool(x[a - 1] < h.voltage))
     if len(sides) == 2:
         return
     length = float(np.mean([h.duration for h in found]))

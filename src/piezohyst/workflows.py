@@ -48,6 +48,7 @@ from .identification import Blocks, Summary, default_thresholds
 from .io import (
     MD_MARKER,
     DataSpec,
+    Recording,
     RecordingStream,
     atomic_write_text,
     write_blocks,
@@ -158,6 +159,14 @@ def excite_file(
     return exc
 
 
+def _continuing(rec: Recording, initial_state: InitialState) -> InitialState:
+    """Where a window of a record starts: after the record's first sample and "from rest",
+    the state the input before it left (its History), as every windowed fit starts."""
+    if rec.window.start and isinstance(initial_state, str) and initial_state == "rest":
+        return History(rec.x[: rec.window.start])
+    return initial_state
+
+
 def select_file(
     data: PathLike,
     out: PathLike | None = None,
@@ -201,9 +210,7 @@ def select_file(
     assert rec.y is not None
     w = rec.window
     warn_clipped([rec.y[w]], rec.names[1], rec.units[1], data)
-    start: InitialState = initial_state
-    if w.start and initial_state == "rest":  # the window continues the record's input
-        start = History(rec.x[: w.start])
+    start = _continuing(rec, initial_state)
     sel = select_model(
         rec.x[w], rec.y[w], rec.t[w], candidates=candidates, operators=operators,
         initial_state=start, input_unit=rec.units[0] or "V",
@@ -307,9 +314,7 @@ def fit_file(
         assert rec.y is not None
         y_win = rec.y[w]
         warn_clipped([y_win], rec.names[1], rec.units[1], data)
-        start_dyn: InitialState = initial_state
-        if w.start and initial_state == "rest":  # the window continues the record's input
-            start_dyn = History(rec.x[: w.start])
+        start_dyn = _continuing(rec, initial_state)
         fitted_dyn: HysteresisModel = estimator.fit(
             rec.x[w], rec.y[w], t=rec.t[w], initial_state=start_dyn
         )
@@ -422,9 +427,7 @@ def compare_file(
             raise DataFileError(msg)
         tw = trec.window
         test = (trec.x[tw], trec.y[tw], trec.t[tw])
-    start: InitialState = initial_state
-    if w.start and initial_state == "rest":  # the window continues the record's input
-        start = History(rec.x[: w.start])
+    start = _continuing(rec, initial_state)
     result = compare_models(
         estimators, rec.x[w], rec.y[w], rec.t[w], train=train, test=test,
         initial_state=start,
