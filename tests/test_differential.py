@@ -677,7 +677,9 @@ def test_the_compensator_inverts_core_and_creep_together(
     model = creep_models[name]
     if lag:
         model = clone(model).set_params(input_dynamics="first-order")
-        model.fit(record.voltage, record.charge, t=record.t)
+        with warnings.catch_warnings():  # the bench has no lag: the one found is uncertain
+            warnings.simplefilter("ignore", ph.errors.IdentifiabilityWarning)
+            model.fit(record.voltage, record.charge, t=record.t)
         assert model.input_dynamics_.tau > 0
     gains = [g for label, (g, _) in model.coefficients().items() if label.startswith("creep")]
     assert len(gains) == 2  # the bench creeps: the fit finds it on the long record

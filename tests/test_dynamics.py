@@ -261,10 +261,11 @@ def mode_models() -> tuple[ph.ClassicalPI, ph.ClassicalPI]:
     kw = {"output_unit": "m", "input_dynamics": "first-order"}
     full = ph.ClassicalPI(8, output_dynamics="second-order", **kw)  # type: ignore[arg-type]
     lag = ph.ClassicalPI(8, **kw)  # type: ignore[arg-type]
-    return (
-        full.fit(rec.voltage, rec.displacement, t=rec.t),
-        lag.fit(rec.voltage, rec.displacement, t=rec.t),
-    )
+    full.fit(rec.voltage, rec.displacement, t=rec.t)
+    # without the mode, the misfit hides the lag, and the fit says so
+    with pytest.warns(ph.errors.IdentifiabilityWarning, match="cannot separate a lag"):
+        lag.fit(rec.voltage, rec.displacement, t=rec.t)
+    return full, lag
 
 
 def test_a_mode_is_found_with_the_lag(

@@ -20,7 +20,7 @@ from ._formats import estimated_rows
 from .compensator import CompensatorSettings, Domain
 from .errors import PiezohystError
 from .io import DataSpec
-from .models import model_names
+from .models import HysteresisModel, model_names
 from .selfsensing import LoopSettings
 
 
@@ -513,7 +513,33 @@ def _fit_auto(
             ),
         )
     click.echo(sel.table())
-    from .cli import describe
 
     click.echo(describe(sel.model))
     ctx.info(f"saved {out}")
+
+
+def describe(model: HysteresisModel) -> str:
+    """One line on a fitted model's quality and terms, from its public attributes."""
+    core = model.operator_.summary
+    text = (
+        f"{type(model).__name__}: {core}, "
+        f"NRMSE {100 * model.nrmse_:.4g} %, RMSE {model.rmse_:.4g} {model.output_unit}"
+    )
+    growth = model.growth_coefficients()
+    if growth:
+        text += ", growth terms: " + ", ".join(f"{k} {v:.4g} {u}" for k, (v, u) in growth.items())
+    elif "growth_terms" in model.get_params():
+        text += ", growth terms: none"
+    shape = [term for term in model.terms_ if not term.removed]
+    if shape:
+        text += "; shape terms: " + ", ".join(f"{t.kind} ({t.width} coefficients)" for t in shape)
+    dyn = model.input_dynamics_
+    mode = model.output_dynamics_
+    if mode.active:
+        text += f"; output mode {mode.f0:.4g} Hz, damping {mode.zeta:.3g}"
+    if dyn.active:
+        se_d, se_tau = (1.96e3 * v for v in dyn.stderr())  # 95 %, ms (NaN: unknown)
+        lag = f"{1e3 * dyn.tau:.4g}" + (f" ± {se_tau:.2g}" if se_tau == se_tau else "")
+        delay = f"{1e3 * dyn.delay:.4g}" + (f" ± {se_d:.2g}" if se_d == se_d else "")
+        text += f"; input dynamics {dyn.kind}: lag {lag} ms, delay {delay} ms"
+    return text

@@ -265,17 +265,32 @@ def compensator_step(desired, tables, config, state):  # type: ignore[no-untyped
     return _step_at(0, desired, tables[np.newaxis], config[np.newaxis], state[np.newaxis])
 
 
-# Input dynamics of a compensator (analytic path): command -> [fractional delay as a lag A]
-# -> [lag B] -> piezo voltage. ``dyn`` = [gain A, gain B] (0: absent; gain = 1 - exp(-dt/tau)),
-# ``dstate`` = [after A, after B]. An integer delay is handled by the caller (preview).
-DYN_GAIN_A = 0
+# Input dynamics of a compensator (analytic path): command -> [fraction f of a sample's delay,
+# interpolated as the model does: w = (1 - f) x + f x_prev] -> [lag B] -> piezo voltage.
+# ``dyn`` = [f, gain B] (0: absent; gain = 1 - exp(-dt/tau)), ``dstate`` = [after the
+# fraction, after B]. An integer delay is handled by the caller (preview). The fraction is
+# inverted as ``x = (1 + f) w_target - f w_prev``: exact on ramps, and stable (its poles lie
+# at radius f < 1), where the interpolation's own inverse rings at -f / (1 - f).
+DYN_FRACTION = 0
 DYN_GAIN_B = 1
 
 
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def delay_fraction(x, last, f):  # type: ignore[no-untyped-def]
+    """Command ``x`` after a delay of a fraction ``f`` of a sample (``last``: the one before)."""
+    return (1.0 - f) * x + f * last if f > 0.0 else x
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def undo_fraction(w_target, w_prev, f):  # type: ignore[no-untyped-def]
+    """The command whose delayed value heads for ``w_target`` (see ``DYN_FRACTION``)."""
+    return (1.0 + f) * w_target - f * w_prev if f > 0.0 else w_target
+
+
 @njit(cache=True, fastmath=FASTMATH)
-def _advance_dynamics(x, dyn, dstate):  # type: ignore[no-untyped-def]
-    """The piezo voltage after command ``x`` is held for one sample (state updated)."""
-    w = dstate[0] + dyn[DYN_GAIN_A] * (x - dstate[0]) if dyn[DYN_GAIN_A] > 0.0 else x
+def _advance_dynamics(x, last, dyn, dstate):  # type: ignore[no-untyped-def]
+    """The piezo voltage after command ``x`` (after ``last``) is held for one sample."""
+    w = delay_fraction(x, last, dyn[DYN_FRACTION])
     u = dstate[1] + dyn[DYN_GAIN_B] * (w - dstate[1]) if dyn[DYN_GAIN_B] > 0.0 else w
     dstate[0] = w
     dstate[1] = u
@@ -299,7 +314,7 @@ def dynamic_step(desired, tables, config, state, dyn, dstate):  # type: ignore[n
     hi = config[CFG_V_MAX]
     if not math.isfinite(desired):  # hold the last command: the piezo keeps settling on it
         state[end + ST_NONFINITE] += 1.0
-        u = _advance_dynamics(last, dyn, dstate)
+        u = _advance_dynamics(last, last, dyn, dstate)
         for i in range(n):
             state[i] = min(max(state[i], u - tables[TAB_R, i]), u + tables[TAB_R, i])
         inverse_states(tables, config, state)
@@ -316,14 +331,13 @@ def dynamic_step(desired, tables, config, state, dyn, dstate):  # type: ignore[n
     if dyn[DYN_GAIN_B] > 0.0:
         w_target = dstate[1] + (target - dstate[1]) / dyn[DYN_GAIN_B]
     x = w_target
-    if dyn[DYN_GAIN_A] > 0.0:
-        x = dstate[0] + (w_target - dstate[0]) / dyn[DYN_GAIN_A]
+    x = undo_fraction(w_target, dstate[0], dyn[DYN_FRACTION])
     if not math.isfinite(x):
         state[end + ST_NONFINITE] += 1.0
         inverse_states(tables, config, state)
         return last
     x, _ = _limit(x, last, config, state)
-    u = _advance_dynamics(x, dyn, dstate)
+    u = _advance_dynamics(x, last, dyn, dstate)
     for i in range(n):
         state[i] = min(max(state[i], u - tables[TAB_R, i]), u + tables[TAB_R, i])
     if abs(u - target) > 1e-12 * (hi - lo):

@@ -586,9 +586,10 @@ def region_distance(region, cfg, v, y):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
-def _advance(x, dyn, dstate):  # type: ignore[no-untyped-def]
-    """The piezo voltage after command x is held one sample (as ``_kernels._advance_dynamics``)."""
-    w = dstate[0] + dyn[0] * (x - dstate[0]) if dyn[0] > 0.0 else x
+def _advance(x, last, dyn, dstate):  # type: ignore[no-untyped-def]
+    """The piezo voltage after command x (after ``last``) is held one sample (as
+    ``_kernels._advance_dynamics``)."""
+    w = K.delay_fraction(x, last, dyn[0])
     u = dstate[1] + dyn[1] * (w - dstate[1]) if dyn[1] > 0.0 else w
     dstate[0] = w
     dstate[1] = u
@@ -645,7 +646,8 @@ def core_step(desired, p, cfg, st, region, dyn, dstate, trial):  # type: ignore[
     if not math.isfinite(desired):  # hold the last command (the piezo keeps settling on it)
         st[end + DS_NONFINITE] += 1.0
         if dynamic or cfg[CC_SLOW_AT] > 0.0:
-            _move_all(p, cfg, st, trial, _advance(last, dyn, dstate) if dynamic else st[0], 0.0)
+            held = _advance(last, last, dyn, dstate) if dynamic else st[0]
+            _move_all(p, cfg, st, trial, held, 0.0)
             _commit(st, trial)
         _lags_advance(dyn, dstate, st[0])
         return last
@@ -666,14 +668,12 @@ def core_step(desired, p, cfg, st, region, dyn, dstate, trial):  # type: ignore[
         w = u
         if dyn[1] > 0.0:
             w = dstate[1] + (u - dstate[1]) / dyn[1]
-        x = w
-        if dyn[0] > 0.0:
-            x = dstate[0] + (w - dstate[0]) / dyn[0]
+        x = K.undo_fraction(w, dstate[0], dyn[0])
         if not math.isfinite(x):
             x = last
         x = min(max(x, lo), hi)
         x = min(max(x, last - step), last + step)
-        u = _advance(x, dyn, dstate)
+        u = _advance(x, last, dyn, dstate)
         if trial[0] != u:
             _move_all(p, cfg, st, trial, u, 0.0)
     if cfg[CC_TOL] < math.inf:  # leaving the region (moves back towards it always pass)
@@ -685,7 +685,7 @@ def core_step(desired, p, cfg, st, region, dyn, dstate, trial):  # type: ignore[
                 if dynamic:  # hold the last command instead
                     dstate[0] = saved0
                     dstate[1] = saved1
-                    _move_all(p, cfg, st, trial, _advance(last, dyn, dstate), 0.0)
+                    _move_all(p, cfg, st, trial, _advance(last, last, dyn, dstate), 0.0)
                     _commit(st, trial)
                     _lags_advance(dyn, dstate, st[0])
                     return last

@@ -27,6 +27,7 @@ from ._cli_support import (
     _model_options,
     _run,
     _suffix,
+    describe,
     initial_state_option,
     input_dynamics_option,
     operators_option,
@@ -38,7 +39,7 @@ from .compensator import CompensatorSettings
 from .excitation import KINDS
 from .io import DataSpec
 from .leakage import LEAKAGE_TERMS
-from .models import HysteresisModel, model_names
+from .models import model_names
 from .selfsensing import LoopSettings
 from .simulation.signals import SIGNALS
 
@@ -132,33 +133,6 @@ def simulate(
     ):  # the leaked charge would clip the ADC
         ctx.info(f"reference capacitor {rec.preset.c_ref * 1e6:.3g} uF, so the charge never clips")
     click.echo(str(out))
-
-
-def describe(model: HysteresisModel) -> str:
-    """One line on a fitted model's quality and terms, from its public attributes."""
-    core = model.operator_.summary
-    text = (
-        f"{type(model).__name__}: {core}, "
-        f"NRMSE {100 * model.nrmse_:.4g} %, RMSE {model.rmse_:.4g} {model.output_unit}"
-    )
-    growth = model.growth_coefficients()
-    if growth:
-        text += ", growth terms: " + ", ".join(f"{k} {v:.4g} {u}" for k, (v, u) in growth.items())
-    elif "growth_terms" in model.get_params():
-        text += ", growth terms: none"
-    shape = [term for term in model.terms_ if not term.removed]
-    if shape:
-        text += "; shape terms: " + ", ".join(f"{t.kind} ({t.width} coefficients)" for t in shape)
-    dyn = model.input_dynamics_
-    mode = model.output_dynamics_
-    if mode.active:
-        text += f"; output mode {mode.f0:.4g} Hz, damping {mode.zeta:.3g}"
-    if dyn.active:
-        text += (
-            f"; input dynamics {dyn.kind}: lag {1e3 * dyn.tau:.4g} ms, "
-            f"delay {1e3 * dyn.delay:.4g} ms"
-        )
-    return text
 
 
 @main.command()
@@ -276,6 +250,9 @@ def excite(
     "periodic: the record is one period of a drive that was already running (it "
     "starts mid-cycle); the operators start in the periodic steady state.",
 )
+@click.option("--scan-frequency", type=click.FloatRange(min=0.0, min_open=True), default=None,
+              help="With input dynamics: their gain and phase at this frequency (Hz), with the "
+              "loop width their uncertainty allows.")  # fmt: skip
 @_data_options
 @OUT_FILE_JSON
 @FORCE
@@ -291,6 +268,7 @@ def fit(
     input_dynamics: str,
     output_dynamics: str,
     initial_state: str,
+    scan_frequency: float | None,
     data_spec: DataSpec,
     out: Path,
     force: bool,
@@ -344,6 +322,8 @@ def fit(
             ),
         )
     click.echo(describe(model))
+    if scan_frequency is not None and model.input_dynamics_.active:
+        click.echo(f"input dynamics {model.input_dynamics_.response_interval(scan_frequency)}")
     if ctx.verbose:
         for label, text in model.operator_.describe(model.input_unit, model.output_unit)[1:]:
             click.echo(f"{label} {text}")

@@ -235,8 +235,8 @@ class Compensator:
             d = dyn.delay / dt
             self.delay_samples = math.floor(d + 1e-9)
             frac = d - self.delay_samples
-            if frac > 1e-9:  # the fraction of a sample inverted as a lag of that length
-                self.dyn[K.DYN_GAIN_A] = 1.0 - math.exp(-1.0 / frac)
+            if frac > 1e-9:  # interpolated as the model does; inverted stably (see _kernels)
+                self.dyn[K.DYN_FRACTION] = frac
             if dyn.tau > 0:
                 self.dyn[K.DYN_GAIN_B] = 1.0 - math.exp(-dt / dyn.tau)
         self._max_step = max_step
@@ -414,8 +414,9 @@ class Compensator:
             for a, b, m in zip(knots[:-1], knots[1:], counts, strict=True)
         ]
         if self.dynamic:  # hold each extreme until the lagging piezo voltage has reached it
-            gains = self.dyn[self.dyn > 0]
-            settle = int(np.ceil(np.sum(-np.log(1e-9) / -np.log1p(-gains)))) if gains.size else 0
+            gain = self.dyn[K.DYN_GAIN_B]  # the lag's (creep terms of other cores follow)
+            settle = int(np.ceil(-np.log(1e-9) / -np.log1p(-gain))) if gain > 0 else 0
+            settle += 1 if self.dyn[K.DYN_FRACTION] > 0 else 0  # the fraction: one sample
             settle += self.delay_samples
             for j in (0, 1):
                 pieces[j] = np.concatenate([pieces[j], np.full(settle, knots[j + 1])])

@@ -30,9 +30,59 @@ else:  # numba loads when a model first runs (see _lazy)
     _kernels = LazyModule("piezohyst._kernels", globals(), "_kernels")
     _signals = LazyModule("piezohyst._signalkernels", globals(), "_signals")
 
-__all__ = ["KINDS", "InputDynamics", "OutputDynamics"]
+__all__ = ["KINDS", "InputDynamics", "OutputDynamics", "ResponseInterval"]
 
 KINDS = ("none", "delay", "first-order", "delay+first-order")
+
+
+@dataclass(frozen=True)
+class ResponseInterval:
+    """The input dynamics' response at one frequency, and how sure it is.
+
+    Attributes
+    ----------
+    frequency : float
+        Hz.
+    gain, phase : float
+        The identified values' gain and phase lag (degrees).
+    gain_range, phase_range : tuple of float
+        Their range over the confidence region (NaN when unknown).
+    width : float
+        The largest loop width (fraction of the span) that a compensator
+        built on the identified values leaves for a truth inside the region.
+    """
+
+    frequency: float
+    gain: float
+    phase: float
+    gain_range: tuple[float, float]
+    phase_range: tuple[float, float]
+    width: float
+
+    def __str__(self) -> str:
+        lo, hi = self.phase_range
+        return (
+            f"at {self.frequency:g} Hz: gain {self.gain:.3f}, phase lag {self.phase:.1f}° "
+            f"(95 % {lo:.1f}-{hi:.1f}°), loop width from this uncertainty <= "
+            f"{100 * self.width:.2g} %"
+        )
+
+
+def _response(delay: Any, tau: Any, dt: float, frequency: Any) -> Any:
+    """The discrete filter's response: linear-interpolated delay, then a held-input lag."""
+    f = np.asarray(frequency, dtype=np.float64)
+    d = np.asarray(delay, dtype=np.float64)
+    tt = np.asarray(tau, dtype=np.float64)
+    if dt <= 0:
+        return np.ones(np.broadcast(f, d, tt).shape, dtype=complex)
+    z1 = np.exp(-2j * np.pi * f * dt)  # z^-1
+    samples = d / dt
+    whole = np.floor(samples + 1e-9)
+    frac = np.maximum(samples - whole, 0.0)
+    h = z1**whole * ((1.0 - frac) + frac * z1)
+    with np.errstate(divide="ignore", over="ignore"):
+        e = np.where(tt > 0, np.exp(-dt / np.where(tt > 0, tt, 1.0)), 0.0)
+    return h * (1.0 - e) / (1.0 - e * z1)
 
 
 @dataclass(frozen=True)
@@ -51,6 +101,21 @@ class InputDynamics:
         assumed uniformly sampled.
     sample_interval : float
         The training record's median sample interval (s).
+    covariance : tuple of float
+        The 2x2 covariance (s², row-major over ``(delay, tau)``) of the
+        identified values, from the profile of the model's own fit (see
+        :func:`~piezohyst.dynamics_fit.profile_dynamics`); ``()`` when unknown
+        (stated by hand, or a file from before 0.9). A parameter the kind
+        lacks has zero variance.
+
+    Notes
+    -----
+    A DAC that ramps between commands (first-order hold) instead of holding
+    each one (staircase) is covered exactly: a lag of ramps equals the same
+    lag of held commands after a delay of ``1 - c / (1 - e)`` samples
+    (``e = exp(-dt/tau)``, ``c = 1 - (tau/dt)(1 - e)``; half a sample for
+    ``tau >> dt``), which is how the linearly interpolated delay acts. So
+    ``"delay+first-order"`` (or ``"auto"``) fits either DAC.
 
     Examples
     --------
@@ -64,6 +129,7 @@ class InputDynamics:
     tau: float = 0.0
     delay: float = 0.0
     sample_interval: float = 0.0
+    covariance: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -76,6 +142,10 @@ class InputDynamics:
                 raise ParameterError(msg)
         if self.delay > 0 and self.sample_interval <= 0:
             msg = "a delay needs the record's sample interval (s) to count its samples"
+            raise ParameterError(msg)
+        cov = self.covariance
+        if cov and (len(cov) != 4 or not all(math.isfinite(c) for c in cov)):
+            msg = f"input dynamics covariance must be 4 finite numbers (2x2, s^2). Got {cov!r}."
             raise ParameterError(msg)
 
     @property
@@ -146,8 +216,91 @@ class InputDynamics:
         )
         return out, st
 
+    def response(self, frequency: Any) -> Any:
+        """The complex response from command to piezo voltage at ``frequency`` (Hz).
+
+        The discrete filter the model applies (delay interpolated linearly,
+        the lag exact for a held command) at the training sample interval;
+        1 for no dynamics.
+
+        Parameters
+        ----------
+        frequency : float or array_like
+
+        Returns
+        -------
+        complex ndarray
+        """
+        return _response(self.delay, self.tau, self.sample_interval, frequency)
+
+    def stderr(self) -> tuple[float, float]:
+        """Standard errors (s) of ``(delay, tau)``; NaN when unknown.
+
+        Returns
+        -------
+        tuple of float
+        """
+        if not self.covariance:
+            return math.nan, math.nan
+        c = self.covariance
+        return math.sqrt(max(c[0], 0.0)), math.sqrt(max(c[3], 0.0))
+
+    def response_interval(self, frequency: float, level: float = 0.95) -> ResponseInterval:
+        """What the identified dynamics do at ``frequency`` (Hz), with their uncertainty.
+
+        Over the joint confidence region of ``(delay, tau)`` at ``level``
+        (an ellipse from :attr:`covariance`, kept to non-negative values):
+        the gain and phase lag's range, and the loop width a compensator
+        built on the identified values would leave if the truth were
+        anywhere in it, ``max |sin(phase - phase identified)|`` (a line seen
+        through a phase error ``p`` becomes an ellipse of width ``sin p`` of
+        its span). NaN ranges when the covariance is unknown.
+
+        Parameters
+        ----------
+        frequency : float
+            The scan frequency (Hz).
+        level : float, default 0.95
+
+        Returns
+        -------
+        ResponseInterval
+        """
+        f = float(frequency)
+        if not (math.isfinite(f) and f > 0):
+            msg = f"frequency must be a finite number > 0 (Hz). Got {frequency!r}."
+            raise ParameterError(msg)
+        nominal = complex(self.response(f))
+        gain0, phase0 = abs(nominal), -math.degrees(np.angle(nominal))
+        if not self.covariance or not self.active:
+            nan = (math.nan, math.nan)
+            known = self.active is False
+            return ResponseInterval(f, gain0, phase0, (gain0, gain0) if known else nan,
+                                    (phase0, phase0) if known else nan,
+                                    0.0 if known else math.nan)  # fmt: skip
+        from scipy.stats import chi2
+
+        cov = np.array(self.covariance).reshape(2, 2)
+        vals, vecs = np.linalg.eigh(0.5 * (cov + cov.T))
+        radius = math.sqrt(float(chi2.ppf(level, 2)))
+        angles = np.linspace(0.0, 2 * np.pi, 73)
+        unit = np.stack([np.cos(angles), np.sin(angles)])
+        scale = np.sqrt(np.maximum(vals, 0.0))[:, None]
+        ring = vecs @ (scale * unit) * radius
+        pts = np.concatenate([ring, 0.5 * ring, np.zeros((2, 1))], axis=1)
+        delay = np.maximum(self.delay + pts[0], 0.0)
+        tau = np.maximum(self.tau + pts[1], 0.0)
+        h = _response(delay, tau, self.sample_interval, np.full(delay.size, f))
+        gain = np.abs(h)
+        phase = -np.degrees(np.unwrap(np.angle(h)))
+        miss = np.abs(np.sin(np.radians(phase - phase0)))
+        return ResponseInterval(
+            f, gain0, phase0, (float(gain.min()), float(gain.max())),
+            (float(phase.min()), float(phase.max())), float(miss.max()),
+        )  # fmt: skip
+
     def to_dict(self) -> dict[str, Any]:
-        """``kind``, ``tau`` (s), ``delay`` (s), ``sample_interval`` (s).
+        """``kind``, ``tau`` (s), ``delay`` (s), ``sample_interval`` (s), ``covariance`` (s²).
 
         Returns
         -------
@@ -158,6 +311,7 @@ class InputDynamics:
             "tau": self.tau,
             "delay": self.delay,
             "sample_interval": self.sample_interval,
+            "covariance": list(self.covariance),
         }
 
     @classmethod
@@ -177,6 +331,7 @@ class InputDynamics:
             float(data.get("tau", 0.0)),
             float(data.get("delay", 0.0)),
             float(data.get("sample_interval", 0.0)),
+            tuple(float(c) for c in data.get("covariance", ())),
         )
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 __all__ = [
     "DataFileError",
     "ExtrapolationWarning",
+    "IdentifiabilityWarning",
     "InsufficientDataError",
     "ModelFileError",
     "NonFiniteError",
@@ -86,3 +87,7 @@ class OutputError(PiezohystError, OSError):
 
 class ExtrapolationWarning(UserWarning):
     """A model ran outside the (input, output) region its training data covered."""
+
+
+class IdentifiabilityWarning(UserWarning):
+    """The record cannot determine a fitted quantity (e.g. a lag apart from hysteresis)."""

@@ -170,7 +170,7 @@ def export_c(
     init = [] if controller is None else _feedback_init(controller, p)
     files = ["ieee.c", "play.c"]
     if comp.dynamic:
-        lines += _constants(p, GAIN_A=comp.dyn[K.DYN_GAIN_A], GAIN_B=comp.dyn[K.DYN_GAIN_B])
+        lines += _constants(p, FRACTION=comp.dyn[K.DYN_FRACTION], GAIN_B=comp.dyn[K.DYN_GAIN_B])
         init = [f"s->w = {_literal(comp.dstate[0], p)};", f"s->u = {_literal(comp.dstate[1], p)};"]
         files.append("play_dynamic.c")
     if controller is not None:
@@ -344,7 +344,7 @@ def _packed_c(comp: Compensator, prefix: str, precision: Precision) -> CCode:
     lines += _constants(p, LAST0=state.command)
     init: list[str] = []
     if comp.dynamic:
-        lines += _constants(p, GAIN_A=comp.dyn[0], GAIN_B=comp.dyn[1])
+        lines += _constants(p, FRACTION=comp.dyn[0], GAIN_B=comp.dyn[1])
         init += [f"s->w = {_literal(comp.dstate[0], p)};", f"s->u = {_literal(comp.dstate[1], p)};"]
     if n_lags:  # gains and 1 - exp(-dt / tau) at the loop's sample rate
         lines += [

@@ -20,8 +20,14 @@ from numpy.typing import ArrayLike
 from ._validation import FloatArray, as_signal, as_time, same_length
 from .cores.base import Core, CoreFit, FitJob
 from .dynamics import InputDynamics, OutputDynamics
-from .dynamics_fit import search_dynamics
-from .errors import ExtrapolationWarning, InsufficientDataError, ParameterError, TimeAxisError
+from .dynamics_fit import profile_dynamics, search_dynamics
+from .errors import (
+    ExtrapolationWarning,
+    IdentifiabilityWarning,
+    InsufficientDataError,
+    ParameterError,
+    TimeAxisError,
+)
 from .estimator import _dynamics_kind, _output_kind
 from .identification import Blocks, Summary, array_blocks, block_dt
 from .state import InitialState, ModelState
@@ -58,7 +64,12 @@ def fit_arrays(
             raise TimeAxisError(msg)
         seed_mode = OutputDynamics() if out_kind != "none" else None
         dyn, mode = search_dynamics(model, xs, ys, ts, kind, seed_mode)
-        us, _ = dyn.apply(xs, block_dt(ts, 0, ts.size, None))
+        dt = block_dt(ts, 0, ts.size, None)
+        if mode is not None:
+            model._fitting_output = mode
+        dyn = profile_dynamics(dyn, kind, _own_fit(model, xs, ys, ts, dt, initial_state), ys, ts)
+        _check_identifiable(dyn)
+        us, _ = dyn.apply(xs, dt)
         if mode is not None:  # the solve filters its columns through it; set_fitted keeps it
             model._fitting_output = mode
     blocks = array_blocks(us, ys, ts)
@@ -76,6 +87,48 @@ def fit_arrays(
         model.max_slew_rate_, model.max_step_ = logged.max_slew_rate, logged.max_step
     model.input_dynamics_ = dyn
     return model
+
+
+def _check_identifiable(dyn: InputDynamics) -> None:
+    """Warn when the record leaves the delay and lag undetermined: the 95 % region reaches
+    half the total lag, and a sample, in some direction (at one drive frequency a lag, a
+    delay and hysteresis look alike)."""
+    if not dyn.active or not dyn.covariance:
+        return
+    total = dyn.delay + dyn.tau
+    widest = float(np.linalg.eigvalsh(np.array(dyn.covariance).reshape(2, 2)).max())
+    half = math.sqrt(max(widest, 0.0) * 5.991)  # chi-square, 2 degrees of freedom, 95 %
+    if half >= max(0.5 * total, dyn.sample_interval):  # a sample: no lag found is no warning
+        warnings.warn(
+            f"the record (or the model's misfit) cannot separate a lag from hysteresis (delay "
+            f"+ lag {1e3 * total:.3g} ± {1e3 * half:.2g} ms, 95 %): record loops at two "
+            "frequencies or more, the fastest near the scan rate (piezohyst excite --kind "
+            "multifreq)",
+            IdentifiabilityWarning,
+            stacklevel=4,
+        )
+
+
+def _own_fit(
+    model: Any, xs: FloatArray, ys: FloatArray, ts: FloatArray, dt: Any, initial_state: InitialState
+) -> Any:
+    """``fit_sse(dynamics)`` for :func:`profile_dynamics`: the model's own fit on the
+    command filtered by ``dynamics`` (warnings kept for the final fit)."""
+    cheap = model._core_class().profile_settings
+
+    def fit_sse(dyn: InputDynamics, final: bool) -> tuple[float, FloatArray | None]:
+        us, _ = dyn.apply(xs, dt)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            try:
+                blocks = array_blocks(us, ys, ts)
+                identify_model(model, blocks, initial_state, True, None if final else cheap)
+            except (InsufficientDataError, ParameterError):
+                return math.inf, None
+            resid = model.predict(us, t=ts) - ys
+        return float(resid @ resid), resid
+
+    return fit_sse
 
 
 def fit_stream(
@@ -101,8 +154,14 @@ def fit_stream(
     return model
 
 
-def identify_model(model: Any, blocks: Blocks, initial_state: InitialState, timed: bool) -> Summary:
-    params = model.check_params()
+def identify_model(
+    model: Any,
+    blocks: Blocks,
+    initial_state: InitialState,
+    timed: bool,
+    overrides: dict[str, Any] | None = None,
+) -> Summary:
+    params = {**model.check_params(), **(overrides or {})}
     sm = Summary.of(blocks)
     if not sm.x_max - sm.x_min > 1e-12 * max(abs(sm.x_min), abs(sm.x_max), 1e-300):
         msg = (

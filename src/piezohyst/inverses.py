@@ -334,7 +334,7 @@ class PlayInverse(Inverse):
         step = comp._max_step
         for k, v_target in enumerate(cycle):
             v = min(max(v_target, last - step), last + step)
-            u = K._advance_dynamics(v, comp.dyn, comp.dstate) if comp.dynamic else v
+            u = K._advance_dynamics(v, last, comp.dyn, comp.dstate) if comp.dynamic else v
             z[:] = np.clip(z, u - r, u + r)
             lag += alpha * (u - lag)
             out[k] = last = v
@@ -565,8 +565,10 @@ class PackedInverse(Inverse):
         ns = int(comp.config[D.CC_NS])
         slow = comp._state[ns : comp._ns]  # a view: the slow core moves in place
         a = float(comp.config[D.CC_SLOW_A])
+        last = comp.last_command
         for k, v in enumerate(cycle):
-            u[k] = K._advance_dynamics(v, comp.dyn, comp.dstate) if comp.dynamic else v
+            u[k] = K._advance_dynamics(v, last, comp.dyn, comp.dstate) if comp.dynamic else v
+            last = v
             comp.dstate[D.DYN_LAGS :] += alphas * (u[k] - comp.dstate[D.DYN_LAGS :])
             if slow.size:
                 c = float(slow[0])

@@ -374,6 +374,9 @@ class Core:
     c_source: ClassVar[str | None] = None
     #: the growth terms come from a play-operator proxy first (cores whose loops need not close)
     growth_from_proxy: ClassVar[bool] = False
+    #: Settings that make the repeated fits of the input-dynamics profile cheaper (see
+    #: :func:`~piezohyst.dynamics_fit.profile_dynamics`); the final fit uses the model's own
+    profile_settings: ClassVar[dict[str, Any]] = {}
     #: fields of its file form a reader checks by name first: "number" or "numbers" (a list)
     file_fields: ClassVar[dict[str, str]] = {}
     initial_state: FloatArray

@@ -86,6 +86,7 @@ class DuhemHysteresis(PackedCore):
     packed: FloatArray = field(init=False, repr=False)
     kind: ClassVar[str] = "duhem"
     growth_from_proxy: ClassVar[bool] = True  # its loops need not close: PI settles growth
+    profile_settings: ClassVar[dict[str, Any]] = {"refine": False}  # the slopes' polish
     inner: ClassVar[str] = "output"
 
     def __post_init__(self) -> None:

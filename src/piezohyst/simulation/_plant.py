@@ -128,28 +128,39 @@ def chain_kernel(t, v, q_c, elec, state, q_r_out, v_amp_out):  # type: ignore[no
 
 
 @njit(cache=True)
-def amplifier_lag(t, v, tau, state, out):  # type: ignore[no-untyped-def]
-    """The voltage that reaches the piezo: a first-order lag ``tau`` (s) of the command.
+def amplifier_lag(t, v, tau, ramp, state, out):  # type: ignore[no-untyped-def]
+    """The voltage that reaches the piezo: a first-order lag ``tau`` (s) of the DAC's output.
 
-    The command ``v[k]`` is held over the sample ending at ``t[k]``, so the
-    piezo voltage there is ``u[k] = u[k-1] + (1 - exp(-dt/tau)) (v[k] - u[k-1])``
-    (exact for the held command). ``state`` = [u, t, started]; the first sample
-    starts settled at its command.
+    The command ``v[k]`` takes effect over the sample ending at ``t[k]``. A
+    staircase DAC (``ramp`` False) holds it there, so
+    ``u[k] = u[k-1] + (1 - e) (v[k] - u[k-1])`` with ``e = exp(-dt/tau)``; an
+    interpolating DAC (``ramp`` True) ramps from ``v[k-1]`` to ``v[k]`` over it,
+    so ``u[k] = e u[k-1] + (1 - e) v[k-1] + (1 - (tau/dt)(1 - e)) (v[k] - v[k-1])``.
+    Both exact. ``state`` = [u, t, started, v]; the first sample starts settled
+    at its command.
     """
     u = state[0]
     t_prev = state[1]
     started = state[2] > 0.0
+    v_prev = state[3]
     for k in range(v.shape[0]):
         if not started or tau <= 0.0:
             u = v[k]
             started = True
         else:
-            u += (1.0 - math.exp(-(t[k] - t_prev) / tau)) * (v[k] - u)
+            dt = t[k] - t_prev
+            e = math.exp(-dt / tau)
+            if ramp and dt > 0.0:
+                u = e * u + (1.0 - e) * v_prev + (1.0 - tau / dt * (1.0 - e)) * (v[k] - v_prev)
+            else:
+                u += (1.0 - e) * (v[k] - u)
         t_prev = t[k]
+        v_prev = v[k]
         out[k] = u
     state[0] = u
     state[1] = t_prev
     state[2] = 1.0
+    state[3] = v_prev
 
 
 # ------------------------------------------------------------ other capacitors (the zoo)

@@ -40,6 +40,10 @@ else:  # numba loads when the bench first runs (see piezohyst._lazy)
 __all__ = ["PLANTS", "PRESETS", "Bench", "BenchPreset", "BenchRecord", "Reading", "simulate"]
 
 
+#: How a DAC reconstructs the commands between samples (see ``BenchPreset.dac``)
+DACS = ("staircase", "interpolating")
+
+
 @dataclass(frozen=True)
 class BenchPreset:
     """Every parameter of the simulated bench (SI units).
@@ -70,6 +74,9 @@ class BenchPreset:
     laser_noise: float  # m rms
     sources: dict[str, str] = field(default_factory=dict)
     amp_tau: float = 0.0  # s, the amplifier's lag driving the capacitive load (0: none)
+    #: how the DAC turns commands into a voltage: "staircase" holds each over its sample,
+    #: "interpolating" ramps from one to the next (first-order hold)
+    dac: str = "staircase"
     mech_f0: float = 0.0  # Hz, the bender's first mode between charge and displacement (0: none)
     mech_zeta: float = 0.0  # its damping ratio
     #: the capacitor's law: "preisach" (the bench's relays), "bouc-wen", "duhem",
@@ -383,6 +390,9 @@ class _Plant:
         if p.law not in LAWS or (p.law == "preisach" and p.relax_taus):
             msg = f"unknown capacitor law {p.law!r} (relaxation goes with the others)"
             raise ParameterError(msg)
+        if p.dac not in DACS:
+            msg = f"unknown DAC {p.dac!r}; one of {', '.join(DACS)}"
+            raise ParameterError(msg)
         self.law_state = np.zeros(2 + max(TWO_STATE_POPULATIONS, 1))
         self.relax_state = np.zeros(2 + len(p.relax_taus))
         if p.law == "two-state":
@@ -395,7 +405,7 @@ class _Plant:
             [p.c0, p.g_leak, p.leak_voltage_coeff, max(p.v_max, 1e-9), p.i_bias, p.c_ref, p.r_ref]
         )
         self.state = np.zeros(_plant.STATE_SIZE)
-        self.lag_state = np.zeros(3)
+        self.lag_state = np.zeros(4)
         self.lsb = 2.0 * p.adc_range / 2**p.adc_bits
         self.mode = OutputDynamics(p.mech_f0, p.mech_zeta, 1.0 / p.rate)
         self.mode_state: FloatArray | None = None
@@ -420,7 +430,8 @@ class _Plant:
         q_c, q_r, v_amp = out[0], out[1], out[2]
         if self.p.amp_tau > 0.0:  # the piezo sees the amplifier's lagging output
             lagged = np.empty_like(v)
-            _plant.amplifier_lag(t, v, self.p.amp_tau, self.lag_state, lagged)
+            ramp = self.p.dac == "interpolating"
+            _plant.amplifier_lag(t, v, self.p.amp_tau, ramp, self.lag_state, lagged)
             v = lagged
         p = self.p
         if p.law == "preisach" and not p.relax_taus:
@@ -643,6 +654,7 @@ def simulate(
     duration: float = 20.0,
     seed: int = 0,
     auto_range: bool = True,
+    dac: str | None = None,
 ) -> BenchRecord:
     """Run the simulated bench on a voltage command.
 
@@ -669,6 +681,10 @@ def simulate(
         ADC's full scale (long records accumulate leaked charge), the next
         E6 value that keeps it under 80 % is used (``record.preset.c_ref``).
         False keeps the preset's, and the charge clips at full scale.
+    dac : {"staircase", "interpolating"}, optional
+        How the DAC turns the commands into a voltage, if not the preset's
+        (``"staircase"``): held over each sample, or ramped from one to the
+        next. It matters behind an amplifier lag (``amp_tau``).
 
     Returns
     -------
@@ -692,6 +708,8 @@ def simulate(
             raise ParameterError(msg)
         preset = PLANTS[plant]
     p = _preset(preset)
+    if dac is not None:
+        p = replace(p, dac=dac)
     if voltage is None:
         amp = p.v_max if amplitude is None else amplitude
         ts, v = make_signal(

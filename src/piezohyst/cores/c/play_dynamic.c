@@ -1,8 +1,9 @@
 /* The play compensator step with the input lags inverted: _kernels.dynamic_step in C. */
 
+/* x after a fraction of a sample's delay, interpolated from the last command */
 static real_t advance(PREFIX_t *s, real_t x)
 {
-    s->w = GAIN_A > 0 ? s->w + GAIN_A * (x - s->w) : x;
+    s->w = FRACTION > 0 ? (1 - FRACTION) * x + FRACTION * s->last : x;
     s->u = GAIN_B > 0 ? s->u + GAIN_B * (s->w - s->u) : s->w;
     return s->u;
 }
@@ -32,7 +33,7 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
         target += WI[i] * s->zeta[i];
     }
     w_target = GAIN_B > 0 ? s->u + (target - s->u) / GAIN_B : target;
-    x = GAIN_A > 0 ? s->w + (w_target - s->w) / GAIN_A : w_target;
+    x = FRACTION > 0 ? (1 + FRACTION) * w_target - FRACTION * s->w : w_target;
     if (non_finite(x)) {
         s->nonfinite++;
         inverse_states(s);
