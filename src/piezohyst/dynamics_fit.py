@@ -268,9 +268,11 @@ def profile_dynamics(
     along ``delay + tau = const`` (a DAC that ramps between commands is such a
     delay, half a sample). Here the model's own core is refitted at a 3x3
     design around the proxy's result — total lag ``T = delay + tau`` ± 5 %
-    (at least 0.2 sample) and delay 0, 0.5, 1 sample — or at three points for a
-    1-D kind; a quadratic through the sums of squares gives the minimum
-    (kept inside the design, one step beyond at most) and its curvature
+    (at least 0.2 sample) and three delays half a sample apart, none below 0
+    or beyond ``T`` — or at three points for a 1-D kind (a pure delay found by
+    ``"auto"`` is one: at ``tau = 0`` the sums of squares have a kink); a
+    quadratic through the sums of squares gives the minimum (kept inside the
+    design, one step beyond at most) and its curvature
     ``A``. With ``sigma² = SSE_min / N_eff``, ``N_eff = N (1 - rho) / (1 + rho)``
     (``rho`` the residuals' lag-1 autocorrelation: model error is not white
     noise), the covariance is ``sigma² A⁻¹`` — the likelihood-ratio region of
