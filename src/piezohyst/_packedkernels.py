@@ -61,6 +61,7 @@ DU_Q_LO = 5
 DU_Q_STEP = 6
 DU_DV_MAX = 7  # largest Euler sub-step (V)
 DU_F_MIN = 8  # the smallest slope (bounds the inverse's bracket)
+PR_S_OUT = 5  # Preisach: the slope beyond the grid (0: the smallest slope)
 DU_UP = 9
 # Bouc-Wen: p = [kind, c0, alpha, beta, gamma, n, offset, dv_max, g_max, s_min]
 BW_C0 = 1
@@ -227,20 +228,22 @@ def _node(p, i, j):  # type: ignore[no-untyped-def]
 
 @njit(cache=True, fastmath=FASTMATH)
 def everett(p, a, b):  # type: ignore[no-untyped-def]
-    """(E(a, b), dE/da, dE/db): bilinear inside the grid, slope s_min beyond it."""
+    """(E(a, b), dE/da, dE/db): bilinear inside the grid, continued beyond it with the slope
+    ``p[PR_S_OUT]`` (the smallest reversible slope; 0: the smallest slope)."""
     n = p[DU_NV]
     lo = p[DU_V_LO]
     h = p[DU_V_STEP]
     hi = lo + h * (n - 1.0)
+    s_out = p[PR_S_OUT] if p[PR_S_OUT] > 0.0 else p[DU_F_MIN]
     extra = 0.0
     da_out = 0.0
     db_out = 0.0
     if b > hi:
-        extra += p[DU_F_MIN] * (b - hi)
-        db_out = p[DU_F_MIN]
+        extra += s_out * (b - hi)
+        db_out = s_out
     if a < lo:
-        extra += p[DU_F_MIN] * (lo - a)
-        da_out = -p[DU_F_MIN]
+        extra += s_out * (lo - a)
+        da_out = -s_out
     i, fa, inside_a = _cell(a, lo, h, n)
     j, fb, inside_b = _cell(b, lo, h, n)
     e00 = _node(p, i, j)

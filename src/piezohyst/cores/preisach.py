@@ -2,7 +2,8 @@ r"""The Preisach core: hysteresis by its Everett function on a grid of reversal 
 
 The output rising from a minimum :math:`a` is :math:`q(a) + E(a, v)`, with
 wiping-out and return-point memory (a stack of reversal points). Linear in
-its density, so identified by one bounded least squares (density >= 0) joint
+its density, so identified by one bounded least squares (density >= 0, or a
+signed PI part plus one >= 0 where the loops flatten after reversals) joint
 with the growth terms and a relaxation term; inverted by the packed cores'
 bracketed Newton solve. Kernels in :mod:`piezohyst._packedkernels`
 (``everett``, ``rev_move``, ``rev_design``); the compensator step in C is
@@ -59,6 +60,28 @@ DEMAG_POINTS = 20
 DEMAG_RATIO = 0.7
 
 
+def branch_sums(density: ArrayLike) -> FloatArray:
+    """The density's sums from the diagonal along each column (a rising branch's slope, times
+    the node spacing, after a reversal in that row) and each row (a falling branch's).
+
+    Parameters
+    ----------
+    density : array_like, shape (m, m)
+        Upper triangle used.
+
+    Returns
+    -------
+    ndarray
+        ``m (m + 1)`` sums: ``sum(mu[j:l+1, l])`` and ``sum(mu[k, k:L+1])`` for ``j <= l``,
+        ``k <= L``.
+    """
+    mu = np.triu(np.asarray(density, dtype=np.float64))
+    upper = np.triu(np.ones(mu.shape, dtype=bool))
+    rising = np.cumsum(mu[::-1], axis=0)[::-1][upper]  # rows j..l of column l
+    falling = np.cumsum(mu, axis=1)[upper]  # columns k..L of row k
+    return np.concatenate([rising, falling])
+
+
 @dataclass(frozen=True, eq=False)
 class PreisachHysteresis(PackedCore):
     r"""The Preisach model, by its Everett function on a grid of reversal points.
@@ -71,17 +94,21 @@ class PreisachHysteresis(PackedCore):
     point (return-point memory), and minor loops have the shape their place
     in the major loop gives them — not PI's congruent copies. :math:`E` is
     bilinear between the nodes, built from a Preisach density
-    :math:`\mu \ge 0` on the grid's cells,
-    :math:`E(a_i, b_j) = \sum_{i \le k \le l < j} \mu_{kl}`, so every branch
-    is increasing; beyond the grid it continues with the smallest slope.
+    :math:`\mu` on the grid's cells,
+    :math:`E(a_i, b_j) = \sum_{i \le k \le l < j} \mu_{kl}`. A branch's
+    slope is a sum of the density from the diagonal along a row (falling) or a
+    column (rising), so every branch is increasing when all those sums are
+    positive (:func:`branch_sums`); the density itself may be negative off the
+    diagonal, as a PI model's weights may (a loop that flattens after each
+    reversal). Beyond the grid it continues with the smallest slope.
 
     Parameters
     ----------
     nodes : array_like, shape (n,)
         Equally spaced voltages (V), at least 2.
     density : array_like, shape (n - 1, n - 1)
-        :math:`\mu_{kl}` (output units) for cells ``k <= l``; ``>= 0``, the
-        diagonal ``> 0``; the lower half is ignored.
+        :math:`\mu_{kl}` (output units) for cells ``k <= l``, its
+        :func:`branch_sums` ``> 0``; the lower half is ignored.
     initial_state : array_like
         ``[v, q, direction, k, R[0..STACK-1]]`` (see ``_packedkernels``).
     region : Region, optional
@@ -108,8 +135,11 @@ class PreisachHysteresis(PackedCore):
         if mu.shape != (n - 1, n - 1):
             msg = f"'density' must have shape {(n - 1, n - 1)} (cells). Got {mu.shape}."
             raise ShapeError(msg)
-        if not np.all(np.isfinite(mu)) or np.any(mu < 0) or np.any(np.diag(mu) <= 0):
-            msg = "the Preisach density must be finite and >= 0, its diagonal > 0"
+        if not np.all(np.isfinite(mu)) or not branch_sums(mu).min() > 0:
+            msg = (
+                "the Preisach density must be finite, and its sums from the diagonal along every "
+                "row and column > 0 (every branch increasing)"
+            )
             raise ParameterError(msg)
         mu.flags.writeable = False
         z0 = _frozen(self.initial_state, "initial_state")
@@ -120,8 +150,9 @@ class PreisachHysteresis(PackedCore):
         object.__setattr__(self, "density", mu)
         object.__setattr__(self, "initial_state", z0)
         h = (nodes[-1] - nodes[0]) / (n - 1)
-        s_min = float(np.diag(mu).min()) / h
-        head = [D.KIND_PREISACH, n, n, nodes[0], h, 0.0, 0.0, 0.0, s_min]
+        s_min = float(branch_sums(mu).min()) / h  # a true lower bound: the solve's bracket
+        s_out = float(np.diag(mu).min()) / h  # beyond the grid: the smallest reversible slope
+        head = [D.KIND_PREISACH, n, n, nodes[0], h, s_out, 0.0, 0.0, s_min]
         packed = np.concatenate([head, D.everett_nodes(mu).ravel()])
         packed.flags.writeable = False
         object.__setattr__(self, "packed", packed)
@@ -225,7 +256,7 @@ def _solve(job: Solving) -> tuple[PreisachHysteresis, list[FloatArray]]:
         ["virgin", "branch"] if choice == "auto" else [choice])  # fmt: skip
     rows = _picked_rows(x.size, FIT_ROWS)
     g_mat = _growth_matrix(terms, x, t, rows)
-    fits = [_solve_density(job, rows, g_mat, k == "virgin") for k in kinds]
+    fits = [_signed_or_not(job, rows, g_mat, k == "virgin") for k in kinds]
     if len(fits) == 2 and not (  # the initial loading curve must earn its extra cells
         fits[0][2] < VIRGIN_GAIN * fits[1][2] and fits[1][2] > 1e-6 * float(np.ptp(y))
     ):
@@ -234,8 +265,22 @@ def _solve(job: Solving) -> tuple[PreisachHysteresis, list[FloatArray]]:
     return core, coefs
 
 
-def _solve_density(
+def _signed_or_not(
     job: Solving, rows: np.ndarray, g_mat: FloatArray, virgin: bool
+) -> tuple[PreisachHysteresis, list[FloatArray], float]:
+    """The density >= 0, or signed (``signed=True``); with ``"auto"`` the signed one where
+    its RMSE is below :data:`SIGNED_GAIN` of the other's (it holds the other, so it always
+    fits as well: it must earn its extra freedom, as the initial loading curve must)."""
+    choice = job.params.get("signed", "auto")
+    if choice != "auto":
+        return _solve_density(job, rows, g_mat, virgin, bool(choice))
+    plain = _solve_density(job, rows, g_mat, virgin, False)
+    signed = _solve_density(job, rows, g_mat, virgin, True)
+    return signed if signed[2] < SIGNED_GAIN * plain[2] else plain
+
+
+def _solve_density(
+    job: Solving, rows: np.ndarray, g_mat: FloatArray, virgin: bool, signed: bool
 ) -> tuple[PreisachHysteresis, list[FloatArray], float]:
     """One bounded least squares: (core, term coefficients, RMSE on the picked rows);
     ``virgin``: from rest the first move follows the initial loading curve."""
@@ -258,19 +303,25 @@ def _solve_density(
     probe = PreisachHysteresis(nodes, np.eye(m), np.zeros(D.RV_SIZE), virgin=virgin)
     start = _start_inner(probe, x, initial_state)  # the reversal stack before the record
     z0 = probe.rest_state(float(x[0])) if start is None else start
-    # Everett nodes from the parameters (cells, tied where the data only see a width)
-    to_nodes = np.ascontiguousarray(D.everett_map(n)[:, upper] @ _tie_matrix(tie, n_par))
+    # Everett nodes from the parameters: a density >= 0 on the cells (tied where the data only
+    # see a width), plus a PI part, one signed density per width l - k whose partial sums over
+    # the widths (its own parameters) stay >= the smallest slope, so every branch increases
+    cells = _tie_matrix(tie, n_par)
+    m_pi = m if signed else 0
+    to_cells = np.hstack([cells, (_width_matrix(m, upper) @ _from_partial_sums(m))[:, :m_pi]])
+    n_all = n_par + m_pi
+    to_nodes = np.ascontiguousarray(D.everett_map(n)[:, upper] @ to_cells)
     extra = np.hstack([g_mat, np.ones((rows.size, 1))])
-    width = n_par + ng + 1
+    width = n_all + ng + 1
     gram = np.zeros((width, width))
     rhs = np.zeros(width)
     yy = 0.0
-    st, acc, tmp = z0.copy(), np.zeros(n_par), np.zeros(n * n)
+    st, acc, tmp = z0.copy(), np.zeros(n_all), np.zeros(n * n)
     for s0 in range(0, rows.size, DESIGN_ROWS):  # the walk in pieces: memory stays flat
         picked = rows[s0 : s0 + DESIGN_ROWS]
         stop = int(picked[-1]) + 1
         begin = 0 if s0 == 0 else int(rows[s0 - 1]) + 1
-        design = np.empty((picked.size, n_par))
+        design = np.empty((picked.size, n_all))
         D.rev_design(
             packed, x[begin:stop], st, picked - begin, acc, begin == 0, to_nodes, tmp, design
         )
@@ -282,20 +333,27 @@ def _solve_density(
     inside = np.diag(gram)[: grid.inside]  # the smoothing's scale: the range's own cells
     weight = float(params["smoothing"]) * max(float(np.mean(inside)), 1e-300)
     gram[:n_par, :n_par] += weight * _curvature_tied(m, upper, tie, n_par, grid.inside)
-    col = n_par
+    # the PI part's density over the widths is smoothed alike (second differences)
+    if m_pi:
+        d2 = np.diff(np.eye(m), 2, axis=0) @ _from_partial_sums(m)
+        pi = slice(n_par, n_all)
+        pi_weight = float(params["smoothing"]) * max(float(np.mean(np.diag(gram)[pi])), 1e-300)
+        gram[pi, pi] += pi_weight * (d2.T @ d2)
+    col = n_all
     for term in terms:  # a relaxing density is smoothed like the core's
         if isinstance(term, Relaxation):
             blk = slice(col, col + term.width)
             w = float(params["smoothing"]) * max(float(np.mean(np.diag(gram)[blk])), 1e-300)
             gram[blk, blk] += w * _curvature_upper(term.nodes - 1)
         col += term.width
-    lower = np.concatenate([np.where(grid.diagonal, s_min * h, 0.0), lower_g, [-np.inf]])
+    floor = np.where(grid.diagonal, s_min * h, 0.0) if not m_pi else np.zeros(n_par)
+    lower = np.concatenate([floor, np.full(m_pi, s_min * h), lower_g, [-np.inf]])
     sol = _bounded_lstsq(gram, rhs, lower)
-    sol[:n_par] = np.maximum(sol[:n_par], lower[:n_par])
+    sol[:n_all] = np.maximum(sol[:n_all], lower[:n_all])
     sse = max(yy - 2.0 * float(sol @ rhs) + float(sol @ data_gram @ sol), 0.0)
     mu = np.zeros(m * m)
-    mu[upper] = sol[:n_par][tie]
-    g = sol[n_par : n_par + ng]
+    mu[upper] = to_cells @ sol[:n_all]
+    g = sol[n_all : n_all + ng]
     z0 = np.array(z0)
     z0[1] = float(sol[-1])
     coefs = _split(g, terms)
@@ -319,6 +377,14 @@ def _rest_point(x: FloatArray, initial_state: Any) -> float | None:
 #: record both fit the first rise, and the plainer rest state predicts other records better
 #: when the curve adds little (the simulated Preisach capacitor: 0.1291 against 0.1293 %)
 VIRGIN_GAIN = 0.9
+
+#: A Preisach fit keeps a signed density (``signed="auto"``) only where its RMSE is below this
+#: fraction of the non-negative one's: where a density >= 0 cannot draw the loops (a branch
+#: that flattens after each reversal: the non-negative fit's RMSE 3-5x the signed one's on
+#: Bouc-Wen capacitors), not where it fits a little worse (0.86-0.98 on Preisach, Duhem and
+#: two-state capacitors, where the extra freedom compensated the bench's own loops worse:
+#: 0.96 % width against 0.68 %). Set after seeing those ratios.
+SIGNED_GAIN = 0.5
 
 
 #: Rows of the Preisach design formed at a time (memory: this many x its parameters)
@@ -376,6 +442,19 @@ def _preisach_grid(lo: float, hi: float, n_in: int, rest: float | None) -> _Prei
     return _PreisachGrid(
         np.asarray(nodes, dtype=np.float64), h, tie, n_inside + tied, n_inside, diagonal
     )
+
+
+def _width_matrix(m: int, upper: np.ndarray) -> FloatArray:
+    """(upper cells, m): 1 where a cell's width ``l - k`` is the column's."""
+    ks, ls = np.divmod(upper, m)
+    out = np.zeros((upper.size, m))
+    out[np.arange(upper.size), ls - ks] = 1.0
+    return out
+
+
+def _from_partial_sums(m: int) -> FloatArray:
+    """(m, m): the densities per width from their partial sums (first differences)."""
+    return np.eye(m) - np.eye(m, k=-1)
 
 
 def _tie_matrix(tie: np.ndarray, n_par: int) -> FloatArray:

@@ -22,7 +22,7 @@ static void cell(real_t u, int *i, real_t *frac, int *inside)
 /* the Everett function at nodes, antisymmetric below the diagonal */
 static real_t node(int i, int j) { return i <= j ? EV[i * NN + j] : -EV[j * NN + i]; }
 
-/* E(a, b), bilinear, continued with the smallest slope beyond the grid; *da, *db its
+/* E(a, b), bilinear, continued with the slope S_OUT beyond the grid; *da, *db its
  * derivatives */
 static real_t everett(real_t a, real_t b, real_t *da, real_t *db)
 {
@@ -30,12 +30,12 @@ static real_t everett(real_t a, real_t b, real_t *da, real_t *db)
     real_t da_out = 0, db_out = 0;
     int i, j, in_a, in_b;
     if (b > hi) {
-        extra += S_MIN * (b - hi);
-        db_out = S_MIN;
+        extra += S_OUT * (b - hi);
+        db_out = S_OUT;
     }
     if (a < V_LO) {
-        extra += S_MIN * (V_LO - a);
-        da_out = -S_MIN;
+        extra += S_OUT * (V_LO - a);
+        da_out = -S_OUT;
     }
     cell(a, &i, &fa, &in_a);
     cell(b, &j, &fb, &in_b);

@@ -11,4 +11,4 @@
 #define EV SLOW_EV
 #define V_LO SLOW_V_LO
 #define H SLOW_H
-#define S_MIN SLOW_S_MIN
+#define S_OUT SLOW_S_OUT

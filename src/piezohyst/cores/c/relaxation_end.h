@@ -9,4 +9,4 @@
 #undef EV
 #undef V_LO
 #undef H
-#undef S_MIN
+#undef S_OUT
