@@ -13,6 +13,7 @@ bracketed Newton solve. Kernels in :mod:`piezohyst._packedkernels`
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -269,21 +270,29 @@ def _signed_or_not(
     job: Solving, rows: np.ndarray, g_mat: FloatArray, virgin: bool
 ) -> tuple[PreisachHysteresis, list[FloatArray], float]:
     """The density >= 0, or signed (``signed=True``); with ``"auto"`` the signed one where
-    its RMSE is below :data:`SIGNED_GAIN` of the other's (it holds the other, so it always
-    fits as well: it must earn its extra freedom, as the initial loading curve must)."""
+    its RMSE is below :data:`SIGNED_GAIN` of the density >= 0 (it holds that one, so it fits
+    at least as well: it must earn its extra freedom, as the initial loading curve must).
+    The signed solve, with many cells on their bound, is the costly one: it runs only where
+    the PI part alone (a small solve) already fits better than the density >= 0, the sign
+    that the loops flatten after reversals."""
     choice = job.params.get("signed", "auto")
+    solve = _density_solver(job, rows, g_mat, virgin, choice is not False)
     if choice != "auto":
-        return _solve_density(job, rows, g_mat, virgin, bool(choice))
-    plain = _solve_density(job, rows, g_mat, virgin, False)
-    signed = _solve_density(job, rows, g_mat, virgin, True)
+        return solve("signed" if choice else "plain")
+    plain = solve("plain")
+    if solve("pi")[2] >= plain[2]:
+        return plain
+    signed = solve("signed")
     return signed if signed[2] < SIGNED_GAIN * plain[2] else plain
 
 
-def _solve_density(
-    job: Solving, rows: np.ndarray, g_mat: FloatArray, virgin: bool, signed: bool
-) -> tuple[PreisachHysteresis, list[FloatArray], float]:
-    """One bounded least squares: (core, term coefficients, RMSE on the picked rows);
-    ``virgin``: from rest the first move follows the initial loading curve."""
+def _density_solver(
+    job: Solving, rows: np.ndarray, g_mat: FloatArray, virgin: bool, with_pi: bool
+) -> Callable[[str], tuple[PreisachHysteresis, list[FloatArray], float]]:
+    """One pass over the record, then bounded least squares on demand: ``"plain"`` (a density
+    >= 0), ``"pi"`` (the PI part alone, ``with_pi``) or ``"signed"`` (both): (core, term
+    coefficients, RMSE on the picked rows); ``virgin``: from rest the first move follows
+    the initial loading curve."""
     x, y, t, terms, params, initial_state, _ = job
     n_in = int(params["nodes"])
     lo, hi = float(x.min()), float(x.max())
@@ -307,7 +316,7 @@ def _solve_density(
     # see a width), plus a PI part, one signed density per width l - k whose partial sums over
     # the widths (its own parameters) stay >= the smallest slope, so every branch increases
     cells = _tie_matrix(tie, n_par)
-    m_pi = m if signed else 0
+    m_pi = m if with_pi else 0  # the PI part's columns, when asked for
     to_cells = np.hstack([cells, (_width_matrix(m, upper) @ _from_partial_sums(m))[:, :m_pi]])
     n_all = n_par + m_pi
     to_nodes = np.ascontiguousarray(D.everett_map(n)[:, upper] @ to_cells)
@@ -346,20 +355,31 @@ def _solve_density(
             w = float(params["smoothing"]) * max(float(np.mean(np.diag(gram)[blk])), 1e-300)
             gram[blk, blk] += w * _curvature_upper(term.nodes - 1)
         col += term.width
-    floor = np.where(grid.diagonal, s_min * h, 0.0) if not m_pi else np.zeros(n_par)
-    lower = np.concatenate([floor, np.full(m_pi, s_min * h), lower_g, [-np.inf]])
-    sol = _bounded_lstsq(gram, rhs, lower)
-    sol[:n_all] = np.maximum(sol[:n_all], lower[:n_all])
-    sse = max(yy - 2.0 * float(sol @ rhs) + float(sol @ data_gram @ sol), 0.0)
-    mu = np.zeros(m * m)
-    mu[upper] = to_cells @ sol[:n_all]
-    g = sol[n_all : n_all + ng]
-    z0 = np.array(z0)
-    z0[1] = float(sol[-1])
-    coefs = _split(g, terms)
-    qh = y - _terms_output(terms, coefs, x, t) if ng else y
-    core = PreisachHysteresis(nodes, mu.reshape(m, m), z0, Region.of(x, qh), virgin=virgin)
-    return core, coefs, math.sqrt(sse / rows.size)
+
+    def solve(variant: str) -> tuple[PreisachHysteresis, list[FloatArray], float]:
+        density = np.r_[0:n_par] if variant != "pi" else np.zeros(0, dtype=np.int64)
+        pi = np.r_[n_par:n_all] if variant != "plain" else np.zeros(0, dtype=np.int64)
+        keep = np.concatenate([density, pi, np.r_[n_all:width]])
+        floor = np.where(grid.diagonal, s_min * h, 0.0) if variant == "plain" else 0.0
+        lower = np.concatenate([np.broadcast_to(floor, density.shape),
+                                np.full(pi.size, s_min * h), lower_g, [-np.inf]])  # fmt: skip
+        q = _bounded_lstsq(gram[np.ix_(keep, keep)], rhs[keep], lower)
+        bounded = density.size + pi.size  # the density's parameters: exactly on their bounds
+        q[:bounded] = np.maximum(q[:bounded], lower[:bounded])
+        sol = np.zeros(width)
+        sol[keep] = q
+        sse = max(yy - 2.0 * float(sol @ rhs) + float(sol @ data_gram @ sol), 0.0)
+        mu = np.zeros(m * m)
+        mu[upper] = to_cells @ sol[:n_all]
+        g = sol[n_all : n_all + ng]
+        z = np.array(z0)
+        z[1] = float(sol[-1])
+        coefs = _split(g, terms)
+        qh = y - _terms_output(terms, coefs, x, t) if ng else y
+        core = PreisachHysteresis(nodes, mu.reshape(m, m), z, Region.of(x, qh), virgin=virgin)
+        return core, coefs, math.sqrt(sse / rows.size)
+
+    return solve
 
 
 def _rest_point(x: FloatArray, initial_state: Any) -> float | None:
