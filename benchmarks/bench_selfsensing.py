@@ -10,7 +10,12 @@ Run: ``python benchmarks/bench_selfsensing.py [--seeds 3] [--operators 20]``.
    model's identified leakage, and by the loop with the calibrated leakage.
    Width and NRMSE are desired -> laser displacement; the first and last 20 s
    are RMS errors over the whole trajectory's span.
-2. Cost: ``step`` called from Python, against the same algorithm written as a
+2. Plants of other physics (issue 26), for each seed: the model ``select_model``
+   chooses (among the cores the loop runs) on what ``piezohyst excite`` writes,
+   leakage from 10 s holds up and down, 60 s of ``decaying`` loops over the range
+   the identification record reached (its leakage-corrected charge at the lowest
+   and highest voltage, from every history in it, less 3 %).
+3. Cost: ``step`` called from Python, against the same algorithm written as a
    plain Python function (measured in the same run); ``process`` throughput,
    against a NumPy loop over time.
 
@@ -127,6 +132,46 @@ def targets(seed: int, operators: int, ki: float = 0.5) -> dict[str, dict[str, f
     }
 
 
+def plants(seed: int) -> None:
+    """The loop on each plant of ``ph.simulation.PLANTS`` (issue 26's protocol)."""
+    import warnings
+
+    from piezohyst.excitation import excitation
+    from piezohyst.metrics import hysteresis_width
+    from piezohyst.simulation import PLANTS, Bench, make_signal, run_loop
+
+    cores = ("classical-pi", "active-pi", "bouc-wen", "preisach", "duhem")
+    played = excitation(v_min=0.0, v_max=140.0, sample_rate=1000.0)
+    holds = excitation("holds", v_min=0.0, v_max=140.0, sample_rate=1000.0, hold=10.0)
+    _, shape = make_signal("decaying", amplitude=1.0, frequency=0.5, duration=60.0)
+    for name, p in PLANTS.items():
+        ident = ph.simulate(played.voltage, played.t, preset=p, seed=3 * seed + 1)
+        cal = ph.simulate(holds.voltage, holds.t, preset=p, seed=3 * seed + 2)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            leak = ph.calibrate_leakage(cal.t, cal.voltage, cal.charge)
+            model = ph.select_model(ident.voltage, ident.charge, t=ident.t, candidates=cores).model
+        q = ident.charge - leak.charge(ident.voltage, ident.t, ident.charge)
+        v = ident.voltage
+        top = float(q[v >= v.max() - 1e-9].min() - q[0])
+        bottom = float(q[v <= v.min() + 1e-9].max() - q[0])
+        lo, hi = bottom + 0.03 * (top - bottom), top - 0.03 * (top - bottom)
+        desired = p.gain * (lo + (hi - lo) * shape)
+        ctl = ph.SelfSensingController(model, v_min=0.0, v_max=140.0, sample_rate=1000.0,
+                                       leakage=leak, domain="displacement", gain=p.gain,
+                                       slew_rate=30e3)  # fmt: skip
+        run = run_loop(ctl, desired, Bench(p, seed=3 * seed + 3, voltage=ctl.last_command))
+        err = run.displacement - desired
+        thirds = [100 * math.sqrt(float(np.mean(e * e))) / float(np.ptp(desired))
+                  for e in np.array_split(err, 3)]  # fmt: skip
+        print(
+            f"  {name:19s} {type(model).__name__:13s} width "
+            f"{100 * hysteresis_width(desired, run.displacement):5.3f} %, RMS error by thirds "
+            + ", ".join(f"{x:5.3f}" for x in thirds)
+            + f" %, saturated {ctl.saturated_count}"
+        )
+
+
 def cost(operators: int) -> None:
     rec = ph.simulate(signal="hold", duration=10.0, seed=0)
     model = ph.ActivePI(operators).fit(rec.voltage, rec.charge, t=rec.t)
@@ -196,6 +241,10 @@ def main() -> None:
         m = targets(0, args.operators, ki)["closed loop, hold-calibrated leakage"]
         width, err = m["width_S_pct"], m["tracking_nrmse_S_pct"]
         print(f"  ki {ki:3.1f}  width {width:6.3f} %  NRMSE {err:6.3f} %")
+    print("plants of other physics, 60 s of decaying loops (target 0.3 % width, no drift):")
+    for seed in range(args.seeds):
+        print(f" seed {seed}")
+        plants(seed)
     cost(args.operators)
 
 
