@@ -84,8 +84,9 @@ def test_auto_selection_finds_the_leakage_terms(levels: tuple) -> None:
     noisy = y + 0.002 * np.ptp(y) * rng.standard_normal(y.size)
     fit = ph.GeneralizedPI(6, asymmetry=3).fit(v, noisy, t=t)
     assert "integral" in fit.growth_terms_ and "abs_integral" in fit.growth_terms_
-    assert set(fit.selection_) == {"none", "integral", "time", "abs_integral", "integral+time",
-                                   "integral+abs_integral", "time+abs_integral",
+    # a conductance rising with the voltage only beside the conductance itself
+    assert set(fit.selection_) == {"none", "integral", "time", "integral+time",
+                                   "integral+abs_integral",
                                    "integral+time+abs_integral"}  # fmt: skip
     # without any growth in the data, 'auto' keeps the growth terms out (or nearly zero)
     clean = known_model(v, (), creep=()).predict(v, t=t)
