@@ -272,12 +272,11 @@ class InputDynamics:
             raise ParameterError(msg)
         nominal = complex(self.response(f))
         gain0, phase0 = abs(nominal), -math.degrees(np.angle(nominal))
-        if not self.covariance or not self.active:
+        if not self.active:  # no dynamics: nothing uncertain
+            return ResponseInterval(f, gain0, phase0, (gain0, gain0), (phase0, phase0), 0.0)
+        if not self.covariance:  # stated by hand, or an older file: unknown
             nan = (math.nan, math.nan)
-            known = self.active is False
-            return ResponseInterval(f, gain0, phase0, (gain0, gain0) if known else nan,
-                                    (phase0, phase0) if known else nan,
-                                    0.0 if known else math.nan)  # fmt: skip
+            return ResponseInterval(f, gain0, phase0, nan, nan, math.nan)
         from scipy.stats import chi2
 
         cov = np.array(self.covariance).reshape(2, 2)

@@ -314,16 +314,12 @@ def profile_dynamics(
     total0 = found.delay + found.tau
 
     def make(delay: float, tau: float, cov: tuple[float, ...] = ()) -> InputDynamics:
+        """A fixed kind keeps its name; "auto" takes the name of the parts present."""
         delay, tau = max(delay, 0.0), max(tau, 0.0)
-        if kind in ("delay", "first-order") or (kind == "auto" and not both):
-            name = kind if kind != "auto" else "delay"
-        elif kind == "auto":
-            name = ("delay+first-order" if delay >= 0.05 * dt and tau >= 0.05 * dt
-                    else "delay" if delay >= 0.05 * dt else "first-order")  # fmt: skip
-            delay, tau = (delay, tau) if name == "delay+first-order" else (
-                (delay + tau, 0.0) if name == "delay" else (0.0, delay + tau))  # fmt: skip
-        else:
-            name = kind
+        name = kind
+        if kind == "auto":
+            name = ("delay+first-order" if delay > 0.0 and tau > 0.0
+                    else "delay" if delay > 0.0 else "first-order")  # fmt: skip
         return InputDynamics(name, tau, delay, dt, cov)
 
     cache: dict[tuple[float, float], float] = {}

@@ -65,13 +65,11 @@ def fit_arrays(
         seed_mode = OutputDynamics() if out_kind != "none" else None
         dyn, mode = search_dynamics(model, xs, ys, ts, kind, seed_mode)
         dt = block_dt(ts, 0, ts.size, None)
-        if mode is not None:
+        if mode is not None:  # the solve filters its columns through it; set_fitted keeps it
             model._fitting_output = mode
         dyn = profile_dynamics(dyn, kind, _own_fit(model, xs, ys, ts, dt, initial_state), ys, ts)
         _check_identifiable(dyn)
         us, _ = dyn.apply(xs, dt)
-        if mode is not None:  # the solve filters its columns through it; set_fitted keeps it
-            model._fitting_output = mode
     blocks = array_blocks(us, ys, ts)
     try:
         summary = identify_model(model, blocks, initial_state, ts is not None)
@@ -96,8 +94,10 @@ def _check_identifiable(dyn: InputDynamics) -> None:
     if not dyn.active or not dyn.covariance:
         return
     total = dyn.delay + dyn.tau
+    from scipy.stats import chi2
+
     widest = float(np.linalg.eigvalsh(np.array(dyn.covariance).reshape(2, 2)).max())
-    half = math.sqrt(max(widest, 0.0) * 5.991)  # chi-square, 2 degrees of freedom, 95 %
+    half = math.sqrt(max(widest, 0.0) * float(chi2.ppf(0.95, 2)))
     if half >= max(0.5 * total, dyn.sample_interval):  # a sample: no lag found is no warning
         warnings.warn(
             f"the record (or the model's misfit) cannot separate a lag from hysteresis (delay "
