@@ -6,6 +6,8 @@ time, with no NumPy in the recursions.
 
 from __future__ import annotations
 
+import cmath
+import math
 from collections.abc import Sequence
 
 
@@ -61,3 +63,33 @@ def inverse_parameters(r: Sequence[float], w: Sequence[float]) -> tuple[list[flo
     r_inv = [sum(w[j] * (r[i] - r[j]) for j in range(i + 1)) for i in range(len(r))]
     w_inv = [1.0 / w[0]] + [-w[i] / (sums[i] * sums[i - 1]) for i in range(1, len(w))]
     return r_inv, w_inv
+
+
+def ilc_update(
+    correction: Sequence[float],
+    error: Sequence[float],
+    gain: float,
+    cutoff: float,
+    lag: float,
+    dt: float,
+    learn_mean: bool,
+) -> list[float]:
+    """One trial of the learning law, written out: c' = Q (c + gain L e) over the periodic
+    trial, by a plain discrete Fourier sum. Q = 1 / (1 + (f/cutoff)^8) (zero phase); L inverts
+    a held-input first-order lag y[k] = a y[k-1] + (1 - a) x[k], a = exp(-dt/lag)."""
+    n = len(error)
+    a = math.exp(-dt / lag) if lag > 0 else 0.0
+    out = [0.0] * n
+    for k in range(n // 2 + 1):
+        f = k / (n * dt)
+        q = 1.0 / (1.0 + (f / cutoff) ** 8)
+        z = cmath.exp(-2j * math.pi * k / n)  # z^-1 at this harmonic
+        lag_response = (1 - a) / (1 - a * z)
+        c_k = sum(correction[i] * cmath.exp(-2j * math.pi * k * i / n) for i in range(n))
+        e_k = sum(error[i] * cmath.exp(-2j * math.pi * k * i / n) for i in range(n))
+        new = c_k + (gain * e_k / lag_response if (k > 0 or learn_mean) else 0.0)
+        new *= q
+        weight = 1.0 if k == 0 or (n % 2 == 0 and k == n // 2) else 2.0  # the real signal's pair
+        for i in range(n):
+            out[i] += weight * (new * cmath.exp(2j * math.pi * k * i / n)).real / n
+    return out

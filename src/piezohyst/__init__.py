@@ -35,6 +35,7 @@ from .errors import (
 from .identification import default_thresholds
 from .io import read_recording, read_table, write_table
 from .leakage import Leakage, calibrate_leakage
+from .learning import LearningCompensator
 from .model import History, HysteresisModel, InverseSpec, ModelState
 from .models import (
     ActivePI,
@@ -74,6 +75,7 @@ __all__ = [
     "InsufficientDataError",
     "InverseSpec",
     "Leakage",
+    "LearningCompensator",
     "ModelBank",
     "ModelFileError",
     "ModelState",

@@ -973,5 +973,9 @@ def demo(ctx: Context, out: Path, operators: int, seed: int) -> None:
     click.echo(str(out / "report.md"))
 
 
+from ._cli_learn import learn  # noqa: E402 - registered after main is defined
+
+main.add_command(learn)
+
 if __name__ == "__main__":  # pragma: no cover
     main()

@@ -91,3 +91,7 @@ class ExtrapolationWarning(UserWarning):
 
 class IdentifiabilityWarning(UserWarning):
     """The record cannot determine a fitted quantity (e.g. a lag apart from hysteresis)."""
+
+
+class LearningWarning(UserWarning):
+    """A learning trial was undone (its error grew) or not learned from (too few readings)."""

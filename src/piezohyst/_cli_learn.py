@@ -1,0 +1,154 @@
+"""``piezohyst learn``: learning from repetition across trial files (a thin shell over
+:func:`piezohyst.learning_files.learn_file`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+import click
+
+from ._cli_support import EXISTING, Context, _limit_options, _run
+from .compensator import CompensatorSettings
+
+
+def _auto_or_float(value: str) -> float | Literal["auto"]:
+    if value == "auto":
+        return "auto"
+    try:
+        return float(value)
+    except ValueError:
+        raise click.BadParameter(f"expected auto or a number. Got {value!r}.") from None
+
+
+@click.command("learn")
+@click.argument("model", type=EXISTING)
+@click.argument("recorded", type=EXISTING, required=False)
+@click.option(
+    "--state",
+    "state",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="The learner's state file (JSON), kept between trials.",
+)
+@click.option(
+    "--desired",
+    type=EXISTING,
+    default=None,
+    help="The trajectory, one period (first call only; column --column, and time).",
+)
+@click.option("--column", default="desired", show_default=True, help="Desired column.")
+@click.option(
+    "--leakage",
+    type=EXISTING,
+    default=None,
+    help="A leakage file (calibrate-leakage); default the model's growth terms.",
+)
+@click.option(
+    "--lag",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="A lag the model does not hold, in s (a rate-independent model behind an amplifier).",
+)
+@click.option(
+    "--learning-gain",
+    default="auto",
+    show_default=True,
+    help="Fraction of the error learned per trial, or auto.",
+)
+@click.option(
+    "--cutoff",
+    default="auto",
+    show_default=True,
+    help="The robustness filter's cutoff in Hz, or auto.",
+)
+@click.option(
+    "--voltage-column",
+    default="voltage",
+    show_default=True,
+    help="The recording's column of the voltage sent.",
+)
+@click.option(
+    "--reading-column",
+    default="charge",
+    show_default=True,
+    help="The recording's column learned from.",
+)
+@click.option(
+    "--sensor", is_flag=True, help="The reading is a displacement sensor's (m), not the charge."
+)
+@_limit_options
+@click.option(
+    "-o",
+    "--out",
+    "out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="The next trial's commands (CSV: time, command, desired).",
+)
+@click.pass_obj
+def learn(
+    ctx: Context,
+    model: Path,
+    recorded: Path | None,
+    state: Path,
+    desired: Path | None,
+    column: str,
+    leakage: Path | None,
+    lag: float,
+    learning_gain: str,
+    cutoff: str,
+    voltage_column: str,
+    reading_column: str,
+    sensor: bool,
+    settings: CompensatorSettings,
+    out: Path,
+) -> None:
+    """Learn from the trial RECORDED and write the next trial's commands.
+
+    A repeated scan (one period per trial, trials sent back to back): the first
+    call takes --desired and writes the first trial; each later call takes the
+    DAQ's recording of the trial just sent (its voltage column must match what
+    was written) and the charge measured over it, and writes the next. The
+    state file names the model, settings and trajectory it belongs to.
+
+    \b
+    Example:
+      piezohyst learn model.json --desired scan.csv --state learn.json -o next.csv
+      piezohyst learn model.json trial.csv --state learn.json -o next.csv
+    """
+    from .learning_files import learn_file
+
+    result = _run(
+        ctx,
+        lambda: learn_file(
+            model,
+            state,
+            out,
+            recorded=recorded,
+            desired=desired,
+            column=column,
+            settings=settings,
+            leakage=leakage,
+            lag=lag,
+            learning_gain=_auto_or_float(learning_gain),
+            cutoff=_auto_or_float(cutoff),
+            voltage_column=voltage_column,
+            reading_column=reading_column,
+            sensor=sensor,
+        ),
+    )
+    trial, learner = result.trial, result.learner
+    if trial is not None:
+        if trial.skipped:
+            click.echo(f"trial {trial.index}: {trial.learned} readings to learn from: skipped")
+        else:
+            back = " (rolled back, gain halved)" if trial.rolled_back else ""
+            click.echo(
+                f"trial {trial.index}: error {trial.error:.3%}, loop width {trial.width:.3%}, "
+                f"learned from {trial.learned} samples{back}"
+            )
+    if learner.design is not None and trial is not None:
+        ctx.info(learner.design.describe())
+    click.echo(f"trial {learner.trials}'s commands: {out}")

@@ -1,0 +1,357 @@
+"""Learning from repetition (issue 27): the law against a plain reference, the safety rules,
+state and files that resume exactly, and the learning on plants the project did not tune on."""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import piezohyst as ph
+from piezohyst.cli import main
+from piezohyst.errors import LearningWarning
+from piezohyst.excitation import excitation
+from piezohyst.metrics import hysteresis_width
+from piezohyst.simulation import PLANTS, Bench, BenchPreset, BenchRecord, make_signal
+
+from . import reference
+
+RATE = 1000.0
+
+
+@pytest.fixture(scope="module")
+def pi_model() -> ph.ClassicalPI:
+    h = ph.PIHysteresis([0.0, 20.0, 50.0], [1e-8, 5e-9, 3e-9])
+    return ph.ClassicalPI.from_operator(h)
+
+
+def cosine(model: ph.ClassicalPI, n: int = 64, cycles: int = 2) -> np.ndarray:
+    top = float(model.hysteresis_.predict([0.0, 140.0])[-1])
+    return top * (0.3 + 0.2 * (1 - np.cos(2 * np.pi * cycles * np.arange(n) / n)))
+
+
+def test_the_law_is_the_one_written_out(pi_model: ph.ClassicalPI) -> None:
+    """c' = Q (c + gain L e): the learner's update against a plain Fourier sum, two trials."""
+    d = cosine(pi_model)
+    ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
+                                 slew_rate=None, lag=3e-3, learning_gain=0.6,
+                                 cutoff=120.0)  # fmt: skip
+    rng = np.random.default_rng(1)
+    c = np.zeros(d.size)
+    for _ in range(2):
+        ilc.command(d)
+        y = d * (0.9 + 0.05 * rng.standard_normal(d.size)) + 3e-7  # any readings will do
+        ilc.learn(y)
+        e = d - y
+        e = e - e.mean()  # the charge's zero is not learned
+        want = reference.ilc_update(c.tolist(), e.tolist(), 0.6, 120.0, 3e-3, 1 / RATE, False)
+        # tol: an FFT against an O(N^2) sum of 64 terms: rounding, relative to the correction
+        np.testing.assert_allclose(ilc.correction, want, rtol=0, atol=1e-12 * np.ptp(d))
+        c = np.asarray(want)
+    assert ilc.design is not None and ilc.design.gain == 0.6 and ilc.design.cutoff == 120.0
+
+
+def test_a_sensor_is_learned_with_its_offset(pi_model: ph.ClassicalPI) -> None:
+    d = cosine(pi_model)
+    gain = 2.0e3  # m/C
+    ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
+                                 slew_rate=None, domain="displacement", gain=gain,
+                                 learning_gain=1.0, cutoff=math.inf)  # fmt: skip
+    ilc.command(d * gain)
+    s = d * gain - 1e-6  # 1 um short everywhere: an offset only a sensor sees
+    ilc.learn(displacement=s)
+    # tol: one FFT round trip of a constant
+    np.testing.assert_allclose(ilc.correction, 1e-6, rtol=1e-9)
+
+
+def test_the_design_states_its_condition_and_meets_it() -> None:
+    """Monotone convergence when max |Q (1 - g rho e^{i theta})| < 1 over the allowed slope and
+    timing errors; the automatic choice keeps it at 0.9 or under."""
+    rec = ph.simulate(signal="triangle", duration=4.0, seed=0)
+    model = ph.ActivePI(n_operators=4).fit(rec.voltage, rec.charge, t=rec.t)
+    d = ph.learning.design_learning(model, sample_rate=RATE, samples=1000, lag=4e-3)
+    f = d.frequencies()
+    theta = np.minimum(2 * np.pi * f * d.timing, np.pi)
+    for rho in np.linspace(1 - d.slope_error, 1 + d.slope_error, 7):
+        for sign in (-1, 1):
+            factor = np.abs(d.q() * (1 - d.gain * rho * np.exp(1j * sign * theta)))
+            assert factor[1:].max() <= 0.9 + 1e-12
+    assert d.contraction <= 0.9 and "converges monotonically" in d.describe()
+    assert d.timing == pytest.approx(0.5e-3 + 0.25 * 4e-3)  # half a sample + the lag's 25 %
+    # a gain and cutoff that cannot converge say so
+    bad = ph.learning.design_learning(model, sample_rate=RATE, samples=1000, lag=4e-3,
+                                      gain=1.0, cutoff=400.0)  # fmt: skip
+    assert bad.contraction > 1 and "may NOT converge" in bad.describe()
+
+
+@pytest.mark.filterwarnings("ignore::piezohyst.errors.LearningWarning")  # a random plant
+def test_every_command_is_safe_across_trials(pi_model: ph.ClassicalPI) -> None:
+    """Inside the limits and within the slew limit of the command before, from the resting
+    actuator into the first trial and from each trial into the next."""
+    d = cosine(pi_model, n=200, cycles=4)
+    ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
+                                 slew_rate=20e3)  # fmt: skip
+    sent = [ilc.last_command]
+    rng = np.random.default_rng(0)
+    for _ in range(6):
+        u = ilc.command(d)
+        sent += list(u)
+        y = pi_model.hysteresis_.predict(np.clip(u + rng.normal(0, 3, u.size), 0, 140))
+        ilc.learn(y)
+    v = np.asarray(sent)
+    assert np.isfinite(v).all() and v.min() >= 0.0 and v.max() <= 140.0
+    assert np.abs(np.diff(v)).max() <= 20.0 * (1 + 1e-9)  # 20e3 V/s at 1 kHz
+    assert ilc.history[0].learned < d.size  # the ramp in from rest is not learned from
+
+
+def test_what_a_trial_refuses(pi_model: ph.ClassicalPI) -> None:
+    d = cosine(pi_model)
+    ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE)
+    ramp = np.linspace(d.min(), d.max(), 64)
+    with pytest.raises(ph.ParameterError, match="not periodic over the trial: it jumps"):
+        ilc.command(ramp)
+    with pytest.raises(ph.ParameterError, match="needs a trial"):
+        ilc.learn(d)
+    ilc.command(d)
+    with pytest.raises(ph.ParameterError, match="still waits for its readings"):
+        ilc.command(d)
+    with pytest.raises(ph.ShapeError, match="one reading per command"):
+        ilc.learn(d[:-1])
+    ilc.learn(d)
+    with pytest.raises(ph.ParameterError, match="belongs to another trajectory"):
+        ilc.command(d * 1.01)
+    with pytest.raises(ph.ParameterError, match="learning_gain"):
+        ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
+                               learning_gain=1.5)  # fmt: skip
+
+
+def test_missing_readings_are_not_learned_from(pi_model: ph.ClassicalPI) -> None:
+    """NaN readings do not enter the correction: readings that differ only there teach the
+    same; a trial with fewer than half its readings teaches nothing, and says so."""
+    d = cosine(pi_model, n=128)
+    got = []
+    for fill in (np.nan, 1.0):
+        ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
+                                     slew_rate=None, learning_gain=0.5,
+                                     cutoff=200.0)  # fmt: skip
+        ilc.command(d)
+        y = 0.95 * d
+        y[40:44] = fill
+        if math.isnan(fill):
+            trial = ilc.learn(y)
+            assert trial.learned == d.size - 4
+            got.append(ilc.correction)
+            continue
+        ilc.learn(0.95 * d)  # no gap
+        got.append(ilc.correction)
+    assert np.isfinite(got[0]).all()
+    # the gap is bridged linearly from its neighbours: the error e = 0.05 d is smooth, and the
+    # bridge misses it by at most (5 samples)^2 / 8 max|e''|; the update (gain 0.5, |Q| <= 1)
+    # moves no sample by more than gain * sqrt(N) times that (the l2 norm bounds every sample)
+    e = 0.05 * d
+    bridge = 5**2 / 8 * np.abs(np.diff(e, 2)).max()
+    diff = got[0] - got[1]
+    assert np.abs(diff - diff.mean()).max() <= 0.5 * math.sqrt(d.size) * bridge
+    ilc.command()
+    with pytest.warns(LearningWarning, match="nothing learned"):
+        trial = ilc.learn(np.full(d.size, np.nan))
+    assert trial.skipped and ilc.trials == 2
+
+
+def test_a_trial_whose_error_grew_is_rolled_back(pi_model: ph.ClassicalPI) -> None:
+    d = cosine(pi_model)
+    ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
+                                 slew_rate=None, learning_gain=0.8,
+                                 cutoff=100.0)  # fmt: skip
+    ilc.command(d)
+    ilc.learn(0.9 * d)
+    good = ilc.correction
+    e0 = (d - 0.9 * d) - (d - 0.9 * d).mean()
+    ilc.command()
+    with pytest.warns(LearningWarning, match="error grew .* learning gain halved to 0.4"):
+        trial = ilc.learn(0.5 * d)  # far worse
+    assert trial.rolled_back and trial.gain == 0.4 and ilc.rollbacks == 1
+    # the update is redone from the last good trial with half the gain
+    want = reference.ilc_update([0.0] * d.size, e0.tolist(), 0.4, 100.0, 0.0, 1 / RATE, False)
+    # tol: FFT against a plain sum: rounding
+    np.testing.assert_allclose(ilc.correction, want, rtol=0, atol=1e-12 * np.ptp(d))
+    assert not np.allclose(ilc.correction, good)
+
+
+@pytest.mark.filterwarnings("ignore::piezohyst.errors.LearningWarning")  # rollbacks resume too
+def test_a_saved_learner_resumes_exactly(pi_model: ph.ClassicalPI, tmp_path: Path) -> None:
+    d = cosine(pi_model, n=200, cycles=4)
+    kw = {"v_min": 0.0, "v_max": 140.0, "sample_rate": RATE, "slew_rate": 20e3}
+    whole = ph.LearningCompensator(pi_model, **kw)  # type: ignore[arg-type]
+    path = tmp_path / "learn.json"
+    rng = np.random.default_rng(4)
+    for j in range(4):
+        u = whole.command(d)
+        y = pi_model.hysteresis_.predict(u) * (1 + 0.02 * rng.standard_normal(u.size))
+        whole.learn(y)
+        again = ph.LearningCompensator(pi_model, **kw)  # type: ignore[arg-type]
+        if j:
+            again.load(path)
+            np.testing.assert_array_equal(again.command(), u)  # the same trial, to the bit
+            again.learn(y)
+            np.testing.assert_array_equal(again.correction, whole.correction)
+        whole.save(path)
+    other = ph.LearningCompensator(pi_model, **{**kw, "v_max": 120.0})  # type: ignore[arg-type]
+    with pytest.raises(ph.ModelFileError, match="another model, leakage or settings"):
+        other.load(path)
+
+
+def test_the_file_loop_is_the_in_memory_loop(tmp_path: Path) -> None:
+    """piezohyst learn, trial after trial through CSV files, sends what the class sends."""
+    rec = ph.simulate(signal="triangle", duration=4.0, seed=0)
+    model = ph.ActivePI(n_operators=6).fit(rec.voltage, rec.charge, t=rec.t)
+    model.save(tmp_path / "model.json")
+    lo, hi = model.input_range_
+    q = model.hysteresis_.predict([lo, hi])
+    n = 250
+    d = q[0] + (q[1] - q[0]) * (0.4 + 0.2 * np.sin(2 * np.pi * 5 * np.arange(n) / n))
+    t = np.arange(n) / RATE
+    ph.write_table(tmp_path / "scan.csv", {"time": t, "desired": d})
+    ilc = ph.LearningCompensator(model, v_min=lo, v_max=hi, sample_rate=RATE, slew_rate=30e3)
+    mem, bench_a, bench_b = [], Bench(seed=2), Bench(seed=2)
+    runner = CliRunner()
+    base = ["learn", str(tmp_path / "model.json"), "--state", str(tmp_path / "s.json"),
+            "-o", str(tmp_path / "next.csv"), "--slew-rate", "30000"]  # fmt: skip
+    res = runner.invoke(main, [*base, "--desired", str(tmp_path / "scan.csv")])
+    assert res.exit_code == 0, res.output
+    for j in range(3):
+        u = ilc.command(d)
+        mem.append(u)
+        ilc.learn(bench_a.run(u).charge)
+        sent = ph.read_table(tmp_path / "next.csv").get("command")
+        np.testing.assert_array_equal(sent, u)  # the CSV carries every bit
+        got = bench_b.run(sent)
+        ph.write_table(tmp_path / f"trial{j}.csv", {"time": got.t, "voltage": got.voltage,
+                                                    "charge": got.charge})  # fmt: skip
+        res = runner.invoke(main, [*base[:2], str(tmp_path / f"trial{j}.csv"), *base[2:]])
+        assert res.exit_code == 0, res.output
+        assert f"trial {j}: error" in res.output
+    np.testing.assert_array_equal(ph.read_table(tmp_path / "next.csv").get("command"),
+                                  ilc.command())  # fmt: skip
+    state = json.loads((tmp_path / "s.json").read_text())
+    assert state["trajectory"] and len(state["history"]) == 3
+    # a recording of another trial is refused, naming the row
+    res = runner.invoke(main, [*base[:2], str(tmp_path / "trial0.csv"), *base[2:]])
+    assert res.exit_code == 1 and "a recording of another trial or run" in res.output
+
+
+# ------------------------------------------------------------------ on a plant not tuned on
+#: a leaky Bouc-Wen capacitor with dielectric relaxation behind a 4 ms amplifier lag
+PLANT = PLANTS["bouc-wen-creep-lag"]
+
+
+@dataclass
+class Rig:
+    preset: BenchPreset
+    leak: ph.Leakage
+    model: ph.BoucWenModel
+    ident: BenchRecord
+    range: tuple[float, float]
+
+
+@pytest.fixture(scope="module")
+def rig() -> Rig:
+    """The plant with 0.1 % noise on the charge, its leakage calibrated from 10 s holds up and
+    down, a Bouc-Wen model with identified input dynamics from 30 s of multifreq."""
+    played = excitation(v_min=0.0, v_max=140.0, sample_rate=RATE)
+    span = np.ptp(ph.simulate(played.voltage, played.t, preset=PLANT, seed=1).capacitor_charge)
+    p = replace(PLANT, amp_noise=1e-3 * span / PLANT.c_ref)
+    ident = ph.simulate(played.voltage, played.t, preset=p, seed=1)
+    holds = excitation("holds", v_min=0.0, v_max=140.0, sample_rate=RATE, hold=10.0)
+    cal = ph.simulate(holds.voltage, holds.t, preset=p, seed=2)
+    t, v = make_signal("multifreq", amplitude=140.0, frequency=0.5, duration=30.0)
+    multi = ph.simulate(v, t, preset=p, seed=4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the relaxing plant's calibration says how sure it is
+        leak = ph.calibrate_leakage(cal.t, cal.voltage, cal.charge)
+        model = ph.BoucWenModel(input_dynamics="auto").fit(multi.voltage, multi.charge, t=multi.t)
+    # the scan's range: the charge (leakage removed) the record reached at its lowest and highest
+    # voltage from every history in it (as the self-sensing loop's test), its middle 40 %
+    q = ident.charge - leak.charge(ident.voltage, ident.t, ident.charge)
+    vv = ident.voltage
+    top = float(q[vv >= vv.max() - 1e-9].min() - q[0])
+    bottom = float(q[vv <= vv.min() + 1e-9].max() - q[0])
+    middle = (bottom + 0.3 * (top - bottom), top - 0.3 * (top - bottom))
+    return Rig(p, leak, model, ident, middle)
+
+
+def scan(
+    rig: Rig, model: ph.HysteresisModel, f: float, trials: int, *, lag: float = 0.0,
+    gap: int | None = None,
+) -> tuple[ph.LearningCompensator, list[tuple[float, float]]]:  # fmt: skip
+    """Trials of one second of a sine at ``f``, continuous; per trial the width and the
+    offset-free NRMSE of the true displacement."""
+    p = rig.preset
+    lo, hi = rig.range
+    shape = np.sin(2 * np.pi * f * np.arange(int(RATE)) / RATE)
+    desired = p.gain * (0.5 * (lo + hi) + 0.5 * (hi - lo) * shape)
+    v_min, v_max = model.input_range_
+    ilc = ph.LearningCompensator(model, v_min=v_min, v_max=v_max, sample_rate=RATE,
+                                 leakage=rig.leak, domain="displacement", gain=p.gain,
+                                 lag=lag, slew_rate=30e3)  # fmt: skip
+    bench = Bench(p, seed=3, voltage=ilc.last_command)
+    scores = []
+    for j in range(trials):
+        u = ilc.command(desired)
+        assert np.isfinite(u).all() and v_min <= u.min() and u.max() <= v_max
+        rec = bench.run(u)
+        y = rec.charge.copy()
+        if gap is not None and j == gap:
+            y[::3] = np.nan  # a third of the readings lost, everywhere in the trial
+            y[300:500] = np.nan
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", LearningWarning)  # no rollback expected
+            ilc.learn(y)
+        s = rec.true_displacement
+        e = (desired - desired.mean()) - (s - s.mean())
+        scores.append((hysteresis_width(desired, s),
+                       float(np.sqrt(np.mean(e**2)) / np.ptp(desired))))  # fmt: skip
+    return ilc, scores
+
+
+@pytest.mark.heavy
+def test_ten_trials_at_10_and_40_hz_on_a_plant_we_did_not_write(rig: Rig) -> None:
+    """Issue 27: after 10 trials, width and offset-free NRMSE <= 0.5 % at 10 Hz, <= 1 % at 40 Hz;
+    a trial with a third of its readings and a 0.2 s stretch lost leaves <= 1 % at 40 Hz."""
+    model = rig.model
+    _, s10 = scan(rig, model, 10.0, 11)
+    assert max(s10[-1]) <= 0.005
+    _, s40 = scan(rig, model, 40.0, 11, gap=5)
+    assert max(s40[-1]) <= 0.01
+    # measured (seed 3): 10 Hz 0.18 % width, 0.17 % NRMSE; 40 Hz 0.08 %, 0.17 %; the first
+    # trial (feedforward alone) 6.4 % and 1.5 % width
+    assert s10[0][0] > 5 * s10[-1][0] and s40[0][1] > 5 * s40[-1][1]
+
+
+@pytest.mark.heavy
+def test_a_rate_independent_model_with_a_stated_lag_learns_too(rig: Rig) -> None:
+    """ActivePI knows no lag: the 4 ms is stated (trusted to 25 %), and L inverts it."""
+    ident = rig.ident
+    model = ph.ActivePI(n_operators=10).fit(ident.voltage, ident.charge, t=ident.t)
+    ilc, s10 = scan(rig, model, 10.0, 11, lag=4e-3)
+    assert max(s10[-1]) <= 0.005  # measured 0.36 % width, 0.18 % NRMSE
+    assert ilc.design is not None and ilc.design.lag == 4e-3
+
+
+@pytest.mark.heavy
+def test_the_error_falls_monotonically_over_100_trials(rig: Rig) -> None:
+    """What the learner sees falls trial after trial (to within its estimate's noise), with
+    no rollback, and the displacement stays where ten trials took it."""
+    ilc, scores = scan(rig, rig.model, 10.0, 100)
+    errors = [t.error for t in ilc.history]
+    for j in range(1, len(errors)):
+        # tol: the growth test's own bound: 3 standard errors of an RMS over 1000 readings
+        assert errors[j] <= errors[j - 1] * (1 + 3 / math.sqrt(1000))
+    assert ilc.rollbacks == 0
+    assert max(scores[-1]) <= 0.005
