@@ -165,23 +165,27 @@ def test_missing_readings_are_not_learned_from(pi_model: ph.ClassicalPI) -> None
 
 
 def test_a_trial_whose_error_grew_is_rolled_back(pi_model: ph.ClassicalPI) -> None:
+    """The update is undone: the last good correction is sent again and measured anew, and
+    learning goes on from that measurement with half the gain."""
     d = cosine(pi_model)
     ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
                                  slew_rate=None, learning_gain=0.8,
                                  cutoff=100.0)  # fmt: skip
     ilc.command(d)
     ilc.learn(0.9 * d)
-    good = ilc.correction
-    e0 = (d - 0.9 * d) - (d - 0.9 * d).mean()
     ilc.command()
     with pytest.warns(LearningWarning, match="error grew .* learning gain halved to 0.4"):
         trial = ilc.learn(0.5 * d)  # far worse
     assert trial.rolled_back and trial.gain == 0.4 and ilc.rollbacks == 1
-    # the update is redone from the last good trial with half the gain
-    want = reference.ilc_update([0.0] * d.size, e0.tolist(), 0.4, 100.0, 0.0, 1 / RATE, False)
+    np.testing.assert_array_equal(ilc.correction, np.zeros(d.size))  # trial 0's, sent again
+    ilc.command()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # measured again: accepted, whatever it shows
+        ilc.learn(0.8 * d)
+    e = (d - 0.8 * d) - (d - 0.8 * d).mean()
+    want = reference.ilc_update([0.0] * d.size, e.tolist(), 0.4, 100.0, 0.0, 1 / RATE, False)
     # tol: FFT against a plain sum: rounding
     np.testing.assert_allclose(ilc.correction, want, rtol=0, atol=1e-12 * np.ptp(d))
-    assert not np.allclose(ilc.correction, good)
 
 
 @pytest.mark.filterwarnings("ignore::piezohyst.errors.LearningWarning")  # rollbacks resume too
@@ -350,8 +354,12 @@ def test_the_error_falls_monotonically_over_100_trials(rig: Rig) -> None:
     no rollback, and the displacement stays where ten trials took it."""
     ilc, scores = scan(rig, rig.model, 10.0, 100)
     errors = [t.error for t in ilc.history]
+    d = ilc.design
+    assert d is not None
+    floor = d.noise * math.sqrt(1 + d.noise_gain**2) / np.ptp(ilc.desired)
     for j in range(1, len(errors)):
-        # tol: the growth test's own bound: 3 standard errors of an RMS over 1000 readings
-        assert errors[j] <= errors[j - 1] * (1 + 3 / math.sqrt(1000))
+        # tol: the growth test's own bound: 3 standard errors of an RMS over 1000 readings,
+        # above the noise the readings and the correction carry
+        assert errors[j] <= max(errors[j - 1], floor) * (1 + 3 / math.sqrt(1000))
     assert ilc.rollbacks == 0
     assert max(scores[-1]) <= 0.005

@@ -386,6 +386,8 @@ LAYERS = {
     "inverses": 10,
     "compensator": 10,
     "selfsensing": 10,
+    "learning_design": 10,
+    "learning": 11,
     "channels": 11,
     "export": 11,
     "report": 11,
@@ -394,9 +396,11 @@ LAYERS = {
     "control_files": 12,
     "workflows": 12,
     "fleet": 12,
+    "learning_files": 12,
     "demo": 12,
     "_cli_support": 13,
     "cli": 13,
+    "_cli_learn": 13,
     "__init__": 14,
 }
 

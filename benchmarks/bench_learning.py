@@ -1,0 +1,198 @@
+"""Learning from repetition: its targets on the bench behind a 4 ms amplifier, and its cost.
+
+Run: ``python benchmarks/bench_learning.py [--trials 10] [--figure learning.png]``.
+
+1. Targets (issue 27), on the bench's amplifier-lag preset ``T226-H4-203X-amp4ms`` with
+   0.1 % noise on the charge: the leakage calibrated from 10 s holds up and down; an
+   ``ActivePI(10)`` identified on what ``piezohyst excite`` writes, learning with the lag
+   stated (4 ms, trusted to 25 %), and an ``ActivePI(10, input_dynamics="auto")``
+   identified on 30 s of ``multifreq``; one-second trials of a sine over the middle 40 % of
+   the charge reached, at 1, 10, 40 and 100 Hz, continuous. Width and offset-free NRMSE of
+   the true displacement, first trial (feedforward) and after ``--trials``.
+2. Cost of one trial's update (1000 samples): the learner's FFT law against the same law as
+   a dense DFT matrix in NumPy (the naive reference), measured in the same run; and a whole
+   trial (``command`` + ``learn``) per sample.
+
+Not a test: nothing here asserts a time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+import warnings
+from dataclasses import replace
+
+import numpy as np
+
+import piezohyst as ph
+from piezohyst.excitation import excitation
+from piezohyst.metrics import hysteresis_width
+from piezohyst.simulation import PRESETS, Bench, make_signal
+
+RATE = 1000.0
+
+
+def rig() -> dict[str, object]:
+    p = PRESETS["T226-H4-203X-amp4ms"]
+    played = excitation(v_min=0.0, v_max=140.0, sample_rate=RATE)
+    span = np.ptp(ph.simulate(played.voltage, played.t, preset=p, seed=1).capacitor_charge)
+    p = replace(p, amp_noise=1e-3 * span / p.c_ref)
+    ident = ph.simulate(played.voltage, played.t, preset=p, seed=1)
+    holds = excitation("holds", v_min=0.0, v_max=140.0, sample_rate=RATE, hold=10.0)
+    cal = ph.simulate(holds.voltage, holds.t, preset=p, seed=2)
+    t, v = make_signal("multifreq", amplitude=140.0, frequency=0.5, duration=30.0)
+    multi = ph.simulate(v, t, preset=p, seed=4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        leak = ph.calibrate_leakage(cal.t, cal.voltage, cal.charge)
+        stated = ph.ActivePI(n_operators=10).fit(ident.voltage, ident.charge, t=ident.t)
+        dynamic = ph.ActivePI(n_operators=10, input_dynamics="auto").fit(
+            multi.voltage, multi.charge, t=multi.t
+        )
+    q = ident.charge - leak.charge(ident.voltage, ident.t, ident.charge)
+    vv = ident.voltage
+    top = float(q[vv >= vv.max() - 1e-9].min() - q[0])
+    bottom = float(q[vv <= vv.min() + 1e-9].max() - q[0])
+    lo, hi = bottom + 0.3 * (top - bottom), top - 0.3 * (top - bottom)
+    return {"preset": p, "leak": leak, "stated": stated, "dynamic": dynamic, "range": (lo, hi)}
+
+
+def run(r: dict[str, object], model: ph.HysteresisModel, f: float, trials: int, lag: float):  # type: ignore[no-untyped-def]
+    p = r["preset"]
+    lo, hi = r["range"]  # type: ignore[misc]
+    shape = np.sin(2 * np.pi * f * np.arange(int(RATE)) / RATE)
+    desired = p.gain * (0.5 * (lo + hi) + 0.5 * (hi - lo) * shape)  # type: ignore[attr-defined]
+    v_min, v_max = model.input_range_
+    ilc = ph.LearningCompensator(
+        model,
+        v_min=v_min,
+        v_max=v_max,
+        sample_rate=RATE,
+        leakage=r["leak"],  # type: ignore[arg-type]
+        domain="displacement",
+        gain=p.gain,
+        lag=lag,
+        slew_rate=30e3,  # type: ignore[attr-defined]
+    )
+    bench = Bench(p, seed=3, voltage=ilc.last_command)  # type: ignore[arg-type]
+    scores, loops = [], []
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        for _ in range(trials + 1):
+            u = ilc.command(desired)
+            rec = bench.run(u)
+            ilc.learn(rec.charge)
+            s = rec.true_displacement
+            e = (desired - desired.mean()) - (s - s.mean())
+            scores.append(
+                (hysteresis_width(desired, s), float(np.sqrt(np.mean(e**2)) / np.ptp(desired)))
+            )
+            loops.append(s)
+    return ilc, scores, loops, desired, len(said)
+
+
+def dense_update(
+    c: np.ndarray, e: np.ndarray, q: np.ndarray, lf: np.ndarray, g: float
+) -> np.ndarray:
+    """The law with a dense DFT matrix: the naive NumPy reference."""
+    n = c.size
+    k = np.arange(n)
+    w = np.exp(-2j * np.pi * np.outer(k, k) / n)
+    full_q = np.concatenate([q, q[1 : n - q.size + 1][::-1]])
+    full_l = np.concatenate([lf, np.conj(lf[1 : n - lf.size + 1][::-1])])
+    spectrum = w @ c + g * full_l * (w @ e)
+    spectrum[0] = (w @ c)[0]
+    return (np.conj(w) @ (full_q * spectrum)).real / n
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--trials", type=int, default=10)
+    ap.add_argument("--figure", default=None, help="write a figure (error per trial, loops)")
+    args = ap.parse_args()
+    r = rig()
+    print(f"bench {r['preset'].name} with 0.1 % charge noise; trials of 1 s; widths and "  # type: ignore[attr-defined]
+          "offset-free NRMSE of the true displacement")  # fmt: skip
+    print("| model | scan | first trial | after | law | rollbacks |")
+    print("|---|---|---|---|---|---|")
+    keep = None
+    for name, lag in (("stated", 4e-3), ("dynamic", 0.0)):
+        model = r[name]
+        label = "ActivePI(10) + lag=4 ms stated" if lag else "ActivePI(10), input_dynamics auto"
+        for f in (1.0, 10.0, 40.0, 100.0):
+            ilc, scores, loops, desired, warned = run(r, model, f, args.trials, lag)  # type: ignore[arg-type]
+            a, b = scores[0], scores[-1]
+            d = ilc.design
+            print(f"| {label} | {f:g} Hz | {100 * a[0]:.2f} %, {100 * a[1]:.2f} % | "
+                  f"{100 * b[0]:.2f} %, {100 * b[1]:.2f} % | gain {d.gain:.2g}, cutoff "
+                  f"{d.cutoff:.3g} Hz | {ilc.rollbacks} ({warned} warnings) |")  # fmt: skip
+            if name == "stated" and f == 40.0:
+                keep = ([100 * t.error for t in ilc.history], loops, desired)
+            if name == "dynamic" and f == 40.0:
+                timed = ilc
+    # cost
+    n = 1000
+    rng = np.random.default_rng(0)
+    c, e = rng.standard_normal(n), rng.standard_normal(n)
+    assert keep is not None
+    ilc = timed
+    design = ilc.design
+    q, lf = design.q(), design.l()
+    spectrum = np.fft.rfft(c) + design.gain * lf * np.fft.rfft(e)
+    spectrum[0] = np.fft.rfft(c)[0]
+    fast = np.fft.irfft(q * spectrum, n=n)
+    naive = dense_update(c, e, q, lf, design.gain)
+    assert np.allclose(fast, naive, atol=1e-9)
+    reps = 200
+    t0 = time.perf_counter()
+    for _ in range(reps):
+        s2 = np.fft.rfft(c) + design.gain * lf * np.fft.rfft(e)
+        np.fft.irfft(q * s2, n=n)
+    fft_t = (time.perf_counter() - t0) / reps
+    t0 = time.perf_counter()
+    for _ in range(5):
+        dense_update(c, e, q, lf, design.gain)
+    dense_t = (time.perf_counter() - t0) / 5
+    print(f"\nupdate of 1000 samples: FFT {fft_t * 1e6:.0f} us, dense DFT (naive NumPy) "
+          f"{dense_t * 1e3:.1f} ms: {dense_t / fft_t:.0f}x")  # fmt: skip
+    bench = Bench(r["preset"], seed=9, voltage=ilc.last_command)  # type: ignore[arg-type]
+    warnings.simplefilter("ignore")  # a new bench: the learner's first trials there roll back
+    t0 = time.perf_counter()
+    for _ in range(10):
+        u = ilc.command()
+        rec = bench.run(u)
+        ilc.learn(rec.charge)
+    per = (time.perf_counter() - t0) / 10
+    t0 = time.perf_counter()
+    for _ in range(10):
+        rec = bench.run(u)
+    sim = (time.perf_counter() - t0) / 10
+    print(f"a whole trial (command + learn, 1000 samples, ActivePI with input dynamics): "
+          f"{(per - sim) * 1e3:.1f} ms, {(per - sim) / n * 1e6:.1f} us per sample")  # fmt: skip
+    if args.figure:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        errs, loops, desired = keep
+        fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+        ax1.semilogy(range(len(errs)), errs, "o-")
+        ax1.set_xlabel("trial")
+        ax1.set_ylabel("error on the leakage-corrected charge (% of span)")
+        ax1.set_title("40 Hz scan, 4 ms amplifier, ActivePI + stated lag")
+        cut = slice(500, 600)
+        dd = desired - desired.mean()
+        for s, label in ((loops[0], "first trial (feedforward)"), (loops[-1], "after 10 trials")):
+            ax2.plot(dd[cut] * 1e6, (s - s.mean())[cut] * 1e6, label=label)
+        ax2.set_xlabel("desired, offset removed (um)")
+        ax2.set_ylabel("true displacement, offset removed (um)")
+        ax2.legend()
+        fig.tight_layout()
+        fig.savefig(args.figure, dpi=110)
+        print(f"figure: {args.figure}")
+
+
+if __name__ == "__main__":
+    main()
