@@ -398,6 +398,7 @@ LAYERS = {
     "fleet": 12,
     "learning_files": 12,
     "demo": 12,
+    "demo_learning": 12,
     "_cli_support": 13,
     "cli": 13,
     "_cli_learn": 13,

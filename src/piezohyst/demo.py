@@ -25,6 +25,7 @@ import numpy as np
 from ._validation import FloatArray, check_int
 from ._version import __version__
 from .compensator import Compensator
+from .demo_learning import learning_figure, learning_report, learning_study
 from .errors import ExtrapolationWarning
 from .io import atomic_write_text
 from .leakage import Leakage, calibrate_leakage
@@ -474,6 +475,11 @@ def run_demo(
     say("identifying the amplifier's lag over several frequencies (rate)")
     rate = _rate_study(seed + 900, n_operators)
 
+    say("learning a repeated scan from the charge (10 trials)")
+    p_loop = dataclasses.replace(p, i_bias=p.i_bias + LOOP_EXTRA_BIAS)  # the loop's bench
+    learned = learning_study(active, loop["calibrated"], preset=p_loop, gain=gain,
+                             slew_rate=AMP_SLEW, seed=seed + 1300)  # fmt: skip
+
     say("comparing excitations and models")
     study = _excitation_study(preset, n_operators)
     comparison = _model_comparison(
@@ -542,6 +548,8 @@ def run_demo(
     files = _figures(out_dir, ident, valid, classical, active, pred_c, pred_a, pure, fixed, multi)
     files.append(_loop_figure(out_dir, loop))
     files.append(_rate_figure(out_dir, rate))
+    files.append(learning_figure(out_dir, learned))
+    metrics["learning"] = {k: learned[k] for k in ("rows", "design", "rollbacks")}
     metrics["runtime_s"] = time.perf_counter() - started
     mpath = out_dir / "metrics.json"
     atomic_write_text(mpath, json.dumps(metrics, indent=2) + "\n")
@@ -965,6 +973,7 @@ def render_report(m: dict[str, Any]) -> str:
         "real position: the loops stay thin but wander. Hence the leakage from holds.",
         "",
         "![Fig. 11](fig11_self_sensing_loop.png)",
+        *(learning_report(m["learning"]) if "learning" in m else []),
         "",
         "## Figures",
         "",
@@ -975,6 +984,7 @@ def render_report(m: dict[str, Any]) -> str:
         "- `fig10_compensation_displacement.png` — compensation, mechanical domain (Fig. 10)",
         "- `fig11_self_sensing_loop.png` — feedforward vs the self-sensing closed loop",
         "- `fig12_rate.png` — an amplifier's lag at 40 Hz, folded into hysteresis or identified",
+        "- `fig13_learning.png` — a repeated scan learned from the charge, trial by trial",
         "",
     ]
     return "\n".join(lines)

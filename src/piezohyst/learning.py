@@ -185,15 +185,17 @@ class LearningCompensator:
     --------
     >>> import numpy as np, piezohyst as ph
     >>> from piezohyst.simulation import Bench
-    >>> rec = ph.simulate(signal="decaying", duration=10.0)
+    >>> rec = ph.simulate(duration=10.0)
     >>> model = ph.ActivePI(n_operators=8).fit(rec.voltage, rec.charge, t=rec.t)
-    >>> lo, hi = np.quantile(model.hysteresis_.predict(rec.voltage), [0.3, 0.7])
-    >>> desired = lo + (hi - lo) * (0.5 - 0.5 * np.cos(2 * np.pi * np.arange(100) / 100))
-    >>> ilc = ph.LearningCompensator(model, v_min=0.0, v_max=140.0, sample_rate=1000.0)
-    >>> bench = Bench(seed=1)
+    >>> top, bottom = model.hysteresis_.predict(np.array([140.0, 0.0]))
+    >>> k = np.arange(200)                                   # a trial: four 20 Hz scans
+    >>> desired = bottom + (top - bottom) * (0.4 + 0.1 * np.sin(2 * np.pi * 4 * k / 200))
+    >>> ilc = ph.LearningCompensator(model, v_min=0.0, v_max=140.0, sample_rate=1000.0,
+    ...                              slew_rate=30e3)
+    >>> bench = Bench(seed=1, voltage=ilc.last_command)
     >>> for _ in range(8):
     ...     trial = ilc.learn(bench.run(ilc.command(desired)).charge)
-    >>> ilc.history[-1].error < ilc.history[0].error / 3
+    >>> ilc.history[-1].error < 0.6 * ilc.history[0].error   # 0.51 % -> 0.25 %: the noise
     True
     """
 
