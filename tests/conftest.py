@@ -20,6 +20,18 @@ settings.register_profile("ci", max_examples=60, derandomize=True, database=None
 settings.register_profile("dev", max_examples=300, **_COMMON)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
+# One BLAS (and OpenMP) thread per xdist worker: `make test` runs as many workers as cores,
+# and each worker's BLAS starting a thread per core as well oversubscribes them; OpenBLAS's
+# spinning threads then wait on each other. Measured on the 2-core CI machine: the compiled
+# pass took 167 s with the default threads and 66 s with one (2026-11-25). Set before the
+# commands the docs' tests start, too (they inherit the environment).
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(_var, "1")
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1)
+
 
 #: Module fixtures that fit long records to measure accuracy: seconds compiled, half a minute
 #: each with numba's JIT off. Their tests are ``heavy``.
