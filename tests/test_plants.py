@@ -186,11 +186,8 @@ def test_the_command_line_calibrates_as_the_api(tmp_path: object) -> None:
     assert bad.exit_code == 2 and "expected auto or a fraction in [0, 1)" in bad.output
 
 
-#: The cores the self-sensing loop runs compiled (GeneralizedPI's asymmetry and creep it does not),
-#: but Duhem: its fit polishes its slopes by output error, 4 of the 5.5 s each choice took, and
-#: it won on no plant's record here (measured 2026-11-25: 2.3-56 % forward-chained, against
-#: 0.8-1.8 % for Bouc-Wen); tests/test_selection.py chooses among every core
-LOOP_CANDIDATES = ("classical-pi", "active-pi", "bouc-wen", "preisach")
+#: The cores the self-sensing loop runs compiled (GeneralizedPI's asymmetry and creep it does not)
+LOOP_CANDIDATES = ("classical-pi", "active-pi", "bouc-wen", "preisach", "duhem")
 
 
 @pytest.mark.parametrize("name", list(PLANTS))
