@@ -303,6 +303,11 @@ class LearningCompensator:
         return sum(t.rolled_back for t in self.history)
 
     @property
+    def skipped(self) -> int:
+        """Trials not learned from (under half their readings usable)."""
+        return sum(t.skipped for t in self.history)
+
+    @property
     def correction(self) -> FloatArray:
         """The correction added to the desired trajectory next trial (a copy; desired units)."""
         return self._correction.copy()
