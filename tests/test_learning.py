@@ -96,8 +96,8 @@ def test_every_command_is_safe_across_trials(pi_model: ph.ClassicalPI) -> None:
     actuator into the first trial and from each trial into the next."""
     d = cosine(pi_model, n=200, cycles=4)
     ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
-                                 slew_rate=20e3)  # fmt: skip
-    sent = [ilc.last_command]
+                                 slew_rate=20e3, voltage=130.0)  # fmt: skip
+    sent = [ilc.last_command]  # the actuator sits at 130 V: the first trial ramps down
     rng = np.random.default_rng(0)
     for _ in range(6):
         u = ilc.command(d)
@@ -126,6 +126,9 @@ def test_what_a_trial_refuses(pi_model: ph.ClassicalPI) -> None:
     ilc.learn(d)
     with pytest.raises(ph.ParameterError, match="belongs to another trajectory"):
         ilc.command(d * 1.01)
+    with pytest.raises(ph.ParameterError, match="'voltage' must lie inside the limits"):
+        ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
+                               voltage=150.0)  # fmt: skip
     with pytest.raises(ph.ParameterError, match="learning_gain"):
         ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
                                learning_gain=1.5)  # fmt: skip

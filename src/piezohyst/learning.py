@@ -171,14 +171,21 @@ class LearningCompensator:
     lag : float, default 0
         s: a lag the model does not hold, inverted by the learning filter
         (see :func:`design_learning`, with ``lag_tolerance``, ``slope_error``).
-    learning_gain : float, default 0.5
-    cutoff : float or "auto"
+    learning_gain, cutoff : float or "auto", default "auto"
+        The fraction of the error learned per trial, and the robustness filter's
+        cutoff (Hz); ``"auto"`` chooses them from the first trial's error
+        (:func:`design_learning`).
     lag_tolerance, slope_error : float
+        What the convergence condition allows for (defaults 0.25 and 0.5).
+    voltage : float, optional
+        Where the actuator sits now (V; default the model's initial state): the
+        first trial ramps in from there at the slew limit.
 
     Attributes
     ----------
     design : LearningDesign
-        The law in use; ``"auto"`` fixes its cutoff after the first trial learned.
+        The law in use, chosen when the first trial is learned from (before it: a
+        provisional one, gain 0.5 and the widest band that converges).
     history : list of Trial
 
     Examples
@@ -216,6 +223,7 @@ class LearningCompensator:
         cutoff: float | Literal["auto"] = "auto",
         lag_tolerance: float = 0.25,
         slope_error: float = 0.5,
+        voltage: float | None = None,
     ) -> None:
         self.model = model
         self.compensator = Compensator(
@@ -252,7 +260,7 @@ class LearningCompensator:
         # checks every design setting now (a one-sample trial stands in for the trajectory)
         design_learning(model, **self._design_args(2))
         self._fingerprint = self._make_fingerprint()
-        self.reset()
+        self.reset(voltage=voltage)
 
     # ------------------------------------------------------------------ state
     def _design_args(self, samples: int) -> dict[str, Any]:
@@ -274,9 +282,15 @@ class LearningCompensator:
         ).encode()
         return _digest(model + rest)
 
-    def reset(self) -> None:
-        """Forget the trajectory and what was learned; the actuator is taken to sit at the
-        model's initial state (the compensator's :meth:`~piezohyst.Compensator.reset`)."""
+    def reset(self, *, voltage: float | None = None) -> None:
+        """Forget the trajectory and what was learned.
+
+        Parameters
+        ----------
+        voltage : float, optional
+            Where the actuator sits now (V); default the model's initial state.
+            The first trial ramps in from there.
+        """
         self.compensator.reset()
         self._desired: FloatArray | None = None
         self._correction = np.zeros(0)
@@ -286,6 +300,15 @@ class LearningCompensator:
         self._pending: FloatArray | None = None
         self._clamped = np.zeros(0, dtype=bool)
         self._last = float(self.compensator.last_command)
+        if voltage is not None:
+            v = float(voltage)
+            if not (math.isfinite(v) and self.compensator.v_min <= v <= self.compensator.v_max):
+                msg = (
+                    f"'voltage' must lie inside the limits [{self.compensator.v_min:g}, "
+                    f"{self.compensator.v_max:g}] V. Got {voltage!r}."
+                )
+                raise ParameterError(msg)
+            self._last = v
         self._leaked = 0.0
         self._gain = 0.5
         self._first = True  # the law is chosen from the first trial learned from
