@@ -130,6 +130,32 @@ def _check_periodic(d: FloatArray) -> None:
         raise ParameterError(msg)
 
 
+def _at_limits(u: FloatArray, comp: Compensator) -> tuple[FloatArray, FloatArray]:
+    """Commands at the top and at the bottom limit."""
+    top = u >= comp.v_max - 1e-9 * max(1.0, abs(comp.v_max))
+    bottom = u <= comp.v_min + 1e-9 * max(1.0, abs(comp.v_min))
+    return top, bottom
+
+
+def _saturated(u: FloatArray, comp: Compensator) -> int:
+    """Commands at a voltage limit or moved by the whole slew limit."""
+    top, bottom = _at_limits(u, comp)
+    slewed = np.zeros(u.size, dtype=bool)
+    if math.isfinite(comp.max_step):
+        slewed[1:] = np.abs(np.diff(u)) >= comp.max_step * (1 - 1e-9)
+    return int(np.count_nonzero(top | bottom | slewed))
+
+
+def _anti_windup(e: FloatArray, u: FloatArray, comp: Compensator, sign: float) -> FloatArray:
+    """No learning outward where a command sat at a limit (the error there is out of reach);
+    ``sign``: -1 when the desired falls as the voltage rises (a negative gain)."""
+    top, bottom = _at_limits(u, comp)
+    out = e.copy()
+    out[top & (sign * e > 0)] = 0.0
+    out[bottom & (sign * e < 0)] = 0.0
+    return out
+
+
 def _digest(values: Any) -> str:
     return hashlib.sha256(values).hexdigest()[:16]
 
@@ -508,15 +534,17 @@ class LearningCompensator:
                 stacklevel=2,
             )
             trial = Trial(index, math.nan, math.nan, learned, self._gain, False, True, bound,
-                          self._saturated(u))  # fmt: skip
+                          _saturated(u, self.compensator))  # fmt: skip
             self._previous = self._correction  # sent again: the history of the next trial
             self._close(trial)
             return trial
         error = float(np.sqrt(np.mean(e[ok] ** 2))) / span
         width = hysteresis_width(d[ok], measured[ok]) if learned > 2 else math.nan
         e = _periodic_fill(e, ok)
-        e = self._anti_windup(e, u, sensor)
-        saturated = self._saturated(u)
+        g = self.settings["gain"]
+        flipped = self.settings["domain"] == "displacement" and g is not None and g < 0
+        e = _anti_windup(e, u, self.compensator, -1.0 if flipped else 1.0)
+        saturated = _saturated(u, self.compensator)
         if saturated > SATURATED * u.size:
             warnings.warn(
                 f"trial {index}: {saturated} of {u.size} commands at the voltage or slew limit: "
@@ -557,17 +585,6 @@ class LearningCompensator:
         self._close(trial)
         return trial
 
-    def _saturated(self, u: FloatArray) -> int:
-        """Commands at a voltage limit or moved by the whole slew limit."""
-        comp = self.compensator
-        at = (u >= comp.v_max - 1e-9 * max(1.0, abs(comp.v_max))) | (
-            u <= comp.v_min + 1e-9 * max(1.0, abs(comp.v_min))
-        )
-        slewed = np.zeros(u.size, dtype=bool)
-        if math.isfinite(comp.max_step):
-            slewed[1:] = np.abs(np.diff(u)) >= comp.max_step * (1 - 1e-9)
-        return int(np.count_nonzero(at | slewed))
-
     def _close(self, trial: Trial) -> None:
         self.history.append(trial)
         self._pending = None
@@ -595,20 +612,6 @@ class LearningCompensator:
         bound = 2.0 * float(np.mean(sigma)) * u.size * dt * scale / span
         h = np.where(ok, y, np.nan) - leaked
         return (h * g if as_displacement and g is not None else h), bound
-
-    def _anti_windup(self, e: FloatArray, u: FloatArray, sensor: bool) -> FloatArray:
-        """No learning outward where a command sat at a limit (the error there is out of reach)."""
-        comp = self.compensator
-        g = self.settings["gain"]
-        sign = (
-            -1.0 if (self.settings["domain"] == "displacement" and g is not None and g < 0) else 1.0
-        )
-        at_top = u >= comp.v_max - 1e-9 * max(1.0, abs(comp.v_max))
-        at_bottom = u <= comp.v_min + 1e-9 * max(1.0, abs(comp.v_min))
-        out = e.copy()
-        out[at_top & (sign * e > 0)] = 0.0
-        out[at_bottom & (sign * e < 0)] = 0.0
-        return out
 
     def _update(self, base: FloatArray, e: FloatArray, sensor: bool) -> FloatArray:
         """``Q (base + gain L e)``, over the periodic trial (the mean kept for a charge)."""
