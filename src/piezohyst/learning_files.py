@@ -7,14 +7,16 @@ writes the next trial's commands; the learner's state lives in a JSON file betwe
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 
+from ._formats import Table
 from .compensator import CompensatorSettings
-from .errors import DataFileError, ParameterError
+from .errors import DataFileError, ModelFileError, ParameterError
 from .io import read_table, write_table
 from .leakage import Leakage
 from .learning import LearningCompensator, Trial
@@ -41,10 +43,11 @@ class LearnFileResult:
     commands: np.ndarray
 
 
-def _column(path: Path, name: str, what: str) -> np.ndarray:
-    table = read_table(path)
+def _column(table: Table, name: str, what: str) -> np.ndarray:
     if name not in table:
-        msg = f"{path}: no column {name!r} for the {what} (columns: {', '.join(table.columns)})"
+        msg = (
+            f"{table.path}: no column {name!r} for the {what} (columns: {', '.join(table.columns)})"
+        )
         raise DataFileError(msg)
     return table.get(name, finite=False)
 
@@ -106,6 +109,7 @@ def learn_file(
     v_max = hi if settings.v_max is None else settings.v_max
     first = not state_path.exists()
     d: np.ndarray | None = None
+    saved: dict[str, Any] = {}
     rate = settings.sample_rate
     if first:
         if desired is None or recorded is not None:
@@ -114,25 +118,25 @@ def learn_file(
                 "and no recording"
             )
             raise ParameterError(msg)
-        d = _column(Path(desired), column, "desired trajectory")
+        table = read_table(Path(desired))
+        d = _column(table, column, "desired trajectory")
         if rate is None:
-            table = read_table(Path(desired))
-            if "time" not in table:
-                msg = f"{desired}: no 'time' column: give the sample rate (--sample-rate)"
-                raise DataFileError(msg)
-            t = table.get("time")
+            t = _column(table, "time", "time (or give --sample-rate)")
             rate = float(f"{(t.size - 1) / (t[-1] - t[0]):.12g}")  # 1000.0, not 999.9999999999
-    elif desired is not None:
-        msg = f"{state_path} already holds a trajectory: --desired starts a run (new state file)"
-        raise ParameterError(msg)
-    if rate is None:  # a later call: the rate the state was made with
-        import json
-
-        saved = json.loads(state_path.read_text(encoding="utf-8"))
-        rate = float(saved.get("sample_rate", 0.0)) or None
-        if rate is None:
-            msg = f"{state_path}: no sample rate in the state: give --sample-rate"
+    else:
+        if desired is not None:
+            msg = f"{state_path} already holds a trajectory: --desired starts a run (new file)"
             raise ParameterError(msg)
+        try:
+            saved = json.loads(state_path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            msg = f"{state_path}: cannot read the learning state ({exc})"
+            raise ModelFileError(msg) from None
+        if rate is None:  # the rate the run was started with
+            rate = float(saved.get("sample_rate", 0.0)) if isinstance(saved, dict) else 0.0
+            if not rate > 0:
+                msg = f"{state_path}: no sample rate in the state: give --sample-rate"
+                raise ModelFileError(msg)
     learner = LearningCompensator(
         model,
         v_min=v_min,
@@ -149,14 +153,15 @@ def learn_file(
     )
     trial = None
     if not first:
-        learner.load(state_path)
+        learner.restore(saved, str(state_path))
         if recorded is None:
             msg = f"{state_path} waits for trial {learner.trials}'s recording (RECORDED)"
             raise ParameterError(msg)
         rec = Path(recorded)
         sent = learner.pending
         assert sent is not None
-        v = _column(rec, voltage_column, "voltage sent")
+        recording = read_table(rec)
+        v = _column(recording, voltage_column, "voltage sent")
         if v.size != sent.size:
             msg = f"{rec}: {v.size} rows, but trial {learner.trials} sent {sent.size} commands"
             raise DataFileError(msg)
@@ -168,7 +173,7 @@ def learn_file(
                 f"trial {learner.trials} ({sent[worst]!r}): a recording of another trial or run"
             )
             raise DataFileError(msg)
-        y = _column(rec, reading_column, "reading")
+        y = _column(recording, reading_column, "reading")
         trial = learner.learn(displacement=y) if sensor else learner.learn(y)
     else:
         assert d is not None
