@@ -78,6 +78,11 @@ def _auto_or_float(value: str) -> float | Literal["auto"]:
 @click.option(
     "--sensor", is_flag=True, help="The reading is a displacement sensor's (m), not the charge."
 )
+@click.option(
+    "--no-lead-in",
+    is_flag=True,
+    help="Learn from the first trial too (the actuator already runs the scan).",
+)
 @_limit_options
 @click.option(
     "-o",
@@ -102,6 +107,7 @@ def learn(
     voltage_column: str,
     reading_column: str,
     sensor: bool,
+    no_lead_in: bool,
     settings: CompensatorSettings,
     out: Path,
 ) -> None:
@@ -137,11 +143,17 @@ def learn(
             voltage_column=voltage_column,
             reading_column=reading_column,
             sensor=sensor,
+            lead_in=not no_lead_in,
         ),
     )
     trial, learner = result.trial, result.learner
     if trial is not None:
-        if trial.skipped:
+        if trial.skipped and trial.index == 0 and learner.settings["lead_in"]:
+            click.echo(
+                f"trial 0: the lead-in (error {trial.error:.3%}: the actuator arriving), not "
+                "learned from"
+            )
+        elif trial.skipped:
             click.echo(f"trial {trial.index}: {trial.learned} readings to learn from: skipped")
         else:
             back = " (rolled back, gain halved)" if trial.rolled_back else ""

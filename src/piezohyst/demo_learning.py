@@ -124,8 +124,9 @@ def learning_report(study: dict[str, Any]) -> list[str]:
         "A scan repeats, and so does its error: `LearningCompensator` learns it from the "
         "measured charge minus the leakage calibrated from holds (the loop's bench above, its "
         "bias current never identified), trial after trial, without a sensor; the laser only "
-        "checks. Ten scans of 10 Hz per one-second trial; the laser is scored after each "
-        f"trial's first scan (trial 0 ramps in from rest there). The law: {study['design']}. "
+        "checks. Ten scans of 10 Hz per one-second trial; trial 0, the lead-in, brings the "
+        "actuator from rest into the scan and is not learned from; the laser is scored after "
+        f"each trial's first scan. The law: {study['design']}. "
         f"Rollbacks: {study['rollbacks']}.",
         "",
         "| trial | error the learner saw | laser: width | laser: NRMSE, offset removed |",

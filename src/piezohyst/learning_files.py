@@ -69,6 +69,7 @@ def learn_file(
     reading_column: str = "charge",
     sensor: bool = False,
     tolerance: float = 1e-4,
+    lead_in: bool = True,
 ) -> LearnFileResult:
     """One trial of learning through files.
 
@@ -94,7 +95,7 @@ def learn_file(
         domain and gain.
     leakage : path, optional
         A leakage file (:func:`~piezohyst.leakage.calibrate_leakage`); default the model's.
-    lag, learning_gain, cutoff
+    lag, learning_gain, cutoff, lead_in
         See :class:`~piezohyst.LearningCompensator`.
 
     Returns
@@ -150,6 +151,7 @@ def learn_file(
         lag=lag,
         learning_gain=learning_gain,
         cutoff=cutoff,
+        lead_in=lead_in,
     )
     trial = None
     if not first:
