@@ -117,7 +117,9 @@ def learn(
     call takes --desired and writes the first trial; each later call takes the
     DAQ's recording of the trial just sent (its voltage column must match what
     was written) and the charge measured over it, and writes the next. The
-    state file names the model, settings and trajectory it belongs to.
+    state file names the model, settings and trajectory it belongs to. A
+    reading the DAQ lost is written NaN and not learned from (an empty cell is
+    refused as a damaged row). The first trial is the lead-in, not learned from.
 
     \b
     Example:
