@@ -408,3 +408,31 @@ def test_the_command_line_learns_from_a_sensor_column(
     assert "not learned from" not in res.output
     res = runner.invoke(main, [*base, "--desired", str(tmp_path / "scan.csv")])
     assert res.exit_code == 1 and "--desired starts a run" in res.output
+
+
+def test_the_command_line_skips_lost_readings_written_nan(
+    pi_model: ph.ClassicalPI, tmp_path: Path
+) -> None:
+    pi_model.save(tmp_path / "m.json")
+    d = cosine(pi_model, n=200, cycles=4)
+    ph.write_table(tmp_path / "scan.csv", {"time": np.arange(d.size) / RATE, "desired": d})
+    base = ["learn", str(tmp_path / "m.json"), "--state", str(tmp_path / "s.json"), "-o",
+            str(tmp_path / "next.csv"), "--v-min", "0", "--v-max", "140", "--slew-rate", "20000",
+            "--no-lead-in"]  # fmt: skip
+    runner = CliRunner()
+    assert runner.invoke(main, [*base, "--desired", str(tmp_path / "scan.csv")]).exit_code == 0
+    u = ph.read_table(tmp_path / "next.csv").get("command")
+    q = 0.97 * pi_model.hysteresis_.predict(u)
+    pairs = enumerate(zip(u.tolist(), q.tolist(), strict=True))
+    rows = ["voltage,charge"] + [
+        f"{v!r},{'NaN' if 50 <= i < 60 else repr(c)}" for i, (v, c) in pairs
+    ]
+    (tmp_path / "t0.csv").write_text("\n".join(rows) + "\n")
+    res = runner.invoke(main, [*base[:2], str(tmp_path / "t0.csv"), *base[2:]])
+    assert res.exit_code == 0, res.output
+    learned = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
+                                     slew_rate=20e3, lead_in=False)  # fmt: skip
+    learned.command(d)
+    trial = learned.learn(np.where((np.arange(d.size) >= 50) & (np.arange(d.size) < 60),
+                                   np.nan, q))  # fmt: skip
+    assert f"learned from {trial.learned} samples" in res.output and trial.learned <= d.size - 10
