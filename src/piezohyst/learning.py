@@ -542,23 +542,20 @@ class LearningCompensator:
         index = self.trials
         span = float(np.ptp(d))
         learned = int(ok.sum())
-        if self.settings["lead_in"] and index == 0:  # the arrival, not the scan's response yet
-            seen = float(np.sqrt(np.mean(e[ok] ** 2))) / span if ok.any() else math.nan
-            trial = Trial(index, seen, math.nan, 0, self._gain, False, True, bound,
-                          _saturated(u, self.compensator))  # fmt: skip
-            self._previous = self._correction
-            self._close(trial)
-            return trial
-        if learned < d.size // 2:
-            warnings.warn(
-                f"trial {index}: {learned} of {d.size} readings to learn from (NaN or "
-                "slew-limited into the trajectory): nothing learned",
-                LearningWarning,
-                stacklevel=2,
-            )
-            trial = Trial(index, math.nan, math.nan, learned, self._gain, False, True, bound,
-                          _saturated(u, self.compensator))  # fmt: skip
-            self._previous = self._correction  # sent again: the history of the next trial
+        saturated = _saturated(u, self.compensator)
+        self._previous = self._correction  # what this trial sent: the next trial's history
+        lead_in = self.settings["lead_in"] and index == 0  # the arrival, not the scan's response
+        if lead_in or learned < d.size // 2:
+            if not lead_in:
+                warnings.warn(
+                    f"trial {index}: {learned} of {d.size} readings to learn from (NaN or "
+                    "slew-limited into the trajectory): nothing learned",
+                    LearningWarning,
+                    stacklevel=2,
+                )
+            seen = float(np.sqrt(np.mean(e[ok] ** 2))) / span if lead_in and ok.any() else math.nan
+            trial = Trial(index, seen, math.nan, 0 if lead_in else learned, self._gain, False,
+                          True, bound, saturated)  # fmt: skip
             self._close(trial)
             return trial
         error = float(np.sqrt(np.mean(e[ok] ** 2))) / span
@@ -567,7 +564,6 @@ class LearningCompensator:
         g = self.settings["gain"]
         flipped = self.settings["domain"] == "displacement" and g is not None and g < 0
         e = _anti_windup(e, u, self.compensator, -1.0 if flipped else 1.0)
-        saturated = _saturated(u, self.compensator)
         if saturated > SATURATED * u.size:
             warnings.warn(
                 f"trial {index}: {saturated} of {u.size} commands at the voltage or slew limit: "
@@ -586,7 +582,6 @@ class LearningCompensator:
         grown = self._good is not None and error > max(self._good[1], floor) * (
             1 + GROWTH_SIGMAS / math.sqrt(learned)
         )
-        self._previous = self._correction
         if grown and not self._resend:
             assert self._good is not None
             rolled = True
