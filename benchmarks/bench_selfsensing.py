@@ -14,7 +14,8 @@ Run: ``python benchmarks/bench_selfsensing.py [--seeds 3] [--operators 20]``.
    chooses (among the cores the loop runs) on what ``piezohyst excite`` writes,
    leakage from 10 s holds up and down, 60 s of ``decaying`` loops over the range
    the identification record reached (its leakage-corrected charge at the lowest
-   and highest voltage, from every history in it, less 3 %).
+   and highest voltage, from every history in it, less 3 %). ``--every-core``: only
+   this, through each core the loop runs instead of the one chosen.
 3. Cost: ``step`` called from Python, against the same algorithm written as a
    plain Python function (measured in the same run); ``process`` throughput,
    against a NumPy loop over time.
@@ -132,12 +133,14 @@ def targets(seed: int, operators: int, ki: float = 0.5) -> dict[str, dict[str, f
     }
 
 
-def plants(seed: int) -> None:
-    """The loop on each plant of ``ph.simulation.PLANTS`` (issue 26's protocol)."""
+def plants(seed: int, every_core: bool = False) -> None:
+    """The loop on each plant of ``ph.simulation.PLANTS`` (issue 26's protocol); with
+    ``every_core``, the loop through each core the loop runs, not only the one chosen."""
     import warnings
 
     from piezohyst.excitation import excitation
     from piezohyst.metrics import hysteresis_width
+    from piezohyst.selection import _candidate
     from piezohyst.simulation import PLANTS, Bench, make_signal, run_loop
 
     cores = ("classical-pi", "active-pi", "bouc-wen", "preisach", "duhem")
@@ -150,26 +153,39 @@ def plants(seed: int) -> None:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             leak = ph.calibrate_leakage(cal.t, cal.voltage, cal.charge)
-            model = ph.select_model(ident.voltage, ident.charge, t=ident.t, candidates=cores).model
+            if every_core:
+                models = {c: _candidate(c, 10, ("V", "C")).fit(ident.voltage, ident.charge,
+                                                               t=ident.t)
+                          for c in cores[1:]}  # fmt: skip
+            else:
+                sel = ph.select_model(ident.voltage, ident.charge, t=ident.t, candidates=cores)
+                models = {sel.name: sel.model}
         q = ident.charge - leak.charge(ident.voltage, ident.t, ident.charge)
         v = ident.voltage
         top = float(q[v >= v.max() - 1e-9].min() - q[0])
         bottom = float(q[v <= v.min() + 1e-9].max() - q[0])
         lo, hi = bottom + 0.03 * (top - bottom), top - 0.03 * (top - bottom)
         desired = p.gain * (lo + (hi - lo) * shape)
-        ctl = ph.SelfSensingController(model, v_min=0.0, v_max=140.0, sample_rate=1000.0,
-                                       leakage=leak, domain="displacement", gain=p.gain,
-                                       slew_rate=30e3)  # fmt: skip
-        run = run_loop(ctl, desired, Bench(p, seed=3 * seed + 3, voltage=ctl.last_command))
-        err = run.displacement - desired
-        thirds = [100 * math.sqrt(float(np.mean(e * e))) / float(np.ptp(desired))
-                  for e in np.array_split(err, 3)]  # fmt: skip
-        print(
-            f"  {name:19s} {type(model).__name__:13s} width "
-            f"{100 * hysteresis_width(desired, run.displacement):5.3f} %, RMS error by thirds "
-            + ", ".join(f"{x:5.3f}" for x in thirds)
-            + f" %, saturated {ctl.saturated_count}"
-        )
+        for model in models.values():
+            ctl = ph.SelfSensingController(model, v_min=0.0, v_max=140.0, sample_rate=1000.0,
+                                           leakage=leak, domain="displacement", gain=p.gain,
+                                           slew_rate=30e3)  # fmt: skip
+            run = run_loop(ctl, desired, Bench(p, seed=3 * seed + 3, voltage=ctl.last_command))
+            err = run.displacement - desired
+            thirds = [100 * math.sqrt(float(np.mean(e * e))) / float(np.ptp(desired))
+                      for e in np.array_split(err, 3)]  # fmt: skip
+            # the error above 100 Hz (a loop that chatters), RMS in % of the span
+            spec = np.fft.rfft(err)
+            fast = np.fft.rfftfreq(err.size, 1e-3) >= 100.0
+            chatter = 100 * math.sqrt(2 * float(np.sum(np.abs(spec[fast]) ** 2))) / err.size
+            chatter /= float(np.ptp(desired))
+            print(
+                f"  {name:19s} {type(model).__name__:13s} width "
+                f"{100 * hysteresis_width(desired, run.displacement):5.3f} %, RMS error by "
+                "thirds "
+                + ", ".join(f"{x:5.3f}" for x in thirds)
+                + f" %, above 100 Hz {chatter:5.3f} %, saturated {ctl.saturated_count}"
+            )
 
 
 def cost(operators: int) -> None:
@@ -221,7 +237,15 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--operators", type=int, default=20)
+    parser.add_argument("--every-core", action="store_true",
+                        help="only the plants, the loop through every core it runs")  # fmt: skip
     args = parser.parse_args()
+    if args.every_core:
+        print("plants of other physics, the loop through each core (60 s of decaying loops):")
+        for seed in range(args.seeds):
+            print(f" seed {seed}")
+            plants(seed, every_core=True)
+        return
     print(f"piezohyst {ph.__version__}: self-sensing loop, 60 s decaying loops, +40 pA unseen bias")
     rows = []
     for seed in range(args.seeds):
