@@ -669,7 +669,9 @@ def matrix(data: Path) -> str:
         "the creep-lag plant's training record scored the polished Duhem at 56 % (its loops "
         "ratcheted by 55 % of the span a cycle), before this matrix was rerun. Classical "
         "PI has no growth term: on a "
-        "leaking capacitor's charge it drifts by design (the paper's baseline).\n",
+        "leaking capacitor's charge it drifts by design (the paper's baseline). Other rules "
+        "for the choice, tried on other units of the same batches and checked here: "
+        "`docs/selection-study.md`.\n",
     ]
     return "\n".join(lines)
 
