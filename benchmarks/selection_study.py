@@ -1,6 +1,6 @@
 """How well does a rule for choosing a model do on data it was not tuned on?
 
-``python benchmarks/selection_study.py [DATA_DIR] [-o docs/selection-study.md]`` (about 75
+``python benchmarks/selection_study.py [DATA_DIR] [-o docs/selection-study.md]`` (about 50
 minutes on two cores; ``-o`` rewrites the tables between the page's markers).
 
 The question behind ``select_model``'s folds. A rule for scoring candidates inside a record
