@@ -112,7 +112,12 @@ class SelfSensingController:
     ki : float, default 0.5
         Integral gain per sample, in [0, 1.9]: 1 removes a constant error in
         one sample but passes the measurement noise; the loop's bandwidth is
-        about ``ki * sample_rate / (2 pi)`` (see ``docs/realtime.md``).
+        about ``ki * sample_rate / (2 pi)`` (see ``docs/realtime.md``). The
+        correction passes through the model's inverse, so the gain the actuator
+        sees is ``ki`` times its slope over the model's: where a model's branches
+        start far flatter than the actuator's (a Preisach density at its floor
+        just after a reversal), the loop chatters near the Nyquist rate; lower
+        ``ki`` or choose a core whose branches start steep.
     kp : float, default 0.0
         Proportional gain, in [0, 1].
     slew_rate : float, "trained" or None, default "trained"
