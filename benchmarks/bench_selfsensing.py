@@ -167,6 +167,12 @@ def plants(seed: int, every_core: bool = False) -> None:
         lo, hi = bottom + 0.03 * (top - bottom), top - 0.03 * (top - bottom)
         desired = p.gain * (lo + (hi - lo) * shape)
         for model in models.values():
+            if isinstance(model, ph.PreisachModel):  # its slope just after a reversal
+                core = model.operator_
+                step, reach = core.nodes[1] - core.nodes[0], core.nodes[-1] - core.nodes[0]
+                first = float(np.diag(core.density).min() / step)
+                share = 100 * first / (core.density.sum() / reach)
+                print(f"  {name:19s} Preisach: first slope down to {share:.1f} % of its mean")
             ctl = ph.SelfSensingController(model, v_min=0.0, v_max=140.0, sample_rate=1000.0,
                                            leakage=leak, domain="displacement", gain=p.gain,
                                            slew_rate=30e3)  # fmt: skip
