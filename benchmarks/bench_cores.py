@@ -142,7 +142,9 @@ def cost() -> list[dict[str, float]]:
             sweep = np.concatenate([np.linspace(0.0, hi, 2000), np.linspace(hi, 0.0, 2000)])
             ramp = model.hysteresis_.predict(sweep, t=times(sweep.size))
         desired = ramp[-1] + (ramp[1999] - ramp[-1]) * (0.05 + 0.9 * shape)
-        comp = ph.Compensator(model, v_min=0.0, v_max=hi, sample_rate=FS)
+        # no slew limit: the naive reference has none (with the trained default the first
+        # samples ramp up from 0 V and the two differed by tens of volts there)
+        comp = ph.Compensator(model, v_min=0.0, v_max=hi, sample_rate=FS, slew_rate=None)
         comp.process(desired[:10])
 
         def block(comp: ph.Compensator = comp, desired: np.ndarray = desired) -> None:
