@@ -85,7 +85,11 @@ def test_demo_goes_beyond_pi_on_minor_loops(demo_run: tuple[Path, dict[str, Any]
     assert set(rows) == {"active PI (paper)", "Preisach", "Duhem", "Bouc-Wen"}
     preisach, active = rows["Preisach"], rows["active PI (paper)"]
     assert preisach["width_decaying_S_pct"] <= 1.0
-    assert preisach["width_decaying_S_pct"] < 0.7 * active["width_decaying_S_pct"]
+    # 0.80 % against 1.09 %: 0.69 % when the fit's first rise followed a branch, before the
+    # initial loading curve (the bench's own rest: demagnetised at 0 V) became the default on
+    # a tie. With it the model predicts the held-out loops better (0.44 % against 0.53 %), and
+    # its own major loop, which sets each model's desired range here, ends higher
+    assert preisach["width_decaying_S_pct"] < 0.8 * active["width_decaying_S_pct"]
     assert preisach["train_nrmse_pct"] < active["train_nrmse_pct"]
     for r in rows.values():
         assert r["heldout_nrmse_pct"] < 3.0 and r["width_steady_S_pct"] < 3.0

@@ -155,6 +155,38 @@ def reversals(x, band, state):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
+def unturned_bounds(x, band):  # type: ignore[no-untyped-def]
+    """(lowest input after the first fall of ``band`` from a maximum, highest after the first
+    rise of ``band`` from a minimum); NaN for a side the input never turned on. Below the
+    first (above the second) no relay the input switched up (down) ever switched back."""
+    low = math.nan
+    high = math.nan
+    top = x[0] if x.shape[0] else 0.0
+    bottom = top
+    fell = False
+    rose = False
+    for k in range(x.shape[0]):
+        v = x[k]
+        if fell:
+            if not v >= low:
+                low = v
+        elif v > top:
+            top = v
+        elif top - v >= band:
+            fell = True
+            low = v
+        if rose:
+            if not v <= high:
+                high = v
+        elif v < bottom:
+            bottom = v
+        elif v - bottom >= band:
+            rose = True
+            high = v
+    return low, high
+
+
+@njit(cache=True)
 def constant_runs(x, tol, edges):  # type: ignore[no-untyped-def]
     """Split ``x`` into runs that stay within ``tol`` of their first sample.
 

@@ -590,11 +590,14 @@ class PreisachModel(HysteresisModel):
         play operators from zero state do (the grid then reaches beyond the
         range to the rest point's mirror image, where that curve's cells are
         one function of the loop width); ``"branch"``, a branch from the rest
-        point, as from an extremum. ``"auto"`` fits both and takes the
-        initial loading curve only where its RMSE is below 0.9 of the other's:
-        the paper's experiment (the simulated bench from rest at 0 V) 0.96 % →
-        0.07 %; the simulated Preisach capacitor keeps the branch (0.129 %
-        either way, and the branch predicts its other records better).
+        point, as from an extremum. ``"auto"`` fits both and keeps the
+        initial loading curve unless the branch's RMSE is below 0.9 of its
+        own (the paper's experiment, the simulated bench from rest at 0 V:
+        the curve 0.07 %, a branch 0.96 %). Where the record never falls back
+        to its rest voltage the two fit alike and the curve predicts other
+        records better: on decaying loops of plants of other physics, full
+        cycles to 1.0-2.5 % where a branch left 3.3-7.0 %
+        (``cores.preisach.BRANCH_GAIN``).
     smoothing : float, default 1e-4
         Weight of the curvature penalty on the density, relative to the data's.
     signed : bool or "auto", default "auto"
