@@ -15,7 +15,8 @@ Run: ``python benchmarks/bench_selfsensing.py [--seeds 3] [--operators 20]``.
    leakage from 10 s holds up and down, 60 s of ``decaying`` loops over the range
    the identification record reached (its leakage-corrected charge at the lowest
    and highest voltage, from every history in it, less 3 %). ``--every-core``: only
-   this, through each core the loop runs instead of the one chosen.
+   this, through each core the loop runs instead of the one chosen; ``--flat-guard``:
+   with the controllers' ``flat_guard`` (the gain they then use is printed).
 3. Cost: ``step`` called from Python, against the same algorithm written as a
    plain Python function (measured in the same run); ``process`` throughput,
    against a NumPy loop over time.
@@ -133,7 +134,7 @@ def targets(seed: int, operators: int, ki: float = 0.5) -> dict[str, dict[str, f
     }
 
 
-def plants(seed: int, every_core: bool = False) -> None:
+def plants(seed: int, every_core: bool = False, flat_guard: bool = False) -> None:
     """The loop on each plant of ``ph.simulation.PLANTS`` (issue 26's protocol); with
     ``every_core``, the loop through each core the loop runs, not only the one chosen."""
     import warnings
@@ -175,7 +176,7 @@ def plants(seed: int, every_core: bool = False) -> None:
                 print(f"  {name:19s} Preisach: first slope down to {share:.1f} % of its mean")
             ctl = ph.SelfSensingController(model, v_min=0.0, v_max=140.0, sample_rate=1000.0,
                                            leakage=leak, domain="displacement", gain=p.gain,
-                                           slew_rate=30e3)  # fmt: skip
+                                           slew_rate=30e3, flat_guard=flat_guard)  # fmt: skip
             run = run_loop(ctl, desired, Bench(p, seed=3 * seed + 3, voltage=ctl.last_command))
             err = run.displacement - desired
             thirds = [100 * math.sqrt(float(np.mean(e * e))) / float(np.ptp(desired))
@@ -191,6 +192,7 @@ def plants(seed: int, every_core: bool = False) -> None:
                 "thirds "
                 + ", ".join(f"{x:5.3f}" for x in thirds)
                 + f" %, above 100 Hz {chatter:5.3f} %, saturated {ctl.saturated_count}"
+                + (f", ki {ctl.ki_used:.3g}" if flat_guard else "")
             )
 
 
@@ -245,12 +247,14 @@ def main() -> None:
     parser.add_argument("--operators", type=int, default=20)
     parser.add_argument("--every-core", action="store_true",
                         help="only the plants, the loop through every core it runs")  # fmt: skip
+    parser.add_argument("--flat-guard", action="store_true",
+                        help="with --every-core: the controllers' flat_guard on")  # fmt: skip
     args = parser.parse_args()
     if args.every_core:
         print("plants of other physics, the loop through each core (60 s of decaying loops):")
         for seed in range(args.seeds):
             print(f" seed {seed}")
-            plants(seed, every_core=True)
+            plants(seed, every_core=True, flat_guard=args.flat_guard)
         return
     print(f"piezohyst {ph.__version__}: self-sensing loop, 60 s decaying loops, +40 pA unseen bias")
     rows = []

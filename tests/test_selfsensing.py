@@ -389,3 +389,40 @@ def test_command_line_loop(tmp_path: Path) -> None:
         "--leakage", tmp_path / "uc.json", "-o", tmp_path / "x.csv",
     )  # fmt: skip
     assert code == 1 and "the leakage is in uC/V, the model in C/V" in err
+
+
+def _loop_reversals(model: ph.HysteresisModel, actuator: ph.PIHysteresis, *, guard: bool) -> int:
+    """Command reversals of the loop on a 1 Hz sine, 2 s, plant read one sample late."""
+    desired = model.hysteresis_.predict(70 + 40 * np.sin(2 * np.pi * np.arange(2000) / FS))
+    ctl = ph.SelfSensingController(model, v_min=0.0, v_max=140.0, sample_rate=FS,
+                                   slew_rate=None, flat_guard=guard)  # fmt: skip
+    plant = ph.ActivePI.from_operator(actuator).hysteresis_
+    state, reading, out = None, 0.0, []
+    for d in desired:
+        out.append(ctl.step(d, reading))
+        run = plant.propagate(np.array([out[-1]]), None, state)
+        state, reading = run.state, float(run.output[0])
+    steps = np.diff(np.array(out))
+    moving = steps[np.abs(steps) > 1e-9]
+    return int(np.count_nonzero(np.sign(moving[1:]) != np.sign(moving[:-1])))
+
+
+def test_the_flat_guard_stops_the_chatter_of_a_model_flatter_than_its_actuator() -> None:
+    """A model whose branches start at 1 % of its mean slope, an actuator whose start at a
+    third of it: through the inverse, ki = 0.5 becomes a loop gain of about 17 after each
+    reversal, and the loop reverses the command every sample; guarded, the integral gain
+    is twice the first slope over the mean (0.02), and the command turns where the sine
+    does."""
+    r = [0.0, 10.0, 25.0, 45.0, 70.0]
+    model = ph.ActivePI.from_operator(ph.PIHysteresis(r, [2e-10, 1e-8, 6e-9, 4e-9, 2e-9]))
+    plant = ph.PIHysteresis(r, [7e-9, 5e-9, 4e-9, 3e-9, 1e-9])
+    chatter = _loop_reversals(model, plant, guard=False)
+    guarded = _loop_reversals(model, plant, guard=True)
+    assert chatter > 200
+    assert guarded <= 6  # measured 4: the sine's own turns
+    ctl = ph.SelfSensingController(model, v_min=0.0, v_max=140.0, sample_rate=FS,
+                                   flat_guard=True)  # fmt: skip
+    # the first weight over the mean slope between the limits (2e-10 against 2.42e-8 / 140 V)
+    mean = float(np.ptp(model.hysteresis_.predict(np.array([0.0, 140.0, 0.0])))) / 140.0
+    assert ctl.first_slope == pytest.approx(2e-10 / mean, rel=1e-9)  # tol: rounding of a difference
+    assert ctl.ki_used == pytest.approx(2 * ctl.first_slope) and ctl.ki == 0.5
