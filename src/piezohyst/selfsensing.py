@@ -263,7 +263,6 @@ class SelfSensingController:
         ref_slot, gain_slot = comp.inverse.slots()
         self.ctl = np.zeros(K.CTL_SIZE)
         self.ctl[K.CTL_KP] = self.kp
-        self.ctl[K.CTL_KI] = self.ki
         self.ctl[K.CTL_G0] = leakage.conductance
         self.ctl[K.CTL_G1] = leakage.quadratic
         self.ctl[K.CTL_INV_SCALE] = 1.0 / leakage.scale
@@ -276,9 +275,9 @@ class SelfSensingController:
         tol = 1e-4 * span if hold_tolerance is None else abs(float(hold_tolerance)) * abs(inv_gain)
         self.ctl[K.CTL_HOLD_TOL] = tol
         self.ctl[K.CTL_HOLD_SAMPLES] = max(8.0, round(_gain(hold_time, "hold_time", 0, 1e6) * fs))
-        # the integral's gain scales down where the model is flatter than ki / 2 of its mean
-        # slope (see _kernels.feedback_close_at): the loop's gain there is twice the actuator's
-        # slope over the model's mean, not ki times it over the model's own
+        # the guard: just after a reversal the loop's gain is ki times the actuator's slope over
+        # the model's; at most 2 first_slope for ki, it is at most twice the actuator's slope
+        # over the model's mean
         self.flat_guard = flat_guard
         self._span = span
         self._first: float | None = None

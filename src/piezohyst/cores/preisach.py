@@ -469,14 +469,15 @@ def _preisach_grid(
         below = round((lo - first) / h)
     nodes = (lo - below * h) + h * np.arange(n)
     k_lo, k_hi = below, round((hi - nodes[0]) / h)  # the training range's first and last node
-    m = n - 1
-    ks, ls = np.triu_indices(m)
-    in_range = (ks >= k_lo) & (ls < k_hi)
     # cells wholly below the lowest turn (above the highest) the record switched only on its
     # way to a new extreme, a column (row) of them at once: seen through their widths alone
-    t_lo = math.floor((seen[0] - nodes[0]) / h + 1e-9) if math.isfinite(seen[0]) else k_lo
-    t_hi = math.ceil((seen[1] - nodes[0]) / h - 1e-9) if math.isfinite(seen[1]) else k_hi
-    inside = in_range & (ks >= t_lo) & (ls < t_hi)
+    if math.isfinite(seen[0]):
+        k_lo = max(k_lo, math.floor((seen[0] - nodes[0]) / h + 1e-9))
+    if math.isfinite(seen[1]):
+        k_hi = min(k_hi, math.ceil((seen[1] - nodes[0]) / h - 1e-9))
+    m = n - 1
+    ks, ls = np.triu_indices(m)
+    inside = (ks >= k_lo) & (ls < k_hi)
     tie = np.empty(ks.size, dtype=np.int64)
     n_inside = int(inside.sum())
     tie[inside] = np.arange(n_inside)
