@@ -426,3 +426,18 @@ def test_the_flat_guard_stops_the_chatter_of_a_model_flatter_than_its_actuator()
     mean = float(np.ptp(model.hysteresis_.predict(np.array([0.0, 140.0, 0.0])))) / 140.0
     assert ctl.first_slope == pytest.approx(2e-10 / mean, rel=1e-9)  # tol: rounding of a difference
     assert ctl.ki_used == pytest.approx(2 * ctl.first_slope) and ctl.ki == 0.5
+
+
+def test_a_bank_guards_each_channel_by_its_own_model() -> None:
+    """flat_guard passes through a BankController's settings: each channel runs with the gain
+    its own model's first slope allows, in the fused kernel's rows too."""
+    r = [0.0, 10.0, 25.0, 45.0, 70.0]
+    flat = ph.PIHysteresis(r, [2e-10, 1e-8, 6e-9, 4e-9, 2e-9])
+    steep = ph.PIHysteresis(r, [7e-9, 5e-9, 4e-9, 3e-9, 1e-9])
+    bank = ph.ModelBank.from_models([ph.ClassicalPI.from_operator(u) for u in (flat, steep)])
+    ctl = ph.BankController(bank, v_min=0.0, v_max=140.0, sample_rate=FS, flat_guard=True)
+    used = [ch.ki_used for ch in ctl._channels]
+    assert used[0] < 0.05 and used[1] == 0.5  # the steep model's first slope allows ki
+    from piezohyst import _kernels as K
+
+    np.testing.assert_array_equal(ctl.ctl[:, K.CTL_KI], used)
