@@ -1,0 +1,135 @@
+"""Which score of select_model's two parts chooses best on data it was not tuned on?
+
+``python benchmarks/selection_scores.py --units 4,5,6 [DATA_DIR]`` (about 9 minutes on two
+cores for three units; ``--units 1,2,3`` for the matrix's own).
+
+The matrix's splits (``docs/validation.md``): every plant trained on what ``piezohyst
+excite`` writes or on 40 s of decaying loops and tested on 12 s of ``multi``; with
+DATA_DIR, its two measured sets. For each record: every candidate's held-out NRMSE, and
+``select_model``'s two part scores per candidate (fit on the first half, score the next
+quarter; fit on three quarters, score the last). Four scores of the same two parts, each
+choosing the simplest candidate within 2 % of its best: the plain mean, weights in
+proportion to each part's fit length (0.4, 0.6; what ``select_model`` uses), the last
+part alone, the worst part. A score's ratio on a row is the mean held-out NRMSE of what it
+chose over the units, divided by the best candidate's mean, as in the matrix. Units 4-6 are
+where a score may be chosen; units 1-3 are the matrix's, to check it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import warnings
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import piezohyst as ph
+from piezohyst.selection import CANDIDATES, TIE, _candidate
+
+SCORES: dict[str, Callable[[list[float]], float]] = {
+    "mean": lambda f: float(np.mean(f)),
+    "weighted 0.4, 0.6 (select_model)": lambda f: 0.4 * f[0] + 0.6 * f[1],
+    "last part": lambda f: f[-1],
+    "worst part": lambda f: max(f),
+}
+
+
+def row(train: tuple[Any, ...], test: tuple[Any, ...] | None, unit: str) -> dict[str, Any]:
+    """Held-out NRMSE of every default and select_model's part scores on one split (``test``
+    None: the record's last 30 % is held out, predicted on from the fit's start)."""
+    x, y, t = train
+    if test is None:
+        stop = round(0.7 * x.size)
+        part, (xt, yt, tt), scored = slice(0, stop), (x, y, t), slice(stop, None)
+    else:
+        part, (xt, yt, tt), scored = slice(0, x.size), test, slice(None)
+    errs = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for name in CANDIDATES:
+            try:
+                m = _candidate(name, 10, ("V", unit)).fit(x[part], y[part], t=t[part])
+                e = float(ph.metrics.nrmse(yt[scored], m.predict(xt, t=tt)[scored]))
+            except ph.PiezohystError:
+                e = math.inf
+            errs[name] = e if math.isfinite(e) else math.inf
+        sel = ph.select_model(x[part], y[part], t[part], output_unit=unit)
+    return {"errs": errs, "folds": {r.name: list(r.folds) for r in sel.rows}}
+
+
+def plant_job(job: tuple[str, str, int]) -> dict[str, Any]:
+    from piezohyst.excitation import excitation
+    from piezohyst.simulation import PLANTS, batch_unit
+
+    design, plant, unit = job
+    p = batch_unit(PLANTS[plant], unit)
+    if design == "excite":
+        played = excitation(v_min=0.0, v_max=140.0, sample_rate=1000.0)
+        tr = ph.simulate(played.voltage, played.t, preset=p, seed=unit)
+    else:
+        tr = ph.simulate(preset=p, signal="decaying", duration=40.0, seed=unit)
+    te = ph.simulate(preset=p, signal="multi", duration=12.0, seed=unit + 100)
+    return row((tr.voltage, tr.charge, tr.t), (te.voltage, te.charge, te.t), "C")
+
+
+def measured_rows(data: Path) -> dict[tuple[str, str], list[dict[str, Any]]]:
+    act = ph.read_table(data / "piezo_actuator_smarthysteresis" / "hysteresis_v_150_1hz.csv")
+    t, d, v = act.get("col1"), act.get("col2") * 1e-6, act.get("col3")
+    a = int(np.searchsorted(t, 3.3))
+    folder = data / "piezo_micromanipulator_dbo"
+    mm, nr = np.loadtxt(folder / "Model_Vi_Do.dat"), np.loadtxt(folder / "Test_Vi_Do_Di.dat")
+    tm, tn = np.arange(mm.shape[0]) / 200.0, np.arange(nr.shape[0]) / 200.0
+    return {
+        ("measured", "SmartHysteresis"): [row((v[a:], d[a:], t[a:]), None, "m")],
+        ("measured", "micromanipulator"): [
+            row((mm[:, 0], mm[:, 4] * 1e-6, tm), (nr[:, 0], nr[:, 4] * 1e-6, tn), "m")
+        ],
+    }
+
+
+def choose(folds: dict[str, list[float]], score: Callable[[list[float]], float]) -> str:
+    """The simplest candidate within 2 % of the best score."""
+    s = {n: score(f) if all(math.isfinite(x) for x in f) else math.inf for n, f in folds.items()}
+    best = min(s.values())
+    return next(n for n in CANDIDATES if s[n] <= best * (1 + TIE))
+
+
+def main() -> None:
+    from piezohyst.simulation import PLANTS
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("data", nargs="?", type=Path, help="the shared data folder (optional)")
+    ap.add_argument("--units", default="4,5,6", help="batch units, comma-separated")
+    args = ap.parse_args()
+    units = [int(u) for u in args.units.split(",")]
+    jobs = [(d, p, u) for d in ("excite", "decaying") for p in PLANTS for u in units]
+    with ProcessPoolExecutor(2) as ex:
+        results = list(ex.map(plant_job, jobs))
+    rows: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for (design, plant, _), res in zip(jobs, results, strict=True):
+        rows.setdefault((design, plant), []).append(res)
+    if args.data is not None:
+        rows.update(measured_rows(args.data))
+    print(f"piezohyst {ph.__version__}: select_model's part scores, units {args.units}")
+    ratios: dict[str, list[float]] = {s: [] for s in SCORES}
+    for (design, plant), runs in rows.items():
+        means = {n: float(np.mean([r["errs"][n] for r in runs])) for n in CANDIDATES}
+        best = min(means.values())
+        cells = []
+        for label, score in SCORES.items():
+            picks = [choose(r["folds"], score) for r in runs]
+            ratio = float(np.mean([r["errs"][p] for r, p in zip(runs, picks, strict=True)]))
+            ratios[label].append(ratio / best)
+            cells.append(f"{label} {ratio / best:.2f}")
+        print(f"  {plant} ({design}): " + ", ".join(cells))
+    for label, rs in ratios.items():
+        print(f"{label}: within 1.25x on {sum(r <= 1.25 for r in rs)} of {len(rs)} rows, "
+              f"worst {max(rs):.2f}x, mean ratio {np.mean(rs):.2f}")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
