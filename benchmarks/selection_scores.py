@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from selection_study import _measured, _record  # the study's records, built alike
 
 import piezohyst as ph
 from piezohyst.selection import CANDIDATES, TIE, _candidate
@@ -38,57 +39,27 @@ SCORES: dict[str, Callable[[list[float]], float]] = {
 }
 
 
-def row(train: tuple[Any, ...], test: tuple[Any, ...] | None, unit: str) -> dict[str, Any]:
-    """Held-out NRMSE of every default and select_model's part scores on one split (``test``
-    None: the record's last 30 % is held out, predicted on from the fit's start)."""
-    x, y, t = train
-    if test is None:
-        stop = round(0.7 * x.size)
-        part, (xt, yt, tt), scored = slice(0, stop), (x, y, t), slice(stop, None)
+def row(job: tuple[str, str, int, str | None]) -> dict[str, Any]:
+    """Held-out NRMSE of every default and select_model's part scores on one split: a plant's
+    (design, plant, unit, None) or a measured set's ("measured", name, 0, DATA_DIR), built
+    as the selection study builds them."""
+    design, plant, unit, data = job
+    if data is None:
+        (x, y, t, out), (xt, yt, tt, scored) = _record(design, plant, unit)
     else:
-        part, (xt, yt, tt), scored = slice(0, x.size), test, slice(None)
+        (x, y, t, out), (xt, yt, tt, scored) = _measured(Path(data), plant)
     errs = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for name in CANDIDATES:
             try:
-                m = _candidate(name, 10, ("V", unit)).fit(x[part], y[part], t=t[part])
-                e = float(ph.metrics.nrmse(yt[scored], m.predict(xt, t=tt)[scored]))
+                m = _candidate(name, 10, ("V", out)).fit(x, y, t=t)
+                e = float(ph.metrics.nrmse(yt[scored:], m.predict(xt, t=tt)[scored:]))
             except ph.PiezohystError:
                 e = math.inf
             errs[name] = e if math.isfinite(e) else math.inf
-        sel = ph.select_model(x[part], y[part], t[part], output_unit=unit)
+        sel = ph.select_model(x, y, t, output_unit=out)
     return {"errs": errs, "folds": {r.name: list(r.folds) for r in sel.rows}}
-
-
-def plant_job(job: tuple[str, str, int]) -> dict[str, Any]:
-    from piezohyst.excitation import excitation
-    from piezohyst.simulation import PLANTS, batch_unit
-
-    design, plant, unit = job
-    p = batch_unit(PLANTS[plant], unit)
-    if design == "excite":
-        played = excitation(v_min=0.0, v_max=140.0, sample_rate=1000.0)
-        tr = ph.simulate(played.voltage, played.t, preset=p, seed=unit)
-    else:
-        tr = ph.simulate(preset=p, signal="decaying", duration=40.0, seed=unit)
-    te = ph.simulate(preset=p, signal="multi", duration=12.0, seed=unit + 100)
-    return row((tr.voltage, tr.charge, tr.t), (te.voltage, te.charge, te.t), "C")
-
-
-def measured_rows(data: Path) -> dict[tuple[str, str], list[dict[str, Any]]]:
-    act = ph.read_table(data / "piezo_actuator_smarthysteresis" / "hysteresis_v_150_1hz.csv")
-    t, d, v = act.get("col1"), act.get("col2") * 1e-6, act.get("col3")
-    a = int(np.searchsorted(t, 3.3))
-    folder = data / "piezo_micromanipulator_dbo"
-    mm, nr = np.loadtxt(folder / "Model_Vi_Do.dat"), np.loadtxt(folder / "Test_Vi_Do_Di.dat")
-    tm, tn = np.arange(mm.shape[0]) / 200.0, np.arange(nr.shape[0]) / 200.0
-    return {
-        ("measured", "SmartHysteresis"): [row((v[a:], d[a:], t[a:]), None, "m")],
-        ("measured", "micromanipulator"): [
-            row((mm[:, 0], mm[:, 4] * 1e-6, tm), (nr[:, 0], nr[:, 4] * 1e-6, tn), "m")
-        ],
-    }
 
 
 def choose(folds: dict[str, list[float]], score: Callable[[list[float]], float]) -> str:
@@ -106,14 +77,18 @@ def main() -> None:
     ap.add_argument("--units", default="4,5,6", help="batch units, comma-separated")
     args = ap.parse_args()
     units = [int(u) for u in args.units.split(",")]
-    jobs = [(d, p, u) for d in ("excite", "decaying") for p in PLANTS for u in units]
-    with ProcessPoolExecutor(2) as ex:
-        results = list(ex.map(plant_job, jobs))
-    rows: dict[tuple[str, str], list[dict[str, Any]]] = {}
-    for (design, plant, _), res in zip(jobs, results, strict=True):
-        rows.setdefault((design, plant), []).append(res)
+    jobs: list[tuple[str, str, int, str | None]] = [
+        (d, p, u, None) for d in ("excite", "decaying") for p in PLANTS for u in units
+    ]
     if args.data is not None:
-        rows.update(measured_rows(args.data))
+        jobs += [
+            ("measured", n, 0, str(args.data)) for n in ("SmartHysteresis", "micromanipulator")
+        ]
+    with ProcessPoolExecutor(2) as ex:
+        results = list(ex.map(row, jobs))
+    rows: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for (design, plant, _, _), res in zip(jobs, results, strict=True):
+        rows.setdefault((design, plant), []).append(res)
     print(f"piezohyst {ph.__version__}: select_model's part scores, units {args.units}")
     ratios: dict[str, list[float]] = {s: [] for s in SCORES}
     for (design, plant), runs in rows.items():
