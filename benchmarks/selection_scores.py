@@ -29,11 +29,11 @@ import numpy as np
 from selection_study import _measured, _record  # the study's records, built alike
 
 import piezohyst as ph
-from piezohyst.selection import CANDIDATES, TIE, _candidate
+from piezohyst.selection import CANDIDATES, TIE, WEIGHTS, _candidate
 
 SCORES: dict[str, Callable[[list[float]], float]] = {
     "mean": lambda f: float(np.mean(f)),
-    "weighted 0.4, 0.6 (select_model)": lambda f: 0.4 * f[0] + 0.6 * f[1],
+    "weighted 0.4, 0.6 (select_model)": lambda f: float(np.dot(WEIGHTS, f)),
     "last part": lambda f: f[-1],
     "worst part": lambda f: max(f),
 }
@@ -101,6 +101,8 @@ def main() -> None:
             ratios[label].append(ratio / best)
             cells.append(f"{label} {ratio / best:.2f}")
         print(f"  {plant} ({design}): " + ", ".join(cells))
+        for n in CANDIDATES:  # each default's held-out NRMSE per unit
+            print(f"    {n}: " + " / ".join(f"{100 * r['errs'][n]:.2f}" for r in runs) + " %")
     for label, rs in ratios.items():
         print(f"{label}: within 1.25x on {sum(r <= 1.25 for r in rs)} of {len(rs)} rows, "
               f"worst {max(rs):.2f}x, mean ratio {np.mean(rs):.2f}")  # fmt: skip
