@@ -141,10 +141,10 @@ def plants(seed: int, every_core: bool = False, flat_guard: bool = False) -> Non
 
     from piezohyst.excitation import excitation
     from piezohyst.metrics import hysteresis_width
-    from piezohyst.selection import _candidate
+    from piezohyst.selection import LOOP_CANDIDATES, _candidate
     from piezohyst.simulation import PLANTS, Bench, make_signal, run_loop
 
-    cores = ("classical-pi", "active-pi", "bouc-wen", "preisach", "duhem")
+    cores = ("classical-pi", "active-pi", "bouc-wen", "preisach", "duhem")  # every_core's
     played = excitation(v_min=0.0, v_max=140.0, sample_rate=1000.0)
     holds = excitation("holds", v_min=0.0, v_max=140.0, sample_rate=1000.0, hold=10.0)
     _, shape = make_signal("decaying", amplitude=1.0, frequency=0.5, duration=60.0)
@@ -159,7 +159,9 @@ def plants(seed: int, every_core: bool = False, flat_guard: bool = False) -> Non
                                                                t=ident.t)
                           for c in cores[1:]}  # fmt: skip
             else:
-                sel = ph.select_model(ident.voltage, ident.charge, t=ident.t, candidates=cores)
+                sel = ph.select_model(
+                    ident.voltage, ident.charge, t=ident.t, candidates=LOOP_CANDIDATES
+                )
                 models = {sel.name: sel.model}
         q = ident.charge - leak.charge(ident.voltage, ident.t, ident.charge)
         v = ident.voltage

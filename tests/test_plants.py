@@ -11,6 +11,7 @@ import pytest
 import piezohyst as ph
 from piezohyst.excitation import excitation
 from piezohyst.metrics import hysteresis_width
+from piezohyst.selection import LOOP_CANDIDATES
 from piezohyst.simulation import PLANTS, make_signal
 
 ZOO = [name for name in PLANTS if name != "preisach"]
@@ -186,13 +187,10 @@ def test_the_command_line_calibrates_as_the_api(tmp_path: object) -> None:
     assert bad.exit_code == 2 and "expected auto or a fraction in [0, 1)" in bad.output
 
 
-#: The cores the self-sensing loop runs compiled (GeneralizedPI's asymmetry and creep it does not)
-LOOP_CANDIDATES = ("classical-pi", "active-pi", "bouc-wen", "preisach", "duhem")
-
-
 @pytest.mark.parametrize("name", list(PLANTS))
 def test_the_self_sensing_loop_on_each_plant(name: str) -> None:
-    """Issue 26: the model chosen for the user on what excite writes, leakage from 10 s holds up
+    """Issue 26: the model chosen for the user on what excite writes (among the loop's
+    candidates, :data:`~piezohyst.selection.LOOP_CANDIDATES`), leakage from 10 s holds up
     and down, the loop closed on the charge holds 60 s of decaying loops to 0.3 % width,
     without drift, over the range the actuator demonstrably reached in that record."""
     from piezohyst.simulation import Bench, run_loop

@@ -29,6 +29,7 @@ from .persistence import model_class, model_names
 __all__ = [
     "CANDIDATES",
     "FOLDS",
+    "LOOP_CANDIDATES",
     "WEIGHTS",
     "Selection",
     "SelectionRow",
@@ -39,6 +40,17 @@ __all__ = [
 
 #: Candidates, simplest first: a tie (within 2 %) goes to the earlier
 CANDIDATES = ("classical-pi", "active-pi", "generalized-pi", "bouc-wen", "preisach", "duhem")
+#: Candidates for the self-sensing loop (``select_model(..., candidates=LOOP_CANDIDATES)``):
+#: the cores the loop runs compiled, less the Preisach model. Its Everett function is
+#: interpolated linearly between nodes, so after a reversal its slope stays at one value
+#: across a whole cell where an actuator's rises smoothly; the loop's correction passes
+#: through the inverse, its gain multiplied by the actuator's slope over the model's, and it
+#: chatters there. Measured on issue 26's plants, 60 s of decaying loops (units 0 and 4-6;
+#: ``docs/realtime.md``): through the Preisach model 0.52-2.2 % width on the Duhem plant,
+#: where Bouc-Wen, chosen among these, leaves 0.09-0.21 %; checked on units 1-3: the model
+#: chosen among these 0.04-0.29 % on every plant, the Preisach model 0.76-0.92 % on the
+#: Duhem plant
+LOOP_CANDIDATES = ("classical-pi", "active-pi", "bouc-wen", "duhem")
 #: (end of the fitted part, end of the scored part) as fractions of the record
 FOLDS = ((0.5, 0.75), (0.75, 1.0))
 #: Each part's weight in the score: the share of the record its fit saw. Chosen on units 4-6
