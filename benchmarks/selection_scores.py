@@ -32,8 +32,10 @@ import piezohyst as ph
 from piezohyst.selection import CANDIDATES, TIE, WEIGHTS, _candidate
 
 SCORES: dict[str, Callable[[list[float]], float]] = {
-    "mean": lambda f: float(np.mean(f)),
-    "weighted 0.4, 0.6 (select_model)": lambda f: float(np.dot(WEIGHTS, f)),
+    f"weights {', '.join(f'{w:.2g}' for w in WEIGHTS)} (select_model)": (
+        lambda f: float(np.dot(WEIGHTS, f))
+    ),
+    "weights 0.4, 0.6": lambda f: 0.4 * f[0] + 0.6 * f[1],
     "last part": lambda f: f[-1],
     "worst part": lambda f: max(f),
 }

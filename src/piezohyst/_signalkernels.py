@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 from ._kernels import FASTMATH
@@ -114,8 +115,10 @@ def mode_filter(u, ad, bd, state, out):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def reversals(x, band, state):  # type: ignore[no-untyped-def]
-    """Count the input's reversals: turns of at least ``band`` back from the last extreme.
+def turn_points(x, band, state, out):  # type: ignore[no-untyped-def]
+    """The input's turns: reversals of at least ``band`` back from the last extreme. Writes
+    the index of each turn's extreme (in this block; -1 where it lay in an earlier block)
+    to ``out`` (as long as ``x``) and returns how many.
 
     ``state`` = [direction (+1 rising, -1 falling, 0 not yet known), the
     running extreme (the start while the direction is unknown), started];
@@ -123,8 +126,10 @@ def reversals(x, band, state):  # type: ignore[no-untyped-def]
     """
     direction = state[0]
     extreme = state[1]
+    at = -1
     if state[2] == 0.0 and x.shape[0]:
         extreme = x[0]
+        at = 0
         state[2] = 1.0
     count = 0
     for k in range(x.shape[0]):
@@ -132,26 +137,34 @@ def reversals(x, band, state):  # type: ignore[no-untyped-def]
         if direction == 0.0:
             if v - extreme >= band:
                 direction = 1.0
-                extreme = v
+                extreme, at = v, k
             elif extreme - v >= band:
                 direction = -1.0
-                extreme = v
+                extreme, at = v, k
         elif direction > 0.0:
             if v > extreme:
-                extreme = v
+                extreme, at = v, k
             elif extreme - v >= band:
+                out[count] = at
                 count += 1
                 direction = -1.0
-                extreme = v
+                extreme, at = v, k
         elif v < extreme:
-            extreme = v
+            extreme, at = v, k
         elif v - extreme >= band:
+            out[count] = at
             count += 1
             direction = 1.0
-            extreme = v
+            extreme, at = v, k
     state[0] = direction
     state[1] = extreme
     return count
+
+
+@njit(cache=True)
+def reversals(x, band, state):  # type: ignore[no-untyped-def]
+    """Count the input's reversals (:func:`turn_points`, with its ``state``)."""
+    return turn_points(x, band, state, np.empty(x.shape[0], np.int64))
 
 
 @njit(cache=True)

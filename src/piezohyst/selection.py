@@ -1,13 +1,15 @@
 """A model chosen for the user: every candidate scored on data it was not fitted on, inside
 the record the user gives (never on what they will test on), the winner refitted on all.
 
-Forward chaining, as a recording runs: fit on the first half, score the next quarter; fit
-on the first three quarters, score the last. Each part starts where the input before it
-left the actuator (the model runs on from its training start). The score is the scored
-parts' NRMSE averaged with weights in proportion to how much of the record each part's fit
-saw (:data:`WEIGHTS`: 0.4 and 0.6; the later fit is more like the final one, fitted on all);
-the candidate with the lowest wins, a simpler one (earlier in :data:`CANDIDATES`) on a tie
-within 2 %.
+Forward chaining, as a recording runs: fit on the first half of the record's input turns,
+score up to three quarters of them; fit up to three quarters, score the rest
+(:data:`FOLDS`, :func:`fold_bounds`). Hysteresis is learnt from reversals, not from
+seconds: a record whose fast loops come last (what ``piezohyst excite`` writes) is split
+where its turns are, and each fit has seen loops of the kind it is scored on. A record with
+fewer than :data:`MIN_TURNS` turns is split by its samples instead. Each part starts where
+the input before it left the actuator (the model runs on from its training start). The
+score is the mean of the scored parts' NRMSE (:data:`WEIGHTS`); the candidate with the
+lowest wins, a simpler one (earlier in :data:`CANDIDATES`) on a tie within 2 %.
 """
 
 from __future__ import annotations
@@ -16,24 +18,34 @@ import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._lazy import LazyModule
 from ._validation import FloatArray, as_signal, as_time, same_length
 from .comparison import compare_models
 from .errors import ExtrapolationWarning, InsufficientDataError, ParameterError
 from .model import HysteresisModel, InitialState
 from .persistence import model_class, model_names
 
+if TYPE_CHECKING:
+    from . import _signalkernels as S
+else:  # numba loads when a selection first runs (see _lazy)
+    S = LazyModule("piezohyst._signalkernels", globals(), "S")
+
 __all__ = [
     "CANDIDATES",
     "FOLDS",
     "LOOP_CANDIDATES",
+    "MIN_TURNS",
+    "TURN_BAND",
     "WEIGHTS",
     "Selection",
     "SelectionRow",
     "chosen",
+    "fold_bounds",
     "forward_scores",
     "select_model",
 ]
@@ -51,14 +63,20 @@ CANDIDATES = ("classical-pi", "active-pi", "generalized-pi", "bouc-wen", "preisa
 #: chosen among these 0.04-0.29 % on every plant, the Preisach model 0.76-0.92 % on the
 #: Duhem plant
 LOOP_CANDIDATES = ("classical-pi", "active-pi", "bouc-wen", "duhem")
-#: (end of the fitted part, end of the scored part) as fractions of the record
+#: (end of the fitted part, end of the scored part) as fractions of the record's input turns
+#: (of its samples where it has fewer than :data:`MIN_TURNS`)
 FOLDS = ((0.5, 0.75), (0.75, 1.0))
-#: Each part's weight in the score: the share of the record its fit saw. Chosen on units 4-6
-#: of the simulated plants' batches: these weights, the plain mean, the last part alone and
-#: the worst part chose within 1.25x of the best model's held-out error on 7, 6, 8 and 7 of
-#: 10 rows, the worst row 1.71, 1.71, 2.43 and 2.33x; checked on units 1-3
+#: A turn: the input back by this fraction of its span from its last extreme
+TURN_BAND = 0.01
+#: Fewest turns for folds placed by turns: two per scored part at the least
+MIN_TURNS = 8
+#: Each part's weight in the score: equal. Chosen on units 4-6 of the simulated plants'
+#: batches with the folds placed by turns: the plain mean, weights 0.4 and 0.6 (the share of
+#: the turns each fit saw), the last part alone and the worst part chose within 1.25x of the
+#: best model's held-out error on 9, 8, 7 and 9 of 10 rows, the worst row 1.71, 2.62, 2.62
+#: and 1.71x (``benchmarks/selection_scores.py``); checked on units 1-3
 #: (``docs/validation.md``)
-WEIGHTS = tuple(end / sum(e for e, _ in FOLDS) for end, _ in FOLDS)
+WEIGHTS = (0.5, 0.5)
 TIE = 0.02
 
 
@@ -128,6 +146,42 @@ def _candidate(name: str, operators: int, units: tuple[str, str]) -> HysteresisM
     return model
 
 
+def fold_bounds(x: FloatArray) -> list[tuple[int, int]]:
+    """Where each of :data:`FOLDS` ends its fitted and its scored part, in samples.
+
+    A fraction ``f`` of the turns ends at the extreme of turn ``round(f * n)`` of the ``n``
+    turns of at least :data:`TURN_BAND` of the span (the extreme is the fit's last sample);
+    a fraction of 1 at the record's end. With fewer than :data:`MIN_TURNS` turns, or where a
+    part would hold fewer than 2 samples, the fractions are of the samples.
+
+    Parameters
+    ----------
+    x : ndarray, shape (N,)
+        The input.
+
+    Returns
+    -------
+    list of (int, int)
+        (fit stop, score stop) per fold.
+    """
+    by_samples = [(round(a * x.size), round(b * x.size)) for a, b in FOLDS]
+    span = float(np.ptp(x)) if x.size else 0.0
+    if span <= 0.0:
+        return by_samples
+    turns = np.empty(x.size, np.int64)
+    n = int(S.turn_points(x, TURN_BAND * span, np.zeros(3), turns))
+    if n < MIN_TURNS:
+        return by_samples
+
+    def stop(f: float) -> int:
+        return x.size if f >= 1.0 else int(turns[max(round(f * n), 1) - 1]) + 1
+
+    bounds = [(stop(a), stop(b)) for a, b in FOLDS]
+    if any(a < 2 or b - a < 2 for a, b in bounds):
+        return by_samples
+    return bounds
+
+
 def forward_scores(
     models: dict[str, HysteresisModel],
     x: FloatArray,
@@ -152,13 +206,12 @@ def forward_scores(
     """
     scores: dict[str, list[float]] = {n: [] for n in models}
     errors: dict[str, str] = {}
-    for fit_end, score_end in FOLDS:
-        stop = round(score_end * x.size)
+    for fit_stop, stop in fold_bounds(x):
         with warnings.catch_warnings():  # a scored part may leave the fitted region
             warnings.simplefilter("ignore", ExtrapolationWarning)
             result = compare_models(
                 models, x[:stop], y[:stop], None if t is None else t[:stop],
-                train=fit_end / score_end, initial_state=initial_state,
+                train=fit_stop / stop, initial_state=initial_state,
             )  # fmt: skip
         for row in result.rows:
             scores[row.name].append(math.nan if row.error else row.test_nrmse)
