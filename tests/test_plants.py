@@ -7,6 +7,8 @@ import warnings
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 import piezohyst as ph
 from piezohyst.excitation import excitation
@@ -129,6 +131,63 @@ def test_up_and_down_holds_calibrate_every_plant_and_no_sign_is_unphysical(
     err = leak.stderr()
     assert set(err) == {"conductance", "quadratic", "bias", "discharge"}
     assert all(e >= 0 for e in err.values())
+
+
+def true_leakage(p: ph.simulation.BenchPreset) -> ph.Leakage:
+    """The plant's leakage in the calibration's terms, its charge amplifier's discharge too."""
+    g, a = p.g_leak, p.leak_voltage_coeff
+    return ph.Leakage(g, g * a, p.i_bias, p.v_max, 1.0 / (p.r_ref * p.c_ref))
+
+
+@pytest.mark.parametrize("name", list(PLANTS))
+def test_the_leaked_charge_s_stated_uncertainty_covers_its_error_over_a_minute(name: str) -> None:
+    """A self-sensing loop holds the charge less the leakage estimate, so the estimate's
+    error along the scan is how far the position drifts: the leakage over 60 s of decaying
+    loops is 2.3-5.8 times the capacitor's charge span, and 1 % of it is 2-6 % of the span.
+    Calibrated from 10 s holds up and down (the loop's protocol), the estimate's stated
+    standard error along the path covers its error at every 10 s. It covers the terms the
+    calibration kept: from 3 s holds the Bouc-Wen plant's bias and discharge are left out
+    (not determined) and its error reaches 3.7 standard errors in the first minute."""
+    _, shape = make_signal("decaying", amplitude=1.0, frequency=0.5, duration=60.0)
+    v = 70.0 + 60.0 * shape
+    t = np.arange(v.size) / 1000.0
+    rec = ph.simulate(v, t, plant=name, seed=4)
+    exc = excitation("holds", v_min=0.0, v_max=140.0, sample_rate=1000.0, hold=10.0)
+    cal = ph.simulate(exc.voltage, exc.t, plant=name, seed=3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a relaxing plant's calibration says how sure it is
+        leak = ph.calibrate_leakage(cal.t, cal.voltage, cal.charge)
+    every = np.arange(9999, v.size, 10000)
+    err = np.abs(leak.charge(v, t, rec.charge) - true_leakage(rec.preset).charge(v, t, rec.charge))
+    sigma = leak.charge_stderr(v, t, rec.charge)
+    # tol: three of its own standard errors (measured at most 1.3 here); the two-state
+    # plant's is 12.5 % of the span at 60 s, and its calibration warns
+    assert np.all(err[every] <= 3 * sigma[every])
+
+
+@given(
+    v=st.lists(st.floats(-150.0, 150.0), min_size=1, max_size=30),
+    q=st.floats(-1e-6, 1e-6),
+    term=st.integers(0, 3),
+    sigma=st.floats(1e-14, 1e-9),
+)
+def test_charge_stderr_is_the_charge_s_change_along_its_one_uncertain_term(
+    v: list[float], q: float, term: int, sigma: float
+) -> None:
+    """The leaked charge is linear in the coefficients: with one term uncertain by sigma,
+    its standard error is exactly how far the charge moves when that term moves by sigma."""
+    cov = np.zeros((4, 4))
+    cov[term, term] = sigma**2
+    base = ph.Leakage(1e-9, 2e-10, 1e-11, 140.0, 1e-5,
+                      covariance=tuple(map(tuple, cov)))  # fmt: skip
+    coefs = [base.conductance, base.quadratic, base.bias, base.discharge]
+    coefs[term] += sigma
+    moved = ph.Leakage(coefs[0], coefs[1], coefs[2], 140.0, coefs[3])
+    x, t = np.array(v), np.arange(len(v)) * 1e-3
+    qs = np.full(x.size, q)
+    want = np.abs(moved.charge(x, t, qs) - base.charge(x, t, qs))
+    # tol: a few roundings of sums of up to 30 terms of the charge's own size
+    np.testing.assert_allclose(base.charge_stderr(x, t, qs), want, rtol=1e-9, atol=1e-25)
 
 
 def test_a_leakage_file_keeps_its_uncertainty(tmp_path: object) -> None:

@@ -195,6 +195,47 @@ class Leakage:
         cov = np.asarray(self.covariance, dtype=np.float64)
         return np.asarray(np.sqrt(np.maximum(np.einsum("...i,ij,...j->...", g, cov, g), 0.0)))
 
+    def charge_stderr(self, v: ArrayLike, t: ArrayLike, q: ArrayLike | None = None) -> FloatArray:
+        """Standard error of :meth:`charge` along a path, from the calibration's covariance
+        (NaN when the leakage was not calibrated from holds).
+
+        The leaked charge is linear in the coefficients, so its variance at each sample is
+        ``g' C g``, ``g`` the integrated terms (as :meth:`charge` integrates them) and ``C``
+        their covariance. A self-sensing loop holds the charge less this estimate: this is
+        how far its position may drift along the path (1 sigma, times the gain), however
+        well the current at each hold was known. It counts the terms the calibration kept;
+        a term it left out (the holds could not determine it) is not in it.
+
+        Parameters
+        ----------
+        v : array_like, shape (N,)
+            Voltages (input units).
+        t : array_like, shape (N,)
+            Times (s), strictly increasing.
+        q : array_like, shape (N,), optional
+            The measured charge, needed when the discharge was calibrated.
+
+        Returns
+        -------
+        ndarray, shape (N,)
+            Output units.
+        """
+        x = as_signal(v, "v")
+        ts = as_time(t, x.size, required=True, owner="Leakage.charge_stderr")
+        assert ts is not None
+        if not self.covariance:
+            return np.full(x.shape, np.nan)
+        cov = np.asarray(self.covariance, dtype=np.float64)
+        if q is None and cov[3, 3] != 0.0:
+            msg = "this leakage's discharge was calibrated: pass the measured charge q"
+            raise ParameterError(msg)
+        qs = np.zeros_like(x) if q is None else as_signal(q, "q")
+        same_length(x, qs, "v", "q")
+        dt = np.diff(ts, prepend=ts[0])
+        terms = np.stack([x, x * np.abs(x) / self.scale, np.ones_like(x), -qs], axis=-1)
+        g = np.cumsum(terms * dt[:, None], axis=0)
+        return np.asarray(np.sqrt(np.maximum(np.einsum("ki,ij,kj->k", g, cov, g), 0.0)))
+
     def charge(self, v: ArrayLike, t: ArrayLike, q: ArrayLike | None = None) -> FloatArray:
         """Charge leaked since the first sample: the paper's backward-rectangle integral (eq. 13).
 
