@@ -111,6 +111,12 @@ class Leakage:
     covariance : tuple of tuple of float
         Covariance of (conductance, quadratic, bias, discharge) from the calibration
         (zero rows for terms it did not fit); empty when not calibrated.
+    drift_covariance : tuple of tuple of float
+        The covariance :meth:`charge_stderr` uses: ``covariance``, or where the
+        calibration's choice left out terms the holds still determine, the fit of every
+        term's plus the outer product of the two fits' difference (a term left out is
+        too small for the holds' currents to tell, not known to be 0, and it adds up in
+        the charge over a minute); empty when not calibrated.
     """
 
     conductance: float = 0.0
@@ -123,6 +129,7 @@ class Leakage:
     holds: tuple[Hold, ...] = field(default=(), compare=False)
     residual: float = field(default=math.nan, compare=False)
     covariance: tuple[tuple[float, ...], ...] = field(default=(), compare=False)
+    drift_covariance: tuple[tuple[float, ...], ...] = field(default=(), compare=False)
 
     def __post_init__(self) -> None:
         for name in ("conductance", "quadratic", "bias", "scale", "discharge"):
@@ -203,8 +210,8 @@ class Leakage:
         ``g' C g``, ``g`` the integrated terms (as :meth:`charge` integrates them) and ``C``
         their covariance. A self-sensing loop holds the charge less this estimate: this is
         how far its position may drift along the path (1 sigma, times the gain), however
-        well the current at each hold was known. It counts the terms the calibration kept;
-        a term it left out (the holds could not determine it) is not in it.
+        well the current at each hold was known. It counts the terms the calibration left
+        out too (:attr:`drift_covariance`).
 
         Parameters
         ----------
@@ -225,7 +232,7 @@ class Leakage:
         assert ts is not None
         if not self.covariance:
             return np.full(x.shape, np.nan)
-        cov = np.asarray(self.covariance, dtype=np.float64)
+        cov = np.asarray(self.drift_covariance or self.covariance, dtype=np.float64)
         if q is None and cov[3, 3] != 0.0:
             msg = "this leakage's discharge was calibrated: pass the measured charge q"
             raise ParameterError(msg)
@@ -342,6 +349,7 @@ class Leakage:
         out["holds"] = [asdict(h) for h in self.holds]
         out["residual"] = None if math.isnan(self.residual) else self.residual
         out["covariance"] = [list(row) for row in self.covariance]
+        out["drift_covariance"] = [list(row) for row in self.drift_covariance]
         return {"format": "piezohyst-leakage", "kind": "leakage", **out}
 
     @classmethod
@@ -375,19 +383,23 @@ class Leakage:
             "input_unit",
             "output_unit",
         }
-        extra = set(fields) - known - {"holds", "residual", "covariance"}
+        extra = set(fields) - known - {"holds", "residual", "covariance", "drift_covariance"}
         if extra:
             msg = f"{where}: unknown field {sorted(extra)[0]!r}"
             raise ModelFileError(msg)
         try:
             holds = tuple(Hold(**h) for h in fields.get("holds") or ())
             residual = fields.get("residual")
-            cov = tuple(tuple(float(c) for c in row) for row in fields.get("covariance") or ())
+            cov, drift = (
+                tuple(tuple(float(c) for c in row) for row in fields.get(name) or ())
+                for name in ("covariance", "drift_covariance")
+            )
             return cls(
                 **{k: fields[k] for k in known if k in fields},
                 holds=holds,
                 residual=math.nan if residual is None else float(residual),
                 covariance=cov,
+                drift_covariance=drift,
             )
         except (TypeError, ParameterError) as exc:
             msg = f"{where}: {exc}"
@@ -514,8 +526,10 @@ def calibrate_leakage(
     misfit in the holds' standard errors, plus ln(holds) per term); while holds
     still settle, every voltage term is kept and no discharge is chosen. The
     result carries the coefficients' covariance (:meth:`Leakage.stderr`,
-    :meth:`Leakage.current_stderr`); a current less sure than 3 % at a hold's
-    voltage gets a warning naming the hold length that would do, and beyond
+    :meth:`Leakage.current_stderr`), and one that also counts the terms the choice
+    left out, for the charge over a scan (:meth:`Leakage.charge_stderr`); a current
+    less sure than 3 % at a hold's voltage gets a warning naming the hold length
+    that would do, and beyond
     10 % the calibration refuses, as it does for settling holds all reached
     from one side. The
     discharge term needs holds at one voltage with different charges (reached
@@ -664,12 +678,37 @@ def calibrate_leakage(
     full = np.zeros((4, 4))
     index = [LEAKAGE_TERMS.index(name) for name in pick]
     full[np.ix_(index, index)] = cov
+    drift = _choice_covariance(system, pick, coef, full, pool, levels)
+    rows = [tuple(tuple(float(c) for c in row) for row in m) for m in (full, drift)]
     leak = Leakage(values["conductance"], values["quadratic"], values["bias"], s,
                    values["discharge"], input_unit, output_unit, holds=tuple(found),
                    residual=float(np.sqrt(np.mean(misfit**2))),
-                   covariance=tuple(tuple(float(c) for c in row) for row in full))  # fmt: skip
+                   covariance=rows[0], drift_covariance=rows[1])  # fmt: skip
     _check_sure(leak, found, input_unit, settling)
     return leak
+
+
+def _choice_covariance(
+    system: _HoldSystem,
+    pick: Sequence[str],
+    coef: Sequence[float],
+    cov: FloatArray,
+    pool: Sequence[str],
+    levels: list[float],
+) -> FloatArray:
+    """:attr:`Leakage.drift_covariance`: ``cov`` (4, 4), or where the choice left out terms
+    of ``pool`` that the holds determine with their physics all at once, the fit of every
+    term's plus the outer product of the two fits' difference."""
+    if set(pick) == set(pool) or not (system.determines(pool, levels) and system.physical(pool)):
+        return cov
+    every, every_cov, _ = system.fit(pool)
+    at = [LEAKAGE_TERMS.index(n) for n in pool]
+    chosen, whole = np.zeros(4), np.zeros(4)
+    chosen[[LEAKAGE_TERMS.index(n) for n in pick]] = coef
+    whole[at] = every
+    out = np.zeros((4, 4))
+    out[np.ix_(at, at)] = every_cov
+    return out + np.outer(chosen - whole, chosen - whole)
 
 
 def _slope(ts: FloatArray, y: FloatArray, a: int, b: int) -> tuple[float, float]:
