@@ -198,7 +198,7 @@ class Leakage:
         if not self.covariance:
             return np.full(x.shape, np.nan)
         qq = np.broadcast_to(np.asarray(q, dtype=np.float64), x.shape)
-        g = np.stack([x, x * np.abs(x) / self.scale, np.ones_like(x), -qq], axis=-1)
+        g = self._columns(x, np.asarray(qq))
         cov = np.asarray(self.covariance, dtype=np.float64)
         return np.asarray(np.sqrt(np.maximum(np.einsum("...i,ij,...j->...", g, cov, g), 0.0)))
 
@@ -215,33 +215,38 @@ class Leakage:
 
         Parameters
         ----------
-        v : array_like, shape (N,)
-            Voltages (input units).
-        t : array_like, shape (N,)
-            Times (s), strictly increasing.
-        q : array_like, shape (N,), optional
-            The measured charge, needed when the discharge was calibrated.
+        v, t, q : array_like, shape (N,)
+            As for :meth:`charge` (``q`` needed when the discharge was calibrated).
 
         Returns
         -------
         ndarray, shape (N,)
             Output units.
         """
-        x = as_signal(v, "v")
-        ts = as_time(t, x.size, required=True, owner="Leakage.charge_stderr")
-        assert ts is not None
-        if not self.covariance:
-            return np.full(x.shape, np.nan)
         cov = np.asarray(self.drift_covariance or self.covariance, dtype=np.float64)
-        if q is None and cov[3, 3] != 0.0:
-            msg = "this leakage's discharge was calibrated: pass the measured charge q"
+        x, qs, dt = self._path(v, t, q, cov.size > 0 and cov[3, 3] != 0.0, "charge_stderr")
+        if not cov.size:
+            return np.full(x.shape, np.nan)
+        g = np.cumsum(self._columns(x, qs) * dt[:, None], axis=0)
+        return np.asarray(np.sqrt(np.maximum(np.einsum("ki,ij,kj->k", g, cov, g), 0.0)))
+
+    def _columns(self, x: FloatArray, q: FloatArray) -> FloatArray:
+        """Each term's column at voltages ``x`` and charges ``q`` (its current per unit)."""
+        return np.stack([x, x * np.abs(x) / self.scale, np.ones_like(x), -q], axis=-1)
+
+    def _path(
+        self, v: ArrayLike, t: ArrayLike, q: ArrayLike | None, needs_q: bool, owner: str
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """A path's voltages, charges (0 without ``q``) and sample intervals, checked."""
+        x = as_signal(v, "v")
+        ts = as_time(t, x.size, required=True, owner=f"Leakage.{owner}")
+        assert ts is not None
+        if q is None and needs_q:
+            msg = "this leakage has a discharge term: pass the measured charge q"
             raise ParameterError(msg)
         qs = np.zeros_like(x) if q is None else as_signal(q, "q")
         same_length(x, qs, "v", "q")
-        dt = np.diff(ts, prepend=ts[0])
-        terms = np.stack([x, x * np.abs(x) / self.scale, np.ones_like(x), -qs], axis=-1)
-        g = np.cumsum(terms * dt[:, None], axis=0)
-        return np.asarray(np.sqrt(np.maximum(np.einsum("ki,ij,kj->k", g, cov, g), 0.0)))
+        return x, qs, np.diff(ts, prepend=ts[0])
 
     def charge(self, v: ArrayLike, t: ArrayLike, q: ArrayLike | None = None) -> FloatArray:
         """Charge leaked since the first sample: the paper's backward-rectangle integral (eq. 13).
@@ -263,16 +268,7 @@ class Leakage:
         ndarray, shape (N,)
             Output units.
         """
-        x = as_signal(v, "v")
-        ts = as_time(t, x.size, required=True, owner="Leakage.charge")
-        assert ts is not None
-        if q is None and self.discharge != 0.0:
-            msg = "this leakage has a discharge term: pass the measured charge q"
-            raise ParameterError(msg)
-        qs = 0.0 if q is None else as_signal(q, "q")
-        if not isinstance(qs, float):
-            same_length(x, qs, "v", "q")
-        dt = np.diff(ts, prepend=ts[0])
+        x, qs, dt = self._path(v, t, q, self.discharge != 0.0, "charge")
         return np.asarray(np.cumsum(self.current(x, qs) * dt))
 
     def coefficients(self) -> dict[str, tuple[float, str]]:
