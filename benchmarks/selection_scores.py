@@ -6,13 +6,14 @@ cores for three units; ``--units 1,2,3`` for the matrix's own).
 The matrix's splits (``docs/validation.md``): every plant trained on what ``piezohyst
 excite`` writes or on 40 s of decaying loops and tested on 12 s of ``multi``; with
 DATA_DIR, its two measured sets. For each record: every candidate's held-out NRMSE, and
-``select_model``'s two part scores per candidate (fit on the first half, score the next
-quarter; fit on three quarters, score the last). Four scores of the same two parts, each
-choosing the simplest candidate within 2 % of its best: the plain mean, weights in
-proportion to each part's fit length (0.4, 0.6; what ``select_model`` uses), the last
-part alone, the worst part. A score's ratio on a row is the mean held-out NRMSE of what it
-chose over the units, divided by the best candidate's mean, as in the matrix. Units 4-6 are
-where a score may be chosen; units 1-3 are the matrix's, to check it.
+``select_model``'s two part scores per candidate (its folds, ``selection.fold_bounds``: fit
+on half the input's turns, score to three quarters; fit to three quarters, score the rest).
+Four scores of the same two parts, each choosing the simplest candidate within 2 % of its
+best: ``select_model``'s (:data:`~piezohyst.selection.WEIGHTS`, the plain mean), weights
+0.4 and 0.6, the last part alone, the worst part. A score's ratio on a row is the mean
+held-out NRMSE of what it chose over the units, divided by the best candidate's mean, as in
+the matrix. Units 4-6 are where a score may be chosen; units 1-3 are the matrix's, to check
+it.
 """
 
 from __future__ import annotations
