@@ -1,6 +1,6 @@
 """Which score of select_model's two parts chooses best on data it was not tuned on?
 
-``python benchmarks/selection_scores.py --units 4,5,6 [DATA_DIR]`` (about 9 minutes on two
+``python benchmarks/selection_scores.py --units 4,5,6 [DATA_DIR]`` (about 10 minutes on two
 cores for three units; ``--units 1,2,3`` for the matrix's own).
 
 The matrix's splits (``docs/validation.md``): every plant trained on what ``piezohyst
