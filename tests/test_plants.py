@@ -75,8 +75,15 @@ def ascending_holds(seconds: float) -> tuple[np.ndarray, np.ndarray]:
     return np.arange(v.size) / fs, v
 
 
+def true_leakage(p: ph.simulation.BenchPreset) -> ph.Leakage:
+    """The plant's leakage in the calibration's terms, its charge amplifier's discharge too."""
+    g, a = p.g_leak, p.leak_voltage_coeff
+    return ph.Leakage(g, g * a, p.i_bias, p.v_max, 1.0 / (p.r_ref * p.c_ref))
+
+
 def true_current(p: ph.simulation.BenchPreset, v: np.ndarray) -> np.ndarray:
-    return p.g_leak * (1 + p.leak_voltage_coeff * np.abs(v) / p.v_max) * v + p.i_bias
+    """The leakage current at ``v`` through the capacitor (the discharge acts on the charge)."""
+    return true_leakage(p).current(v)
 
 
 @pytest.mark.parametrize("name", list(PLANTS))
@@ -131,12 +138,6 @@ def test_up_and_down_holds_calibrate_every_plant_and_no_sign_is_unphysical(
     err = leak.stderr()
     assert set(err) == {"conductance", "quadratic", "bias", "discharge"}
     assert all(e >= 0 for e in err.values())
-
-
-def true_leakage(p: ph.simulation.BenchPreset) -> ph.Leakage:
-    """The plant's leakage in the calibration's terms, its charge amplifier's discharge too."""
-    g, a = p.g_leak, p.leak_voltage_coeff
-    return ph.Leakage(g, g * a, p.i_bias, p.v_max, 1.0 / (p.r_ref * p.c_ref))
 
 
 @pytest.mark.parametrize("name", list(PLANTS))
