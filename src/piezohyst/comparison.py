@@ -25,7 +25,7 @@ import math
 import time
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -68,6 +68,9 @@ class ComparisonRow:
         Warnings met on the way (e.g. the test part left the training region).
     error : str
         Why fitting failed ("" when it did not).
+    test_residual : ndarray or None
+        Measured minus predicted over the test part (output units); None when fitting
+        failed.
     """
 
     name: str
@@ -81,6 +84,7 @@ class ComparisonRow:
     absorbed: str = ""
     notes: str = ""
     error: str = ""
+    test_residual: FloatArray | None = field(default=None, repr=False, compare=False)
 
     def as_dict(self) -> dict[str, Any]:
         """The row as plain data (for CSV/Parquet), without the model.
@@ -363,6 +367,7 @@ def compare_models(
                 fit_seconds=seconds,
                 absorbed=_absorbed(model),
                 notes="; ".join(sorted(notes)),
+                test_residual=y_test - p_test,
             )
         )
     return Comparison(

@@ -10,6 +10,14 @@ fewer than :data:`MIN_TURNS` turns is split by its samples instead. Each part st
 the input before it left the actuator (the model runs on from its training start). The
 score is the mean of the scored parts' NRMSE (:data:`WEIGHTS`); the candidate with the
 lowest wins, a simpler one (earlier in :data:`CANDIDATES`) on a tie within 2 %.
+
+How sure the choice is: each scored part is cut into blocks at the input's turns (a
+half-cycle each), and every candidate's margin over the chosen one gets a paired
+block-jackknife standard error (:func:`jackknife`): the same blocks left out of both
+scores in turn. A margin within :data:`SURE` standard errors is one the record cannot
+decide. What a record cannot test at all is said in :attr:`Selection.notes`: a record
+with no minor loops scores how a candidate follows the major loop, not how it predicts
+smaller ones.
 """
 
 from __future__ import annotations
@@ -17,7 +25,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -37,17 +45,24 @@ else:  # numba loads when a selection first runs (see _lazy)
 
 __all__ = [
     "CANDIDATES",
+    "EVEN_BLOCKS",
     "FOLDS",
     "LOOP_CANDIDATES",
+    "MAJOR",
     "MIN_TURNS",
+    "SURE",
     "TURN_BAND",
     "WEIGHTS",
+    "Part",
     "Selection",
     "SelectionRow",
     "chosen",
     "fold_bounds",
     "forward_scores",
+    "jackknife",
+    "record_notes",
     "select_model",
+    "with_margins",
 ]
 
 #: Candidates, simplest first: a tie (within 2 %) goes to the earlier
@@ -78,6 +93,42 @@ MIN_TURNS = 8
 #: (``docs/validation.md``) and on units 7-9, never scored before: 9, 8, 7 and 7 of 10
 WEIGHTS = (0.5, 0.5)
 TIE = 0.02
+#: A scored part with fewer than two turns inside is cut into this many equal blocks
+EVEN_BLOCKS = 8
+#: Reversals spanning at least this share of the input's range belong to the major loop
+MAJOR = 0.9
+#: A margin within this many of its standard errors is one the record does not decide
+SURE = 2.0
+
+
+@dataclass(frozen=True)
+class Part:
+    """One scored part of a candidate, cut into blocks for the jackknife.
+
+    Attributes
+    ----------
+    squares : ndarray
+        Sum of the squared error over each block (output units squared).
+    counts : ndarray
+        Samples in each block.
+    span : float
+        The measured output's span over the part (output units): NRMSE's denominator.
+    """
+
+    squares: FloatArray
+    counts: FloatArray
+    span: float
+
+    def left_out(self) -> FloatArray:
+        """The part's NRMSE with each block left out in turn."""
+        total, n = float(self.squares.sum()), float(self.counts.sum())
+        rest = np.maximum(total - self.squares, 0.0) / (n - self.counts)
+        return np.asarray(np.sqrt(rest) / self.span, dtype=np.float64)
+
+    @property
+    def nrmse(self) -> float:
+        """The part's NRMSE, all blocks in."""
+        return math.sqrt(float(self.squares.sum()) / float(self.counts.sum())) / self.span
 
 
 @dataclass(frozen=True)
@@ -94,12 +145,31 @@ class SelectionRow:
         Their mean weighted by :data:`WEIGHTS` (inf when a fold failed).
     error : str
         Why a fit failed ("" when none did).
+    stderr : float
+        The score's block-jackknife standard error (NaN where a part has one block or a
+        fold failed).
+    margin : float
+        The score minus the chosen candidate's (0 for it; NaN until chosen).
+    margin_stderr : float
+        The margin's paired block-jackknife standard error.
+    parts : tuple of Part
+        The scored parts' blocks (empty when a fold failed).
     """
 
     name: str
     folds: tuple[float, ...]
     score: float
     error: str = ""
+    stderr: float = math.nan
+    margin: float = math.nan
+    margin_stderr: float = math.nan
+    parts: tuple[Part, ...] = field(default=(), repr=False, compare=False)
+
+    @property
+    def decided(self) -> bool:
+        """Whether the record tells this candidate from the chosen one: its margin beyond
+        :data:`SURE` standard errors (False for the chosen one itself)."""
+        return bool(abs(self.margin) > SURE * self.margin_stderr)
 
 
 @dataclass(frozen=True)
@@ -113,12 +183,25 @@ class Selection:
     name : str
         Its CLI name.
     rows : tuple of SelectionRow
-        Every candidate, best first.
+        Every candidate, best first, with its margin over the chosen one.
+    notes : tuple of str
+        What the record cannot test (no minor loops, too few turns to split by).
     """
 
     model: HysteresisModel
     name: str
     rows: tuple[SelectionRow, ...]
+    notes: tuple[str, ...] = ()
+
+    @property
+    def undecided(self) -> tuple[str, ...]:
+        """The candidates this record does not tell from the chosen one (their margin
+        within :data:`SURE` standard errors, or of unknown error), best first."""
+        return tuple(
+            r.name
+            for r in self.rows
+            if r.name != self.name and math.isfinite(r.score) and not r.decided
+        )
 
     def table(self) -> str:
         """A Markdown table of the candidates, best first, the winner marked.
@@ -129,13 +212,27 @@ class Selection:
         """
         heads = " | ".join(f"part {k + 1}" for k in range(len(FOLDS)))
         weights = ", ".join(f"{w:.2g}" for w in WEIGHTS)
-        lines = [f"| candidate | {heads} | score ({weights}) |", "|---" * (len(FOLDS) + 2) + "|"]
+        lines = [
+            f"| candidate | {heads} | score ({weights}) | vs chosen (± s.e.) |",
+            "|---" * (len(FOLDS) + 3) + "|",
+        ]
         for row in self.rows:
-            mark = " (chosen)" if row.name == self.name else ""
+            chosen_row = row.name == self.name
+            mark = " (chosen)" if chosen_row else ""
             cells = " | ".join("-" if math.isnan(f) else f"{100 * f:.4g} %" for f in row.folds)
             mean = row.error or f"{100 * row.score:.4g} %"
-            lines.append(f"| {row.name}{mark} | {cells} | {mean} |")
-        return "\n".join(lines)
+            if chosen_row or not math.isfinite(row.margin):
+                versus = "-"
+            else:
+                versus = f"{100 * row.margin:+.3g} ± {100 * row.margin_stderr:.2g} %"
+            lines.append(f"| {row.name}{mark} | {cells} | {mean} | {versus} |")
+        said = list(self.notes)
+        if self.undecided:
+            said.insert(0, (
+                f"Not told apart from {self.name} by this record (within {SURE:g} standard "
+                f"errors): {', '.join(self.undecided)}."
+            ))  # fmt: skip
+        return "\n".join(lines + (["", *said] if said else []))
 
 
 def _candidate(name: str, operators: int, units: tuple[str, str]) -> HysteresisModel:
@@ -169,11 +266,8 @@ def fold_bounds(x: FloatArray) -> list[tuple[int, int]]:
         (fit stop, score stop) per fold.
     """
     by_samples = [(round(a * x.size), round(b * x.size)) for a, b in FOLDS]
-    span = float(np.ptp(x)) if x.size else 0.0
-    if span <= 0.0:
-        return by_samples
-    turns = np.empty(x.size, np.int64)
-    n = int(S.turn_points(x, TURN_BAND * span, np.zeros(3), turns))
+    turns = _turns(x)
+    n = turns.size
     if n < MIN_TURNS:
         return by_samples
 
@@ -184,6 +278,115 @@ def fold_bounds(x: FloatArray) -> list[tuple[int, int]]:
     if any(a < 2 or b - a < 2 for a, b in bounds):
         return by_samples
     return bounds
+
+
+def _turns(x: FloatArray) -> np.ndarray:
+    """The index of each turn's extreme (:data:`TURN_BAND`); none for a constant input."""
+    span = float(np.ptp(x)) if x.size else 0.0
+    turns = np.empty(x.size, np.int64)
+    if span <= 0.0:
+        return turns[:0]
+    return turns[: int(S.turn_points(x, TURN_BAND * span, np.zeros(3), turns))]
+
+
+def _block_starts(turns: np.ndarray, a: int, b: int) -> np.ndarray:
+    """Where the blocks of part ``a:b`` start, relative to ``a``: after each turn inside it
+    (a half-cycle a block), or :data:`EVEN_BLOCKS` equal blocks with fewer than two turns."""
+    inside = turns[(turns > a) & (turns < b - 1)] + 1 - a
+    if inside.size >= 2:
+        return np.concatenate([[0], inside]).astype(np.int64)
+    k = max(1, min(EVEN_BLOCKS, (b - a) // 2))
+    return np.unique(np.linspace(0, b - a, k + 1)[:-1].astype(np.int64))
+
+
+def _part(residual: FloatArray, starts: np.ndarray, span: float) -> Part:
+    squares = np.add.reduceat(residual * residual, starts)
+    counts = np.diff(np.append(starts, residual.size)).astype(np.float64)
+    return Part(squares, counts, span)
+
+
+def jackknife(parts: Sequence[Part], other: Sequence[Part] = ()) -> float:
+    r"""The block-jackknife standard error of a score (:data:`WEIGHTS` over its parts' NRMSE),
+    or of its difference from ``other``'s on the same blocks (paired).
+
+    Each block of each part is left out in turn (of both scores, when paired) and the score
+    recomputed; :math:`\mathrm{se}^2 = \frac{J-1}{J}\sum_j (\theta_{(j)} - \bar\theta)^2`
+    over the :math:`J` blocks. Blocks are half-cycles of the input, so an error that
+    repeats with the drive counts once per block, not once per sample.
+
+    Parameters
+    ----------
+    parts : sequence of Part
+        One per fold.
+    other : sequence of Part, optional
+        Another candidate's parts on the same blocks.
+
+    Returns
+    -------
+    float
+        NaN where a part has fewer than two blocks.
+    """
+    if any(p.squares.size < 2 for p in parts):
+        return math.nan
+
+    def left_out(ps: Sequence[Part]) -> FloatArray:
+        whole = [p.nrmse for p in ps]
+        runs = []
+        for f, p in enumerate(ps):
+            rest = sum(w * v for k, (w, v) in enumerate(zip(WEIGHTS, whole, strict=True)) if k != f)
+            runs.append(WEIGHTS[f] * p.left_out() + rest)
+        return np.concatenate(runs)
+
+    theta = left_out(parts) - (left_out(other) if other else 0.0)
+    j = theta.size
+    return math.sqrt((j - 1) / j * float(np.sum((theta - theta.mean()) ** 2)))
+
+
+def with_margins(rows: Sequence[SelectionRow], winner: SelectionRow) -> list[SelectionRow]:
+    """The rows with each one's margin over ``winner`` and its paired standard error."""
+    out = []
+    for r in rows:
+        if r.name == winner.name:
+            out.append(replace(r, margin=0.0, margin_stderr=0.0))
+        elif r.parts and winner.parts:
+            se = jackknife(r.parts, winner.parts)
+            out.append(replace(r, margin=r.score - winner.score, margin_stderr=se))
+        else:
+            out.append(r)
+    return out
+
+
+def record_notes(x: FloatArray) -> tuple[str, ...]:
+    """What a record's input cannot test, said plainly (for :attr:`Selection.notes`).
+
+    Parameters
+    ----------
+    x : ndarray, shape (N,)
+        The input.
+
+    Returns
+    -------
+    tuple of str
+    """
+    turns = _turns(x)
+    notes = []
+    if turns.size < MIN_TURNS:
+        notes.append(
+            f"The input turns {turns.size} times (fewer than {MIN_TURNS}): the folds split its "
+            "samples, and each scored part holds few loops."
+        )
+    span = float(np.ptp(x)) if x.size else 0.0
+    if turns.size >= 2 and span > 0.0:
+        widths = np.abs(np.diff(x[turns])) / span
+        if np.all(widths >= MAJOR):
+            notes.append(
+                f"Every reversal spans at least {100 * MAJOR:.0f} % of the input's range: the "
+                "record holds no minor loops, so the scores rank how each candidate follows the "
+                "major loop, not how it predicts smaller loops (a Preisach density or a Duhem "
+                "grid inside the loop is then a guess). Record loops of several amplitudes "
+                "(piezohyst excite) to choose for them."
+            )
+    return tuple(notes)
 
 
 def forward_scores(
@@ -209,8 +412,12 @@ def forward_scores(
     list of SelectionRow
     """
     scores: dict[str, list[float]] = {n: [] for n in models}
+    parts: dict[str, list[Part]] = {n: [] for n in models}
     errors: dict[str, str] = {}
+    turns = _turns(x)
     for fit_stop, stop in fold_bounds(x):
+        starts = _block_starts(turns, fit_stop, stop)
+        span = float(np.ptp(y[fit_stop:stop]))
         with warnings.catch_warnings():  # a scored part may leave the fitted region
             warnings.simplefilter("ignore", ExtrapolationWarning)
             result = compare_models(
@@ -221,13 +428,17 @@ def forward_scores(
             scores[row.name].append(math.nan if row.error else row.test_nrmse)
             if row.error:
                 errors.setdefault(row.name, row.error)
+            elif row.test_residual is not None and span > 0.0:
+                parts[row.name].append(_part(row.test_residual, starts, span))
     rows = []
     for n in models:
         folds = tuple(scores[n])
         finite = all(math.isfinite(f) for f in folds)
         why = errors.get(n, "" if finite else "non-finite prediction")
         score = float(np.dot(WEIGHTS, folds)) if finite else math.inf
-        rows.append(SelectionRow(n, folds, score, why))
+        kept = tuple(parts[n]) if finite and len(parts[n]) == len(folds) else ()
+        se = jackknife(kept) if kept else math.nan
+        rows.append(SelectionRow(n, folds, score, why, stderr=se, parts=kept))
     return rows
 
 
@@ -296,4 +507,5 @@ def select_model(
     winner = chosen(rows)
     model = _candidate(winner.name, operators, units)
     model.fit(xs, ys, t=ts, initial_state=initial_state)
-    return Selection(model, winner.name, tuple(ranked))
+    ranked = sorted(with_margins(rows, winner), key=lambda r: r.score)
+    return Selection(model, winner.name, tuple(ranked), record_notes(xs))

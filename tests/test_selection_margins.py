@@ -1,0 +1,147 @@
+"""How sure a model choice is (issue 26): a paired block jackknife over the scored parts'
+half-cycles, and what a record cannot test said in the selection's notes."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+
+import piezohyst as ph
+from piezohyst.excitation import excitation
+from piezohyst.selection import (
+    FOLDS,
+    MAJOR,
+    SURE,
+    WEIGHTS,
+    Part,
+    _block_starts,
+    _part,
+    _turns,
+    jackknife,
+    record_notes,
+    select_model,
+)
+
+
+def naive_jackknife(
+    residuals: list[np.ndarray], blocks: list[list[int]], spans: list[float], other=None
+) -> float:  # type: ignore[no-untyped-def]
+    """The score recomputed from the residual samples with each block deleted, plainly."""
+
+    def score(res: list[np.ndarray], drop: tuple[int, int] | None) -> float:
+        total = 0.0
+        for f, (r, edges, span) in enumerate(zip(res, blocks, spans, strict=True)):
+            keep = np.ones(r.size, bool)
+            if drop is not None and drop[0] == f:
+                a = edges[drop[1]]
+                b = edges[drop[1] + 1] if drop[1] + 1 < len(edges) else r.size
+                keep[a:b] = False
+            total += WEIGHTS[f] * math.sqrt(float(np.mean(r[keep] ** 2))) / span
+        return total
+
+    thetas = []
+    for f, edges in enumerate(blocks):
+        for j in range(len(edges)):
+            value = score(residuals, (f, j))
+            if other is not None:
+                value -= score(other, (f, j))
+            thetas.append(value)
+    th = np.array(thetas)
+    return math.sqrt((th.size - 1) / th.size * float(np.sum((th - th.mean()) ** 2)))
+
+
+@st.composite
+def parts_of_two_folds(draw: st.DrawFn) -> tuple[list[np.ndarray], list[np.ndarray], list]:
+    residuals, others, blocks = [], [], []
+    for _ in FOLDS:
+        n = draw(st.integers(8, 60))
+        values = st.floats(-1.0, 1.0, allow_nan=False, width=64)
+        residuals.append(np.array(draw(st.lists(values, min_size=n, max_size=n))))
+        others.append(np.array(draw(st.lists(values, min_size=n, max_size=n))))
+        cuts = sorted(draw(st.sets(st.integers(1, n - 1), min_size=1, max_size=6)))
+        blocks.append([0, *cuts])
+    return residuals, others, blocks
+
+
+@settings(max_examples=60, deadline=None)
+@given(parts_of_two_folds(), st.floats(0.5, 3.0))
+def test_the_jackknife_is_the_score_recomputed_with_each_block_left_out(
+    drawn: tuple[list[np.ndarray], list[np.ndarray], list], span: float
+) -> None:
+    residuals, others, blocks = drawn
+    for r, o, edges in zip(residuals, others, blocks, strict=True):
+        # a block holding nearly all of a part's error leaves a rest that cancels: keep the
+        # rest above 1e-6 of the total, so rounding stays below 1e-9 of the score
+        for res in (r, o):
+            sq = np.add.reduceat(res * res, np.array(edges))
+            assume(float(np.min(res @ res - sq)) > 1e-6 * float(res @ res))
+    spans = [span, 1.3 * span]
+    parts = [_part(r, np.array(e), s) for r, e, s in zip(residuals, blocks, spans, strict=True)]
+    other = [_part(r, np.array(e), s) for r, e, s in zip(others, blocks, spans, strict=True)]
+    scale = sum(p.nrmse for p in parts) + sum(p.nrmse for p in other)
+    # tol: sums of <= 120 squares in two orders, and one subtraction kept above 1e-6 of its
+    # total: 1e-9 of the score
+    np.testing.assert_allclose(
+        jackknife(parts), naive_jackknife(residuals, blocks, spans), rtol=0, atol=1e-9 * scale
+    )
+    np.testing.assert_allclose(
+        jackknife(parts, other),
+        naive_jackknife(residuals, blocks, spans, others),
+        rtol=0,
+        atol=1e-9 * scale,
+    )
+    assert jackknife(parts, parts) == 0.0  # a candidate does not differ from itself
+    assert jackknife(parts, other) == pytest.approx(jackknife(other, parts), rel=1e-12)
+
+
+def test_a_part_of_one_block_gives_no_standard_error() -> None:
+    one = Part(np.array([4.0]), np.array([10.0]), 1.0)
+    two = Part(np.array([1.0, 3.0]), np.array([5.0, 5.0]), 1.0)
+    assert math.isnan(jackknife([one, two]))
+
+
+def test_blocks_are_the_half_cycles_between_the_input_s_turns() -> None:
+    t = np.arange(4000) / 1000.0
+    x = 70.0 + 60.0 * np.sin(2 * np.pi * 2.0 * t)  # 2 Hz: a turn every 250 samples
+    turns = _turns(x)
+    starts = _block_starts(turns, 1000, 3000)
+    lengths = np.diff(np.append(starts, 2000))
+    assert starts[0] == 0 and np.all(lengths[1:-1] == 250)  # whole half-cycles inside
+    # a part with fewer than two turns inside: equal blocks
+    few = _block_starts(turns, 1000, 1300)
+    assert few.size == 8 and few[0] == 0
+
+
+def test_the_choice_says_its_margins_and_what_the_record_cannot_test() -> None:
+    """A constant-amplitude record (the paper's `hold` signal) shows no minor loops, and the
+    selection says so; each candidate's margin over the chosen one carries its standard
+    error, and the candidates within SURE of them are listed as undecided."""
+    rec = ph.simulate(duration=20.0, seed=2)
+    sel = select_model(rec.voltage, rec.charge, rec.t)
+    win = next(r for r in sel.rows if r.name == sel.name)
+    assert win.margin == 0.0 and win.margin_stderr == 0.0 and not win.decided
+    for r in sel.rows:
+        assert r.margin == pytest.approx(r.score - win.score, rel=1e-12, abs=1e-15)
+        assert r.stderr > 0.0 and r.margin_stderr >= 0.0
+        assert (r.name in sel.undecided) == (r.name != sel.name and not r.decided)
+        assert r.decided == (abs(r.margin) > SURE * r.margin_stderr)
+    classical = next(r for r in sel.rows if r.name == "classical-pi")
+    assert classical.decided  # no growth term on a leaking charge: far behind, and sure
+    assert any("no minor loops" in n for n in sel.notes)
+    table = sel.table()
+    assert "vs chosen (± s.e.)" in table and "no minor loops" in table
+
+
+def test_a_record_with_minor_loops_has_no_such_note() -> None:
+    exc = excitation(v_min=0.0, v_max=140.0, sample_rate=1000.0)
+    assert record_notes(exc.voltage) == ()
+    t = np.arange(6000) / 1000.0  # six cycles: 12 turns
+    sine = 70.0 + 70.0 * np.sin(2 * np.pi * t)
+    notes = record_notes(sine)
+    assert len(notes) == 1 and f"{100 * MAJOR:.0f} %" in notes[0]
+    # a slow ramp turns twice at most: too few turns to split by is said too
+    assert any("fewer than" in n for n in record_notes(np.linspace(0.0, 1.0, 50)))
