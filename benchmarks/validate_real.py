@@ -574,7 +574,53 @@ def _matrix_row(
                           output_unit=unit)  # fmt: skip
     row["chosen"] = sel.name
     row["select_model"] = row[sel.name]  # the same defaults, fitted on the same part
+    # what the record itself said of the model that did best held out: its margin over the
+    # chosen one inside the record, with the paired jackknife's standard error
+    best = min(candidates, key=lambda n: float(row[n]))
+    said = next(r for r in sel.rows if r.name == best)
+    row["best"], row["margin"], row["margin_se"] = best, said.margin, said.margin_stderr
+    row["notes"] = " ".join(sel.notes)
     return row
+
+
+def _evidence(rows: list[tuple[str, list[dict[str, float | str]]]]) -> list[str]:
+    """Per unit: the model that did best held out, and what the training record said of
+    it (its margin over select_model's choice inside the record, ± the paired jackknife's
+    standard error); then how often a miss was the record's own clear evidence."""
+    out = [
+        "What each training record said of the model that did best on the test (per unit): "
+        "its score inside the record minus the chosen model's, ± the paired block-jackknife "
+        "standard error (`SelectionRow.margin`, `margin_stderr`); 'clear' where beyond 2 of "
+        "them, the record's own evidence against it. Where the chosen model is the best, "
+        "nothing is said. The last column: what `Selection.notes` says the record cannot "
+        "test.\n",
+        "| record | held-out best per unit: in-record margin over the chosen | notes |",
+        "|---|---|---|",
+    ]
+    misses = clear = 0
+    for label, runs in rows:
+        cells = []
+        for r in runs:
+            if r["best"] == r["chosen"]:
+                cells.append(f"{r['best']} (chosen)")
+                continue
+            margin, se = float(r["margin"]), float(r["margin_se"])
+            decided = abs(margin) > 2.0 * se
+            cells.append(f"{r['best']}: {100 * margin:+.3g} ± {100 * se:.2g} %"
+                         + (" clear" if decided else ""))  # fmt: skip
+            if float(r["select_model"]) > 1.25 * float(r[str(r["best"])]):
+                misses += 1
+                clear += decided and margin > 0
+        notes = "; ".join(sorted({str(r["notes"]) for r in runs if r["notes"]})) or "-"
+        out.append(f"| {label} | " + "; ".join(cells) + f" | {notes} |")
+    out += [
+        "",
+        f"Of the {misses} units where the chosen model's held-out error was more than 1.25x "
+        f"the unit's best, the training record's own evidence put that best clearly behind "
+        f"(beyond 2 standard errors) on {clear}: there a rule that follows the record "
+        "chooses against the test, whichever score it uses.",
+    ]
+    return out
 
 
 def matrix(data: Path) -> str:
@@ -651,6 +697,7 @@ def matrix(data: Path) -> str:
         ratios.append(ratio)
         worst_default.append(max(means[n] for n in CANDIDATES if n != "classical-pi") / best)
         lines.append(f"| {label} | " + " | ".join(cells) + f" | {chosen} | {ratio:.2f} |")
+    lines += ["", *_evidence(rows)]
     lines += [
         "",
         f"`select_model` within 1.25x the best on {sum(r <= 1.25 for r in ratios)} of "

@@ -109,7 +109,8 @@ def test_the_compare_command(tmp_path: Path) -> None:
     names = {lines[k].split(" | ")[0].removesuffix(" (recommended)") for k in (3, 4)}
     assert names == {"| active-pi", "| preisach"}
     assert sum("(recommended)" in lines[k] for k in (3, 4)) == 1  # one, chosen in training
-    assert md.read_text().splitlines()[2:] == lines[1:5]
+    written = md.read_text().splitlines()[2:]  # the table and what is said under it
+    assert written[:4] == lines[1:5] and written == lines[1 : 1 + len(written)]
     assert ph.io.is_piezohyst_output(md)  # so a second run may replace it
     out_csv = tmp_path / "cmp.csv"
     res = runner.invoke(main, ["compare", str(data), "--models", "active-pi", "--test", str(data),

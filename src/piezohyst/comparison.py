@@ -126,6 +126,9 @@ class Comparison:
     recommended : str
         The model chosen by forward chaining inside the training part alone
         (:func:`~piezohyst.selection.forward_scores`; "" when not asked for).
+    recommendation_notes : tuple of str
+        How sure that choice is: the models the training part does not tell apart from
+        it, and what the training part cannot test (:attr:`Selection.notes`).
     """
 
     rows: tuple[ComparisonRow, ...]
@@ -134,6 +137,7 @@ class Comparison:
     separate_test: bool = False
     output_unit: str = ""
     recommended: str = ""
+    recommendation_notes: tuple[str, ...] = ()
 
     def best(self) -> ComparisonRow:
         """The row with the smallest held-out NRMSE.
@@ -179,6 +183,8 @@ class Comparison:
                 f"| {r.test_rmse:.4g} | {100 * r.test_width:.3g} % | {r.absorbed or '-'} "
                 f"| {r.notes} |"
             )
+        if self.recommendation_notes:
+            lines += ["", *self.recommendation_notes]
         return "\n".join(lines)
 
 

@@ -62,6 +62,8 @@ __all__ = [
     "jackknife",
     "record_notes",
     "select_model",
+    "undecided",
+    "verdict",
     "with_margins",
 ]
 
@@ -197,11 +199,12 @@ class Selection:
     def undecided(self) -> tuple[str, ...]:
         """The candidates this record does not tell from the chosen one (their margin
         within :data:`SURE` standard errors, or of unknown error), best first."""
-        return tuple(
-            r.name
-            for r in self.rows
-            if r.name != self.name and math.isfinite(r.score) and not r.decided
-        )
+        return undecided(self.rows, self.name)
+
+    def said(self) -> tuple[str, ...]:
+        """What the table says under its rows: the candidates not told apart from the
+        chosen one, then :attr:`notes`."""
+        return verdict(self.rows, self.name, self.notes)
 
     def table(self) -> str:
         """A Markdown table of the candidates, best first, the winner marked.
@@ -226,12 +229,7 @@ class Selection:
             else:
                 versus = f"{100 * row.margin:+.3g} ± {100 * row.margin_stderr:.2g} %"
             lines.append(f"| {row.name}{mark} | {cells} | {mean} | {versus} |")
-        said = list(self.notes)
-        if self.undecided:
-            said.insert(0, (
-                f"Not told apart from {self.name} by this record (within {SURE:g} standard "
-                f"errors): {', '.join(self.undecided)}."
-            ))  # fmt: skip
+        said = self.said()
         return "\n".join(lines + (["", *said] if said else []))
 
 
@@ -354,6 +352,27 @@ def with_margins(rows: Sequence[SelectionRow], winner: SelectionRow) -> list[Sel
         else:
             out.append(r)
     return out
+
+
+def undecided(rows: Sequence[SelectionRow], name: str) -> tuple[str, ...]:
+    """The rows' candidates not told apart from ``name`` (see :attr:`Selection.undecided`),
+    in the rows' order; ``rows`` carry margins (:func:`with_margins`)."""
+    return tuple(
+        r.name for r in rows if r.name != name and math.isfinite(r.score) and not r.decided
+    )
+
+
+def verdict(rows: Sequence[SelectionRow], name: str, notes: Sequence[str]) -> tuple[str, ...]:
+    """How sure the choice of ``name`` is, in sentences: the candidates the record does not
+    tell apart from it (``rows`` with margins, :func:`with_margins`), then ``notes``."""
+    close = undecided(sorted(rows, key=lambda r: r.score), name)
+    if not close:
+        return tuple(notes)
+    head = (
+        f"Not told apart from {name} by this record (within {SURE:g} standard errors): "
+        f"{', '.join(close)}."
+    )
+    return (head, *notes)
 
 
 def record_notes(x: FloatArray) -> tuple[str, ...]:

@@ -57,7 +57,16 @@ from .io import (
 )
 from .model import History, HysteresisModel, InitialState, ModelState
 from .persistence import model_class, model_names
-from .selection import CANDIDATES, Selection, chosen, forward_scores, select_model
+from .selection import (
+    CANDIDATES,
+    Selection,
+    chosen,
+    forward_scores,
+    record_notes,
+    select_model,
+    verdict,
+    with_margins,
+)
 from .simulation import DEFAULT_PRESET, PRESETS, BenchRecord, batch_unit, simulate
 
 __all__ = [
@@ -435,7 +444,9 @@ def compare_file(
     a, b = result.train
     inner = forward_scores(estimators, rec.x[w][a:b], rec.y[w][a:b], rec.t[w][a:b], start)
     if any(math.isfinite(r.score) for r in inner):  # chosen inside the training part alone
-        result = dataclasses.replace(result, recommended=chosen(inner).name)
+        winner = chosen(inner)
+        said = verdict(with_margins(inner, winner), winner.name, record_notes(rec.x[w][a:b]))
+        result = dataclasses.replace(result, recommended=winner.name, recommendation_notes=said)
     if w.start:  # the samples scored, as rows of the record
         (a, b), (c, d) = result.train, result.test
         shift = 0 if result.separate_test else w.start
