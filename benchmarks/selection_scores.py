@@ -13,7 +13,9 @@ best: ``select_model``'s (:data:`~piezohyst.selection.WEIGHTS`, the plain mean),
 0.4 and 0.6, the last part alone, the worst part. A score's ratio on a row is the mean
 held-out NRMSE of what it chose over the units, divided by the best candidate's mean, as in
 the matrix. Units 4-6 are where a score may be chosen; units 1-3 are the matrix's, to check
-it.
+it. Two rules that weigh the scores' uncertainty as well (:data:`WITHIN`): the simplest
+candidate whose paired block-jackknife margin over the best-scoring one is within 1 or 2
+standard errors.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from __future__ import annotations
 import argparse
 import math
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
@@ -30,7 +32,7 @@ import numpy as np
 from selection_study import _measured, _record  # the study's records, built alike
 
 import piezohyst as ph
-from piezohyst.selection import CANDIDATES, TIE, WEIGHTS, _candidate
+from piezohyst.selection import CANDIDATES, TIE, WEIGHTS, SelectionRow, _candidate, with_margins
 
 SCORES: dict[str, Callable[[list[float]], float]] = {
     f"weights {', '.join(f'{w:.2g}' for w in WEIGHTS)} (select_model)": (
@@ -62,7 +64,27 @@ def row(job: tuple[str, str, int, str | None]) -> dict[str, Any]:
                 e = math.inf
             errs[name] = e if math.isfinite(e) else math.inf
         sel = ph.select_model(x, y, t, output_unit=out)
-    return {"errs": errs, "folds": {r.name: list(r.folds) for r in sel.rows}}
+    folds = {r.name: list(r.folds) for r in sel.rows}
+    picks = {label: choose(folds, score) for label, score in SCORES.items()}
+    picks |= {label: simplest_within(sel.rows, k) for label, k in WITHIN.items()}
+    return {"errs": errs, "picks": picks}
+
+
+#: Rules that weigh the scores' uncertainty: the simplest candidate whose paired
+#: block-jackknife margin over the best-scoring one is within k standard errors
+WITHIN = {"simplest within 1 s.e.": 1.0, "simplest within 2 s.e.": 2.0}
+
+
+def simplest_within(rows: Sequence[SelectionRow], k: float) -> str:
+    """The first candidate (simplest) not told apart from the best-scoring one at k
+    standard errors of their paired margin."""
+    best = min(rows, key=lambda r: r.score)
+    margins = {r.name: r for r in with_margins(rows, best)}
+    for name in CANDIDATES:
+        r = margins.get(name)
+        if r is not None and math.isfinite(r.score) and r.margin <= k * r.margin_stderr:
+            return name
+    return best.name
 
 
 def choose(folds: dict[str, list[float]], score: Callable[[list[float]], float]) -> str:
@@ -93,13 +115,13 @@ def main() -> None:
     for (design, plant, _, _), res in zip(jobs, results, strict=True):
         rows.setdefault((design, plant), []).append(res)
     print(f"piezohyst {ph.__version__}: select_model's part scores, units {args.units}")
-    ratios: dict[str, list[float]] = {s: [] for s in SCORES}
+    ratios: dict[str, list[float]] = {s: [] for s in [*SCORES, *WITHIN]}
     for (design, plant), runs in rows.items():
         means = {n: float(np.mean([r["errs"][n] for r in runs])) for n in CANDIDATES}
         best = min(means.values())
         cells = []
-        for label, score in SCORES.items():
-            picks = [choose(r["folds"], score) for r in runs]
+        for label in [*SCORES, *WITHIN]:
+            picks = [r["picks"][label] for r in runs]
             ratio = float(np.mean([r["errs"][p] for r, p in zip(runs, picks, strict=True)]))
             ratios[label].append(ratio / best)
             cells.append(f"{label} {ratio / best:.2f}")
