@@ -203,7 +203,13 @@ class Selection:
 
     def said(self) -> tuple[str, ...]:
         """What the table says under its rows: the candidates not told apart from the
-        chosen one, then :attr:`notes`."""
+        chosen one, then :attr:`notes`.
+
+        Returns
+        -------
+        tuple of str
+            Sentences (:func:`verdict`).
+        """
         return verdict(self.rows, self.name, self.notes)
 
     def table(self) -> str:
