@@ -50,6 +50,7 @@ __all__ = [
     "LOOP_CANDIDATES",
     "MAJOR",
     "MIN_TURNS",
+    "NOISE_REACH",
     "SURE",
     "TURN_BAND",
     "WEIGHTS",
@@ -59,9 +60,11 @@ __all__ = [
     "chosen",
     "fold_bounds",
     "forward_scores",
+    "input_noise",
     "jackknife",
     "record_notes",
     "select_model",
+    "turn_band",
     "undecided",
     "verdict",
     "with_margins",
@@ -87,6 +90,10 @@ FOLDS = ((0.5, 0.75), (0.75, 1.0))
 TURN_BAND = 0.01
 #: Fewest turns for folds placed by turns: two per scored part at the least
 MIN_TURNS = 8
+#: A turn must also move back this many times the input's noise (RMS): over a hold of
+#: 10^4-10^5 samples Gaussian noise spans 8.6-9.5 of its RMS from highest to lowest, so a
+#: smaller band counts the noise of a hold as turns
+NOISE_REACH = 10.0
 #: Each part's weight in the score: equal. Chosen on units 4-6 of the simulated plants'
 #: batches with the folds placed by turns: the plain mean, weights 0.4 and 0.6 (the share of
 #: the turns each fit saw), the last part alone and the worst part chose within 1.25x of the
@@ -251,13 +258,12 @@ def fold_bounds(x: FloatArray) -> list[tuple[int, int]]:
     """Where each of :data:`FOLDS` ends its fitted and its scored part, in samples.
 
     A fraction ``f`` of the turns ends at the extreme of turn ``round(f * n)`` of the ``n``
-    turns of at least :data:`TURN_BAND` of the span (the extreme is the fit's last sample);
+    turns (:func:`turn_band`: at least :data:`TURN_BAND` of the span, and
+    :data:`NOISE_REACH` times the input's noise; the extreme is the fit's last sample);
     a fraction of 1 at the record's end. With fewer than :data:`MIN_TURNS` turns, or where a
-    part would hold fewer than 2 samples, the fractions are of the samples. An input noisier
-    than about 0.1 % of its span (RMS) turns on its noise as well, and the folds drift back
-    towards even shares of the samples: on what ``piezohyst excite`` writes, 87 turns with
-    0-0.1 % noise, 302 with 0.2 % (the first fit ending at 45 % of the samples, not 93 %).
-    Give the commanded voltage, as most DAQs log it, or a filtered one.
+    part would hold fewer than 2 samples, the fractions are of the samples. A measured
+    voltage's noise does not turn: on what ``piezohyst excite`` writes, 87 turns with 0 to
+    1 % RMS noise (with the span's band alone, 302 at 0.2 %).
 
     Parameters
     ----------
@@ -284,13 +290,61 @@ def fold_bounds(x: FloatArray) -> list[tuple[int, int]]:
     return bounds
 
 
-def _turns(x: FloatArray) -> np.ndarray:
-    """The index of each turn's extreme (:data:`TURN_BAND`); none for a constant input."""
+#: Savitzky-Golay smoothing, 7 points, quadratic: exact on cubics, so what it leaves of a
+#: smooth input is its noise (times sqrt(1 - 7/21): the centre weight is 7/21)
+_SMOOTH = np.array([-2.0, 3.0, 6.0, 7.0, 6.0, 3.0, -2.0]) / 21.0
+
+
+def input_noise(x: FloatArray) -> float:
+    """The input's noise (RMS, its units), from what a 7-point quadratic smoothing leaves,
+    by its median absolute deviation (steps and corners are outliers there).
+
+    A smooth input leaves little: from a 70 V sine sampled at 1 kHz it estimates 0.001 V
+    at 10 Hz, 0.41 V at 50 Hz and 4.3 V at 100 Hz (6 % of the amplitude), which then
+    counts as noise.
+
+    Parameters
+    ----------
+    x : ndarray, shape (N,)
+
+    Returns
+    -------
+    float
+        0 for fewer than 7 samples or a quantised input whose codes rarely change.
+    """
+    if x.size < _SMOOTH.size:
+        return 0.0
+    left = x[3:-3] - np.convolve(x, _SMOOTH, mode="valid")
+    mad = float(np.median(np.abs(left - np.median(left))))
+    return 1.4826 * mad / math.sqrt(1.0 - 7.0 / 21.0)
+
+
+def turn_band(x: FloatArray) -> float:
+    """How far the input must move back from its last extreme to turn: :data:`TURN_BAND` of
+    its span, or :data:`NOISE_REACH` times its noise (:func:`input_noise`) where larger.
+
+    Parameters
+    ----------
+    x : ndarray, shape (N,)
+
+    Returns
+    -------
+    float
+        In the input's units; 0 for a constant input.
+    """
     span = float(np.ptp(x)) if x.size else 0.0
-    turns = np.empty(x.size, np.int64)
     if span <= 0.0:
+        return 0.0
+    return max(TURN_BAND * span, NOISE_REACH * input_noise(x))
+
+
+def _turns(x: FloatArray) -> np.ndarray:
+    """The index of each turn's extreme (:func:`turn_band`); none for a constant input."""
+    band = turn_band(x)
+    turns = np.empty(x.size, np.int64)
+    if band <= 0.0:
         return turns[:0]
-    return turns[: int(S.turn_points(x, TURN_BAND * span, np.zeros(3), turns))]
+    return turns[: int(S.turn_points(x, band, np.zeros(3), turns))]
 
 
 def _block_starts(turns: np.ndarray, a: int, b: int) -> np.ndarray:
