@@ -276,14 +276,18 @@ def fold_bounds(x: FloatArray) -> list[tuple[int, int]]:
     list of (int, int)
         (fit stop, score stop) per fold.
     """
-    by_samples = [(round(a * x.size), round(b * x.size)) for a, b in FOLDS]
-    turns = _turns(x)
+    return _bounds(x.size, _turns(x))
+
+
+def _bounds(size: int, turns: np.ndarray) -> list[tuple[int, int]]:
+    """:func:`fold_bounds` of a record of ``size`` samples whose turns are ``turns``."""
+    by_samples = [(round(a * size), round(b * size)) for a, b in FOLDS]
     n = turns.size
     if n < MIN_TURNS:
         return by_samples
 
     def stop(f: float) -> int:
-        return x.size if f >= 1.0 else int(turns[max(round(f * n), 1) - 1]) + 1
+        return size if f >= 1.0 else int(turns[max(round(f * n), 1) - 1]) + 1
 
     bounds = [(stop(a), stop(b)) for a, b in FOLDS]
     if any(a < 2 or b - a < 2 for a, b in bounds):
@@ -448,7 +452,10 @@ def record_notes(x: FloatArray) -> tuple[str, ...]:
     -------
     tuple of str
     """
-    turns = _turns(x)
+    return _record_notes(x, _turns(x))
+
+
+def _record_notes(x: FloatArray, turns: np.ndarray) -> tuple[str, ...]:
     notes = []
     if turns.size < MIN_TURNS:
         notes.append(
@@ -491,11 +498,22 @@ def forward_scores(
     -------
     list of SelectionRow
     """
+    return _forward(models, x, y, t, initial_state, _turns(x))
+
+
+def _forward(
+    models: dict[str, HysteresisModel],
+    x: FloatArray,
+    y: FloatArray,
+    t: FloatArray | None,
+    initial_state: InitialState,
+    turns: np.ndarray,
+) -> list[SelectionRow]:
+    """:func:`forward_scores` on a record whose turns are ``turns`` (:func:`_turns`)."""
     scores: dict[str, list[float]] = {n: [] for n in models}
     parts: dict[str, list[Part]] = {n: [] for n in models}
     errors: dict[str, str] = {}
-    turns = _turns(x)
-    for fit_stop, stop in fold_bounds(x):
+    for fit_stop, stop in _bounds(x.size, turns):
         starts = _block_starts(turns, fit_stop, stop)
         span = float(np.ptp(y[fit_stop:stop]))
         with warnings.catch_warnings():  # a scored part may leave the fitted region
@@ -577,8 +595,9 @@ def select_model(
     same_length(xs, ys, "x", "y")
     ts = as_time(t, xs.size, required=False, owner="select_model")
     units = (input_unit, output_unit)
-    rows = forward_scores(
-        {n: _candidate(n, operators, units) for n in names}, xs, ys, ts, initial_state
+    turns = _turns(xs)
+    rows = _forward(
+        {n: _candidate(n, operators, units) for n in names}, xs, ys, ts, initial_state, turns
     )
     ranked = sorted(rows, key=lambda r: r.score)
     if not math.isfinite(ranked[0].score):
@@ -588,4 +607,4 @@ def select_model(
     model = _candidate(winner.name, operators, units)
     model.fit(xs, ys, t=ts, initial_state=initial_state)
     ranked = sorted(with_margins(rows, winner), key=lambda r: r.score)
-    return Selection(model, winner.name, tuple(ranked), record_notes(xs))
+    return Selection(model, winner.name, tuple(ranked), _record_notes(xs, turns))
