@@ -18,6 +18,7 @@ from piezohyst.selection import (
     _turns,
     fold_bounds,
     input_noise,
+    turn_band,
 )
 
 pytestmark = pytest.mark.kernels
@@ -107,3 +108,21 @@ def test_the_noise_estimate_reads_little_of_a_smooth_input() -> None:
     for f, most in ((10.0, 0.01), (50.0, 0.5)):  # V, of a 70 V sine: see input_noise
         assert input_noise(70.0 + 70.0 * np.sin(2 * np.pi * f * t)) < most
     assert input_noise(np.full(100, 3.0)) == 0.0 and input_noise(np.arange(5.0)) == 0.0
+
+
+@given(
+    x=st.lists(st.floats(-5.0, 5.0, allow_nan=False), min_size=0, max_size=60),
+    scale=st.sampled_from([-8.0, -0.5, 0.25, 2.0, 1024.0]),
+    shift=st.sampled_from([-3.0, 0.0, 100.0]),
+)
+def test_the_noise_and_the_band_follow_the_input_s_units(
+    x: list[float], scale: float, shift: float
+) -> None:
+    """Volts or millivolts, offset or not: the noise scales with |scale| and ignores the
+    offset, and so does the band (powers of two scale exactly; the offset costs rounding)."""
+    xs = np.array(x)
+    moved = scale * xs + shift
+    # tol: the 7-point smoothing and the offset round at 1e-15 of the largest |value|
+    tol = 1e-12 * (1.0 + float(np.max(np.abs(moved), initial=0.0)))
+    assert abs(input_noise(moved) - abs(scale) * input_noise(xs)) <= tol * 10.0
+    assert abs(turn_band(moved) - abs(scale) * turn_band(xs)) <= tol * 100.0
