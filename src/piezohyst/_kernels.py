@@ -266,11 +266,16 @@ def compensator_step(desired, tables, config, state):  # type: ignore[no-untyped
 
 
 # Input dynamics of a compensator (analytic path): command -> [fraction f of a sample's delay,
-# interpolated as the model does: w = (1 - f) x + f x_prev] -> [lag B] -> piezo voltage.
+# interpolated: w = (1 - f) x + f x_prev] -> [lag B] -> piezo voltage.
 # ``dyn`` = [f, gain B] (0: absent; gain = 1 - exp(-dt/tau)), ``dstate`` = [after the
-# fraction, after B]. An integer delay is handled by the caller (preview). The fraction is
-# inverted as ``x = (1 + f) w_target - f w_prev``: exact on ramps, and stable (its poles lie
-# at radius f < 1), where the interpolation's own inverse rings at -f / (1 - f).
+# fraction, after B]. An integer delay is handled by the caller (preview). The compensator
+# keeps f in [-1/2, 1/2]: a model's fraction above half a sample is one more sample of preview
+# and f - 1 < 0 (the same delay at low frequency; the filters differ by O(w^2) at w rad/sample).
+# A fraction f > 0 is inverted as ``x = (1 + f) w_target - f w_prev``: exact on ramps, poles at
+# radius f <= 1/2 (the interpolation's own inverse has its pole at -f / (1 - f), outside the
+# unit circle for f > 1/2, and a pole at radius f near 1 rings at a quarter of the sample rate).
+# A fraction f < 0 (an extrapolation) is inverted exactly: x = (w_target - f x_prev) / (1 - f),
+# its pole at -f / (1 - f) in (0, 1/3].
 DYN_FRACTION = 0
 DYN_GAIN_B = 1
 
@@ -278,13 +283,17 @@ DYN_GAIN_B = 1
 @njit(cache=True, fastmath=FASTMATH, inline="always")
 def delay_fraction(x, last, f):  # type: ignore[no-untyped-def]
     """Command ``x`` after a delay of a fraction ``f`` of a sample (``last``: the one before)."""
-    return (1.0 - f) * x + f * last if f > 0.0 else x
+    return (1.0 - f) * x + f * last if f != 0.0 else x
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
-def undo_fraction(w_target, w_prev, f):  # type: ignore[no-untyped-def]
+def undo_fraction(w_target, w_prev, last, f):  # type: ignore[no-untyped-def]
     """The command whose delayed value heads for ``w_target`` (see ``DYN_FRACTION``)."""
-    return (1.0 + f) * w_target - f * w_prev if f > 0.0 else w_target
+    if f > 0.0:
+        return (1.0 + f) * w_target - f * w_prev
+    if f < 0.0:
+        return (w_target - f * last) / (1.0 - f)
+    return w_target
 
 
 @njit(cache=True, fastmath=FASTMATH)
@@ -330,8 +339,7 @@ def dynamic_step(desired, tables, config, state, dyn, dstate):  # type: ignore[n
     w_target = target
     if dyn[DYN_GAIN_B] > 0.0:
         w_target = dstate[1] + (target - dstate[1]) / dyn[DYN_GAIN_B]
-    x = w_target
-    x = undo_fraction(w_target, dstate[0], dyn[DYN_FRACTION])
+    x = undo_fraction(w_target, dstate[0], last, dyn[DYN_FRACTION])
     if not math.isfinite(x):
         state[end + ST_NONFINITE] += 1.0
         inverse_states(tables, config, state)

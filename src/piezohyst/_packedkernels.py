@@ -645,7 +645,7 @@ def core_step(desired, p, cfg, st, region, dyn, dstate, trial):  # type: ignore[
     last = st[end + DS_LAST]
     lo = cfg[CC_V_MIN]
     hi = cfg[CC_V_MAX]
-    dynamic = dyn[0] > 0.0 or dyn[1] > 0.0
+    dynamic = dyn[0] != 0.0 or dyn[1] > 0.0
     if not math.isfinite(desired):  # hold the last command (the piezo keeps settling on it)
         st[end + DS_NONFINITE] += 1.0
         if dynamic or cfg[CC_SLOW_AT] > 0.0:
@@ -671,7 +671,7 @@ def core_step(desired, p, cfg, st, region, dyn, dstate, trial):  # type: ignore[
         w = u
         if dyn[1] > 0.0:
             w = dstate[1] + (u - dstate[1]) / dyn[1]
-        x = K.undo_fraction(w, dstate[0], dyn[0])
+        x = K.undo_fraction(w, dstate[0], last, dyn[0])
         if not math.isfinite(x):
             x = last
         x = min(max(x, lo), hi)

@@ -233,9 +233,11 @@ class Compensator:
         if dyn.active:
             dt = 1.0 / float(sample_rate)  # type: ignore[arg-type]
             d = dyn.delay / dt
-            self.delay_samples = math.floor(d + 1e-9)
+            # the whole samples go to the preview, the fraction in [-1/2, 1/2] is inverted
+            # per sample (above half a sample its inverse rings: see _kernels.DYN_FRACTION)
+            self.delay_samples = math.floor(d + 0.5)
             frac = d - self.delay_samples
-            if frac > 1e-9:  # interpolated as the model does; inverted stably (see _kernels)
+            if abs(frac) > 1e-9:
                 self.dyn[K.DYN_FRACTION] = frac
             if dyn.tau > 0:
                 self.dyn[K.DYN_GAIN_B] = 1.0 - math.exp(-dt / dyn.tau)
@@ -416,7 +418,7 @@ class Compensator:
         if self.dynamic:  # hold each extreme until the lagging piezo voltage has reached it
             gain = self.dyn[K.DYN_GAIN_B]  # the lag's (creep terms of other cores follow)
             settle = int(np.ceil(-np.log(1e-9) / -np.log1p(-gain))) if gain > 0 else 0
-            settle += 1 if self.dyn[K.DYN_FRACTION] > 0 else 0  # the fraction: one sample
+            settle += 1 if self.dyn[K.DYN_FRACTION] != 0 else 0  # the fraction: one sample
             settle += self.delay_samples
             for j in (0, 1):
                 pieces[j] = np.concatenate([pieces[j], np.full(settle, knots[j + 1])])

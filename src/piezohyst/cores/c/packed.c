@@ -163,7 +163,7 @@ static void lags_advance(PREFIX_t *s, real_t u)
 /* x after a fraction of a sample's delay, interpolated from the last command */
 static real_t advance(PREFIX_t *s, real_t x)
 {
-    s->w = FRACTION > 0 ? (1 - FRACTION) * x + FRACTION * s->last : x;
+    s->w = FRACTION != 0 ? (1 - FRACTION) * x + FRACTION * s->last : x;
     s->u = GAIN_B > 0 ? s->u + GAIN_B * (s->w - s->u) : s->w;
     return s->u;
 }
@@ -219,7 +219,9 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired)
 #if DYNAMIC
     {
         real_t w = GAIN_B > 0 ? s->u + (u - s->u) / GAIN_B : u;
-        x = FRACTION > 0 ? (1 + FRACTION) * w - FRACTION * s->w : w;
+        x = FRACTION > 0   ? (1 + FRACTION) * w - FRACTION * s->w
+            : FRACTION < 0 ? (w - FRACTION * s->last) / (1 - FRACTION)
+                           : w;
         if (non_finite(x)) {
             x = s->last;
         }

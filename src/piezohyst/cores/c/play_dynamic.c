@@ -3,7 +3,7 @@
 /* x after a fraction of a sample's delay, interpolated from the last command */
 static real_t advance(PREFIX_t *s, real_t x)
 {
-    s->w = FRACTION > 0 ? (1 - FRACTION) * x + FRACTION * s->last : x;
+    s->w = FRACTION != 0 ? (1 - FRACTION) * x + FRACTION * s->last : x;
     s->u = GAIN_B > 0 ? s->u + GAIN_B * (s->w - s->u) : s->w;
     return s->u;
 }
@@ -33,7 +33,9 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
         target += WI[i] * s->zeta[i];
     }
     w_target = GAIN_B > 0 ? s->u + (target - s->u) / GAIN_B : target;
-    x = FRACTION > 0 ? (1 + FRACTION) * w_target - FRACTION * s->w : w_target;
+    x = FRACTION > 0   ? (1 + FRACTION) * w_target - FRACTION * s->w
+        : FRACTION < 0 ? (w_target - FRACTION * s->last) / (1 - FRACTION)
+                       : w_target;
     if (non_finite(x)) {
         s->nonfinite++;
         inverse_states(s);
