@@ -355,6 +355,7 @@ LAYERS = {
     "_packedkernels": 1,
     "_signalkernels": 1,
     "metrics": 1,
+    "screening": 1,
     "_isolate": 1,
     "_parsers": 1,
     "io": 1,

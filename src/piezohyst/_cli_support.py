@@ -239,6 +239,13 @@ def _data_options(fn: Callable[..., Any]) -> Callable[..., Any]:
             default=None,
             help="Unit of the time column (default: its header's, or s).",
         ),
+        click.option(
+            "--keep-outliers",
+            is_flag=True,
+            default=False,
+            help="Keep the isolated outliers the record's check names (an ADC glitch); by "
+            "default each is replaced by its neighbours' mean, so it sets no limit.",
+        ),
     ]
 
     @functools.wraps(fn)
@@ -256,6 +263,7 @@ def _data_options(fn: Callable[..., Any]) -> Callable[..., Any]:
         input_unit: str | None,
         output_unit: str | None,
         time_unit: str | None,
+        keep_outliers: bool,
         **kwargs: Any,
     ) -> Any:
         spec = DataSpec(
@@ -271,6 +279,7 @@ def _data_options(fn: Callable[..., Any]) -> Callable[..., Any]:
             time_unit,
             skip_rows,
             output_file,
+            keep_outliers,
         )
         return fn(*args, data_spec=spec, **kwargs)
 

@@ -21,6 +21,7 @@ __all__ = [
     "OverwriteError",
     "ParameterError",
     "PiezohystError",
+    "RecordWarning",
     "ShapeError",
     "TimeAxisError",
 ]
@@ -91,6 +92,10 @@ class ExtrapolationWarning(UserWarning):
 
 class IdentifiabilityWarning(UserWarning):
     """The record cannot determine a fitted quantity (e.g. a lag apart from hysteresis)."""
+
+
+class RecordWarning(UserWarning):
+    """A record holds something not to be trusted blindly: an isolated outlier, a hole in time."""
 
 
 class LearningWarning(UserWarning):

@@ -26,14 +26,24 @@ from .errors import (
     IdentifiabilityWarning,
     InsufficientDataError,
     ParameterError,
+    RecordWarning,
     TimeAxisError,
 )
 from .estimator import _dynamics_kind, _output_kind
 from .identification import Blocks, Summary, array_blocks, block_dt
+from .screening import screen
 from .state import InitialState, ModelState
 from .terms import Term
 
-__all__ = ["apply_fit", "fit_arrays", "fit_stream", "identify_model", "score_model", "set_fitted"]
+__all__ = [
+    "apply_fit",
+    "fit_arrays",
+    "fit_stream",
+    "identify_model",
+    "score_model",
+    "screened",
+    "set_fitted",
+]
 
 SCORE_PIECE = 1 << 16  # samples per piece when scoring a fit (2 MB of temporaries)
 
@@ -45,11 +55,13 @@ def fit_arrays(
     t: ArrayLike | None = None,
     *,
     initial_state: InitialState = None,
+    keep_outliers: bool = False,
 ) -> Any:
     xs = as_signal(x, "x")
     ys = as_signal(y, "y")
     same_length(xs, ys, "x", "y")
     ts = as_time(t, xs.size, required=False, owner=type(model).__name__)
+    xs, ys = screened(xs, ys, ts, keep_outliers, model.input_unit, model.output_unit)
     dyn = InputDynamics()
     us = xs
     owner = type(model).__name__
@@ -85,6 +97,42 @@ def fit_arrays(
         model.max_slew_rate_, model.max_step_ = logged.max_slew_rate, logged.max_step
     model.input_dynamics_ = dyn
     return model
+
+
+def screened(
+    x: FloatArray,
+    y: FloatArray,
+    t: FloatArray | None,
+    keep_outliers: bool,
+    x_unit: str | None = None,
+    y_unit: str | None = None,
+) -> tuple[FloatArray, FloatArray]:
+    """``x`` and ``y`` with their isolated outliers replaced (unless kept), each finding
+    named in a :class:`~piezohyst.errors.RecordWarning` (see :mod:`piezohyst.screening`).
+
+    Parameters
+    ----------
+    x, y : ndarray
+    t : ndarray or None
+    keep_outliers : bool
+    x_unit, y_unit : str, optional
+        For the message.
+
+    Returns
+    -------
+    tuple of ndarray
+    """
+    found = screen({"x": x, "y": y}, t)
+    if found.outliers:
+        message = found.outlier_message("the record", {"x": x_unit, "y": y_unit}, arrays=True)
+        if keep_outliers:
+            message = message.split("; kept out of")[0] + "; kept, as asked (keep_outliers)"
+        warnings.warn(message, RecordWarning, stacklevel=4)
+    if found.holes:
+        warnings.warn(found.hole_message("the record", arrays=True), RecordWarning, stacklevel=4)
+    if keep_outliers:
+        return x, y
+    return found.cleaned("x", x), found.cleaned("y", y)
 
 
 def _check_identifiable(dyn: InputDynamics) -> None:

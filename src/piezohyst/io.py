@@ -50,7 +50,8 @@ from ._writers import (
     write_rows,
     write_table,
 )
-from .errors import DataFileError
+from .errors import DataFileError, RecordWarning
+from .screening import Screen, Screener
 from .units import split_unit, to_standard
 
 __all__ = [
@@ -294,6 +295,9 @@ class RecordingStream:
         Units of input and output after conversion (see :class:`Recording`).
     t_start, t_stop : float
         The window asked for (s): ``t_start <= t < t_stop`` (infinite: open).
+    keep_outliers : bool
+        Keep the isolated outliers :meth:`screen` finds (by default each is
+        replaced by its neighbours' mean in every block).
     """
 
     path: Path
@@ -306,6 +310,8 @@ class RecordingStream:
     _rate: float | None = field(default=None, repr=False)
     _step: float | None = field(default=None, repr=False)
     _warned: set[str] = field(default_factory=set, repr=False, compare=False)  # once per stream
+    keep_outliers: bool = False
+    _screened: dict[str, Screen] = field(default_factory=dict, repr=False, compare=False)
 
     def in_window(self, t: FloatArray) -> FloatArray:
         """Which of the times ``t`` (s) lie in the window (a boolean array).
@@ -336,8 +342,43 @@ class RecordingStream:
             f"(the record spans {first:g} to {last:g} s)"
         )
 
+    def screen(self) -> Screen:
+        """The record's isolated outliers and holes in time (:mod:`piezohyst.screening`),
+        found in one pass of its own the first time it is asked for, and warned of once.
+
+        Returns
+        -------
+        Screen
+
+        Warns
+        -----
+        RecordWarning
+            Naming each outlier (row, column, value) and each hole (row, length).
+        """
+        found = self._screened.get("screen")
+        if found is not None:
+            return found
+        x_name, y_name, t_name = self.names
+        names = [n for n in (x_name, y_name) if n is not None]
+        check = Screener(names)
+        for b in self._read():
+            check.add(b.start, dict(zip(names, (b.x, b.y), strict=False)),  # type: ignore[arg-type]
+                      b.t if t_name is not None else None)  # fmt: skip
+        found = check.finish()
+        self._screened["screen"] = found
+        units = dict(zip(names, self.units, strict=False))
+        if found.outliers:
+            message = found.outlier_message(str(self.path), units)
+            if self.keep_outliers:
+                message = message.split("; kept out of")[0] + "; kept, as asked (keep_outliers)"
+            warnings.warn(message, RecordWarning, stacklevel=3)
+        if found.holes:
+            warnings.warn(found.hole_message(str(self.path)), RecordWarning, stacklevel=3)
+        return found
+
     def blocks(self, progress: Callable[[int], None] | None = None) -> Iterator[Block]:
-        """The record from its first sample, block by block, checked and converted.
+        """The record from its first sample, block by block, checked, converted and screened
+        (an isolated outlier replaced by its neighbours' mean, unless ``keep_outliers``).
 
         Parameters
         ----------
@@ -354,6 +395,16 @@ class RecordingStream:
             A value that is not finite, or a time that does not increase (naming
             the row and column), or an empty record.
         """
+        found = self.screen()
+        x_name, y_name, _ = self.names
+        for b in self._read(progress):
+            if found.outliers and not self.keep_outliers:
+                y = None if b.y is None or y_name is None else found.cleaned(y_name, b.y, b.start)
+                b = Block(b.start, b.t, found.cleaned(x_name, b.x, b.start), y)
+            yield b
+
+    def _read(self, progress: Callable[[int], None] | None = None) -> Iterator[Block]:
+        """The record's blocks as the file holds them, checked and converted."""
         x_name, y_name, t_name = self.names
         keys = [k for k in (x_name, y_name, t_name) if k is not None]
         t_unit, x_unit, y_unit = self._source_units
@@ -484,6 +535,7 @@ def open_recording(
     time_unit: str | None = None,
     skip_rows: int = 0,
     output_file: str | os.PathLike[str] | None = None,
+    keep_outliers: bool = False,
 ) -> RecordingStream:
     """A recording to read block by block (arguments as :func:`read_recording`).
 
@@ -494,7 +546,7 @@ def open_recording(
     ----------
     path : str or os.PathLike
     input_column, output_column, time_column, rate, group, output_required
-    t_start, t_stop, input_unit, output_unit, time_unit, skip_rows, output_file
+    t_start, t_stop, input_unit, output_unit, time_unit, skip_rows, output_file, keep_outliers
         See :func:`read_recording`.
 
     Returns
@@ -568,6 +620,7 @@ def open_recording(
         source,
         None if rate is None else float(rate),
         step,
+        keep_outliers=bool(keep_outliers),
     )
 
 
@@ -666,6 +719,10 @@ def read_recording(
     output_file : str or os.PathLike, optional
         The output column is in this file, row for row with ``path``
         (the Bouc-Wen benchmark's ``uval``/``yval`` files).
+    keep_outliers : bool, default False
+        Keep the isolated outliers (an ADC glitch) that are otherwise named in a
+        :class:`~piezohyst.errors.RecordWarning` and replaced by their
+        neighbours' mean (:mod:`piezohyst.screening`).
 
     Returns
     -------
@@ -746,6 +803,8 @@ class DataSpec:
         Text files: lines to skip before the table.
     output_file : str or None
         A second file holding the output column, row for row.
+    keep_outliers : bool
+        Keep the isolated outliers the record's check finds.
     """
 
     input_column: str = "voltage"
@@ -760,6 +819,7 @@ class DataSpec:
     time_unit: str | None = None
     skip_rows: int = 0
     output_file: str | None = None
+    keep_outliers: bool = False
 
     def open(
         self, path: str | os.PathLike[str], *, output_required: bool = True
@@ -792,6 +852,7 @@ class DataSpec:
             time_unit=self.time_unit,
             skip_rows=self.skip_rows,
             output_file=self.output_file,
+            keep_outliers=self.keep_outliers,
         )
 
     def read(

@@ -294,8 +294,15 @@ class HysteresisModel(Estimator):
         t: ArrayLike | None = None,
         *,
         initial_state: InitialState = None,
+        keep_outliers: bool = False,
     ) -> Self:
         """Identify the core and every term jointly from input ``x`` and output ``y``.
+
+        The record is checked first (:mod:`piezohyst.screening`): an isolated
+        outlier (a sample far outside both neighbours, such as an ADC glitch)
+        is named in a :class:`~piezohyst.errors.RecordWarning` and replaced by
+        its neighbours' mean, so it sets neither the identified voltage range
+        nor the trained slew; a hole in ``t`` is named too.
 
         Parameters
         ----------
@@ -314,6 +321,8 @@ class HysteresisModel(Estimator):
             run again and again until its states repeat) — for a record that
             starts mid-cycle. A :class:`History`: the input before the
             record. An array: the operator states (V) themselves.
+        keep_outliers : bool, default False
+            Keep the isolated outliers as recorded (still named).
 
         Returns
         -------
@@ -327,7 +336,9 @@ class HysteresisModel(Estimator):
         InsufficientDataError
             Fewer samples than parameters.
         """
-        return fit_arrays(self, x, y, t, initial_state=initial_state)  # type: ignore[no-any-return]
+        return fit_arrays(  # type: ignore[no-any-return]
+            self, x, y, t, initial_state=initial_state, keep_outliers=keep_outliers
+        )
 
     def fit_blocks(
         self, blocks: Blocks, *, timed: bool = True, initial_state: InitialState = None

@@ -37,6 +37,7 @@ from .comparison import compare_models
 from .errors import ExtrapolationWarning, InsufficientDataError, ParameterError
 from .model import HysteresisModel, InitialState
 from .persistence import model_class, model_names
+from .screening import noise_level
 
 if TYPE_CHECKING:
     from . import _signalkernels as S
@@ -295,33 +296,8 @@ def _bounds(size: int, turns: np.ndarray) -> list[tuple[int, int]]:
     return bounds
 
 
-#: Savitzky-Golay smoothing, 7 points, quadratic: exact on cubics, so what it leaves of a
-#: smooth input is its noise (times sqrt(1 - 7/21): the centre weight is 7/21)
-_SMOOTH = np.array([-2.0, 3.0, 6.0, 7.0, 6.0, 3.0, -2.0]) / 21.0
-
-
-def input_noise(x: FloatArray) -> float:
-    """The input's noise (RMS, its units), from what a 7-point quadratic smoothing leaves,
-    by its median absolute deviation (steps and corners are outliers there).
-
-    A smooth input leaves little: from a 70 V sine sampled at 1 kHz it estimates 0.001 V
-    at 10 Hz, 0.41 V at 50 Hz and 4.3 V at 100 Hz (6 % of the amplitude), which then
-    counts as noise.
-
-    Parameters
-    ----------
-    x : ndarray, shape (N,)
-
-    Returns
-    -------
-    float
-        0 for fewer than 7 samples or a quantised input whose codes rarely change.
-    """
-    if x.size < _SMOOTH.size:
-        return 0.0
-    left = x[3:-3] - np.convolve(x, _SMOOTH, mode="valid")
-    mad = float(np.median(np.abs(left - np.median(left))))
-    return 1.4826 * mad / math.sqrt(1.0 - 7.0 / 21.0)
+#: the input's noise (RMS): one estimator with the record's check
+input_noise = noise_level
 
 
 def turn_band(x: FloatArray) -> float:

@@ -1,0 +1,198 @@
+"""A lab's record checked before it is trusted: isolated outliers (an ADC glitch) and holes in
+the time axis are named, and a glitch sets no limit of the model (API and command line)."""
+
+from __future__ import annotations
+
+import itertools
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import piezohyst as ph
+from piezohyst.cli import main
+from piezohyst.errors import RecordWarning
+from piezohyst.screening import Screener, noise_level, screen
+
+GLITCH_ROW = 1234  # 0-based: data row 1235
+
+
+@pytest.fixture(scope="module")
+def bench() -> ph.simulation.BenchRecord:
+    return ph.simulate(signal="hold", duration=20.0, seed=0)
+
+
+def _write(path: Path, rec: ph.simulation.BenchRecord, **replace: np.ndarray) -> Path:
+    cols = {"time": rec.t, "voltage": rec.voltage, "charge": rec.charge, **replace}
+    ph.io.write_table(path, cols)
+    return path
+
+
+# ------------------------------------------------------------------------- the rule itself
+@settings(max_examples=40, deadline=None)
+@given(
+    freq=st.floats(0.2, 40.0),
+    noise=st.floats(0.0, 0.02),
+    lsb=st.sampled_from([0.0, 140.0 / 2**16, 140.0 / 2**12]),
+    seed=st.integers(0, 2**16),
+)
+def test_smooth_noisy_quantised_signals_raise_no_false_alarm(
+    freq: float, noise: float, lsb: float, seed: int
+) -> None:
+    """Sines, triangles and staircases with Gaussian noise up to 2 % of the span and a 12- or
+    16-bit ADC's codes: no sample is an outlier (the rule needs 10x the noise on both sides)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(20000) * 1e-3
+    phase = 2 * np.pi * freq * t
+    signals = [
+        70 - 70 * np.cos(phase),
+        140 * np.abs(((freq * t) % 1.0) * 2 - 1),  # a triangle: corners are not outliers
+        np.repeat(rng.uniform(0, 140, 200), 100),  # a staircase: steps are not outliers
+    ]
+    for x in signals:
+        x = x + rng.normal(0.0, noise * 140, x.size)
+        if lsb:
+            x = np.round(x / lsb) * lsb
+        assert screen({"v": x}, t).outliers == ()
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    where=st.integers(1, 4998),
+    cuts=st.lists(st.integers(1, 4999), max_size=4),
+    size=st.floats(0.05, 1e4),
+    sign=st.sampled_from([-1.0, 1.0]),
+)
+def test_a_planted_glitch_is_found_wherever_the_blocks_are_cut(
+    where: int, cuts: list[int], size: float, sign: float
+) -> None:
+    """Read in blocks cut anywhere (a cut beside the glitch included), the findings are the
+    whole record's: the glitch, its row and the neighbours' mean (the noise level is a median
+    of the blocks' estimates, so it may differ a little)."""
+    rng = np.random.default_rng(where)
+    t = np.arange(5000) * 1e-3
+    x = 70 - 70 * np.cos(2 * np.pi * 2.0 * t) + rng.normal(0.0, 0.01, t.size)
+    x[where] += sign * 140 * size  # 5 % of the span to 10^4 spans
+    bounds = [0, *sorted(set(cuts)), t.size]
+    s = Screener(["v"])
+    for a, b in itertools.pairwise(bounds):
+        s.add(a, {"v": x[a:b]}, t[a:b])
+    found = s.finish()
+    whole = screen({"v": x}, t)
+    assert (found.outliers, found.holes) == (whole.outliers, whole.holes)
+    assert [(o.row, o.value) for o in found.outliers] == [(where + 1, x[where])]
+    # tol: the mean of two doubles, as computed
+    assert found.outliers[0].replacement == pytest.approx(0.5 * (x[where - 1] + x[where + 1]))
+    assert found.cleaned("v", x)[where] == found.outliers[0].replacement
+
+
+def test_the_first_and_last_samples_are_not_judged_and_two_in_a_row_are_not_isolated() -> None:
+    """A record that starts with a step (the measured PZT creep files do) is not a glitch."""
+    x = np.concatenate([[638.0], np.full(500, 1473.0)])
+    x[-1] = 9e3
+    assert screen({"v": x}).outliers == ()
+    y = np.sin(np.linspace(0, 6, 1000))
+    y[400:402] = 50.0
+    assert screen({"v": y}).outliers == ()
+
+
+def test_the_noise_level_is_the_noise() -> None:
+    rng = np.random.default_rng(1)
+    x = 70 - 70 * np.cos(2 * np.pi * np.arange(50000) * 1e-3) + rng.normal(0, 0.3, 50000)
+    # tol: a MAD estimate from 5e4 samples scatters by about 1 %
+    assert noise_level(x) == pytest.approx(0.3, rel=0.03)
+    assert ph.selection.input_noise is noise_level  # one estimator for both uses
+
+
+# ------------------------------------------------------------------------- the fit
+def test_a_glitch_is_named_and_sets_no_limit(bench: ph.simulation.BenchRecord) -> None:
+    v = bench.voltage.copy()
+    v[GLITCH_ROW] = 1e4
+    clean = ph.ActivePI(10).fit(bench.voltage, bench.charge, t=bench.t)
+    with pytest.warns(RecordWarning, match=r"x\[1234\] 10000 V"):
+        model = ph.ActivePI(10).fit(v, bench.charge, t=bench.t)
+    assert model.input_range_ == clean.input_range_
+    assert model.max_slew_rate_ == clean.max_slew_rate_
+    # tol: the replaced sample is its neighbours' mean, not the clean one: the fit moves by
+    # far less than the noise (0.14 % NRMSE)
+    assert model.nrmse_ == pytest.approx(clean.nrmse_, rel=1e-3)
+    with pytest.warns(RecordWarning, match="kept, as asked"):
+        kept = ph.ActivePI(10).fit(v, bench.charge, t=bench.t, keep_outliers=True)
+    assert kept.input_range_[1] == 1e4
+
+
+def test_a_hole_is_named_by_its_sample(bench: ph.simulation.BenchRecord) -> None:
+    keep = np.ones(bench.t.size, bool)
+    keep[8000:9000] = False
+    with pytest.warns(RecordWarning, match=r"1 hole .* before t\[8000\] \(1 s missing"):
+        ph.ActivePI(10).fit(bench.voltage[keep], bench.charge[keep], t=bench.t[keep])
+
+
+# ------------------------------------------------------------------------- from the shell
+def test_the_shell_names_the_glitch_and_no_limit_follows_it(
+    tmp_path: Path, bench: ph.simulation.BenchRecord
+) -> None:
+    v = bench.voltage.copy()
+    v[GLITCH_ROW] = 1e4
+    data = _write(tmp_path / "glitch.csv", bench, voltage=v)
+    runner = CliRunner()
+    fit = runner.invoke(main, ["fit", str(data), "-o", str(tmp_path / "m.json")])
+    assert fit.exit_code == 0, fit.output
+    assert "row 1235 column 'voltage' 10000" in fit.output
+    model = ph.load_model(tmp_path / "m.json")
+    assert model.input_range_[1] <= 140.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ph.errors.ExtrapolationWarning)
+        target = model.hysteresis_.predict(np.linspace(20, 120, 500))
+    ph.io.write_table(tmp_path / "target.csv", {"time": np.arange(500) * 1e-3, "charge": target})
+    comp = runner.invoke(
+        main, ["compensate", str(tmp_path / "m.json"), str(tmp_path / "target.csv"),
+               "-o", str(tmp_path / "cmd.csv")],
+    )  # fmt: skip
+    assert comp.exit_code == 0, comp.output
+    assert "commands in [0, 140] V" in comp.output
+    c_file = tmp_path / "ph_comp.c"
+    exp = runner.invoke(main, ["export-c", str(tmp_path / "m.json"), "-o", str(c_file)])
+    assert exp.exit_code == 0, exp.output
+    header = (tmp_path / "ph_comp.h").read_text() + c_file.read_text()
+    assert "10000" not in header and "V_MAX" in header
+    kept = runner.invoke(
+        main, ["fit", str(data), "--keep-outliers", "-o", str(tmp_path / "k.json")]
+    )
+    assert kept.exit_code == 0 and "kept, as asked" in kept.output
+    assert ph.load_model(tmp_path / "k.json").input_range_[1] == 1e4
+
+
+def test_a_charge_spike_is_named_and_moves_nothing(
+    tmp_path: Path, bench: ph.simulation.BenchRecord
+) -> None:
+    q = bench.charge.copy()
+    span = float(np.ptp(q))
+    q[5000] += 100 * span
+    runner = CliRunner()
+    clean = runner.invoke(main, ["fit", str(_write(tmp_path / "c.csv", bench)),
+                                 "-o", str(tmp_path / "c.json")])  # fmt: skip
+    spiked = runner.invoke(main, ["fit", str(_write(tmp_path / "s.csv", bench, charge=q)),
+                                  "-o", str(tmp_path / "s.json")])  # fmt: skip
+    assert clean.exit_code == 0 and spiked.exit_code == 0, spiked.output
+    assert "row 5001 column 'charge'" in spiked.output
+    a = ph.load_model(tmp_path / "c.json").predict(bench.voltage, t=bench.t)
+    b = ph.load_model(tmp_path / "s.json").predict(bench.voltage, t=bench.t)
+    assert np.abs(a - b).max() <= 5e-4 * span  # the issue's bar: 0.05 % of the span
+
+
+def test_the_shell_names_a_hole_by_its_row(
+    tmp_path: Path, bench: ph.simulation.BenchRecord
+) -> None:
+    keep = np.ones(bench.t.size, bool)
+    keep[8000:9000] = False
+    data = tmp_path / "hole.csv"
+    ph.io.write_table(data, {"time": bench.t[keep], "voltage": bench.voltage[keep],
+                             "charge": bench.charge[keep]})  # fmt: skip
+    out = CliRunner().invoke(main, ["fit", str(data), "-o", str(tmp_path / "m.json")])
+    assert out.exit_code == 0, out.output
+    assert "1 hole in the time axis" in out.output and "before row 8001 (1 s missing" in out.output
