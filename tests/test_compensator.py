@@ -12,7 +12,14 @@ import piezohyst as ph
 
 from .strategies import invertible_pi
 
-pytestmark = pytest.mark.kernels
+# these tests drive targets past the voltage and slew limits on purpose (safety, exactness
+# where no limit acts); that the limits then say so is tested in test_records.py
+# generated signals hold one-sample jumps, which the record check names (test_records.py)
+pytestmark = [
+    pytest.mark.filterwarnings("ignore::piezohyst.errors.RecordWarning"),
+    pytest.mark.kernels,
+    pytest.mark.filterwarnings("ignore::piezohyst.errors.LimitWarning"),
+]
 
 V_MIN, V_MAX = -20.0, 160.0
 wild = st.one_of(

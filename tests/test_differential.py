@@ -26,7 +26,14 @@ from piezohyst.simulation import make_signal
 
 from .strategies import examples
 
-pytestmark = pytest.mark.kernels
+# these tests drive targets past the voltage and slew limits on purpose (safety, exactness
+# where no limit acts); that the limits then say so is tested in test_records.py
+# generated signals hold one-sample jumps, which the record check names (test_records.py)
+pytestmark = [
+    pytest.mark.filterwarnings("ignore::piezohyst.errors.RecordWarning"),
+    pytest.mark.kernels,
+    pytest.mark.filterwarnings("ignore::piezohyst.errors.LimitWarning"),
+]
 
 CC = shutil.which("cc") or shutil.which("gcc")
 

@@ -13,7 +13,10 @@ import piezohyst as ph
 from piezohyst.export import export_c, write_c
 
 CC = shutil.which("cc") or shutil.which("gcc")
+# these tests drive targets past the voltage and slew limits on purpose (safety, exactness
+# where no limit acts); that the limits then say so is tested in test_records.py
 pytestmark = [
+    pytest.mark.filterwarnings("ignore::piezohyst.errors.LimitWarning"),
     pytest.mark.skipif(CC is None, reason="no C compiler on this machine"),
     pytest.mark.kernels,
 ]

@@ -196,3 +196,75 @@ def test_the_shell_names_a_hole_by_its_row(
     out = CliRunner().invoke(main, ["fit", str(data), "-o", str(tmp_path / "m.json")])
     assert out.exit_code == 0, out.output
     assert "1 hole in the time axis" in out.output and "before row 8001 (1 s missing" in out.output
+
+
+# ------------------------------------------------------------------------- limits that bite
+@pytest.fixture(scope="module")
+def slow_model(bench: ph.simulation.BenchRecord) -> ph.ActivePI:
+    """Identified on a 1 Hz-ish record: its trained slew is that record's fastest change."""
+    rec = ph.simulate(signal="fixed", frequency=1.0, duration=5.0, seed=0)
+    return ph.ActivePI(10).fit(rec.voltage, rec.charge, t=rec.t)
+
+
+def _scan(model: ph.ActivePI, f: float, lo: float = 0.3, hi: float = 0.7) -> np.ndarray:
+    q0, q1 = model.hysteresis_.predict([0.0, 140.0])
+    t = np.arange(2000) * 1e-3
+    return q0 + (q1 - q0) * (lo + (hi - lo) * 0.5 * (1 - np.cos(2 * np.pi * f * t)))
+
+
+def test_a_scan_held_by_the_trained_slew_says_so(slow_model: ph.ActivePI) -> None:
+    lo, hi = slow_model.input_range_
+    comp = ph.Compensator(slow_model, v_min=lo, v_max=hi, sample_rate=1000.0)
+    with pytest.warns(ph.errors.LimitWarning, match=r"slew limit \(\d.* V/s\) held \d+ of 2000"):
+        comp.process(_scan(slow_model, 40.0))
+    assert comp.slew_limited_count > 0.5 * comp.command_count
+    stepped = ph.Compensator(slow_model, v_min=lo, v_max=hi, sample_rate=1000.0)
+    with pytest.warns(ph.errors.LimitWarning, match="slew_rate"):  # step by step: the same
+        for d in _scan(slow_model, 40.0):
+            stepped.step(d)
+    assert stepped.slew_limited_count == comp.slew_limited_count
+    with warnings.catch_warnings():  # a slow scan, no limit acting: no word
+        warnings.simplefilter("error")
+        quiet = ph.Compensator(slow_model, v_min=lo, v_max=hi, sample_rate=1000.0)
+        quiet.process(_scan(slow_model, 0.25, 0.0, 0.7))  # from rest, rising: in reach
+    assert quiet.slew_limited_count == 0 and quiet.saturated_count == 0
+
+
+def test_a_target_out_of_reach_says_which_limit(slow_model: ph.ActivePI) -> None:
+    comp = ph.Compensator(slow_model, v_min=20.0, v_max=120.0, slew_rate=None)
+    with pytest.warns(ph.errors.LimitWarning, match=r"voltage limits \[20, 120\] V held"):
+        comp.process(_scan(slow_model, 0.5, 0.0, 1.0))
+
+
+def test_the_shell_counts_what_the_limits_held(tmp_path: Path, slow_model: ph.ActivePI) -> None:
+    slow_model.save(tmp_path / "m.json")
+    ph.io.write_table(tmp_path / "scan.csv", {"time": np.arange(2000) * 1e-3,
+                                              "desired": _scan(slow_model, 40.0)})  # fmt: skip
+    res = CliRunner().invoke(main, ["compensate", str(tmp_path / "m.json"),
+                                    str(tmp_path / "scan.csv"), "-o", str(tmp_path / "c.csv")])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "warning: Compensator: the slew limit" in res.output
+    assert "by the slew limit" in res.output
+
+
+def test_misused_steps_and_plots_are_piezohyst_errors(
+    slow_model: ph.ActivePI, bench: ph.simulation.BenchRecord
+) -> None:
+    comp = ph.Compensator(slow_model, v_min=0.0, v_max=139.0, allow_extrapolation=True)
+    with pytest.raises(ph.errors.ParameterError, match=r"one desired value .* Got 'x'"):
+        comp.step("x")
+    with pytest.raises(ph.errors.ShapeError, match="same length"):
+        slow_model.plot(bench.voltage, bench.charge[:100], t=bench.t)
+
+
+def test_predicting_beyond_the_identified_range_warns_for_every_kind(
+    slow_model: ph.ActivePI,
+) -> None:
+    inverse = slow_model.hysteresis_.inverse()
+    with pytest.warns(ph.errors.ExtrapolationWarning, match=r"sample 0, 1 C\) lie outside"):
+        inverse.predict(np.array([1.0]))  # 1 C: 10^5 times the record's charge
+    with pytest.warns(ph.errors.ExtrapolationWarning, match="300 V"):
+        slow_model.predict(np.array([0.0, 300.0]), t=np.array([0.0, 1e-3]))
+    with warnings.catch_warnings():  # inside the range: no word
+        warnings.simplefilter("error")
+        slow_model.predict(np.linspace(0.0, 130.0, 50), t=np.arange(50) * 1e-3)

@@ -555,9 +555,13 @@ def compensate(
             ),
         )
     comp = result.compensator
+    slew = (
+        f"{comp.max_step * result.sample_rate:.4g} V/s" if math.isfinite(comp.max_step) else "none"
+    )
     click.echo(
-        f"commands in [{comp.v_min:g}, {comp.v_max:g}] V; {comp.saturated_count} "
-        f"saturated, {comp.nonfinite_count} non-finite desired values held"
+        f"commands in [{comp.v_min:g}, {comp.v_max:g}] V; of {comp.command_count}, "
+        f"{comp.saturated_count} held by the voltage limits, {comp.slew_limited_count} by the "
+        f"slew limit ({slew}), {comp.nonfinite_count} for non-finite desired values"
     )
     if result.preamble:
         ctx.info(

@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike
 
 from ._lazy import LazyModule
 from ._validation import FloatArray
-from .errors import ParameterError, ShapeError
+from .errors import LimitWarning, ParameterError, ShapeError
 from .inverses import INVERSES, CompensatorState, Inverse, _finite_number
 from .model import HysteresisModel, InverseSpec
 
@@ -361,6 +361,7 @@ class Compensator:
             If the last command would lie outside the limits.
         """
         self.inverse.reset(self, state, voltage)
+        self._count_reset()
 
     def precondition(
         self, samples: int = 1000, span: tuple[float, float] | None = None
@@ -387,7 +388,9 @@ class Compensator:
         ndarray
             The voltages (V) to send.
         """
-        return self.inverse.precondition(self, self._cycle(samples, span))
+        cycle = self.inverse.precondition(self, self._cycle(samples, span))
+        self._prev = self.last_command  # a cycle at the slew limit by design: not counted
+        return cycle
 
     def _cycle(self, samples: int, span: tuple[float, float] | None = None) -> FloatArray:
         """last command -> v_max -> v_min -> back, each extreme reached exactly (and held
@@ -459,8 +462,29 @@ class Compensator:
         float
             The command (V), finite and inside ``[v_min, v_max]``.
         """
+        try:
+            d = float(desired)
+        except (TypeError, ValueError):
+            msg = (
+                "Compensator.step takes one desired value (a number, in "
+                f"{'m' if self.domain == 'displacement' else self.model.output_unit}). Got "
+                f"{desired!r} instead."
+            )
+            raise ParameterError(msg) from None
         if self._plain:  # the common case first: one kernel call
-            return float(K.compensator_step(float(desired), self.tables, self.config, self._state))
+            c = float(K.compensator_step(d, self.tables, self.config, self._state))
+        else:
+            c = self._step_general(d, preview)
+        self._issued += 1
+        if abs(c - self._prev) >= self._slew_tol:
+            self._slewed += 1
+        self._prev = c
+        if self._issued >= self._check_at:
+            self._check_limits()
+        return c
+
+    def _step_general(self, desired: float, preview: ArrayLike | None) -> float:
+        """:meth:`step` for a model with input dynamics, a mode or another engine."""
         if self.mode.active and self.dynamic and self.delay_samples:
             return self._step_mode_delayed(float(desired), preview)
         if self.mode.active:
@@ -524,14 +548,109 @@ class Compensator:
         if self.mode.active:
             d = np.ascontiguousarray(self._through_mode(d, None))
         out = np.empty_like(d)
+        prev = self.last_command
         self._inner_process(d, out)
         if self.dynamic and d.size:
             self._last_desired = float(d[-1])
+        if out.size:
+            self._issued += out.size
+            moves = np.abs(np.diff(out, prepend=prev))
+            self._slewed += int(np.count_nonzero(moves >= self._slew_tol))
+            self._prev = float(out[-1])
+            self._check_limits()
         return out
+
+    # -------------------------------------------------------------- limits that bite
+    @property
+    def slew_limited_count(self) -> int:
+        """Commands held back by the slew limit (moved by exactly :attr:`max_step`)."""
+        return self._slewed
+
+    @property
+    def command_count(self) -> int:
+        """Commands given by :meth:`step` and :meth:`process` since the last reset."""
+        return self._issued
+
+    def _count_reset(self) -> None:
+        """The counters of commands held by the limits, from zero."""
+        self._issued = 0
+        self._slewed = 0
+        self._check_at = LIMIT_CHECK_FIRST
+        self._limits_warned = False
+        self._slew_tol = (
+            self._max_step * (1.0 - 1e-9) if math.isfinite(self._max_step) else math.inf
+        )
+        self._prev = self.last_command
+
+    def _check_limits(self) -> None:
+        """Warn once when the limits held more than :data:`LIMIT_SHARE` of the commands."""
+        self._check_at = 2 * max(self._issued, LIMIT_CHECK_FIRST)
+        if self._limits_warned or self._issued < LIMIT_CHECK_FIRST:
+            return
+        message = limits_message(
+            "Compensator", self._issued, self.saturated_count, self._slewed,
+            (self.v_min, self.v_max), self._max_step, self.sample_rate, self.slew_rate,
+        )  # fmt: skip
+        if message:
+            self._limits_warned = True
+            warnings.warn(message, LimitWarning, stacklevel=3)
 
     def _inner_process(self, d: FloatArray, out: FloatArray) -> None:
         """The engine over a block of hysteresis outputs (after the mode)."""
         self.inverse.inner_process(self, d, out)
+
+
+#: The share of commands held by a limit above which a compensator or controller warns
+LIMIT_SHARE = 0.01
+#: Commands given before the first check (then at every doubling, and after each block)
+LIMIT_CHECK_FIRST = 100
+
+
+def limits_message(
+    owner: str,
+    issued: int,
+    saturated: int,
+    slewed: int,
+    limits: tuple[float, float],
+    max_step: float,
+    sample_rate: float | None,
+    slew_rate: float | None,
+) -> str:
+    """The warning when the voltage or slew limits held over :data:`LIMIT_SHARE` of the
+    commands (empty when they did not): the counts and the setting to change.
+
+    Parameters
+    ----------
+    owner : str
+    issued, saturated, slewed : int
+        Commands given; held by the voltage limits; held by the slew limit.
+    limits : (float, float)
+        ``v_min, v_max`` (V).
+    max_step : float
+        The slew limit per sample (V).
+    sample_rate, slew_rate : float or None
+        Hz and V/s, for the message.
+
+    Returns
+    -------
+    str
+    """
+    parts = []
+    if slewed > LIMIT_SHARE * issued:
+        per_s = f"{max_step * sample_rate:.4g} V/s" if sample_rate else f"{max_step:.4g} V/sample"
+        parts.append(
+            f"the slew limit ({per_s}) held {slewed} of {issued} commands "
+            f"({100 * slewed / issued:.1f} %): the trajectory is faster than the limit (by "
+            "default the training record's fastest change); set slew_rate (--slew-rate) to "
+            "what the amplifier allows, or identify on faster loops"
+        )
+    if saturated > LIMIT_SHARE * issued:
+        parts.append(
+            f"the voltage limits [{limits[0]:g}, {limits[1]:g}] V held {saturated} of {issued} "
+            f"commands ({100 * saturated / issued:.1f} %): the target is out of reach there; "
+            "widen v_min/v_max (--v-min/--v-max) if the actuator allows, or lower the target"
+        )
+    return f"{owner}: {'; '.join(parts)}" if parts else ""
 
 
 def _trained_limit(model: Any, sample_rate: float | None) -> tuple[float | None, float]:

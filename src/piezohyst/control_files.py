@@ -550,7 +550,8 @@ def model_report(
     model = _load(model_path)
     rec = spec.read(data, progress=progress)
     w = rec.window  # the model runs over the whole record: the window's start has a history
-    pred = predict_record(model, rec.x, rec.t)[w]
+    end = rec.x.size if w.stop is None else w.stop  # nothing after the window is run
+    pred = predict_record(model, rec.x[:end], rec.t[:end])[w]
     assert rec.y is not None
     _check_measured_unit(rec.units[1], model, data)
     x, y, t = rec.x[w], rec.y[w], rec.t[w]

@@ -94,6 +94,10 @@ class IdentifiabilityWarning(UserWarning):
     """The record cannot determine a fitted quantity (e.g. a lag apart from hysteresis)."""
 
 
+class LimitWarning(UserWarning):
+    """A voltage or slew limit held back more than a small share of the commands."""
+
+
 class RecordWarning(UserWarning):
     """A record holds something not to be trusted blindly: an isolated outlier, a hole in time."""
 

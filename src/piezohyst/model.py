@@ -71,6 +71,7 @@ from .state import (
     InitialState,
     ModelState,
     model_table,
+    range_warning,
     remove_growth,
     rest_state,
     run_model,
@@ -298,31 +299,21 @@ class HysteresisModel(Estimator):
     ) -> Self:
         """Identify the core and every term jointly from input ``x`` and output ``y``.
 
-        The record is checked first (:mod:`piezohyst.screening`): an isolated
-        outlier (a sample far outside both neighbours, such as an ADC glitch)
-        is named in a :class:`~piezohyst.errors.RecordWarning` and replaced by
-        its neighbours' mean, so it sets neither the identified voltage range
-        nor the trained slew; a hole in ``t`` is named too.
-
         Parameters
         ----------
-        x : array_like, shape (N,)
-            Input (V).
-        y : array_like, shape (N,)
-            Output (C, or m for displacement data).
+        x, y : array_like, shape (N,)
+            Input (V) and output (C, or m for displacement data).
         t : array_like, shape (N,), optional
             Sample times (s), strictly increasing, may be non-uniform. Required
             when a term is rate dependent; checked and otherwise unused.
         initial_state : {"rest", "periodic"}, History or array_like, optional
-            Where the operators stand before the first sample. ``"rest"``
-            (default): at rest at ``x[0]``. ``"periodic"``: the record is one
-            period (or whole periods) of a periodic drive that had been
-            running, so they start in the periodic steady state (the record
-            run again and again until its states repeat) — for a record that
-            starts mid-cycle. A :class:`History`: the input before the
-            record. An array: the operator states (V) themselves.
+            Where the operators stand before the first sample. ``"rest"`` (default): at
+            rest at ``x[0]``. ``"periodic"``: in the periodic steady state of a drive that
+            had been running (a record of whole periods that starts mid-cycle). A
+            :class:`History`: the input before the record. An array: the states (V).
         keep_outliers : bool, default False
-            Keep the isolated outliers as recorded (still named).
+            Keep the isolated outliers (an ADC glitch) the record's check names
+            (:mod:`piezohyst.screening`); else each is its neighbours' mean.
 
         Returns
         -------
@@ -336,9 +327,8 @@ class HysteresisModel(Estimator):
         InsufficientDataError
             Fewer samples than parameters.
         """
-        return fit_arrays(  # type: ignore[no-any-return]
-            self, x, y, t, initial_state=initial_state, keep_outliers=keep_outliers
-        )
+        return fit_arrays(self, x, y, t, initial_state=initial_state,  # type: ignore[no-any-return]
+                          keep_outliers=keep_outliers)  # fmt: skip
 
     def fit_blocks(
         self, blocks: Blocks, *, timed: bool = True, initial_state: InitialState = None
@@ -492,10 +482,7 @@ class HysteresisModel(Estimator):
         return self.propagate(history, t).state
 
     def propagate(
-        self,
-        x: ArrayLike,
-        t: ArrayLike | None = None,
-        state: ModelState | InitialState = None,
+        self, x: ArrayLike, t: ArrayLike | None = None, state: ModelState | InitialState = None
     ) -> Propagation[ModelState]:
         """Output and final state; chunks, each passed the last state, equal one call.
 
@@ -569,10 +556,9 @@ class HysteresisModel(Estimator):
 
         Notes
         -----
-        The classical and active models, from their initial state, run in one
-        compiled call that also checks the input (a few microseconds for
-        short blocks); the result is :meth:`propagate`'s to rounding (the sums
-        are formed in another order, 1e-13 of the output or better).
+        The classical and active models, from their initial state, run in one compiled
+        call that also checks the input; the result is :meth:`propagate`'s to rounding
+        (1e-13 of the output). An input beyond the identified range warns.
         """
         if state is None and type(x) is np.ndarray and x.dtype == np.float64 and x.ndim == 1:
             try:
@@ -582,6 +568,7 @@ class HysteresisModel(Estimator):
             if plan is not None and x.size:
                 out = plan(x, t)
                 if out is not None:
+                    range_warning(self, x)
                     return out  # type: ignore[no-any-return]
         return self.propagate(x, t, state).output
 
@@ -741,6 +728,7 @@ class HysteresisModel(Estimator):
         core = self.operator_.inverse()
         inv = self._bare(self.output_unit, self.input_unit, getattr(core, "n_operators", None))
         inv.set_fitted(core, (), ())
+        inv.input_range_ = _outputs_reached(self)  # its range: what the training inputs reach
         return inv
 
     @classmethod
@@ -829,3 +817,15 @@ def is_model(value: object) -> bool:
     bool
     """
     return isinstance(value, HysteresisModel)
+
+
+def _outputs_reached(model: HysteresisModel) -> tuple[float, float]:
+    """The core's outputs over the model's training input range (NaN where unknown)."""
+    lo, hi = model.input_range_
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        return (math.nan, math.nan)
+    ends = []
+    for path in ([lo, hi, lo, hi], [hi, lo, hi, lo]):  # from where the training record started
+        ends.append(model.operator_.propagate(np.array(path), model.initial_state_).output)
+    q = np.concatenate(ends)
+    return (float(q.min()), float(q.max()))

@@ -14,7 +14,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from numpy.typing import ArrayLike
 
-from ._validation import FloatArray, as_signal
+from ._validation import FloatArray, as_signal, as_time, same_length
 
 __all__ = ["Curve", "fit_figure", "loop_figure", "model_figure", "save_grid", "save_panels"]
 
@@ -158,7 +158,8 @@ def model_figure(model: Any, x: ArrayLike, y: ArrayLike, t: ArrayLike | None = N
     matplotlib.figure.Figure
     """
     xs, ys = as_signal(x, "x"), as_signal(y, "y")
-    ts = None if t is None else as_signal(t, "t")
+    same_length(xs, ys, "x", "y")
+    ts = None if t is None else as_time(t, xs.size, required=False, owner="plot")
     return fit_figure(xs, ys, model.predict(xs, ts), ts,
                       units=(model.input_unit, model.output_unit),
                       title=f"{type(model).__name__}: {model.operator_.summary}")  # fmt: skip

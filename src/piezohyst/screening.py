@@ -28,9 +28,10 @@ Two or more bad samples in a row are not isolated: they are left as they are
 have one neighbour each, so a glitch there cannot be told from a step: they
 are not judged.
 
-An interval longer than :data:`HOLE_FACTOR` times the median one is a *hole*
-(one missing sample doubles an interval; a DAQ's timestamp jitter is far below
-half an interval).
+An interval longer than :data:`HOLE_FACTOR` times the median one is a *hole*:
+two samples or more missing. A non-uniform record (a logger's jitter, samples
+taken on events) has intervals up to about twice its median, and one missing
+sample (twice the interval) changes nothing a model can see.
 """
 
 from __future__ import annotations
@@ -58,7 +59,7 @@ __all__ = [
 
 NOISE_REACH = 10.0
 LOCAL_REACH = 4.0
-HOLE_FACTOR = 1.5
+HOLE_FACTOR = 3.0
 #: findings named in a message; the rest are counted
 SHOWN = 5
 

@@ -10,6 +10,7 @@ terms block by block, the input dynamics before, the output mode after).
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass, field
 from typing import Any
@@ -295,7 +296,10 @@ def rest_state(model: Any, x0: float) -> ModelState:
 def region_warning(model: Any, x: FloatArray, core_output: FloatArray) -> None:
     """Warn when a run leaves the (voltage, output) region the core was identified on."""
     region = model.operator_.region
-    if region is None or x.size == 0:
+    if x.size == 0:
+        return
+    if region is None:  # a core without a region: the input range it was identified on
+        range_warning(model, x)
         return
     d = region.distance(x, core_output)
     outside = d > float(getattr(model, "region_tolerance", 0.05)) * region.span
@@ -306,6 +310,26 @@ def region_warning(model: Any, x: FloatArray, core_output: FloatArray) -> None:
             f"{x[k]:.4g} {model.input_unit}) lie outside the (voltage, output) region the "
             f"{type(model).__name__} was identified on, by up to {float(d.max()):.3g} "
             f"{model.output_unit}: the model extrapolates there",
+            ExtrapolationWarning,
+            stacklevel=5,
+        )
+
+
+def range_warning(model: Any, x: FloatArray) -> None:
+    """Warn when a run's input leaves the range the model was identified on by more than
+    its ``region_tolerance`` (5 %) of that range."""
+    lo, hi = getattr(model, "input_range_", (math.nan, math.nan))
+    if not (math.isfinite(lo) and math.isfinite(hi)) or not hi > lo:
+        return
+    reach = float(getattr(model, "region_tolerance", 0.05)) * (hi - lo)
+    outside = (x < lo - reach) | (x > hi + reach)
+    if outside.any():
+        k = int(np.argmax(outside))
+        warnings.warn(
+            f"{int(outside.sum())} of {x.size} samples (first: sample {k}, {x[k]:.4g} "
+            f"{model.input_unit}) lie outside the input range [{lo:.4g}, {hi:.4g}] "
+            f"{model.input_unit} the {type(model).__name__} was identified on: the model "
+            "extrapolates there",
             ExtrapolationWarning,
             stacklevel=5,
         )
@@ -335,7 +359,9 @@ def predict_record(model: Any, x: FloatArray, t: FloatArray | None) -> FloatArra
     if t is None or not np.isfinite(t_w) or t[0] >= t_w:
         return np.asarray(model.predict(x, t))
     k = int(np.searchsorted(t, t_w, "left"))
-    before = model.predict(x[:k], t[:k], state=model.rest_state(float(x[0])))
+    with warnings.catch_warnings():  # the input before the training window: it may lie
+        warnings.simplefilter("ignore", ExtrapolationWarning)  # outside the window's range
+        before = model.predict(x[:k], t[:k], state=model.rest_state(float(x[0])))
     return np.concatenate([before, model.predict(x[k:], t[k:])])
 
 
