@@ -248,9 +248,47 @@ def test_the_file_loop_is_the_in_memory_loop(tmp_path: Path) -> None:
                                   ilc.command())  # fmt: skip
     state = json.loads((tmp_path / "s.json").read_text())
     assert state["trajectory"] and len(state["history"]) == 3
-    # a recording of another trial is refused, naming the row
+    # a recording of another trial is refused, naming the row, in plain numbers
     res = runner.invoke(main, [*base[:2], str(tmp_path / "trial0.csv"), *base[2:]])
     assert res.exit_code == 1 and "a recording of another trial or run" in res.output
+    assert "np.float64" not in res.output and "--voltage-tolerance" in res.output
+    # the DAQ's measured voltage: the commands + 10 mV of noise is the trial's own recording
+    sent = ph.read_table(tmp_path / "next.csv").get("command")
+    got = bench_b.run(sent)
+    noisy = sent + np.random.default_rng(7).normal(0.0, 0.01, sent.size)
+    ph.write_table(tmp_path / "measured.csv", {"time": got.t, "voltage": noisy,
+                                               "charge": got.charge})  # fmt: skip
+    res = runner.invoke(main, [*base[:2], str(tmp_path / "measured.csv"), *base[2:]])
+    assert res.exit_code == 0, res.output
+    check = json.loads((tmp_path / "s.json").read_text())["recording_check"]
+    # tol: a MAD estimate of 10 mV from 250 samples scatters by about 10 %
+    assert check["noise_V"] == pytest.approx(0.01, rel=0.25)
+    assert check["allowed_V"] == pytest.approx(10 * check["noise_V"])
+    assert abs(check["lag1"]) < 4 / np.sqrt(sent.size)  # white
+    # ... and another trial's recording, with the same noise, is still refused
+    old = ph.read_table(tmp_path / "trial1.csv")
+    cols = {"time": old.get("time"), "charge": old.get("charge")}
+    ph.write_table(tmp_path / "old.csv", {**cols, "voltage": old.get("voltage") + noisy - sent})
+    res = runner.invoke(main, [*base[:2], str(tmp_path / "old.csv"), *base[2:]])
+    assert res.exit_code == 1 and "a recording of another trial or run" in res.output
+
+
+def test_learn_writes_over_a_file_it_did_not_write_only_with_force(tmp_path: Path) -> None:
+    rec = ph.simulate(signal="triangle", duration=4.0, seed=0)
+    model = ph.ActivePI(n_operators=6).fit(rec.voltage, rec.charge, t=rec.t)
+    model.save(tmp_path / "model.json")
+    q = model.hysteresis_.predict(list(model.input_range_))
+    t = np.arange(250) / RATE
+    scan = q[0] + (q[1] - q[0]) * (0.4 + 0.2 * np.sin(2 * np.pi * 5 * np.arange(250) / 250))
+    ph.write_table(tmp_path / "scan.csv", {"time": t, "desired": scan})
+    (tmp_path / "next.csv").write_text("a lab's own file\n")
+    base = ["learn", str(tmp_path / "model.json"), "--state", str(tmp_path / "s.json"),
+            "--desired", str(tmp_path / "scan.csv"), "-o", str(tmp_path / "next.csv")]  # fmt: skip
+    res = CliRunner().invoke(main, base)
+    assert res.exit_code == 1 and "--force" in res.output
+    assert (tmp_path / "next.csv").read_text() == "a lab's own file\n"
+    res = CliRunner().invoke(main, [*base, "--force"])
+    assert res.exit_code == 0, res.output
 
 
 # ------------------------------------------------------------------ on a plant not tuned on

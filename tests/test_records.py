@@ -240,8 +240,8 @@ def test_the_shell_counts_what_the_limits_held(tmp_path: Path, slow_model: ph.Ac
     slow_model.save(tmp_path / "m.json")
     ph.io.write_table(tmp_path / "scan.csv", {"time": np.arange(2000) * 1e-3,
                                               "desired": _scan(slow_model, 40.0)})  # fmt: skip
-    res = CliRunner().invoke(main, ["compensate", str(tmp_path / "m.json"),
-                                    str(tmp_path / "scan.csv"), "-o", str(tmp_path / "c.csv")])  # fmt: skip
+    files = [str(tmp_path / "m.json"), str(tmp_path / "scan.csv")]
+    res = CliRunner().invoke(main, ["compensate", *files, "-o", str(tmp_path / "c.csv")])
     assert res.exit_code == 0, res.output
     assert "warning: Compensator: the slew limit" in res.output
     assert "by the slew limit" in res.output

@@ -8,7 +8,7 @@ from typing import Literal
 
 import click
 
-from ._cli_support import EXISTING, Context, _limit_options, _run
+from ._cli_support import EXISTING, FORCE, Context, _limit_options, _run
 from .compensator import CompensatorSettings
 
 
@@ -76,6 +76,13 @@ def _auto_or_float(value: str) -> float | Literal["auto"]:
     help="The recording's column learned from.",
 )
 @click.option(
+    "--voltage-tolerance",
+    type=click.FloatRange(min=0.0),
+    default=None,
+    help="How far (V) the recorded voltage may stray from the commands, beyond its noise "
+    "(default: 10x its noise, at least 1e-4 of the voltage range; kept in the state file).",
+)
+@click.option(
     "--sensor", is_flag=True, help="The reading is a displacement sensor's (m), not the charge."
 )
 @click.option(
@@ -92,6 +99,7 @@ def _auto_or_float(value: str) -> float | Literal["auto"]:
     required=True,
     help="The next trial's commands (CSV: time, command, desired).",
 )
+@FORCE
 @click.pass_obj
 def learn(
     ctx: Context,
@@ -106,17 +114,20 @@ def learn(
     cutoff: str,
     voltage_column: str,
     reading_column: str,
+    voltage_tolerance: float | None,
     sensor: bool,
     no_lead_in: bool,
     settings: CompensatorSettings,
     out: Path,
+    force: bool,
 ) -> None:
     """Learn from the trial RECORDED and write the next trial's commands.
 
     A repeated scan (one period per trial, trials sent back to back): the first
     call takes --desired and writes the first trial; each later call takes the
-    DAQ's recording of the trial just sent (its voltage column must match what
-    was written) and the charge measured over it, and writes the next. The
+    DAQ's recording of the trial just sent (its voltage column: the commands
+    written, or the voltage measured while sending them, within its noise) and
+    the charge measured over it, and writes the next. The
     state file names the model, settings and trajectory it belongs to. A
     reading the DAQ lost is written NaN and not learned from (an empty cell is
     refused as a damaged row). The first trial is the lead-in, not learned from.
@@ -146,6 +157,8 @@ def learn(
             reading_column=reading_column,
             sensor=sensor,
             lead_in=not no_lead_in,
+            voltage_tolerance=voltage_tolerance,
+            force=force,
         ),
     )
     trial, learner = result.trial, result.learner

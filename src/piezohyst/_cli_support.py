@@ -71,6 +71,22 @@ def progress_steps(ctx: Context, total: int) -> Iterator[Callable[[str], None]]:
         bar.update(task, completed=total, description="done")
 
 
+@contextmanager
+def working(ctx: Context, label: str) -> Iterator[None]:
+    """A spinner with the time elapsed on a terminal, for work whose length cannot be counted
+    (fitting several models); nothing when piped or quiet."""
+    if ctx.quiet or not sys.stderr.isatty():
+        yield
+        return
+    from rich.console import Console
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    with Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(),
+                  console=Console(stderr=True), transient=True) as bar:  # fmt: skip
+        bar.add_task(label, total=None)
+        yield
+
+
 #: Records shorter than this read in moments: no progress line when the output is piped
 QUIET_ROWS = 100_000
 
@@ -508,7 +524,10 @@ def _fit_auto(
     """fit --model auto: every model scored inside the record, the best saved."""
     from .workflows import select_file
 
-    with rows_progress(ctx, f"choosing a model for {data.name}", data) as progress:
+    with (
+        working(ctx, f"choosing a model for {data.name}: each candidate on the record's folds"),
+        rows_progress(ctx, f"reading {data.name}", data) as progress,
+    ):
         sel = _run(
             ctx,
             lambda: select_file(

@@ -33,6 +33,7 @@ from ._cli_support import (
     operators_option,
     progress_steps,
     rows_progress,
+    working,
 )
 from ._version import __version__
 from .compensator import CompensatorSettings
@@ -398,21 +399,22 @@ def compare(
     from .workflows import compare_file
 
     names = [m.strip() for m in models.split(",") if m.strip()]
-    result = _run(
-        ctx,
-        lambda: compare_file(
-            data,
-            out,
-            models=names,
-            train=train,
-            test_data=test_data,
-            data_spec=data_spec,
-            operators=operators,
-            input_dynamics=input_dynamics,
-            initial_state=initial_state,
-            force=force,
-        ),
-    )
+    with working(ctx, f"fitting {len(names)} models on {data.name}, scoring each held out"):
+        result = _run(
+            ctx,
+            lambda: compare_file(
+                data,
+                out,
+                models=names,
+                train=train,
+                test_data=test_data,
+                data_spec=data_spec,
+                operators=operators,
+                input_dynamics=input_dynamics,
+                initial_state=initial_state,
+                force=force,
+            ),
+        )
     a, b = result.train
     c, d = result.test
     held = f"{test_data.name if test_data else data.name} samples {c}-{d}"

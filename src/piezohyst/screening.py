@@ -55,6 +55,7 @@ __all__ = [
     "Screener",
     "noise_level",
     "screen",
+    "smoothed",
 ]
 
 NOISE_REACH = 10.0
@@ -97,6 +98,25 @@ def noise_level(x: ArrayLike) -> float:
     left = x[3:-3] - np.convolve(x, _SMOOTH, mode="valid")
     mad = float(np.median(np.abs(left - np.median(left))))
     return 1.4826 * mad / math.sqrt(1.0 - 7.0 / 21.0)
+
+
+def smoothed(x: ArrayLike) -> FloatArray:
+    """The 7-point quadratic smoothing :func:`noise_level` measures against (its first and
+    last three samples as they are).
+
+    Parameters
+    ----------
+    x : array_like, shape (N,)
+
+    Returns
+    -------
+    ndarray, shape (N,)
+    """
+    x = np.asarray(x, dtype=np.float64)
+    out = x.copy()
+    if x.size >= _SMOOTH.size:
+        out[3:-3] = np.convolve(x, _SMOOTH, mode="valid")
+    return out
 
 
 @dataclass(frozen=True)
