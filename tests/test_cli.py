@@ -270,10 +270,19 @@ def write(path: Path, text: str) -> Path:
         ("", ["the file is empty"]),
         ("time,voltage,charge\n", ["header but no data rows"]),
         ("time,voltage,q\n0,1,2\n0.1,2,3\n", ["no column 'charge'", "'time', 'voltage', 'q'"]),
-        ("time,voltage,charge\n0,1,2\n0.1,x,3\n", ["'x' at row 3, column 'voltage'"]),
+        (
+            "time,voltage,charge\n0,1,2\n0.1,x,3\n",
+            ["'x' at row 2 (line 3 of the file), column 'voltage'"],
+        ),
         ("time,voltage,charge\n0,1,2\n0.1,nan,3\n", ["nan at row 2, column 'voltage'"]),
-        ("time,voltage,charge\n0,1,2\n0.1,,3\n", ["empty value at row 3, column 'voltage'"]),
-        ("time,voltage,charge\n0,1,2\n0.1,2\n", ["row 3 has 2 fields, expected 3"]),
+        (
+            "time,voltage,charge\n0,1,2\n0.1,,3\n",
+            ["empty value at row 2 (line 3 of the file), column 'voltage'"],
+        ),
+        (
+            "time,voltage,charge\n0,1,2\n0.1,2\n",
+            ["row 2 (line 3 of the file) has 2 fields, expected 3"],
+        ),
         ("time,voltage,charge\n0,1,2\n0.2,2,3\n0.1,3,4\n", ["time is not increasing at row 3"]),
         ("voltage,charge\n1,2\n2,3\n", ["no time column 'time' and no sample rate"]),
     ],

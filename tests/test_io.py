@@ -125,7 +125,10 @@ def test_csv_round_trip_and_header_detection(tmp_path: Path) -> None:
     np.testing.assert_array_equal(ph.read_table(tmp_path / "c.csv").get("Spannung"), [1.5, -22.5])
     np.testing.assert_array_equal(ph.read_table(tmp_path / "c.csv").get("Zeit"), [0.0, 0.1])
     (tmp_path / "d.csv").write_text("Zeit;Spannung\n0;1.5\n0.1;x\n")  # a point: no commas
-    with pytest.raises(DataFileError, match="'x' at row 3, column 'Spannung' is not a number"):
+    with pytest.raises(
+        DataFileError,
+        match=r"'x' at row 2 \(line 3 of the file\), column 'Spannung' is not a number",
+    ):
         ph.read_table(tmp_path / "d.csv").get("Spannung")
 
 
@@ -156,7 +159,9 @@ def test_unused_bad_columns_do_not_block_reading(tmp_path: Path) -> None:
     (tmp_path / "d.csv").write_text(",0.0,1.5,2\n,0.1,2.5,3\n")
     table = ph.read_table(tmp_path / "d.csv")
     np.testing.assert_array_equal(table.get("col2"), [1.5, 2.5])
-    with pytest.raises(DataFileError, match="an empty value at row 1, column 'col0'"):
+    with pytest.raises(
+        DataFileError, match=r"an empty value at row 1 \(line 1 of the file\), column 'col0'"
+    ):
         table.get("col0")
 
 

@@ -268,3 +268,83 @@ def test_predicting_beyond_the_identified_range_warns_for_every_kind(
     with warnings.catch_warnings():  # inside the range: no word
         warnings.simplefilter("error")
         slow_model.predict(np.linspace(0.0, 130.0, 50), t=np.arange(50) * 1e-3)
+
+
+# ------------------------------------------------------------------------- a lab's files
+def test_a_mat_struct_of_signals_and_a_matrix_of_columns(
+    tmp_path: Path, bench: ph.simulation.BenchRecord
+) -> None:
+    """MATLAB's usual saves: a struct of signals (--group names it) and one [t v q] matrix
+    (columns by index, whether the signals lie in columns or rows)."""
+    from scipy.io import savemat
+
+    t, v, q = bench.t[:3000], bench.voltage[:3000], bench.charge[:3000]
+    savemat(tmp_path / "s.mat", {"meas": {"t": t, "v": v, "q": q}})
+    savemat(tmp_path / "m.mat", {"data": np.column_stack([t, v, q])})
+    savemat(tmp_path / "r.mat", {"data": np.vstack([t, v, q])})
+    runner = CliRunner()
+    wrong = runner.invoke(main, ["fit", str(tmp_path / "s.mat"), "--group", "nope",
+                                 "-o", str(tmp_path / "x.json")])  # fmt: skip
+    assert wrong.exit_code == 1 and "available: 'meas'" in wrong.output
+    fits = []
+    for name, cols in (("s.mat", ["--group", "meas", "--input", "v", "--output", "q",
+                                  "--time", "t"]),
+                       ("m.mat", ["--input", "1", "--output", "2", "--time", "0"]),
+                       ("r.mat", ["--input", "1", "--output", "2", "--time", "0"])):  # fmt: skip
+        res = runner.invoke(main, ["fit", str(tmp_path / name), *cols, "--model", "classical-pi",
+                                   "-o", str(tmp_path / f"{name}.json")])  # fmt: skip
+        assert res.exit_code == 0, res.output
+        fits.append(ph.load_model(tmp_path / f"{name}.json").nrmse_)
+    direct = ph.ClassicalPI(10).fit(v, q).nrmse_
+    # tol: the same samples through three readers: the same fit to rounding
+    assert fits == pytest.approx([direct] * 3, rel=1e-9)
+
+
+def test_a_second_file_holding_one_signal_needs_no_name(
+    tmp_path: Path, bench: ph.simulation.BenchRecord
+) -> None:
+    """The Bouc-Wen benchmark's uval/yval pairs: one signal in each file, no time column."""
+    from scipy.io import savemat
+
+    savemat(tmp_path / "u.mat", {"uval_multisine": bench.voltage[:3000]})
+    savemat(tmp_path / "y.mat", {"yval_multisine": bench.charge[:3000]})
+    res = CliRunner().invoke(main, ["fit", str(tmp_path / "u.mat"), "--output-file",
+                                    str(tmp_path / "y.mat"), "--rate", "1000", "--model",
+                                    "classical-pi", "-o", str(tmp_path / "m.json")])  # fmt: skip
+    assert res.exit_code == 0, res.output
+
+
+def test_a_rate_independent_model_needs_no_time(
+    tmp_path: Path, bench: ph.simulation.BenchRecord
+) -> None:
+    data = tmp_path / "untimed.csv"
+    ph.io.write_table(data, {"voltage": bench.voltage, "charge": bench.charge})
+    runner = CliRunner()
+    res = runner.invoke(main, ["fit", str(data), "--model", "classical-pi",
+                               "-o", str(tmp_path / "m.json")])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    pred = runner.invoke(main, ["predict", str(tmp_path / "m.json"), str(data),
+                                "-o", str(tmp_path / "p.csv")])  # fmt: skip
+    assert pred.exit_code == 0, pred.output
+    assert ph.io.read_table(tmp_path / "p.csv").columns[0] == "sample"  # not a fake time
+    growth = runner.invoke(main, ["fit", str(data), "-o", str(tmp_path / "a.json")])
+    assert growth.exit_code == 1
+    assert "no time column 'time' and no sample rate, which ActivePI's" in growth.output
+
+
+@pytest.mark.parametrize("cell", ["nan", "", "abc"])
+def test_one_row_number_for_a_bad_cell_whatever_it_holds(
+    tmp_path: Path, bench: ph.simulation.BenchRecord, cell: str
+) -> None:
+    ph.io.write_table(tmp_path / "ok.csv", {"time": bench.t[:2000], "voltage":
+                      bench.voltage[:2000], "charge": bench.charge[:2000]})  # fmt: skip
+    lines = (tmp_path / "ok.csv").read_text().splitlines()
+    header = next(i for i, line in enumerate(lines) if line.startswith("time"))
+    parts = lines[header + 1 + GLITCH_ROW].split(",")
+    parts[1] = cell
+    lines[header + 1 + GLITCH_ROW] = ",".join(parts)
+    (tmp_path / "bad.csv").write_text("\n".join(lines) + "\n")
+    res = CliRunner().invoke(main, ["fit", str(tmp_path / "bad.csv"), "-o",
+                                    str(tmp_path / "m.json")])  # fmt: skip
+    assert res.exit_code == 1
+    assert "at row 1235" in res.output and "column 'voltage'" in res.output

@@ -238,9 +238,11 @@ def test_errors_in_later_batches_name_the_row(tmp_path: Path, small_batches: Non
         wf.fit_file(tmp_path / "b.csv")
     ph.write_table(tmp_path / "good.csv", {"time": t, "voltage": v, "charge": q})
     text = (tmp_path / "good.csv").read_text().splitlines()
-    text[5500] = "5.499,oops,1e-6"  # line 5501: the careful reader takes over and names it
+    text[5500] = "5.499,oops,1e-6"  # line 5501, data row 5499 (a comment and the header above)
     (tmp_path / "c.csv").write_text("\n".join(text) + "\n")
-    with pytest.raises(DataFileError, match=r"'oops' at row 5501, column 'voltage'"):
+    with pytest.raises(
+        DataFileError, match=r"'oops' at row 5499 \(line 5501 of the file\), column 'voltage'"
+    ):
         wf.fit_file(tmp_path / "c.csv")
     # found after thousands of rows were written: still no output file, no temporary left
     wf.fit_file(tmp_path / "good.csv", tmp_path / "m.json", operators=5)

@@ -554,11 +554,11 @@ def _table_from_lines(path: Path, lines: list[tuple[int, str]]) -> Table:
         msg = f"{path}: the file has a header but no data rows"
         raise DataFileError(msg)
     width = len(names)
-    for line_no, cells in body:
+    for k, (line_no, cells) in enumerate(body):
         if len(cells) != width:
             msg = (
-                f"{path}: row {line_no} has {len(cells)} fields, expected {width} "
-                f"({', '.join(names)})"
+                f"{path}: row {k + 1} (line {line_no} of the file) has {len(cells)} fields, "
+                f"expected {width} ({', '.join(names)})"
             )
             raise DataFileError(msg)
     line_numbers = [n for n, _ in body]
@@ -573,8 +573,8 @@ def _table_from_lines(path: Path, lines: list[tuple[int, str]]) -> Table:
                     if not _is_number(cell):
                         shown = repr(cell) if cell else "an empty value"
                         msg = (
-                            f"{path}: {shown} at row {line_numbers[k]}, column {names[j]!r} "
-                            "is not a number"
+                            f"{path}: {shown} at row {k + 1} (line {line_numbers[k]} of the "
+                            f"file), column {names[j]!r} is not a number"
                         )
                         raise DataFileError(msg) from None
                 raise  # pragma: no cover

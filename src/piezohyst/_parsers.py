@@ -63,13 +63,43 @@ def mat_arrays(path: str) -> dict[str, Any]:
         data = loadmat(path, squeeze_me=False)
     except NotImplementedError:  # MATLAB v7.3 is HDF5
         return hdf5_arrays(path)
-    variables = {k: v for k, v in data.items() if not k.startswith("__")}
+    variables: dict[str, Any] = {}
+    for name, value in data.items():
+        if not name.startswith("__"):
+            _flatten(name, value, variables)
     units = {  # 'voltage_unit': 'V', as piezohyst writes them
-        k: str(np.asarray(v).reshape(-1)[0])
+        k.rpartition("/")[2] if "/" in k else k: str(np.asarray(v).reshape(-1)[0])
         for k, v in variables.items()
         if k.endswith("_unit") and isinstance(v, np.ndarray) and v.dtype.kind == "U" and v.size
     }
     return {**_numeric(variables), **units}
+
+
+#: A matrix with at most this many rows or columns holds signals (one per column or row)
+MAX_SIGNALS = 64
+
+
+def _flatten(name: str, value: Any, out: dict[str, Any]) -> None:
+    """A MAT variable as 1-D arrays: a struct's fields as ``name/field`` (nested structs
+    deeper: MATLAB's ``save`` of a struct of signals), a matrix of signals as ``name/0``,
+    ``name/1``... (one per column, or per row when they lie in rows), anything else as is."""
+    arr = value if isinstance(value, np.ndarray) else None
+    if arr is None:
+        return
+    if arr.dtype.names and arr.size == 1:  # a 1x1 struct
+        for field in arr.dtype.names:
+            _flatten(f"{name}/{field}", arr[field].reshape(-1)[0], out)
+        return
+    if arr.dtype.kind == "O" and arr.size == 1:  # a struct field holds its value in a cell
+        _flatten(name, arr.reshape(-1)[0], out)
+        return
+    if arr.dtype.kind in "biuf" and arr.ndim == 2 and min(arr.shape) > 1:
+        signals = arr if arr.shape[0] >= arr.shape[1] else arr.T  # samples down the rows
+        if signals.shape[1] <= MAX_SIGNALS:
+            for j in range(signals.shape[1]):
+                out[f"{name}/{j}"] = np.ascontiguousarray(signals[:, j])
+            return
+    out[name] = arr
 
 
 def bank_hdf5(path: str) -> tuple[str, list[str]]:

@@ -298,6 +298,10 @@ class RecordingStream:
     keep_outliers : bool
         Keep the isolated outliers :meth:`screen` finds (by default each is
         replaced by its neighbours' mean in every block).
+    untimed : bool
+        The file has no time column, rate or interval: its blocks carry the
+        sample index as time, enough for a rate-independent model only
+        (:meth:`require_time` refuses the rest).
     """
 
     path: Path
@@ -312,6 +316,22 @@ class RecordingStream:
     _warned: set[str] = field(default_factory=set, repr=False, compare=False)  # once per stream
     keep_outliers: bool = False
     _screened: dict[str, Screen] = field(default_factory=dict, repr=False, compare=False)
+    untimed: bool = False
+
+    def require_time(self, why: str) -> None:
+        """Raise unless the record has a time axis (a column, a rate or a stated interval).
+
+        Parameters
+        ----------
+        why : str
+            What needs it, for the message ("ActivePI's growth terms").
+
+        Raises
+        ------
+        DataFileError
+        """
+        if self.untimed:
+            raise DataFileError(no_time_message(self.path, self._table.columns, why))
 
     def in_window(self, t: FloatArray) -> FloatArray:
         """Which of the times ``t`` (s) lie in the window (a boolean array).
@@ -453,6 +473,14 @@ class RecordingStream:
             )
 
 
+def no_time_message(path: Path, columns: Sequence[str], why: str) -> str:
+    """The one line for a record without a time axis that ``why`` needs."""
+    return (
+        f"{path}: no time column 'time' and no sample rate, which {why} needs; name the time "
+        f"column or give the rate in Hz (columns: {', '.join(map(repr, columns))})"
+    )
+
+
 #: Magnitudes beyond this in a data file are logging errors, not measurements (1e100 C, V, s)
 MAX_VALUE = 1e100
 
@@ -559,12 +587,16 @@ def open_recording(
     if time_column is not None and time_column != "time":
         wanted.append(time_column)
     table = open_table(path, group=group, channels=wanted, skip_rows=skip_rows)
+    if output_file is not None and input_column not in table and len(table.columns) == 1:
+        input_column = table.columns[0]  # a file holding one signal, the output in another
     if output_file is not None:  # the output in a file of its own, row for row
         if output is None:
             msg = f"{output_file}: an output file needs the output column named"
             raise DataFileError(msg)
         other = open_table(output_file, group=group, channels=[output], skip_rows=skip_rows)
-        table, output = _joined(table, other, other.resolve(output))
+        only = other.columns[0] if len(other.columns) == 1 else None  # its one signal: no name
+        name = only if only is not None and output not in other else other.resolve(output)
+        table, output = _joined(table, other, name)
     x_name = table.resolve(input_column)
     y_name: str | None = None
     # the default output may be absent (predicting needs no output); a named one may not
@@ -575,6 +607,7 @@ def open_recording(
         time = next((c for c in table.columns if c.lower() == "time"), time)
     t_name: str | None = None
     step: float | None = None
+    untimed = False
     if rate is not None:
         if not rate > 0:
             msg = f"the sample rate must be positive (Hz). Got {rate}."
@@ -592,12 +625,10 @@ def open_recording(
         raise AssertionError  # pragma: no cover
     elif table.time_step is not None:
         step = table.time_step
+    elif t_start is None and t_stop is None:  # enough for a rate-independent model
+        step, untimed = 1.0, True
     else:
-        msg = (
-            f"{table.path}: no time column 'time' and no sample rate; name the time column "
-            f"or give the rate in Hz (columns: {', '.join(map(repr, table.columns))})"
-        )
-        raise DataFileError(msg)
+        raise DataFileError(no_time_message(table.path, table.columns, "a time window"))
     source = (
         _unit(table, t_name, time_unit),
         _unit(table, x_name, input_unit),
@@ -621,6 +652,7 @@ def open_recording(
         None if rate is None else float(rate),
         step,
         keep_outliers=bool(keep_outliers),
+        untimed=untimed,
     )
 
 
@@ -756,6 +788,7 @@ def collect(stream: RecordingStream, progress: Callable[[int], None] | None = No
     DataFileError
         A window that holds no sample (or any error of the stream).
     """
+    stream.require_time("this command")  # only fit and predict stream an untimed record
     blocks = list(stream.blocks(progress))
     t = np.concatenate([b.t for b in blocks])
     x = np.concatenate([b.x for b in blocks])

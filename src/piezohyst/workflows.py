@@ -42,7 +42,7 @@ from .control_files import (
     simulate_loop_file,
 )
 from .cores.play import history_state
-from .errors import DataFileError, ParameterError
+from .errors import DataFileError, ParameterError, TimeAxisError
 from .excitation import Excitation, excitation
 from .identification import Blocks, Summary, default_thresholds
 from .io import (
@@ -318,6 +318,7 @@ def fit_file(
     }
     estimator = cls(**settings)
     if input_dynamics != "none" or output_dynamics != "none":  # searched over the window in memory
+        stream.require_time(f"{model}'s input and output dynamics")
         rec = (data_spec or DataSpec()).read(data, progress=progress)
         w = rec.window
         assert rec.y is not None
@@ -345,7 +346,13 @@ def fit_file(
         )
         estimator = cls(**{**settings, "thresholds": thresholds})
         start = _history(stream, thresholds, passes.tick())
-    fitted: HysteresisModel = estimator.fit_blocks(window, initial_state=start)
+    try:
+        fitted: HysteresisModel = estimator.fit_blocks(
+            window, timed=not stream.untimed, initial_state=start
+        )
+    except TimeAxisError:  # a rate-dependent term, and the file gives no time
+        stream.require_time(f"{type(estimator).__name__}'s rate-dependent terms")
+        raise
     if isinstance(start, str) and start == "rest":
         x_head, _, t_head = next(iter(window()))
         _mid_loop_hint(x_head[:2], None if t_head is None else t_head[:2], fitted)
@@ -516,7 +523,7 @@ def _window_blocks(stream: RecordingStream, passes: _Passes) -> Blocks:
             i0, i1 = np.searchsorted(b.t, [stream.t_start, stream.t_stop], "left")
             if i1 > i0:
                 found = True
-                block = (b.x[i0:i1], b.y[i0:i1], b.t[i0:i1])
+                block = (b.x[i0:i1], b.y[i0:i1], None if stream.untimed else b.t[i0:i1])
                 rows += int(i1 - i0)
                 keeping = keeping and rows <= KEEP_ROWS
                 if keeping:
@@ -645,6 +652,9 @@ def predict_file(
     guard_outputs([out], [model_path, data], force=force)
     model = _load(model_path)
     stream = (data_spec or DataSpec()).open(data, output_required=False)
+    if model.rate_dependent_:
+        stream.require_time(f"{type(model).__name__}'s rate-dependent terms")
+    clock = "sample" if stream.untimed else "time"  # no time axis: the sample's index
     measured = stream.names[1] is not None
     if measured:
         _check_measured_unit(stream.units[1], model, data)
@@ -713,7 +723,7 @@ def predict_file(
             i0 = int(np.searchsorted(tb, stream.t_start, "left"))
             if end <= i0:
                 continue
-            cols = {"time": tb[i0:], "predicted": output[i0:]}
+            cols = {clock: tb[i0:], "predicted": output[i0:]}
             scored[0], scored[1] = min(scored[0], float(tb[i0])), float(tb[-1])
             if b.y is not None:
                 cols["measured"] = y = b.y[i0:end]
@@ -725,7 +735,8 @@ def predict_file(
             raise stream.empty_window(first, last)
 
     unit = model.output_unit
-    n = write_blocks(out, rows(), units={"time": "s", "predicted": unit, "measured": unit})
+    n = write_blocks(out, rows(), units={"time": "s", "sample": None, "predicted": unit,
+                                         "measured": unit})  # fmt: skip
     err = math.sqrt(sse / n) if measured else math.nan
     nrmse = err / (hi - lo) if hi > lo else math.nan
     return Prediction(n, err, nrmse, unit, (scored[0], scored[1]), said)
