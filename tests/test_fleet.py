@@ -68,9 +68,9 @@ def test_every_unit_gets_its_own_model_and_a_row(line: list[Path], tmp_path: Pat
     rows = _rows(tmp_path / "models" / "summary.csv")
     assert [r["status"] for r in rows].count("failed") == 1
     ok = [r for r in rows if r["status"] == "ok"]
-    assert all(float(r["nrmse"]) < 0.01 and float(r["integral"]) > 0 for r in ok)
-    widths = [float(r["width"]) for r in ok if r["unit"] != "unit3"]
-    assert max(widths) < float(next(r["width"] for r in ok if r["unit"] == "unit3")) / 2
+    assert all(float(r["nrmse [%]"]) < 1.0 and float(r["integral"]) > 0 for r in ok)  # in %
+    widths = [float(r["width [%]"]) for r in ok if r["unit"] != "unit3"]
+    assert max(widths) < float(next(r["width [%]"] for r in ok if r["unit"] == "unit3")) / 2
     # a second run replaces its own outputs without --force
     again = fit_many(line[:2], tmp_path / "models", operators=6, workers=1)
     assert not again.failed
@@ -90,7 +90,7 @@ def test_channels_of_one_file_are_units(tmp_path: Path) -> None:
 
     table = pq.read_table(result.summary).to_pydict()
     assert table["unit"] == ["mirror:v0", "mirror:v1"]
-    assert table["width"][1] > 2 * table["width"][0]
+    assert table["width [%]"][1] > 2 * table["width [%]"][0]
     assert ph.io.is_piezohyst_output(result.summary)
 
 
@@ -138,7 +138,7 @@ def test_the_same_command_runs_on_a_dask_cluster(line: list[Path], tmp_path: Pat
     assert "fitted 4 of 4 units" in res.output
     local = fit_many(line[:4], tmp_path / "local", operators=6, workers=1)
     on_cluster = _rows(tmp_path / "cluster" / "summary.csv")
-    assert [r["nrmse"] for r in on_cluster] == [repr(r["nrmse"]) for r in local.rows]
+    assert [r["nrmse [%]"] for r in on_cluster] == [repr(100 * r["nrmse"]) for r in local.rows]
     for i in range(4):
         a = json.loads((tmp_path / "cluster" / f"unit{i}.json").read_text())
         b = json.loads((tmp_path / "local" / f"unit{i}.json").read_text())

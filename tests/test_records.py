@@ -348,3 +348,21 @@ def test_one_row_number_for_a_bad_cell_whatever_it_holds(
                                     str(tmp_path / "m.json")])  # fmt: skip
     assert res.exit_code == 1
     assert "at row 1235" in res.output and "column 'voltage'" in res.output
+
+
+def test_compensate_writes_empty_precondition_cells_and_clean_times(
+    tmp_path: Path, slow_model: ph.ActivePI
+) -> None:
+    slow_model.save(tmp_path / "m.json")
+    t = np.arange(1500) * 1e-3  # times as a DAQ writes them: 0.001 steps, not exact
+    ph.io.write_table(tmp_path / "scan.csv", {"time": t, "desired": _scan(slow_model, 1.0)[:1500]})
+    files = [str(tmp_path / "m.json"), str(tmp_path / "scan.csv")]
+    res = CliRunner().invoke(main, ["compensate", *files, "-o", str(tmp_path / "c.csv")])
+    assert res.exit_code == 0, res.output
+    text = (tmp_path / "c.csv").read_text()
+    assert "nan" not in text
+    rows = [line.split(",") for line in text.splitlines()[2:]]
+    pre = [r for r in rows if r[2] == ""]
+    assert pre and all(len(r[0]) <= 6 for r in pre)  # -1.001, not -1.001000000000001
+    back = ph.io.read_table(tmp_path / "c.csv").get("desired", finite=False)
+    assert np.isnan(back[: len(pre)]).all() and np.isfinite(back[len(pre) :]).all()

@@ -569,6 +569,8 @@ def _table_from_lines(path: Path, lines: list[tuple[int, str]]) -> Table:
             try:
                 return np.array(cells, dtype=np.float64)
             except ValueError:
+                if _own_blanks(path, cells):  # piezohyst leaves a cell empty on purpose
+                    return np.array([c or "nan" for c in cells], dtype=np.float64)
                 for k, cell in enumerate(cells):
                     if not _is_number(cell):
                         shown = repr(cell) if cell else "an empty value"
@@ -582,6 +584,18 @@ def _table_from_lines(path: Path, lines: list[tuple[int, str]]) -> Table:
         return convert
 
     return Table(path, names, {name: getter(j) for j, name in enumerate(names)}, units=units)
+
+
+def _own_blanks(path: Path, cells: list[str]) -> bool:
+    """Whether a column's only non-numbers are empty cells of a CSV piezohyst wrote (the
+    precondition rows of ``compensate``, where nothing is desired), to be read as NaN."""
+    if not all(_is_number(c) or not c for c in cells):
+        return False
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(len(MARKER)).decode("utf-8", "replace") == MARKER
+    except OSError:
+        return False
 
 
 # ------------------------------------------------------------------ binary formats

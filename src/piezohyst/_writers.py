@@ -13,7 +13,7 @@ import math
 import os
 import shutil
 import tempfile
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -232,6 +232,7 @@ def write_blocks(
     path: str | os.PathLike[str],
     blocks: Iterable[Mapping[str, ArrayLike]],
     units: Mapping[str, str | None] | None = None,
+    blank: Collection[str] = (),
 ) -> int:
     """Write columns that arrive block by block; CSV and Parquet never hold more than one block.
 
@@ -249,6 +250,9 @@ def write_blocks(
         Column name to values; within a block all of one length.
     units : mapping, optional
         Column name to unit (see :func:`write_table`).
+    blank : collection of str, optional
+        Columns whose NaN a CSV file leaves empty (no value there, as in the
+        precondition rows of ``compensate``); other formats keep NaN.
 
     Returns
     -------
@@ -310,10 +314,14 @@ def write_blocks(
             schema = pa.schema([(f"c{i}", pa.float64()) for i in range(len(names))])
             options = pacsv.WriteOptions(include_header=False, batch_size=1 << 16)
             with pacsv.CSVWriter(fh, schema, write_options=options) as writer:
+                empty = [k in blank for k in names]
                 for block in chain:
                     columns = arrays_of(block, names)
-                    # shortest round-trip decimal text, written in batches by pyarrow
-                    writer.write_table(pa.Table.from_arrays(columns, schema=schema))
+                    # shortest round-trip decimal text, written in batches by pyarrow; a
+                    # NaN of a blank column as a null, which pyarrow writes empty
+                    cols = [pa.array(c, type=pa.float64(), from_pandas=e)
+                            for c, e in zip(columns, empty, strict=True)]  # fmt: skip
+                    writer.write_table(pa.Table.from_arrays(cols, schema=schema))
 
     def write_mat(tmp: Path) -> None:
         from scipy.io import savemat

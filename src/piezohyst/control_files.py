@@ -185,6 +185,7 @@ def compensate_file(
     if fs is None:
         steps = np.diff(to_standard(head["time"], t_unit, "time", f"{target}: column 'time'")[0])
         fs = 1.0 / float(np.median(steps)) if steps.size and np.all(steps > 0) else 1.0
+        fs = float(f"{fs:.12g}")  # 1000.0, not 999.9999999999991 from times written in ms
     comp = dataclasses.replace(settings, sample_rate=fs).build(model)  # slew: "trained"
     start = present_voltage
     if start is None:  # at rest: 0 V, or the nearer limit
@@ -211,10 +212,10 @@ def compensate_file(
                 t = (row + np.arange(desired.size, dtype=np.float64)) / fs
             if row == 0 and preamble.size:
                 n = preamble.size
-                yield {
-                    "time": t[0] - np.arange(n, 0, -1) / fs,
+                yield {  # k / fs from the first time: -1.001, not -1.001000000000001
+                    "time": t[0] + np.arange(-n, 0) / fs,
                     "command": preamble,
-                    "desired": np.full(n, np.nan),
+                    "desired": np.full(n, np.nan),  # written empty: nothing is desired there
                 }
             finite += int(np.count_nonzero(np.isfinite(desired)))
             yield {"time": t, "command": comp.process(desired), "desired": desired}
@@ -232,7 +233,8 @@ def compensate_file(
             )
             raise ParameterError(msg)
 
-    write_blocks(out, rows(), units={"time": "s", "command": "V", "desired": expected})
+    write_blocks(out, rows(), units={"time": "s", "command": "V", "desired": expected},
+                 blank=("desired",))  # fmt: skip
     return Compensation(comp, preamble.size, fs)
 
 

@@ -211,7 +211,8 @@ class FleetResult:
         (``ok``/``failed``), ``error``, ``nrmse``, ``rmse``, ``v_min``,
         ``v_max``, ``width``, growth coefficients (e.g. ``integral``),
         ``outlier`` (columns in which the unit is far from the fleet),
-        ``model_file``.
+        ``model_file``. NRMSE and width are fractions here; the summary file
+        gives them in % (``nrmse [%]``, ``width [%]``), as the CLI prints them.
     summary : Path or None
         The summary table written.
     """
@@ -250,7 +251,28 @@ def write_summary(path: PathLike, rows: list[dict[str, Any]]) -> Path:
     Path
     """
     text = ("unit", "file", "status", "outlier", "model_file", "error")
-    return write_rows(path, rows, _columns(rows), text)
+    shown = [_with_units(r) for r in rows]
+    return write_rows(path, shown, [SUMMARY_UNITS.get(c, (c, 1.0))[0] for c in _columns(rows)],
+                      text)  # fmt: skip
+
+
+#: The summary file's columns with their units in the header (the reader strips them),
+#: and the factor from the rows' values: NRMSE and loop width in % as the CLI prints them
+SUMMARY_UNITS = {
+    "nrmse": ("nrmse [%]", 100.0),
+    "width": ("width [%]", 100.0),
+    "v_min": ("v_min [V]", 1.0),
+    "v_max": ("v_max [V]", 1.0),
+}
+
+
+def _with_units(row: dict[str, Any]) -> dict[str, Any]:
+    out = dict(row)
+    for key, (label, factor) in SUMMARY_UNITS.items():
+        if key in out:
+            value = out.pop(key)
+            out[label] = value * factor if isinstance(value, int | float) else value
+    return out
 
 
 def fit_many(
