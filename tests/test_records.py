@@ -4,6 +4,7 @@ the time axis are named, and a glitch sets no limit of the model (API and comman
 from __future__ import annotations
 
 import itertools
+import json
 import warnings
 from pathlib import Path
 
@@ -366,3 +367,29 @@ def test_compensate_writes_empty_precondition_cells_and_clean_times(
     assert pre and all(len(r[0]) <= 6 for r in pre)  # -1.001, not -1.001000000000001
     back = ph.io.read_table(tmp_path / "c.csv").get("desired", finite=False)
     assert np.isnan(back[: len(pre)]).all() and np.isfinite(back[len(pre) :]).all()
+
+
+def test_the_report_names_its_windows_and_the_zero_baseline(
+    tmp_path: Path, bench: ph.simulation.BenchRecord
+) -> None:
+    data = _write(tmp_path / "r.csv", bench)
+    runner = CliRunner()
+    fit = runner.invoke(main, ["fit", str(data), "--t-stop", "10", "-o", str(tmp_path / "m.json")])
+    assert fit.exit_code == 0, fit.output
+    rep = runner.invoke(main, ["report", str(tmp_path / "m.json"), str(data), "--t-start", "10",
+                               "--out", str(tmp_path / "rep")])  # fmt: skip
+    assert rep.exit_code == 0, rep.output
+    metrics = json.loads((tmp_path / "rep" / "metrics.json").read_text())["metrics"]
+    assert metrics["training_window_s"]["value"] == "0 to 9.999"
+    assert metrics["held_out_pct"]["value"] == 100.0
+    assert metrics["nrmse_zero_pct"]["value"] > metrics["nrmse_pct"]["value"]
+    assert "verdict" not in metrics
+    page = (tmp_path / "rep" / "report.html").read_text()
+    assert "&quot;" not in page and 'setting thresholds</th><td class="v">default' in page
+    # a record the model does not describe: worse than predicting zero, and said so
+    flipped = _write(tmp_path / "f.csv", bench, charge=-bench.charge)
+    bad = runner.invoke(main, ["report", str(tmp_path / "m.json"), str(flipped),
+                               "--out", str(tmp_path / "bad")])  # fmt: skip
+    assert bad.exit_code == 0, bad.output
+    verdict = json.loads((tmp_path / "bad" / "metrics.json").read_text())["metrics"]["verdict"]
+    assert verdict["value"].startswith("worse than predicting zero")

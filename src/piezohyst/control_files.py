@@ -8,7 +8,6 @@ from __future__ import annotations
 import copy
 import dataclasses
 import itertools
-import json
 import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -591,7 +590,7 @@ def _report(
     }
     rep.tables["Model"] = [
         ("class", type(model).__name__),
-        *[(f"setting {k}", json.dumps(v)) for k, v in model.params_to_json().items()],
+        *[(f"setting {k}", _setting(v)) for k, v in model.params_to_json().items()],
         *model.operator_.describe(in_u, out_u),
         (
             "training input range",
@@ -614,8 +613,14 @@ def _report(
         rep.add("input_delay_s", "input dynamics: delay", model.input_dynamics_.delay, "s")
     err = y - pred
     rep.add("samples", "samples", int(x.size))
+    _windows(rep, model, t)
     nrmse_pct = 100 * nrmse(y, pred)
     rep.add("nrmse_pct", "NRMSE (RMSE / output span)", nrmse_pct, "%")
+    zero_pct = 100 * nrmse(y, np.zeros_like(y))
+    rep.add("nrmse_zero_pct", "NRMSE of predicting zero (the baseline)", zero_pct, "%")
+    if nrmse_pct >= zero_pct:
+        rep.add("verdict", "verdict", "worse than predicting zero: the model does not describe "
+                "this record (check the columns, units and the model's class)")  # fmt: skip
     rep.add("rmse", "RMSE", rmse(y, pred), out_u)
     rep.add("max_abs_error", "largest error", float(np.max(np.abs(err))), out_u)
     rep.add("hysteresis_width_measured_pct", "hysteresis width, measured",
@@ -624,9 +629,10 @@ def _report(
     if not math.isnan(lo):
         outside = int(np.count_nonzero((x < lo - 1e-9) | (x > hi + 1e-9)))
         rep.add("samples_outside_training_range", "samples outside the training range", outside)
-    measured = {"color": "0.55", "lw": 1.6}
-    model_line = {"color": "C0", "lw": 1.0, "ls": "--"}
-    rep.figure("loop.png", "input-output loop: data (grey) and model (dashed)", [
+    # the model a wide pale band beneath, the measured line thin on top: both stay visible
+    measured = {"color": "0.2", "lw": 0.8, "zorder": 3}
+    model_line = {"color": "C0", "lw": 3.0, "alpha": 0.45, "zorder": 2}
+    rep.figure("loop.png", "input-output loop: data (dark line) and model (blue band)", [
         {"curves": [(x, y, "measured", measured), (x, pred, "model", model_line)],
          "xlabel": "input", "xunit": in_u, "ylabel": "output", "yunit": out_u, "title": ""},
     ])  # fmt: skip
@@ -656,6 +662,37 @@ def _report(
         rep.add(f"selection_{label}", f"held-out RMSE, growth {label}{mark}",
                 f"{score:.4g} {out_u}; per fold: {folds}")  # fmt: skip
     return rep
+
+
+def _setting(value: object) -> str:
+    """A model setting as a reader wants it: text bare, lists joined, none as 'default'."""
+    if value is None:
+        return "default"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, str):
+        return value
+    if isinstance(value, list | tuple):
+        return ", ".join(_setting(v) for v in value) or "none"
+    if isinstance(value, dict):
+        return ", ".join(f"{k}: {_setting(v)}" for k, v in value.items()) or "none"
+    return f"{value:.6g}" if isinstance(value, float) else str(value)
+
+
+def _windows(rep: Any, model: HysteresisModel, t: FloatArray) -> None:
+    """Which part of the record trained the model and how much of the scored part it never
+    saw (by time: when the report's record is the one the model was fitted on)."""
+    t0, t1 = model.train_window_
+    a, b = float(t[0]), float(t[-1])
+    rep.add("scored_window_s", "scored window", f"{a:.6g} to {b:.6g}", "s")
+    if not (math.isfinite(t0) and math.isfinite(t1)):
+        rep.add("training_window_s", "training window", "unknown (not in the model file)")
+        return
+    rep.add("training_window_s", "training window (of the record it was fitted on)",
+            f"{t0:.6g} to {t1:.6g}", "s")  # fmt: skip
+    unseen = float(np.mean((t < t0) | (t > t1)))
+    rep.add("held_out_pct", "scored samples outside the training window (held out, if this "
+            "is the record it was fitted on)", 100 * unseen, "%")  # fmt: skip
 
 
 def _fmt(values: FloatArray) -> str:

@@ -224,8 +224,7 @@ class Report:
             ax.set_title(panel.get("title", ""), fontsize=10)
             ax.grid(True, lw=0.3)
             ax.legend(fontsize=8, loc="best")
-        fig.suptitle(caption, fontsize=11)
-        fig.tight_layout()
+        fig.tight_layout()  # the caption goes under the figure in the report, not into it
         path = self.folder / name
 
         def save(tmp: Path) -> None:
