@@ -216,7 +216,7 @@ def _scan(model: ph.ActivePI, f: float, lo: float = 0.3, hi: float = 0.7) -> np.
 def test_a_scan_held_by_the_trained_slew_says_so(slow_model: ph.ActivePI) -> None:
     lo, hi = slow_model.input_range_
     comp = ph.Compensator(slow_model, v_min=lo, v_max=hi, sample_rate=1000.0)
-    with pytest.warns(ph.errors.LimitWarning, match=r"slew limit \(\d.* V/s\) held \d+ of 2000"):
+    with pytest.warns(ph.errors.LimitWarning, match=r"slew limit \(\d.* V/s\) held \d+ of \d+"):
         comp.process(_scan(slow_model, 40.0))
     assert comp.slew_limited_count > 0.5 * comp.command_count
     stepped = ph.Compensator(slow_model, v_min=lo, v_max=hi, sample_rate=1000.0)
@@ -393,3 +393,24 @@ def test_the_report_names_its_windows_and_the_zero_baseline(
     assert bad.exit_code == 0, bad.output
     verdict = json.loads((tmp_path / "bad" / "metrics.json").read_text())["metrics"]["verdict"]
     assert verdict["value"].startswith("worse than predicting zero")
+
+
+def test_the_controller_and_the_bank_say_when_a_limit_bites(slow_model: ph.ActivePI) -> None:
+    lo, hi = slow_model.input_range_
+    ctl = ph.SelfSensingController(slow_model, v_min=lo, v_max=hi, sample_rate=1000.0)
+    scan = _scan(slow_model, 40.0)
+    with pytest.warns(ph.errors.LimitWarning, match="SelfSensingController: the slew limit"):
+        ctl.process(scan, scan)
+    assert ctl.slew_limited_count > 0.1 * scan.size  # 633 of 2000 measured
+    bank = ph.ModelBank(ph.ActivePI(10))
+    rec = ph.simulate(signal="fixed", frequency=1.0, duration=5.0, seed=0)
+    bank.fit(np.column_stack([rec.voltage] * 3), np.column_stack([rec.charge] * 3), t=rec.t)
+    comps = ph.BankCompensator(bank, v_min=lo, v_max=hi, sample_rate=1000.0)
+    assert comps.fused
+    with pytest.warns(ph.errors.LimitWarning, match=r"slew limit held .* on 3 of 3 channels"):
+        comps.process(np.column_stack([scan] * 3))
+    stepped = ph.BankCompensator(bank, v_min=lo, v_max=hi, sample_rate=1000.0)
+    with pytest.warns(ph.errors.LimitWarning, match="BankCompensator"):
+        for row in np.column_stack([scan] * 3):
+            stepped.step(row)
+    np.testing.assert_array_equal(stepped.slew_limited_count, comps.slew_limited_count)

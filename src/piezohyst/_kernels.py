@@ -265,6 +265,46 @@ def compensator_step(desired, tables, config, state):  # type: ignore[no-untyped
     return _step_at(0, desired, tables[np.newaxis], config[np.newaxis], state[np.newaxis])
 
 
+# A compensator's tally of the commands the slew limit held: [last command, the limit per
+# sample less rounding (inf: none), commands held, commands given, arrived]. Counting starts
+# when the commands first arrive on the trajectory (a command the limit did not hold): the
+# ramp from rest, or from the end of a precondition cycle, is the limit doing its job.
+TALLY_PREV = 0
+TALLY_TOL = 1
+TALLY_HELD = 2
+TALLY_GIVEN = 3
+TALLY_ARRIVED = 4
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def tally_command(c, tally):  # type: ignore[no-untyped-def]
+    """Count command ``c`` in ``tally`` (see ``TALLY_PREV``); returns ``c``."""
+    held = abs(c - tally[TALLY_PREV]) >= tally[TALLY_TOL]
+    tally[TALLY_PREV] = c
+    if tally[TALLY_ARRIVED] == 0.0:
+        if held:
+            return c
+        tally[TALLY_ARRIVED] = 1.0
+    if held:
+        tally[TALLY_HELD] += 1.0
+    tally[TALLY_GIVEN] += 1.0
+    return c
+
+
+@njit(cache=True)
+def tally_block(commands, tally):  # type: ignore[no-untyped-def]
+    """:func:`tally_command` over a block of commands."""
+    for k in range(commands.shape[0]):
+        tally_command(commands[k], tally)
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def compensator_step_tallied(desired, tables, config, state, tally):  # type: ignore[no-untyped-def]
+    """:func:`compensator_step`, the command counted in ``tally`` (one call from Python)."""
+    c = _step_at(0, desired, tables[np.newaxis], config[np.newaxis], state[np.newaxis])
+    return tally_command(c, tally)
+
+
 # Input dynamics of a compensator (analytic path): command -> [fraction f of a sample's delay,
 # interpolated: w = (1 - f) x + f x_prev] -> [lag B] -> piezo voltage.
 # ``dyn`` = [f, gain B] (0: absent; gain = 1 - exp(-dt/tau)), ``dstate`` = [after the

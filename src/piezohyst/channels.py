@@ -11,6 +11,7 @@ step.
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any, Generic, Literal, Protocol, TypeVar
@@ -21,18 +22,23 @@ from numpy.typing import ArrayLike, NDArray
 from ._lazy import LazyModule
 from ._validation import FloatArray
 from .bank import ModelBank
-from .compensator import Compensator, Domain
-from .errors import ParameterError, ShapeError
+from .compensator import LIMIT_CHECK_FIRST, LIMIT_SHARE, Compensator, Domain
+from .errors import LimitWarning, ParameterError, ShapeError
 from .leakage import Leakage
 from .model import HysteresisModel
 from .selfsensing import SelfSensingController
 
 if TYPE_CHECKING:
     from . import _kernels as K
+    from . import _signalkernels as S
 else:  # numba loads when a model first runs (see _lazy)
     K = LazyModule("piezohyst._kernels", globals(), "K")
+    S = LazyModule("piezohyst._signalkernels", globals(), "S")
 
 __all__ = ["BankCompensator", "BankController", "ChannelBank", "per_channel"]
+
+#: Steps of a fused bank whose commands are counted together (the slew-limit tally)
+TALLY_ROWS = 64
 
 
 class _Channel(Protocol):
@@ -94,9 +100,77 @@ class ChannelBank(Generic[C]):
                 raise type(exc)(f"channel {i}: {exc}") from None
         self.bank = bank
         self._channels = channels
+        #: True when all channels run in the one parallel kernel (set by the subclass)
+        self.fused = False
 
     def __len__(self) -> int:
         return len(self._channels)
+
+    # -------------------------------------------------------------- limits that bite
+    def _tally_reset(self) -> None:
+        """The fused kernels' counts of commands held by the slew limit, from zero."""
+        comps = [getattr(ch, "compensator", ch) for ch in self._channels]  # a controller's
+        steps = np.array([getattr(cp, "max_step", math.inf) for cp in comps])
+        self._tol = np.where(np.isfinite(steps), steps * (1.0 - 1e-9), np.inf)
+        self._prev = self.last_command
+        self._held = np.zeros(len(self._channels), dtype=np.int64)
+        self._given = np.zeros(len(self._channels), dtype=np.int64)
+        self._arrived = np.zeros(len(self._channels), dtype=np.bool_)  # on the trajectory
+        self._recent = np.empty((TALLY_ROWS, len(self._channels)))  # steps not yet counted
+        self._pending = 0
+        self._issued = 0
+        self._check_at = LIMIT_CHECK_FIRST
+        self._limits_warned = False
+
+    @property
+    def slew_limited_count(self) -> NDArray[np.int64]:
+        """Per channel: commands held back by the slew limit."""
+        if self.fused:
+            self._flush()
+            return self._held.copy()
+        return np.array([getattr(ch, "slew_limited_count", 0) for ch in self._channels],
+                        dtype=np.int64)  # fmt: skip
+
+    def _tally_step(self, commands: FloatArray) -> None:
+        """:meth:`_tally` for one step's commands (C,), counted :data:`TALLY_ROWS` at a time
+        (one kernel call per step would cost a third of the step)."""
+        self._recent[self._pending] = commands
+        self._pending += 1
+        if self._pending == TALLY_ROWS:
+            self._flush()
+
+    def _flush(self) -> None:
+        if self._pending:
+            rows, self._pending = self._recent[: self._pending], 0
+            self._tally(rows)
+
+    def _tally(self, commands: FloatArray) -> None:
+        """Count what the limits held in a block of fused commands (samples, C); warn once
+        when on some channel they held more than :data:`LIMIT_SHARE` of its commands."""
+        if self._pending and commands is not self._recent:
+            self._flush()
+        S.count_held(commands, self._prev, self._tol, self._held, self._given, self._arrived)
+        self._issued = int(self._given.max())
+        if self._limits_warned or self._issued < self._check_at:
+            return
+        self._check_at = 2 * self._issued
+        held = {"slew limit": self._held, "voltage limits": self.saturated_count}
+        given = self._given
+        parts = []
+        for what, counts in held.items():
+            over = np.flatnonzero((counts > LIMIT_SHARE * given) & (given >= LIMIT_CHECK_FIRST))
+            if over.size:
+                worst = int(over[np.argmax(counts[over])])
+                parts.append(
+                    f"the {what} held more than {100 * LIMIT_SHARE:g} % of the commands on "
+                    f"{over.size} of {len(self)} channels (worst: channel {worst}, "
+                    f"{int(counts[worst])} of {int(given[worst])})"
+                )
+        if parts:
+            self._limits_warned = True
+            setting = "set slew_rate to what the amplifiers allow, or widen v_min/v_max"
+            warnings.warn(f"{type(self).__name__}: {'; '.join(parts)}: {setting}",
+                          LimitWarning, stacklevel=3)  # fmt: skip
 
     @classmethod
     def _models(cls, bank: ModelBank) -> list[HysteresisModel]:
@@ -254,6 +328,7 @@ class BankCompensator(ChannelBank[Compensator]):
             self._state = self._stack([ch.kernel_state for ch in channels])
             for i, ch in enumerate(channels):
                 ch.share(self.tables[i], self.config[i], self._state[i])
+        self._tally_reset()
 
     def reset(self, *, voltage: float | ArrayLike | None = None) -> None:
         """Every channel back to its model's initial state, or settled at ``voltage`` (per channel).
@@ -265,6 +340,7 @@ class BankCompensator(ChannelBank[Compensator]):
         volts = per_channel(voltage, len(self), "voltage")
         for ch, v in zip(self._channels, volts, strict=True):
             ch.reset(voltage=v)
+        self._tally_reset()
 
     def precondition(self, samples: int = 1000) -> FloatArray:
         """Every channel's preconditioning cycle (see :meth:`Compensator.precondition`).
@@ -286,6 +362,9 @@ class BankCompensator(ChannelBank[Compensator]):
         for c, cy in enumerate(cycles):
             out[: cy.size, c] = cy
             out[cy.size :, c] = cy[-1]
+        self._flush()
+        self._prev = self.last_command  # a cycle at the slew limit by design: not counted,
+        self._arrived[:] = False  # nor the ramp from its end to the trajectory
         return out
 
     def step(self, desired: ArrayLike, out: FloatArray | None = None) -> FloatArray:
@@ -308,6 +387,7 @@ class BankCompensator(ChannelBank[Compensator]):
         out = self._out(out, d.shape)
         if self.fused:
             K.bank_step(d, self.tables, self.config, self._state, out)
+            self._tally_step(out)
         else:
             for i, ch in enumerate(self._channels):
                 out[i] = ch.step(float(d[i]))
@@ -328,6 +408,7 @@ class BankCompensator(ChannelBank[Compensator]):
         out = np.empty_like(d)
         if self.fused:
             K.bank_process(d, self.tables, self.config, self._state, out)
+            self._tally(out)
         else:
             for i, ch in enumerate(self._channels):
                 out[:, i] = ch.process(np.ascontiguousarray(d[:, i]))
@@ -405,6 +486,7 @@ class BankController(ChannelBank[SelfSensingController]):
         #: True when all channels run in the one parallel kernel (play operators); a bank
         #: of Preisach, Duhem or Bouc-Wen models runs its channels' controllers in turn
         self.fused = all(ch.compensator.plain for ch in channels)
+        self._tally_reset()
         if not self.fused:
             return
         comps = [ch.compensator for ch in channels]
@@ -427,6 +509,7 @@ class BankController(ChannelBank[SelfSensingController]):
         """Every channel back to its initial state, feedback cleared."""
         for ch in self._channels:
             ch.reset()
+        self._tally_reset()
 
     def step(
         self, desired: ArrayLike, measured: ArrayLike, out: FloatArray | None = None
@@ -455,6 +538,7 @@ class BankController(ChannelBank[SelfSensingController]):
         K.bank_controller_step(
             d, m, self.tables, self.config, self.state_array, self.ctl, self.feedback, out
         )
+        self._tally_step(out)
         return out
 
     def process(self, desired: ArrayLike, measured: ArrayLike) -> FloatArray:
@@ -477,4 +561,5 @@ class BankController(ChannelBank[SelfSensingController]):
         K.bank_controller_process(
             d, m, self.tables, self.config, self.state_array, self.ctl, self.feedback, out
         )
+        self._tally(out)
         return out

@@ -561,9 +561,10 @@ def compensate(
         f"{comp.max_step * result.sample_rate:.4g} V/s" if math.isfinite(comp.max_step) else "none"
     )
     click.echo(
-        f"commands in [{comp.v_min:g}, {comp.v_max:g}] V; of {comp.command_count}, "
-        f"{comp.saturated_count} held by the voltage limits, {comp.slew_limited_count} by the "
-        f"slew limit ({slew}), {comp.nonfinite_count} for non-finite desired values"
+        f"commands in [{comp.v_min:g}, {comp.v_max:g}] V; of the {comp.command_count} on the "
+        f"trajectory, {comp.saturated_count} held by the voltage limits, "
+        f"{comp.slew_limited_count} by the slew limit ({slew}), {comp.nonfinite_count} for "
+        "non-finite desired values"
     )
     if result.preamble:
         ctx.info(

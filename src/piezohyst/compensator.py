@@ -389,7 +389,8 @@ class Compensator:
             The voltages (V) to send.
         """
         cycle = self.inverse.precondition(self, self._cycle(samples, span))
-        self._prev = self.last_command  # a cycle at the slew limit by design: not counted
+        self._tally[K.TALLY_PREV] = self.last_command  # a cycle at the slew limit: not counted
+        self._tally[K.TALLY_ARRIVED] = 0.0  # nor the ramp from its end to the trajectory
         return cycle
 
     def _cycle(self, samples: int, span: tuple[float, float] | None = None) -> FloatArray:
@@ -471,16 +472,14 @@ class Compensator:
                 f"{desired!r} instead."
             )
             raise ParameterError(msg) from None
-        if self._plain:  # the common case first: one kernel call
-            c = float(K.compensator_step(d, self.tables, self.config, self._state))
+        if self._plain:  # the common case first: one kernel call, the command counted in it
+            c = float(K.compensator_step_tallied(d, self.tables, self.config, self._state,
+                                                 self._tally))  # fmt: skip
         else:
-            c = self._step_general(d, preview)
-        self._issued += 1
-        if abs(c - self._prev) >= self._slew_tol:
-            self._slewed += 1
-        self._prev = c
-        if self._issued >= self._check_at:
-            self._check_limits()
+            c = float(K.tally_command(self._step_general(d, preview), self._tally))
+        self._until_check -= 1
+        if not self._until_check:
+            self._check_limits("Compensator")
         return c
 
     def _step_general(self, desired: float, preview: ArrayLike | None) -> float:
@@ -552,48 +551,77 @@ class Compensator:
         self._inner_process(d, out)
         if self.dynamic and d.size:
             self._last_desired = float(d[-1])
-        if out.size:
-            self._issued += out.size
-            moves = np.abs(np.diff(out, prepend=prev))
-            self._slewed += int(np.count_nonzero(moves >= self._slew_tol))
-            self._prev = float(out[-1])
-            self._check_limits()
+        self._tally[K.TALLY_PREV] = prev
+        self.tally(out)
         return out
+
+    def tally_one(self, command: float, owner: str = "Compensator") -> None:
+        """:meth:`tally` for one command (a loop's step).
+
+        Parameters
+        ----------
+        command : float
+            The command sent (V).
+        owner : str, default "Compensator"
+        """
+        K.tally_command(float(command), self._tally)
+        self._until_check -= 1
+        if not self._until_check:
+            self._check_limits(owner)
+
+    def tally(self, commands: FloatArray, owner: str = "Compensator") -> None:
+        """Count the commands the voltage and slew limits held, and warn once (a
+        :class:`~piezohyst.errors.LimitWarning`) when they hold more than
+        :data:`LIMIT_SHARE` of them. :meth:`step` and :meth:`process` call it; a loop
+        built on this compensator's kernel (the self-sensing controller) calls it with
+        the commands it sent.
+
+        Parameters
+        ----------
+        commands : ndarray
+            The commands sent since the last call, in order (V).
+        owner : str, default "Compensator"
+            Who sent them, for the message.
+        """
+        if not commands.size:
+            return
+        K.tally_block(np.ascontiguousarray(commands, dtype=np.float64), self._tally)
+        self._check_limits(owner)
 
     # -------------------------------------------------------------- limits that bite
     @property
     def slew_limited_count(self) -> int:
-        """Commands held back by the slew limit (moved by exactly :attr:`max_step`)."""
-        return self._slewed
+        """Commands held back by the slew limit (moved by exactly :attr:`max_step`), from
+        the first command that reached the trajectory on (the approach from rest or from a
+        precondition cycle's end is the limit doing its job: not counted)."""
+        return int(self._tally[K.TALLY_HELD])
 
     @property
     def command_count(self) -> int:
-        """Commands given by :meth:`step` and :meth:`process` since the last reset."""
-        return self._issued
+        """Commands given by :meth:`step` and :meth:`process` since the last reset, from the
+        first that reached the trajectory on (see :attr:`slew_limited_count`)."""
+        return int(self._tally[K.TALLY_GIVEN])
 
     def _count_reset(self) -> None:
         """The counters of commands held by the limits, from zero."""
-        self._issued = 0
-        self._slewed = 0
-        self._check_at = LIMIT_CHECK_FIRST
+        tol = self._max_step * (1.0 - 1e-9) if math.isfinite(self._max_step) else math.inf
+        self._tally = np.array([self.last_command, tol, 0.0, 0.0, 0.0])
+        self._until_check = LIMIT_CHECK_FIRST  # steps until the next look at the counts
         self._limits_warned = False
-        self._slew_tol = (
-            self._max_step * (1.0 - 1e-9) if math.isfinite(self._max_step) else math.inf
-        )
-        self._prev = self.last_command
 
-    def _check_limits(self) -> None:
+    def _check_limits(self, owner: str) -> None:
         """Warn once when the limits held more than :data:`LIMIT_SHARE` of the commands."""
-        self._check_at = 2 * max(self._issued, LIMIT_CHECK_FIRST)
-        if self._limits_warned or self._issued < LIMIT_CHECK_FIRST:
+        issued = self.command_count
+        self._until_check = max(issued, LIMIT_CHECK_FIRST)  # again when they have doubled
+        if self._limits_warned or issued < LIMIT_CHECK_FIRST:
             return
         message = limits_message(
-            "Compensator", self._issued, self.saturated_count, self._slewed,
+            owner, issued, self.saturated_count, self.slew_limited_count,
             (self.v_min, self.v_max), self._max_step, self.sample_rate, self.slew_rate,
         )  # fmt: skip
         if message:
             self._limits_warned = True
-            warnings.warn(message, LimitWarning, stacklevel=3)
+            warnings.warn(message, LimitWarning, stacklevel=4)
 
     def _inner_process(self, d: FloatArray, out: FloatArray) -> None:
         """The engine over a block of hysteresis outputs (after the mode)."""

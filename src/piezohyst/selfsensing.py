@@ -422,9 +422,11 @@ class SelfSensingController:
             The command (V): finite, inside ``[v_min, v_max]``.
         """
         comp = self.compensator
-        return comp.inverse.controller_step(
+        c = comp.inverse.controller_step(
             comp, float(desired), float(measured), (self.config, self.ctl, self.feedback)
         )
+        comp.tally_one(c, "SelfSensingController")
+        return c
 
     def process(self, desired: ArrayLike, measured: ArrayLike) -> FloatArray:
         """Commands for recorded blocks; equal to :meth:`step` on each sample.
@@ -449,7 +451,13 @@ class SelfSensingController:
         out = np.empty_like(d)
         comp = self.compensator
         comp.inverse.controller_process(comp, d, m, (self.config, self.ctl, self.feedback), out)
+        comp.tally(out, "SelfSensingController")
         return out
+
+    @property
+    def slew_limited_count(self) -> int:
+        """Commands held back by the slew limit (see :meth:`Compensator.tally`)."""
+        return self.compensator.slew_limited_count
 
 
 def build_controller(
