@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import itertools
 import json
+import shutil
+import subprocess
+import sys
 import warnings
 from pathlib import Path
 
@@ -414,3 +417,18 @@ def test_the_controller_and_the_bank_say_when_a_limit_bites(slow_model: ph.Activ
         for row in np.column_stack([scan] * 3):
             stepped.step(row)
     np.testing.assert_array_equal(stepped.slew_limited_count, comps.slew_limited_count)
+
+
+@pytest.mark.skipif(shutil.which("script") is None, reason="no 'script' to give a terminal")
+def test_model_choice_shows_progress_on_a_terminal(
+    tmp_path: Path, bench: ph.simulation.BenchRecord
+) -> None:
+    """compare and fit --model auto run for seconds: on a terminal a spinner says what runs
+    (piped, nothing: the output stays clean)."""
+    data = _write(tmp_path / "r.csv", bench)
+    exe = Path(sys.executable).parent / "piezohyst"
+    cmd = f"{exe} compare {data} --models active-pi,classical-pi"
+    shown = subprocess.run(["script", "-qc", cmd, "/dev/null"], capture_output=True, text=True)
+    assert "fitting 2 models on r.csv" in shown.stdout
+    piped = subprocess.run(cmd.split(), capture_output=True, text=True)
+    assert piped.returncode == 0 and "fitting 2 models" not in piped.stdout + piped.stderr
