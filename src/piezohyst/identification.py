@@ -35,7 +35,7 @@ import math
 import operator
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -50,13 +50,33 @@ from .terms import Term
 if TYPE_CHECKING:
     from . import _kernels
     from . import _signalkernels as _signals
-    from .cores.play import PlayCore
 else:  # numba loads when a model first runs (see _lazy)
     _kernels = LazyModule("piezohyst._kernels", globals(), "_kernels")
     _signals = LazyModule("piezohyst._signalkernels", globals(), "_signals")
 
+
+class ColumnCore(Protocol):
+    """What the solve needs of a core whose output is linear in its parameters (the play
+    core): its operator columns block by block, a scaled copy, and the map from slopes to
+    parameters. The solve takes this protocol, not a core's class, so it imports no core."""
+
+    @property
+    def n_operators(self) -> int: ...
+
+    def scaled(self, scale: float) -> ColumnCore: ...
+
+    def fill(self, x: FloatArray, state: FloatArray, block: FloatArray) -> None: ...
+
+    def fill_rows(
+        self, x: FloatArray, state: FloatArray, rows: npt.NDArray[np.intp], block: FloatArray
+    ) -> None: ...
+
+    def slope_map(self, p: int) -> FloatArray: ...
+
+
 __all__ = [
     "BLOCK",
+    "ColumnCore",
     "Identification",
     "NormalEquations",
     "Summary",
@@ -379,7 +399,7 @@ def _power_of_two(values: FloatArray) -> float:
 
 
 def _accumulate(
-    core: PlayCore,
+    core: ColumnCore,
     terms: Sequence[Term],
     blocks: Blocks,
     x_first: float,
@@ -596,7 +616,7 @@ class Identification:
 
 
 def identify(
-    core: PlayCore,
+    core: ColumnCore,
     terms: Sequence[Term],
     blocks: Blocks,
     summary: Summary,
@@ -614,7 +634,7 @@ def identify(
 
     Parameters
     ----------
-    core : PlayCore
+    core : ColumnCore
         The hysteresis core.
     terms : sequence of Term
         Bound terms (see :meth:`Term.bind`); with ``subsets``, every candidate.
