@@ -21,6 +21,7 @@ lint: $(BIN)/.installed
 	$(BIN)/ruff check src tests benchmarks
 	$(BIN)/ruff format --check src tests benchmarks
 	$(BIN)/mypy
+	$(BIN)/lint-imports
 
 # The tests, as CI runs them (.ci/run calls this target):
 #  1. every test once, compiled, on two workers, under coverage: numba's compiled kernels are
