@@ -14,7 +14,7 @@ import tracemalloc
 import numpy as np
 
 import piezohyst as ph
-from piezohyst import _kernels
+from piezohyst import _kernels, _signalkernels
 
 
 def excitation(n: int, fs: float = 1000.0) -> tuple[np.ndarray, np.ndarray]:
@@ -66,6 +66,7 @@ def main() -> None:
     h = ph.PIHysteresis(r, np.diff(slopes, prepend=0.0), 0.0, np.full(m, v[0]))
     q = 1e-8 * h.predict(v) + 2e-9 * np.concatenate([[0.0], np.cumsum(v[1:] * np.diff(t))])
     _kernels.warm_up()
+    _signalkernels.warm_up()
     h.predict(v[:100])
 
     print(f"piezohyst {ph.__version__} core benchmark: {n:,} samples x {m} operators")

@@ -853,18 +853,14 @@ def bank_controller_process(desired, measured, tables, config, state, ctl, cs, o
 
 
 def warm_up() -> None:
-    """Compile every kernel once (numba caches the result on disk)."""
-    from . import _signalkernels as _signals
-
+    """Compile every kernel of this module once (numba caches the result on disk);
+    :func:`piezohyst._signalkernels.warm_up` does the signal kernels."""
     x = np.zeros(2)
     r = np.zeros(1)
     z = np.zeros(1)
     pi_forward(x, r, np.ones(1), z, np.empty(2))
     fast_predict(x, x, True, r, np.ones(1), z, 0.0, FAST_INTEGRAL, 1.0, np.empty(2))
     play_states(x, r, z, np.empty((2, 1)))
-    _signals.running_integral(x, np.zeros(2), 0.0, np.empty(2))
-    _signals.reversals(x, 1.0, np.zeros(3))
-    _signals.lag_filter(x, np.zeros(2), np.ones(1), np.zeros(1), np.empty((2, 1)))
     tables = np.zeros((5, 1))
     tables[TAB_W] = tables[TAB_S] = tables[TAB_WI] = 1.0
     config = np.zeros(CONFIG_SIZE)

@@ -254,3 +254,11 @@ def count_held(commands, prev, tol, counts, given, arrived):  # type: ignore[no-
             if held:
                 counts[c] += 1
             given[c] += 1
+
+
+def warm_up() -> None:
+    """Compile the kernels the fits use first (numba caches the result on disk)."""
+    x = np.zeros(2)
+    running_integral(x, np.zeros(2), 0.0, np.empty(2))
+    reversals(x, 1.0, np.zeros(3))
+    lag_filter(x, np.zeros(2), np.ones(1), np.zeros(1), np.empty((2, 1)))
