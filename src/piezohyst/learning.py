@@ -24,7 +24,6 @@ import hashlib
 import json
 import math
 import os
-import tempfile
 import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -38,10 +37,10 @@ from .errors import (
     LearningWarning,
     ModelFileError,
     NonFiniteError,
-    OutputError,
     ParameterError,
     ShapeError,
 )
+from .io import atomic_write_text
 from .leakage import Leakage
 from .learning_design import LearningDesign, design_learning
 from .metrics import hysteresis_width
@@ -747,7 +746,7 @@ class LearningCompensator:
         -------
         Path
         """
-        return write_atomic(Path(path), json.dumps(data))
+        return atomic_write_text(Path(path), json.dumps(data))
 
     def load(self, path: str | os.PathLike[str]) -> None:
         """Continue from a file :meth:`save` wrote (see :meth:`restore`).
@@ -763,16 +762,3 @@ class LearningCompensator:
             msg = f"{p}: cannot read the learning state ({exc})"
             raise ModelFileError(msg) from None
         self.restore(data, str(p))
-
-
-def write_atomic(path: Path, text: str) -> Path:
-    """Write ``text`` to ``path`` through a temporary file in the same folder and a rename."""
-    try:
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except OSError as exc:
-        msg = f"cannot write {path}: {exc.strerror or exc}"
-        raise OutputError(msg) from None
-    return path

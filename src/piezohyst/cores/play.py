@@ -33,7 +33,7 @@ from ..identification import (
     without_time,
 )
 from ..terms import Integral, Term, TimeTerm
-from .base import Core, CoreFit, FitJob, InversePlan, Propagation
+from .base import Core, CoreFit, FitJob, InversePlan, Propagation, _frozen
 
 if TYPE_CHECKING:
     from .. import _kernels
@@ -48,12 +48,6 @@ __all__ = [
     "initial_operators",
     "periodic_state",
 ]
-
-
-def _frozen(values: ArrayLike, name: str) -> FloatArray:
-    arr = as_signal(values, name).copy()
-    arr.flags.writeable = False
-    return arr
 
 
 @dataclass(frozen=True, eq=False)
