@@ -143,6 +143,16 @@ class BoucWenHysteresis(PackedCore):
         return float(s ** (-1.0 / self.n)) if s > 0 else math.inf
 
     @property
+    def min_slope(self) -> float:
+        r"""The smallest slope dy/dv, :math:`c_0 + \min(\alpha, 0)\, g_{max}` (output per V).
+
+        Its own slot of the packed layout (``BW_S_MIN``): the slot the Duhem and Preisach
+        cores keep it in holds Bouc-Wen's ``g_max``, which this property returned before
+        (a dimensionless 2.06 for a slope of 6e-9 C/V; the kernels read the right slot).
+        """
+        return float(self.packed[D.BW_S_MIN])
+
+    @property
     def summary(self) -> str:
         """See :attr:`DifferentialCore.summary`."""
         return f"Bouc-Wen, n = {self.n:.3g}"
