@@ -2,6 +2,45 @@
 
 Active Prandtl-Ishlinskii models identified from voltage-to-charge data
 (sensorless), their analytic inverse, and the tools around them.
+
+Models (the scikit-learn estimator contract: ``fit``, ``predict``, ``score``)
+    ClassicalPI, ActivePI, GeneralizedPI, PIModel -- play operators plus terms
+    PreisachModel, DuhemModel, BoucWenModel -- the other cores, same terms
+    HysteresisModel -- the one model class: a core, terms, input/output dynamics
+    ModelState, History, InverseSpec -- explicit state; what a compensator inverts
+    load_model, ModelBank, load_bank -- model files; one model per channel
+    default_thresholds -- play thresholds spread over an input range
+
+Cores and terms (for people who write their own; ``piezohyst.testing.check_core``)
+    Core, Propagation, Region -- the core contract
+    PIHysteresis, PreisachHysteresis, DuhemHysteresis, BoucWenHysteresis
+    Term, terms -- growth and shape terms (``terms.growth_kinds()``)
+
+Compensation and control
+    Compensator, CompensatorState -- streaming feedforward, safe by default
+    SelfSensingController, ControllerState -- feedback on the measured charge
+    Leakage, calibrate_leakage -- the leakage from constant-voltage holds
+    LearningCompensator -- learning a repeated scan from the charge
+    BankCompensator, BankController -- many channels in one kernel
+
+Choosing and checking a model
+    compare_models, Comparison, ComparisonRow -- held-out scores of several models
+    select_model, Selection -- the choice inside one record, with how sure it is
+    metrics -- NRMSE, loop width and the other error measures
+
+Records
+    io, read_recording, read_table, write_table -- CSV, Parquet, MAT, TDMS, HDF5...
+    simulate -- the simulated bench and plants (``piezohyst.simulation``)
+
+Errors and warnings (``piezohyst.errors``; every error is a ``ValueError`` too)
+    PiezohystError, ParameterError, ShapeError, NonFiniteError, TimeAxisError,
+    InsufficientDataError, NumericRangeError, NotFittedError, NotInvertibleError,
+    ModelFileError, DataFileError, OutputError
+    ExtrapolationWarning, LimitWarning, RecordWarning
+
+Modules not imported here: ``piezohyst.screening`` (a record's check),
+``piezohyst.testing`` (the core contract as a check), ``piezohyst.selection``,
+``piezohyst.workflows`` (file to file), ``piezohyst.cli`` (the command line).
 """
 
 from __future__ import annotations
@@ -21,6 +60,7 @@ from .errors import (
     DataFileError,
     ExtrapolationWarning,
     InsufficientDataError,
+    LimitWarning,
     ModelFileError,
     NonFiniteError,
     NotFittedError,
@@ -29,6 +69,7 @@ from .errors import (
     OutputError,
     ParameterError,
     PiezohystError,
+    RecordWarning,
     ShapeError,
     TimeAxisError,
 )
@@ -76,6 +117,7 @@ __all__ = [
     "InverseSpec",
     "Leakage",
     "LearningCompensator",
+    "LimitWarning",
     "ModelBank",
     "ModelFileError",
     "ModelState",
@@ -91,6 +133,7 @@ __all__ = [
     "PreisachHysteresis",
     "PreisachModel",
     "Propagation",
+    "RecordWarning",
     "Region",
     "Selection",
     "SelfSensingController",

@@ -61,22 +61,31 @@ class ColumnCore(Protocol):
     parameters. The solve takes this protocol, not a core's class, so it imports no core."""
 
     @property
-    def n_operators(self) -> int: ...
+    def n_operators(self) -> int:
+        """Operator columns (the parameters before the terms')."""
+        ...
 
-    def scaled(self, scale: float) -> ColumnCore: ...
+    def scaled(self, scale: float) -> ColumnCore:
+        """The same core for an input divided by ``scale``."""
+        ...
 
-    def fill(self, x: FloatArray, state: FloatArray, block: FloatArray) -> None: ...
+    def fill(self, x: FloatArray, state: FloatArray, block: FloatArray) -> None:
+        """Write the operator columns for ``x`` into ``block`` (``state`` carried)."""
+        ...
 
     def fill_rows(
         self, x: FloatArray, state: FloatArray, rows: npt.NDArray[np.intp], block: FloatArray
-    ) -> None: ...
+    ) -> None:
+        """:meth:`fill` for the rows ``rows`` only (the state runs through all)."""
+        ...
 
-    def slope_map(self, p: int) -> FloatArray: ...
+    def slope_map(self, p: int) -> FloatArray:
+        """The matrix from (slopes, other parameters) to parameters."""
+        ...
 
 
 __all__ = [
     "BLOCK",
-    "ColumnCore",
     "Identification",
     "NormalEquations",
     "Summary",
