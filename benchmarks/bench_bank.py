@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit
 
 import piezohyst as ph
-from piezohyst import _kernels as K
+from piezohyst._kernels import play as K
 
 
 def units(channels: int, operators: int, seed: int = 0) -> ph.ModelBank:

@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 import piezohyst as ph
-from piezohyst import _kernels as K
+from piezohyst._kernels import play as K
 
 
 def best(fn, calls: int, repeats: int = 7) -> float:  # type: ignore[no-untyped-def]

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 import piezohyst as ph
-from piezohyst.export import write_c
+from piezohyst.control.export import write_c
 
 
 def python_step_reference(h: ph.PIHysteresis, inv: ph.PIHysteresis):  # type: ignore[no-untyped-def]

@@ -14,7 +14,8 @@ import tracemalloc
 import numpy as np
 
 import piezohyst as ph
-from piezohyst import _kernels, _signalkernels
+from piezohyst._kernels import play as _kernels
+from piezohyst._kernels import signal as _signalkernels
 
 
 def excitation(n: int, fs: float = 1000.0) -> tuple[np.ndarray, np.ndarray]:

@@ -138,7 +138,7 @@ def dac(seed: int) -> None:
     """Either DAC behind the 4 ms lag of a Bouc-Wen capacitor."""
     import math
 
-    from piezohyst.dynamics import InputDynamics
+    from piezohyst.model.dynamics import InputDynamics
     from piezohyst.simulation import PLANTS
 
     plant = dataclasses.replace(PLANTS["bouc-wen"], amp_tau=4e-3)

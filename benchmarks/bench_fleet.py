@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 import piezohyst as ph
-from piezohyst.fleet import fit_many
 from piezohyst.workflows import fit_file
+from piezohyst.workflows.fleet import fit_many
 
 
 def write_units(folder: Path, units: int, samples: int, suffix: str) -> list[Path]:

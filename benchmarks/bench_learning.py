@@ -31,9 +31,9 @@ from dataclasses import replace
 import numpy as np
 
 import piezohyst as ph
-from piezohyst.excitation import excitation
 from piezohyst.metrics import hysteresis_width
 from piezohyst.simulation import PRESETS, Bench, make_signal
+from piezohyst.workflows.excitation import excitation
 
 RATE = 1000.0
 

@@ -33,7 +33,7 @@ import time
 import numpy as np
 
 import piezohyst as ph
-from piezohyst import demo
+from piezohyst.workflows import demo
 
 
 def python_controller(ctl: ph.SelfSensingController):  # type: ignore[no-untyped-def]
@@ -139,10 +139,10 @@ def plants(seed: int, every_core: bool = False, flat_guard: bool = False) -> Non
     ``every_core``, the loop through each core the loop runs, not only the one chosen."""
     import warnings
 
-    from piezohyst.excitation import excitation
+    from piezohyst.analysis.selection import LOOP_CANDIDATES, _candidate
     from piezohyst.metrics import hysteresis_width
-    from piezohyst.selection import LOOP_CANDIDATES, _candidate
     from piezohyst.simulation import PLANTS, Bench, make_signal, run_loop
+    from piezohyst.workflows.excitation import excitation
 
     cores = ("classical-pi", "active-pi", "bouc-wen", "preisach", "duhem")  # every_core's
     played = excitation(v_min=0.0, v_max=140.0, sample_rate=1000.0)

@@ -9,7 +9,7 @@ DATA_DIR, its two measured sets. For each record: every candidate's held-out NRM
 ``select_model``'s two part scores per candidate (its folds, ``selection.fold_bounds``: fit
 on half the input's turns, score to three quarters; fit to three quarters, score the rest).
 Four scores of the same two parts, each choosing the simplest candidate within 2 % of its
-best: ``select_model``'s (:data:`~piezohyst.selection.WEIGHTS`, the plain mean), weights
+best: ``select_model``'s (:data:`~piezohyst.analysis.selection.WEIGHTS`, the plain mean), weights
 0.4 and 0.6, the last part alone, the worst part. A score's ratio on a row is the mean
 held-out NRMSE of what it chose over the units, divided by the best candidate's mean, as in
 the matrix. Units 4-6 are where a score may be chosen; units 1-3 are the matrix's, to check
@@ -32,7 +32,14 @@ import numpy as np
 from selection_study import _measured, _record  # the study's records, built alike
 
 import piezohyst as ph
-from piezohyst.selection import CANDIDATES, TIE, WEIGHTS, SelectionRow, _candidate, with_margins
+from piezohyst.analysis.selection import (
+    CANDIDATES,
+    TIE,
+    WEIGHTS,
+    SelectionRow,
+    _candidate,
+    with_margins,
+)
 
 SCORES: dict[str, Callable[[list[float]], float]] = {
     f"weights {', '.join(f'{w:.2g}' for w in WEIGHTS)} (select_model)": (

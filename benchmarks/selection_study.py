@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 import piezohyst as ph
-from piezohyst.selection import CANDIDATES, TIE, _candidate
+from piezohyst.analysis.selection import CANDIDATES, TIE, _candidate
 
 #: Fit origins (fractions of the record); every rule's folds start at one of them
 ORIGINS = (0.3, 0.4, 0.5, 0.6, 0.7, 0.75, 0.8, 0.9)
@@ -38,8 +38,8 @@ Run = dict[str, Any]
 
 
 def _record(design: str, plant: str, unit: int) -> tuple[Any, Any]:
-    from piezohyst.excitation import excitation
     from piezohyst.simulation import PLANTS, batch_unit
+    from piezohyst.workflows.excitation import excitation
 
     p = batch_unit(PLANTS[plant], unit)
     if design == "excite":

@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 
 import piezohyst as ph
-from piezohyst.cores.play import history_state
-from piezohyst.identification import default_thresholds
+from piezohyst.model.cores.play import history_state
+from piezohyst.model.identification import default_thresholds
 
 Factory = Callable[[], ph.HysteresisModel]
 
@@ -477,8 +477,8 @@ def boucwen(data: Path) -> str:
 
 def rate(data: Path) -> str:
     """What a lag model absorbs on the two 1 Hz sets that log the *commanded* voltage."""
-    from piezohyst.identification import block_dt
     from piezohyst.metrics import hysteresis_width
+    from piezohyst.model.identification import block_dt
 
     act = ph.read_table(data / "piezo_actuator_smarthysteresis" / "hysteresis_v_150_1hz.csv")
     mm = np.loadtxt(data / "piezo_micromanipulator_dbo" / "Model_Vi_Do.dat")
@@ -551,7 +551,7 @@ def _matrix_row(
 
     ``test`` None: the record's last 30 % is held out, predicted on from the fit's start;
     else a record of its own, started at rest."""
-    from piezohyst.selection import _candidate
+    from piezohyst.analysis.selection import _candidate
 
     x, y, t = train
     if test is None:
@@ -625,9 +625,9 @@ def _evidence(rows: list[tuple[str, list[dict[str, float | str]]]]) -> list[str]
 
 def matrix(data: Path) -> str:
     """Every model's defaults and select_model, held out, on every plant and measured set."""
-    from piezohyst.excitation import excitation
-    from piezohyst.selection import CANDIDATES
+    from piezohyst.analysis.selection import CANDIDATES
     from piezohyst.simulation import PLANTS, batch_unit
+    from piezohyst.workflows.excitation import excitation
 
     print("matrix: defaults and select_model on plants and measured sets")
     # what piezohyst excite writes for a 0-140 V actuator: the full range, holds, loops of

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 import piezohyst as ph
-from piezohyst.cores.base import CoreFit, FitJob, Propagation
+from piezohyst.model.cores.base import CoreFit, FitJob, Propagation
 
 
 @dataclass(frozen=True, eq=False)

@@ -7,19 +7,14 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 import piezohyst as ph
-from piezohyst import (
-    bank,
-    compensator,
-    export,
-    fleet,
-    identification,
-    io,
-    models,
-    persistence,
-    terms,
-)
+from piezohyst import io, testing
+from piezohyst.control import compensator, export
+from piezohyst.io import screening
+from piezohyst.model import bank, identification, models, persistence, terms
+from piezohyst.workflows import fleet
 
-MODULES = [ph, models, terms, identification, compensator, export, persistence, io, bank, fleet]
+MODULES = [ph, models, terms, identification, compensator, export, persistence, io, bank, fleet,
+           screening, testing]  # fmt: skip
 
 
 def _documented_objects() -> Iterator[tuple[str, Any]]:

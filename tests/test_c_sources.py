@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 import piezohyst as ph
-from piezohyst.export import export_c
+from piezohyst.control.export import export_c
 from piezohyst.simulation import make_signal
 
 SRC = Path(ph.__file__).parent
-C_DIR = SRC / "cores" / "c"
+C_DIR = SRC / "model" / "cores" / "c"
 COMPILERS = [c for c in (shutil.which("gcc"), shutil.which("clang")) if c]
 FLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-c"]
 #: a C function definition or a C for loop inside a Python string: C source that should
@@ -42,7 +42,7 @@ def test_the_c_files_ship_with_the_package() -> None:
     assert {"play.c", "play.h", "packed.c", "packed.h", "ieee.c", "mode.c", "duhem.c",
             "preisach.c", "preisach_grid.c", "boucwen.c"} <= names  # fmt: skip
     text = (SRC.parent.parent / "pyproject.toml").read_text()
-    assert '"cores/c/*.c", "cores/c/*.h"' in text
+    assert '"model/cores/c/*.c", "model/cores/c/*.h"' in text
 
 
 def _record() -> tuple[np.ndarray, np.ndarray, np.ndarray]:

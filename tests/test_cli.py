@@ -341,7 +341,7 @@ def test_console_script_runs_as_a_subprocess(tmp_path: Path) -> None:
 
 def test_time_windows_carry_the_input_history(workdir: Path) -> None:
     """Fit on [4, 9) s and predict from 9 s: both start from the state the earlier input left."""
-    from piezohyst.cores.play import history_state
+    from piezohyst.model.cores.play import history_state
 
     data = workdir / "run.csv"
     res = run("fit", data, "--operators", "8", "--t-start", "4", "--t-stop", "9",
@@ -413,7 +413,7 @@ def test_fit_from_the_periodic_state(tmp_path: Path) -> None:
 def test_long_work_says_so_once_when_piped(tmp_path: Path) -> None:
     """Piped (no terminal), a long fit logs one line when it starts, with the rows it
     expects, and one when done; a short one and --quiet log nothing."""
-    from piezohyst._formats import estimated_rows
+    from piezohyst.io._formats import estimated_rows
 
     exe = Path(sys.executable).with_name("piezohyst")
     n = 150_000

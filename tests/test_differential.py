@@ -17,11 +17,11 @@ from hypothesis import strategies as st
 from sklearn.base import clone
 
 import piezohyst as ph
-from piezohyst import _packedkernels as D
-from piezohyst.cores import preisach
-from piezohyst.cores.duhem import _curvature
-from piezohyst.cores.preisach import _curvature_upper
-from piezohyst.export import write_c
+from piezohyst._kernels import packed as D
+from piezohyst.control.export import write_c
+from piezohyst.model.cores import preisach
+from piezohyst.model.cores.duhem import _curvature
+from piezohyst.model.cores.preisach import _curvature_upper
 from piezohyst.simulation import make_signal
 
 from .strategies import examples
@@ -351,14 +351,14 @@ def test_a_broken_core_in_a_file_is_named(models: dict[str, Any], tmp_path: Path
     data.pop("checksum")
     data["fitted"]["core"]["kind"] = "jiles-atherton"
     with pytest.raises(ph.ModelFileError, match="unknown core 'jiles-atherton'"):
-        ph.persistence.model_from_dict(data)
+        ph.model.persistence.model_from_dict(data)
     data["fitted"]["core"]["kind"] = "bouc_wen"
     data["fitted"]["core"]["beta"] = -1.0
     with pytest.raises(ph.ModelFileError, match=r"fitted.core.*beta > 0"):
-        ph.persistence.model_from_dict(data)
+        ph.model.persistence.model_from_dict(data)
     del data["fitted"]["core"]["c0"]
     with pytest.raises(ph.ModelFileError, match=r"missing field 'fitted\.core\.c0'"):
-        ph.persistence.model_from_dict(data)
+        ph.model.persistence.model_from_dict(data)
 
 
 # ----------------------------------------------------------------- inversion
@@ -722,7 +722,7 @@ def test_creep_on_a_core_needs_the_loop_rate(creep_models: dict[str, Any]) -> No
     with pytest.raises(ph.errors.ParameterError, match="sample_rate"):
         ph.Compensator(model, v_min=0.0, v_max=model.input_range_[1])
     comp = ph.Compensator(model, v_min=0.0, v_max=model.input_range_[1], sample_rate=1e3)
-    bad = ph.compensator.CompensatorState(comp.state.operators, np.zeros(3), 0.0)
+    bad = ph.control.compensator.CompensatorState(comp.state.operators, np.zeros(3), 0.0)
     with pytest.raises(ph.errors.ShapeError, match="creep lag"):
         comp.reset(bad)
 

@@ -13,9 +13,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import piezohyst as ph
-from piezohyst.dynamics import InputDynamics
-from piezohyst.export import write_c
+from piezohyst.control.export import write_c
 from piezohyst.metrics import hysteresis_width, nrmse
+from piezohyst.model.dynamics import InputDynamics
 from piezohyst.simulation import make_signal, simulate
 
 from .strategies import examples
@@ -138,7 +138,7 @@ def test_state_chunks_and_files(
     np.testing.assert_array_equal(back.predict(rec.voltage, t=rec.t), whole)
     with pytest.raises(ph.ParameterError, match="record in memory"):
         ph.ActivePI(5, input_dynamics="delay").fit_blocks(
-            ph.identification.array_blocks(rec.voltage, rec.charge, rec.t)
+            ph.model.identification.array_blocks(rec.voltage, rec.charge, rec.t)
         )
 
 

@@ -14,10 +14,10 @@ from hypothesis import strategies as st
 
 import piezohyst as ph
 from piezohyst.cli import main
-from piezohyst.excitation import KINDS, excitation
+from piezohyst.workflows.excitation import KINDS, Excitation, excitation
 
 
-def check_safe(exc: ph.excitation.Excitation, v_min: float, v_max: float, slew: float) -> None:
+def check_safe(exc: Excitation, v_min: float, v_max: float, slew: float) -> None:
     v = exc.voltage
     rest = float(np.clip(0.0, v_min, v_max))
     assert v[0] == rest and v[-1] == rest  # starts and ends at rest, exactly

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import piezohyst as ph
-from piezohyst.export import export_c, write_c
+from piezohyst.control.export import export_c, write_c
 
 CC = shutil.which("cc") or shutil.which("gcc")
 # these tests drive targets past the voltage and slew limits on purpose (safety, exactness

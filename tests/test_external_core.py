@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import piezohyst as ph
-from piezohyst.export import export_c
+from piezohyst.control.export import export_c
 
 from .external_core import BacklashCore
 

@@ -415,7 +415,7 @@ def test_an_interrupted_report_leaves_nothing_and_the_rerun_works(
 ) -> None:
     """Ctrl-C while the report is written: no folder (not even hidden staging), and the
     same command then succeeds; an earlier report stays until a new one is complete."""
-    import piezohyst.report as report_module
+    import piezohyst.analysis.report as report_module
 
     written = report_module.Report.write
 

@@ -13,8 +13,8 @@ from click.testing import CliRunner, Result
 
 import piezohyst as ph
 from piezohyst.cli import main
-from piezohyst.fleet import fit_many, units_of
 from piezohyst.workflows import fit_file
+from piezohyst.workflows.fleet import fit_many, units_of
 
 N = 3000
 

@@ -44,7 +44,7 @@ def known_model(
         "time": (ph.terms.TimeTerm(), 3e-9),
         "abs_integral": (ph.terms.AbsIntegral(hi - lo), 2.5e-10),
     }
-    parts += [(growth[k][0], [growth[k][1]]) for k in ph.models.GROWTH_TERMS if k in terms]
+    parts += [(growth[k][0], [growth[k][1]]) for k in ph.model.models.GROWTH_TERMS if k in terms]
     m = ph.GeneralizedPI.from_operator(
         ph.PIHysteresis(r, w, 2e-8, np.full(6, v[0])),
         terms=[p[0] for p in parts],
@@ -189,7 +189,7 @@ def test_persistence_and_cli_name(tmp_path: Path, levels: tuple) -> None:
     (tmp_path / "bad.json").write_text(json.dumps(data))
     with pytest.raises(ph.ModelFileError, match=r"fitted.terms\[0\].coefficients.*signs"):
         ph.load_model(tmp_path / "bad.json")
-    assert ph.models.model_class("generalized-pi") is ph.GeneralizedPI
+    assert ph.model.models.model_class("generalized-pi") is ph.GeneralizedPI
 
 
 def test_defaults_and_errors() -> None:
@@ -211,7 +211,7 @@ def test_defaults_and_errors() -> None:
     with pytest.raises(ph.NotInvertibleError, match="Compensator"):
         m.inverse()
     with pytest.raises(ph.ParameterError, match="C export"):
-        from piezohyst.export import export_c
+        from piezohyst.control.export import export_c
 
         export_c(ph.Compensator(m, v_min=0.0, v_max=140.0))
 

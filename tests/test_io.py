@@ -192,7 +192,7 @@ def test_a_mat_file_that_crashed_scipy_is_one_line(
 
 
 def test_a_parser_crash_is_an_error_naming_the_file(tmp_path: Path) -> None:
-    from piezohyst._isolate import parse_isolated
+    from piezohyst.io._isolate import parse_isolated
 
     path = tmp_path / "x.h5"
     with pytest.raises(DataFileError, match=r"x\.h5: the HDF5 reader crashed .*signal 11"):

@@ -16,9 +16,9 @@ from click.testing import CliRunner
 import piezohyst as ph
 from piezohyst.cli import main
 from piezohyst.errors import LearningWarning
-from piezohyst.excitation import excitation
 from piezohyst.metrics import hysteresis_width
 from piezohyst.simulation import PLANTS, Bench, BenchPreset, BenchRecord, make_signal
+from piezohyst.workflows.excitation import excitation
 
 from . import reference
 
@@ -75,7 +75,7 @@ def test_the_design_states_its_condition_and_meets_it() -> None:
     timing errors; the automatic choice keeps it at 0.9 or under."""
     rec = ph.simulate(signal="triangle", duration=4.0, seed=0)
     model = ph.ActivePI(n_operators=4).fit(rec.voltage, rec.charge, t=rec.t)
-    d = ph.learning.design_learning(model, sample_rate=RATE, samples=1000, lag=4e-3)
+    d = ph.control.learning.design_learning(model, sample_rate=RATE, samples=1000, lag=4e-3)
     f = d.frequencies()
     theta = np.minimum(2 * np.pi * f * d.timing, np.pi)
     for rho in np.linspace(1 - d.slope_error, 1 + d.slope_error, 7):
@@ -85,7 +85,7 @@ def test_the_design_states_its_condition_and_meets_it() -> None:
     assert d.contraction <= 0.9 and "converges monotonically" in d.describe()
     assert d.timing == pytest.approx(0.5e-3 + 0.25 * 4e-3)  # half a sample + the lag's 25 %
     # a gain and cutoff that cannot converge say so
-    bad = ph.learning.design_learning(model, sample_rate=RATE, samples=1000, lag=4e-3,
+    bad = ph.control.learning.design_learning(model, sample_rate=RATE, samples=1000, lag=4e-3,
                                       gain=1.0, cutoff=400.0)  # fmt: skip
     assert bad.contraction > 1 and "may NOT converge" in bad.describe()
 

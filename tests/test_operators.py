@@ -8,7 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import piezohyst as ph
-from piezohyst import _kernels
+from piezohyst._kernels import play as _kernels
 
 from . import reference
 from .strategies import invertible_pi, signals, thresholds

@@ -11,10 +11,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import piezohyst as ph
-from piezohyst.excitation import excitation
+from piezohyst.analysis.selection import LOOP_CANDIDATES
 from piezohyst.metrics import hysteresis_width
-from piezohyst.selection import LOOP_CANDIDATES
 from piezohyst.simulation import PLANTS, make_signal
+from piezohyst.workflows.excitation import excitation
 
 ZOO = [name for name in PLANTS if name != "preisach"]
 RELAXING = {"two-state", "bouc-wen-creep-lag"}  # the charge keeps moving on a hold
@@ -257,7 +257,7 @@ def test_the_command_line_calibrates_as_the_api(tmp_path: object) -> None:
 @pytest.mark.parametrize("name", list(PLANTS))
 def test_the_self_sensing_loop_on_each_plant(name: str) -> None:
     """Issue 26: the model chosen for the user on what excite writes (among the loop's
-    candidates, :data:`~piezohyst.selection.LOOP_CANDIDATES`), leakage from 10 s holds up
+    candidates, :data:`~piezohyst.analysis.selection.LOOP_CANDIDATES`), leakage from 10 s holds up
     and down, the loop closed on the charge holds 60 s of decaying loops to 0.3 % width,
     without drift, over the range the actuator demonstrably reached in that record."""
     from piezohyst.simulation import Bench, run_loop
@@ -298,8 +298,8 @@ def test_a_duhem_fit_keeps_no_polish_whose_loops_do_not_close() -> None:
     """Fitted on half of what excite writes on the relaxing plant, the output-error polish fit
     that half better with loops that ratchet: 108 % on the next quarter (the span walked away
     by 55 % a cycle). The polish is kept only if its loops close as well as the linear fit's."""
-    from piezohyst.cores.duhem import CLOSED, _ratchet
     from piezohyst.metrics import nrmse
+    from piezohyst.model.cores.duhem import CLOSED, _ratchet
 
     played = excitation(v_min=0.0, v_max=140.0, sample_rate=1000.0)
     rec = ph.simulate(played.voltage, played.t, plant="bouc-wen-creep-lag", seed=1)

@@ -14,8 +14,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import piezohyst as ph
-from piezohyst import _signalkernels as S
-from piezohyst.cores.preisach import _preisach_grid
+from piezohyst._kernels import signal as S
+from piezohyst.model.cores.preisach import _preisach_grid
 from piezohyst.simulation import PLANTS, batch_unit
 
 pytestmark = pytest.mark.kernels

@@ -15,8 +15,8 @@ from click.testing import CliRunner
 
 import piezohyst as ph
 from piezohyst.cli import main
-from piezohyst.dynamics import InputDynamics
 from piezohyst.metrics import hysteresis_width
+from piezohyst.model.dynamics import InputDynamics
 from piezohyst.simulation import PLANTS, _plant, make_signal, simulate
 
 DT = 1e-3

@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 import piezohyst as ph
 from piezohyst.cli import main
 from piezohyst.errors import RecordWarning
-from piezohyst.screening import Screener, noise_level, screen
+from piezohyst.io.screening import Screener, noise_level, screen
 
 GLITCH_ROW = 1234  # 0-based: data row 1235
 

@@ -10,8 +10,8 @@ from click.testing import CliRunner
 
 import piezohyst as ph
 import piezohyst.workflows as wf
+from piezohyst.analysis.selection import CANDIDATES, FOLDS, chosen, forward_scores, select_model
 from piezohyst.cli import main
-from piezohyst.selection import CANDIDATES, FOLDS, chosen, forward_scores, select_model
 
 
 @pytest.fixture(scope="module")
@@ -49,7 +49,7 @@ def test_the_choice_never_sees_beyond_the_record_it_is_given(
 
 
 def test_a_tie_goes_to_the_simpler_model() -> None:
-    from piezohyst.selection import SelectionRow
+    from piezohyst.analysis.selection import SelectionRow
 
     rows = [SelectionRow("active-pi", (0.0101,), 0.0101), SelectionRow("preisach", (0.01,), 0.01)]
     assert chosen(rows).name == "active-pi"  # within 2 % of the best, and earlier

@@ -8,9 +8,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from piezohyst import _signalkernels as S
-from piezohyst.excitation import excitation
-from piezohyst.selection import (
+from piezohyst._kernels import signal as S
+from piezohyst.analysis.selection import (
     FOLDS,
     MIN_TURNS,
     NOISE_REACH,
@@ -20,6 +19,7 @@ from piezohyst.selection import (
     input_noise,
     turn_band,
 )
+from piezohyst.workflows.excitation import excitation
 
 pytestmark = pytest.mark.kernels
 

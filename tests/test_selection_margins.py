@@ -10,8 +10,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 import piezohyst as ph
-from piezohyst.excitation import excitation
-from piezohyst.selection import (
+from piezohyst.analysis.selection import (
     FOLDS,
     MAJOR,
     SURE,
@@ -24,6 +23,7 @@ from piezohyst.selection import (
     record_notes,
     select_model,
 )
+from piezohyst.workflows.excitation import excitation
 
 
 def naive_jackknife(
@@ -151,7 +151,7 @@ def test_compare_s_recommendation_says_what_its_training_part_cannot_test(tmp_pa
     """`compare` recommends from the training part alone, and says under its table what that
     part cannot tell: the same sentences select_model would give for it."""
     import piezohyst.workflows as wf
-    from piezohyst.selection import chosen, forward_scores, verdict, with_margins
+    from piezohyst.analysis.selection import chosen, forward_scores, verdict, with_margins
 
     rec = ph.simulate(duration=20.0, seed=2)  # one amplitude: no minor loops
     ph.write_table(tmp_path / "run.csv", {"time": rec.t, "voltage": rec.voltage,

@@ -11,12 +11,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import piezohyst as ph
-import piezohyst._formats as formats
 import piezohyst.io as pio
+import piezohyst.io._formats as formats
 import piezohyst.workflows as wf
-from piezohyst.cores.play import history_state
 from piezohyst.errors import DataFileError
-from piezohyst.identification import Summary, array_blocks, default_thresholds
+from piezohyst.model.cores.play import history_state
+from piezohyst.model.identification import Summary, array_blocks, default_thresholds
 
 from .strategies import examples
 
@@ -46,7 +46,7 @@ def small_batches(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def split_blocks(
     x: np.ndarray, y: np.ndarray, t: np.ndarray | None, cuts: list[int]
-) -> ph.identification.Blocks:
+) -> ph.model.identification.Blocks:
     edges = [0, *sorted(set(c % x.size for c in cuts) - {0}), x.size]
 
     def blocks():  # type: ignore[no-untyped-def]
@@ -206,9 +206,9 @@ def test_compensate_file_streams_like_one_call(
     fs = res.sample_rate  # from the time column
     # tol: the rate from the time column's mean step: rounding of the sum
     assert fs == pytest.approx(1000.0, rel=1e-9)
-    comp = ph.compensator.CompensatorSettings(slew_rate=model.max_slew_rate_, sample_rate=fs).build(
-        model
-    )
+    comp = ph.control.compensator.CompensatorSettings(
+        slew_rate=model.max_slew_rate_, sample_rate=fs
+    ).build(model)
     comp.reset(voltage=float(np.clip(0.0, comp.v_min, comp.v_max)))  # at rest by default
     back = ph.read_table(tmp_path / "cmd.csv").get("command")
     written = back[: res.preamble]  # the cycle over what the trajectory needs

@@ -10,7 +10,7 @@ import pytest
 from numpy.typing import ArrayLike
 
 import piezohyst as ph
-from piezohyst.cores.base import Propagation
+from piezohyst.model.cores.base import Propagation
 from piezohyst.simulation import make_signal
 from piezohyst.testing import CoreContractError, check_core
 

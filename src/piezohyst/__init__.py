@@ -38,24 +38,23 @@ Errors and warnings (``piezohyst.errors``; every error is a ``ValueError`` too)
     ModelFileError, DataFileError, OutputError
     ExtrapolationWarning, LimitWarning, RecordWarning
 
-Modules not imported here: ``piezohyst.screening`` (a record's check),
-``piezohyst.testing`` (the core contract as a check), ``piezohyst.selection``,
+Modules not imported here: ``piezohyst.io.screening`` (a record's check),
+``piezohyst.testing`` (the core contract as a check), ``piezohyst.analysis.selection``,
 ``piezohyst.workflows`` (file to file), ``piezohyst.cli`` (the command line).
 """
 
 from __future__ import annotations
 
-from . import io, metrics, terms
+from . import io, metrics
 from ._version import __version__
-from .bank import ModelBank, load_bank
-from .channels import BankCompensator, BankController
-from .comparison import Comparison, ComparisonRow, compare_models
-from .compensator import Compensator, CompensatorState
-from .cores.base import Core, Propagation, Region
-from .cores.boucwen import BoucWenHysteresis
-from .cores.duhem import DuhemHysteresis
-from .cores.play import PIHysteresis
-from .cores.preisach import PreisachHysteresis
+from .analysis import selection as selection  # ph.selection, as before the packages
+from .analysis.comparison import Comparison, ComparisonRow, compare_models
+from .analysis.selection import Selection, select_model
+from .control.channels import BankCompensator, BankController
+from .control.compensator import Compensator, CompensatorState
+from .control.leakage import Leakage, calibrate_leakage
+from .control.learning import LearningCompensator
+from .control.selfsensing import ControllerState, SelfSensingController
 from .errors import (
     DataFileError,
     ExtrapolationWarning,
@@ -73,12 +72,17 @@ from .errors import (
     ShapeError,
     TimeAxisError,
 )
-from .identification import default_thresholds
 from .io import read_recording, read_table, write_table
-from .leakage import Leakage, calibrate_leakage
-from .learning import LearningCompensator
-from .model import History, HysteresisModel, InverseSpec, ModelState
-from .models import (
+from .model import terms
+from .model.bank import ModelBank, load_bank
+from .model.cores.base import Core, Propagation, Region
+from .model.cores.boucwen import BoucWenHysteresis
+from .model.cores.duhem import DuhemHysteresis
+from .model.cores.play import PIHysteresis
+from .model.cores.preisach import PreisachHysteresis
+from .model.identification import default_thresholds
+from .model.model import History, HysteresisModel, InverseSpec, ModelState
+from .model.models import (
     ActivePI,
     BoucWenModel,
     ClassicalPI,
@@ -87,11 +91,9 @@ from .models import (
     PIModel,
     PreisachModel,
 )
-from .persistence import load_model
-from .selection import Selection, select_model
-from .selfsensing import ControllerState, SelfSensingController
+from .model.persistence import load_model
+from .model.terms import Term
 from .simulation import simulate
-from .terms import Term
 
 __all__ = [
     "ActivePI",

@@ -21,8 +21,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._validation import FloatArray
-from .cores.base import CORES, Core, InversePlan, Propagation
 from .errors import ExtrapolationWarning, LimitWarning, PiezohystError, RecordWarning
+from .model.cores.base import CORES, Core, InversePlan, Propagation
 
 __all__ = ["CoreContractError", "check_core"]
 
@@ -168,8 +168,8 @@ def _estimator(core: Core) -> Any:
     """The model that fits this core: the first registered preset built on its class that
     adds no growth term (its settings' defaults; as many operators as the core has), else a
     plain HysteresisModel on it (a core from outside the library)."""
-    from .model import HysteresisModel
-    from .persistence import model_class, model_names
+    from .model.model import HysteresisModel
+    from .model.persistence import model_class, model_names
 
     for name in model_names():  # the registry lists the plainest preset of a core first
         cls = model_class(name)
@@ -186,7 +186,7 @@ def _estimator(core: Core) -> Any:
 
 def _identifies(core: Core, xs: FloatArray, y: FloatArray) -> None:
     """identify through the model and the one Compensator back to the probe's voltages."""
-    from .compensator import Compensator
+    from .control.compensator import Compensator
 
     t = np.arange(xs.size) * 1e-3
     with warnings.catch_warnings():

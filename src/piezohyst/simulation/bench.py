@@ -28,8 +28,8 @@ from numpy.typing import ArrayLike
 
 from .._lazy import LazyModule
 from .._validation import FloatArray, as_signal, as_time, same_length
-from ..dynamics import OutputDynamics
 from ..errors import ParameterError
+from ..model.dynamics import OutputDynamics
 from .signals import make_signal
 
 if TYPE_CHECKING:

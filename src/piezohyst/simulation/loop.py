@@ -6,8 +6,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._validation import as_signal
-from ..compensator import Compensator
-from ..selfsensing import SelfSensingController
+from ..control.compensator import Compensator
+from ..control.selfsensing import SelfSensingController
 from .bench import Bench, BenchRecord
 
 __all__ = ["run_loop"]
@@ -18,10 +18,10 @@ def run_loop(
 ) -> BenchRecord:
     """Drive ``bench`` with ``controller`` over a desired trajectory, one sample at a time.
 
-    A :class:`~piezohyst.selfsensing.SelfSensingController` gets, each sample,
+    A :class:`~piezohyst.control.selfsensing.SelfSensingController` gets, each sample,
     the charge the bench read after the previous command (as on a rig: read
     the ADC, compute, write the DAC); a
-    :class:`~piezohyst.compensator.Compensator` (feedforward) needs no
+    :class:`~piezohyst.control.compensator.Compensator` (feedforward) needs no
     reading. Sample ``k`` of the result is what the bench read after command
     ``k``, so ``displacement[k]`` is the response to ``desired[k]``.
 

@@ -1,0 +1,586 @@
+"""A model chosen for the user: every candidate scored on data it was not fitted on, inside
+the record the user gives (never on what they will test on), the winner refitted on all.
+
+Forward chaining, as a recording runs: fit on the first half of the record's input turns,
+score up to three quarters of them; fit up to three quarters, score the rest
+(:data:`FOLDS`, :func:`fold_bounds`). Hysteresis is learnt from reversals, not from
+seconds: a record whose fast loops come last (what ``piezohyst excite`` writes) is split
+where its turns are, and each fit has seen loops of the kind it is scored on. A record with
+fewer than :data:`MIN_TURNS` turns is split by its samples instead. Each part starts where
+the input before it left the actuator (the model runs on from its training start). The
+score is the mean of the scored parts' NRMSE (:data:`WEIGHTS`); the candidate with the
+lowest wins, a simpler one (earlier in :data:`CANDIDATES`) on a tie within 2 %.
+
+How sure the choice is: each scored part is cut into blocks at the input's turns (a
+half-cycle each), and every candidate's margin over the chosen one gets a paired
+block-jackknife standard error (:func:`jackknife`): the same blocks left out of both
+scores in turn. A margin within :data:`SURE` standard errors is one the record cannot
+decide. What a record cannot test at all is said in :attr:`Selection.notes`: a record
+with no minor loops scores how a candidate follows the major loop, not how it predicts
+smaller ones.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from .._lazy import LazyModule
+from .._validation import FloatArray, as_signal, as_time, same_length
+from ..errors import ExtrapolationWarning, InsufficientDataError, ParameterError
+from ..io.screening import noise_level
+from ..model.model import HysteresisModel, InitialState
+from ..model.persistence import model_class, model_names
+from .comparison import compare_models
+
+if TYPE_CHECKING:
+    from .._kernels import signal as S
+else:  # numba loads when a selection first runs (see _lazy)
+    S = LazyModule("piezohyst._kernels.signal", globals(), "S")
+
+__all__ = [
+    "CANDIDATES",
+    "EVEN_BLOCKS",
+    "FOLDS",
+    "LOOP_CANDIDATES",
+    "MAJOR",
+    "MIN_TURNS",
+    "NOISE_REACH",
+    "SURE",
+    "TURN_BAND",
+    "WEIGHTS",
+    "Part",
+    "Selection",
+    "SelectionRow",
+    "chosen",
+    "fold_bounds",
+    "forward_scores",
+    "input_noise",
+    "jackknife",
+    "record_notes",
+    "select_model",
+    "turn_band",
+    "undecided",
+    "verdict",
+    "with_margins",
+]
+
+#: Candidates, simplest first: a tie (within 2 %) goes to the earlier
+CANDIDATES = ("classical-pi", "active-pi", "generalized-pi", "bouc-wen", "preisach", "duhem")
+#: Candidates for the self-sensing loop (``select_model(..., candidates=LOOP_CANDIDATES)``):
+#: the cores the loop runs compiled, less the Preisach model. Its Everett function is
+#: interpolated linearly between nodes, so after a reversal its slope stays at one value
+#: across a whole cell where an actuator's rises smoothly; the loop's correction passes
+#: through the inverse, its gain multiplied by the actuator's slope over the model's, and it
+#: chatters there. Measured on issue 26's plants, 60 s of decaying loops (units 0 and 4-6;
+#: ``docs/realtime.md``): through the Preisach model 0.52-2.2 % width on the Duhem plant,
+#: where Bouc-Wen, chosen among these, leaves 0.09-0.21 %; checked on units 1-3: the model
+#: chosen among these 0.04-0.29 % on every plant, the Preisach model 0.76-0.92 % on the
+#: Duhem plant
+LOOP_CANDIDATES = ("classical-pi", "active-pi", "bouc-wen", "duhem")
+#: (end of the fitted part, end of the scored part) as fractions of the record's input turns
+#: (of its samples where it has fewer than :data:`MIN_TURNS`)
+FOLDS = ((0.5, 0.75), (0.75, 1.0))
+#: A turn: the input back by this fraction of its span from its last extreme
+TURN_BAND = 0.01
+#: Fewest turns for folds placed by turns: two per scored part at the least
+MIN_TURNS = 8
+#: A turn must also move back this many times the input's noise (RMS): over a hold of
+#: 10^4-10^5 samples Gaussian noise spans 8.6-9.5 of its RMS from highest to lowest, so a
+#: smaller band counts the noise of a hold as turns
+NOISE_REACH = 10.0
+#: Each part's weight in the score: equal. Chosen on units 4-6 of the simulated plants'
+#: batches with the folds placed by turns: the plain mean, weights 0.4 and 0.6 (the share of
+#: the turns each fit saw), the last part alone and the worst part chose within 1.25x of the
+#: best model's held-out error on 9, 8, 7 and 9 of 10 rows, the worst row 1.71, 2.62, 2.62
+#: and 1.71x (``benchmarks/selection_scores.py``); checked on units 1-3
+#: (``docs/validation.md``) and on units 7-9, never scored before: 9, 8, 7 and 7 of 10
+WEIGHTS = (0.5, 0.5)
+TIE = 0.02
+#: A scored part with fewer than two turns inside is cut into this many equal blocks
+EVEN_BLOCKS = 8
+#: Reversals spanning at least this share of the input's range belong to the major loop
+MAJOR = 0.9
+#: A margin within this many of its standard errors is one the record does not decide
+SURE = 2.0
+
+
+@dataclass(frozen=True)
+class Part:
+    """One scored part of a candidate, cut into blocks for the jackknife.
+
+    Attributes
+    ----------
+    squares : ndarray
+        Sum of the squared error over each block (output units squared).
+    counts : ndarray
+        Samples in each block.
+    span : float
+        The measured output's span over the part (output units): NRMSE's denominator.
+    """
+
+    squares: FloatArray
+    counts: FloatArray
+    span: float
+
+    def left_out(self) -> FloatArray:
+        """The part's NRMSE with each block left out in turn."""
+        total, n = float(self.squares.sum()), float(self.counts.sum())
+        rest = np.maximum(total - self.squares, 0.0) / (n - self.counts)
+        return np.asarray(np.sqrt(rest) / self.span, dtype=np.float64)
+
+    @property
+    def nrmse(self) -> float:
+        """The part's NRMSE, all blocks in."""
+        return math.sqrt(float(self.squares.sum()) / float(self.counts.sum())) / self.span
+
+
+@dataclass(frozen=True)
+class SelectionRow:
+    """One candidate's scores.
+
+    Attributes
+    ----------
+    name : str
+        Its CLI name.
+    folds : tuple of float
+        NRMSE on each scored part (NaN where the fit failed).
+    score : float
+        Their mean weighted by :data:`WEIGHTS` (inf when a fold failed).
+    error : str
+        Why a fit failed ("" when none did).
+    stderr : float
+        The score's block-jackknife standard error (NaN where a part has one block or a
+        fold failed).
+    margin : float
+        The score minus the chosen candidate's (0 for it; NaN until chosen).
+    margin_stderr : float
+        The margin's paired block-jackknife standard error.
+    parts : tuple of Part
+        The scored parts' blocks (empty when a fold failed).
+    """
+
+    name: str
+    folds: tuple[float, ...]
+    score: float
+    error: str = ""
+    stderr: float = math.nan
+    margin: float = math.nan
+    margin_stderr: float = math.nan
+    parts: tuple[Part, ...] = field(default=(), repr=False, compare=False)
+
+    @property
+    def decided(self) -> bool:
+        """Whether the record tells this candidate from the chosen one: its margin beyond
+        :data:`SURE` standard errors (False for the chosen one itself)."""
+        return bool(abs(self.margin) > SURE * self.margin_stderr)
+
+
+@dataclass(frozen=True)
+class Selection:
+    """What :func:`select_model` chose, and why.
+
+    Attributes
+    ----------
+    model : HysteresisModel
+        The winner, fitted on the whole record.
+    name : str
+        Its CLI name.
+    rows : tuple of SelectionRow
+        Every candidate, best first, with its margin over the chosen one.
+    notes : tuple of str
+        What the record cannot test (no minor loops, too few turns to split by).
+    """
+
+    model: HysteresisModel
+    name: str
+    rows: tuple[SelectionRow, ...]
+    notes: tuple[str, ...] = ()
+
+    @property
+    def undecided(self) -> tuple[str, ...]:
+        """The candidates this record does not tell from the chosen one (their margin
+        within :data:`SURE` standard errors, or of unknown error), best first."""
+        return undecided(self.rows, self.name)
+
+    def said(self) -> tuple[str, ...]:
+        """What the table says under its rows: the candidates not told apart from the
+        chosen one, then :attr:`notes`.
+
+        Returns
+        -------
+        tuple of str
+            Sentences (:func:`verdict`).
+        """
+        return verdict(self.rows, self.name, self.notes)
+
+    def table(self) -> str:
+        """A Markdown table of the candidates, best first, the winner marked.
+
+        Returns
+        -------
+        str
+        """
+        heads = " | ".join(f"part {k + 1}" for k in range(len(FOLDS)))
+        weights = ", ".join(f"{w:.2g}" for w in WEIGHTS)
+        lines = [
+            f"| candidate | {heads} | score ({weights}) | vs chosen (± s.e.) |",
+            "|---" * (len(FOLDS) + 3) + "|",
+        ]
+        for row in self.rows:
+            chosen_row = row.name == self.name
+            mark = " (chosen)" if chosen_row else ""
+            cells = " | ".join("-" if math.isnan(f) else f"{100 * f:.4g} %" for f in row.folds)
+            mean = row.error or f"{100 * row.score:.4g} %"
+            if chosen_row or not math.isfinite(row.margin):
+                versus = "-"
+            else:
+                versus = f"{100 * row.margin:+.3g} ± {100 * row.margin_stderr:.2g} %"
+            lines.append(f"| {row.name}{mark} | {cells} | {mean} | {versus} |")
+        said = self.said()
+        return "\n".join(lines + (["", *said] if said else []))
+
+
+def _candidate(name: str, operators: int, units: tuple[str, str]) -> HysteresisModel:
+    cls = model_class(name)
+    accepted = cls().get_params()
+    extra = {"n_operators": operators} if "n_operators" in accepted else {}
+    model: HysteresisModel = cls(**extra, input_unit=units[0], output_unit=units[1])
+    return model
+
+
+def fold_bounds(x: FloatArray) -> list[tuple[int, int]]:
+    """Where each of :data:`FOLDS` ends its fitted and its scored part, in samples.
+
+    A fraction ``f`` of the turns ends at the extreme of turn ``round(f * n)`` of the ``n``
+    turns (:func:`turn_band`: at least :data:`TURN_BAND` of the span, and
+    :data:`NOISE_REACH` times the input's noise; the extreme is the fit's last sample);
+    a fraction of 1 at the record's end. With fewer than :data:`MIN_TURNS` turns, or where a
+    part would hold fewer than 2 samples, the fractions are of the samples. A measured
+    voltage's noise does not turn: on what ``piezohyst excite`` writes, 87 turns with 0 to
+    0.5 % RMS noise, the folds on the same tops (with the span's band alone, 302 turns at
+    0.2 %); at 1 % 85-87, loops smaller than ten times the noise no longer counting.
+
+    Parameters
+    ----------
+    x : ndarray, shape (N,)
+        The input.
+
+    Returns
+    -------
+    list of (int, int)
+        (fit stop, score stop) per fold.
+    """
+    return _bounds(x.size, _turns(x))
+
+
+def _bounds(size: int, turns: np.ndarray) -> list[tuple[int, int]]:
+    """:func:`fold_bounds` of a record of ``size`` samples whose turns are ``turns``."""
+    by_samples = [(round(a * size), round(b * size)) for a, b in FOLDS]
+    n = turns.size
+    if n < MIN_TURNS:
+        return by_samples
+
+    def stop(f: float) -> int:
+        return size if f >= 1.0 else int(turns[max(round(f * n), 1) - 1]) + 1
+
+    bounds = [(stop(a), stop(b)) for a, b in FOLDS]
+    if any(a < 2 or b - a < 2 for a, b in bounds):
+        return by_samples
+    return bounds
+
+
+#: the input's noise (RMS): one estimator with the record's check
+input_noise = noise_level
+
+
+def turn_band(x: FloatArray) -> float:
+    """How far the input must move back from its last extreme to turn: :data:`TURN_BAND` of
+    its span, or :data:`NOISE_REACH` times its noise (:func:`input_noise`) where larger.
+
+    Parameters
+    ----------
+    x : ndarray, shape (N,)
+
+    Returns
+    -------
+    float
+        In the input's units; 0 for a constant input.
+    """
+    span = float(np.ptp(x)) if x.size else 0.0
+    if span <= 0.0:
+        return 0.0
+    return max(TURN_BAND * span, NOISE_REACH * input_noise(x))
+
+
+def _turns(x: FloatArray) -> np.ndarray:
+    """The index of each turn's extreme (:func:`turn_band`); none for a constant input."""
+    band = turn_band(x)
+    turns = np.empty(x.size, np.int64)
+    if band <= 0.0:
+        return turns[:0]
+    return turns[: int(S.turn_points(x, band, np.zeros(3), turns))]
+
+
+def _block_starts(turns: np.ndarray, a: int, b: int) -> np.ndarray:
+    """Where the blocks of part ``a:b`` start, relative to ``a``: after each turn inside it
+    (a half-cycle a block), or :data:`EVEN_BLOCKS` equal blocks with fewer than two turns."""
+    inside = turns[(turns > a) & (turns < b - 1)] + 1 - a
+    if inside.size >= 2:
+        return np.concatenate([[0], inside]).astype(np.int64)
+    k = max(1, min(EVEN_BLOCKS, (b - a) // 2))
+    return np.unique(np.linspace(0, b - a, k + 1)[:-1].astype(np.int64))
+
+
+def _part(residual: FloatArray, starts: np.ndarray, span: float) -> Part:
+    squares = np.add.reduceat(residual * residual, starts)
+    counts = np.diff(np.append(starts, residual.size)).astype(np.float64)
+    return Part(squares, counts, span)
+
+
+def jackknife(parts: Sequence[Part], other: Sequence[Part] = ()) -> float:
+    r"""The block-jackknife standard error of a score (:data:`WEIGHTS` over its parts' NRMSE),
+    or of its difference from ``other``'s on the same blocks (paired).
+
+    Each block of each part is left out in turn (of both scores, when paired) and the score
+    recomputed; :math:`\mathrm{se}^2 = \frac{J-1}{J}\sum_j (\theta_{(j)} - \bar\theta)^2`
+    over the :math:`J` blocks. Blocks are half-cycles of the input, so an error that
+    repeats with the drive counts once per block, not once per sample.
+
+    Parameters
+    ----------
+    parts : sequence of Part
+        One per fold.
+    other : sequence of Part, optional
+        Another candidate's parts on the same blocks.
+
+    Returns
+    -------
+    float
+        NaN where a part has fewer than two blocks.
+    """
+    if any(p.squares.size < 2 for p in parts):
+        return math.nan
+
+    def left_out(ps: Sequence[Part]) -> FloatArray:
+        whole = [p.nrmse for p in ps]
+        runs = []
+        for f, p in enumerate(ps):
+            rest = sum(w * v for k, (w, v) in enumerate(zip(WEIGHTS, whole, strict=True)) if k != f)
+            runs.append(WEIGHTS[f] * p.left_out() + rest)
+        return np.concatenate(runs)
+
+    theta = left_out(parts) - (left_out(other) if other else 0.0)
+    j = theta.size
+    return math.sqrt((j - 1) / j * float(np.sum((theta - theta.mean()) ** 2)))
+
+
+def with_margins(rows: Sequence[SelectionRow], winner: SelectionRow) -> list[SelectionRow]:
+    """The rows with each one's margin over ``winner`` and its paired standard error."""
+    out = []
+    for r in rows:
+        if r.name == winner.name:
+            out.append(replace(r, margin=0.0, margin_stderr=0.0))
+        elif r.parts and winner.parts:
+            se = jackknife(r.parts, winner.parts)
+            out.append(replace(r, margin=r.score - winner.score, margin_stderr=se))
+        else:
+            out.append(r)
+    return out
+
+
+def undecided(rows: Sequence[SelectionRow], name: str) -> tuple[str, ...]:
+    """The rows' candidates not told apart from ``name`` (see :attr:`Selection.undecided`),
+    in the rows' order; ``rows`` carry margins (:func:`with_margins`)."""
+    return tuple(
+        r.name for r in rows if r.name != name and math.isfinite(r.score) and not r.decided
+    )
+
+
+def verdict(rows: Sequence[SelectionRow], name: str, notes: Sequence[str]) -> tuple[str, ...]:
+    """How sure the choice of ``name`` is, in sentences: the candidates the record does not
+    tell apart from it (``rows`` with margins, :func:`with_margins`), then ``notes``."""
+    close = undecided(sorted(rows, key=lambda r: r.score), name)
+    if not close:
+        return tuple(notes)
+    head = (
+        f"Not told apart from {name} by this record (within {SURE:g} standard errors): "
+        f"{', '.join(close)}."
+    )
+    return (head, *notes)
+
+
+def record_notes(x: FloatArray) -> tuple[str, ...]:
+    """What a record's input cannot test, said plainly (for :attr:`Selection.notes`).
+
+    Parameters
+    ----------
+    x : ndarray, shape (N,)
+        The input.
+
+    Returns
+    -------
+    tuple of str
+    """
+    return _record_notes(x, _turns(x))
+
+
+def _record_notes(x: FloatArray, turns: np.ndarray) -> tuple[str, ...]:
+    notes = []
+    if turns.size < MIN_TURNS:
+        notes.append(
+            f"The input turns {turns.size} times (fewer than {MIN_TURNS}): the folds split its "
+            "samples, and each scored part holds few loops."
+        )
+    span = float(np.ptp(x)) if x.size else 0.0
+    if turns.size >= 2 and span > 0.0:
+        widths = np.abs(np.diff(x[turns])) / span
+        if np.all(widths >= MAJOR):
+            notes.append(
+                f"Every reversal spans at least {100 * MAJOR:.0f} % of the input's range: the "
+                "record holds no minor loops, so the scores rank how each candidate follows the "
+                "major loop, not how it predicts smaller loops (a Preisach density or a Duhem "
+                "grid inside the loop is then a guess). Record loops of several amplitudes "
+                "(piezohyst excite) to choose for them."
+            )
+    return tuple(notes)
+
+
+def forward_scores(
+    models: dict[str, HysteresisModel],
+    x: FloatArray,
+    y: FloatArray,
+    t: FloatArray | None,
+    initial_state: InitialState = "rest",
+) -> list[SelectionRow]:
+    """Each model's forward-chaining scores inside a record (:data:`FOLDS`), in order.
+
+    Parameters
+    ----------
+    models : dict of str to HysteresisModel
+        Estimators (cloned, not changed).
+    x, y, t : ndarray
+        The record.
+    initial_state : {"rest", "periodic"} or History
+        Where it starts.
+
+    Returns
+    -------
+    list of SelectionRow
+    """
+    return _forward(models, x, y, t, initial_state, _turns(x))
+
+
+def _forward(
+    models: dict[str, HysteresisModel],
+    x: FloatArray,
+    y: FloatArray,
+    t: FloatArray | None,
+    initial_state: InitialState,
+    turns: np.ndarray,
+) -> list[SelectionRow]:
+    """:func:`forward_scores` on a record whose turns are ``turns`` (:func:`_turns`)."""
+    scores: dict[str, list[float]] = {n: [] for n in models}
+    parts: dict[str, list[Part]] = {n: [] for n in models}
+    errors: dict[str, str] = {}
+    for fit_stop, stop in _bounds(x.size, turns):
+        starts = _block_starts(turns, fit_stop, stop)
+        span = float(np.ptp(y[fit_stop:stop]))
+        with warnings.catch_warnings():  # a scored part may leave the fitted region
+            warnings.simplefilter("ignore", ExtrapolationWarning)
+            result = compare_models(
+                models, x[:stop], y[:stop], None if t is None else t[:stop],
+                train=fit_stop / stop, initial_state=initial_state,
+            )  # fmt: skip
+        for row in result.rows:
+            scores[row.name].append(math.nan if row.error else row.test_nrmse)
+            if row.error:
+                errors.setdefault(row.name, row.error)
+            elif row.test_residual is not None and span > 0.0:
+                parts[row.name].append(_part(row.test_residual, starts, span))
+    rows = []
+    for n in models:
+        folds = tuple(scores[n])
+        finite = all(math.isfinite(f) for f in folds)
+        why = errors.get(n, "" if finite else "non-finite prediction")
+        score = float(np.dot(WEIGHTS, folds)) if finite else math.inf
+        kept = tuple(parts[n]) if finite and len(parts[n]) == len(folds) else ()
+        se = jackknife(kept) if kept else math.nan
+        rows.append(SelectionRow(n, folds, score, why, stderr=se, parts=kept))
+    return rows
+
+
+def chosen(rows: Sequence[SelectionRow]) -> SelectionRow:
+    """The first row (the simplest, in candidate order) within :data:`TIE` of the best."""
+    best = min(r.score for r in rows)
+    return next(r for r in rows if r.score <= best * (1 + TIE))
+
+
+def select_model(
+    x: ArrayLike,
+    y: ArrayLike,
+    t: ArrayLike | None = None,
+    *,
+    candidates: Sequence[str] = CANDIDATES,
+    operators: int = 10,
+    initial_state: InitialState = "rest",
+    input_unit: str = "V",
+    output_unit: str = "C",
+) -> Selection:
+    """Choose a model for a record: each candidate with its defaults, scored by forward
+    chaining inside the record (:data:`FOLDS`), the best refitted on all of it.
+
+    Parameters
+    ----------
+    x, y : array_like, shape (N,)
+        Input and measured output.
+    t : array_like, shape (N,), optional
+        Times (s); needed by candidates with growth terms.
+    candidates : sequence of str
+        CLI model names (:func:`~piezohyst.model.persistence.model_names`).
+    operators : int, default 10
+        Play operators of the candidates that have them.
+    initial_state : {"rest", "periodic"} or History
+        Where the record starts (a History: the input before it).
+    input_unit, output_unit : str
+        The models' units.
+
+    Returns
+    -------
+    Selection
+
+    Raises
+    ------
+    ParameterError
+        An unknown candidate.
+    InsufficientDataError
+        Every candidate failed.
+    """
+    names = list(dict.fromkeys(candidates))
+    unknown = [n for n in names if n not in model_names()]
+    if unknown or not names:
+        msg = f"candidates must be model names from {model_names()}. Got {candidates!r}."
+        raise ParameterError(msg)
+    xs, ys = as_signal(x, "x"), as_signal(y, "y")
+    same_length(xs, ys, "x", "y")
+    ts = as_time(t, xs.size, required=False, owner="select_model")
+    units = (input_unit, output_unit)
+    turns = _turns(xs)
+    rows = _forward(
+        {n: _candidate(n, operators, units) for n in names}, xs, ys, ts, initial_state, turns
+    )
+    ranked = sorted(rows, key=lambda r: r.score)
+    if not math.isfinite(ranked[0].score):
+        msg = f"no candidate could be fitted: {ranked[0].name}: {ranked[0].error}"
+        raise InsufficientDataError(msg)
+    winner = chosen(rows)
+    model = _candidate(winner.name, operators, units)
+    model.fit(xs, ys, t=ts, initial_state=initial_state)
+    ranked = sorted(with_margins(rows, winner), key=lambda r: r.score)
+    return Selection(model, winner.name, tuple(ranked), _record_notes(xs, turns))

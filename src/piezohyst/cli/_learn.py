@@ -1,0 +1,181 @@
+"""``piezohyst learn``: learning from repetition across trial files (a thin shell over
+:func:`piezohyst.workflows.learning_files.learn_file`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+import click
+
+from ..control.compensator import CompensatorSettings
+from ._support import EXISTING, FORCE, Context, _limit_options, _run
+
+
+def _auto_or_float(value: str) -> float | Literal["auto"]:
+    if value == "auto":
+        return "auto"
+    try:
+        return float(value)
+    except ValueError:
+        raise click.BadParameter(f"expected auto or a number. Got {value!r}.") from None
+
+
+@click.command("learn")
+@click.argument("model", type=EXISTING)
+@click.argument("recorded", type=EXISTING, required=False)
+@click.option(
+    "--state",
+    "state",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="The learner's state file (JSON), kept between trials.",
+)
+@click.option(
+    "--desired",
+    type=EXISTING,
+    default=None,
+    help="The trajectory, one period (first call only; column --column, and time).",
+)
+@click.option("--column", default="desired", show_default=True, help="Desired column.")
+@click.option(
+    "--leakage",
+    type=EXISTING,
+    default=None,
+    help="A leakage file (calibrate-leakage); default the model's growth terms.",
+)
+@click.option(
+    "--lag",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="A lag the model does not hold, in s (a rate-independent model behind an amplifier).",
+)
+@click.option(
+    "--learning-gain",
+    default="auto",
+    show_default=True,
+    help="Fraction of the error learned per trial, or auto.",
+)
+@click.option(
+    "--cutoff",
+    default="auto",
+    show_default=True,
+    help="The robustness filter's cutoff in Hz, or auto.",
+)
+@click.option(
+    "--voltage-column",
+    default="voltage",
+    show_default=True,
+    help="The recording's column of the voltage sent.",
+)
+@click.option(
+    "--reading-column",
+    default="charge",
+    show_default=True,
+    help="The recording's column learned from.",
+)
+@click.option(
+    "--voltage-tolerance",
+    type=click.FloatRange(min=0.0),
+    default=None,
+    help="How far (V) the recorded voltage may stray from the commands, beyond its noise "
+    "(default: 10x its noise, at least 1e-4 of the voltage range; kept in the state file).",
+)
+@click.option(
+    "--sensor", is_flag=True, help="The reading is a displacement sensor's (m), not the charge."
+)
+@click.option(
+    "--no-lead-in",
+    is_flag=True,
+    help="Learn from the first trial too (the actuator already runs the scan).",
+)
+@_limit_options
+@click.option(
+    "-o",
+    "--out",
+    "out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="The next trial's commands (CSV: time, command, desired).",
+)
+@FORCE
+@click.pass_obj
+def learn(
+    ctx: Context,
+    model: Path,
+    recorded: Path | None,
+    state: Path,
+    desired: Path | None,
+    column: str,
+    leakage: Path | None,
+    lag: float,
+    learning_gain: str,
+    cutoff: str,
+    voltage_column: str,
+    reading_column: str,
+    voltage_tolerance: float | None,
+    sensor: bool,
+    no_lead_in: bool,
+    settings: CompensatorSettings,
+    out: Path,
+    force: bool,
+) -> None:
+    """Learn from the trial RECORDED and write the next trial's commands.
+
+    A repeated scan (one period per trial, trials sent back to back): the first
+    call takes --desired and writes the first trial; each later call takes the
+    DAQ's recording of the trial just sent (its voltage column: the commands
+    written, or the voltage measured while sending them, within its noise) and
+    the charge measured over it, and writes the next. The
+    state file names the model, settings and trajectory it belongs to. A
+    reading the DAQ lost is written NaN and not learned from (an empty cell is
+    refused as a damaged row). The first trial is the lead-in, not learned from.
+
+    \b
+    Example:
+      piezohyst learn model.json --desired scan.csv --state learn.json -o next.csv
+      piezohyst learn model.json trial.csv --state learn.json -o next.csv
+    """
+    from ..workflows.learning_files import learn_file
+
+    result = _run(
+        ctx,
+        lambda: learn_file(
+            model,
+            state,
+            out,
+            recorded=recorded,
+            desired=desired,
+            column=column,
+            settings=settings,
+            leakage=leakage,
+            lag=lag,
+            learning_gain=_auto_or_float(learning_gain),
+            cutoff=_auto_or_float(cutoff),
+            voltage_column=voltage_column,
+            reading_column=reading_column,
+            sensor=sensor,
+            lead_in=not no_lead_in,
+            voltage_tolerance=voltage_tolerance,
+            force=force,
+        ),
+    )
+    trial, learner = result.trial, result.learner
+    if trial is not None:
+        if trial.skipped and trial.index == 0 and learner.settings["lead_in"]:
+            click.echo(
+                f"trial 0: the lead-in (error {trial.error:.3%}: the actuator arriving), not "
+                "learned from"
+            )
+        elif trial.skipped:
+            click.echo(f"trial {trial.index}: {trial.learned} readings to learn from: skipped")
+        else:
+            back = " (rolled back, gain halved)" if trial.rolled_back else ""
+            click.echo(
+                f"trial {trial.index}: error {trial.error:.3%}, loop width {trial.width:.3%}, "
+                f"learned from {trial.learned} samples{back}"
+            )
+    if learner.design is not None and trial is not None:
+        ctx.info(learner.design.describe())
+    click.echo(f"trial {learner.trials}'s commands: {out}")

@@ -1,0 +1,565 @@
+"""Banks of channels: one live compensator or controller per channel of a ModelBank.
+
+:class:`ChannelBank` is what a bank's feedforward compensator and its
+self-sensing controller share: per-channel settings (one value, or one per
+channel), errors that name their channel, one live object per channel
+(:meth:`~ChannelBank.channel`), the counters as arrays, shape checks, and the
+stacked arrays of the one parallel kernel when every channel runs play
+operators. :class:`BankCompensator` and :class:`BankController` add their
+step.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any, Generic, Literal, Protocol, TypeVar
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .._lazy import LazyModule
+from .._validation import FloatArray
+from ..errors import LimitWarning, ParameterError, ShapeError
+from ..model.bank import ModelBank
+from ..model.model import HysteresisModel
+from .compensator import LIMIT_CHECK_FIRST, LIMIT_SHARE, Compensator, Domain
+from .leakage import Leakage
+from .selfsensing import SelfSensingController
+
+if TYPE_CHECKING:
+    from .._kernels import play as K
+    from .._kernels import signal as S
+else:  # numba loads when a model first runs (see _lazy)
+    K = LazyModule("piezohyst._kernels.play", globals(), "K")
+    S = LazyModule("piezohyst._kernels.signal", globals(), "S")
+
+__all__ = ["BankCompensator", "BankController", "ChannelBank", "per_channel"]
+
+#: Steps of a fused bank whose commands are counted together (the slew-limit tally)
+TALLY_ROWS = 64
+
+
+class _Channel(Protocol):
+    @property
+    def v_min(self) -> float: ...
+
+    @property
+    def v_max(self) -> float: ...
+
+    @property
+    def last_command(self) -> float: ...
+
+    @property
+    def saturated_count(self) -> int: ...
+
+    @property
+    def nonfinite_count(self) -> int: ...
+
+    def reset(self) -> None: ...
+
+
+C = TypeVar("C", bound=_Channel)
+
+
+def per_channel(value: object, c: int, name: str) -> list[Any]:
+    """A setting for each of ``c`` channels: a scalar (or None) repeated, or ``c`` values.
+
+    Parameters
+    ----------
+    value : float, None or array_like
+    c : int
+        Channels.
+    name : str
+        The setting, named in the error.
+
+    Returns
+    -------
+    list
+        ``c`` values.
+    """
+    if value is None or isinstance(value, str | int | float | np.integer | np.floating):
+        return [value] * c
+    arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    if arr.size != c:
+        msg = f"'{name}' must be a number or one value per channel ({c}). Got {arr.size} values."
+        raise ShapeError(msg)
+    return [float(a) for a in arr]
+
+
+class ChannelBank(Generic[C]):
+    """One live object per channel of a fitted bank (see the module documentation)."""
+
+    def __init__(self, bank: ModelBank, build: Callable[[int, HysteresisModel], C]) -> None:
+        channels: list[C] = []
+        for i, m in enumerate(self._models(bank)):
+            try:
+                channels.append(build(i, m))
+            except (ParameterError, ShapeError) as exc:
+                raise type(exc)(f"channel {i}: {exc}") from None
+        self.bank = bank
+        self._channels = channels
+        #: True when all channels run in the one parallel kernel (set by the subclass)
+        self.fused = False
+
+    def __len__(self) -> int:
+        return len(self._channels)
+
+    # -------------------------------------------------------------- limits that bite
+    def _tally_reset(self) -> None:
+        """The fused kernels' counts of commands held by the slew limit, from zero."""
+        comps = [getattr(ch, "compensator", ch) for ch in self._channels]  # a controller's
+        steps = np.array([getattr(cp, "max_step", math.inf) for cp in comps])
+        self._tol = np.where(np.isfinite(steps), steps * (1.0 - 1e-9), np.inf)
+        self._prev = self.last_command
+        self._held = np.zeros(len(self._channels), dtype=np.int64)
+        self._given = np.zeros(len(self._channels), dtype=np.int64)
+        self._arrived = np.zeros(len(self._channels), dtype=np.bool_)  # on the trajectory
+        self._recent = np.empty((TALLY_ROWS, len(self._channels)))  # steps not yet counted
+        self._pending = 0
+        self._issued = 0
+        self._check_at = LIMIT_CHECK_FIRST
+        self._limits_warned = False
+
+    @property
+    def slew_limited_count(self) -> NDArray[np.int64]:
+        """Per channel: commands held back by the slew limit."""
+        if self.fused:
+            self._flush()
+            return self._held.copy()
+        return np.array([getattr(ch, "slew_limited_count", 0) for ch in self._channels],
+                        dtype=np.int64)  # fmt: skip
+
+    def _tally_step(self, commands: FloatArray) -> None:
+        """:meth:`_tally` for one step's commands (C,), counted :data:`TALLY_ROWS` at a time
+        (one kernel call per step would cost a third of the step)."""
+        self._recent[self._pending] = commands
+        self._pending += 1
+        if self._pending == TALLY_ROWS:
+            self._flush()
+
+    def _flush(self) -> None:
+        if self._pending:
+            rows, self._pending = self._recent[: self._pending], 0
+            self._tally(rows)
+
+    def _tally(self, commands: FloatArray) -> None:
+        """Count what the limits held in a block of fused commands (samples, C); warn once
+        when on some channel they held more than :data:`LIMIT_SHARE` of its commands."""
+        if self._pending and commands is not self._recent:
+            self._flush()
+        S.count_held(commands, self._prev, self._tol, self._held, self._given, self._arrived)
+        self._issued = int(self._given.max())
+        if self._limits_warned or self._issued < self._check_at:
+            return
+        self._check_at = 2 * self._issued
+        held = {"slew limit": self._held, "voltage limits": self.saturated_count}
+        given = self._given
+        parts = []
+        for what, counts in held.items():
+            over = np.flatnonzero((counts > LIMIT_SHARE * given) & (given >= LIMIT_CHECK_FIRST))
+            if over.size:
+                worst = int(over[np.argmax(counts[over])])
+                parts.append(
+                    f"the {what} held more than {100 * LIMIT_SHARE:g} % of the commands on "
+                    f"{over.size} of {len(self)} channels (worst: channel {worst}, "
+                    f"{int(counts[worst])} of {int(given[worst])})"
+                )
+        if parts:
+            self._limits_warned = True
+            setting = "set slew_rate to what the amplifiers allow, or widen v_min/v_max"
+            warnings.warn(f"{type(self).__name__}: {'; '.join(parts)}: {setting}",
+                          LimitWarning, stacklevel=3)  # fmt: skip
+
+    @classmethod
+    def _models(cls, bank: ModelBank) -> list[HysteresisModel]:
+        """The bank's models, one per channel (every channel fitted)."""
+        if not isinstance(bank, ModelBank):
+            msg = f"{cls.__name__} needs a fitted ModelBank. Got {type(bank).__name__}."
+            raise ParameterError(msg)
+        return bank.complete_models()
+
+    def channel(self, index: int) -> C:
+        """Channel ``index``'s object: live, sharing the bank's state.
+
+        Parameters
+        ----------
+        index : int
+
+        Returns
+        -------
+        Compensator or SelfSensingController
+        """
+        return self._channels[index]
+
+    @property
+    def v_min(self) -> FloatArray:
+        """Lower limits in force, per channel (V)."""
+        return np.array([ch.v_min for ch in self._channels])
+
+    @property
+    def v_max(self) -> FloatArray:
+        """Upper limits in force, per channel (V)."""
+        return np.array([ch.v_max for ch in self._channels])
+
+    @property
+    def last_command(self) -> FloatArray:
+        """The last command of every channel (V)."""
+        return np.array([ch.last_command for ch in self._channels])
+
+    @property
+    def nonfinite_count(self) -> NDArray[np.int64]:
+        """Per channel: desired values that were NaN or infinite (the last command held)."""
+        return np.array([ch.nonfinite_count for ch in self._channels], dtype=np.int64)
+
+    @property
+    def saturated_count(self) -> NDArray[np.int64]:
+        """Per channel: commands clipped to the limits."""
+        return np.array([ch.saturated_count for ch in self._channels], dtype=np.int64)
+
+    def _rows(self, arrays: Sequence[ArrayLike], names: str, ndim: int) -> list[FloatArray]:
+        """The per-channel inputs as float arrays of one shape, ``(C,)`` or ``(samples, C)``."""
+        out = [np.ascontiguousarray(a, dtype=np.float64) for a in arrays]
+        c = len(self._channels)
+        first = out[0]
+        if first.ndim != ndim or first.shape[-1] != c or any(a.shape != first.shape for a in out):
+            want = f"({c},)" if ndim == 1 else f"(samples, {c})"
+            shapes = " and ".join(str(a.shape) for a in out)
+            msg = f"{names} must have shape {want}, one value per channel. Got {shapes}."
+            raise ShapeError(msg)
+        return out
+
+    @staticmethod
+    def _out(out: FloatArray | None, shape: tuple[int, ...]) -> FloatArray:
+        if out is None:
+            return np.empty(shape)
+        if out.shape != shape or out.dtype != np.float64:
+            msg = f"'out' must be a float64 array of shape {shape}. Got {out.dtype} {out.shape}."
+            raise ShapeError(msg)
+        return out
+
+    @staticmethod
+    def _stack(rows: Sequence[FloatArray]) -> FloatArray:
+        return np.ascontiguousarray(np.stack(list(rows)))
+
+
+class BankCompensator(ChannelBank[Compensator]):
+    r"""Feedforward compensation of every channel of a :class:`~piezohyst.ModelBank`.
+
+    Channel ``c`` is exactly the :class:`Compensator` of ``bank[c]`` (same
+    inverse, limits, slew limit, NaN handling and counters; :meth:`channel`
+    returns it, live): :meth:`step` takes one desired value per channel and
+    returns one command per channel. When every channel inverts analytically
+    without input dynamics (play operators and removed growth terms), all
+    channels run in one numba kernel, in parallel across cores, allocating
+    nothing; otherwise the channels' own compensators run one after another.
+
+    Built as ``ph.BankCompensator(bank, v_min=..., v_max=...)``.
+
+    Parameters
+    ----------
+    bank : ModelBank
+        A fitted bank (every channel fitted).
+    v_min, v_max : float or array_like of C
+        Voltage limits (V), shared or one per channel.
+    slew_rate, gain : float or array_like of C, optional
+        As for :class:`Compensator`, shared or per channel (the slew limit's
+        default, "trained": each channel's training record's fastest change).
+    sample_rate : float, optional
+        The loop rate (Hz), shared.
+    domain : {"charge", "displacement"}
+    allow_extrapolation : bool, default False
+        Limits beyond a channel's identified range are narrowed to it, with
+        one warning naming how many channels were narrowed.
+
+    Examples
+    --------
+    >>> import numpy as np, piezohyst as ph
+    >>> units = [ph.PIHysteresis([0.0, 20.0], [g * 1e-8, 5e-9]) for g in (1.0, 2.0)]
+    >>> bank = ph.ModelBank.from_models([ph.ClassicalPI.from_operator(u) for u in units])
+    >>> comp = ph.BankCompensator(bank, v_min=0.0, v_max=140.0)
+    >>> desired = np.array([units[0].predict([50.0])[0], units[1].predict([80.0])[0]])
+    >>> np.round(comp.step(desired), 9).tolist()
+    [50.0, 80.0]
+    """
+
+    def __init__(
+        self,
+        bank: ModelBank,
+        *,
+        v_min: float | ArrayLike,
+        v_max: float | ArrayLike,
+        slew_rate: float | ArrayLike | Literal["trained"] | None = "trained",
+        sample_rate: float | None = None,
+        domain: Domain = "charge",
+        gain: float | ArrayLike | None = None,
+        allow_extrapolation: bool = False,
+    ) -> None:
+        c = len(self._models(bank))
+        lows, highs = per_channel(v_min, c, "v_min"), per_channel(v_max, c, "v_max")
+        slews, gains = per_channel(slew_rate, c, "slew_rate"), per_channel(gain, c, "gain")
+
+        def build(i: int, m: HysteresisModel) -> Compensator:
+            return Compensator(m, v_min=lows[i], v_max=highs[i], slew_rate=slews[i],
+                               sample_rate=sample_rate, domain=domain, gain=gains[i],
+                               allow_extrapolation=allow_extrapolation)  # fmt: skip
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            super().__init__(bank, build)
+        narrowed = sum(ch.requested_limits is not None for ch in self._channels)
+        if narrowed:
+            warnings.warn(
+                f"Compensator limits narrowed on {narrowed} of {c} channels to the voltages "
+                "each was identified on (pass allow_extrapolation=True to keep them; "
+                "v_min/v_max show the limits in force).",
+                UserWarning,
+                stacklevel=2,
+            )
+        channels = self._channels
+        #: True when all channels run in the one parallel kernel
+        self.fused = all(ch.plain for ch in channels)
+        if self.fused:
+            # one array per quantity; each channel's compensator keeps views of its row,
+            # so channel(i) stays live and identical to the bank's state
+            self.tables = self._stack([ch.tables for ch in channels])
+            self.config = self._stack([ch.config for ch in channels])
+            self._state = self._stack([ch.kernel_state for ch in channels])
+            for i, ch in enumerate(channels):
+                ch.share(self.tables[i], self.config[i], self._state[i])
+        self._tally_reset()
+
+    def reset(self, *, voltage: float | ArrayLike | None = None) -> None:
+        """Every channel back to its model's initial state, or settled at ``voltage`` (per channel).
+
+        Parameters
+        ----------
+        voltage : float or array_like of C, optional
+        """
+        volts = per_channel(voltage, len(self), "voltage")
+        for ch, v in zip(self._channels, volts, strict=True):
+            ch.reset(voltage=v)
+        self._tally_reset()
+
+    def precondition(self, samples: int = 1000) -> FloatArray:
+        """Every channel's preconditioning cycle (see :meth:`Compensator.precondition`).
+
+        Parameters
+        ----------
+        samples : int, default 1000
+            Samples in each channel's cycle (more where a slew limit needs them).
+
+        Returns
+        -------
+        ndarray, shape (samples', C)
+            Commands to send first; a channel whose cycle is shorter (wider
+            slew limit) holds its last command to the end.
+        """
+        cycles = [ch.precondition(samples) for ch in self._channels]
+        m = max(cy.size for cy in cycles)
+        out = np.empty((m, len(cycles)))
+        for c, cy in enumerate(cycles):
+            out[: cy.size, c] = cy
+            out[cy.size :, c] = cy[-1]
+        self._flush()
+        self._prev = self.last_command  # a cycle at the slew limit by design: not counted,
+        self._arrived[:] = False  # nor the ramp from its end to the trajectory
+        return out
+
+    def step(self, desired: ArrayLike, out: FloatArray | None = None) -> FloatArray:
+        """One command per channel.
+
+        Parameters
+        ----------
+        desired : array_like, shape (C,)
+            Desired output per channel; NaN or infinity holds that channel's
+            last command (counted).
+        out : ndarray, shape (C,), optional
+            Written in place (a float64 array): nothing is allocated.
+
+        Returns
+        -------
+        ndarray, shape (C,)
+            Commands (V), each inside its channel's limits.
+        """
+        (d,) = self._rows([desired], "'desired'", 1)
+        out = self._out(out, d.shape)
+        if self.fused:
+            K.bank_step(d, self.tables, self.config, self._state, out)
+            self._tally_step(out)
+        else:
+            for i, ch in enumerate(self._channels):
+                out[i] = ch.step(float(d[i]))
+        return out
+
+    def process(self, desired: ArrayLike) -> FloatArray:
+        """Commands for a block: equal to :meth:`step` on each row.
+
+        Parameters
+        ----------
+        desired : array_like, shape (samples, C)
+
+        Returns
+        -------
+        ndarray, shape (samples, C)
+        """
+        (d,) = self._rows([desired], "'desired'", 2)
+        out = np.empty_like(d)
+        if self.fused:
+            K.bank_process(d, self.tables, self.config, self._state, out)
+            self._tally(out)
+        else:
+            for i, ch in enumerate(self._channels):
+                out[:, i] = ch.process(np.ascontiguousarray(d[:, i]))
+        return out
+
+
+class BankController(ChannelBank[SelfSensingController]):
+    """The self-sensing controller of every channel of a :class:`~piezohyst.ModelBank`.
+
+    Channel ``c`` is exactly the :class:`SelfSensingController` of ``bank[c]``
+    (:meth:`channel` returns it, live); :meth:`step` takes one desired value
+    and one measured charge per channel, and all channels run in one numba
+    kernel across cores. Usually built as
+    ``ph.BankController(bank, v_min=..., v_max=..., sample_rate=...)``.
+
+    Parameters
+    ----------
+    bank : ModelBank
+        A fitted bank (every channel fitted). Play-operator channels run in one
+        parallel kernel; Preisach, Duhem or Bouc-Wen channels one after another.
+    v_min, v_max : float or array_like of C
+        Voltage limits (V).
+    sample_rate : float
+        The loop rate (Hz), shared.
+    leakage : Leakage or sequence of Leakage, optional
+        One calibration for all channels, or one per channel (default: each
+        channel's identified leakage).
+    **settings
+        The other settings of :class:`SelfSensingController` (``ki``, ``kp``,
+        ``slew_rate``, ``domain``, ``gain``...), shared; ``slew_rate`` and
+        ``gain`` may be one per channel.
+
+    Examples
+    --------
+    >>> import numpy as np, piezohyst as ph
+    >>> units = [ph.PIHysteresis([0.0, 20.0], [g * 1e-8, 5e-9]) for g in (1.0, 2.0)]
+    >>> bank = ph.ModelBank.from_models([ph.ClassicalPI.from_operator(u) for u in units])
+    >>> ctl = ph.BankController(bank, v_min=0.0, v_max=140.0, sample_rate=1000.0)
+    >>> ctl.step(np.array([2e-7, 4e-7]), np.array([0.0, 0.0])).shape
+    (2,)
+    """
+
+    def __init__(
+        self,
+        bank: ModelBank,
+        *,
+        v_min: float | ArrayLike,
+        v_max: float | ArrayLike,
+        sample_rate: float,
+        leakage: Leakage | list[Leakage] | tuple[Leakage, ...] | None = None,
+        **settings: Any,
+    ) -> None:
+        c = len(self._models(bank))
+        lows, highs = per_channel(v_min, c, "v_min"), per_channel(v_max, c, "v_max")
+        per = {
+            k: per_channel(settings.pop(k, default), c, k)
+            for k, default in (("slew_rate", "trained"), ("gain", None))
+        }
+        if leakage is None or isinstance(leakage, Leakage):
+            leaks: list[Leakage | None] = [leakage] * c
+        else:
+            leaks = list(leakage)
+            if len(leaks) != c:
+                msg = f"'leakage' must be one Leakage or one per channel ({c}). Got {len(leaks)}."
+                raise ShapeError(msg)
+
+        def build(i: int, m: HysteresisModel) -> SelfSensingController:
+            return SelfSensingController(m, v_min=lows[i], v_max=highs[i],
+                                         sample_rate=sample_rate, leakage=leaks[i],
+                                         slew_rate=per["slew_rate"][i], gain=per["gain"][i],
+                                         **settings)  # fmt: skip
+
+        super().__init__(bank, build)
+        channels = self._channels
+        #: True when all channels run in the one parallel kernel (play operators); a bank
+        #: of Preisach, Duhem or Bouc-Wen models runs its channels' controllers in turn
+        self.fused = all(ch.compensator.plain for ch in channels)
+        self._tally_reset()
+        if not self.fused:
+            return
+        comps = [ch.compensator for ch in channels]
+        self.tables = self._stack([cp.tables for cp in comps])
+        comp_config = self._stack([cp.config for cp in comps])
+        self.state_array = self._stack([cp.kernel_state for cp in comps])
+        self.config = self._stack([ch.config for ch in channels])
+        self.ctl = self._stack([ch.ctl for ch in channels])
+        self.feedback = self._stack([ch.feedback for ch in channels])
+        for i, ch in enumerate(channels):  # each channel keeps views of its rows: live
+            ch.compensator.share(self.tables[i], comp_config[i], self.state_array[i])
+            ch.config, ch.ctl, ch.feedback = self.config[i], self.ctl[i], self.feedback[i]
+
+    @property
+    def measurement_faults(self) -> NDArray[np.int64]:
+        """Per channel: non-finite measurements (feedforward used)."""
+        return np.array([ch.measurement_faults for ch in self._channels], dtype=np.int64)
+
+    def reset(self) -> None:
+        """Every channel back to its initial state, feedback cleared."""
+        for ch in self._channels:
+            ch.reset()
+        self._tally_reset()
+
+    def step(
+        self, desired: ArrayLike, measured: ArrayLike, out: FloatArray | None = None
+    ) -> FloatArray:
+        """One command per channel.
+
+        Parameters
+        ----------
+        desired, measured : array_like, shape (C,)
+            Desired output and the charge read at this sample, per channel
+            (NaN: hold / feedforward alone for that channel).
+        out : ndarray, shape (C,), optional
+            Written in place.
+
+        Returns
+        -------
+        ndarray, shape (C,)
+            Commands (V).
+        """
+        d, m = self._rows([desired, measured], "'desired' and 'measured'", 1)
+        out = self._out(out, d.shape)
+        if not self.fused:
+            for i, ch in enumerate(self._channels):
+                out[i] = ch.step(float(d[i]), float(m[i]))
+            return out
+        K.bank_controller_step(
+            d, m, self.tables, self.config, self.state_array, self.ctl, self.feedback, out
+        )
+        self._tally_step(out)
+        return out
+
+    def process(self, desired: ArrayLike, measured: ArrayLike) -> FloatArray:
+        """Commands for recorded blocks (samples, C); equal to :meth:`step` on each row.
+
+        Parameters
+        ----------
+        desired, measured : array_like, shape (samples, C)
+
+        Returns
+        -------
+        ndarray, shape (samples, C)
+        """
+        d, m = self._rows([desired, measured], "'desired' and 'measured'", 2)
+        out = np.empty_like(d)
+        if not self.fused:
+            for i, ch in enumerate(self._channels):
+                out[:, i] = ch.process(np.ascontiguousarray(d[:, i]), np.ascontiguousarray(m[:, i]))
+            return out
+        K.bank_controller_process(
+            d, m, self.tables, self.config, self.state_array, self.ctl, self.feedback, out
+        )
+        self._tally(out)
+        return out

@@ -1,0 +1,771 @@
+r"""Streaming feedforward compensator with safety limits.
+
+The compensator inverts the hysteresis part of a fitted model (eq. 18) one
+sample at a time. It keeps the *forward* operator states (volts: the
+actuator's condition) as its state; for each desired value it derives the
+inverse states from them, inverts, limits the command, then advances the
+forward states with the command actually sent. Inside the limits the output
+equals the analytic inverse; when a limit bites, the state still matches what
+the actuator received, so the compensator recovers cleanly.
+
+Safety, always:
+
+* the output is finite and inside ``[v_min, v_max]``;
+* a NaN or infinite desired value holds the last command and is counted;
+* desired values the actuator cannot reach within the limits saturate at
+  the limit instead of extrapolating the model;
+* an optional slew-rate limit (V/s) bounds the change per sample.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from .._lazy import LazyModule
+from .._validation import FloatArray
+from ..errors import LimitWarning, ParameterError, ShapeError
+from ..model.model import HysteresisModel, InverseSpec
+from .inverses import INVERSES, CompensatorState, Inverse, _finite_number
+
+if TYPE_CHECKING:
+    from .._kernels import packed as D
+    from .._kernels import play as K
+else:  # numba loads when a model first runs (see _lazy)
+    D = LazyModule("piezohyst._kernels.packed", globals(), "D")
+    K = LazyModule("piezohyst._kernels.play", globals(), "K")
+
+__all__ = ["Compensator", "CompensatorSettings", "CompensatorState"]
+
+Domain = Literal["charge", "displacement"]
+
+
+class Compensator:
+    r"""Feedforward hysteresis compensator for any fitted model.
+
+    The model's growth terms are dropped (leaked charge moves nothing) and its
+    hysteresis part is inverted: analytically (eq. 18) when it is play
+    operators alone, otherwise exactly by a safeguarded Newton solve per
+    sample. The method follows from the terms the model holds
+    (:meth:`~piezohyst.model.models.HysteresisModel.inversion`), not from its class.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        A fitted model (or any object with an ``inversion()`` method returning
+        an :class:`~piezohyst.model.models.InverseSpec`).
+    v_min, v_max : float
+        The actuator's voltage limits (V). Every command lies inside them.
+    slew_rate : float, "trained" or None, default "trained"
+        Largest command change in V/s; needs ``sample_rate``. The default is
+        the training record's fastest change: ``model.max_slew_rate_`` per
+        second when ``sample_rate`` is given, else ``model.max_step_`` per
+        sample (a model that does not record them has no limit). None: no
+        limit. The same default as ``piezohyst compensate``.
+    sample_rate : float, optional
+        Samples per second (Hz) of the control loop, for ``slew_rate`` and for
+        models with creep.
+    domain : {"charge", "displacement"}
+        Units of the desired values: the model's output units, or metres.
+    gain : float, optional
+        Displacement per model output unit (m/C), required for
+        ``domain="displacement"`` (eq. 6-7: S = g·Q). Displacement 0 is the
+        actuator at rest in the model's initial state.
+    allow_extrapolation : bool, default False
+        By default, limits wider than the voltage range the model was
+        identified on (``model.input_range_``) are narrowed to it, with one
+        ``UserWarning`` (the asked limits stay in :attr:`requested_limits`):
+        a model is not trusted where it never saw the actuator. True keeps
+        the limits as given.
+
+    Examples
+    --------
+    >>> import numpy as np, piezohyst as ph
+    >>> h = ph.PIHysteresis([0.0, 20.0], [1e-8, 5e-9])
+    >>> comp = ph.Compensator(ph.ClassicalPI.from_operator(h), v_min=0.0, v_max=140.0)
+    >>> desired = h.predict([0.0, 50.0, 100.0])
+    >>> np.round(comp.process(desired), 9).tolist()
+    [0.0, 50.0, 100.0]
+    >>> round(comp.step(float("nan")), 9), comp.nonfinite_count   # holds the last command
+    (100.0, 1)
+    >>> comp.step(1.0)          # far beyond what 140 V gives: saturates
+    140.0
+
+    The inverse follows the core's plan (:meth:`~piezohyst.model.cores.base.Core.inverse_plan`):
+    eq. 18 for play operators, the compiled bracketed Newton step for the
+    Preisach, Duhem and Bouc-Wen cores, a root search on the core for any
+    other (:mod:`piezohyst.control.inverses`). A :class:`~piezohyst.ModelBank` has its
+    own :class:`BankCompensator`.
+    """
+
+    # the kernel arrays the engine lays out (``setup``, :mod:`piezohyst.control.inverses`)
+    inverse: Inverse
+    analytic: bool
+    _plain: bool
+    tables: FloatArray
+    config: FloatArray
+    _state: FloatArray
+    static: FloatArray
+    lags: FloatArray
+    params: FloatArray
+    region: FloatArray
+    trial: FloatArray
+    slow: FloatArray
+    core: Any
+    _n_aux: int
+    _ns: int
+
+    def __init__(
+        self,
+        model: HysteresisModel,
+        *,
+        v_min: float,
+        v_max: float,
+        slew_rate: float | Literal["trained"] | None = "trained",
+        sample_rate: float | None = None,
+        domain: Domain = "charge",
+        gain: float | None = None,
+        allow_extrapolation: bool = False,
+    ) -> None:
+        spec, max_step, inv_gain = self._settings(
+            model, v_min, v_max, slew_rate, sample_rate, domain, gain, allow_extrapolation
+        )
+        #: the engine the core's inverse plan names (play, packed, python)
+        self.inverse = INVERSES[spec.operator.inverse_plan().engine]()
+        self.inverse.setup(self, spec, max_step, inv_gain)
+        self.reset()
+
+    def _settings(
+        self,
+        model: HysteresisModel,
+        v_min: float,
+        v_max: float,
+        slew_rate: float | Literal["trained"] | None,
+        sample_rate: float | None,
+        domain: Domain,
+        gain: float | None,
+        allow_extrapolation: bool,
+    ) -> tuple[InverseSpec, float, float]:
+        """The checks and settings every compensator shares; (spec, max step, inverse gain)."""
+        inversion = getattr(model, "inversion", None)
+        if not callable(inversion):
+            msg = (
+                "The 'model' parameter of Compensator must be a fitted piezohyst model (a "
+                "ModelBank has ph.BankCompensator and ph.BankController). "
+                f"Got {type(model).__name__} instead."
+            )
+            raise ParameterError(msg)
+        spec: InverseSpec = inversion()
+        self.v_min = _finite_number(v_min, "v_min")
+        self.v_max = _finite_number(v_max, "v_max")
+        if not self.v_min < self.v_max:
+            msg = f"Compensator needs v_min < v_max. Got v_min={v_min!r}, v_max={v_max!r}."
+            raise ParameterError(msg)
+        if not isinstance(allow_extrapolation, bool):
+            msg = f"'allow_extrapolation' must be True or False. Got {allow_extrapolation!r}."
+            raise ParameterError(msg)
+        self.allow_extrapolation = allow_extrapolation
+        #: The limits asked for, when they were narrowed to the training range (else None).
+        self.requested_limits: tuple[float, float] | None = None
+        self._narrow_to(spec.input_range)
+        max_step = math.inf
+        if isinstance(slew_rate, str):
+            if slew_rate != "trained":
+                msg = f"slew_rate must be a number in V/s, 'trained' or None. Got {slew_rate!r}."
+                raise ParameterError(msg)
+            slew_rate, max_step = _trained_limit(model, sample_rate)
+        if slew_rate is not None:
+            rate = _finite_number(slew_rate, "slew_rate")
+            if sample_rate is None:
+                msg = "A slew_rate (V/s) needs the loop's sample_rate (Hz). Got sample_rate=None."
+                raise ParameterError(msg)
+            fs = _finite_number(sample_rate, "sample_rate")
+            if rate <= 0 or fs <= 0:
+                msg = f"slew_rate and sample_rate must be > 0. Got {slew_rate!r}, {sample_rate!r}."
+                raise ParameterError(msg)
+            max_step = rate / fs
+        if domain not in ("charge", "displacement"):
+            msg = (
+                "The 'domain' parameter of Compensator must be 'charge' or 'displacement'. "
+                f"Got {domain!r} instead."
+            )
+            raise ParameterError(msg)
+        inv_gain = 1.0
+        if domain == "displacement":
+            if gain is None:
+                msg = "domain='displacement' needs the gain (m per model output unit). Got None."
+                raise ParameterError(msg)
+            g = _finite_number(gain, "gain")
+            if g == 0.0:
+                msg = "The 'gain' parameter of Compensator must be non-zero. Got 0."
+                raise ParameterError(msg)
+            inv_gain = 1.0 / g
+        dyn = spec.dynamics
+        timed = [(dyn.active, "input dynamics"), (spec.lags is not None, "creep"),
+                 (spec.relaxation is not None, "a relaxation term")]  # fmt: skip
+        for needed, what in timed:
+            if needed and sample_rate is None:
+                msg = f"A model with {what} needs the loop's sample_rate (Hz). Got None."
+                raise ParameterError(msg)
+        self.model = model
+        self.spec = spec
+        self.domain: Domain = domain
+        self.gain = gain
+        self.slew_rate = slew_rate
+        self.sample_rate = sample_rate
+        # input dynamics: an integer delay (handled by preview) and lags inverted per sample
+        self.dynamic = dyn.active
+        self.delay_samples = 0
+        self.dyn = np.zeros(2)
+        self.dstate = np.zeros(2)
+        self._last_desired = math.nan
+        #: A mechanical mode after the hysteresis, inverted from the desired trajectory (its
+        #: differences taken at the loop's rate when given, else the training record's)
+        self.mode = spec.output_dynamics
+        if self.mode.active and sample_rate is not None:
+            self.mode = replace(self.mode, sample_interval=1.0 / float(sample_rate))
+        self._mode_history = np.full(2, np.nan)
+        if dyn.active:
+            dt = 1.0 / float(sample_rate)  # type: ignore[arg-type]
+            d = dyn.delay / dt
+            # the whole samples go to the preview, the fraction in [-1/2, 1/2] is inverted
+            # per sample (above half a sample its inverse rings: see _kernels.DYN_FRACTION)
+            self.delay_samples = math.floor(d + 0.5)
+            frac = d - self.delay_samples
+            if abs(frac) > 1e-9:
+                self.dyn[K.DYN_FRACTION] = frac
+            if dyn.tau > 0:
+                self.dyn[K.DYN_GAIN_B] = 1.0 - math.exp(-dt / dyn.tau)
+        self._max_step = max_step
+        return spec, max_step, inv_gain
+
+    @property
+    def max_step(self) -> float:
+        """The largest command change per sample (V; inf: no slew limit)."""
+        return self._max_step
+
+    def _narrow_to(self, trained: tuple[float, float]) -> None:
+        """Keep every command inside the voltages the model was identified on."""
+        lo, hi = trained
+        if self.allow_extrapolation or math.isnan(lo) or math.isnan(hi):
+            return
+        if self.v_min >= lo and self.v_max <= hi:
+            return
+        new_lo, new_hi = max(self.v_min, lo), min(self.v_max, hi)
+        if not new_lo < new_hi:
+            msg = (
+                f"The limits [{self.v_min:g}, {self.v_max:g}] V do not overlap the voltages the "
+                f"model was identified on, [{lo:g}, {hi:g}] V; pass allow_extrapolation=True "
+                "to use the model outside them."
+            )
+            raise ParameterError(msg)
+        self.requested_limits = (self.v_min, self.v_max)
+        warnings.warn(
+            f"Compensator limits [{self.v_min:g}, {self.v_max:g}] V narrowed to "
+            f"[{new_lo:g}, {new_hi:g}] V, the voltages the model was identified on: a model "
+            "is not trusted outside them (pass allow_extrapolation=True to keep the limits).",
+            UserWarning,
+            stacklevel=3,
+        )
+        self.v_min, self.v_max = new_lo, new_hi
+
+    # ----------------------------------------------------------------- state
+    @property
+    def n_operators(self) -> int:
+        """Values in the core's state (play operators: their number)."""
+        return int(self.inverse.n_operators(self))
+
+    @property
+    def state(self) -> CompensatorState:
+        """The forward states and the last command (copies; see :meth:`reset`)."""
+        return self.inverse.state(self)
+
+    @property
+    def mode_history(self) -> FloatArray:
+        """The two desired values before the next one (raw; NaN: none yet), for the mode."""
+        return self._mode_history.copy()
+
+    @property
+    def plain(self) -> bool:
+        """True when :meth:`step` is one analytic kernel call (no input dynamics, no mode)."""
+        return self._plain
+
+    def share(self, tables: FloatArray, config: FloatArray, state: FloatArray) -> None:
+        """Run on arrays owned by a multi-channel container (views of its rows; play only).
+
+        Parameters
+        ----------
+        tables, config, state : ndarray
+            Views of the container's rows, laid out as this compensator's own.
+        """
+        self.inverse.share(self, tables, config, state)
+
+    @property
+    def last_command(self) -> float:
+        """The command sent last (V): where the actuator sits now."""
+        return float(self.inverse.last_command(self))
+
+    @property
+    def kernel_state(self) -> FloatArray:
+        """The live state array the kernels update (no copy).
+
+        For loops built on this compensator's kernel (the self-sensing
+        controller); use :attr:`state` and :meth:`reset` otherwise.
+        """
+        return self._state
+
+    @property
+    def nonfinite_count(self) -> int:
+        """Desired values that were NaN or infinite (the last command was held)."""
+        return int(self.inverse.nonfinite_count(self))
+
+    @property
+    def saturated_count(self) -> int:
+        """Samples whose command was clipped to ``[v_min, v_max]`` (out of reach)."""
+        return int(self.inverse.saturated_count(self))
+
+    @property
+    def outside_count(self) -> int:
+        """Commands that would have left the identified region (held unless extrapolating)."""
+        return int(self.inverse.outside_count(self))
+
+    def reset(
+        self, state: CompensatorState | ArrayLike | None = None, *, voltage: float | None = None
+    ) -> None:
+        """Start again from a known actuator condition; counters go back to 0.
+
+        Parameters
+        ----------
+        state : CompensatorState or array_like, optional
+            Explicit forward states, e.g. a :attr:`state` saved earlier; or an
+            array of the core's states, optionally followed by the last command.
+        voltage : float, optional
+            The actuator now sits at ``voltage`` (V): the model's initial
+            state moved there (play operators: clamped into
+            ``[v - r_i, v + r_i]``, eq. 10), lags settled there. Use this after
+            an unknown history only with :meth:`precondition`, which erases it.
+
+        Notes
+        -----
+        Without arguments: the model's initial state (the training record's
+        start); if the limits exclude that voltage, the first command steps in.
+
+        Raises
+        ------
+        ParameterError
+            If the last command would lie outside the limits.
+        """
+        self.inverse.reset(self, state, voltage)
+        self._count_reset()
+
+    def precondition(
+        self, samples: int = 1000, span: tuple[float, float] | None = None
+    ) -> FloatArray:
+        """The preconditioning cycle to send first: last command → high → low → back.
+
+        A full-amplitude cycle wipes out the actuator's unknown history (the
+        remanence problem: a fresh model assumes a known state). The returned
+        voltages must be sent to the amplifier before the first :meth:`step`;
+        the compensator's state is advanced as if they had been. With a
+        slew-rate limit the cycle gets as many samples as it needs to reach
+        both ends.
+
+        Parameters
+        ----------
+        samples : int, default 1000
+            Samples in the cycle (at least 3).
+        span : (float, float), optional
+            The voltages (V) the cycle reaches, inside the limits: what a
+            trajectory needs (its commands, with a margin). Default: the limits.
+
+        Returns
+        -------
+        ndarray
+            The voltages (V) to send.
+        """
+        cycle = self.inverse.precondition(self, self._cycle(samples, span))
+        self._tally[K.TALLY_PREV] = self.last_command  # a cycle at the slew limit: not counted
+        self._tally[K.TALLY_ARRIVED] = 0.0  # nor the ramp from its end to the trajectory
+        return cycle
+
+    def _cycle(self, samples: int, span: tuple[float, float] | None = None) -> FloatArray:
+        """last command -> v_max -> v_min -> back, each extreme reached exactly (and held
+        until a lagging piezo voltage reached it)."""
+        if isinstance(samples, bool) or not isinstance(samples, int) or samples < 3:
+            msg = f"'samples' must be an int >= 3. Got {samples!r}."
+            raise ParameterError(msg)
+        start = self.last_command
+        low, high = (self.v_min, self.v_max) if span is None else span
+        if not self.v_min <= low < high <= self.v_max:
+            msg = (
+                f"'span' must lie inside the limits [{self.v_min:g}, {self.v_max:g}] V with "
+                f"low < high. Got {span!r}."
+            )
+            raise ParameterError(msg)
+        knots = [start, high, low, start]
+        legs = np.abs(np.diff(knots))
+        step = self._max_step
+        # every leg ends exactly on its knot: reaching v_max and v_min is what wipes history
+        share = legs / max(float(legs.sum()), 1e-300)
+        counts = np.maximum(np.round(share * (samples - 1)).astype(int), 1)
+        if math.isfinite(step):
+            counts = np.maximum(counts, np.ceil(legs / step * (1 + 1e-12)).astype(int))
+        pieces = [
+            np.linspace(a, b, int(m) + 1)[1:]
+            for a, b, m in zip(knots[:-1], knots[1:], counts, strict=True)
+        ]
+        if self.dynamic:  # hold each extreme until the lagging piezo voltage has reached it
+            gain = self.dyn[K.DYN_GAIN_B]  # the lag's (creep terms of other cores follow)
+            settle = int(np.ceil(-np.log(1e-9) / -np.log1p(-gain))) if gain > 0 else 0
+            settle += 1 if self.dyn[K.DYN_FRACTION] != 0 else 0  # the fraction: one sample
+            settle += self.delay_samples
+            for j in (0, 1):
+                pieces[j] = np.concatenate([pieces[j], np.full(settle, knots[j + 1])])
+        cycle = np.concatenate(pieces)
+        return cycle
+
+    # -------------------------------------------------------------- commands
+    def _through_mode(self, desired: FloatArray, preview: ArrayLike | None) -> FloatArray:
+        """The hysteresis output that makes the model's mode follow ``desired``."""
+        if not self.mode.active:
+            return desired
+        ahead = np.asarray(preview if preview is not None else [], dtype=np.float64).reshape(-1)
+        target = self.mode.invert(desired, self._mode_history, ahead)
+        both = np.concatenate([self._mode_history, desired])
+        self._mode_history = both[-2:].copy()
+        return target
+
+    def step(self, desired: float, preview: ArrayLike | None = None) -> float:
+        """The command for one desired value.
+
+        Parameters
+        ----------
+        desired : float
+            Desired output (model output units, or m for ``domain="displacement"``).
+            NaN or infinity holds the last command and is counted.
+        preview : array_like, optional
+            The desired values of the next samples, for a model with an input
+            delay of ``delay_samples`` samples: the command sent now acts that
+            many samples later, so it is computed for ``preview[delay_samples - 1]``.
+            Without enough preview the target is extrapolated linearly from
+            the last two desired values (the best causal guess). Lags need no
+            preview: they are inverted exactly one sample at a time. A model
+            with an output mode uses ``preview[0]`` for the trajectory's
+            derivatives (extrapolated without it).
+
+        Returns
+        -------
+        float
+            The command (V), finite and inside ``[v_min, v_max]``.
+        """
+        try:
+            d = float(desired)
+        except (TypeError, ValueError):
+            msg = (
+                "Compensator.step takes one desired value (a number, in "
+                f"{'m' if self.domain == 'displacement' else self.model.output_unit}). Got "
+                f"{desired!r} instead."
+            )
+            raise ParameterError(msg) from None
+        if self._plain:  # the common case first: one kernel call, the command counted in it
+            c = float(K.compensator_step_tallied(d, self.tables, self.config, self._state,
+                                                 self._tally))  # fmt: skip
+        else:
+            c = float(K.tally_command(self._step_general(d, preview), self._tally))
+        self._until_check -= 1
+        if not self._until_check:
+            self._check_limits("Compensator")
+        return c
+
+    def _step_general(self, desired: float, preview: ArrayLike | None) -> float:
+        """:meth:`step` for a model with input dynamics, a mode or another engine."""
+        if self.mode.active and self.dynamic and self.delay_samples:
+            return self._step_mode_delayed(float(desired), preview)
+        if self.mode.active:
+            desired = float(self._through_mode(np.array([float(desired)]), preview)[0])
+        if self.dynamic:
+            d = float(desired)
+            m = self.delay_samples
+            target = d
+            if m:
+                ahead = np.asarray(preview if preview is not None else [], dtype=np.float64)
+                if ahead.size >= m:
+                    target = float(ahead[m - 1])
+                elif math.isfinite(self._last_desired):
+                    target = d + m * (d - self._last_desired)
+            self._last_desired = d
+            return self._inner_step(target)
+        return self._inner_step(float(desired))
+
+    def _inner_step(self, target: float) -> float:
+        """The engine's command for the hysteresis output ``target`` (after mode and delay)."""
+        return float(self.inverse.inner_step(self, target))
+
+    def _step_mode_delayed(self, d: float, preview: ArrayLike | None) -> float:
+        """A mode and an integer delay: the command now acts ``m`` samples later, so the
+        mode is inverted at the desired value ``m`` samples ahead, from the preview."""
+        m = self.delay_samples
+        ahead = np.asarray(preview if preview is not None else [], dtype=np.float64).reshape(-1)
+        seq = [float(v) for v in self._mode_history] + [d] + [float(v) for v in ahead]
+        while len(seq) < m + 5:  # up to the sample after the target, extrapolated linearly
+            a, b = seq[-2], seq[-1]
+            seq.append(2.0 * b - a if math.isfinite(a) else b)
+        j = 2 + m  # the target's index: k + m
+        e = np.array(seq)
+        target = float(self.mode.invert(e[j : j + 1], e[j - 2 : j], e[j + 1 : j + 2])[0])
+        self._mode_history = np.array([self._mode_history[1], d])
+        self._last_desired = d
+        return self._inner_step(target)
+
+    def process(self, desired: ArrayLike) -> FloatArray:
+        """Commands for a block of desired values; equal to calling :meth:`step` on each.
+
+        With an input delay, the block is its own preview: the command at
+        sample k targets ``desired[k + delay_samples]``, and the last
+        ``delay_samples`` targets, beyond the block, are extrapolated. Give a
+        planned trajectory in one call (or blocks that overlap by the delay).
+
+        Parameters
+        ----------
+        desired : array_like, shape (N,)
+            Desired outputs; NaN and infinite values hold the last command.
+
+        Returns
+        -------
+        ndarray, shape (N,)
+            Commands (V).
+        """
+        d = np.ascontiguousarray(desired, dtype=np.float64)
+        if d.ndim != 1:
+            msg = f"'desired' must be a 1-D array. Got shape {d.shape}."
+            raise ShapeError(msg)
+        if self.mode.active:
+            d = np.ascontiguousarray(self._through_mode(d, None))
+        out = np.empty_like(d)
+        prev = self.last_command
+        self._inner_process(d, out)
+        if self.dynamic and d.size:
+            self._last_desired = float(d[-1])
+        self._tally[K.TALLY_PREV] = prev
+        self.tally(out)
+        return out
+
+    def tally_one(self, command: float, owner: str = "Compensator") -> None:
+        """:meth:`tally` for one command (a loop's step).
+
+        Parameters
+        ----------
+        command : float
+            The command sent (V).
+        owner : str, default "Compensator"
+        """
+        K.tally_command(float(command), self._tally)
+        self._until_check -= 1
+        if not self._until_check:
+            self._check_limits(owner)
+
+    def tally(self, commands: FloatArray, owner: str = "Compensator") -> None:
+        """Count the commands the voltage and slew limits held, and warn once (a
+        :class:`~piezohyst.errors.LimitWarning`) when they hold more than
+        :data:`LIMIT_SHARE` of them. :meth:`step` and :meth:`process` call it; a loop
+        built on this compensator's kernel (the self-sensing controller) calls it with
+        the commands it sent.
+
+        Parameters
+        ----------
+        commands : ndarray
+            The commands sent since the last call, in order (V).
+        owner : str, default "Compensator"
+            Who sent them, for the message.
+        """
+        if not commands.size:
+            return
+        K.tally_block(np.ascontiguousarray(commands, dtype=np.float64), self._tally)
+        self._check_limits(owner)
+
+    # -------------------------------------------------------------- limits that bite
+    @property
+    def slew_limited_count(self) -> int:
+        """Commands held back by the slew limit (moved by exactly :attr:`max_step`), from
+        the first command that reached the trajectory on (the approach from rest or from a
+        precondition cycle's end is the limit doing its job: not counted)."""
+        return int(self._tally[K.TALLY_HELD])
+
+    @property
+    def command_count(self) -> int:
+        """Commands given by :meth:`step` and :meth:`process` since the last reset, from the
+        first that reached the trajectory on (see :attr:`slew_limited_count`)."""
+        return int(self._tally[K.TALLY_GIVEN])
+
+    def _count_reset(self) -> None:
+        """The counters of commands held by the limits, from zero."""
+        tol = self._max_step * (1.0 - 1e-9) if math.isfinite(self._max_step) else math.inf
+        self._tally = np.array([self.last_command, tol, 0.0, 0.0, 0.0])
+        self._until_check = LIMIT_CHECK_FIRST  # steps until the next look at the counts
+        self._limits_warned = False
+
+    def _check_limits(self, owner: str) -> None:
+        """Warn once when the limits held more than :data:`LIMIT_SHARE` of the commands."""
+        issued = self.command_count
+        self._until_check = max(issued, LIMIT_CHECK_FIRST)  # again when they have doubled
+        if self._limits_warned or issued < LIMIT_CHECK_FIRST:
+            return
+        message = limits_message(
+            owner, issued, self.saturated_count, self.slew_limited_count,
+            (self.v_min, self.v_max), self._max_step, self.sample_rate, self.slew_rate,
+        )  # fmt: skip
+        if message:
+            self._limits_warned = True
+            warnings.warn(message, LimitWarning, stacklevel=4)
+
+    def _inner_process(self, d: FloatArray, out: FloatArray) -> None:
+        """The engine over a block of hysteresis outputs (after the mode)."""
+        self.inverse.inner_process(self, d, out)
+
+
+#: The share of commands held by a limit above which a compensator or controller warns
+LIMIT_SHARE = 0.01
+#: Commands given before the first check (then at every doubling, and after each block)
+LIMIT_CHECK_FIRST = 100
+
+
+def limits_message(
+    owner: str,
+    issued: int,
+    saturated: int,
+    slewed: int,
+    limits: tuple[float, float],
+    max_step: float,
+    sample_rate: float | None,
+    slew_rate: float | None,
+) -> str:
+    """The warning when the voltage or slew limits held over :data:`LIMIT_SHARE` of the
+    commands (empty when they did not): the counts and the setting to change.
+
+    Parameters
+    ----------
+    owner : str
+    issued, saturated, slewed : int
+        Commands given; held by the voltage limits; held by the slew limit.
+    limits : (float, float)
+        ``v_min, v_max`` (V).
+    max_step : float
+        The slew limit per sample (V).
+    sample_rate, slew_rate : float or None
+        Hz and V/s, for the message.
+
+    Returns
+    -------
+    str
+    """
+    parts = []
+    if slewed > LIMIT_SHARE * issued:
+        per_s = f"{max_step * sample_rate:.4g} V/s" if sample_rate else f"{max_step:.4g} V/sample"
+        parts.append(
+            f"the slew limit ({per_s}) held {slewed} of {issued} commands "
+            f"({100 * slewed / issued:.1f} %): the trajectory is faster than the limit (by "
+            "default the training record's fastest change); set slew_rate (--slew-rate) to "
+            "what the amplifier allows, or identify on faster loops"
+        )
+    if saturated > LIMIT_SHARE * issued:
+        parts.append(
+            f"the voltage limits [{limits[0]:g}, {limits[1]:g}] V held {saturated} of {issued} "
+            f"commands ({100 * saturated / issued:.1f} %): the target is out of reach there; "
+            "widen v_min/v_max (--v-min/--v-max) if the actuator allows, or lower the target"
+        )
+    return f"{owner}: {'; '.join(parts)}" if parts else ""
+
+
+def _trained_limit(model: Any, sample_rate: float | None) -> tuple[float | None, float]:
+    """The default slew limit: the training record's fastest change, as (V/s, V per sample).
+
+    Per second when the loop's rate is known; else per sample; none when the model
+    does not record it (built by hand, or an older file).
+    """
+    per_second = float(getattr(model, "max_slew_rate_", math.nan))
+    per_sample = float(getattr(model, "max_step_", math.nan))
+    if sample_rate is not None and math.isfinite(per_second) and per_second > 0:
+        return per_second, math.inf
+    if math.isfinite(per_sample) and per_sample > 0:
+        return None, per_sample
+    return None, math.inf
+
+
+@dataclass(frozen=True)
+class CompensatorSettings:
+    """How to build a :class:`~piezohyst.Compensator` from a model file.
+
+    Attributes
+    ----------
+    v_min, v_max : float or None
+        Voltage limits (V); None: the model's training range.
+    domain : {"charge", "displacement"}
+        Units of the desired values.
+    gain : float or None
+        m per model output unit, for ``domain="displacement"``.
+    slew_rate : float, "trained" or None
+        Largest change in V/s (needs ``sample_rate``); "trained": the training
+        record's fastest (see :class:`Compensator`); None: no limit.
+    sample_rate : float or None
+        Loop rate (Hz).
+    allow_extrapolation : bool
+        Allow limits beyond the voltages the model was identified on (refused
+        otherwise, not narrowed: a file workflow states what it will do).
+    """
+
+    v_min: float | None = None
+    v_max: float | None = None
+    domain: Domain = "charge"
+    gain: float | None = None
+    slew_rate: float | Literal["trained"] | None = "trained"
+    sample_rate: float | None = None
+    allow_extrapolation: bool = False
+
+    def build(self, model: HysteresisModel) -> Compensator:
+        """A compensator for ``model`` whose limits default to its training voltage range.
+
+        Parameters
+        ----------
+        model : HysteresisModel
+            A fitted model.
+
+        Returns
+        -------
+        Compensator
+
+        Raises
+        ------
+        ParameterError
+            A limit is missing and the model does not record its training range.
+        """
+        lo, hi = model.input_range_
+        known = not (math.isnan(lo) or math.isnan(hi))
+        if (self.v_min is None or self.v_max is None) and not known:
+            msg = "the model does not record its training voltage range: give v_min and v_max"
+            raise ParameterError(msg)
+        wide = (self.v_min is not None and self.v_min < lo) or (
+            self.v_max is not None and self.v_max > hi
+        )
+        if known and wide and not self.allow_extrapolation:
+            msg = (
+                f"the limits [{self.v_min if self.v_min is not None else lo:g}, "
+                f"{self.v_max if self.v_max is not None else hi:g}] V go beyond the voltages "
+                f"the model was identified on, [{lo:g}, {hi:g}] V; allow extrapolation "
+                "explicitly to command them"
+            )
+            raise ParameterError(msg)
+        return Compensator(
+            model,
+            v_min=lo if self.v_min is None else float(self.v_min),
+            v_max=hi if self.v_max is None else float(self.v_max),
+            domain=self.domain,
+            gain=self.gain,
+            slew_rate=self.slew_rate,
+            sample_rate=self.sample_rate,
+            allow_extrapolation=self.allow_extrapolation,
+        )

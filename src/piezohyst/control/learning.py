@@ -1,0 +1,764 @@
+r"""Learning from repetition: iterative learning control on the measured charge.
+
+A scan repeats, and so does what a model gets wrong about it. After each trial (one period
+of the trajectory, sent without a pause) the error measured over it corrects the reference
+the next trial's compensator inverts:
+
+.. math::
+
+    r_j = d + c_j, \qquad c_{j+1} = Q\,(c_j + \gamma\,L\,e_j),
+
+with :math:`e_j` the desired trajectory minus what was measured: the charge with the
+calibrated leakage removed (sensorless), or a sensor's displacement. The inverse model is
+the learning law's plant inverse (a change :math:`\delta r` of the reference becomes
+:math:`\delta r / (dq/dv)` volts: the model's local slope), :math:`L` inverts a lag the
+model does not hold, :math:`Q` is a zero-phase low-pass over the periodic trial, and
+:math:`\gamma` is the learning gain. :class:`LearningDesign` holds the choices and the
+condition under which the error shrinks from trial to trial; ``docs/realtime.md``
+("Learning from repetition") derives them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import warnings
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ..errors import (
+    LearningWarning,
+    ModelFileError,
+    NonFiniteError,
+    ParameterError,
+    ShapeError,
+)
+from ..io import atomic_write_text
+from ..metrics import hysteresis_width
+from .compensator import Compensator, Domain
+from .leakage import Leakage
+from .learning_design import LearningDesign, design_learning
+
+FloatArray = np.ndarray
+
+#: the law itself lives in :mod:`piezohyst.control.learning_design`
+__all__ = ["LearningCompensator", "LearningDesign", "Trial", "design_learning"]
+
+#: the share of a trial's commands at a limit beyond which it is out of the actuator's reach
+SATURATED = 0.02
+#: a trial's error counts as grown beyond this many standard errors of its estimate
+GROWTH_SIGMAS = 3.0
+#: learning stops halving its gain below the first gain over this
+GAIN_FLOOR = 64.0
+FORMAT = "piezohyst-learning"
+
+
+@dataclass(frozen=True)
+class Trial:
+    """What one trial measured and what the learner did with it.
+
+    Attributes
+    ----------
+    index : int
+        0 for the first trial.
+    error : float
+        RMS error over the desired span (fraction), of the quantity learned
+        from: offset-free for the charge (the leakage leaves its zero unknown),
+        absolute for a sensor.
+    width : float
+        Loop width of the measured against the desired (fraction of the span).
+    learned : int
+        Samples learned from (readings that were NaN, and samples whose command
+        was slew-limited into the trajectory, are not).
+    gain : float
+        The learning gain of the update made after this trial.
+    rolled_back : bool
+        The error grew over the trial before: that update was undone and the gain halved.
+    skipped : bool
+        Nothing learned: the lead-in (the first trial, see ``lead_in``), or too
+        few readings (under half the trial).
+    leakage_bound : float
+        The charge error one trial's leakage uncertainty can build (2 standard
+        errors of the calibrated current, over the trial), as a fraction of the
+        span; NaN when the leakage is not calibrated, 0 for a sensor.
+    saturated : int
+        Commands at a voltage limit or moved by the whole slew limit (beyond 2 %
+        of the trial, a ``LearningWarning``: the trajectory is out of reach).
+    """
+
+    index: int
+    error: float
+    width: float
+    learned: int
+    gain: float
+    rolled_back: bool
+    skipped: bool
+    leakage_bound: float
+    saturated: int = 0
+
+
+def _periodic_fill(values: FloatArray, ok: FloatArray) -> FloatArray:
+    """Values at the samples not ``ok`` interpolated linearly from the others, around the period."""
+    if ok.all():
+        return values
+    n = values.size
+    k = np.flatnonzero(ok)
+    xs = np.concatenate([k - n, k, k + n])
+    ys = np.tile(values[k], 3)
+    out = values.copy()
+    bad = np.flatnonzero(~ok)
+    out[bad] = np.interp(bad, xs, ys)
+    return out
+
+
+def _check_periodic(d: FloatArray) -> None:
+    steps = np.abs(np.diff(d))
+    jump = abs(float(d[0] - d[-1]))
+    largest = float(steps.max()) if steps.size else 0.0
+    if jump > 2.0 * largest + 1e-12 * float(np.ptp(d)):
+        msg = (
+            f"the desired trajectory is not periodic over the trial: it jumps {jump:.4g} from "
+            f"its last sample to its first, where its largest step is {largest:.4g}; a trial "
+            "must end where the next begins (send whole periods)"
+        )
+        raise ParameterError(msg)
+
+
+def _at_limits(u: FloatArray, comp: Compensator) -> tuple[FloatArray, FloatArray]:
+    """Commands at the top and at the bottom limit."""
+    top = u >= comp.v_max - 1e-9 * max(1.0, abs(comp.v_max))
+    bottom = u <= comp.v_min + 1e-9 * max(1.0, abs(comp.v_min))
+    return top, bottom
+
+
+def _saturated(u: FloatArray, comp: Compensator) -> int:
+    """Commands at a voltage limit or moved by the whole slew limit."""
+    top, bottom = _at_limits(u, comp)
+    slewed = np.zeros(u.size, dtype=bool)
+    if math.isfinite(comp.max_step):
+        slewed[1:] = np.abs(np.diff(u)) >= comp.max_step * (1 - 1e-9)
+    return int(np.count_nonzero(top | bottom | slewed))
+
+
+def _anti_windup(e: FloatArray, u: FloatArray, comp: Compensator, sign: float) -> FloatArray:
+    """No learning outward where a command sat at a limit (the error there is out of reach);
+    ``sign``: -1 when the desired falls as the voltage rises (a negative gain)."""
+    top, bottom = _at_limits(u, comp)
+    out = e.copy()
+    out[top & (sign * e > 0)] = 0.0
+    out[bottom & (sign * e < 0)] = 0.0
+    return out
+
+
+def _flag(value: object, name: str) -> bool:
+    if not isinstance(value, bool):
+        msg = f"'{name}' must be True or False. Got {value!r}."
+        raise ParameterError(msg)
+    return value
+
+
+def _digest(values: Any) -> str:
+    return hashlib.sha256(values).hexdigest()[:16]
+
+
+class LearningCompensator:
+    r"""A feedforward compensator that learns from repetition (iterative learning control).
+
+    Each trial is one period of a repeated trajectory, sent right after the
+    one before (the actuator's hysteresis and the leakage carry over):
+    :meth:`command` gives the trial's voltages, :meth:`learn` takes what was
+    measured over it (reading *i* taken at the end of sample *i*, as the
+    models are identified) and updates the correction for the next. Learning
+    from the charge needs no position sensor: the leakage (calibrated from
+    holds, :func:`~piezohyst.calibrate_leakage`) is removed and its zero,
+    which the leakage leaves unknown, is not learned. A sensor's
+    displacement (``learn(displacement=...)``) is learned with its offset.
+
+    The commands of a trial are the compensator's (:class:`~piezohyst.Compensator`)
+    for the reference ``desired + correction``, continuing from the previous
+    trial's reference (one period of it, at least 1 s, run first from the
+    model's initial state: the same history the actuator has, so a trial's
+    commands depend on the correction alone and a saved learner resumes
+    exactly). Every command is finite, inside ``[v_min, v_max]`` and within
+    the slew limit of the command before it, across trials too.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        A fitted model; its inverse drives the actuator.
+    v_min, v_max : float
+        The actuator's limits (V).
+    sample_rate : float
+        Hz, of the trials.
+    leakage : Leakage, optional
+        Removed from the measured charge; default the model's growth terms.
+    slew_rate, domain, gain, allow_extrapolation
+        As for :class:`~piezohyst.Compensator` (``gain``, m per model output
+        unit, also turns a sensor's displacement into the model's units).
+    lag : float, default 0
+        s: a lag the model does not hold, inverted by the learning filter
+        (see :func:`design_learning`, with ``lag_tolerance``, ``slope_error``).
+    learning_gain, cutoff : float or "auto", default "auto"
+        The fraction of the error learned per trial, and the robustness filter's
+        cutoff (Hz); ``"auto"`` chooses them from the first trial's error
+        (:func:`design_learning`).
+    lag_tolerance, slope_error : float
+        What the convergence condition allows for (defaults 0.25 and 0.5).
+    voltage : float, optional
+        Where the actuator sits now (V; default the model's initial state): the
+        first trial ramps in from there at the slew limit.
+    lead_in : bool, default True
+        The first trial brings the actuator from where it sat into the scan and
+        is not learned from: its response is the arrival's, not the scan's (on the
+        plants, an error of 11 % where the scan's own was 0.75 %; learned from, it
+        cost a trial to undo). False learns from it too (the actuator already runs
+        the scan).
+
+    Attributes
+    ----------
+    design : LearningDesign
+        The law in use, chosen when the first trial is learned from (before it: a
+        provisional one, gain 0.5 and the widest band that converges).
+    history : list of Trial
+
+    Examples
+    --------
+    >>> import numpy as np, piezohyst as ph
+    >>> from piezohyst.simulation import Bench
+    >>> rec = ph.simulate(duration=10.0)
+    >>> model = ph.ActivePI(n_operators=8).fit(rec.voltage, rec.charge, t=rec.t)
+    >>> top, bottom = model.hysteresis_.predict(np.array([140.0, 0.0]))
+    >>> k = np.arange(200)                                   # a trial: four 20 Hz scans
+    >>> desired = bottom + (top - bottom) * (0.4 + 0.1 * np.sin(2 * np.pi * 4 * k / 200))
+    >>> ilc = ph.LearningCompensator(model, v_min=0.0, v_max=140.0, sample_rate=1000.0,
+    ...                              slew_rate=30e3)
+    >>> bench = Bench(seed=1, voltage=ilc.last_command)
+    >>> for _ in range(8):
+    ...     trial = ilc.learn(bench.run(ilc.command(desired)).charge)
+    >>> ilc.history[-1].error < 0.6 * ilc.history[0].error   # 0.51 % -> 0.25 %: the noise
+    True
+    """
+
+    def __init__(
+        self,
+        model: Any,
+        *,
+        v_min: float,
+        v_max: float,
+        sample_rate: float,
+        leakage: Leakage | None = None,
+        slew_rate: float | Literal["trained"] | None = "trained",
+        domain: Domain = "charge",
+        gain: float | None = None,
+        allow_extrapolation: bool = False,
+        lag: float = 0.0,
+        learning_gain: float | Literal["auto"] = "auto",
+        cutoff: float | Literal["auto"] = "auto",
+        lag_tolerance: float = 0.25,
+        slope_error: float = 0.5,
+        voltage: float | None = None,
+        lead_in: bool = True,
+    ) -> None:
+        self.model = model
+        self.compensator = Compensator(
+            model,
+            v_min=v_min,
+            v_max=v_max,
+            slew_rate=slew_rate,
+            sample_rate=sample_rate,
+            domain=domain,
+            gain=gain,
+            allow_extrapolation=allow_extrapolation,
+        )
+        if leakage is None:
+            leakage = Leakage.from_model(model)
+        if not isinstance(leakage, Leakage):
+            msg = f"'leakage' must be a Leakage (see calibrate_leakage). Got {leakage!r}."
+            raise ParameterError(msg)
+        self.leakage = leakage
+        self.sample_rate = float(sample_rate)
+        self.settings: dict[str, Any] = {
+            "v_min": float(v_min),
+            "v_max": float(v_max),
+            "sample_rate": self.sample_rate,
+            "slew_rate": slew_rate,
+            "domain": domain,
+            "gain": gain,
+            "allow_extrapolation": bool(allow_extrapolation),
+            "lag": float(lag),
+            "learning_gain": learning_gain,
+            "cutoff": cutoff,
+            "lag_tolerance": float(lag_tolerance),
+            "slope_error": float(slope_error),
+            "lead_in": _flag(lead_in, "lead_in"),
+        }
+        # checks every design setting now (a one-sample trial stands in for the trajectory)
+        design_learning(model, **self._design_args(2))
+        self._fingerprint = self._make_fingerprint()
+        self.reset(voltage=voltage)
+
+    # ------------------------------------------------------------------ state
+    def _design_args(self, samples: int) -> dict[str, Any]:
+        s = self.settings
+        return {
+            "sample_rate": s["sample_rate"],
+            "samples": samples,
+            "gain": s["learning_gain"],
+            "cutoff": s["cutoff"],
+            "lag": s["lag"],
+            "lag_tolerance": s["lag_tolerance"],
+            "slope_error": s["slope_error"],
+        }
+
+    def _make_fingerprint(self) -> str:
+        model = json.dumps(self.model.to_dict(), sort_keys=True, default=str).encode()
+        rest = json.dumps(
+            [self.settings, self.leakage.to_dict()], sort_keys=True, default=str
+        ).encode()
+        return _digest(model + rest)
+
+    def reset(self, *, voltage: float | None = None) -> None:
+        """Forget the trajectory and what was learned.
+
+        Parameters
+        ----------
+        voltage : float, optional
+            Where the actuator sits now (V); default the model's initial state.
+            The first trial ramps in from there.
+        """
+        self.compensator.reset()
+        self._desired: FloatArray | None = None
+        self._correction = np.zeros(0)
+        self._previous = np.zeros(0)  # the reference correction of the trial before
+        self._good: tuple[FloatArray, float] | None = None  # the last good correction, error
+        self._resend = False  # the correction now is the last good one, sent again
+        self._pending: FloatArray | None = None
+        self._clamped = np.zeros(0, dtype=bool)
+        self._last = float(self.compensator.last_command)
+        if voltage is not None:
+            v = float(voltage)
+            if not (math.isfinite(v) and self.compensator.v_min <= v <= self.compensator.v_max):
+                msg = (
+                    f"'voltage' must lie inside the limits [{self.compensator.v_min:g}, "
+                    f"{self.compensator.v_max:g}] V. Got {voltage!r}."
+                )
+                raise ParameterError(msg)
+            self._last = v
+        self._leaked = 0.0
+        self._gain = 0.5
+        self._first = True  # the law is chosen from the first trial learned from
+        self.history: list[Trial] = []
+        self.design: LearningDesign | None = None
+
+    @property
+    def trials(self) -> int:
+        """Trials learned from (or skipped) so far."""
+        return len(self.history)
+
+    @property
+    def rollbacks(self) -> int:
+        """Trials whose update was undone because the error grew."""
+        return sum(t.rolled_back for t in self.history)
+
+    @property
+    def skipped(self) -> int:
+        """Trials not learned from (the lead-in, or under half their readings usable)."""
+        return sum(t.skipped for t in self.history)
+
+    @property
+    def correction(self) -> FloatArray:
+        """The correction added to the desired trajectory next trial (a copy; desired units)."""
+        return self._correction.copy()
+
+    @property
+    def pending(self) -> FloatArray | None:
+        """The commands of the trial sent and not yet learned from (a copy), or None."""
+        return None if self._pending is None else self._pending.copy()
+
+    @property
+    def desired(self) -> FloatArray:
+        """The trajectory every trial repeats (a copy; empty before the first command)."""
+        return np.zeros(0) if self._desired is None else self._desired.copy()
+
+    @property
+    def last_command(self) -> float:
+        """The last voltage sent (V)."""
+        return self._last
+
+    # --------------------------------------------------------------- commands
+    def _set_trajectory(self, desired: ArrayLike) -> FloatArray:
+        try:
+            d = np.ascontiguousarray(desired, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            msg = f"'desired' must be a 1-D array of numbers ({exc})."
+            raise ShapeError(msg) from None
+        if d.ndim != 1 or d.size < 8:
+            msg = f"'desired' must be a 1-D array of at least 8 samples. Got shape {d.shape}."
+            raise ShapeError(msg)
+        bad = ~np.isfinite(d)
+        if bad.any():
+            i = int(np.argmax(bad))
+            msg = f"'desired' must be finite: a trial repeats it. Got {d[i]} at index {i}."
+            raise NonFiniteError(msg)
+        if not np.ptp(d) > 0:
+            msg = "'desired' must move: a constant trajectory has nothing to learn."
+            raise ParameterError(msg)
+        _check_periodic(d)
+        if self._desired is None:
+            self._desired = d.copy()
+            self._correction = np.zeros(d.size)
+            self._previous = np.zeros(d.size)
+            self.design = design_learning(self.model, **self._design_args(d.size))
+        elif d.size != self._desired.size or not np.array_equal(d, self._desired):
+            msg = (
+                "this learner belongs to another trajectory: every trial repeats the first "
+                "(reset() to learn a new one)"
+            )
+            raise ParameterError(msg)
+        return self._desired
+
+    def _commands(self, previous: FloatArray, correction: FloatArray) -> FloatArray:
+        """The compensator's commands for ``desired + correction`` after the history of
+        ``desired + previous`` (at least 1 s of it, from the model's initial state)."""
+        assert self._desired is not None
+        d = self._desired
+        comp = self.compensator
+        comp.reset()
+        reps = max(1, math.ceil(self.sample_rate / d.size))
+        comp.process(np.tile(d + previous, reps))
+        return comp.process(d + correction)
+
+    def command(self, desired: ArrayLike | None = None) -> FloatArray:
+        """The voltages of the next trial.
+
+        Parameters
+        ----------
+        desired : array_like, optional
+            One period of the trajectory (model output units, or m with
+            ``domain="displacement"``), the same every trial; needed the first
+            time. It must end where it begins (checked).
+
+        Returns
+        -------
+        ndarray
+            Commands (V): finite, inside the limits, within the slew limit of
+            the last command sent.
+
+        Raises
+        ------
+        ParameterError
+            A trial still waits for its readings (:meth:`learn`), or another trajectory.
+        """
+        if self._pending is not None:
+            msg = (
+                f"trial {self.trials} still waits for its readings: call learn() with what was "
+                "measured over it before the next command()"
+            )
+            raise ParameterError(msg)
+        if desired is None and self._desired is None:
+            msg = "the first command() needs the desired trajectory"
+            raise ParameterError(msg)
+        if desired is not None:
+            self._set_trajectory(desired)
+        u = self._commands(self._previous, self._correction)
+        clamped = np.zeros(u.size, dtype=bool)
+        step, prev = self.compensator.max_step, self._last
+        for k in range(u.size):  # into the trajectory from the last command, at the slew limit
+            if abs(u[k] - prev) <= step * (1 + 1e-12):
+                break
+            u[k] = prev + math.copysign(step, u[k] - prev)
+            clamped[k] = True
+            prev = float(u[k])
+        if clamped.any():  # the history differs until the trajectory's extremes wipe it out
+            d = self._desired
+            assert d is not None
+            last = int(np.flatnonzero(clamped)[-1])
+            after = np.arange(d.size) > last
+            near = 0.01 * float(np.ptp(d))  # within 1 % of an extreme: the memory is wiped
+            hi = np.flatnonzero(after & (d >= d.max() - near))
+            lo = np.flatnonzero(after & (d <= d.min() + near))
+            wiped = max(int(hi[0]) if hi.size else d.size, int(lo[0]) if lo.size else d.size)
+            clamped[: wiped + 1] = True
+        self._pending, self._clamped = u.copy(), clamped
+        self._last = float(u[-1])
+        return u
+
+    # ----------------------------------------------------------------- learning
+    def learn(
+        self, charge: ArrayLike | None = None, *, displacement: ArrayLike | None = None
+    ) -> Trial:
+        """Learn from what was measured over the trial just sent.
+
+        Parameters
+        ----------
+        charge : array_like, optional
+            The measured charge (model output units), one reading per command;
+            NaN where a reading is missing.
+        displacement : array_like, optional
+            Instead: a displacement sensor's reading (m; needs ``gain``), learned
+            with its offset (its zero: the actuator at rest, as the compensator's).
+
+        Returns
+        -------
+        Trial
+            Also appended to :attr:`history`.
+
+        Warns
+        -----
+        LearningWarning
+            The error grew (the update is undone and the gain halved), or too
+            few readings to learn from.
+        """
+        if self._pending is None:
+            msg = "learn() needs a trial: call command() and send its voltages first"
+            raise ParameterError(msg)
+        if (charge is None) == (displacement is None):
+            msg = "learn() takes the measured charge or a sensor's displacement (one of them)"
+            raise ParameterError(msg)
+        sensor = displacement is not None
+        raw = charge if charge is not None else displacement
+        try:
+            y = np.array(raw, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError) as exc:
+            msg = f"the readings must be numbers ({exc})."
+            raise ShapeError(msg) from None
+        u, d = self._pending, self._desired
+        assert d is not None
+        if y.size != u.size:
+            msg = f"one reading per command: the trial sent {u.size}, got {y.size} readings"
+            raise ShapeError(msg)
+        ok = np.isfinite(y) & ~self._clamped
+        measured, bound = self._measured(y, u, sensor)
+        e = d - measured
+        if not sensor:
+            e = e - (e[ok].mean() if ok.any() else 0.0)
+        index = self.trials
+        span = float(np.ptp(d))
+        learned = int(ok.sum())
+        saturated = _saturated(u, self.compensator)
+        self._previous = self._correction  # what this trial sent: the next trial's history
+        lead_in = self.settings["lead_in"] and index == 0  # the arrival, not the scan's response
+        if lead_in or learned < d.size // 2:
+            if not lead_in:
+                warnings.warn(
+                    f"trial {index}: {learned} of {d.size} readings to learn from (NaN or "
+                    "slew-limited into the trajectory): nothing learned",
+                    LearningWarning,
+                    stacklevel=2,
+                )
+            seen = float(np.sqrt(np.mean(e[ok] ** 2))) / span if lead_in and ok.any() else math.nan
+            trial = Trial(index, seen, math.nan, 0 if lead_in else learned, self._gain, False,
+                          True, bound, saturated)  # fmt: skip
+            self._close(trial)
+            return trial
+        error = float(np.sqrt(np.mean(e[ok] ** 2))) / span
+        width = hysteresis_width(d[ok], measured[ok]) if learned > 2 else math.nan
+        e = _periodic_fill(e, ok)
+        g = self.settings["gain"]
+        flipped = self.settings["domain"] == "displacement" and g is not None and g < 0
+        e = _anti_windup(e, u, self.compensator, -1.0 if flipped else 1.0)
+        if saturated > SATURATED * u.size:
+            warnings.warn(
+                f"trial {index}: {saturated} of {u.size} commands at the voltage or slew limit: "
+                "the trajectory asks for more than the actuator and amplifier give, and "
+                "learning cannot remove the error that leaves",
+                LearningWarning,
+                stacklevel=2,
+            )
+        rolled = False
+        if self._first:  # the law, chosen from the first trial learned from
+            self.design = design_learning(self.model, **self._design_args(d.size), first_error=e)
+            self._gain = self.design.gain
+            self._first = False
+        assert self.design is not None
+        floor = self.design.noise * math.sqrt(1.0 + self.design.noise_gain**2) / span
+        grown = self._good is not None and error > max(self._good[1], floor) * (
+            1 + GROWTH_SIGMAS / math.sqrt(learned)
+        )
+        if grown and not self._resend:
+            assert self._good is not None
+            rolled = True
+            self._gain = max(self._gain / 2, self.design.gain / GAIN_FLOOR)
+            warnings.warn(
+                f"trial {index}: the error grew from {self._good[1]:.3%} to {error:.3%}: the "
+                "last update is undone (its correction is sent again) and the learning gain "
+                f"halved to {self._gain:.3g}",
+                LearningWarning,
+                stacklevel=2,
+            )
+            self._correction = self._good[0].copy()
+            self._resend = True
+        else:  # a better trial, or the last good correction measured again: learn from it
+            self._good = (self._correction.copy(), error)
+            self._resend = False
+            self._correction = self._update(self._correction, e, sensor)
+        trial = Trial(index, error, width, learned, self._gain, rolled, False, bound, saturated)
+        self._close(trial)
+        return trial
+
+    def _close(self, trial: Trial) -> None:
+        self.history.append(trial)
+        self._pending = None
+
+    def _measured(self, y: FloatArray, u: FloatArray, sensor: bool) -> tuple[FloatArray, float]:
+        """The readings in the desired's units (leakage removed from a charge), and the
+        leakage's 95 % bound over the trial (fraction of the span)."""
+        d = self._desired
+        assert d is not None
+        g = self.settings["gain"]
+        as_displacement = self.settings["domain"] == "displacement"
+        span = float(np.ptp(d))
+        if sensor:
+            if g is None:
+                msg = "learning from a displacement needs the gain (m per model output unit)"
+                raise ParameterError(msg)
+            return (y if as_displacement else y / g), 0.0
+        ok = np.isfinite(y)
+        q = _periodic_fill(np.where(ok, y, 0.0), ok) if ok.any() else np.zeros_like(y)
+        dt = 1.0 / self.sample_rate
+        leaked = self._leaked + np.cumsum(self.leakage.current(u, q) * dt)
+        self._leaked = float(leaked[-1])
+        sigma = self.leakage.current_stderr(u, q)
+        scale = abs(g) if as_displacement and g is not None else 1.0
+        bound = 2.0 * float(np.mean(sigma)) * u.size * dt * scale / span
+        h = np.where(ok, y, np.nan) - leaked
+        return (h * g if as_displacement and g is not None else h), bound
+
+    def _update(self, base: FloatArray, e: FloatArray, sensor: bool) -> FloatArray:
+        """``Q (base + gain L e)``, over the periodic trial; the mean is kept for a charge."""
+        design = self.design
+        assert design is not None
+        old, err = np.fft.rfft(base), np.fft.rfft(e)
+        spectrum = old + self._gain * design.l() * err
+        spectrum[0] = old[0] + (self._gain * err[0] if sensor else 0.0)
+        return np.fft.irfft(design.q() * spectrum, n=base.size)
+
+    # -------------------------------------------------------------------- files
+    def to_dict(self) -> dict[str, Any]:
+        """The learner's state, JSON-ready (see :meth:`from_dict`).
+
+        Returns
+        -------
+        dict
+        """
+        good = None
+        if self._good is not None:
+            good = {"correction": self._good[0].tolist(), "metric": self._good[1]}
+        return {
+            "format": FORMAT,
+            "version": 1,
+            "fingerprint": self._fingerprint,
+            "trajectory": None if self._desired is None else _digest(self._desired.tobytes()),
+            "desired": None if self._desired is None else self._desired.tolist(),
+            "correction": self._correction.tolist(),
+            "previous": self._previous.tolist(),
+            "good": good,
+            "pending": None if self._pending is None else self._pending.tolist(),
+            "clamped": np.flatnonzero(self._clamped).tolist(),
+            "last_command": self._last,
+            "leaked": self._leaked,
+            "gain": self._gain,
+            "first": self._first,
+            "resend": self._resend,
+            "design": None if self.design is None else asdict(self.design),
+            "history": [asdict(t) for t in self.history],
+        }
+
+    def restore(self, data: dict[str, Any], where: str = "learning state") -> None:
+        """Continue from :meth:`to_dict`'s contents, made with the same model and settings.
+
+        Parameters
+        ----------
+        data : dict
+        where : str
+            Named in errors (a file's path).
+
+        Raises
+        ------
+        ModelFileError
+            Another model, other settings, or not a learning state.
+        """
+        if not isinstance(data, dict) or data.get("format") != FORMAT:
+            msg = f"{where}: not a piezohyst learning state"
+            raise ModelFileError(msg)
+        if data.get("fingerprint") != self._fingerprint:
+            msg = (
+                f"{where}: made with another model, leakage or settings; a learning state "
+                "continues only the run that wrote it"
+            )
+            raise ModelFileError(msg)
+        try:
+            self.reset()
+            if data["desired"] is not None:
+                self._set_trajectory(data["desired"])
+                if data["trajectory"] != _digest(self._desired.tobytes()):  # type: ignore[union-attr]
+                    raise ValueError("the trajectory's digest does not match its values")
+            self._correction = np.array(data["correction"], dtype=np.float64)
+            self._previous = np.array(data["previous"], dtype=np.float64)
+            good = data["good"]
+            if good is not None:
+                self._good = (np.array(good["correction"], dtype=np.float64), float(good["metric"]))
+            pending = data["pending"]
+            self._pending = None if pending is None else np.array(pending, dtype=np.float64)
+            n = 0 if self._desired is None else self._desired.size
+            self._clamped = np.zeros(n, dtype=bool)
+            self._clamped[np.array(data["clamped"], dtype=int)] = True
+            self._last = float(data["last_command"])
+            self._leaked = float(data["leaked"])
+            self._gain = float(data["gain"])
+            self._first = bool(data["first"])
+            self._resend = bool(data["resend"])
+            self.design = None if data["design"] is None else LearningDesign(**data["design"])
+            self.history = [Trial(**t) for t in data["history"]]
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            self.reset()
+            msg = f"{where}: a damaged learning state ({exc})"
+            raise ModelFileError(msg) from None
+
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write :meth:`to_dict` as JSON, atomically (a reader sees the old file or the new).
+
+        Parameters
+        ----------
+        path : path
+
+        Returns
+        -------
+        Path
+        """
+        return self.save_dict(path, self.to_dict())
+
+    def save_dict(self, path: str | os.PathLike[str], data: dict[str, Any]) -> Path:
+        """Write ``data`` (:meth:`to_dict`'s, perhaps with keys added) as JSON, atomically.
+
+        Parameters
+        ----------
+        path : path
+        data : dict
+
+        Returns
+        -------
+        Path
+        """
+        return atomic_write_text(Path(path), json.dumps(data))
+
+    def load(self, path: str | os.PathLike[str]) -> None:
+        """Continue from a file :meth:`save` wrote (see :meth:`restore`).
+
+        Parameters
+        ----------
+        path : path
+        """
+        p = Path(path)
+        try:
+            data = json.loads(p.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            msg = f"{p}: cannot read the learning state ({exc})"
+            raise ModelFileError(msg) from None
+        self.restore(data, str(p))

@@ -1,0 +1,4 @@
+"""Models: terms, dynamics, the cores (``cores/``, one module per core), the estimator
+contract, state, the fit, the model class and its presets, files and banks.
+May import: the foundation, ``_kernels``, ``io``.
+"""

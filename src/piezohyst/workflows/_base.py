@@ -1,0 +1,117 @@
+"""What every file workflow shares: the output guard, the units check, loading a model."""
+
+from __future__ import annotations
+
+import os
+import warnings
+from collections.abc import Callable, Iterable, Sequence
+from pathlib import Path
+
+from .._validation import FloatArray
+from ..control.compensator import CompensatorSettings
+from ..errors import DataFileError, OverwriteError
+from ..io import (
+    is_piezohyst_output,
+)
+from ..metrics import clipped
+from ..model.model import HysteresisModel
+from ..model.persistence import load_model
+
+PathLike = str | os.PathLike[str]
+
+
+Progress = Callable[[int], None] | None  # told the rows read so far
+
+
+def guard_outputs(
+    outputs: Sequence[PathLike], inputs: Sequence[PathLike], *, force: bool = False
+) -> None:
+    """Refuse to write where data would be lost, before any work is done.
+
+    An output that is one of the inputs is always refused; an existing file
+    (or report folder) that piezohyst did not write is refused unless
+    ``force`` (see :func:`~piezohyst.io.is_piezohyst_output`).
+
+    Parameters
+    ----------
+    outputs, inputs : sequence of path
+    force : bool, default False
+        Replace existing files piezohyst did not write.
+
+    Raises
+    ------
+    OverwriteError
+    """
+    # inputs by resolved path and by file identity (hard links), each looked up once
+    by_path: dict[Path, Path] = {}
+    by_inode: dict[tuple[int, int], Path] = {}
+    for src in map(Path, inputs):
+        by_path.setdefault(src.resolve(), src)
+        try:
+            st = src.stat()
+        except OSError:
+            continue
+        by_inode.setdefault((st.st_dev, st.st_ino), src)
+    for out in map(Path, outputs):
+        same = by_path.get(out.resolve())
+        if same is None and out.exists():
+            st = out.stat()
+            same = by_inode.get((st.st_dev, st.st_ino))
+        if same is not None:
+            msg = (
+                f"{out}: that is an input of this command ({same}); piezohyst never writes "
+                "over its input: choose another output name"
+            )
+            raise OverwriteError(msg, replaceable=False)
+        if out.exists() and not force and not is_piezohyst_output(out):
+            kind = "folder" if out.is_dir() else "file"
+            msg = f"{out}: an existing {kind} that piezohyst did not write; not replacing it"
+            raise OverwriteError(msg, replaceable=True)
+
+
+_DEFAULT_SETTINGS = CompensatorSettings()  # frozen: safe as a shared default
+
+
+def _default_unit(column: str | None) -> str:
+    """The unit of an output column that names none: piezohyst's own names, else arbitrary."""
+    return {"charge": "C", "displacement": "m"}.get(column or "", "a.u.")
+
+
+def _check_measured_unit(unit: str | None, model: HysteresisModel, data: PathLike) -> None:
+    """The recorded output must be in the model's unit; a unit the file omits is assumed."""
+    if unit is None:
+        warnings.warn(
+            f"{data}: the output column states no unit; taken to be in the model's unit "
+            f"{model.output_unit!r} (give the output unit if it is not)",
+            UserWarning,
+            stacklevel=3,
+        )
+    elif unit != model.output_unit:
+        msg = f"{data}: the output column is in {unit!r}, the model predicts {model.output_unit!r}"
+        raise DataFileError(msg)
+
+
+def _load(model_path: PathLike) -> HysteresisModel:
+    model: HysteresisModel = load_model(model_path)
+    return model
+
+
+#: A measured channel flat at its extreme on this share of the samples or more is reported
+CLIP_SHARE = 0.01
+
+
+def warn_clipped(
+    chunks: Iterable[FloatArray], column: str | None, unit: str | None, data: PathLike
+) -> None:
+    """Warn when a measured channel sits at its top or bottom in flat runs (clipped)."""
+    count, which, level, first, n = clipped(chunks)
+    if n and count >= CLIP_SHARE * n:
+        warnings.warn(
+            f"{data}: column {column!r} sits at its {which} ({level:.6g} {unit or ''}) on "
+            f"{count} of {n} samples ({100 * count / n:.1f} %, the first at sample {first} of "
+            "the window) in flat runs: the recording clipped there (a sensor or an ADC at "
+            "its full scale) and those samples say nothing of the actuator; record with a "
+            "wider range, or use a window that does not clip",
+            UserWarning,
+            stacklevel=3,
+        )

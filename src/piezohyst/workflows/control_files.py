@@ -1,0 +1,699 @@
+"""File workflows around a fitted model: compensate, export C, calibrate leakage, run the
+closed loop on the bench, report. Each is one call of a CLI command (see
+:mod:`piezohyst.workflows`, which re-exports them).
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import itertools
+import math
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._validation import FloatArray, check_float, check_int
+from ..control.compensator import Compensator, CompensatorSettings
+from ..control.export import Precision, c_paths, write_c
+from ..control.leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
+from ..control.selfsensing import LoopSettings
+from ..errors import DataFileError, ParameterError
+from ..io import (
+    DataSpec,
+    Table,
+    atomic_folder,
+    check_finite,
+    check_increasing,
+    open_table,
+    read_table,
+    write_blocks,
+    write_table,
+)
+from ..metrics import hysteresis_width, nrmse, rmse
+from ..model.model import HysteresisModel
+from ..model.state import predict_record
+from ..simulation import DEFAULT_PRESET, PRESETS, Bench, BenchRecord, run_loop
+from ..units import to_standard
+from ._base import (
+    _DEFAULT_SETTINGS,
+    PathLike,
+    Progress,
+    _check_measured_unit,
+    _default_unit,
+    _load,
+    guard_outputs,
+    warn_clipped,
+)
+
+__all__ = [
+    "Compensation",
+    "LoopRun",
+    "ReportResult",
+    "calibrate_leakage_file",
+    "compensate_file",
+    "export_c_file",
+    "model_report",
+    "simulate_loop_file",
+]
+
+
+@dataclass(frozen=True)
+class Compensation:
+    """What :func:`compensate_file` did.
+
+    Attributes
+    ----------
+    compensator : Compensator
+        After the run: limits used, counters of saturated and non-finite samples.
+    preamble : int
+        Samples of ramp-in and preconditioning written before the trajectory.
+    sample_rate : float
+        Samples per second of the written commands (Hz).
+    """
+
+    compensator: Compensator
+    preamble: int
+    sample_rate: float
+
+
+def compensate_file(
+    model_path: PathLike,
+    target: PathLike,
+    out: PathLike,
+    *,
+    column: str | None = None,
+    settings: CompensatorSettings = _DEFAULT_SETTINGS,
+    precondition: bool = True,
+    present_voltage: float | None = None,
+    target_unit: str | None = None,
+    target_offset: float = 0.0,
+    force: bool = False,
+    progress: Progress = None,
+) -> Compensation:
+    """Feedforward voltage for a desired trajectory; writes ``time,command,desired``.
+
+    Safe by default, as a lab running an amplifier needs:
+
+    * commands stay inside the limits, which default to the voltages the model
+      was identified on; limits beyond them are refused unless
+      ``settings.allow_extrapolation``;
+    * the slew limit defaults to the fastest change of the training record
+      (``model.max_slew_rate_``);
+    * the file starts with a ramp from the actuator's present voltage
+      (default: at rest, 0 V or the nearer limit) and a precondition cycle
+      over the voltages the trajectory needs, 10 % beyond them (inside the
+      limits), that wipes out the unknown history (rows with an empty
+      ``desired``); ``precondition=False`` keeps only the ramp;
+    * NaN or infinite desired values hold the last command and are counted;
+    * a trajectory that saturates most samples (out of reach: units, or the
+      sign of the gain) is an error, and nothing is written.
+
+    Parameters
+    ----------
+    model_path : str or os.PathLike
+        A saved model.
+    target : str or os.PathLike
+        The desired trajectory with its ``time`` column (s), or give
+        ``settings.sample_rate``.
+    out : str or os.PathLike
+        Where to write the commands.
+    column : str, optional
+        The desired column (default ``desired``, or the only one besides ``time``).
+    settings : CompensatorSettings
+        Limits, domain, gain, slew rate, sample rate, extrapolation.
+    precondition : bool, default True
+        Write the precondition cycle before the trajectory.
+    present_voltage : float, optional
+        The actuator's voltage now (V); default at rest: 0 V, or the nearer limit.
+    target_unit : str, optional
+        The desired column's unit (``um``, ``nm``, ``uC``) when its header names
+        none; a header naming another is an error.
+    target_offset : float, default 0
+        Added to every desired value, in the target's unit: a target written
+        relative to another zero (the written ``desired`` column includes it).
+    force : bool, default False
+        Replace an existing ``out`` that piezohyst did not write.
+    progress : callable, optional
+        Called with the rows of the target read so far.
+
+    Returns
+    -------
+    Compensation
+    """
+    guard_outputs([out], [model_path, target], force=force)
+    model = _load(model_path)
+    table = open_table(target)
+    name = _desired_column(table, column, target)
+    expected = "m" if settings.domain == "displacement" else model.output_unit
+    where = f"{target}: column {name!r}"
+    source_unit = table.unit(name) or target_unit
+    if table.unit(name) is not None and target_unit is not None and table.unit(name) != target_unit:
+        msg = (
+            f"{target}: column {name!r} is marked {table.unit(name)!r} in the file, but the "
+            f"target's unit was given as {target_unit!r}"
+        )
+        raise DataFileError(msg)
+    if not math.isfinite(target_offset):
+        msg = f"the target offset must be finite. Got {target_offset}."
+        raise ParameterError(msg)
+
+    def desired_of(values: FloatArray) -> FloatArray:
+        return to_standard(values + target_offset, source_unit, "output", where)[0]
+
+    unit = to_standard(np.empty(0), source_unit, "output", where)[1]
+    if unit is not None and unit != expected:
+        msg = f"{target}: the desired column is in {unit!r}, the compensator expects {expected!r}"
+        raise DataFileError(msg)
+    timed = "time" in table
+    if not timed and settings.sample_rate is None:
+        msg = (
+            f"{target}: no time column; the commands need their sample times: add a 'time' "
+            "column (s) or give the sample rate"
+        )
+        raise DataFileError(msg)
+    keys = [name, "time"] if timed else [name]
+    batches = table.batches(keys)
+    head = next(batches)  # the sample rate comes from the first batch
+    t_unit = table.unit("time") if timed else None
+    fs = settings.sample_rate
+    if fs is None:
+        steps = np.diff(to_standard(head["time"], t_unit, "time", f"{target}: column 'time'")[0])
+        fs = 1.0 / float(np.median(steps)) if steps.size and np.all(steps > 0) else 1.0
+        fs = float(f"{fs:.12g}")  # 1000.0, not 999.9999999999991 from times written in ms
+    comp = dataclasses.replace(settings, sample_rate=fs).build(model)  # slew: "trained"
+    start = present_voltage
+    if start is None:  # at rest: 0 V, or the nearer limit
+        start = float(np.clip(0.0, comp.v_min, comp.v_max))
+    comp.reset(voltage=start)
+    preamble = np.empty(0)
+    if precondition:  # a cycle over what the trajectory needs, with a margin
+        span = _needed_span(comp, (desired_of(b[name]) for b in table.batches(keys)))
+        preamble = comp.precondition(max(3, round(fs)), span)
+    finite = 0
+
+    def rows() -> Iterator[dict[str, FloatArray]]:
+        nonlocal finite
+        row = 0
+        t_last: float | None = None
+        for batch in itertools.chain([head], batches):
+            desired = desired_of(batch[name])
+            if timed:
+                check_finite(batch["time"], row, f"{target}", "time")
+                check_increasing(batch["time"], t_last, row, f"{target}", "time")
+                t_last = float(batch["time"][-1])
+                t = to_standard(batch["time"], t_unit, "time", f"{target}: column 'time'")[0]
+            else:
+                t = (row + np.arange(desired.size, dtype=np.float64)) / fs
+            if row == 0 and preamble.size:
+                n = preamble.size
+                yield {  # k / fs from the first time: -1.001, not -1.001000000000001
+                    "time": t[0] + np.arange(-n, 0) / fs,
+                    "command": preamble,
+                    "desired": np.full(n, np.nan),  # written empty: nothing is desired there
+                }
+            finite += int(np.count_nonzero(np.isfinite(desired)))
+            yield {"time": t, "command": comp.process(desired), "desired": desired}
+            row += desired.size
+            if progress is not None:
+                progress(row)
+        if finite and comp.saturated_count > 0.5 * finite:  # before the file is renamed into place
+            lo, hi = _reachable(model, comp, settings)
+            unit = "m" if settings.domain == "displacement" else model.output_unit
+            msg = (
+                f"{target}: {comp.saturated_count} of {finite} desired values "
+                f"({100 * comp.saturated_count / finite:.0f} %) are out of reach of "
+                f"[{comp.v_min:g}, {comp.v_max:g}] V, which reaches about [{lo:.4g}, {hi:.4g}] "
+                f"{unit}; check the units and the sign of the gain"
+            )
+            raise ParameterError(msg)
+
+    write_blocks(out, rows(), units={"time": "s", "command": "V", "desired": expected},
+                 blank=("desired",))  # fmt: skip
+    return Compensation(comp, preamble.size, fs)
+
+
+#: The precondition cycle reaches this fraction of the trajectory's own voltage span beyond it
+PRECONDITION_MARGIN = 0.1
+
+
+def _needed_span(comp: Compensator, desired: Iterator[FloatArray]) -> tuple[float, float]:
+    """The voltages a trajectory's commands cover (a dry run on a copy), with a margin,
+    inside the limits; the whole limits when it has no finite command."""
+    probe = copy.deepcopy(comp)
+    probe.precondition(3)  # from a preconditioned state, as the commands will be
+    lo, hi = math.inf, -math.inf
+    for values in desired:
+        commands = probe.process(values)
+        lo, hi = min(lo, float(commands.min())), max(hi, float(commands.max()))
+    if not lo < hi:
+        return comp.v_min, comp.v_max
+    margin = PRECONDITION_MARGIN * (hi - lo)
+    return max(comp.v_min, lo - margin), min(comp.v_max, hi + margin)
+
+
+def _desired_column(table: Table, column: str | None, target: PathLike) -> str:
+    """The desired trajectory's column: as named, else ``desired``, else the only one but time."""
+    if column is None:
+        others = [c for c in table.columns if c != "time"]
+        column = "desired" if "desired" in table else (others[0] if len(others) == 1 else None)
+        if column is None:
+            msg = (
+                f"{target}: which column is the desired trajectory? Name it 'desired' or name "
+                f"the column (columns: {', '.join(map(repr, table.columns))})"
+            )
+            raise DataFileError(msg)
+    return table.resolve(column)
+
+
+def _reachable(
+    model: HysteresisModel, comp: Compensator, settings: CompensatorSettings
+) -> tuple[float, float]:
+    """Roughly the desired values the limits reach: the outputs at v_min and v_max from rest."""
+    h = model.hysteresis_
+    x0 = float(model.initial_state_[0])
+    rest, low, high = h.predict(np.array([x0, comp.v_min, comp.v_max]))
+    values = np.array([low, high])
+    if settings.domain == "displacement" and settings.gain is not None:
+        values = settings.gain * (values - rest)
+    return float(values.min()), float(values.max())
+
+
+def export_c_file(
+    model_path: PathLike,
+    out: PathLike,
+    *,
+    settings: CompensatorSettings = _DEFAULT_SETTINGS,
+    precision: Precision = "double",
+    controller: LoopSettings | None = None,
+    force: bool = False,
+) -> tuple[Path, Path]:
+    """Write ``NAME.c`` and ``NAME.h`` for the model's compensator (:mod:`~.control.export`).
+
+    Parameters
+    ----------
+    model_path : str or os.PathLike
+        A saved model.
+    out : str or os.PathLike
+        The ``.c`` file.
+    settings : CompensatorSettings
+        Limits, domain, gain, slew rate (and the sample rate a controller needs).
+    precision : {"double", "float"}
+        The C type of every real.
+    controller : LoopSettings, optional
+        Export the self-sensing controller instead of the feedforward compensator.
+    force : bool, default False
+        Replace existing files piezohyst did not write.
+
+    Returns
+    -------
+    tuple of Path
+    """
+    c_path, h_path, _ = c_paths(out)
+    inputs: list[PathLike] = [model_path]
+    if controller is not None and controller.leakage is not None:
+        inputs.append(controller.leakage)
+    guard_outputs([c_path, h_path], inputs, force=force)
+    model = _load(model_path)
+    built = settings.build(model) if controller is None else controller.build(settings, model)
+    return write_c(built, out, precision=precision)
+
+
+def calibrate_leakage_file(
+    data: PathLike,
+    out: PathLike | None = None,
+    *,
+    data_spec: DataSpec | None = None,
+    terms: Sequence[str] = LEAKAGE_TERMS,
+    min_duration: float = 1.0,
+    settle: float | str = "auto",
+    force: bool = False,
+) -> Leakage:
+    """Calibrate the leakage from the holds of a record and save it (JSON) to ``out``.
+
+    Parameters
+    ----------
+    data : str or os.PathLike
+        A record with constant-voltage holds (voltage, charge, time).
+    out : str or os.PathLike, optional
+        Where to save the leakage.
+    data_spec : DataSpec, optional
+        Columns, units and window.
+    terms : sequence of str
+        Leakage terms to fit (see :func:`~piezohyst.control.leakage.calibrate_leakage`).
+    min_duration, settle
+        Hold detection and trim (see :func:`~piezohyst.control.leakage.calibrate_leakage`).
+    force : bool
+        Replace an existing ``out`` that piezohyst did not write.
+
+    Returns
+    -------
+    Leakage
+    """
+    if out is not None:
+        guard_outputs([out], [data], force=force)
+    rec = (data_spec or DataSpec()).read(data)
+    assert rec.y is not None
+    w = rec.window
+    x_unit, y_unit = rec.units
+    leak = calibrate_leakage(
+        rec.t[w],
+        rec.x[w],
+        rec.y[w],
+        terms=terms,
+        min_duration=min_duration,
+        settle=settle,
+        input_unit=x_unit or "V",
+        output_unit=y_unit or _default_unit(rec.names[1]),
+    )
+    if out is not None:
+        leak.save(out)
+    return leak
+
+
+@dataclass(frozen=True)
+class LoopRun:
+    """What :func:`simulate_loop_file` did.
+
+    Attributes
+    ----------
+    record : BenchRecord
+        Commands, readings and the bench's hidden truth.
+    desired : ndarray
+        The desired trajectory.
+    width : float
+        Hysteresis width desired → laser displacement (fraction of the span).
+    nrmse : float
+        Tracking NRMSE desired → laser displacement (displacement domain; else NaN).
+    saturated : int
+        Commands clipped to the limits.
+    """
+
+    record: BenchRecord
+    desired: FloatArray
+    width: float
+    nrmse: float
+    saturated: int
+
+
+def simulate_loop_file(
+    model_path: PathLike,
+    target: PathLike,
+    out: PathLike,
+    *,
+    column: str | None = None,
+    settings: CompensatorSettings = _DEFAULT_SETTINGS,
+    loop: LoopSettings | None = None,
+    preset: str = DEFAULT_PRESET,
+    extra_bias: float = 0.0,
+    seed: int = 0,
+    force: bool = False,
+) -> LoopRun:
+    """Run a desired trajectory through a controller against the simulated bench.
+
+    Writes ``time, desired, command, charge, displacement`` (s, desired
+    units, V, C, m): what the bench read after each command. ``loop=None``
+    runs the feedforward compensator alone, otherwise the self-sensing
+    controller. ``extra_bias`` (A) adds to the preset's amplifier bias
+    current, a change the model never saw.
+
+    Parameters
+    ----------
+    model_path, target, out : path
+        A saved model, the desired trajectory (``time`` and ``desired``), the output.
+    column : str, optional
+        The desired column.
+    settings : CompensatorSettings
+        Limits, domain, gain, slew; the sample rate defaults to the preset's.
+    loop : LoopSettings, optional
+        The controller's settings; None: feedforward alone.
+    preset : str
+        Bench preset.
+    extra_bias : float
+        A (added to the preset's bias current).
+    seed : int
+        Noise seed.
+    force : bool
+        Replace an existing ``out`` that piezohyst did not write.
+
+    Returns
+    -------
+    LoopRun
+    """
+    inputs: list[PathLike] = [model_path, target]
+    if loop is not None and loop.leakage is not None:
+        inputs.append(loop.leakage)
+    guard_outputs([out], inputs, force=force)
+    if preset not in PRESETS:
+        msg = f"unknown preset {preset!r}; available: {', '.join(PRESETS)}"
+        raise ParameterError(msg)
+    p = PRESETS[preset]
+    p = dataclasses.replace(
+        p, i_bias=p.i_bias + check_float(extra_bias, "extra_bias", "simulate-loop", -1e-6, 1e-6)
+    )
+    model = _load(model_path)
+    table = read_table(target)
+    name = _desired_column(table, column, target)
+    desired = table.get(name, finite=False)
+    fs = settings.sample_rate or p.rate
+    if abs(fs - p.rate) > 1e-9 * p.rate:
+        msg = f"the bench {preset} samples at {p.rate:g} Hz; the loop rate must be the same"
+        raise ParameterError(msg)
+    settings = dataclasses.replace(settings, sample_rate=fs)
+    ctl = settings.build(model) if loop is None else loop.build(settings, model)
+    bench = Bench(
+        p, voltage=ctl.last_command, seed=check_int(seed, "seed", "simulate-loop", 0, 2**32 - 1)
+    )
+    rec = run_loop(ctl, desired, bench)
+    write_table(
+        out,
+        {
+            "time": rec.t,
+            "desired": desired,
+            "command": rec.voltage,
+            "charge": rec.charge,
+            "displacement": rec.displacement,
+        },
+        units={
+            "time": "s",
+            "desired": "m" if settings.domain == "displacement" else model.output_unit,
+            "command": "V",
+            "charge": "C",
+            "displacement": "m",
+        },
+    )
+    ok = np.isfinite(desired)
+    width = hysteresis_width(desired[ok], rec.displacement[ok])
+    err = (
+        nrmse(desired[ok], rec.displacement[ok]) if settings.domain == "displacement" else math.nan
+    )
+    return LoopRun(rec, desired, width, err, ctl.saturated_count)
+
+
+@dataclass(frozen=True)
+class ReportResult:
+    """Metrics and files written by :func:`model_report`.
+
+    Attributes
+    ----------
+    metrics : dict
+        Metric key to value (units in ``metrics.json``).
+    files : list of Path
+        Figures, ``metrics.json``, ``report.md`` and ``report.html``.
+    """
+
+    metrics: dict[str, Any]
+    files: list[Path]
+
+
+def model_report(
+    model_path: PathLike,
+    data: PathLike,
+    out: PathLike,
+    *,
+    data_spec: DataSpec | None = None,
+    command: str | None = None,
+    force: bool = False,
+    progress: Progress = None,
+) -> ReportResult:
+    """A report a lab can file on a model and a data file (HTML, Markdown, JSON, figures).
+
+    Parameters
+    ----------
+    model_path : str or os.PathLike
+        A saved model.
+    data : str or os.PathLike
+        The recording to check it on.
+    out : str or os.PathLike
+        The report folder; an existing one that does not hold a piezohyst
+        report is refused unless ``force`` (see :func:`guard_outputs`).
+    data_spec : DataSpec, optional
+        Columns, units and time window.
+    command : str, optional
+        The command line that made the report, recorded in it.
+    force : bool, default False
+        Replace an existing folder piezohyst did not write.
+    progress : callable, optional
+        Called with the rows read so far.
+
+    Returns
+    -------
+    ReportResult
+    """
+    from ..analysis.report import Report
+
+    guard_outputs([out], [model_path, data], force=force)
+    spec = data_spec or DataSpec()
+    model = _load(model_path)
+    rec = spec.read(data, progress=progress)
+    w = rec.window  # the model runs over the whole record: the window's start has a history
+    end = rec.x.size if w.stop is None else w.stop  # nothing after the window is run
+    pred = predict_record(model, rec.x[:end], rec.t[:end])[w]
+    assert rec.y is not None
+    _check_measured_unit(rec.units[1], model, data)
+    x, y, t = rec.x[w], rec.y[w], rec.t[w]
+    warn_clipped([y], rec.names[1], rec.units[1], data)
+    with atomic_folder(out) as folder:  # all or nothing: Ctrl-C leaves no partial folder
+        rep = _report(model, rec, pred, Report(f"{type(model).__name__} on {Path(data).name}",
+                      folder), (x, y, t), (model_path, data, command))  # fmt: skip
+        files = [Path(out) / f.name for f in rep.write()]
+    return ReportResult({m.key: m.value for m in rep.metrics}, files)
+
+
+def _report(
+    model: HysteresisModel,
+    rec: Any,
+    pred: FloatArray,
+    rep: Any,
+    xyt: tuple[FloatArray, FloatArray, FloatArray],
+    sources: tuple[PathLike, PathLike, str | None],
+) -> Any:
+    """The report's metadata, tables, metrics and figures (written by the caller)."""
+    from ..analysis.report import file_facts
+
+    x, y, t = xyt
+    model_path, data, command = sources
+    w = rec.window
+    in_u, out_u = model.input_unit, model.output_unit
+    rep.metadata = {
+        "written": datetime.now(UTC).isoformat(timespec="seconds"),
+        "command": command or "(called from Python)",
+        "data_file": file_facts(data),
+        "model_file": file_facts(model_path),
+        "columns": dict(zip(("input", "output", "time"), rec.names, strict=True)),
+        "time_window_s": [float(t[0]), float(t[-1])],
+        "units": {"input": in_u, "output": out_u, "time": "s"},
+    }
+    rep.tables["Model"] = [
+        ("class", type(model).__name__),
+        *[(f"setting {k}", _setting(v)) for k, v in model.params_to_json().items()],
+        *model.operator_.describe(in_u, out_u),
+        (
+            "training input range",
+            f"{model.input_range_[0]:.6g} to {model.input_range_[1]:.6g} {in_u}",
+        ),
+        *[(k, f"{v:.6g} {u}") for k, (v, u) in model.coefficients().items()],
+        (
+            "input dynamics",
+            "none"
+            if not model.input_dynamics_.active
+            else f"{model.input_dynamics_.kind}: lag {model.input_dynamics_.tau * 1e3:.4g} ms, "
+            f"delay {model.input_dynamics_.delay * 1e3:.4g} ms",
+        ),
+    ]
+    if model.output_dynamics_.active:
+        rep.add("output_mode_hz", "output mode: resonance", model.output_dynamics_.f0, "Hz")
+        rep.add("output_mode_zeta", "output mode: damping ratio", model.output_dynamics_.zeta, "")
+    if model.input_dynamics_.active:
+        rep.add("input_lag_s", "input dynamics: lag", model.input_dynamics_.tau, "s")
+        rep.add("input_delay_s", "input dynamics: delay", model.input_dynamics_.delay, "s")
+    err = y - pred
+    rep.add("samples", "samples", int(x.size))
+    _windows(rep, model, t)
+    nrmse_pct = 100 * nrmse(y, pred)
+    rep.add("nrmse_pct", "NRMSE (RMSE / output span)", nrmse_pct, "%")
+    zero_pct = 100 * nrmse(y, np.zeros_like(y))
+    rep.add("nrmse_zero_pct", "NRMSE of predicting zero (the baseline)", zero_pct, "%")
+    if nrmse_pct >= zero_pct:
+        rep.add("verdict", "verdict", "worse than predicting zero: the model does not describe "
+                "this record (check the columns, units and the model's class)")  # fmt: skip
+    rep.add("rmse", "RMSE", rmse(y, pred), out_u)
+    rep.add("max_abs_error", "largest error", float(np.max(np.abs(err))), out_u)
+    rep.add("hysteresis_width_measured_pct", "hysteresis width, measured",
+            100 * hysteresis_width(x, y), "%")  # fmt: skip
+    lo, hi = model.input_range_
+    if not math.isnan(lo):
+        outside = int(np.count_nonzero((x < lo - 1e-9) | (x > hi + 1e-9)))
+        rep.add("samples_outside_training_range", "samples outside the training range", outside)
+    # the model a wide pale band beneath, the measured line thin on top: both stay visible
+    measured = {"color": "0.2", "lw": 0.8, "zorder": 3}
+    model_line = {"color": "C0", "lw": 3.0, "alpha": 0.45, "zorder": 2}
+    rep.figure("loop.png", "input-output loop: data (dark line) and model (blue band)", [
+        {"curves": [(x, y, "measured", measured), (x, pred, "model", model_line)],
+         "xlabel": "input", "xunit": in_u, "ylabel": "output", "yunit": out_u, "title": ""},
+    ])  # fmt: skip
+    caption = f"output over time, and the residual (NRMSE {nrmse_pct:.3g} %)"
+    rep.figure("fit.png", caption, [
+        {"curves": [(t, y, "measured", measured), (t, pred, "model", model_line)],
+         "xlabel": "time", "xunit": "s", "ylabel": "output", "yunit": out_u},
+        {"curves": [(t, err, "measured - model", {"lw": 0.7, "color": "C3"})],
+         "xlabel": "time", "xunit": "s", "ylabel": "residual", "yunit": out_u},
+    ], stacked=True)  # fmt: skip
+    growth = model.growth_coefficients()
+    if growth:
+        pure = y - model.growth(rec.x, t=rec.t)[w]
+        for k, (v, u) in growth.items():
+            rep.add(f"growth_{k}", f"growth term {k}", v, u)
+        rep.add("hysteresis_width_growth_removed_pct", "hysteresis width, growth removed",
+                100 * hysteresis_width(x, pure), "%")  # fmt: skip
+        rep.figure("growth_removed.png", "identified growth removed (eq. 19)", [
+            {"curves": [(x, y, "measured", {"lw": 0.7, "color": "0.55"}),
+                        (x, pure, "growth removed", {"lw": 1.1, "color": "C1"})],
+             "xlabel": "input", "xunit": in_u, "ylabel": "output", "yunit": out_u},
+        ])  # fmt: skip
+    chosen = "+".join(k for k in growth) or "none"
+    for label, score in model.selection_.items():  # the term selection, fold by fold
+        folds = ", ".join(f"{f:.4g}" for f in model.selection_folds_.get(label, []))
+        mark = " (chosen)" if label == chosen else ""
+        rep.add(f"selection_{label}", f"held-out RMSE, growth {label}{mark}",
+                f"{score:.4g} {out_u}; per fold: {folds}")  # fmt: skip
+    return rep
+
+
+def _setting(value: object) -> str:
+    """A model setting as a reader wants it: text bare, lists joined, none as 'default'."""
+    if value is None:
+        return "default"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, str):
+        return value
+    if isinstance(value, list | tuple):
+        return ", ".join(_setting(v) for v in value) or "none"
+    if isinstance(value, dict):
+        return ", ".join(f"{k}: {_setting(v)}" for k, v in value.items()) or "none"
+    return f"{value:.6g}" if isinstance(value, float) else str(value)
+
+
+def _windows(rep: Any, model: HysteresisModel, t: FloatArray) -> None:
+    """Which part of the record trained the model and how much of the scored part it never
+    saw (by time: when the report's record is the one the model was fitted on)."""
+    t0, t1 = model.train_window_
+    a, b = float(t[0]), float(t[-1])
+    rep.add("scored_window_s", "scored window", f"{a:.6g} to {b:.6g}", "s")
+    if not (math.isfinite(t0) and math.isfinite(t1)):
+        rep.add("training_window_s", "training window", "unknown (not in the model file)")
+        return
+    rep.add("training_window_s", "training window (of the record it was fitted on)",
+            f"{t0:.6g} to {t1:.6g}", "s")  # fmt: skip
+    unseen = float(np.mean((t < t0) | (t > t1)))
+    rep.add("held_out_pct", "scored samples outside the training window (held out, if this "
+            "is the record it was fitted on)", 100 * unseen, "%")  # fmt: skip
+
+
+def _fmt(values: FloatArray) -> str:
+    return ", ".join(f"{v:.6g}" for v in values)

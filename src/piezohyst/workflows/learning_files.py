@@ -1,0 +1,264 @@
+"""Learning across trial files: what ``piezohyst learn`` does, for labs that run their own DAQ.
+
+Each call reads what the DAQ recorded over the trial last written, learns from it, and
+writes the next trial's commands; the learner's state lives in a JSON file between calls
+(written atomically, and bound to its model, settings and trajectory).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from ..control.compensator import CompensatorSettings
+from ..control.leakage import Leakage
+from ..control.learning import LearningCompensator, Trial
+from ..errors import DataFileError, ModelFileError, ParameterError
+from ..io import read_table, write_table
+from ..io._formats import Table
+from ..io.screening import NOISE_REACH, noise_level
+from ..model.persistence import load_model
+from ._base import guard_outputs
+
+__all__ = ["LearnFileResult", "learn_file", "recording_check"]
+
+
+@dataclass(frozen=True)
+class LearnFileResult:
+    """What one call of :func:`learn_file` did.
+
+    Attributes
+    ----------
+    learner : LearningCompensator
+    trial : Trial or None
+        What the recorded trial measured (None on the first call).
+    commands : ndarray
+        The next trial's voltages, as written.
+    """
+
+    learner: LearningCompensator
+    trial: Trial | None
+    commands: np.ndarray
+
+
+def _column(table: Table, name: str, what: str) -> np.ndarray:
+    if name not in table:
+        msg = (
+            f"{table.path}: no column {name!r} for the {what} (columns: {', '.join(table.columns)})"
+        )
+        raise DataFileError(msg)
+    return table.get(name, finite=False)
+
+
+def learn_file(
+    model_path: str | Path,
+    state_path: str | Path,
+    out: str | Path,
+    *,
+    recorded: str | Path | None = None,
+    desired: str | Path | None = None,
+    column: str = "desired",
+    settings: CompensatorSettings | None = None,
+    leakage: str | Path | None = None,
+    lag: float = 0.0,
+    learning_gain: float | Literal["auto"] = "auto",
+    cutoff: float | Literal["auto"] = "auto",
+    voltage_column: str = "voltage",
+    reading_column: str = "charge",
+    sensor: bool = False,
+    tolerance: float = 1e-4,
+    lead_in: bool = True,
+    voltage_tolerance: float | None = None,
+    force: bool = False,
+) -> LearnFileResult:
+    """One trial of learning through files.
+
+    The first call (no state file yet) takes the desired trajectory and writes
+    the first trial's commands. Every later call takes the file the DAQ recorded
+    over the trial just sent: its voltage column must be the commands written,
+    or the voltage the DAQ measured while sending them (:func:`recording_check`:
+    the commands plus white noise; two runs are never mixed), its
+    ``reading_column`` the charge (or,
+    with ``sensor``, a displacement in m).
+    The state is saved after the commands are written, so a call that fails
+    halfway can be repeated with the same files.
+
+    Parameters
+    ----------
+    model_path, state_path, out : path
+        The model file, the learner's state (JSON), the next commands' CSV
+        (``time``, ``command``, ``desired``).
+    recorded : path, optional
+        The trial's recording.
+    desired : path, optional
+        The trajectory (column ``column``, and ``time`` or ``sample_rate``), first call only.
+    settings : CompensatorSettings
+        Limits (default: the model's training range), slew limit, sample rate,
+        domain and gain.
+    leakage : path, optional
+        A leakage file (:func:`~piezohyst.control.leakage.calibrate_leakage`); default the model's.
+    lag, learning_gain, cutoff, lead_in
+        See :class:`~piezohyst.LearningCompensator`.
+    voltage_tolerance : float, optional
+        How far (V) the recorded voltage may stray from the commands; default from
+        its noise (:func:`recording_check`, what it found kept in the state file).
+    force : bool, default False
+        Replace an ``out`` that piezohyst did not write.
+
+    Returns
+    -------
+    LearnFileResult
+    """
+    settings = settings or CompensatorSettings()
+    state_path, out = Path(state_path), Path(out)
+    inputs = [p for p in (model_path, recorded, desired, leakage, state_path) if p is not None]
+    guard_outputs([out], inputs, force=force)
+    model = load_model(model_path)
+    lo, hi = model.input_range_
+    v_min = lo if settings.v_min is None else settings.v_min
+    v_max = hi if settings.v_max is None else settings.v_max
+    first = not state_path.exists()
+    d: np.ndarray | None = None
+    saved: dict[str, Any] = {}
+    rate = settings.sample_rate
+    if first:
+        if desired is None or recorded is not None:
+            msg = (
+                f"no learning state at {state_path} yet: start with --desired (the trajectory) "
+                "and no recording"
+            )
+            raise ParameterError(msg)
+        table = read_table(Path(desired))
+        d = _column(table, column, "desired trajectory")
+        if rate is None:
+            t = _column(table, "time", "time (or give --sample-rate)")
+            rate = float(f"{(t.size - 1) / (t[-1] - t[0]):.12g}")  # 1000.0, not 999.9999999999
+    else:
+        if desired is not None:
+            msg = f"{state_path} already holds a trajectory: --desired starts a run (new file)"
+            raise ParameterError(msg)
+        try:
+            saved = json.loads(state_path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            msg = f"{state_path}: cannot read the learning state ({exc})"
+            raise ModelFileError(msg) from None
+        if rate is None:  # the rate the run was started with
+            rate = float(saved.get("sample_rate", 0.0)) if isinstance(saved, dict) else 0.0
+            if not rate > 0:
+                msg = f"{state_path}: no sample rate in the state: give --sample-rate"
+                raise ModelFileError(msg)
+    learner = LearningCompensator(
+        model,
+        v_min=v_min,
+        v_max=v_max,
+        sample_rate=rate,
+        leakage=None if leakage is None else Leakage.load(leakage),
+        slew_rate=settings.slew_rate,
+        domain=settings.domain,
+        gain=settings.gain,
+        allow_extrapolation=settings.allow_extrapolation,
+        lag=lag,
+        learning_gain=learning_gain,
+        cutoff=cutoff,
+        lead_in=lead_in,
+    )
+    trial = None
+    check: dict[str, float] = {}
+    if not first:
+        learner.restore(saved, str(state_path))
+        if recorded is None:
+            msg = f"{state_path} waits for trial {learner.trials}'s recording (RECORDED)"
+            raise ParameterError(msg)
+        rec = Path(recorded)
+        sent = learner.pending
+        assert sent is not None
+        recording = read_table(rec)
+        v = _column(recording, voltage_column, "voltage sent")
+        if v.size != sent.size:
+            msg = f"{rec}: {v.size} rows, but trial {learner.trials} sent {sent.size} commands"
+            raise DataFileError(msg)
+        check = recording_check(v, sent, tolerance * (v_max - v_min), voltage_tolerance)
+        if check["worst_row"] >= 0:
+            row = int(check["worst_row"])
+            msg = (
+                f"{rec}: row {row}'s voltage {v[row - 1]:.6g} V is not the command written for "
+                f"trial {learner.trials} ({sent[row - 1]:.6g} V; off by {check['off_V']:.3g} V, "
+                f"allowed {check['allowed_V']:.3g} V, the difference not white noise: lag-1 "
+                f"autocorrelation {check['lag1']:.2f}): a recording of another trial or run "
+                "(--voltage-tolerance sets what is allowed)"
+            )
+            raise DataFileError(msg)
+        y = _column(recording, reading_column, "reading")
+        trial = learner.learn(displacement=y) if sensor else learner.learn(y)
+    else:
+        assert d is not None
+    commands = learner.command(d)
+    desired_now = learner.desired
+    t = np.arange(commands.size) / rate
+    write_table(out, {"time": t, "command": commands, "desired": desired_now})
+    payload: dict[str, Any] = learner.to_dict()
+    payload["sample_rate"] = rate
+    if check:  # how the last recording's voltage was matched to the commands, for the record
+        payload["recording_check"] = check
+    learner.save_dict(state_path, payload)
+    return LearnFileResult(learner, trial, commands)
+
+
+def recording_check(
+    voltage: np.ndarray, sent: np.ndarray, floor: float, allowed: float | None = None
+) -> dict[str, float]:
+    """Whether a trial's recorded voltage is the commands sent, or those commands measured
+    with noise.
+
+    A DAQ logs the command written, or the voltage it measured: the commands plus
+    white noise. The recording is the trial's own when every row is within
+    ``floor`` (V) of its command, or when the difference is white noise: its lag-1
+    autocorrelation within 4/sqrt(N) of 0 (four standard errors) and every row
+    within 10x its noise level (:func:`~piezohyst.io.screening.noise_level`; the
+    Gaussian range over 10^4-10^5 samples). Another trial's commands differ by
+    what was learned, which follows the trajectory from sample to sample (lag-1
+    autocorrelation 0.4-0.9 between the trials of a 5 Hz scan), so its recording
+    is refused. ``allowed`` (V) replaces the rule: every row within it.
+
+    Parameters
+    ----------
+    voltage, sent : ndarray
+        The recorded voltage and the commands written (V), row for row.
+    floor : float
+        A difference (V) any recording may show (the DAQ's rounding).
+    allowed : float, optional
+        The allowed difference (V), overriding the rule.
+
+    Returns
+    -------
+    dict
+        ``noise_V``, ``lag1`` (the difference's lag-1 autocorrelation), ``allowed_V``,
+        ``off_V`` (the largest difference) and ``worst_row`` (the 1-based row of the
+        largest difference when the recording is refused, else -1).
+    """
+    diff = voltage - sent
+    if not np.isfinite(diff).all():
+        row = int(np.argmax(~np.isfinite(diff)))
+        return {"noise_V": math.nan, "lag1": math.nan, "allowed_V": math.nan,
+                "off_V": math.inf, "worst_row": float(row + 1)}  # fmt: skip
+    off = np.abs(diff)
+    worst = int(np.argmax(off)) if off.size else 0
+    largest = float(off[worst]) if off.size else 0.0
+    noise = noise_level(diff)
+    lag1 = math.nan
+    if diff.size > 2 and float(np.std(diff)) > 0.0:
+        lag1 = float(np.corrcoef(diff[1:], diff[:-1])[0, 1])
+    if allowed is not None:
+        limit = float(allowed)
+        ok = largest <= limit
+    else:
+        white = math.isfinite(lag1) and abs(lag1) <= 4.0 / math.sqrt(diff.size)
+        limit = max(floor, NOISE_REACH * noise) if white else floor
+        ok = largest <= limit
+    return {"noise_V": noise, "lag1": lag1, "allowed_V": limit, "off_V": largest,
+            "worst_row": -1.0 if ok else float(worst + 1)}  # fmt: skip
