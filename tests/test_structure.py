@@ -50,3 +50,66 @@ def test_no_class_swaps_itself_in_new() -> None:
 def test_behaviour_is_not_chosen_by_model_core_or_compensator_class() -> None:
     found = _isinstance_on_classes()
     assert len(found) <= 5, found
+
+
+def _imports(path: Path) -> list[tuple[str, str, str]]:
+    """(importer, target module, name) of each ``from ... import`` inside piezohyst."""
+    rel = path.relative_to(SRC).with_suffix("")
+    parts = ["piezohyst", *rel.parts]
+    is_init = parts[-1] == "__init__"
+    mod = ".".join(parts[:-1] if is_init else parts)
+    base = mod.split(".") if is_init else mod.split(".")[:-1]
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                b = base[: len(base) - (node.level - 1)]
+                target = ".".join([*b, *([node.module] if node.module else [])])
+            else:
+                target = node.module or ""
+            if target.startswith("piezohyst"):
+                found += [(mod, target, a.name) for a in node.names]
+    return found
+
+
+def _package(dotted: str) -> str:
+    return ".".join(dotted.split(".")[:2])
+
+
+def test_private_stays_in_its_package() -> None:
+    """No ``_name`` is imported across a package, and no package reaches into another's
+    private module: what another package needs is public in its package (io exports
+    ``estimated_rows``, not ``io._formats``). The numba kernels are the one private package
+    the layers above call."""
+    crossing = []
+    for path in MODULES:
+        for mod, target, name in _imports(path):
+            if _package(target) == _package(mod):
+                continue
+            private_name = name.startswith("_") and not name.startswith("__")
+            private_module = any(p.startswith("_") for p in target.split(".")[2:])
+            if private_name or private_module:
+                crossing.append(f"{mod} imports {target}.{name}")
+    assert not crossing, crossing
+
+
+def test_no_import_circle_between_modules_outside_one_package() -> None:
+    """Modules of different packages never import each other in a circle (the layers
+    forbid it); inside a package the one left is control's compensator and its engines."""
+    edges: dict[str, set[str]] = {}
+    for path in MODULES:
+        for mod, target, name in _imports(path):
+            full = f"{target}.{name}"
+            edges.setdefault(mod, set()).add(full if _is_module(full) else target)
+    circles = {
+        tuple(sorted((a, b)))
+        for a, targets in edges.items()
+        for b in targets
+        if a != b and a in edges.get(b, set())
+    }
+    assert circles <= {("piezohyst.control.compensator", "piezohyst.control.inverses")}, circles
+
+
+def _is_module(dotted: str) -> bool:
+    rel = Path(*dotted.split(".")[1:])
+    return (SRC / rel).with_suffix(".py").exists() or (SRC / rel / "__init__.py").exists()

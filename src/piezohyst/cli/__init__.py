@@ -297,7 +297,7 @@ def fit(
     if model_name == "auto":
         _fit_auto(ctx, data, operators, initial_state, data_spec, out, force)
         return
-    from ..io._formats import estimated_rows
+    from ..io import estimated_rows
     from ..workflows import KEEP_ROWS
 
     # a window of up to KEEP_ROWS rows is read once and kept; a longer one streams 3 passes

@@ -19,8 +19,7 @@ import click
 from ..control.compensator import CompensatorSettings, Domain
 from ..control.selfsensing import LoopSettings
 from ..errors import PiezohystError
-from ..io import DataSpec
-from ..io._formats import estimated_rows
+from ..io import DataSpec, estimated_rows
 from ..model.models import HysteresisModel, model_names
 
 

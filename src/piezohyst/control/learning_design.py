@@ -10,7 +10,7 @@ from typing import Any, Literal
 import numpy as np
 
 from .._validation import check_float
-from ..model.dynamics import _response
+from ..model.dynamics import filter_response
 
 FloatArray = np.ndarray
 
@@ -143,7 +143,7 @@ def _q(f: FloatArray, cutoff: float) -> FloatArray:
 def _l(f: FloatArray, lag: float, dt: float) -> Any:
     if lag <= 0:
         return np.ones(f.shape, dtype=complex)
-    return 1.0 / _response(0.0, lag, dt, f)
+    return 1.0 / filter_response(0.0, lag, dt, f)
 
 
 def _contraction(

@@ -42,7 +42,9 @@ from ._formats import (
     _read_tdms,
     _read_text,
     _read_text_careful,
+    estimated_rows,
 )
+from ._isolate import parse_isolated
 from ._writers import (
     atomic_folder,
     atomic_write,
@@ -68,9 +70,11 @@ __all__ = [
     "check_finite",
     "check_increasing",
     "collect",
+    "estimated_rows",
     "is_piezohyst_output",
     "open_recording",
     "open_table",
+    "parse_isolated",
     "read_recording",
     "read_table",
     "write_blocks",

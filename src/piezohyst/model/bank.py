@@ -566,7 +566,7 @@ def _read_arrays(p: Path, suffix: str) -> dict[str, Any]:
             header = str(f["bank"][0])
             channels = [str(s) for s in f["channels"]]
     else:
-        from ..io._isolate import parse_isolated
+        from ..io import parse_isolated
 
         header, channels = parse_isolated("bank_hdf5", p, "HDF5")
     data: dict[str, Any] = json.loads(header)

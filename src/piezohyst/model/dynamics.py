@@ -30,7 +30,7 @@ else:  # numba loads when a model first runs (see _lazy)
     _kernels = LazyModule("piezohyst._kernels.play", globals(), "_kernels")
     _signals = LazyModule("piezohyst._kernels.signal", globals(), "_signals")
 
-__all__ = ["KINDS", "InputDynamics", "OutputDynamics", "ResponseInterval"]
+__all__ = ["KINDS", "InputDynamics", "OutputDynamics", "ResponseInterval", "filter_response"]
 
 KINDS = ("none", "delay", "first-order", "delay+first-order")
 
@@ -68,8 +68,23 @@ class ResponseInterval:
         )
 
 
-def _response(delay: Any, tau: Any, dt: float, frequency: Any) -> Any:
-    """The discrete filter's response: linear-interpolated delay, then a held-input lag."""
+def filter_response(delay: Any, tau: Any, dt: float, frequency: Any) -> Any:
+    """The discrete filter's response: linear-interpolated delay, then a held-input lag.
+
+    Parameters
+    ----------
+    delay, tau : float or array_like
+        Delay and lag (s).
+    dt : float
+        Sample interval (s).
+    frequency : float or array_like
+        Frequency (Hz).
+
+    Returns
+    -------
+    complex or ndarray of complex
+        The filter's gain and phase at each frequency.
+    """
     f = np.asarray(frequency, dtype=np.float64)
     d = np.asarray(delay, dtype=np.float64)
     tt = np.asarray(tau, dtype=np.float64)
@@ -231,7 +246,7 @@ class InputDynamics:
         -------
         complex ndarray
         """
-        return _response(self.delay, self.tau, self.sample_interval, frequency)
+        return filter_response(self.delay, self.tau, self.sample_interval, frequency)
 
     def stderr(self) -> tuple[float, float]:
         """Standard errors (s) of ``(delay, tau)``; NaN when unknown.
@@ -289,7 +304,7 @@ class InputDynamics:
         pts = np.concatenate([ring, 0.5 * ring, np.zeros((2, 1))], axis=1)
         delay = np.maximum(self.delay + pts[0], 0.0)
         tau = np.maximum(self.tau + pts[1], 0.0)
-        h = _response(delay, tau, self.sample_interval, np.full(delay.size, f))
+        h = filter_response(delay, tau, self.sample_interval, np.full(delay.size, f))
         gain = np.abs(h)
         phase = -np.degrees(np.unwrap(np.angle(h)))
         miss = np.abs(np.sin(np.radians(phase - phase0)))

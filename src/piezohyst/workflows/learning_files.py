@@ -19,8 +19,7 @@ from ..control.compensator import CompensatorSettings
 from ..control.leakage import Leakage
 from ..control.learning import LearningCompensator, Trial
 from ..errors import DataFileError, ModelFileError, ParameterError
-from ..io import read_table, write_table
-from ..io._formats import Table
+from ..io import Table, read_table, write_table
 from ..io.screening import NOISE_REACH, noise_level
 from ..model.persistence import load_model
 from ._base import guard_outputs
