@@ -57,7 +57,10 @@ __all__ = [
 
 S = TypeVar("S")
 
-PERIODIC_PASSES = 200  # at most this many passes of a record for its periodic state
+#: At most this many passes of a record for its periodic state, for every core: play
+#: operators repeat within two passes once the period reaches its extremes (the loop stops
+#: there); creep and relaxation lags settle by their time constants, which may take more
+PERIODIC_PASSES = 200
 
 #: Every registered core class by its ``kind`` (a file's ``core.kind``)
 CORES: dict[str, type[Core]] = {}

@@ -33,7 +33,7 @@ from ..identification import (
     without_time,
 )
 from ..terms import Integral, Term, TimeTerm
-from .base import Core, CoreFit, FitJob, InversePlan, Propagation, _frozen
+from .base import PERIODIC_PASSES, Core, CoreFit, FitJob, InversePlan, Propagation, _frozen
 
 if TYPE_CHECKING:
     from ..._kernels import play as _kernels
@@ -521,11 +521,6 @@ def history_state(
     z = np.full(thr.size, h[0]) if state is None else np.array(state, dtype=np.float64)
     _kernels.pi_forward(h, thr, np.zeros(thr.size), z, np.empty_like(h))
     return z
-
-
-#: Passes over a period before its operator states must repeat (play operators settle
-#: within two passes once the period reaches its extremes; more covers rounding)
-PERIODIC_PASSES = 10
 
 
 def periodic_state(blocks: Blocks, thresholds: ArrayLike, x_first: float) -> FloatArray:
