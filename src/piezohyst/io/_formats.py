@@ -338,7 +338,16 @@ def _table_start(lines: list[tuple[int, str]], look: int = 200) -> int:
 
 def estimated_rows(path: Path) -> int | None:
     """About how many rows a file holds, without reading it: a Parquet file's own count,
-    a text file's size over its head's mean line length; None for other formats."""
+    a text file's size over its head's mean line length; None for other formats.
+
+    Parameters
+    ----------
+    path : Path
+
+    Returns
+    -------
+    int or None
+    """
     try:
         suffix = path.suffix.lower()
         if suffix == ".parquet":

@@ -88,6 +88,11 @@ def parse_isolated(parser: str, path: Path, kind: str) -> Any:
     kind : str
         The format's name for the message ("MAT", "HDF5").
 
+    Returns
+    -------
+    object
+        What the parser returned: plain data.
+
     Raises
     ------
     DataFileError
