@@ -22,8 +22,7 @@ from pathlib import Path
 import numpy as np
 
 import piezohyst as ph
-from piezohyst.model.cores.play import history_state
-from piezohyst.model.identification import default_thresholds
+from piezohyst.model.cores.play import default_thresholds, history_state
 
 Factory = Callable[[], ph.HysteresisModel]
 
@@ -477,8 +476,8 @@ def boucwen(data: Path) -> str:
 
 def rate(data: Path) -> str:
     """What a lag model absorbs on the two 1 Hz sets that log the *commanded* voltage."""
+    from piezohyst.io.blocks import block_dt
     from piezohyst.metrics import hysteresis_width
-    from piezohyst.model.identification import block_dt
 
     act = ph.read_table(data / "piezo_actuator_smarthysteresis" / "hysteresis_v_150_1hz.csv")
     mm = np.loadtxt(data / "piezo_micromanipulator_dbo" / "Model_Vi_Do.dat")

@@ -9,12 +9,13 @@ from typing import Any
 import piezohyst as ph
 from piezohyst import io, testing
 from piezohyst.control import compensator, export
-from piezohyst.io import screening
-from piezohyst.model import bank, identification, models, persistence, terms
+from piezohyst.io import blocks, screening
+from piezohyst.model import bank, models, persistence, terms
+from piezohyst.model.cores import play, solve
 from piezohyst.workflows import fleet
 
-MODULES = [ph, models, terms, identification, compensator, export, persistence, io, bank, fleet,
-           screening, testing]  # fmt: skip
+MODULES = [ph, models, terms, solve, blocks, play, compensator, export, persistence, io, bank,
+           fleet, screening, testing]  # fmt: skip
 
 
 def _documented_objects() -> Iterator[tuple[str, Any]]:

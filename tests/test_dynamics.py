@@ -138,7 +138,7 @@ def test_state_chunks_and_files(
     np.testing.assert_array_equal(back.predict(rec.voltage, t=rec.t), whole)
     with pytest.raises(ph.ParameterError, match="record in memory"):
         ph.ActivePI(5, input_dynamics="delay").fit_blocks(
-            ph.model.identification.array_blocks(rec.voltage, rec.charge, rec.t)
+            ph.io.blocks.array_blocks(rec.voltage, rec.charge, rec.t)
         )
 
 

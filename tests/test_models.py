@@ -435,9 +435,7 @@ def test_a_record_that_starts_mid_cycle_fits_from_its_periodic_state() -> None:
     np.testing.assert_allclose(periodic.weights_, truth.weights, rtol=1e-8)
     # the same period again, predicted from its periodic state
     np.testing.assert_allclose(periodic.predict(v, state="periodic"), q, rtol=0, atol=1e-15)
-    z = periodic_state(
-        ph.model.identification.array_blocks(v, v, None), truth.thresholds, float(v[0])
-    )
+    z = periodic_state(ph.io.blocks.array_blocks(v, v, None), truth.thresholds, float(v[0]))
     np.testing.assert_array_equal(
         periodic.predict(v, state="periodic"), periodic.predict(v, state=z)
     )

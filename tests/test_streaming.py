@@ -15,8 +15,8 @@ import piezohyst.io as pio
 import piezohyst.io._formats as formats
 import piezohyst.workflows as wf
 from piezohyst.errors import DataFileError
-from piezohyst.model.cores.play import history_state
-from piezohyst.model.identification import Summary, array_blocks, default_thresholds
+from piezohyst.io.blocks import Summary, array_blocks
+from piezohyst.model.cores.play import default_thresholds, history_state
 
 from .strategies import examples
 
@@ -46,7 +46,7 @@ def small_batches(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def split_blocks(
     x: np.ndarray, y: np.ndarray, t: np.ndarray | None, cuts: list[int]
-) -> ph.model.identification.Blocks:
+) -> ph.io.blocks.Blocks:
     edges = [0, *sorted(set(c % x.size for c in cuts) - {0}), x.size]
 
     def blocks():  # type: ignore[no-untyped-def]

@@ -78,9 +78,8 @@ from .model.bank import ModelBank, load_bank
 from .model.cores.base import Core, Propagation, Region
 from .model.cores.boucwen import BoucWenHysteresis
 from .model.cores.duhem import DuhemHysteresis
-from .model.cores.play import PIHysteresis
+from .model.cores.play import PIHysteresis, default_thresholds
 from .model.cores.preisach import PreisachHysteresis
-from .model.identification import default_thresholds
 from .model.model import History, HysteresisModel, InverseSpec, ModelState
 from .model.models import (
     ActivePI,

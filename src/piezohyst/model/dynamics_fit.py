@@ -17,9 +17,10 @@ from typing import Any
 import numpy as np
 
 from .._validation import FloatArray
-from .cores.play import PIHysteresis, PlayCore
+from ..io.blocks import Summary, array_blocks, block_dt
+from .cores.play import PIHysteresis, PlayCore, default_thresholds
+from .cores.solve import identify
 from .dynamics import InputDynamics, OutputDynamics
-from .identification import Summary, array_blocks, block_dt, default_thresholds, identify
 
 __all__ = ["search_dynamics"]
 

@@ -26,12 +26,12 @@ from ..errors import (
     RecordWarning,
     TimeAxisError,
 )
+from ..io.blocks import Blocks, Summary, array_blocks, block_dt
 from ..io.screening import screen
 from .cores.base import Core, CoreFit, FitJob
 from .dynamics import InputDynamics, OutputDynamics
 from .dynamics_fit import profile_dynamics, search_dynamics
 from .estimator import _dynamics_kind, _output_kind
-from .identification import Blocks, Summary, array_blocks, block_dt
 from .state import InitialState, ModelState
 from .terms import Term
 

@@ -49,6 +49,7 @@ from ..errors import (
     NotInvertibleError,
     ParameterError,
 )
+from ..io.blocks import Blocks, Summary
 from .cores.base import Core, Propagation
 from .dynamics import InputDynamics, OutputDynamics
 from .estimator import (
@@ -64,7 +65,6 @@ from .estimator import (
     _unit,
 )
 from .fitting import fit_arrays, fit_stream, set_fitted
-from .identification import Blocks, Summary
 from .persistence import model_from_dict, model_to_dict, register, save_model
 from .state import (
     History,

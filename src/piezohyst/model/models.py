@@ -27,6 +27,7 @@ from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, check_float
 from ..errors import ParameterError
+from ..io.blocks import Summary, array_blocks
 from ..metrics import rmse
 from .cores.base import FitJob
 from .cores.boucwen import BoucWenHysteresis
@@ -45,7 +46,6 @@ from .estimator import (
     _thresholds,
 )
 from .fitting import apply_fit
-from .identification import Summary, array_blocks
 from .model import HysteresisModel, InverseSpec
 from .persistence import model_class, model_names
 from .state import History, InitialState, ModelState

@@ -20,8 +20,9 @@ from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_signal, as_time, same_length
 from ..errors import ExtrapolationWarning, ParameterError, ShapeError, TimeAxisError
+from ..io.blocks import BLOCK, block_dt
 from .cores.base import Propagation
-from .identification import BLOCK, block_dt, term_columns
+from .terms import term_columns
 
 __all__ = [
     "History",

@@ -84,6 +84,7 @@ __all__ = [
     "growth_kinds",
     "make_term",
     "term_class",
+    "term_columns",
 ]
 
 _TERMS: dict[str, type[Term]] = {}
@@ -835,3 +836,28 @@ def coefficient_arrays(
             msg = f"the {term.kind!r} term takes {term.width} coefficients. Got {c.size}."
             raise ShapeError(msg)
     return coefs
+
+
+def term_columns(
+    terms: Sequence[Term],
+    x: FloatArray,
+    t: FloatArray | None,
+    dt: FloatArray | None,
+    states: Sequence[FloatArray],
+    out: FloatArray,
+) -> None:
+    """Every term's columns for one block, side by side in ``out`` (states updated).
+
+    Parameters
+    ----------
+    terms : sequence of Term
+    x, t, dt : ndarray
+        The block's input, times and intervals (see :meth:`Term.columns`).
+    states : sequence of ndarray
+        One state per term, updated in place.
+    out : ndarray, shape (len(x), total width)
+    """
+    col = 0
+    for term, state in zip(terms, states, strict=True):
+        out[:, col : col + term.width] = term.columns(x, t, dt, state)
+        col += term.width

@@ -44,8 +44,8 @@ from ..io import (
     write_rows,
     write_table,
 )
-from ..model.cores.play import history_state
-from ..model.identification import Blocks, Summary, default_thresholds
+from ..io.blocks import Blocks, Summary
+from ..model.cores.play import default_thresholds, history_state
 from ..model.model import History, HysteresisModel, InitialState, ModelState
 from ..model.persistence import model_class, model_names
 from ..simulation import DEFAULT_PRESET, PRESETS, BenchRecord, batch_unit, simulate

@@ -14,8 +14,8 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..._validation import FloatArray, as_signal
-from ..identification import BLOCK, Blocks, block_dt, term_columns
-from ..terms import Term
+from ...io.blocks import BLOCK, Blocks, block_dt
+from ..terms import Term, term_columns
 from .base import Core, CoreFit, FitJob
 from .play import growth_proxy
 

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import importlib
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, Generic, NamedTuple, TypeVar
 
@@ -37,6 +37,7 @@ from numpy.typing import ArrayLike
 from ..._lazy import LazyModule
 from ..._validation import FloatArray, as_signal
 from ...errors import NotInvertibleError, NumericRangeError, ParameterError, ShapeError
+from ...io.blocks import Blocks
 
 if TYPE_CHECKING:
     from ..._kernels import packed as D
@@ -280,9 +281,6 @@ class Region:
         return cls(data["v_lo"], data["v_hi"], data["q_lo"], data["q_hi"])
 
 
-Blocks = Callable[[], Iterable[tuple[FloatArray, FloatArray, FloatArray | None]]]
-
-
 @dataclass
 class FitJob:
     """What the model hands a core's identification step.
@@ -291,7 +289,7 @@ class FitJob:
     ----------
     blocks : callable
         Returns the record's ``(x, y, t)`` blocks from its start, each call.
-    summary : identification.Summary
+    summary : io.blocks.Summary
         The record's extremes, length and times.
     terms : list of Term
         Bound terms beside the core: kept ones (creep, asymmetry) first, then

@@ -20,7 +20,6 @@ import numpy as np
 from ..._lazy import LazyModule
 from ..._validation import FloatArray
 from ...errors import InsufficientDataError, ParameterError, ShapeError
-from ..identification import _bounded_lstsq
 from ._inmemory import (
     FIT_ROWS,
     SEARCH_ROWS,
@@ -39,6 +38,7 @@ from .base import (
     _finite,
     _frozen,
 )
+from .solve import bounded_lstsq as _bounded_lstsq
 
 if TYPE_CHECKING:
     from ..._kernels import packed as D

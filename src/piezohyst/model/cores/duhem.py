@@ -21,7 +21,6 @@ from numpy.typing import ArrayLike
 from ..._lazy import LazyModule
 from ..._validation import FloatArray
 from ...errors import InsufficientDataError, ParameterError, ShapeError
-from ..identification import _bounded_lstsq
 from ._inmemory import (
     FIT_ROWS,
     REFINE_EVALS,
@@ -41,6 +40,7 @@ from .base import (
     _nodes,
     _slopes,
 )
+from .solve import bounded_lstsq as _bounded_lstsq
 
 #: full-range cycles (and samples per leg) over which a fitted core must settle, and the
 #: step per cycle below which its loops count as closed (a fraction of the output's span)

@@ -3,7 +3,7 @@ r"""The play-operator core: Prandtl-Ishlinskii hysteresis (paper eq. 9-12, 18).
 Everything about it in one place: :class:`PIHysteresis`, the immutable fitted
 core (propagation, the eq. 18 inverse, its states, its file form);
 :class:`PlayCore`, the regressor columns it contributes to the one linear
-solve (:mod:`piezohyst.model.identification`); its identification step
+solve (:mod:`piezohyst.model.cores.solve`); its identification step
 (:meth:`PIHysteresis.identify`), and :func:`growth_proxy`, the PI fit other
 cores use to settle their growth terms. The per-sample loops are the play
 kernels in :mod:`piezohyst._kernels`.
@@ -21,19 +21,12 @@ import numpy.typing as npt
 from numpy.typing import ArrayLike
 
 from ..._lazy import LazyModule
-from ..._validation import FloatArray, as_signal
+from ..._validation import FloatArray, as_signal, check_int
 from ...errors import NotInvertibleError, NumericRangeError, ParameterError, ShapeError
-from ..identification import (
-    Blocks,
-    Identification,
-    Summary,
-    array_blocks,
-    default_thresholds,
-    identify,
-    without_time,
-)
+from ...io.blocks import Blocks, Summary, array_blocks, without_time
 from ..terms import Integral, Term, TimeTerm
 from .base import PERIODIC_PASSES, Core, CoreFit, FitJob, InversePlan, Propagation, _frozen
+from .solve import Identification, identify
 
 if TYPE_CHECKING:
     from ..._kernels import play as _kernels
@@ -43,6 +36,7 @@ else:  # numba loads when a model first runs (see _lazy)
 __all__ = [
     "PIHysteresis",
     "PlayCore",
+    "default_thresholds",
     "growth_proxy",
     "history_state",
     "initial_operators",
@@ -700,3 +694,36 @@ def growth_proxy(
     sol = identify(PlayCore(thr), terms, blocks, sm, z0, min_slope=1e-3, subsets=subsets)
     fit = solution_fit(PlayCore(thr).build(sol.core, z0), terms, sol)
     return list(fit.terms), list(fit.coefs), fit.selection if select else None
+
+
+def default_thresholds(x: ArrayLike, n_operators: int) -> FloatArray:
+    r"""Evenly spaced thresholds over half of the input's range.
+
+    :math:`r_i = i \cdot \Delta x / (2n)`, :math:`i = 0 \dots n-1`, where
+    :math:`\Delta x` is the input's span. The largest threshold stays below
+    :math:`\Delta x / 2`: a wider play never reverses inside the range and only
+    adds a column collinear with the input and the offset. The rule depends on
+    the span only, so it suits unipolar (0..Vmax) and bipolar drive alike.
+
+    Parameters
+    ----------
+    x : array_like
+        The training input (V).
+    n_operators : int
+        Number of thresholds, 0 included, in [1, 1000].
+
+    Returns
+    -------
+    ndarray, shape (n_operators,)
+
+    Examples
+    --------
+    >>> default_thresholds([0.0, 140.0], 4).tolist()
+    [0.0, 17.5, 35.0, 52.5]
+    """
+    xs = as_signal(x, "x")
+    n = check_int(n_operators, "n_operators", "default_thresholds", 1, 1000)
+    span = float(xs.max() - xs.min())
+    if span <= 0.0:
+        return np.arange(n, dtype=np.float64)  # any increasing set: the input never moves
+    return np.arange(n, dtype=np.float64) * (span / (2.0 * n))

@@ -23,7 +23,6 @@ from numpy.typing import ArrayLike
 from ..._lazy import LazyModule
 from ..._validation import FloatArray, as_signal
 from ...errors import InsufficientDataError, ParameterError, ShapeError
-from ..identification import _bounded_lstsq
 from ..terms import Relaxation
 from ._inmemory import (
     FIT_ROWS,
@@ -43,6 +42,7 @@ from .base import (
     _frozen,
     _nodes,
 )
+from .solve import bounded_lstsq as _bounded_lstsq
 
 if TYPE_CHECKING:
     from ..._kernels import packed as D

@@ -33,23 +33,23 @@ import functools
 import itertools
 import math
 import operator
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import numpy.typing as npt
-from numpy.typing import ArrayLike
 
-from .._lazy import LazyModule
-from .._validation import FloatArray, as_signal, check_int
-from ..errors import InsufficientDataError
-from .dynamics import OutputDynamics
-from .terms import Term
+from ..._lazy import LazyModule
+from ..._validation import FloatArray
+from ...errors import InsufficientDataError
+from ...io.blocks import BLOCK, Blocks, Summary
+from ..dynamics import OutputDynamics
+from ..terms import Term, term_columns
 
 if TYPE_CHECKING:
-    from .._kernels import play as _kernels
-    from .._kernels import signal as _signals
+    from ..._kernels import play as _kernels
+    from ..._kernels import signal as _signals
 else:  # numba loads when a model first runs (see _lazy)
     _kernels = LazyModule("piezohyst._kernels.play", globals(), "_kernels")
     _signals = LazyModule("piezohyst._kernels.signal", globals(), "_signals")
@@ -84,20 +84,8 @@ class ColumnCore(Protocol):
         ...
 
 
-__all__ = [
-    "BLOCK",
-    "Identification",
-    "NormalEquations",
-    "Summary",
-    "array_blocks",
-    "block_dt",
-    "default_thresholds",
-    "identify",
-    "term_columns",
-    "without_time",
-]
+__all__ = ["Identification", "NormalEquations", "bounded_lstsq", "identify"]
 
-BLOCK = 4096  # samples per block when accumulating or streaming
 # term selection by forward-chaining (blocked) time-series cross-validation: the first
 # SELECT_START of the record trains, the rest is cut into SELECT_FOLDS blocks, each
 # predicted by a fit on everything before it
@@ -135,219 +123,6 @@ def _folds(parts: list[NormalEquations]) -> list[NormalEquations]:
         return [functools.reduce(operator.add, [start, *pieces[:half]]),
                 functools.reduce(operator.add, pieces[half:])]  # fmt: skip
     return [start, *folds]
-
-
-Triple = tuple[FloatArray, FloatArray, FloatArray | None]
-Blocks = Callable[[], Iterable[Triple]]
-"""A record that can be read again from its start: each call yields ``(x, y, t)`` blocks."""
-
-
-def array_blocks(x: FloatArray, y: FloatArray, t: FloatArray | None) -> Blocks:
-    """Arrays in memory as a :data:`Blocks` source (views, no copies).
-
-    Parameters
-    ----------
-    x, y : ndarray
-    t : ndarray or None
-
-    Returns
-    -------
-    callable
-    """
-
-    def blocks() -> Iterator[Triple]:
-        for lo in range(0, x.size, 1 << 18):
-            hi = lo + (1 << 18)
-            yield x[lo:hi], y[lo:hi], None if t is None else t[lo:hi]
-
-    return blocks
-
-
-def without_time(blocks: Blocks) -> Blocks:
-    """The same record with its times dropped (for models without rate-dependent terms).
-
-    Parameters
-    ----------
-    blocks : Blocks
-
-    Returns
-    -------
-    Blocks
-    """
-    return lambda: ((x, y, None) for x, y, _ in blocks())
-
-
-@dataclass(frozen=True)
-class Summary:
-    """What a fit needs to know of a whole record before it reads it again.
-
-    Attributes
-    ----------
-    n : int
-        Samples.
-    x_first, x_min, x_max, y_first, y_min, y_max : float
-        First value and extremes of input and output.
-    t_first, t_last : float
-        First and last time (s); NaN without times.
-    max_slew_rate : float
-        Fastest input change (input units per s); NaN without times.
-    max_step : float
-        Largest input change from one sample to the next (input units).
-    """
-
-    n: int
-    x_first: float
-    x_min: float
-    x_max: float
-    y_first: float
-    y_min: float
-    y_max: float
-    t_first: float = float("nan")
-    t_last: float = float("nan")
-    max_slew_rate: float = float("nan")
-    max_step: float = float("nan")
-
-    @classmethod
-    def of(cls, blocks: Blocks) -> Summary:
-        """One pass over a record.
-
-        Parameters
-        ----------
-        blocks : Blocks
-
-        Returns
-        -------
-        Summary
-
-        Raises
-        ------
-        InsufficientDataError
-            The record is empty.
-        """
-        n = 0
-        x0 = y0 = t0 = t1 = x_last = np.nan
-        x_lo = y_lo = np.inf
-        x_hi = y_hi = -np.inf
-        slew = np.nan
-        jump = 0.0
-        for x, y, t in blocks():
-            if x.size == 0:
-                continue
-            if n == 0:
-                x0, y0 = float(x[0]), float(y[0])
-                t0 = np.nan if t is None else float(t[0])
-            x_lo, x_hi = min(x_lo, float(x.min())), max(x_hi, float(x.max()))
-            if x.size > 1:
-                jump = max(jump, float(np.max(np.abs(np.diff(x)))))
-            if n > 0:
-                jump = max(jump, abs(float(x[0]) - x_last))
-            y_lo, y_hi = min(y_lo, float(y.min())), max(y_hi, float(y.max()))
-            if t is not None:
-                steps = [np.abs(np.diff(x)) / np.diff(t)] if x.size > 1 else []
-                if n > 0:  # the step from the previous block
-                    steps.append(np.array([abs(x[0] - x_last) / (t[0] - t1)]))
-                if steps:
-                    fastest = max(float(np.max(s)) for s in steps)
-                    slew = fastest if np.isnan(slew) else max(slew, fastest)
-                t1 = float(t[-1])
-            x_last = float(x[-1])
-            n += x.size
-        if n == 0:
-            msg = "the record holds no samples"
-            raise InsufficientDataError(msg)
-        return cls(n, x0, x_lo, x_hi, y0, y_lo, y_hi, t0, t1, slew, jump if n > 1 else np.nan)
-
-    @property
-    def x_range(self) -> FloatArray:
-        """``[x_min, x_max]``: what :meth:`~piezohyst.model.terms.Term.bind` and thresholds need."""
-        return np.array([self.x_min, self.x_max])
-
-
-def default_thresholds(x: ArrayLike, n_operators: int) -> FloatArray:
-    r"""Evenly spaced thresholds over half of the input's range.
-
-    :math:`r_i = i \cdot \Delta x / (2n)`, :math:`i = 0 \dots n-1`, where
-    :math:`\Delta x` is the input's span. The largest threshold stays below
-    :math:`\Delta x / 2`: a wider play never reverses inside the range and only
-    adds a column collinear with the input and the offset. The rule depends on
-    the span only, so it suits unipolar (0..Vmax) and bipolar drive alike.
-
-    Parameters
-    ----------
-    x : array_like
-        The training input (V).
-    n_operators : int
-        Number of thresholds, 0 included, in [1, 1000].
-
-    Returns
-    -------
-    ndarray, shape (n_operators,)
-
-    Examples
-    --------
-    >>> default_thresholds([0.0, 140.0], 4).tolist()
-    [0.0, 17.5, 35.0, 52.5]
-    """
-    xs = as_signal(x, "x")
-    n = check_int(n_operators, "n_operators", "default_thresholds", 1, 1000)
-    span = float(xs.max() - xs.min())
-    if span <= 0.0:
-        return np.arange(n, dtype=np.float64)  # any increasing set: the input never moves
-    return np.arange(n, dtype=np.float64) * (span / (2.0 * n))
-
-
-def block_dt(
-    t: FloatArray | None, start: int, stop: int, t_previous: float | None
-) -> FloatArray | None:
-    """Sample intervals (s) of ``t[start:stop]``; the record's first is 0 unless it continues.
-
-    Parameters
-    ----------
-    t : ndarray or None
-        The whole record's times (s); None for a rate-independent model.
-    start, stop : int
-        The block.
-    t_previous : float or None
-        Time of the sample before ``t[0]`` when continuing a saved state.
-
-    Returns
-    -------
-    ndarray or None
-    """
-    if t is None:
-        return None
-    dt = np.empty(stop - start)
-    if start > 0:
-        dt[0] = t[start] - t[start - 1]
-    else:
-        dt[0] = 0.0 if t_previous is None else t[0] - t_previous
-    dt[1:] = np.diff(t[start:stop])
-    return dt
-
-
-def term_columns(
-    terms: Sequence[Term],
-    x: FloatArray,
-    t: FloatArray | None,
-    dt: FloatArray | None,
-    states: Sequence[FloatArray],
-    out: FloatArray,
-) -> None:
-    """Every term's columns for one block, side by side in ``out`` (states updated).
-
-    Parameters
-    ----------
-    terms : sequence of Term
-    x, t, dt : ndarray
-        The block's input, times and intervals (see :meth:`Term.columns`).
-    states : sequence of ndarray
-        One state per term, updated in place.
-    out : ndarray, shape (len(x), total width)
-    """
-    col = 0
-    for term, state in zip(terms, states, strict=True):
-        out[:, col : col + term.width] = term.columns(x, t, dt, state)
-        col += term.width
 
 
 @dataclass(frozen=True)
@@ -542,7 +317,7 @@ RANK_RTOL = 1e-12
 TIE_BREAK = 1e-10
 
 
-def _bounded_lstsq(gram: FloatArray, rhs: FloatArray, lower: FloatArray) -> FloatArray:
+def bounded_lstsq(gram: FloatArray, rhs: FloatArray, lower: FloatArray) -> FloatArray:
     """Minimise ``q'Gq - 2b'q`` subject to ``q >= lower`` (``-inf`` = free).
 
     Columns are scaled to unit norm and the scaled Gram matrix is split by its
@@ -563,6 +338,20 @@ def _bounded_lstsq(gram: FloatArray, rhs: FloatArray, lower: FloatArray) -> Floa
     moves the solution by rounding amplified by the problem's conditioning
     (``1e-12`` relative where no bound is active, up to ``5e-5`` with many active
     bounds and a near-null free face), and the fitted output less.
+
+    Parameters
+    ----------
+    gram : ndarray, shape (p, p)
+        :math:`X^T X`.
+    rhs : ndarray, shape (p,)
+        :math:`X^T y`.
+    lower : ndarray, shape (p,)
+        The lower bounds (``-inf``: free).
+
+    Returns
+    -------
+    ndarray, shape (p,)
+        The solution ``q``.
     """
     p = rhs.size
     d = np.sqrt(np.abs(np.diag(gram)))
@@ -751,7 +540,7 @@ def identify(
         )
         m = core.slope_map(p)
         g = eqs.gram[np.ix_(cols, cols)]
-        return np.asarray(m @ _bounded_lstsq(m.T @ g @ m, m.T @ eqs.rhs[cols], lower))
+        return np.asarray(m @ bounded_lstsq(m.T @ g @ m, m.T @ eqs.rhs[cols], lower))
 
     def cancelling(subset: tuple[int, ...]) -> bool:
         """Growth terms that mostly cancel each other on the record (each larger than
