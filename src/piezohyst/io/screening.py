@@ -234,19 +234,17 @@ class Screen:
         -------
         str
         """
-        shown = ", ".join(
+        n = len(self.outliers)
+        shown = _listing([
             f"{f'{o.column}[{o.row - 1}]' if arrays else f'row {o.row} column {o.column!r}'} "
             f"{o.value:.6g}{_unit(units.get(o.column))} (neighbours {o.replacement:.6g})"
-            for o in self.outliers[:SHOWN]
-        )
-        more = len(self.outliers) - SHOWN
-        n = len(self.outliers)
+            for o in self.outliers
+        ])  # fmt: skip
         return (
             f"{where}: {n} isolated outlier{'s' if n > 1 else ''} (a sample standing out of "
-            f"both neighbours by over {NOISE_REACH:g}x the column's noise): {shown}"
-            f"{f' and {more} more' if more > 0 else ''}; kept out of the fit, its voltage "
-            "range and slew (replaced by its neighbours' mean); keep them with "
-            "keep_outliers=True (--keep-outliers)"
+            f"both neighbours by over {NOISE_REACH:g}x the column's noise): {shown}; kept out "
+            "of the fit, its voltage range and slew (replaced by its neighbours' mean); keep "
+            "them with keep_outliers=True (--keep-outliers)"
         )
 
     def hole_message(self, where: str, *, arrays: bool = False) -> str:
@@ -263,20 +261,24 @@ class Screen:
         -------
         str
         """
-        shown = ", ".join(
+        n = len(self.holes)
+        shown = _listing([
             f"before {f't[{h.row - 1}]' if arrays else f'row {h.row}'} ({h.length:.4g} s "
             f"missing after t = {h.time:.6g} s)"
-            for h in self.holes[:SHOWN]
-        )
-        more = len(self.holes) - SHOWN
-        n = len(self.holes)
+            for h in self.holes
+        ])  # fmt: skip
         return (
             f"{where}: {n} hole{'s' if n > 1 else ''} in the time axis (an interval over "
-            f"{HOLE_FACTOR:g}x the median {self.interval:.4g} s): {shown}"
-            f"{f' and {more} more' if more > 0 else ''}; the model holds its state across "
-            "and integrates leakage over the real time, but what the actuator did there is "
-            "unknown"
+            f"{HOLE_FACTOR:g}x the median {self.interval:.4g} s): {shown}; the model holds its "
+            "state across and integrates leakage over the real time, but what the actuator did "
+            "there is unknown"
         )
+
+
+def _listing(items: list[str]) -> str:
+    """The first :data:`SHOWN` items, then how many more."""
+    more = len(items) - SHOWN
+    return ", ".join(items[:SHOWN]) + (f" and {more} more" if more > 0 else "")
 
 
 def _unit(unit: str | None) -> str:
