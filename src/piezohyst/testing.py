@@ -174,7 +174,7 @@ def _estimator(core: Core) -> Any:
     for name in model_names():  # the registry lists the plainest preset of a core first
         cls = model_class(name)
         params = cls().get_params()
-        if cls()._core_class() is not type(core):
+        if cls().core_class is not type(core):
             continue
         kw: dict[str, Any] = {"growth_terms": ()} if "growth_terms" in params else {}
         n = getattr(core, "n_operators", None)

@@ -41,7 +41,7 @@ def _scorer(
     x_range = np.array([float(x.min()), float(x.max())])
     x_lo, x_hi = float(x_range[0]), float(x_range[1])
     terms, _ = model._terms_to_fit(x_range, params)
-    if model._core_class() is not PIHysteresis:  # shape terms belong to a core the proxy lacks
+    if model.core_class is not PIHysteresis:  # shape terms belong to a core the proxy lacks
         terms = [term for term in terms if term.removed]
     rate = any(term.rate_dependent for term in terms)
     # the proxy of every model (the other cores too): up to 8 play operators

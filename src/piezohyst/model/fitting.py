@@ -162,7 +162,7 @@ def _own_fit(
 ) -> Any:
     """``fit_sse(dynamics)`` for :func:`profile_dynamics`: the model's own fit on the
     command filtered by ``dynamics`` (warnings kept for the final fit)."""
-    cheap = model._core_class().profile_settings
+    cheap = model.core_class.profile_settings
 
     def fit_sse(dyn: InputDynamics, final: bool) -> tuple[float, FloatArray | None]:
         us, _ = dyn.apply(xs, dt)
@@ -230,7 +230,7 @@ def identify_model(
                  {**params, **(params.get("settings") or {})}, type(model).__name__,
                  model.input_unit, model.output_unit,
                  model.__dict__.get("_fitting_output"))  # fmt: skip
-    apply_fit(model, model._core_class().identify(job))
+    apply_fit(model, model.core_class.identify(job))
     _training_facts(model, sm)
     score_model(model, blocks, sm)
     return sm

@@ -277,7 +277,8 @@ class HysteresisModel(Estimator):
         self.input_dynamics = input_dynamics
         self.output_dynamics = output_dynamics
 
-    def _core_class(self) -> type[Core]:
+    @property
+    def core_class(self) -> type[Core]:
         """The core class this model fits (a preset's class attribute, or the ``core`` setting)."""
         return _core_rule(self.core, "core", type(self).__name__)
 

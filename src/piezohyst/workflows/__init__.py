@@ -45,7 +45,7 @@ from ..io import (
     write_table,
 )
 from ..io.blocks import Blocks, Summary
-from ..model.cores.play import default_thresholds, history_state
+from ..model.cores.base import Core
 from ..model.model import History, HysteresisModel, InitialState, ModelState
 from ..model.persistence import model_class, model_names
 from ..simulation import DEFAULT_PRESET, PRESETS, BenchRecord, batch_unit, simulate
@@ -337,15 +337,15 @@ def fit_file(
     window = _window_blocks(stream, passes)
     warn_clipped(_window_output(stream), stream.names[1], stream.units[1], data)
     start: InitialState = initial_state
-    if math.isfinite(stream.t_start) and "n_operators" not in accepted:
-        before = _history_input(stream, passes.tick())  # a core other than play operators runs it
-        start = History(before) if before is not None else initial_state
-    elif math.isfinite(stream.t_start):  # the window continues a known input history
-        thresholds = default_thresholds(
-            Summary.of(window).x_range, check_int(operators, "operators", "fit", 1, 1000)
-        )
-        estimator = cls(**{**settings, "thresholds": thresholds})
-        start = _history(stream, thresholds, passes.tick())
+    if math.isfinite(stream.t_start):  # the window continues a known input history
+        plan = estimator.core_class.states_before_fit(estimator.get_params(), Summary.of(window))
+        if plan is None:  # the fit runs the history itself
+            before = _history_input(stream, passes.tick())
+            start = History(before) if before is not None else initial_state
+        else:  # the core's states run through the history first, streamed
+            fixed, probe = plan
+            estimator.set_params(**fixed)
+            start = _history(stream, probe, passes.tick())
     try:
         fitted: HysteresisModel = estimator.fit_blocks(
             window, timed=not stream.untimed, initial_state=start
@@ -584,14 +584,16 @@ def _window_output(stream: RecordingStream) -> Iterator[FloatArray]:
 
 
 def _history(
-    stream: RecordingStream, thresholds: FloatArray, progress: Callable[[int], None] | None
+    stream: RecordingStream, core: Core, progress: Callable[[int], None] | None
 ) -> FloatArray | None:
-    """Operator states at the window's start, from the input before it (None: no history)."""
+    """The core's state at the window's start, from the input before it, block by block
+    (None: no history)."""
     z = None
     for b in stream.blocks(progress):
         before = int(np.searchsorted(b.t, stream.t_start, "left"))
         if before:
-            z = history_state(b.x[:before], thresholds, z)
+            x = b.x[:before]
+            z = core.propagate(x, core.rest_state(float(x[0])) if z is None else z).state
         if before < b.t.size:
             break
     return z

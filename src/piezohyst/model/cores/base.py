@@ -37,7 +37,7 @@ from numpy.typing import ArrayLike
 from ..._lazy import LazyModule
 from ..._validation import FloatArray, as_signal
 from ...errors import NotInvertibleError, NumericRangeError, ParameterError, ShapeError
-from ...io.blocks import Blocks
+from ...io.blocks import Blocks, Summary
 
 if TYPE_CHECKING:
     from ..._kernels import packed as D
@@ -566,6 +566,29 @@ class Core:
     def min_slope(self) -> float:
         """The smallest slope of the output in the input (output per V), > 0."""
         raise NotImplementedError
+
+    @classmethod
+    def states_before_fit(
+        cls, settings: dict[str, Any], window: Summary
+    ) -> tuple[dict[str, Any], Core] | None:
+        """For a fit on a window of a longer record: the settings the fit fixes from the
+        window, and a core the input before the window can run through first, when its
+        state does not depend on what the fit identifies (play operators: their thresholds
+        alone). None (the default) when it does: the fit runs the history itself (a
+        ``History`` start), and a file's history is read into memory for it.
+
+        Parameters
+        ----------
+        settings : dict
+            The model's settings.
+        window : Summary
+            The window's summary (its input range).
+
+        Returns
+        -------
+        tuple of (dict, Core), or None
+        """
+        return None
 
     @classmethod
     def identify(cls, job: FitJob) -> CoreFit:

@@ -286,6 +286,19 @@ class PIHysteresis(Core):
         """See :meth:`~piezohyst.model.cores.base.Core.history_state`."""
         return history_state(history, self.thresholds)
 
+    @classmethod
+    def states_before_fit(
+        cls, settings: dict[str, Any], window: Summary
+    ) -> tuple[dict[str, Any], Core] | None:
+        """See :meth:`~piezohyst.model.cores.base.Core.states_before_fit`: the thresholds
+        from the window's range (unless set), and play operators of those thresholds (their
+        states do not depend on the weights the fit identifies)."""
+        thr = settings.get("thresholds")
+        if thr is None:
+            thr = default_thresholds(window.x_range, int(settings["n_operators"]))
+        thr = np.asarray(thr, dtype=np.float64)
+        return {**settings, "thresholds": thr}, cls(thr, np.ones(thr.size))
+
     def periodic_state(self, x: ArrayLike) -> FloatArray:
         """See :meth:`~piezohyst.model.cores.base.Core.periodic_state`."""
         xs = as_signal(x, "x")
