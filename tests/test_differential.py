@@ -408,7 +408,7 @@ def test_every_command_is_safe(
         if slew is not None:
             assert abs(v - last) <= slew / 1000.0 * (1 + 1e-12)
         if np.isfinite(d) and slew is None and 0.0 < v < hi:
-            y = comp.core.predict([v], before)[0]
+            y = comp.spec.operator.predict([v], before)[0]
             # tol: as above, one step at a time
             assert y == pytest.approx(d, abs=1e-9 * span)
         last = v
@@ -428,12 +428,12 @@ def test_leaving_the_region_warns_and_the_compensator_stops_at_its_edge(
     desired = np.concatenate([np.linspace(bottom, top, 400), np.linspace(top, bottom, 400)])
     strict = ph.Compensator(model, slew_rate=None, v_min=0.0, v_max=hi)
     free = ph.Compensator(model, slew_rate=None, v_min=0.0, v_max=hi, allow_extrapolation=True)
-    region, config = strict.region, strict.config
+    region, config = strict.inverse.region, strict.inverse.config
     tol = float(config[D.CC_TOL])
 
     def distance(comp: Any) -> float:
         z = comp.state.operators
-        return float(D.region_distance(region, config, z[0], comp.core.output(z)))
+        return float(D.region_distance(region, config, z[0], comp.spec.operator.output(z)))
 
     far_free = far_strict = 0.0
     for d in desired:

@@ -323,8 +323,8 @@ class BankCompensator(ChannelBank[Compensator]):
         if self.fused:
             # one array per quantity; each channel's compensator keeps views of its row,
             # so channel(i) stays live and identical to the bank's state
-            self.tables = self._stack([ch.tables for ch in channels])
-            self.config = self._stack([ch.config for ch in channels])
+            self.tables = self._stack([ch.inverse.tables for ch in channels])
+            self.config = self._stack([ch.inverse.config for ch in channels])
             self._state = self._stack([ch.kernel_state for ch in channels])
             for i, ch in enumerate(channels):
                 ch.share(self.tables[i], self.config[i], self._state[i])
@@ -490,8 +490,8 @@ class BankController(ChannelBank[SelfSensingController]):
         if not self.fused:
             return
         comps = [ch.compensator for ch in channels]
-        self.tables = self._stack([cp.tables for cp in comps])
-        comp_config = self._stack([cp.config for cp in comps])
+        self.tables = self._stack([cp.inverse.tables for cp in comps])
+        comp_config = self._stack([cp.inverse.config for cp in comps])
         self.state_array = self._stack([cp.kernel_state for cp in comps])
         self.config = self._stack([ch.config for ch in channels])
         self.ctl = self._stack([ch.ctl for ch in channels])

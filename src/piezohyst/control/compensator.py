@@ -31,7 +31,7 @@ from .._lazy import LazyModule
 from .._validation import FloatArray
 from ..errors import LimitWarning, ParameterError, ShapeError
 from ..model.model import HysteresisModel, InverseSpec
-from .inverses import INVERSES, CompensatorState, Inverse, _finite_number
+from .inverses import INVERSES, CompensatorState, EngineSettings, Inverse, finite_number
 
 if TYPE_CHECKING:
     from .._kernels import packed as D
@@ -103,23 +103,6 @@ class Compensator:
     own :class:`BankCompensator`.
     """
 
-    # the kernel arrays the engine lays out (``setup``, :mod:`piezohyst.control.inverses`)
-    inverse: Inverse
-    analytic: bool
-    _plain: bool
-    tables: FloatArray
-    config: FloatArray
-    _state: FloatArray
-    static: FloatArray
-    lags: FloatArray
-    params: FloatArray
-    region: FloatArray
-    trial: FloatArray
-    slow: FloatArray
-    core: Any
-    _n_aux: int
-    _ns: int
-
     def __init__(
         self,
         model: HysteresisModel,
@@ -132,12 +115,15 @@ class Compensator:
         gain: float | None = None,
         allow_extrapolation: bool = False,
     ) -> None:
-        spec, max_step, inv_gain = self._settings(
+        spec, settings = self._settings(
             model, v_min, v_max, slew_rate, sample_rate, domain, gain, allow_extrapolation
         )
-        #: the engine the core's inverse plan names (play, packed, python)
-        self.inverse = INVERSES[spec.operator.inverse_plan().engine]()
-        self.inverse.setup(self, spec, max_step, inv_gain)
+        #: the engine the core's inverse plan names (play, packed, python): it owns the
+        #: kernel arrays (:mod:`piezohyst.control.inverses`)
+        self.inverse: Inverse = INVERSES[spec.operator.inverse_plan().engine](spec, settings)
+        #: True when eq. 18's analytic inverse runs (no Newton solve); fixed by the model
+        self.analytic = self.inverse.analytic
+        self._plain = self.inverse.plain
         self.reset()
 
     def _settings(
@@ -150,8 +136,8 @@ class Compensator:
         domain: Domain,
         gain: float | None,
         allow_extrapolation: bool,
-    ) -> tuple[InverseSpec, float, float]:
-        """The checks and settings every compensator shares; (spec, max step, inverse gain)."""
+    ) -> tuple[InverseSpec, EngineSettings]:
+        """The checks and settings every compensator shares; (spec, the engine's settings)."""
         inversion = getattr(model, "inversion", None)
         if not callable(inversion):
             msg = (
@@ -161,8 +147,8 @@ class Compensator:
             )
             raise ParameterError(msg)
         spec: InverseSpec = inversion()
-        self.v_min = _finite_number(v_min, "v_min")
-        self.v_max = _finite_number(v_max, "v_max")
+        self.v_min = finite_number(v_min, "v_min")
+        self.v_max = finite_number(v_max, "v_max")
         if not self.v_min < self.v_max:
             msg = f"Compensator needs v_min < v_max. Got v_min={v_min!r}, v_max={v_max!r}."
             raise ParameterError(msg)
@@ -180,11 +166,11 @@ class Compensator:
                 raise ParameterError(msg)
             slew_rate, max_step = _trained_limit(model, sample_rate)
         if slew_rate is not None:
-            rate = _finite_number(slew_rate, "slew_rate")
+            rate = finite_number(slew_rate, "slew_rate")
             if sample_rate is None:
                 msg = "A slew_rate (V/s) needs the loop's sample_rate (Hz). Got sample_rate=None."
                 raise ParameterError(msg)
-            fs = _finite_number(sample_rate, "sample_rate")
+            fs = finite_number(sample_rate, "sample_rate")
             if rate <= 0 or fs <= 0:
                 msg = f"slew_rate and sample_rate must be > 0. Got {slew_rate!r}, {sample_rate!r}."
                 raise ParameterError(msg)
@@ -200,7 +186,7 @@ class Compensator:
             if gain is None:
                 msg = "domain='displacement' needs the gain (m per model output unit). Got None."
                 raise ParameterError(msg)
-            g = _finite_number(gain, "gain")
+            g = finite_number(gain, "gain")
             if g == 0.0:
                 msg = "The 'gain' parameter of Compensator must be non-zero. Got 0."
                 raise ParameterError(msg)
@@ -221,8 +207,7 @@ class Compensator:
         # input dynamics: an integer delay (handled by preview) and lags inverted per sample
         self.dynamic = dyn.active
         self.delay_samples = 0
-        self.dyn = np.zeros(2)
-        self.dstate = np.zeros(2)
+        frac = lag_gain = 0.0
         self._last_desired = math.nan
         #: A mechanical mode after the hysteresis, inverted from the desired trajectory (its
         #: differences taken at the loop's rate when given, else the training record's)
@@ -237,12 +222,17 @@ class Compensator:
             # per sample (above half a sample its inverse rings: see _kernels.DYN_FRACTION)
             self.delay_samples = math.floor(d + 0.5)
             frac = d - self.delay_samples
-            if abs(frac) > 1e-9:
-                self.dyn[K.DYN_FRACTION] = frac
+            if abs(frac) <= 1e-9:
+                frac = 0.0
             if dyn.tau > 0:
-                self.dyn[K.DYN_GAIN_B] = 1.0 - math.exp(-dt / dyn.tau)
+                lag_gain = 1.0 - math.exp(-dt / dyn.tau)
         self._max_step = max_step
-        return spec, max_step, inv_gain
+        settings = EngineSettings(
+            self.v_min, self.v_max, max_step, inv_gain, sample_rate, domain,
+            allow_extrapolation, self.mode.active, self.delay_samples, frac, lag_gain,
+            self.dynamic,
+        )  # fmt: skip
+        return spec, settings
 
     @property
     def max_step(self) -> float:
@@ -278,12 +268,12 @@ class Compensator:
     @property
     def n_operators(self) -> int:
         """Values in the core's state (play operators: their number)."""
-        return int(self.inverse.n_operators(self))
+        return int(self.inverse.n_operators())
 
     @property
     def state(self) -> CompensatorState:
         """The forward states and the last command (copies; see :meth:`reset`)."""
-        return self.inverse.state(self)
+        return self.inverse.state()
 
     @property
     def mode_history(self) -> FloatArray:
@@ -303,12 +293,12 @@ class Compensator:
         tables, config, state : ndarray
             Views of the container's rows, laid out as this compensator's own.
         """
-        self.inverse.share(self, tables, config, state)
+        self.inverse.share(tables, config, state)
 
     @property
     def last_command(self) -> float:
         """The command sent last (V): where the actuator sits now."""
-        return float(self.inverse.last_command(self))
+        return float(self.inverse.last_command())
 
     @property
     def kernel_state(self) -> FloatArray:
@@ -317,22 +307,22 @@ class Compensator:
         For loops built on this compensator's kernel (the self-sensing
         controller); use :attr:`state` and :meth:`reset` otherwise.
         """
-        return self._state
+        return self.inverse.kernel_state
 
     @property
     def nonfinite_count(self) -> int:
         """Desired values that were NaN or infinite (the last command was held)."""
-        return int(self.inverse.nonfinite_count(self))
+        return int(self.inverse.nonfinite_count())
 
     @property
     def saturated_count(self) -> int:
         """Samples whose command was clipped to ``[v_min, v_max]`` (out of reach)."""
-        return int(self.inverse.saturated_count(self))
+        return int(self.inverse.saturated_count())
 
     @property
     def outside_count(self) -> int:
         """Commands that would have left the identified region (held unless extrapolating)."""
-        return int(self.inverse.outside_count(self))
+        return int(self.inverse.outside_count())
 
     def reset(
         self, state: CompensatorState | ArrayLike | None = None, *, voltage: float | None = None
@@ -360,7 +350,9 @@ class Compensator:
         ParameterError
             If the last command would lie outside the limits.
         """
-        self.inverse.reset(self, state, voltage)
+        self.inverse.reset(state, voltage)
+        self._mode_history[:] = np.nan
+        self._last_desired = math.nan
         self._count_reset()
 
     def precondition(
@@ -388,7 +380,7 @@ class Compensator:
         ndarray
             The voltages (V) to send.
         """
-        cycle = self.inverse.precondition(self, self._cycle(samples, span))
+        cycle = self.inverse.precondition(self._cycle(samples, span))
         self._tally[K.TALLY_PREV] = self.last_command  # a cycle at the slew limit: not counted
         self._tally[K.TALLY_ARRIVED] = 0.0  # nor the ramp from its end to the trajectory
         return cycle
@@ -420,9 +412,10 @@ class Compensator:
             for a, b, m in zip(knots[:-1], knots[1:], counts, strict=True)
         ]
         if self.dynamic:  # hold each extreme until the lagging piezo voltage has reached it
-            gain = self.dyn[K.DYN_GAIN_B]  # the lag's (creep terms of other cores follow)
+            dyn = self.inverse.dyn
+            gain = dyn[K.DYN_GAIN_B]  # the lag's (creep terms of other cores follow)
             settle = int(np.ceil(-np.log(1e-9) / -np.log1p(-gain))) if gain > 0 else 0
-            settle += 1 if self.dyn[K.DYN_FRACTION] != 0 else 0  # the fraction: one sample
+            settle += 1 if dyn[K.DYN_FRACTION] != 0 else 0  # the fraction: one sample
             settle += self.delay_samples
             for j in (0, 1):
                 pieces[j] = np.concatenate([pieces[j], np.full(settle, knots[j + 1])])
@@ -473,7 +466,8 @@ class Compensator:
             )
             raise ParameterError(msg) from None
         if self._plain:  # the common case first: one kernel call, the command counted in it
-            c = float(K.compensator_step_tallied(d, self.tables, self.config, self._state,
+            e = self.inverse
+            c = float(K.compensator_step_tallied(d, e.tables, e.config, e.kernel_state,
                                                  self._tally))  # fmt: skip
         else:
             c = float(K.tally_command(self._step_general(d, preview), self._tally))
@@ -504,7 +498,7 @@ class Compensator:
 
     def _inner_step(self, target: float) -> float:
         """The engine's command for the hysteresis output ``target`` (after mode and delay)."""
-        return float(self.inverse.inner_step(self, target))
+        return float(self.inverse.inner_step(target))
 
     def _step_mode_delayed(self, d: float, preview: ArrayLike | None) -> float:
         """A mode and an integer delay: the command now acts ``m`` samples later, so the
@@ -625,7 +619,7 @@ class Compensator:
 
     def _inner_process(self, d: FloatArray, out: FloatArray) -> None:
         """The engine over a block of hysteresis outputs (after the mode)."""
-        self.inverse.inner_process(self, d, out)
+        self.inverse.inner_process(d, out)
 
 
 #: The share of commands held by a limit above which a compensator or controller warns

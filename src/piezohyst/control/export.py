@@ -141,8 +141,8 @@ def export_c(
             "(ph.Compensator) only."
         )
         raise ParameterError(msg)
-    tables = comp.tables
-    config = comp.config
+    tables = comp.inverse.tables
+    config = comp.inverse.config
     state = comp.state
     n = comp.n_operators
     spec = comp.spec
@@ -170,8 +170,13 @@ def export_c(
     init = [] if controller is None else _feedback_init(controller, p)
     files = ["ieee.c", "play.c"]
     if comp.dynamic:
-        lines += _constants(p, FRACTION=comp.dyn[K.DYN_FRACTION], GAIN_B=comp.dyn[K.DYN_GAIN_B])
-        init = [f"s->w = {_literal(comp.dstate[0], p)};", f"s->u = {_literal(comp.dstate[1], p)};"]
+        lines += _constants(
+            p, FRACTION=comp.inverse.dyn[K.DYN_FRACTION], GAIN_B=comp.inverse.dyn[K.DYN_GAIN_B]
+        )
+        init = [
+            f"s->w = {_literal(comp.inverse.dstate[0], p)};",
+            f"s->u = {_literal(comp.inverse.dstate[1], p)};",
+        ]
         files.append("play_dynamic.c")
     if controller is not None:
         c = controller.ctl
@@ -279,13 +284,13 @@ def _packed_c(comp: Compensator, prefix: str, precision: Precision) -> CCode:
     bounded time per sample.
     """
     p = precision
-    params, cfg, state = comp.params, comp.config, comp.state
+    params, cfg, state = comp.inverse.params, comp.inverse.config, comp.state
     kind = int(params[0])
-    n_lags = int(comp.lags.shape[1])
-    has_slow = int(comp.slow.size > 0)
+    n_lags = int(comp.inverse.lags.shape[1])
+    has_slow = int(comp.inverse.slow.size > 0)
     step = float(cfg[D.CC_MAX_STEP])
     has_slew = int(np.isfinite(step))
-    region = comp.region
+    region = comp.inverse.region
     has_region = int(region.shape[1] > 0 and np.isfinite(cfg[D.CC_TOL]))
     lines = [
         f"#define NS {prefix.upper()}_NS",
@@ -325,7 +330,7 @@ def _packed_c(comp: Compensator, prefix: str, precision: Precision) -> CCode:
         ]
         files.append("duhem.c")
     if has_slow:  # the slow core: the Preisach grid functions again, on its own grid
-        lines.append(_preisach_constants(comp.slow, p, "SLOW_"))
+        lines.append(_preisach_constants(comp.inverse.slow, p, "SLOW_"))
         lines += _constants(p, SLOW_A=cfg[D.CC_SLOW_A])
         files += ["relaxation_begin.h", "preisach_grid.c", "relaxation_end.h"]
     if has_region:
@@ -344,14 +349,17 @@ def _packed_c(comp: Compensator, prefix: str, precision: Precision) -> CCode:
     lines += _constants(p, LAST0=state.command)
     init: list[str] = []
     if comp.dynamic:
-        lines += _constants(p, FRACTION=comp.dyn[0], GAIN_B=comp.dyn[1])
-        init += [f"s->w = {_literal(comp.dstate[0], p)};", f"s->u = {_literal(comp.dstate[1], p)};"]
+        lines += _constants(p, FRACTION=comp.inverse.dyn[0], GAIN_B=comp.inverse.dyn[1])
+        init += [
+            f"s->w = {_literal(comp.inverse.dstate[0], p)};",
+            f"s->u = {_literal(comp.inverse.dstate[1], p)};",
+        ]
     if n_lags:  # gains and 1 - exp(-dt / tau) at the loop's sample rate
         lines += [
-            f"static const real_t LAG_G[N_LAGS] = {_array(comp.lags[1], p)};",
-            f"static const real_t LAG_A[N_LAGS] = {_array(comp.lags[2], p)};",
+            f"static const real_t LAG_G[N_LAGS] = {_array(comp.inverse.lags[1], p)};",
+            f"static const real_t LAG_A[N_LAGS] = {_array(comp.inverse.lags[2], p)};",
         ]
-        init += [f"s->c[{k}] = {_literal(float(comp.dstate[D.DYN_LAGS + k]), p)};"
+        init += [f"s->c[{k}] = {_literal(float(comp.inverse.dstate[D.DYN_LAGS + k]), p)};"
                  for k in range(n_lags)]  # fmt: skip
     files.append("packed.c")
     lines += _mode(comp, p, init, files)

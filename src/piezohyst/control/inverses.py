@@ -1,11 +1,14 @@
 """How the compensator inverts each family of cores, one sample at a time.
 
 A core's :meth:`~piezohyst.model.cores.base.Core.inverse_plan` names its engine;
-:class:`~piezohyst.Compensator` looks it up in :data:`INVERSES` and hands it
-its arrays. An engine is a strategy without state of its own: it lays out the
-compensator's kernel arrays (``setup``), runs the compiled step
+:class:`~piezohyst.Compensator` looks it up in :data:`INVERSES` and builds one
+from the model's :class:`~piezohyst.model.model.InverseSpec` and its
+:class:`EngineSettings`. The engine owns its kernel arrays (the tables, the
+config and the state the compiled step updates in place): it runs the step
 (``inner_step``, ``inner_process``, and the self-sensing loop's
-``controller_step``), and reads, resets and advances the state.
+``controller_step``, which takes the loop's own arrays and returns the
+command), and reads, resets and advances its state. The compensator and the
+controller hold an engine; an engine knows neither.
 
 * ``"play"``: eq. 18 on play operators (Newton beside kept static or creep
   terms), the play kernels of :mod:`piezohyst._kernels`;
@@ -34,12 +37,11 @@ from ..model.model import InverseSpec
 if TYPE_CHECKING:
     from .._kernels import packed as D
     from .._kernels import play as K
-    from .compensator import Compensator
 else:  # numba loads when a model first runs (see _lazy)
     D = LazyModule("piezohyst._kernels.packed", globals(), "D")
     K = LazyModule("piezohyst._kernels.play", globals(), "K")
 
-__all__ = ["INVERSES", "CompensatorState", "Inverse"]
+__all__ = ["INVERSES", "CompensatorState", "EngineSettings", "Inverse", "finite_number"]
 
 #: What a compensator can be reset to: a saved state, the core's states (and last command)
 State = Any
@@ -48,7 +50,8 @@ State = Any
 Loop = tuple[FloatArray, FloatArray, FloatArray]
 
 
-def _finite_number(value: object, name: str) -> float:
+def finite_number(value: object, name: str) -> float:
+    """``value`` as a float, or a one-line ParameterError naming the Compensator's parameter."""
     if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
         msg = f"The '{name}' parameter of Compensator must be a number. Got {value!r} instead."
         raise ParameterError(msg)
@@ -81,14 +84,47 @@ class CompensatorState:
     dynamics: FloatArray = field(default_factory=lambda: np.zeros(0))
 
 
-def _inside(comp: Compensator, last: float) -> None:
-    """A reset's last command must lie inside the limits."""
-    if not comp.v_min <= last <= comp.v_max:
-        msg = (
-            f"The actuator's voltage {last!r} V is outside the limits "
-            f"[{comp.v_min}, {comp.v_max}] V."
-        )
-        raise ParameterError(msg)
+@dataclass(frozen=True)
+class EngineSettings:
+    """What an engine needs from its compensator, fixed when it is built.
+
+    Attributes
+    ----------
+    v_min, v_max : float
+        The voltage limits (V).
+    max_step : float
+        The slew limit per sample (V; inf: none).
+    inv_gain : float
+        Model output units per desired unit (1/g for displacement).
+    sample_rate : float or None
+        The loop's rate (Hz).
+    domain : {"charge", "displacement"}
+    allow_extrapolation : bool
+        Send commands beyond the identified region (packed cores).
+    mode_active : bool
+        The compensator inverts an output mode before the engine.
+    delay_samples : int
+        Whole samples of input delay (handled by preview).
+    delay_fraction : float
+        The delay's fraction of a sample inverted per sample (``_kernels.DYN_FRACTION``).
+    lag_gain : float
+        The input lag's gain per sample (``_kernels.DYN_GAIN_B``; 0: none).
+    dynamic : bool
+        The model has input dynamics.
+    """
+
+    v_min: float
+    v_max: float
+    max_step: float
+    inv_gain: float
+    sample_rate: float | None
+    domain: str
+    allow_extrapolation: bool
+    mode_active: bool = False
+    delay_samples: int = 0
+    delay_fraction: float = 0.0
+    lag_gain: float = 0.0
+    dynamic: bool = False
 
 
 def _play(spec: InverseSpec) -> PIHysteresis:
@@ -97,66 +133,124 @@ def _play(spec: InverseSpec) -> PIHysteresis:
 
 
 class Inverse:
-    """The engine contract (see the module documentation); every method takes the compensator."""
+    """The engine contract (see the module documentation).
+
+    Parameters
+    ----------
+    spec : InverseSpec
+        What to invert (the model's :meth:`~piezohyst.model.models.HysteresisModel.inversion`).
+    settings : EngineSettings
+        The compensator's limits, gain and timing.
+
+    Attributes
+    ----------
+    kernel_state : ndarray
+        The state the compiled step updates in place (the core's states, then the
+        last command and the counters).
+    config : ndarray
+        The step's settings (limits, slew, gain, reference).
+    dyn, dstate : ndarray
+        Input dynamics' settings and state (and the packed cores' creep lags).
+    analytic : bool
+        Eq. 18 runs (no Newton solve).
+    plain : bool
+        One analytic kernel call per step (no input dynamics, no mode).
+    """
 
     name = ""
+    # the kernel arrays an engine lays out (``_layout``); which ones depends on the engine
+    tables: FloatArray
+    config: FloatArray
+    kernel_state: FloatArray
+    static: FloatArray
+    lags: FloatArray
+    params: FloatArray
+    region: FloatArray
+    trial: FloatArray
+    slow: FloatArray
+    core: Any
 
-    def setup(self, comp: Compensator, spec: InverseSpec, max_step: float, inv_gain: float) -> None:
-        """Lay out the compensator's kernel arrays for ``spec``."""
+    def __init__(self, spec: InverseSpec, settings: EngineSettings) -> None:
+        self.spec = spec
+        self.settings = settings
+        self.v_min, self.v_max = settings.v_min, settings.v_max
+        self.max_step = settings.max_step
+        self.sample_rate = settings.sample_rate
+        self.domain = settings.domain
+        self.allow_extrapolation = settings.allow_extrapolation
+        self.dynamic = settings.dynamic
+        self.delay_samples = settings.delay_samples
+        self.dyn = np.zeros(2)
+        self.dyn[K.DYN_FRACTION] = settings.delay_fraction
+        self.dyn[K.DYN_GAIN_B] = settings.lag_gain
+        self.dstate = np.zeros(2)
+        self.analytic = False
+        self.plain = False
+        self._layout(spec, settings.max_step, settings.inv_gain)
+
+    def _layout(self, spec: InverseSpec, max_step: float, inv_gain: float) -> None:
+        """Lay out the kernel arrays for ``spec``."""
         raise NotImplementedError
 
-    def closed_loop(self, comp: Compensator) -> bool:
+    def _inside(self, last: float) -> None:
+        """A reset's last command must lie inside the limits."""
+        if not self.v_min <= last <= self.v_max:
+            msg = (
+                f"The actuator's voltage {last!r} V is outside the limits "
+                f"[{self.v_min}, {self.v_max}] V."
+            )
+            raise ParameterError(msg)
+
+    def closed_loop(self) -> bool:
         """Whether the self-sensing controller can run this inverse in its loop."""
         return False
 
-    def n_operators(self, comp: Compensator) -> int:
+    def n_operators(self) -> int:
         """Values in the core's state."""
         raise NotImplementedError
 
-    def state(self, comp: Compensator) -> CompensatorState:
+    def state(self) -> CompensatorState:
         """The forward states and the last command (copies)."""
         raise NotImplementedError
 
-    def _slot(self, comp: Compensator, name: str) -> int:
+    def _slot(self, name: str) -> int:
         """Where a status value lives in the state array (play and Python engines: its end,
         as ``_kernels.ST_*``)."""
         return {"last": -3, "nonfinite": -2, "saturated": -1}[name]
 
-    def last_command(self, comp: Compensator) -> float:
+    def last_command(self) -> float:
         """The command sent last (V)."""
-        return float(comp._state[self._slot(comp, "last")])
+        return float(self.kernel_state[self._slot("last")])
 
-    def nonfinite_count(self, comp: Compensator) -> int:
+    def nonfinite_count(self) -> int:
         """Desired values that were NaN or infinite (the last command held)."""
-        return int(comp._state[self._slot(comp, "nonfinite")])
+        return int(self.kernel_state[self._slot("nonfinite")])
 
-    def saturated_count(self, comp: Compensator) -> int:
+    def saturated_count(self) -> int:
         """Desired values out of reach (the nearer limit sent)."""
-        return int(comp._state[self._slot(comp, "saturated")])
+        return int(self.kernel_state[self._slot("saturated")])
 
-    def reset(self, comp: Compensator, state: State, voltage: float | None) -> None:
+    def reset(self, state: State, voltage: float | None) -> None:
         """Start again from a known condition (see :meth:`Compensator.reset`)."""
         raise NotImplementedError
 
-    def precondition(self, comp: Compensator, cycle: FloatArray) -> FloatArray:
+    def precondition(self, cycle: FloatArray) -> FloatArray:
         """Advance the state along ``cycle`` as if it had been sent; return it."""
         raise NotImplementedError
 
-    def inner_step(self, comp: Compensator, target: float) -> float:
+    def inner_step(self, target: float) -> float:
         """The command for the hysteresis output ``target``."""
         raise NotImplementedError
 
-    def inner_process(self, comp: Compensator, d: FloatArray, out: FloatArray) -> None:
+    def inner_process(self, d: FloatArray, out: FloatArray) -> None:
         """Commands for a block of hysteresis outputs, into ``out``."""
         raise NotImplementedError
 
-    def outside_count(self, comp: Compensator) -> int:
+    def outside_count(self) -> int:
         """Commands that would have left the identified region."""
         return 0
 
-    def share(
-        self, comp: Compensator, tables: FloatArray, config: FloatArray, state: FloatArray
-    ) -> None:
+    def share(self, tables: FloatArray, config: FloatArray, state: FloatArray) -> None:
         """Run on arrays owned by a multi-channel container (the play engine only)."""
         msg = f"a compensator on a {self.name} inverse runs on its own arrays"
         raise ParameterError(msg)
@@ -165,13 +259,11 @@ class Inverse:
         """Where ``config`` holds the displacement reference and the inverse gain."""
         raise NotImplementedError
 
-    def controller_step(self, comp: Compensator, d: float, m: float, loop: Loop) -> float:
+    def controller_step(self, d: float, m: float, loop: Loop) -> float:
         """One sample of the self-sensing loop around this inverse."""
         raise NotImplementedError
 
-    def controller_process(
-        self, comp: Compensator, d: FloatArray, m: FloatArray, loop: Loop, out: FloatArray
-    ) -> None:
+    def controller_process(self, d: FloatArray, m: FloatArray, loop: Loop, out: FloatArray) -> None:
         """The self-sensing loop over a block."""
         raise NotImplementedError
 
@@ -181,8 +273,8 @@ class PlayInverse(Inverse):
 
     name = "play"
 
-    def setup(self, comp: Compensator, spec: InverseSpec, max_step: float, inv_gain: float) -> None:
-        sample_rate, domain = comp.sample_rate, comp.domain
+    def _layout(self, spec: InverseSpec, max_step: float, inv_gain: float) -> None:
+        sample_rate, domain = self.sample_rate, self.domain
         op = _play(spec)
         if not op.is_invertible:
             op.inverse()  # raises NotInvertibleError with the reason
@@ -200,89 +292,91 @@ class PlayInverse(Inverse):
             )
             raise ParameterError(msg)
         #: True when eq. 18's analytic inverse runs (no Newton solve); fixed by the model
-        comp.analytic = spec.analytic
-        comp._plain = spec.analytic and not dyn.active and not comp.mode.active
+        self.analytic = spec.analytic
+        self.plain = spec.analytic and not dyn.active and not self.settings.mode_active
         n = op.n_operators
-        comp.tables = np.zeros((5, n))
-        comp.tables[K.TAB_R] = op.thresholds
-        comp.tables[K.TAB_W] = op.weights
-        comp.config = np.zeros(K.CONFIG_SIZE)
-        comp.config[K.CFG_OFFSET] = op.offset
-        comp.config[K.CFG_V_MIN] = comp.v_min
-        comp.config[K.CFG_V_MAX] = comp.v_max
-        comp.config[K.CFG_MAX_STEP] = max_step
-        comp.config[K.CFG_INV_GAIN] = inv_gain
-        comp.config[K.CFG_STATIC_SCALE] = 1.0
+        self.tables = np.zeros((5, n))
+        self.tables[K.TAB_R] = op.thresholds
+        self.tables[K.TAB_W] = op.weights
+        self.config = np.zeros(K.CONFIG_SIZE)
+        self.config[K.CFG_OFFSET] = op.offset
+        self.config[K.CFG_V_MIN] = self.v_min
+        self.config[K.CFG_V_MAX] = self.v_max
+        self.config[K.CFG_MAX_STEP] = max_step
+        self.config[K.CFG_INV_GAIN] = inv_gain
+        self.config[K.CFG_STATIC_SCALE] = 1.0
         if spec.analytic:
             inv = op.inverse()
-            comp.tables[K.TAB_S] = op.loading_slopes
-            comp.tables[K.TAB_RI] = inv.thresholds
-            comp.tables[K.TAB_WI] = inv.weights
-            comp.config[K.CFG_INV_OFFSET] = inv.offset
-            reach = max(abs(comp.v_min), abs(comp.v_max)) + float(op.thresholds[-1])
-            comp.config[K.CFG_BOUND] = 2.0 * float(np.abs(op.weights).sum()) * reach + 1.0
-            comp.static = np.zeros((3, 0))
-            comp.lags = np.zeros((3, 0))
+            self.tables[K.TAB_S] = op.loading_slopes
+            self.tables[K.TAB_RI] = inv.thresholds
+            self.tables[K.TAB_WI] = inv.weights
+            self.config[K.CFG_INV_OFFSET] = inv.offset
+            reach = max(abs(self.v_min), abs(self.v_max)) + float(op.thresholds[-1])
+            self.config[K.CFG_BOUND] = 2.0 * float(np.abs(op.weights).sum()) * reach + 1.0
+            self.static = np.zeros((3, 0))
+            self.lags = np.zeros((3, 0))
             n_aux = n
         else:
             st = spec.static
-            comp.static = np.zeros((3, 0)) if st is None else np.vstack([st.knots, st.up, st.down])
+            self.static = np.zeros((3, 0)) if st is None else np.vstack([st.knots, st.up, st.down])
             if st is not None:
-                comp.config[K.CFG_STATIC_SCALE] = st.scale
+                self.config[K.CFG_STATIC_SCALE] = st.scale
             lg = spec.lags
             if lg is None:
-                comp.lags = np.zeros((3, 0))
+                self.lags = np.zeros((3, 0))
             else:
                 dt = 1.0 / float(sample_rate)  # type: ignore[arg-type]
-                comp.lags = np.vstack([lg.taus, lg.gains, 1.0 - np.exp(-dt / lg.taus)])
-            n_aux = comp.lags.shape[1]
-        comp._state = np.zeros(n + n_aux + 3)
-        comp._n_aux = n_aux
+                self.lags = np.vstack([lg.taus, lg.gains, 1.0 - np.exp(-dt / lg.taus)])
+            n_aux = self.lags.shape[1]
+        self.kernel_state = np.zeros(n + n_aux + 3)
+        self._n_aux = n_aux
         if domain == "displacement":  # displacement 0 = output at rest in the initial state
             if spec.analytic:
-                comp.config[K.CFG_REFERENCE] = op.offset + float(op.weights @ op.initial_state)
+                self.config[K.CFG_REFERENCE] = op.offset + float(op.weights @ op.initial_state)
             else:
-                self._set_forward(comp, self._initial_forward(comp))
-                comp.config[K.CFG_REFERENCE] = self._output_now(comp, float(op.initial_state[0]))
+                self._set_forward(self._initial_forward())
+                self.config[K.CFG_REFERENCE] = self._output_now(float(op.initial_state[0]))
 
-    def n_operators(self, comp: Compensator) -> int:
+    def n_operators(self) -> int:
         """Number of play operators of the inverted model."""
-        return int(comp.tables.shape[1])
+        return int(self.tables.shape[1])
 
-    def _initial_forward(self, comp: Compensator) -> tuple[FloatArray, FloatArray]:
-        op = _play(comp.spec)
+    def _initial_forward(self) -> tuple[FloatArray, FloatArray]:
+        op = _play(self.spec)
         x0 = float(op.initial_state[0])
-        return op.initial_state.copy(), np.full(comp.lags.shape[1], x0)
+        return op.initial_state.copy(), np.full(self.lags.shape[1], x0)
 
-    def _set_forward(self, comp: Compensator, forward: tuple[FloatArray, FloatArray]) -> None:
-        n = comp.n_operators
-        comp._state[:n] = forward[0]
-        if not comp.analytic:
-            comp._state[n : n + comp._n_aux] = forward[1]
+    def _set_forward(self, forward: tuple[FloatArray, FloatArray]) -> None:
+        n = self.n_operators()
+        self.kernel_state[:n] = forward[0]
+        if not self.analytic:
+            self.kernel_state[n : n + self._n_aux] = forward[1]
         else:
-            K.inverse_states(comp.tables, comp.config, comp._state)
+            K.inverse_states(self.tables, self.config, self.kernel_state)
 
-    def _output_now(self, comp: Compensator, v: float) -> float:
+    def _output_now(self, v: float) -> float:
         """The hysteresis part's output (model units) if ``v`` were sent from the current state."""
-        y, _ = K.hysteresis_output(v, comp.tables, comp.static, comp.lags, comp.config, comp._state)
+        y, _ = K.hysteresis_output(
+            v, self.tables, self.static, self.lags, self.config, self.kernel_state
+        )
         return float(y)
 
-    def state(self, comp: Compensator) -> CompensatorState:
+    def state(self) -> CompensatorState:
         """The forward states and the last command (copies; see :meth:`reset`)."""
-        n = comp.n_operators
-        lags = comp._state[n : n + comp._n_aux] if not comp.analytic else np.zeros(0)
+        n = self.n_operators()
+        lags = self.kernel_state[n : n + self._n_aux] if not self.analytic else np.zeros(0)
         return CompensatorState(
-            comp._state[:n].copy(),
+            self.kernel_state[:n].copy(),
             lags.copy(),
-            float(comp._state[K.ST_LAST]),
-            comp.dstate.copy() if comp.dynamic else np.zeros(0),
+            float(self.kernel_state[K.ST_LAST]),
+            self.dstate.copy() if self.dynamic else np.zeros(0),
         )
 
-    def reset(self, comp: Compensator, state: State, voltage: float | None) -> None:
+    def reset(self, state: State, voltage: float | None) -> None:
         """See :meth:`~piezohyst.control.inverses.Inverse.reset`."""
-        n = comp.n_operators
-        m = comp.lags.shape[1]
-        op = _play(comp.spec)
+        n = self.n_operators()
+        m = self.lags.shape[1]
+        op = _play(self.spec)
         if isinstance(state, CompensatorState):
             ops = as_signal(state.operators, "state.operators")
             lags = as_signal(state.lags, "state.lags", allow_empty=True)
@@ -301,105 +395,105 @@ class PlayInverse(Inverse):
             ops = z[:n]
             lags = np.full(m, float(ops[0]))
             last = (
-                float(z[-1]) if z.size == n + 1 else float(np.clip(ops[0], comp.v_min, comp.v_max))
+                float(z[-1]) if z.size == n + 1 else float(np.clip(ops[0], self.v_min, self.v_max))
             )
         elif voltage is None:
-            ops, lags = self._initial_forward(comp)
-            last = float(np.clip(ops[0], comp.v_min, comp.v_max))
+            ops, lags = self._initial_forward()
+            last = float(np.clip(ops[0], self.v_min, self.v_max))
         else:
-            v = _finite_number(voltage, "voltage")
+            v = finite_number(voltage, "voltage")
             ops = np.clip(op.initial_state, v - op.thresholds, v + op.thresholds)
             lags = np.full(m, v)
             last = v
-        _inside(comp, last)
-        self._set_forward(comp, (np.array(ops, dtype=np.float64), np.array(lags, dtype=np.float64)))
-        comp.dstate[:] = last  # the piezo settled at the last command
-        comp._mode_history[:] = np.nan
-        if isinstance(state, CompensatorState) and state.dynamics.size == 2 and comp.dynamic:
-            comp.dstate[:] = state.dynamics
-        comp._last_desired = math.nan
-        comp._state[K.ST_LAST] = last
-        comp._state[K.ST_NONFINITE] = 0.0
-        comp._state[K.ST_SATURATED] = 0.0
+        self._inside(last)
+        self._set_forward((np.array(ops, dtype=np.float64), np.array(lags, dtype=np.float64)))
+        self.dstate[:] = last  # the piezo settled at the last command
+        if isinstance(state, CompensatorState) and state.dynamics.size == 2 and self.dynamic:
+            self.dstate[:] = state.dynamics
+        self.kernel_state[K.ST_LAST] = last
+        self.kernel_state[K.ST_NONFINITE] = 0.0
+        self.kernel_state[K.ST_SATURATED] = 0.0
 
-    def precondition(self, comp: Compensator, cycle: FloatArray) -> FloatArray:
+    def precondition(self, cycle: FloatArray) -> FloatArray:
         """See :meth:`~piezohyst.control.inverses.Inverse.precondition`."""
-        n = comp.n_operators
-        r = comp.tables[K.TAB_R]
-        z = comp._state[:n]
-        lag = comp._state[n : n + comp._n_aux] if not comp.analytic else np.empty(0)
-        alpha = comp.lags[2]
+        n = self.n_operators()
+        r = self.tables[K.TAB_R]
+        z = self.kernel_state[:n]
+        lag = self.kernel_state[n : n + self._n_aux] if not self.analytic else np.empty(0)
+        alpha = self.lags[2]
         out = np.empty_like(cycle)
-        last = comp.last_command
-        step = comp._max_step
+        last = self.last_command()
+        step = self.max_step
         for k, v_target in enumerate(cycle):
             v = min(max(v_target, last - step), last + step)
-            u = K._advance_dynamics(v, last, comp.dyn, comp.dstate) if comp.dynamic else v
+            u = K._advance_dynamics(v, last, self.dyn, self.dstate) if self.dynamic else v
             z[:] = np.clip(z, u - r, u + r)
             lag += alpha * (u - lag)
             out[k] = last = v
-        comp._state[K.ST_LAST] = last
-        if comp.analytic:
-            K.inverse_states(comp.tables, comp.config, comp._state)
+        self.kernel_state[K.ST_LAST] = last
+        if self.analytic:
+            K.inverse_states(self.tables, self.config, self.kernel_state)
         return out
 
-    def inner_step(self, comp: Compensator, target: float) -> float:
+    def inner_step(self, target: float) -> float:
         """The kernel's command for the hysteresis output ``target`` (after mode and delay)."""
-        if comp.dynamic:
+        if self.dynamic:
             return float(
-                K.dynamic_step(target, comp.tables, comp.config, comp._state, comp.dyn, comp.dstate)
+                K.dynamic_step(
+                    target, self.tables, self.config, self.kernel_state, self.dyn, self.dstate
+                )
             )
-        if comp.analytic:
-            return float(K.compensator_step(target, comp.tables, comp.config, comp._state))
+        if self.analytic:
+            return float(K.compensator_step(target, self.tables, self.config, self.kernel_state))
         return float(
-            K.numeric_step(target, comp.tables, comp.static, comp.lags, comp.config, comp._state)
+            K.numeric_step(
+                target, self.tables, self.static, self.lags, self.config, self.kernel_state
+            )
         )
 
-    def inner_process(self, comp: Compensator, d: FloatArray, out: FloatArray) -> None:
+    def inner_process(self, d: FloatArray, out: FloatArray) -> None:
         """The kernel over a block of hysteresis outputs (after the mode)."""
-        if comp.dynamic:
+        if self.dynamic:
             K.dynamic_process(
                 d,
-                comp.delay_samples,
-                comp.tables,
-                comp.config,
-                comp._state,
-                comp.dyn,
-                comp.dstate,
+                self.delay_samples,
+                self.tables,
+                self.config,
+                self.kernel_state,
+                self.dyn,
+                self.dstate,
                 out,
             )
-        elif comp.analytic:
-            K.compensator_process(d, comp.tables, comp.config, comp._state, out)
+        elif self.analytic:
+            K.compensator_process(d, self.tables, self.config, self.kernel_state, out)
         else:
-            K.numeric_process(d, comp.tables, comp.static, comp.lags, comp.config, comp._state, out)
+            K.numeric_process(
+                d, self.tables, self.static, self.lags, self.config, self.kernel_state, out
+            )
 
-    def closed_loop(self, comp: Compensator) -> bool:
-        return bool(comp.analytic)
+    def closed_loop(self) -> bool:
+        return bool(self.analytic)
 
-    def share(
-        self, comp: Compensator, tables: FloatArray, config: FloatArray, state: FloatArray
-    ) -> None:
+    def share(self, tables: FloatArray, config: FloatArray, state: FloatArray) -> None:
         """See :meth:`~piezohyst.control.inverses.Inverse.share`."""
         if not (
-            np.array_equal(tables, comp.tables)
-            and np.array_equal(config, comp.config)
-            and np.array_equal(state, comp._state)
+            np.array_equal(tables, self.tables)
+            and np.array_equal(config, self.config)
+            and np.array_equal(state, self.kernel_state)
         ):
             msg = "shared arrays must hold the compensator's current tables, config and state"
             raise ParameterError(msg)
-        comp.tables, comp.config, comp._state = tables, config, state
+        self.tables, self.config, self.kernel_state = tables, config, state
 
     def slots(self) -> tuple[int, int]:
         return int(K.CFG_REFERENCE), int(K.CFG_INV_GAIN)
 
-    def controller_step(self, comp: Compensator, d: float, m: float, loop: Loop) -> float:
-        return float(K.controller_step(d, m, comp.tables, loop[0], comp._state,
+    def controller_step(self, d: float, m: float, loop: Loop) -> float:
+        return float(K.controller_step(d, m, self.tables, loop[0], self.kernel_state,
                                        loop[1], loop[2]))  # fmt: skip
 
-    def controller_process(
-        self, comp: Compensator, d: FloatArray, m: FloatArray, loop: Loop, out: FloatArray
-    ) -> None:
-        K.controller_process(d, m, comp.tables, loop[0], comp._state, loop[1], loop[2], out)
+    def controller_process(self, d: FloatArray, m: FloatArray, loop: Loop, out: FloatArray) -> None:
+        K.controller_process(d, m, self.tables, loop[0], self.kernel_state, loop[1], loop[2], out)
 
 
 class PackedInverse(Inverse):
@@ -422,106 +516,106 @@ class PackedInverse(Inverse):
 
     name = "packed"
 
-    def setup(self, comp: Compensator, spec: InverseSpec, max_step: float, inv_gain: float) -> None:
-        sample_rate, domain = comp.sample_rate, comp.domain
+    def _layout(self, spec: InverseSpec, max_step: float, inv_gain: float) -> None:
+        sample_rate, domain = self.sample_rate, self.domain
         core = cast(PackedCore, spec.operator)
-        comp.core = core
-        comp.analytic = False
-        comp._plain = False
-        comp.params = np.array(core.packed)
-        comp.config = np.zeros(D.CC_SIZE)
-        comp.config[D.CC_V_MIN] = comp.v_min
-        comp.config[D.CC_V_MAX] = comp.v_max
-        comp.config[D.CC_MAX_STEP] = max_step
-        comp.config[D.CC_INV_GAIN] = inv_gain
-        comp.config[D.CC_REFUSE] = 0.0 if comp.allow_extrapolation else 1.0
+        self.core = core
+        self.analytic = False
+        self.plain = False
+        self.params = np.array(core.packed)
+        self.config = np.zeros(D.CC_SIZE)
+        self.config[D.CC_V_MIN] = self.v_min
+        self.config[D.CC_V_MAX] = self.v_max
+        self.config[D.CC_MAX_STEP] = max_step
+        self.config[D.CC_INV_GAIN] = inv_gain
+        self.config[D.CC_REFUSE] = 0.0 if self.allow_extrapolation else 1.0
         region = core.region
         if region is None:
-            comp.config[D.CC_TOL] = math.inf
-            comp.region = np.zeros((2, 0))
+            self.config[D.CC_TOL] = math.inf
+            self.region = np.zeros((2, 0))
         else:
-            comp.config[D.CC_TOL] = spec.region_tolerance * region.span
-            comp.config[D.CC_RV_LO] = region.v_lo
-            comp.config[D.CC_RV_HI] = region.v_hi
-            comp.region = region.array
+            self.config[D.CC_TOL] = spec.region_tolerance * region.span
+            self.config[D.CC_RV_LO] = region.v_lo
+            self.config[D.CC_RV_HI] = region.v_hi
+            self.region = region.array
         if domain == "displacement":  # displacement 0 = the output in the initial state
-            comp.config[D.CC_REF] = core.output(core.initial_state)
+            self.config[D.CC_REF] = core.output(core.initial_state)
         fs = float(sample_rate or 0.0)  # given whenever lags or a slow core need it (_settings)
         lg = spec.lags
         if lg is not None:  # kept creep lags: affine in each sample's voltage, solved with it
             alphas = 1.0 - np.exp(-1.0 / (fs * np.asarray(lg.taus)))
-            comp.lags = np.vstack([lg.taus, lg.gains, alphas])
+            self.lags = np.vstack([lg.taus, lg.gains, alphas])
             pairs = np.column_stack([lg.gains, alphas]).ravel()
-            comp.dyn = np.concatenate([comp.dyn[: D.DYN_LAGS], pairs])
-            comp.dstate = np.zeros(D.DYN_LAGS + alphas.size)
+            self.dyn = np.concatenate([self.dyn[: D.DYN_LAGS], pairs])
+            self.dstate = np.zeros(D.DYN_LAGS + alphas.size)
         else:
-            comp.lags = np.zeros((3, 0))
+            self.lags = np.zeros((3, 0))
         ns = core.n_states
-        comp.config[D.CC_NS] = ns
+        self.config[D.CC_NS] = ns
         slow = spec.relaxation
         if slow is not None:  # a slow Preisach core after the main one: params and state
-            comp.config[D.CC_SLOW_AT] = comp.params.size
-            comp.config[D.CC_SLOW_A] = 1.0 - math.exp(-1.0 / (fs * slow.tau))
-            comp.params = np.concatenate([comp.params, slow.packed])
+            self.config[D.CC_SLOW_AT] = self.params.size
+            self.config[D.CC_SLOW_A] = 1.0 - math.exp(-1.0 / (fs * slow.tau))
+            self.params = np.concatenate([self.params, slow.packed])
             ns += D.RV_SIZE
         #: the slow core's packed parameters (empty without a relaxation term)
-        comp.slow = np.zeros(0) if slow is None else np.array(slow.packed)
-        comp._ns = ns
-        comp._state = np.zeros(comp._ns + D.DS_STATUS)
+        self.slow = np.zeros(0) if slow is None else np.array(slow.packed)
+        self._ns = ns
+        self.kernel_state = np.zeros(self._ns + D.DS_STATUS)
         #: scratch for the kernel's trial steps (the core's state after a candidate command)
-        comp.trial = np.zeros(comp._ns)
+        self.trial = np.zeros(self._ns)
 
-    def n_operators(self, comp: Compensator) -> int:
+    def n_operators(self) -> int:
         """Values in the core's state (the last voltage, the internal variable, ...)."""
-        return comp._ns
+        return self._ns
 
-    def state(self, comp: Compensator) -> CompensatorState:
+    def state(self) -> CompensatorState:
         """The core's state ``[v, x, ...]`` as ``operators``, and the last command (copies)."""
         return CompensatorState(
-            comp._state[: comp._ns].copy(),
-            comp.dstate[D.DYN_LAGS :].copy(),
-            float(comp._state[comp._ns + D.DS_STATUS + D.DS_LAST]),
-            comp.dstate[: D.DYN_LAGS].copy() if comp.dynamic else np.zeros(0),
+            self.kernel_state[: self._ns].copy(),
+            self.dstate[D.DYN_LAGS :].copy(),
+            float(self.kernel_state[self._ns + D.DS_STATUS + D.DS_LAST]),
+            self.dstate[: D.DYN_LAGS].copy() if self.dynamic else np.zeros(0),
         )
 
-    def _slot(self, comp: Compensator, name: str) -> int:
+    def _slot(self, name: str) -> int:
         """The status values follow the core's state (``_packedkernels.DS_*``)."""
         at = {"last": D.DS_LAST, "nonfinite": D.DS_NONFINITE, "saturated": D.DS_SATURATED,
               "outside": D.DS_OUTSIDE}[name]  # fmt: skip
-        return int(comp._ns + D.DS_STATUS + at)
+        return int(self._ns + D.DS_STATUS + at)
 
-    def outside_count(self, comp: Compensator) -> int:
+    def outside_count(self) -> int:
         """Commands that would have left the identified region (held unless extrapolating)."""
-        return int(comp._state[self._slot(comp, "outside")])
+        return int(self.kernel_state[self._slot("outside")])
 
-    def _with_slow(self, comp: Compensator, z: FloatArray) -> FloatArray:
+    def _with_slow(self, z: FloatArray) -> FloatArray:
         """The core's state, then the slow core's at rest at the same voltage (if any)."""
-        if not comp.slow.size:
+        if not self.slow.size:
             return z
         rest = np.zeros(D.RV_SIZE)
         rest[0] = rest[D.RV_R] = float(z[0])
         rest[D.RV_K] = 1.0
         return np.concatenate([z, rest])
 
-    def _moved(self, comp: Compensator, start: FloatArray, v: float) -> FloatArray:
+    def _moved(self, start: FloatArray, v: float) -> FloatArray:
         """The core's state after the voltage moves from ``start`` to ``v`` in small steps."""
         v0 = float(start[0])
-        span = max(comp.v_max - comp.v_min, 1e-300)
+        span = max(self.v_max - self.v_min, 1e-300)
         steps = max(2, math.ceil(abs(v - v0) / (span / 400.0)) + 1)
-        return np.asarray(comp.core.propagate(np.linspace(v0, v, steps), start).state)
+        return np.asarray(self.core.propagate(np.linspace(v0, v, steps), start).state)
 
-    def reset(self, comp: Compensator, state: State, voltage: float | None) -> None:
+    def reset(self, state: State, voltage: float | None) -> None:
         """See :meth:`~piezohyst.control.inverses.Inverse.reset`."""
-        core = comp.core
+        core = self.core
         if isinstance(state, CompensatorState):
             z = as_signal(state.operators, "state.operators")
-            if z.size != comp._ns:
-                msg = f"'state' must hold the core's {comp._ns} values [v, x, ...]. Got {z.size}."
+            if z.size != self._ns:
+                msg = f"'state' must hold the core's {self._ns} values [v, x, ...]. Got {z.size}."
                 raise ShapeError(msg)
             last = float(state.command)
         elif state is not None:
             z = as_signal(state, "state")
-            ns = comp._ns
+            ns = self._ns
             if z.size not in (ns, ns + 1):
                 msg = (
                     f"'state' must hold the core's {ns} values and optionally the last "
@@ -529,87 +623,91 @@ class PackedInverse(Inverse):
                 )
                 raise ShapeError(msg)
             last = (
-                float(z[ns]) if z.size == ns + 1 else float(np.clip(z[0], comp.v_min, comp.v_max))
+                float(z[ns]) if z.size == ns + 1 else float(np.clip(z[0], self.v_min, self.v_max))
             )
             z = z[:ns]
         elif voltage is None:
-            z = self._with_slow(comp, np.array(core.initial_state))
-            last = float(np.clip(z[0], comp.v_min, comp.v_max))
+            z = self._with_slow(np.array(core.initial_state))
+            last = float(np.clip(z[0], self.v_min, self.v_max))
         else:
-            last = _finite_number(voltage, "voltage")
-            z = self._with_slow(comp, self._moved(comp, np.array(core.initial_state), last))
-        _inside(comp, last)
-        comp._state[:] = 0.0
-        comp._state[: comp._ns] = z
-        comp._state[comp._ns + D.DS_STATUS + D.DS_LAST] = last
-        comp.dstate[:] = last  # the piezo and every creep lag settled at the last command
+            last = finite_number(voltage, "voltage")
+            z = self._with_slow(self._moved(np.array(core.initial_state), last))
+        self._inside(last)
+        self.kernel_state[:] = 0.0
+        self.kernel_state[: self._ns] = z
+        self.kernel_state[self._ns + D.DS_STATUS + D.DS_LAST] = last
+        self.dstate[:] = last  # the piezo and every creep lag settled at the last command
         if isinstance(state, CompensatorState):
-            if state.dynamics.size == D.DYN_LAGS and comp.dynamic:
-                comp.dstate[: D.DYN_LAGS] = state.dynamics
+            if state.dynamics.size == D.DYN_LAGS and self.dynamic:
+                self.dstate[: D.DYN_LAGS] = state.dynamics
             lags = as_signal(state.lags, "state.lags", allow_empty=True)
-            if lags.size == comp.lags.shape[1]:
-                comp.dstate[D.DYN_LAGS :] = lags
+            if lags.size == self.lags.shape[1]:
+                self.dstate[D.DYN_LAGS :] = lags
             elif lags.size:
                 msg = (
-                    f"'state.lags' must hold the model's {comp.lags.shape[1]} creep lag "
+                    f"'state.lags' must hold the model's {self.lags.shape[1]} creep lag "
                     f"states. Got {lags.size}."
                 )
                 raise ShapeError(msg)
-        comp._mode_history[:] = np.nan
-        comp._last_desired = math.nan
 
-    def precondition(self, comp: Compensator, cycle: FloatArray) -> FloatArray:
+    def precondition(self, cycle: FloatArray) -> FloatArray:
         """See :meth:`~piezohyst.control.inverses.Inverse.precondition`."""
         u = np.empty_like(cycle)
-        alphas = comp.lags[2]
-        ns = int(comp.config[D.CC_NS])
-        slow = comp._state[ns : comp._ns]  # a view: the slow core moves in place
-        a = float(comp.config[D.CC_SLOW_A])
-        last = comp.last_command
+        alphas = self.lags[2]
+        ns = int(self.config[D.CC_NS])
+        slow = self.kernel_state[ns : self._ns]  # a view: the slow core moves in place
+        a = float(self.config[D.CC_SLOW_A])
+        last = self.last_command()
         for k, v in enumerate(cycle):
-            u[k] = K._advance_dynamics(v, last, comp.dyn, comp.dstate) if comp.dynamic else v
+            u[k] = K._advance_dynamics(v, last, self.dyn, self.dstate) if self.dynamic else v
             last = v
-            comp.dstate[D.DYN_LAGS :] += alphas * (u[k] - comp.dstate[D.DYN_LAGS :])
+            self.dstate[D.DYN_LAGS :] += alphas * (u[k] - self.dstate[D.DYN_LAGS :])
             if slow.size:
                 c = float(slow[0])
-                D.rev_move(comp.slow, slow, c + a * (u[k] - c), True, np.zeros(0), False)
-        comp._state[:ns] = comp.core.propagate(u, comp._state[:ns]).state
-        comp._state[comp._ns + D.DS_STATUS + D.DS_LAST] = cycle[-1]
+                D.rev_move(self.slow, slow, c + a * (u[k] - c), True, np.zeros(0), False)
+        self.kernel_state[:ns] = self.core.propagate(u, self.kernel_state[:ns]).state
+        self.kernel_state[self._ns + D.DS_STATUS + D.DS_LAST] = cycle[-1]
         return cycle
 
-    def inner_step(self, comp: Compensator, target: float) -> float:
+    def inner_step(self, target: float) -> float:
         return float(
             D.core_step(
                 target,
-                comp.params,
-                comp.config,
-                comp._state,
-                comp.region,
-                comp.dyn,
-                comp.dstate,
-                comp.trial,
+                self.params,
+                self.config,
+                self.kernel_state,
+                self.region,
+                self.dyn,
+                self.dstate,
+                self.trial,
             )
         )
 
-    def inner_process(self, comp: Compensator, d: FloatArray, out: FloatArray) -> None:
-        D.core_process(d, comp.delay_samples, comp.params, comp.config, comp._state, comp.region,
-                       comp.dyn, comp.dstate, comp.trial, out)  # fmt: skip
+    def inner_process(self, d: FloatArray, out: FloatArray) -> None:
+        D.core_process(d, self.delay_samples, self.params, self.config, self.kernel_state,
+                       self.region, self.dyn, self.dstate, self.trial, out)  # fmt: skip
 
-    def closed_loop(self, comp: Compensator) -> bool:
+    def closed_loop(self) -> bool:
         return True
 
     def slots(self) -> tuple[int, int]:
         return int(D.CC_REF), int(D.CC_INV_GAIN)
 
-    def controller_step(self, comp: Compensator, d: float, m: float, loop: Loop) -> float:
-        return float(D.core_controller_step(d, m, comp.params, loop[0], comp._state,
-                                            comp.region, comp.dyn, comp.dstate, comp.trial,
+    def controller_step(self, d: float, m: float, loop: Loop) -> float:
+        return float(D.core_controller_step(d, m, self.params, loop[0], self.kernel_state,
+                                            self.region, self.dyn, self.dstate, self.trial,
                                             loop[1], loop[2]))  # fmt: skip
 
-    def controller_process(
-        self, comp: Compensator, d: FloatArray, m: FloatArray, loop: Loop, out: FloatArray
-    ) -> None:
-        a = (comp.params, loop[0], comp._state, comp.region, comp.dyn, comp.dstate, comp.trial)
+    def controller_process(self, d: FloatArray, m: FloatArray, loop: Loop, out: FloatArray) -> None:
+        a = (
+            self.params,
+            loop[0],
+            self.kernel_state,
+            self.region,
+            self.dyn,
+            self.dstate,
+            self.trial,
+        )
         D.core_controller_process(d, m, *a, loop[1], loop[2], out)
 
 
@@ -628,7 +726,7 @@ class PythonInverse(Inverse):
     name = "python"
     _LAST, _NONFINITE, _SATURATED = -3, -2, -1
 
-    def setup(self, comp: Compensator, spec: InverseSpec, max_step: float, inv_gain: float) -> None:
+    def _layout(self, spec: InverseSpec, max_step: float, inv_gain: float) -> None:
         if not spec.analytic or spec.dynamics.active:
             msg = (
                 f"a {type(spec.operator).__name__} core (no compiled inverse step) is compensated "
@@ -636,69 +734,67 @@ class PythonInverse(Inverse):
             )
             raise ParameterError(msg)
         core = spec.operator
-        comp.analytic = False
-        comp._plain = False
-        comp.core = core
-        comp.config = np.array([inv_gain, 0.0])  # inverse gain, output meaning desired 0
-        if comp.domain == "displacement":
-            comp.config[1] = core.output(core.initial_state)
-        comp.lags = np.zeros((3, 0))
-        comp._state = np.zeros(np.asarray(core.initial_state).size + 3)
+        self.analytic = False
+        self.plain = False
+        self.core = core
+        self.config = np.array([inv_gain, 0.0])  # inverse gain, output meaning desired 0
+        if self.domain == "displacement":
+            self.config[1] = core.output(core.initial_state)
+        self.lags = np.zeros((3, 0))
+        self.kernel_state = np.zeros(np.asarray(core.initial_state).size + 3)
 
-    def n_operators(self, comp: Compensator) -> int:
-        return int(comp._state.size - 3)
+    def n_operators(self) -> int:
+        return int(self.kernel_state.size - 3)
 
-    def state(self, comp: Compensator) -> CompensatorState:
-        n = self.n_operators(comp)
-        return CompensatorState(comp._state[:n].copy(), np.zeros(0), self.last_command(comp))
+    def state(self) -> CompensatorState:
+        n = self.n_operators()
+        return CompensatorState(self.kernel_state[:n].copy(), np.zeros(0), self.last_command())
 
-    def reset(self, comp: Compensator, state: State, voltage: float | None) -> None:
-        core: Core = comp.core
-        n = self.n_operators(comp)
+    def reset(self, state: State, voltage: float | None) -> None:
+        core: Core = self.core
+        n = self.n_operators()
         if isinstance(state, CompensatorState):
             z, last = as_signal(state.operators, "state.operators"), float(state.command)
         elif state is not None:
             z = as_signal(state, "state")
-            last = float(z[n]) if z.size == n + 1 else float(np.clip(z[0], comp.v_min, comp.v_max))
+            last = float(z[n]) if z.size == n + 1 else float(np.clip(z[0], self.v_min, self.v_max))
             z = z[:n]
         elif voltage is None:
             z = np.array(core.initial_state, dtype=np.float64)
-            last = float(np.clip(z[0], comp.v_min, comp.v_max))
+            last = float(np.clip(z[0], self.v_min, self.v_max))
         else:
-            last = _finite_number(voltage, "voltage")
+            last = finite_number(voltage, "voltage")
             z = np.asarray(core.history_state([float(np.asarray(core.initial_state)[0]), last]))
         if z.size != n:
             msg = f"'state' must hold the core's {n} values (and the last command). Got {z.size}."
             raise ShapeError(msg)
-        _inside(comp, last)
-        comp._state[:] = 0.0
-        comp._state[:n] = z
-        comp._state[self._LAST] = last
-        comp._mode_history[:] = np.nan
-        comp._last_desired = math.nan
+        self._inside(last)
+        self.kernel_state[:] = 0.0
+        self.kernel_state[:n] = z
+        self.kernel_state[self._LAST] = last
 
-    def precondition(self, comp: Compensator, cycle: FloatArray) -> FloatArray:
-        n = self.n_operators(comp)
-        comp._state[:n] = comp.core.propagate(cycle, comp._state[:n]).state
-        comp._state[self._LAST] = cycle[-1]
+    def precondition(self, cycle: FloatArray) -> FloatArray:
+        n = self.n_operators()
+        self.kernel_state[:n] = self.core.propagate(cycle, self.kernel_state[:n]).state
+        self.kernel_state[self._LAST] = cycle[-1]
         return cycle
 
-    def inner_step(self, comp: Compensator, target: float) -> float:
+    def inner_step(self, target: float) -> float:
         from scipy.optimize import brentq
 
-        n = self.n_operators(comp)
-        st = comp._state
+        n = self.n_operators()
+        st = self.kernel_state
         last = float(st[self._LAST])
         if not math.isfinite(target):
             st[self._NONFINITE] += 1
             return last
-        y = float(comp.config[1] + target * comp.config[0])
-        lo = max(comp.v_min, last - comp._max_step)
-        hi = min(comp.v_max, last + comp._max_step)
+        y = float(self.config[1] + target * self.config[0])
+        lo = max(self.v_min, last - self.max_step)
+        hi = min(self.v_max, last + self.max_step)
         z = st[:n].copy()
 
         def gap(v: float) -> float:
-            return float(comp.core.propagate(np.array([v]), z).output[0]) - y
+            return float(self.core.propagate(np.array([v]), z).output[0]) - y
 
         g_lo, g_hi = gap(lo), gap(hi)
         if g_lo >= 0.0 or g_hi <= 0.0:  # out of reach this sample: the nearer end
@@ -706,13 +802,13 @@ class PythonInverse(Inverse):
             st[self._SATURATED] += (g_lo > 0.0) or (g_hi < 0.0)
         else:
             v = float(brentq(gap, lo, hi, xtol=1e-12 * max(hi - lo, 1e-300), rtol=1e-15))
-        st[:n] = comp.core.propagate(np.array([v]), z).state
+        st[:n] = self.core.propagate(np.array([v]), z).state
         st[self._LAST] = v
         return v
 
-    def inner_process(self, comp: Compensator, d: FloatArray, out: FloatArray) -> None:
+    def inner_process(self, d: FloatArray, out: FloatArray) -> None:
         for k, target in enumerate(d):
-            out[k] = self.inner_step(comp, float(target))
+            out[k] = self.inner_step(float(target))
 
 
 #: The compensator's engine for each inverse plan (a core's ``inverse_plan().engine``)

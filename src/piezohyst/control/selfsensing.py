@@ -226,7 +226,7 @@ class SelfSensingController:
             gain=gain,
             allow_extrapolation=allow_extrapolation,
         )
-        if not comp.inverse.closed_loop(comp):
+        if not comp.inverse.closed_loop():
             msg = (
                 "SelfSensingController runs a compiled inverse: play operators alone (eq. 18) "
                 f"or a Preisach, Duhem or Bouc-Wen core; this {type(model).__name__} keeps "
@@ -268,10 +268,10 @@ class SelfSensingController:
         self.ctl[K.CTL_INV_SCALE] = 1.0 / leakage.scale
         self.ctl[K.CTL_DISCHARGE] = leakage.discharge
         self.ctl[K.CTL_DT] = 1.0 / fs
-        self.ctl[K.CTL_REF] = comp.config[ref_slot]
-        self.ctl[K.CTL_INV_GAIN] = comp.config[gain_slot]
+        self.ctl[K.CTL_REF] = comp.inverse.config[ref_slot]
+        self.ctl[K.CTL_INV_GAIN] = comp.inverse.config[gain_slot]
         self.ctl[K.CTL_TOL] = 1e-9 * span
-        inv_gain = float(comp.config[gain_slot])
+        inv_gain = float(comp.inverse.config[gain_slot])
         tol = 1e-4 * span if hold_tolerance is None else abs(float(hold_tolerance)) * abs(inv_gain)
         self.ctl[K.CTL_HOLD_TOL] = tol
         self.ctl[K.CTL_HOLD_SAMPLES] = max(8.0, round(_gain(hold_time, "hold_time", 0, 1e6) * fs))
@@ -288,7 +288,7 @@ class SelfSensingController:
             _gain(refresh_gain, "refresh_gain", 1e-6, 1.0) if refresh_leakage else 0.0
         )
         # the compensator's kernel sees model units: the controller converts desired values
-        self.config = comp.config.copy()
+        self.config = comp.inverse.config.copy()
         self.config[ref_slot] = 0.0
         self.config[gain_slot] = 1.0
         self.feedback = np.zeros(K.CS_SIZE)
@@ -423,7 +423,7 @@ class SelfSensingController:
         """
         comp = self.compensator
         c = comp.inverse.controller_step(
-            comp, float(desired), float(measured), (self.config, self.ctl, self.feedback)
+            float(desired), float(measured), (self.config, self.ctl, self.feedback)
         )
         comp.tally_one(c, "SelfSensingController")
         return c
@@ -450,7 +450,7 @@ class SelfSensingController:
             raise ShapeError(msg)
         out = np.empty_like(d)
         comp = self.compensator
-        comp.inverse.controller_process(comp, d, m, (self.config, self.ctl, self.feedback), out)
+        comp.inverse.controller_process(d, m, (self.config, self.ctl, self.feedback), out)
         comp.tally(out, "SelfSensingController")
         return out
 
