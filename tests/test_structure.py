@@ -114,3 +114,41 @@ def test_no_import_circle_between_any_two_modules() -> None:
 def _is_module(dotted: str) -> bool:
     rel = Path(*dotted.split(".")[1:])
     return (SRC / rel).with_suffix(".py").exists() or (SRC / rel / "__init__.py").exists()
+
+
+def test_only_the_model_sets_its_fitted_attributes() -> None:
+    """A fit returns what it found and the model applies it (``Fitted.set_fitted`` and
+    ``_take``): no other code assigns a model's fitted attribute, calls ``setattr`` on
+    another object, or passes data through the model's ``__dict__``."""
+    from piezohyst.model.fitted import FIT_FACTS
+
+    fitted = {f"{name}_" for name in FIT_FACTS} | {
+        "operator_",
+        "initial_state_",
+        "terms_",
+        "coefs_",
+    }
+    found = []
+    for path in MODULES:
+        if path == SRC / "model" / "fitted.py":
+            continue
+        where = path.relative_to(SRC)
+        for node in ast.walk(ast.parse(path.read_text())):
+            targets: list[ast.expr] = []
+            if isinstance(node, ast.Assign):
+                targets = list(node.targets)
+            elif isinstance(node, ast.AugAssign | ast.AnnAssign):
+                targets = [node.target]
+            for target in targets:
+                for t in ast.walk(target):
+                    if isinstance(t, ast.Attribute) and t.attr in fitted:
+                        found.append(f"{where}:{t.lineno} sets {ast.unparse(t)}")
+            if isinstance(node, ast.Call) and getattr(node.func, "id", "") == "setattr":
+                name = ast.unparse(node.args[1])  # a fitted name ends with "_"
+                on_self = isinstance(node.args[0], ast.Name) and node.args[0].id == "self"
+                if name.rstrip("'\"").endswith("_") and not on_self:
+                    found.append(f"{where}:{node.lineno} calls {ast.unparse(node)}")
+            if isinstance(node, ast.Attribute) and node.attr == "__dict__":
+                if not (isinstance(node.value, ast.Name) and node.value.id in ("self", "cls")):
+                    found.append(f"{where}:{node.lineno} reads {ast.unparse(node)}")
+    assert not found, found

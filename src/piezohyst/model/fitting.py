@@ -6,6 +6,10 @@ dynamics when asked (:mod:`piezohyst.model.dynamics_fit`), then
 identification step (:meth:`~piezohyst.model.cores.base.Core.identify`), and
 :func:`score_model` runs the fitted model over the record for its error.
 :func:`fit_stream` is the same from blocks read one at a time.
+
+These functions compute; they set nothing on a model. What a step finds (a
+:class:`~piezohyst.model.cores.base.CoreFit`, the record's facts, the score)
+is handed to the model's ``_take``, the one writer of its fitted attributes.
 """
 
 from __future__ import annotations
@@ -28,21 +32,19 @@ from ..errors import (
 )
 from ..io.blocks import Blocks, Summary, array_blocks, block_dt
 from ..io.screening import screen
-from .cores.base import Core, CoreFit, FitJob
+from .cores.base import FitJob
 from .dynamics import InputDynamics, OutputDynamics
 from .dynamics_fit import profile_dynamics, search_dynamics
 from .estimator import _dynamics_kind, _output_kind
 from .state import InitialState, ModelState
-from .terms import Term
 
 __all__ = [
-    "apply_fit",
     "fit_arrays",
     "fit_stream",
     "identify_model",
+    "record_facts",
     "score_model",
     "screened",
-    "set_fitted",
 ]
 
 SCORE_PIECE = 1 << 16  # samples per piece when scoring a fit (2 MB of temporaries)
@@ -63,6 +65,7 @@ def fit_arrays(
     ts = as_time(t, xs.size, required=False, owner=type(model).__name__)
     xs, ys = screened(xs, ys, ts, keep_outliers, model.input_unit, model.output_unit)
     dyn = InputDynamics()
+    mode: OutputDynamics | None = None
     us = xs
     owner = type(model).__name__
     kind = _dynamics_kind(model.input_dynamics, "input_dynamics", owner)
@@ -77,25 +80,22 @@ def fit_arrays(
         seed_mode = OutputDynamics() if out_kind != "none" else None
         dyn, mode = search_dynamics(model, xs, ys, ts, kind, seed_mode)
         dt = block_dt(ts, 0, ts.size, None)
-        if mode is not None:  # the solve filters its columns through it; set_fitted keeps it
-            model._fitting_output = mode
-        dyn = profile_dynamics(dyn, kind, _own_fit(model, xs, ys, ts, dt, initial_state), ys, ts)
+        own = _own_fit(model, xs, ys, ts, dt, initial_state, mode)
+        dyn = profile_dynamics(dyn, kind, own, ys, ts)
         _check_identifiable(dyn)
         us, _ = dyn.apply(xs, dt)
     blocks = array_blocks(us, ys, ts)
-    try:
-        summary = identify_model(model, blocks, initial_state, ts is not None)
-        if model._refine(us, ys, ts, summary, initial_state):
-            _training_facts(model, summary)  # each refit reset them
-            score_model(model, blocks, summary)  # the refinement changed the model
-    finally:
-        model.__dict__.pop("_fitting_output", None)
+    summary = identify_model(model, blocks, initial_state, ts is not None, output_mode=mode)
+    if model._refine(us, ys, ts, summary, initial_state):
+        # each refit reset the record's facts; the refinement changed the model's score
+        model._take(**record_facts(summary), **score_model(model, blocks, summary))
+    facts: dict[str, Any] = {"input_dynamics": dyn}
     if dyn.active:  # commands, their range and slew are the logged input's
-        model.input_range_ = (float(xs.min()), float(xs.max()))
         assert ts is not None
         logged = Summary.of(array_blocks(xs, ys, ts))
-        model.max_slew_rate_, model.max_step_ = logged.max_slew_rate, logged.max_step
-    model.input_dynamics_ = dyn
+        facts["input_range"] = (float(xs.min()), float(xs.max()))
+        facts["max_slew_rate"], facts["max_step"] = logged.max_slew_rate, logged.max_step
+    model._take(**facts)
     return model
 
 
@@ -158,7 +158,13 @@ def _check_identifiable(dyn: InputDynamics) -> None:
 
 
 def _own_fit(
-    model: Any, xs: FloatArray, ys: FloatArray, ts: FloatArray, dt: Any, initial_state: InitialState
+    model: Any,
+    xs: FloatArray,
+    ys: FloatArray,
+    ts: FloatArray,
+    dt: Any,
+    initial_state: InitialState,
+    mode: OutputDynamics | None,
 ) -> Any:
     """``fit_sse(dynamics)`` for :func:`profile_dynamics`: the model's own fit on the
     command filtered by ``dynamics`` (warnings kept for the final fit)."""
@@ -170,7 +176,7 @@ def _own_fit(
             warnings.simplefilter("ignore")
             try:
                 blocks = array_blocks(us, ys, ts)
-                identify_model(model, blocks, initial_state, True, None if final else cheap)
+                identify_model(model, blocks, initial_state, True, None if final else cheap, mode)
             except (InsufficientDataError, ParameterError):
                 return math.inf, None
             resid = model.predict(us, t=ts) - ys
@@ -198,7 +204,7 @@ def fit_stream(
         )
         raise ParameterError(msg)
     identify_model(model, blocks, initial_state, timed)
-    model.input_dynamics_ = InputDynamics()
+    model._take(input_dynamics=InputDynamics())
     return model
 
 
@@ -208,7 +214,13 @@ def identify_model(
     initial_state: InitialState,
     timed: bool,
     overrides: dict[str, Any] | None = None,
+    output_mode: OutputDynamics | None = None,
 ) -> Summary:
+    """Identify ``model``'s core and terms from ``blocks`` and hand the result to the model
+    (its parameters, the record's facts, its score); returns the record's summary.
+
+    ``overrides`` replace settings (a cheap profile); ``output_mode``: a mechanical mode the
+    solve filters its columns through (a search's candidate), kept on the model."""
     params = {**model.check_params(), **(overrides or {})}
     sm = Summary.of(blocks)
     if not sm.x_max - sm.x_min > 1e-12 * max(abs(sm.x_min), abs(sm.x_max), 1e-300):
@@ -228,16 +240,17 @@ def identify_model(
         as_time(None, sm.n, required=True, owner=type(model).__name__)  # raises
     job = FitJob(blocks, sm, terms, subsets, initial_state,
                  {**params, **(params.get("settings") or {})}, type(model).__name__,
-                 model.input_unit, model.output_unit,
-                 model.__dict__.get("_fitting_output"))  # fmt: skip
-    apply_fit(model, model.core_class.identify(job))
-    _training_facts(model, sm)
-    score_model(model, blocks, sm)
+                 model.input_unit, model.output_unit, output_mode)  # fmt: skip
+    fit = model.core_class.identify(job)
+    mode = {} if output_mode is None else {"output_dynamics": output_mode}
+    model._take(fit, **record_facts(sm), **mode)
+    model._take(**score_model(model, blocks, sm))
     return sm
 
 
-def score_model(model: Any, blocks: Blocks, sm: Summary) -> None:
-    """Fit quality over the record (one pass, state carried) and the leakage check."""
+def score_model(model: Any, blocks: Blocks, sm: Summary) -> dict[str, float]:
+    """Fit quality over the record (one pass, state carried) and the leakage check:
+    ``{"rmse": ..., "nrmse": ...}`` for the model to take."""
     sse = 0.0
     state: ModelState | None = None
     rate = model.rate_dependent_
@@ -251,9 +264,9 @@ def score_model(model: Any, blocks: Blocks, sm: Summary) -> None:
                 state = run.state
                 r = run.output - y
                 sse += float(np.sum(r * r))  # not BLAS: no thread pool woken for a sum
-    model.rmse_ = math.sqrt(sse / sm.n)
-    model.nrmse_ = model.rmse_ / max(sm.y_max - sm.y_min, 1e-300)
     _check_leakage(model, sm)
+    err = math.sqrt(sse / sm.n)
+    return {"rmse": err, "nrmse": err / max(sm.y_max - sm.y_min, 1e-300)}
 
 
 def _check_leakage(model: Any, sm: Summary) -> None:
@@ -275,39 +288,12 @@ def _check_leakage(model: Any, sm: Summary) -> None:
         )
 
 
-def set_fitted(
-    model: Any, core: Core, terms: tuple[Term, ...], coefs: tuple[FloatArray, ...]
-) -> None:
-    """Make ``model`` fitted with these parameters; fit quality and training range unknown."""
-    model.operator_ = core
-    model.initial_state_ = core.initial_state
-    for name, value in core.fitted_attributes().items():
-        setattr(model, name, value)
-    model.terms_ = terms
-    model.coefs_ = coefs
-    model.selection_ = {}
-    model.selection_folds_ = {}
-    model.selection_splits_ = []
-    model.rmse_ = model.nrmse_ = math.nan  # set by fit; unknown for a model built by hand
-    model.input_range_ = (math.nan, math.nan)
-    model.max_slew_rate_ = model.max_step_ = math.nan
-    model.train_window_ = (math.nan, math.nan)
-    model.input_dynamics_ = InputDynamics()
-    model.output_dynamics_ = getattr(model, "_fitting_output", OutputDynamics())
-
-
-def apply_fit(model: Any, fit: CoreFit) -> None:
-    """Make ``model`` the identification's result (core, terms, selection scores)."""
-    model.set_fitted(fit.core, fit.terms, fit.coefs)
-    if fit.selection is not None:
-        model.selection_, model.selection_folds_, splits = fit.selection
-        model.selection_splits_ = list(splits)
-
-
-def _training_facts(model: Any, sm: Summary) -> None:
+def record_facts(sm: Summary) -> dict[str, Any]:
     """What the fit learns of its record beside the parameters: its voltages, fastest slew
     and the times of its first and last samples."""
-    model.input_range_ = (sm.x_min, sm.x_max)
-    model.max_slew_rate_ = sm.max_slew_rate
-    model.max_step_ = sm.max_step
-    model.train_window_ = (sm.t_first, sm.t_last)
+    return {
+        "input_range": (sm.x_min, sm.x_max),
+        "max_slew_rate": sm.max_slew_rate,
+        "max_step": sm.max_step,
+        "train_window": (sm.t_first, sm.t_last),
+    }

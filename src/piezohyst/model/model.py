@@ -45,7 +45,6 @@ from numpy.typing import ArrayLike
 from .._lazy import LazyModule
 from .._validation import FloatArray, as_signal, same_length
 from ..errors import (
-    NotFittedError,
     NotInvertibleError,
     ParameterError,
 )
@@ -64,7 +63,8 @@ from .estimator import (
     _terms,
     _unit,
 )
-from .fitting import fit_arrays, fit_stream, set_fitted
+from .fitted import Fitted
+from .fitting import fit_arrays, fit_stream
 from .persistence import model_from_dict, model_to_dict, register, save_model
 from .state import (
     History,
@@ -201,7 +201,7 @@ MODEL_RULES: dict[str, Rule] = {
 }
 
 
-class HysteresisModel(Estimator):
+class HysteresisModel(Fitted, Estimator):
     """A hysteresis core plus terms and dynamics: fit, run, inverse and files (see the module).
 
     Parameters
@@ -233,23 +233,6 @@ class HysteresisModel(Estimator):
 
     cli_name: ClassVar[str] = ""
     _rules: ClassVar[dict[str, Rule]] = MODEL_RULES
-    # fitted attributes (``fitting.set_fitted``)
-    operator_: Core
-    initial_state_: FloatArray
-    terms_: tuple[Term, ...]
-    coefs_: tuple[FloatArray, ...]
-    rmse_: float
-    nrmse_: float
-    input_range_: tuple[float, float]
-    max_slew_rate_: float
-    max_step_: float  # largest input change from one training sample to the next (V)
-    #: times (s) of the first and last training samples (NaN without times)
-    train_window_: tuple[float, float]
-    selection_: dict[str, float]
-    selection_folds_: dict[str, list[float]]
-    selection_splits_: list[int]
-    input_dynamics_: InputDynamics
-    output_dynamics_: OutputDynamics
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -374,37 +357,6 @@ class HysteresisModel(Estimator):
     ) -> bool:  # fmt: skip
         """Optional nonlinear refinement after the linear solve; True if it changed the model."""
         return False
-
-    def set_fitted(
-        self, core: Core, terms: tuple[Term, ...], coefs: tuple[FloatArray, ...]
-    ) -> None:
-        """Make this a fitted model with the given parameters (files, known actuators).
-
-        Fit quality and training range become unknown (NaN) until set.
-
-        Parameters
-        ----------
-        core : Core
-            The fitted core (e.g. play operators, weights, offset and initial state).
-        terms : tuple of Term
-            Bound terms.
-        coefs : tuple of ndarray
-            One coefficient array per term.
-        """
-        set_fitted(self, core, terms, coefs)
-
-    def _check_fitted(self) -> None:
-        if not hasattr(self, "operator_"):
-            msg = (
-                f"This {type(self).__name__} instance is not fitted yet. Call 'fit' with "
-                "input and output data first, or load a saved model with ph.load_model."
-            )
-            raise NotFittedError(msg)
-
-    @property
-    def is_fitted(self) -> bool:
-        """True once :meth:`fit` ran (or the model was loaded)."""
-        return hasattr(self, "operator_")
 
     @property
     def rate_dependent_(self) -> bool:
@@ -691,12 +643,16 @@ class HysteresisModel(Estimator):
         self._check_fitted()
         kept = [(tm, c) for tm, c in zip(self.terms_, self.coefs_, strict=True) if not tm.removed]
         model = type(self)(**self.get_params())
-        model.set_fitted(self.operator_, tuple(tm for tm, _ in kept), tuple(c for _, c in kept))
-        model.input_range_ = self.input_range_
-        model.max_slew_rate_, model.max_step_ = self.max_slew_rate_, self.max_step_
-        model.train_window_ = self.train_window_
-        model.input_dynamics_ = self.input_dynamics_  # the lag sits before the hysteresis
-        model.output_dynamics_ = self.output_dynamics_  # and the mode after it
+        same = (
+            "input_range",
+            "max_slew_rate",
+            "max_step",
+            "train_window",
+            "input_dynamics",
+            "output_dynamics",
+        )  # the lag before it, the mode after it
+        model.set_fitted(self.operator_, tuple(tm for tm, _ in kept), tuple(c for _, c in kept),
+                         **{name: getattr(self, f"{name}_") for name in same})  # fmt: skip
         return model
 
     def inverse(self) -> HysteresisModel:
@@ -728,8 +684,7 @@ class HysteresisModel(Estimator):
             raise NotInvertibleError(msg)
         core = self.operator_.inverse()
         inv = self._bare(self.output_unit, self.input_unit, getattr(core, "n_operators", None))
-        inv.set_fitted(core, (), ())
-        inv.input_range_ = _outputs_reached(self)  # its range: what the training inputs reach
+        inv.set_fitted(core, (), (), input_range=_outputs_reached(self))  # what inputs reach
         return inv
 
     @classmethod

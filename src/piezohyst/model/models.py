@@ -45,7 +45,6 @@ from .estimator import (
     _terms,
     _thresholds,
 )
-from .fitting import apply_fit
 from .model import HysteresisModel, InverseSpec
 from .persistence import model_class, model_names
 from .state import History, InitialState, ModelState
@@ -407,6 +406,8 @@ class GeneralizedPI(_PlayModel):
         from scipy.optimize import minimize
 
         terms = list(self.terms_)
+        kept = self.output_dynamics_  # the mode the fit found, if any: the solve filters through it
+        mode = kept if kept.active else None
         selection, folds, splits = self.selection_, self.selection_folds_, self.selection_splits_
         span = max(float(np.ptp(x)), 1e-300)
         start = np.log(np.diff(self.thresholds_) / span)
@@ -419,21 +420,21 @@ class GeneralizedPI(_PlayModel):
             if thr[-1] >= span:  # a play wider than the range never reverses
                 return 1e300
             job = FitJob(blocks, summary, terms, None, initial_state, {**params, "thresholds": thr},
-                         type(self).__name__, self.input_unit, self.output_unit,
-                         self.__dict__.get("_fitting_output"))  # fmt: skip
-            apply_fit(self, PIHysteresis.identify(job))
+                         type(self).__name__, self.input_unit, self.output_unit, mode)  # fmt: skip
+            self._take(PIHysteresis.identify(job), output_dynamics=kept)
             return rmse(self.predict(x, t=t_fit), y) / span
 
         before = objective(start)
         res = minimize(objective, start, method="L-BFGS-B", options={"maxiter": 30})
         objective(res.x if res.fun < before else start)
-        self.selection_, self.selection_folds_ = selection, folds
-        self.selection_splits_ = splits
+        self._take(selection=selection, selection_folds=folds, selection_splits=splits)
         return True
 
-    def set_fitted(self, core: Any, terms: tuple[Term, ...], coefs: tuple[FloatArray, ...]) -> None:
+    def set_fitted(
+        self, core: Any, terms: tuple[Term, ...], coefs: tuple[FloatArray, ...], **facts: Any
+    ) -> None:
         """See :meth:`HysteresisModel.set_fitted`; also sets the 0.1 names of the terms."""
-        super().set_fitted(core, terms, coefs)
+        super().set_fitted(core, terms, coefs, **facts)
         static = StaticShape(np.zeros(0), np.zeros(0), np.zeros(0), 1.0)
         lags = LagShape(np.zeros(0), np.zeros(0))
         growth: list[tuple[str, FloatArray]] = []

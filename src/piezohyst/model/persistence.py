@@ -381,33 +381,34 @@ def model_from_dict(data: Any, expected: type | None = None) -> Model:
     except (TypeError, ValueError) as exc:
         msg = f"field 'params': {exc}"
         raise ModelFileError(msg) from None
-    model.set_fitted(core, terms, coefs)
+    facts: dict[str, Any] = {}
     selection = fitted.data.get("selection") or {}
     if isinstance(selection, dict):
-        model.selection_ = {str(k): float(v) for k, v in selection.items()}
+        facts["selection"] = {str(k): float(v) for k, v in selection.items()}
     splits = fitted.data.get("selection_splits") or []
     if isinstance(splits, list):
-        model.selection_splits_ = [int(k) for k in splits]
+        facts["selection_splits"] = [int(k) for k in splits]
     folds = fitted.data.get("selection_folds") or {}
     if isinstance(folds, dict):
-        model.selection_folds_ = {
+        facts["selection_folds"] = {
             str(k): [float(x) for x in v] for k, v in folds.items() if isinstance(v, list)
         }
-    model.rmse_ = fitted.number("rmse", optional=True)
-    model.nrmse_ = fitted.number("nrmse", optional=True)
-    model.input_range_ = _range(fitted)
-    model.max_slew_rate_ = fitted.number("max_slew_rate", optional=True)
-    model.max_step_ = fitted.number("max_step", optional=True)  # older files lack it
-    model.train_window_ = _window(fitted)
+    facts["rmse"] = fitted.number("rmse", optional=True)
+    facts["nrmse"] = fitted.number("nrmse", optional=True)
+    facts["input_range"] = _range(fitted)
+    facts["max_slew_rate"] = fitted.number("max_slew_rate", optional=True)
+    facts["max_step"] = fitted.number("max_step", optional=True)  # older files lack it
+    facts["train_window"] = _window(fitted)
     for name, kind in (("input_dynamics", InputDynamics), ("output_dynamics", OutputDynamics)):
         data = fitted.data.get(name)  # absent from older files: none
         if data is None:
             continue
         try:
-            setattr(model, f"{name}_", kind.from_dict(dict(data)))
+            facts[name] = kind.from_dict(dict(data))
         except (TypeError, ValueError) as exc:
             msg = f"field '{fitted.name(name)}': {exc}"
             raise ModelFileError(msg) from None
+    model.set_fitted(core, terms, coefs, **facts)
     return model
 
 
