@@ -1,10 +1,13 @@
 """Kernel modules loaded when a model first runs, not when piezohyst is imported.
 
 Every model module uses numba kernels, and importing numba costs more than the rest of
-``import piezohyst`` together. A module that needs kernels binds a :class:`LazyModule`
-under the kernel module's usual name; the first attribute looked up through it imports the
-kernel module (the import system's locks make that safe from several threads at once) and
-puts the real module in its place in that namespace, so later lookups cost nothing extra.
+``import piezohyst`` together. :mod:`piezohyst._kernels` binds a :class:`LazyModule` under
+each kernel module's name, and the modules that need kernels import it as usual
+(``from .._kernels import play as K``). The first attribute looked up through a stand-in
+imports the kernel module (the import system's locks make that safe from several threads at
+once), puts the real module in its place in the package, and copies the module's names into
+the stand-in, so a module holding the stand-in finds every later name in its ``__dict__``
+as fast as in the module's own.
 """
 
 from __future__ import annotations
@@ -14,10 +17,16 @@ from types import ModuleType
 from typing import Any
 
 
-class LazyModule:
-    """A stand-in for module ``name`` bound as ``alias`` in the namespace ``where``."""
+class LazyModule(ModuleType):
+    """A stand-in for module ``name`` bound as ``alias`` in the namespace ``where``.
+
+    Once loaded it becomes a plain module holding the real one's names (its class is
+    switched back to ``ModuleType``), so a lookup through it is as fast as through the
+    module itself.
+    """
 
     def __init__(self, name: str, where: dict[str, Any], alias: str) -> None:
+        super().__init__(name)
         self._name = name
         self._where = where
         self._alias = alias
@@ -26,6 +35,8 @@ class LazyModule:
         """The real module, now bound in ``where`` instead of this stand-in."""
         module = importlib.import_module(self._name)
         self._where[self._alias] = module
+        self.__dict__.update(vars(module))  # later lookups find the names here:
+        self.__class__ = ModuleType  # type: ignore[assignment]  # a module's fast lookup
         return module
 
     def __getattr__(self, attr: str) -> Any:

@@ -26,23 +26,17 @@ import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._lazy import LazyModule
+from .._kernels import signal as S
 from .._validation import FloatArray, as_signal, as_time, same_length
 from ..errors import ExtrapolationWarning, InsufficientDataError, ParameterError
 from ..io.screening import noise_level
 from ..model.model import HysteresisModel, InitialState
 from ..model.persistence import model_class, model_names
 from .comparison import compare_models
-
-if TYPE_CHECKING:
-    from .._kernels import signal as S
-else:  # numba loads when a selection first runs (see _lazy)
-    S = LazyModule("piezohyst._kernels.signal", globals(), "S")
 
 __all__ = [
     "CANDIDATES",

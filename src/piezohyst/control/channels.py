@@ -14,12 +14,13 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any, Generic, Literal, Protocol, TypeVar
+from typing import Any, Generic, Literal, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._lazy import LazyModule
+from .._kernels import play as K
+from .._kernels import signal as S
 from .._validation import FloatArray
 from ..errors import LimitWarning, ParameterError, ShapeError
 from ..model.bank import ModelBank
@@ -27,13 +28,6 @@ from ..model.model import HysteresisModel
 from .compensator import LIMIT_CHECK_FIRST, LIMIT_SHARE, Compensator, Domain
 from .leakage import Leakage
 from .selfsensing import SelfSensingController
-
-if TYPE_CHECKING:
-    from .._kernels import play as K
-    from .._kernels import signal as S
-else:  # numba loads when a model first runs (see _lazy)
-    K = LazyModule("piezohyst._kernels.play", globals(), "K")
-    S = LazyModule("piezohyst._kernels.signal", globals(), "S")
 
 __all__ = ["BankCompensator", "BankController", "ChannelBank", "per_channel"]
 

@@ -22,23 +22,16 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._lazy import LazyModule
+from .._kernels import play as K
 from .._validation import FloatArray
 from ..errors import LimitWarning, ParameterError, ShapeError
 from ..model.model import HysteresisModel, InverseSpec
 from .inverses import INVERSES, CompensatorState, EngineSettings, Inverse, finite_number
-
-if TYPE_CHECKING:
-    from .._kernels import packed as D
-    from .._kernels import play as K
-else:  # numba loads when a model first runs (see _lazy)
-    D = LazyModule("piezohyst._kernels.packed", globals(), "D")
-    K = LazyModule("piezohyst._kernels.play", globals(), "K")
 
 __all__ = ["Compensator", "CompensatorSettings", "CompensatorState"]
 

@@ -25,22 +25,16 @@ from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from string import Template
-from typing import TYPE_CHECKING, Literal, cast
+from typing import Literal, cast
 
 import numpy as np
 
-from .._lazy import LazyModule
+from .._kernels import packed as D
+from .._kernels import play as K
 from ..errors import ParameterError
 from ..io import atomic_write_text
 from .compensator import Compensator
 from .selfsensing import SelfSensingController
-
-if TYPE_CHECKING:
-    from .._kernels import packed as D
-    from .._kernels import play as K
-else:  # numba loads when a model first runs (see _lazy)
-    D = LazyModule("piezohyst._kernels.packed", globals(), "D")
-    K = LazyModule("piezohyst._kernels.play", globals(), "K")
 
 __all__ = ["CCode", "c_paths", "export_c", "write_c"]
 

@@ -23,23 +23,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, cast
+from typing import Any, cast
 
 import numpy as np
 
-from .._lazy import LazyModule
+from .._kernels import packed as D
+from .._kernels import play as K
 from .._validation import FloatArray, as_signal
 from ..errors import ParameterError, ShapeError
 from ..model.cores.base import Core, PackedCore
 from ..model.cores.play import PIHysteresis
 from ..model.model import InverseSpec
-
-if TYPE_CHECKING:
-    from .._kernels import packed as D
-    from .._kernels import play as K
-else:  # numba loads when a model first runs (see _lazy)
-    D = LazyModule("piezohyst._kernels.packed", globals(), "D")
-    K = LazyModule("piezohyst._kernels.play", globals(), "K")
 
 __all__ = ["INVERSES", "CompensatorState", "EngineSettings", "Inverse", "finite_number"]
 

@@ -31,21 +31,14 @@ import warnings
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._lazy import LazyModule
+from .._kernels import signal as _signals
 from .._validation import FloatArray, as_signal, as_time, same_length
 from ..errors import InsufficientDataError, ModelFileError, ParameterError
-
-if TYPE_CHECKING:
-    from .._kernels import play as _kernels
-    from .._kernels import signal as _signals
-else:  # numba loads when a model first runs (see _lazy)
-    _kernels = LazyModule("piezohyst._kernels.play", globals(), "_kernels")
-    _signals = LazyModule("piezohyst._kernels.signal", globals(), "_signals")
 
 __all__ = ["LEAKAGE_TERMS", "Hold", "Leakage", "calibrate_leakage", "find_holds"]
 

@@ -21,12 +21,12 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._lazy import LazyModule
+from .._kernels import play as K
 from .._validation import FloatArray
 from ..errors import ParameterError, ShapeError
 from ..model.model import HysteresisModel
@@ -36,13 +36,6 @@ from .compensator import (
     CompensatorState,
 )
 from .leakage import Leakage
-
-if TYPE_CHECKING:
-    from .._kernels import packed as D
-    from .._kernels import play as K
-else:  # numba loads when a model first runs (see _lazy)
-    D = LazyModule("piezohyst._kernels.packed", globals(), "D")
-    K = LazyModule("piezohyst._kernels.play", globals(), "K")
 
 __all__ = [
     "ControllerState",

@@ -15,20 +15,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
-from .._lazy import LazyModule
+from .._kernels import signal as _signals
 from .._validation import FloatArray
 from ..errors import ParameterError
-
-if TYPE_CHECKING:
-    from .._kernels import play as _kernels
-    from .._kernels import signal as _signals
-else:  # numba loads when a model first runs (see _lazy)
-    _kernels = LazyModule("piezohyst._kernels.play", globals(), "_kernels")
-    _signals = LazyModule("piezohyst._kernels.signal", globals(), "_signals")
 
 __all__ = ["KINDS", "InputDynamics", "OutputDynamics", "ResponseInterval", "filter_response"]
 

@@ -37,12 +37,11 @@ import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, ClassVar, Self
+from typing import Any, ClassVar, Self
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._lazy import LazyModule
 from .._validation import FloatArray, as_signal, same_length
 from ..errors import (
     NotInvertibleError,
@@ -77,11 +76,6 @@ from .state import (
     run_model,
 )
 from .terms import LagShape, RelaxationShape, StaticShape, Term, coefficient_arrays
-
-if TYPE_CHECKING:
-    from .._kernels import play as K
-else:  # numba loads when a model first runs (see _lazy)
-    K = LazyModule("piezohyst._kernels.play", globals(), "K")
 
 __all__ = [
     "GROWTH_TERMS",

@@ -50,23 +50,15 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._lazy import LazyModule
+from .._kernels import packed as D
+from .._kernels import signal as _signals
 from .._validation import FloatArray
 from ..errors import ParameterError, ShapeError
-
-if TYPE_CHECKING:
-    from .._kernels import packed as D
-    from .._kernels import play as _kernels
-    from .._kernels import signal as _signals
-else:  # numba loads when a model first runs (see _lazy)
-    D = LazyModule("piezohyst._kernels.packed", globals(), "D")
-    _kernels = LazyModule("piezohyst._kernels.play", globals(), "_kernels")
-    _signals = LazyModule("piezohyst._kernels.signal", globals(), "_signals")
 
 __all__ = [
     "AbsIntegral",

@@ -29,20 +29,15 @@ import importlib
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar, Generic, NamedTuple, TypeVar
+from typing import Any, ClassVar, Generic, NamedTuple, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..._lazy import LazyModule
+from ..._kernels import packed as D
 from ..._validation import FloatArray, as_signal
 from ...errors import NotInvertibleError, NumericRangeError, ParameterError, ShapeError
 from ...io.blocks import Blocks, Summary
-
-if TYPE_CHECKING:
-    from ..._kernels import packed as D
-else:  # numba loads when a model first runs (see _lazy)
-    D = LazyModule("piezohyst._kernels.packed", globals(), "D")
 
 __all__ = [
     "CORES",

@@ -13,11 +13,11 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
-from ..._lazy import LazyModule
+from ..._kernels import packed as D
 from ..._validation import FloatArray
 from ...errors import InsufficientDataError, ParameterError, ShapeError
 from ._inmemory import (
@@ -39,11 +39,6 @@ from .base import (
     _frozen,
 )
 from .solve import bounded_lstsq as _bounded_lstsq
-
-if TYPE_CHECKING:
-    from ..._kernels import packed as D
-else:  # numba loads when a model first runs (see _lazy)
-    D = LazyModule("piezohyst._kernels.packed", globals(), "D")
 
 __all__ = ["BoucWenHysteresis"]
 

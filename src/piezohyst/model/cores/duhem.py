@@ -13,12 +13,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..._lazy import LazyModule
+from ..._kernels import packed as D
 from ..._validation import FloatArray
 from ...errors import InsufficientDataError, ParameterError, ShapeError
 from ._inmemory import (
@@ -47,11 +47,6 @@ from .solve import bounded_lstsq as _bounded_lstsq
 CYCLES, CYCLE_LEG, CLOSED = 6, 500, 1e-3
 #: a linear fit whose RMS misfit is within this factor of the polish's counts as nearly as good
 NEARLY = 1.25
-
-if TYPE_CHECKING:
-    from ..._kernels import packed as D
-else:  # numba loads when a model first runs (see _lazy)
-    D = LazyModule("piezohyst._kernels.packed", globals(), "D")
 
 __all__ = ["DuhemHysteresis"]
 

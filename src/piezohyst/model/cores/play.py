@@ -14,24 +14,19 @@ from __future__ import annotations
 import itertools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
 from numpy.typing import ArrayLike
 
-from ..._lazy import LazyModule
+from ..._kernels import play as _kernels
 from ..._validation import FloatArray, as_signal, check_int
 from ...errors import NotInvertibleError, NumericRangeError, ParameterError, ShapeError
 from ...io.blocks import Blocks, Summary, array_blocks, without_time
 from ..terms import Integral, Term, TimeTerm
 from .base import PERIODIC_PASSES, Core, CoreFit, FitJob, InversePlan, Propagation, _frozen
 from .solve import Identification, identify
-
-if TYPE_CHECKING:
-    from ..._kernels import play as _kernels
-else:  # numba loads when a model first runs (see _lazy)
-    _kernels = LazyModule("piezohyst._kernels.play", globals(), "_kernels")
 
 __all__ = [
     "PIHysteresis",

@@ -15,12 +15,13 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..._lazy import LazyModule
+from ..._kernels import packed as D
+from ..._kernels import signal as S
 from ..._validation import FloatArray, as_signal
 from ...errors import InsufficientDataError, ParameterError, ShapeError
 from ..terms import Relaxation
@@ -43,13 +44,6 @@ from .base import (
     _nodes,
 )
 from .solve import bounded_lstsq as _bounded_lstsq
-
-if TYPE_CHECKING:
-    from ..._kernels import packed as D
-    from ..._kernels import signal as S
-else:  # numba loads when a model first runs (see _lazy)
-    D = LazyModule("piezohyst._kernels.packed", globals(), "D")
-    S = LazyModule("piezohyst._kernels.signal", globals(), "S")
 
 __all__ = ["PreisachHysteresis"]
 

@@ -35,24 +35,17 @@ import math
 import operator
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Protocol
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
 
-from ..._lazy import LazyModule
+from ..._kernels import signal as _signals
 from ..._validation import FloatArray
 from ...errors import InsufficientDataError
 from ...io.blocks import BLOCK, Blocks, Summary
 from ..dynamics import OutputDynamics
 from ..terms import Term, term_columns
-
-if TYPE_CHECKING:
-    from ..._kernels import play as _kernels
-    from ..._kernels import signal as _signals
-else:  # numba loads when a model first runs (see _lazy)
-    _kernels = LazyModule("piezohyst._kernels.play", globals(), "_kernels")
-    _signals = LazyModule("piezohyst._kernels.signal", globals(), "_signals")
 
 
 class ColumnCore(Protocol):
