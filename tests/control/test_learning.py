@@ -20,7 +20,7 @@ from piezohyst.metrics import hysteresis_width
 from piezohyst.simulation import PLANTS, Bench, BenchPreset, BenchRecord, make_signal
 from piezohyst.workflows.excitation import excitation
 
-from . import reference
+from .. import reference
 
 RATE = 1000.0
 

@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 import piezohyst as ph
 from piezohyst.model.cores.play import periodic_state
 
-from . import reference
-from .strategies import signals
+from .. import reference
+from ..strategies import signals
 
 # these tests drive targets past the voltage and slew limits on purpose (safety, exactness
 # where no limit acts); that the limits then say so is tested in test_records.py

@@ -10,8 +10,8 @@ from hypothesis import strategies as st
 import piezohyst as ph
 from piezohyst._kernels import play as _kernels
 
-from . import reference
-from .strategies import invertible_pi, signals, thresholds
+from .. import reference
+from ..strategies import invertible_pi, signals, thresholds
 
 pytestmark = pytest.mark.kernels
 

@@ -18,7 +18,7 @@ from piezohyst.metrics import hysteresis_width, nrmse
 from piezohyst.model.dynamics import InputDynamics
 from piezohyst.simulation import make_signal, simulate
 
-from .strategies import examples
+from ..strategies import examples
 
 # these tests drive targets past the voltage and slew limits on purpose (safety, exactness
 # where no limit acts); that the limits then say so is tested in test_records.py

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 import piezohyst as ph
 from piezohyst.errors import DataFileError
 
-from .strategies import examples
+from ..strategies import examples
 
 SUFFIXES = [".csv", ".txt", ".npz", ".mat", ".tdms", ".h5"]
 

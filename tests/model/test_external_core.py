@@ -10,7 +10,7 @@ import pytest
 import piezohyst as ph
 from piezohyst.control.export import export_c
 
-from .external_core import BacklashCore
+from ..external_core import BacklashCore
 
 # these tests drive targets past the voltage and slew limits on purpose (safety, exactness
 # where no limit acts); that the limits then say so is tested in test_records.py

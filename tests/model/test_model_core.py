@@ -29,7 +29,7 @@ pytestmark = [
 ]
 
 FS = 1000.0
-FIXTURES = Path(__file__).parent / "fixtures" / "schema1"
+FIXTURES = Path(__file__).parent.parent / "fixtures" / "schema1"
 
 
 class TimeSquared(ph.Term):

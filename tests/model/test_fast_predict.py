@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 import piezohyst as ph
 
-from .strategies import signals
+from ..strategies import signals
 
 # generated signals hold one-sample jumps, which the record check names (test_records.py)
 # generated inputs reach past the training range: the paths must agree there too

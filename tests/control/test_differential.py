@@ -24,7 +24,7 @@ from piezohyst.model.cores.duhem import _curvature
 from piezohyst.model.cores.preisach import _curvature_upper
 from piezohyst.simulation import make_signal
 
-from .strategies import examples
+from ..strategies import examples
 
 # these tests drive targets past the voltage and slew limits on purpose (safety, exactness
 # where no limit acts); that the limits then say so is tested in test_records.py
@@ -477,7 +477,7 @@ def compare_c_with_python(
 ) -> np.ndarray:
     """Export ``comp`` to C, compile it strictly, run ``desired`` through both: the commands
     agree to 1e-9 V in double (to float precision in float), and so do the counters."""
-    from tests.test_export import HARNESS
+    from tests.control.test_export import HARNESS
 
     c_path, _ = write_c(comp, tmp_path / "core.c", precision=precision)  # type: ignore[arg-type]
     (tmp_path / "main.c").write_text(HARNESS.replace("NAME", "core"))

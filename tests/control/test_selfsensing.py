@@ -15,7 +15,7 @@ import piezohyst as ph
 from piezohyst.metrics import hysteresis_width
 from piezohyst.simulation import PRESETS, Bench, make_signal
 
-from .strategies import examples
+from ..strategies import examples
 
 # generated signals hold one-sample jumps, which the record check names (test_records.py)
 # the loop's safety tests drive it into its limits on purpose (test_records.py: the warning)

@@ -10,7 +10,7 @@ from hypothesis.extra import numpy as hnp
 
 import piezohyst as ph
 
-from .strategies import invertible_pi
+from ..strategies import invertible_pi
 
 # these tests drive targets past the voltage and slew limits on purpose (safety, exactness
 # where no limit acts); that the limits then say so is tested in test_records.py

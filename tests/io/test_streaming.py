@@ -18,7 +18,7 @@ from piezohyst.errors import DataFileError
 from piezohyst.io.blocks import Summary, array_blocks
 from piezohyst.model.cores.play import default_thresholds, history_state
 
-from .strategies import examples
+from ..strategies import examples
 
 # these tests drive targets past the voltage and slew limits on purpose (safety, exactness
 # where no limit acts); that the limits then say so is tested in test_records.py
