@@ -86,6 +86,16 @@ class BenchPreset:
     #: Debye relaxation branches added to the capacitor's charge: time constants (s), F each
     relax_taus: tuple[float, ...] = ()
     relax_gains: tuple[float, ...] = ()
+    #: An electrostrictive part of the strain: S = g (dQ + k dQ^2 / q_ref), dQ the capacitor
+    #: charge from its value at rest (k = ``strain_curvature``, 0: S = g dQ, eq. 6-7)
+    strain_curvature: float = 0.0
+    strain_q_ref: float = 1e-6  # C
+
+    def strain(self, dq: FloatArray) -> FloatArray:
+        """The quasi-static displacement (m) for capacitor charges ``dq`` from rest (C)."""
+        if self.strain_curvature == 0.0:
+            return self.gain * dq
+        return self.gain * (dq + self.strain_curvature * dq * dq / self.strain_q_ref)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -316,7 +326,8 @@ class BenchRecord:
     displacement : m, measured by the laser sensor (for checking only)
     capacitor_charge : C, true charge of the nonlinear capacitor Q_C
     leak_charge : C, true charge through the leakage resistor Q_R
-    true_displacement : m, g * (Q_C - Q_C at t = 0)
+    true_displacement : m, ``preset.strain(Q_C - Q_C at t = 0)``: g (Q_C - Q_C at t = 0) unless
+        the preset has an electrostrictive part
     true_growth_rate : S, the best constant leakage conductance for this run
         (least-squares fit of Q_R on the integral of V), what R should find
     preset : BenchPreset
@@ -561,7 +572,7 @@ class Bench:
         noise = self._rng.standard_normal(2)
         lsb = self._plant.lsb
         v_meas = min(max(v_amp + p.amp_noise * float(noise[0]), -p.adc_range), p.adc_range)
-        s_true = p.gain * (q_c - self._q_rest)
+        s_true = float(p.strain(np.asarray(q_c - self._q_rest)))
         if self._plant.mode.active:
             s_true = float(self._plant.displacement(np.array([s_true]))[0])
         res = p.laser_resolution
@@ -637,7 +648,7 @@ class Bench:
             self._q_rest = float(q_c[0])
         noise = self._rng.standard_normal((v.size, 2))
         charge = self._plant.adc(v_amp + p.amp_noise * noise[:, 0])
-        s_true = self._plant.displacement(p.gain * (q_c - self._q_rest))
+        s_true = self._plant.displacement(p.strain(q_c - self._q_rest))
         s_meas = self._plant.laser(s_true + p.laser_noise * noise[:, 1])
         return BenchRecord(t, v, charge, s_meas, q_c, q_r, s_true, p.g_leak, p)
 
@@ -737,7 +748,7 @@ def simulate(
 
     rng = np.random.default_rng(seed)
     charge = physics.adc(v_amp + p.amp_noise * rng.standard_normal(v.size))
-    s_true = physics.displacement(p.gain * (q_c - q_c[0]))
+    s_true = physics.displacement(p.strain(q_c - q_c[0]))
     s_meas = physics.laser(s_true + p.laser_noise * rng.standard_normal(v.size))
 
     integral = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(ts))])
