@@ -20,6 +20,7 @@ Compensation and control
     Compensator, CompensatorState -- streaming feedforward, safe by default
     SelfSensingController, ControllerState -- feedback on the measured charge
     Leakage, calibrate_leakage -- the leakage from constant-voltage holds
+    OutputMap, calibrate_gain -- charge to displacement, from a sensor once (eq. 6-7)
     LearningCompensator -- learning a repeated scan from the charge
     BankCompensator, BankController -- many channels in one kernel
 
@@ -50,6 +51,7 @@ from ._version import __version__
 from .analysis import selection as selection  # ph.selection, as before the packages
 from .analysis.comparison import Comparison, ComparisonRow, compare_models
 from .analysis.selection import Selection, select_model
+from .control.calibration import OutputMap, calibrate_gain
 from .control.channels import BankCompensator, BankController
 from .control.compensator import Compensator, CompensatorState
 from .control.leakage import Leakage, calibrate_leakage
@@ -127,6 +129,7 @@ __all__ = [
     "NotInvertibleError",
     "NumericRangeError",
     "OutputError",
+    "OutputMap",
     "PIHysteresis",
     "PIModel",
     "ParameterError",
@@ -142,6 +145,7 @@ __all__ = [
     "Term",
     "TimeAxisError",
     "__version__",
+    "calibrate_gain",
     "calibrate_leakage",
     "compare_models",
     "default_thresholds",

@@ -31,6 +31,7 @@ from .._kernels import play as K
 from .._validation import FloatArray
 from ..errors import LimitWarning, ParameterError, ShapeError
 from ..model.model import HysteresisModel, InverseSpec
+from .calibration import Charges, OutputMap
 from .inverses import INVERSES, CompensatorState, EngineSettings, Inverse, finite_number
 
 __all__ = ["Compensator", "CompensatorSettings", "CompensatorState"]
@@ -75,6 +76,13 @@ class Compensator:
         ``UserWarning`` (the asked limits stay in :attr:`requested_limits`):
         a model is not trusted where it never saw the actuator. True keeps
         the limits as given.
+    output_map : OutputMap, optional
+        The map from the capacitor's charge to the displacement
+        (:func:`~piezohyst.control.calibration.calibrate_gain`): desired values
+        are then displacements in its unit, turned into the capacitor charge
+        that gives them (curvature included; on a map that turns, on the
+        branch the charge is on), instead of ``gain``. Displacement 0 is the
+        map's, as the sensor read it at calibration.
 
     Examples
     --------
@@ -96,6 +104,8 @@ class Compensator:
     own :class:`BankCompensator`.
     """
 
+    domain: Domain  # what the desired values are: the model's output, or metres
+
     def __init__(
         self,
         model: HysteresisModel,
@@ -107,16 +117,23 @@ class Compensator:
         domain: Domain = "charge",
         gain: float | None = None,
         allow_extrapolation: bool = False,
+        output_map: OutputMap | None = None,
     ) -> None:
+        #: Desired displacements as charges, through the output map (None: no map)
+        self._charges = Charges.of(output_map, gain)
+        self.output_map = output_map
         spec, settings = self._settings(
-            model, v_min, v_max, slew_rate, sample_rate, domain, gain, allow_extrapolation
-        )
+            model, v_min, v_max, slew_rate, sample_rate,
+            "charge" if output_map is not None else domain, gain, allow_extrapolation,
+        )  # fmt: skip
+        if output_map is not None:
+            self.domain = "displacement"
         #: the engine the core's inverse plan names (play, packed, python): it owns the
         #: kernel arrays (:mod:`piezohyst.control.inverses`)
         self.inverse: Inverse = INVERSES[spec.operator.inverse_plan().engine](spec, settings)
         #: True when eq. 18's analytic inverse runs (no Newton solve); fixed by the model
         self.analytic = self.inverse.analytic
-        self._plain = self.inverse.plain
+        self._plain = self.inverse.plain and output_map is None
         self.reset()
 
     def _settings(
@@ -193,7 +210,7 @@ class Compensator:
                 raise ParameterError(msg)
         self.model = model
         self.spec = spec
-        self.domain: Domain = domain
+        self.domain = domain
         self.gain = gain
         self.slew_rate = slew_rate
         self.sample_rate = sample_rate
@@ -344,6 +361,8 @@ class Compensator:
             If the last command would lie outside the limits.
         """
         self.inverse.reset(state, voltage)
+        if self._charges is not None:
+            self._charges.reset()
         self._mode_history[:] = np.nan
         self._last_desired = math.nan
         self._count_reset()
@@ -470,7 +489,10 @@ class Compensator:
         return c
 
     def _step_general(self, desired: float, preview: ArrayLike | None) -> float:
-        """:meth:`step` for a model with input dynamics, a mode or another engine."""
+        """:meth:`step` for a model with input dynamics, a mode, an output map or another
+        engine."""
+        if self._charges is not None:
+            desired, preview = self._charges.one(desired, preview)
         if self.mode.active and self.dynamic and self.delay_samples:
             return self._step_mode_delayed(float(desired), preview)
         if self.mode.active:
@@ -531,6 +553,8 @@ class Compensator:
         if d.ndim != 1:
             msg = f"'desired' must be a 1-D array. Got shape {d.shape}."
             raise ShapeError(msg)
+        if self._charges is not None:
+            d = self._charges.block(d)
         if self.mode.active:
             d = np.ascontiguousarray(self._through_mode(d, None))
         out = np.empty_like(d)
