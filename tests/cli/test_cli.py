@@ -441,3 +441,30 @@ def test_long_work_says_so_once_when_piped(tmp_path: Path) -> None:
     args = [str(exe), "fit", str(tmp_path / "short.csv"), "-o", str(tmp_path / "s.json")]
     short = subprocess.run(args, capture_output=True, text=True, check=False)
     assert "about" not in short.stderr and "done in" not in short.stderr
+
+
+def test_calibrate_gain_then_compensate_in_metres_from_its_file(workdir: Path) -> None:
+    gain = workdir / "gain.json"
+    res = run("calibrate-gain", workdir / "model.json", workdir / "run.csv", "-o", gain)
+    assert res.exit_code == 0, res.output
+    assert res.stdout.startswith("gain 125.0")  # the bench's 125 m/C, to its printed digits
+    om = ph.OutputMap.load(gain)
+    # tol: issue 40's bar, 0.5 %; measured within 0.003 % on the bench
+    assert om.gain == pytest.approx(125.0, rel=5e-3)
+    lo, hi = om.displacement_range()
+    t = np.arange(2000) / 1000.0
+    ph.write_table(
+        workdir / "target_m.csv", {"time": t, "desired": lo + (hi - lo) * (0.5 + 0.3 * np.sin(t))}
+    )
+    res = run("compensate", workdir / "model.json", workdir / "target_m.csv", "--gain", gain,
+              "-o", workdir / "command_m.csv")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    out = ph.io.read_table(workdir / "command_m.csv")
+    assert np.all((out.get("command") >= 0.0) & (out.get("command") <= 140.0))
+    res = run("compensate", workdir / "model.json", workdir / "target_m.csv", "--gain",
+              workdir / "run.csv", "-o", workdir / "bad.csv")  # fmt: skip
+    assert_clean_error(res, code=2)
+    assert "cannot read an output map" in res.stderr
+    res = run("calibrate-gain", workdir / "model.json", workdir / "run.csv",
+              "--displacement-column", "voltage", "-o", workdir / "g2.json")  # fmt: skip
+    assert_clean_error(res, "the displacement")

@@ -137,3 +137,35 @@ def test_the_map_round_trips_its_file_and_states_its_uncertainty(tmp_path: Path)
         ph.OutputMap.load(path)
     with pytest.warns(ph.ExtrapolationWarning, match="outside the calibrated charges"):
         om.predict([hi + 0.5 * (hi - lo)])
+
+
+@pytest.mark.parametrize("kind", ["active-pi", "preisach"])
+def test_a_linear_map_exports_to_c_like_python(kind: str, tmp_path: Path) -> None:
+    from ..control.test_differential import CC, compare_c_with_python
+
+    if CC is None:
+        pytest.skip("no C compiler on this machine")
+    rec = ph.simulate(signal="decaying", duration=10.0, seed=2)
+    model = _quiet_fit(ph.ActivePI(10) if kind == "active-pi" else ph.PreisachModel(), rec)
+    om = ph.calibrate_gain(model, rec.voltage, rec.charge, rec.displacement, rec.t)
+    lo, hi = model.input_range_
+    comp = ph.Compensator(model, v_min=lo, v_max=hi, output_map=om, slew_rate=None)
+    s_lo, s_hi = om.displacement_range()
+    desired = s_lo + (s_hi - s_lo) * (0.5 + 0.4 * np.sin(np.linspace(0, 12, 1500)))
+    desired[::97] = np.nan
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ph.LimitWarning)  # the counts are compared instead
+        compare_c_with_python(comp, desired, tmp_path, "double", hi, name="ph_comp")
+
+
+def test_a_curved_map_is_refused_by_the_c_export(tmp_path: Path) -> None:
+    from piezohyst.control.export import write_c
+
+    cal = ph.simulate(preset=CURVED, signal="multifreq", duration=10.0, seed=0)
+    model = _quiet_fit(ph.ActivePI(10), cal)
+    om = ph.calibrate_gain(model, cal.voltage, cal.charge, cal.displacement, cal.t)
+    assert om.order == 2
+    lo, hi = model.input_range_
+    comp = ph.Compensator(model, v_min=lo, v_max=hi, output_map=om)
+    with pytest.raises(ph.ParameterError, match="curved"):
+        write_c(comp, tmp_path / "c.c")

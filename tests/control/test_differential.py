@@ -473,15 +473,15 @@ def test_exported_c_matches_python(
 
 
 def compare_c_with_python(
-    comp: Any, desired: np.ndarray, tmp_path: Path, precision: str, hi: float
+    comp: Any, desired: np.ndarray, tmp_path: Path, precision: str, hi: float, name: str = "ph_comp"
 ) -> np.ndarray:
-    """Export ``comp`` to C, compile it strictly, run ``desired`` through both: the commands
-    agree to 1e-9 V in double (to float precision in float), and so do the counters."""
+    """Export ``comp`` to C as ``name``, compile it strictly, run ``desired`` through both: the
+    commands agree to 1e-9 V in double (to float precision in float), and so do the counters."""
     from tests.control.test_export import HARNESS
 
-    c_path, _ = write_c(comp, tmp_path / "core.c", precision=precision)  # type: ignore[arg-type]
-    (tmp_path / "main.c").write_text(HARNESS.replace("NAME", "core"))
-    exe = tmp_path / "core"
+    c_path, _ = write_c(comp, tmp_path / f"{name}.c", precision=precision)  # type: ignore[arg-type]
+    (tmp_path / "main.c").write_text(HARNESS.replace("NAME", name))
+    exe = tmp_path / name
     cmd = [CC or "cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2",
            str(c_path), str(tmp_path / "main.c"), "-o", str(exe), "-lm"]  # fmt: skip
     subprocess.run(cmd, check=True, capture_output=True, text=True)
@@ -744,7 +744,7 @@ def test_exported_c_with_creep_matches_python(
     desired[::97] = np.nan  # the lags keep settling on the held command
     desired[7::301] = -1.0  # unreachable: saturates
     compare_c_with_python(comp, desired, tmp_path, precision, hi)
-    source = (tmp_path / "core.c").read_text()
+    source = (tmp_path / "ph_comp.c").read_text()
     assert "N_LAGS 2" in source
     assert ("SLOW 1" in source) == (name == "relaxing")
 

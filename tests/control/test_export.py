@@ -241,3 +241,14 @@ def test_controller_matches_python(
         ctl.leakage_refreshes,
     )
     assert ctl.measurement_faults > 0 and (ctl.leakage_refreshes > 0) == refresh
+
+
+def test_a_c_name_that_clashes_with_the_steps_own_is_refused(tmp_path: Path) -> None:
+    from piezohyst.control.export import write_c
+
+    h = ph.PIHysteresis([0.0, 20.0], [1e-8, 5e-9])
+    comp = ph.Compensator(ph.ClassicalPI.from_operator(h), v_min=0.0, v_max=140.0)
+    for name in ("core", "real", "hysteresis"):  # core_step, real_t, hysteresis_step are taken
+        with pytest.raises(ph.ParameterError, match="clashes with the exported step"):
+            write_c(comp, tmp_path / f"{name}.c")
+    write_c(comp, tmp_path / "ph_comp.c")  # the name the docs use

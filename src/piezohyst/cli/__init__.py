@@ -15,7 +15,6 @@ import click
 
 from .._version import __version__
 from ..control.compensator import CompensatorSettings
-from ..control.leakage import LEAKAGE_TERMS
 from ..control.selfsensing import LoopSettings
 from ..io import DataSpec
 from ..model.models import model_names
@@ -574,20 +573,6 @@ def compensate(
     ctx.info(f"saved {out}")
 
 
-def _settle(value: str) -> float | str:
-    """--settle: "auto" or a fraction in [0, 1)."""
-    if value == "auto":
-        return value
-    try:
-        fraction = float(value)
-    except ValueError:
-        fraction = -1.0
-    if not 0.0 <= fraction < 1.0:
-        msg = f"expected auto or a fraction in [0, 1), got {value!r}"
-        raise click.BadParameter(msg, param_hint="--settle")
-    return fraction
-
-
 @main.command()
 @click.argument("model", type=EXISTING)
 @click.argument("data", type=EXISTING)
@@ -793,81 +778,6 @@ def export_c(
     click.echo(f"{c_path}\n{h_path}")
 
 
-@main.command("calibrate-leakage")
-@click.argument("data", type=EXISTING)
-@_data_options
-@click.option(
-    "--terms",
-    default=",".join(LEAKAGE_TERMS),
-    show_default=True,
-    help="Leakage terms to fit, separated by commas.",
-)
-@click.option(
-    "--min-hold",
-    type=click.FloatRange(0.0, min_open=True),
-    default=1.0,
-    show_default=True,
-    help="Shortest hold used, in s (after settling).",
-)
-@click.option(
-    "--settle",
-    default="auto",
-    show_default=True,
-    callback=lambda _c, _p, value: _settle(value),
-    help="Fraction of each hold skipped at its start, or auto: per hold, until its slope "
-    "agrees with its end (a hold still settling is then named).",
-)
-@OUT_FILE_JSON
-@FORCE
-@click.pass_obj
-def calibrate_leakage(
-    ctx: Context,
-    data: Path,
-    data_spec: DataSpec,
-    terms: str,
-    min_hold: float,
-    settle: float | str,
-    out: Path,
-    force: bool,
-) -> None:
-    """Calibrate the leakage current from the constant-voltage holds of a record.
-
-    While the voltage is held the hysteresis is still: the charge's slope on
-    each hold is the leakage current there. Record holds of several seconds
-    at several levels, up and down again (e.g. 0, 35, 70, 105, 140, 105, 70,
-    35, 0 V, 10 s each).
-
-    \b
-    Example:
-      piezohyst calibrate-leakage holds.csv -o leak.json
-    """
-    from ..workflows import calibrate_leakage_file
-
-    names = tuple(t.strip() for t in terms.split(",") if t.strip())
-    leak = _run(
-        ctx,
-        lambda: calibrate_leakage_file(
-            data,
-            out,
-            data_spec=data_spec,
-            terms=names,
-            min_duration=min_hold,
-            settle=settle,
-            force=force,
-        ),
-    )
-    errors = leak.stderr()
-    for name, (value, unit) in leak.coefficients().items():
-        sure = f" ± {errors[name]:.2g}" if errors.get(name) else ""
-        click.echo(f"{name:12s} {value:.4g}{sure} {unit}")
-    click.echo(
-        f"from {len(leak.holds)} holds at "
-        f"{', '.join(f'{h.voltage:.4g}' for h in leak.holds)} {leak.input_unit}; "
-        f"RMS misfit {leak.residual:.3g} {leak.output_unit}/s"
-    )
-    ctx.info(f"saved {out}")
-
-
 @main.command("simulate-loop")
 @click.argument("model", type=EXISTING)
 @click.argument("target", type=EXISTING)
@@ -980,8 +890,11 @@ def demo(ctx: Context, out: Path, operators: int, seed: int) -> None:
     click.echo(str(out / "report.md"))
 
 
+from ._calibrate import calibrate_gain, calibrate_leakage  # noqa: E402 - after main
 from ._learn import learn  # noqa: E402 - registered after main is defined
 
+main.add_command(calibrate_leakage)
+main.add_command(calibrate_gain)
 main.add_command(learn)
 
 if __name__ == "__main__":  # pragma: no cover

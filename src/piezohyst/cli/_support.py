@@ -16,6 +16,7 @@ from typing import Any, Literal, cast
 
 import click
 
+from ..control.calibration import OutputMap
 from ..control.compensator import CompensatorSettings, Domain
 from ..control.selfsensing import LoopSettings
 from ..errors import PiezohystError
@@ -304,6 +305,24 @@ def _data_options(fn: Callable[..., Any]) -> Callable[..., Any]:
     return wrapped
 
 
+def _gain_option(value: str | None) -> float | OutputMap | None:
+    """--gain: a number (m/C) or an output map's file (calibrate-gain)."""
+    if value is None:
+        return None
+    try:
+        return float(value)
+    except ValueError:
+        pass
+    path = Path(value)
+    if not path.is_file():
+        msg = f"--gain: {value!r} is neither a number (m/C) nor an output map's file"
+        raise click.BadParameter(msg)
+    try:
+        return OutputMap.load(path)
+    except PiezohystError as exc:
+        raise click.BadParameter(str(exc)) from None
+
+
 def _limit_options(fn: Callable[..., Any]) -> Callable[..., Any]:
     """--v-min/--v-max/--domain/--gain/--slew-rate/--sample-rate, gathered into one settings."""
     options = [
@@ -328,9 +347,10 @@ def _limit_options(fn: Callable[..., Any]) -> Callable[..., Any]:
         ),
         click.option(
             "--gain",
-            type=float,
             default=None,
-            help="Displacement per charge in m/C (for --domain displacement).",
+            callback=lambda _c, _p, value: _gain_option(value),
+            help="Displacement per charge in m/C (for --domain displacement), or the file "
+            "calibrate-gain wrote (its map, curvature included; implies --domain displacement).",
         ),
         click.option(
             "--slew-rate",
@@ -358,16 +378,20 @@ def _limit_options(fn: Callable[..., Any]) -> Callable[..., Any]:
         v_min: float | None,
         v_max: float | None,
         domain: str,
-        gain: float | None,
+        gain: float | OutputMap | None,
         slew_rate: float | None,
         sample_rate: float | None,
         allow_extrapolation: bool,
         **kwargs: Any,
     ) -> Any:
         slew: float | Literal["trained"] = "trained" if slew_rate is None else slew_rate
+        number, output_map = (None, gain) if isinstance(gain, OutputMap) else (gain, None)
+        if output_map is not None:
+            domain = "displacement"  # a map: the desired values are in its unit
         settings = CompensatorSettings(
-            v_min, v_max, cast(Domain, domain), gain, slew, sample_rate, allow_extrapolation
-        )
+            v_min, v_max, cast(Domain, domain), number, slew, sample_rate, allow_extrapolation,
+            output_map,
+        )  # fmt: skip
         return fn(*args, settings=settings, **kwargs)
 
     wrapped: Callable[..., Any] = with_settings

@@ -119,8 +119,9 @@ class Compensator:
         allow_extrapolation: bool = False,
         output_map: OutputMap | None = None,
     ) -> None:
-        #: Desired displacements as charges, through the output map (None: no map)
-        self._charges = Charges.of(output_map, gain)
+        #: Desired displacements as charges through the output map (None: no map); a loop
+        #: built on this compensator's kernel (the self-sensing controller) uses it too
+        self.charges = Charges.of(output_map, gain)
         self.output_map = output_map
         spec, settings = self._settings(
             model, v_min, v_max, slew_rate, sample_rate,
@@ -361,8 +362,8 @@ class Compensator:
             If the last command would lie outside the limits.
         """
         self.inverse.reset(state, voltage)
-        if self._charges is not None:
-            self._charges.reset()
+        if self.charges is not None:
+            self.charges.reset()
         self._mode_history[:] = np.nan
         self._last_desired = math.nan
         self._count_reset()
@@ -491,8 +492,8 @@ class Compensator:
     def _step_general(self, desired: float, preview: ArrayLike | None) -> float:
         """:meth:`step` for a model with input dynamics, a mode, an output map or another
         engine."""
-        if self._charges is not None:
-            desired, preview = self._charges.one(desired, preview)
+        if self.charges is not None:
+            desired, preview = self.charges.one(desired, preview)
         if self.mode.active and self.dynamic and self.delay_samples:
             return self._step_mode_delayed(float(desired), preview)
         if self.mode.active:
@@ -553,8 +554,8 @@ class Compensator:
         if d.ndim != 1:
             msg = f"'desired' must be a 1-D array. Got shape {d.shape}."
             raise ShapeError(msg)
-        if self._charges is not None:
-            d = self._charges.block(d)
+        if self.charges is not None:
+            d = self.charges.block(d)
         if self.mode.active:
             d = np.ascontiguousarray(self._through_mode(d, None))
         out = np.empty_like(d)
@@ -727,6 +728,8 @@ class CompensatorSettings:
     allow_extrapolation : bool
         Allow limits beyond the voltages the model was identified on (refused
         otherwise, not narrowed: a file workflow states what it will do).
+    output_map : OutputMap or None
+        The charge -> displacement map (``calibrate-gain``'s file) instead of a gain.
     """
 
     v_min: float | None = None
@@ -736,6 +739,7 @@ class CompensatorSettings:
     slew_rate: float | Literal["trained"] | None = "trained"
     sample_rate: float | None = None
     allow_extrapolation: bool = False
+    output_map: OutputMap | None = None
 
     def build(self, model: HysteresisModel) -> Compensator:
         """A compensator for ``model`` whose limits default to its training voltage range.
@@ -779,4 +783,5 @@ class CompensatorSettings:
             slew_rate=self.slew_rate,
             sample_rate=self.sample_rate,
             allow_extrapolation=self.allow_extrapolation,
+            output_map=self.output_map,
         )

@@ -31,6 +31,7 @@ import numpy as np
 
 from .._kernels import packed as D
 from .._kernels import play as K
+from .._validation import FloatArray
 from ..errors import ParameterError
 from ..io import atomic_write_text
 from .compensator import Compensator
@@ -119,6 +120,22 @@ def export_c(
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", prefix):
         msg = f"prefix must be a C identifier. Got {prefix!r}."
         raise ParameterError(msg)
+    taken = _taken_prefixes()
+    if prefix in taken:
+        msg = (
+            f"the name {prefix!r} (from the file name) clashes with the exported step's own C "
+            f"names ({prefix}_step, {prefix}_init or {prefix}_t): name the file otherwise, "
+            "e.g. ph_comp.c"
+        )
+        raise ParameterError(msg)
+    om = comp.output_map
+    if om is not None and om.order != 1:
+        msg = (
+            f"C export takes a linear output map; this one is curved (order {om.order}, "
+            "calibrated on evidence): compensate in Python (output_map=), or export in charge "
+            "and map the targets to charge before the step"
+        )
+        raise ParameterError(msg)
     source = comp.spec.operator.c_source  # the core's step in C, or None
     if source == "packed.c":  # Preisach, Duhem, Bouc-Wen: the bracketed Newton step in C
         return _packed_c(comp, prefix, precision)
@@ -136,7 +153,7 @@ def export_c(
         )
         raise ParameterError(msg)
     tables = comp.inverse.tables
-    config = comp.inverse.config
+    config = _mapped(comp, comp.inverse.config, K.CFG_REFERENCE, K.CFG_INV_GAIN)
     state = comp.state
     n = comp.n_operators
     spec = comp.spec
@@ -278,7 +295,8 @@ def _packed_c(comp: Compensator, prefix: str, precision: Precision) -> CCode:
     bounded time per sample.
     """
     p = precision
-    params, cfg, state = comp.inverse.params, comp.inverse.config, comp.state
+    params, state = comp.inverse.params, comp.state
+    cfg = _mapped(comp, comp.inverse.config, D.CC_REF, D.CC_INV_GAIN)
     kind = int(params[0])
     n_lags = int(comp.inverse.lags.shape[1])
     has_slow = int(comp.inverse.slow.size > 0)
@@ -474,3 +492,25 @@ def _preisach_constants(packed: np.ndarray, precision: Precision, prefix: str = 
             f"{_array(packed[D.DU_UP : D.DU_UP + n * n], precision)};",
         ]
     )
+
+
+def _mapped(comp: Compensator, config: FloatArray, ref: int, scale: int) -> FloatArray:
+    """The step's config with a linear output map folded into its reference and scale: the
+    charge for a desired displacement d is ``center + (d - c0) / g``."""
+    om = comp.output_map
+    if om is None:
+        return config
+    out = config.copy()
+    out[scale] = 1.0 / om.gain
+    out[ref] = om.center - om.coefficients[0] / om.gain
+    return out
+
+
+def _taken_prefixes() -> set[str]:
+    """Prefixes whose ``_step``, ``_init`` or ``_t`` names the C sources already use."""
+    folder = resources.files("piezohyst.model.cores") / "c"
+    text = "".join(
+        f.read_text(encoding="utf-8") for f in folder.iterdir() if f.name[-2:] in (".c", ".h")
+    )
+    found = re.findall(r"\b([A-Za-z_][A-Za-z0-9_]*?)_(?:step|init|t)\b", text)
+    return {name for name in found if name != "PREFIX"}

@@ -41,6 +41,7 @@ from ..errors import (
 )
 from ..io import atomic_write_text
 from ..metrics import hysteresis_width
+from .calibration import OutputMap
 from .compensator import Compensator, Domain
 from .leakage import Leakage
 from .learning_design import LearningDesign, design_learning
@@ -167,6 +168,24 @@ def _digest(values: Any) -> str:
     return hashlib.sha256(values).hexdigest()[:16]
 
 
+def _update(
+    design: LearningDesign, gain: float, base: FloatArray, e: FloatArray, sensor: bool
+) -> FloatArray:
+    """``Q (base + gain L e)``, over the periodic trial; the mean is kept for a charge."""
+    old, err = np.fft.rfft(base), np.fft.rfft(e)
+    spectrum = old + gain * design.l() * err
+    spectrum[0] = old[0] + (gain * err[0] if sensor else 0.0)
+    return np.fft.irfft(design.q() * spectrum, n=base.size)
+
+
+def _desired_gain(settings: dict[str, Any], om: OutputMap | None) -> tuple[float | None, bool]:
+    """Desired units per model output unit (an output map's at its center), and whether the
+    desired values are a displacement."""
+    if om is not None:
+        return om.gain, True
+    return settings["gain"], settings["domain"] == "displacement"
+
+
 class LearningCompensator:
     r"""A feedforward compensator that learns from repetition (iterative learning control).
 
@@ -219,6 +238,9 @@ class LearningCompensator:
         plants, an error of 11 % where the scan's own was 0.75 %; learned from, it
         cost a trial to undo). False learns from it too (the actuator already runs
         the scan).
+    output_map : OutputMap, optional
+        Desired values in metres through this map (instead of ``gain``): the charge
+        readings are turned into displacement with it, curvature included.
 
     Attributes
     ----------
@@ -264,6 +286,7 @@ class LearningCompensator:
         slope_error: float = 0.5,
         voltage: float | None = None,
         lead_in: bool = True,
+        output_map: OutputMap | None = None,
     ) -> None:
         self.model = model
         self.compensator = Compensator(
@@ -275,7 +298,10 @@ class LearningCompensator:
             domain=domain,
             gain=gain,
             allow_extrapolation=allow_extrapolation,
+            output_map=output_map,
         )
+        #: The charge -> displacement map of the desired values (None: a gain or charge)
+        self.output_map = output_map
         if leakage is None:
             leakage = Leakage.from_model(model)
         if not isinstance(leakage, Leakage):
@@ -560,8 +586,8 @@ class LearningCompensator:
         error = float(np.sqrt(np.mean(e[ok] ** 2))) / span
         width = hysteresis_width(d[ok], measured[ok]) if learned > 2 else math.nan
         e = _periodic_fill(e, ok)
-        g = self.settings["gain"]
-        flipped = self.settings["domain"] == "displacement" and g is not None and g < 0
+        g, as_displacement = _desired_gain(self.settings, self.output_map)
+        flipped = as_displacement and g is not None and g < 0
         e = _anti_windup(e, u, self.compensator, -1.0 if flipped else 1.0)
         if saturated > SATURATED * u.size:
             warnings.warn(
@@ -597,7 +623,8 @@ class LearningCompensator:
         else:  # a better trial, or the last good correction measured again: learn from it
             self._good = (self._correction.copy(), error)
             self._resend = False
-            self._correction = self._update(self._correction, e, sensor)
+            assert self.design is not None
+            self._correction = _update(self.design, self._gain, self._correction, e, sensor)
         trial = Trial(index, error, width, learned, self._gain, rolled, False, bound, saturated)
         self._close(trial)
         return trial
@@ -611,8 +638,7 @@ class LearningCompensator:
         leakage's 95 % bound over the trial (fraction of the span)."""
         d = self._desired
         assert d is not None
-        g = self.settings["gain"]
-        as_displacement = self.settings["domain"] == "displacement"
+        g, as_displacement = _desired_gain(self.settings, self.output_map)
         span = float(np.ptp(d))
         if sensor:
             if g is None:
@@ -628,16 +654,9 @@ class LearningCompensator:
         scale = abs(g) if as_displacement and g is not None else 1.0
         bound = 2.0 * float(np.mean(sigma)) * u.size * dt * scale / span
         h = np.where(ok, y, np.nan) - leaked
+        if self.output_map is not None:  # the capacitor charge as metres, curvature included
+            return self.output_map.predict(h), bound
         return (h * g if as_displacement and g is not None else h), bound
-
-    def _update(self, base: FloatArray, e: FloatArray, sensor: bool) -> FloatArray:
-        """``Q (base + gain L e)``, over the periodic trial; the mean is kept for a charge."""
-        design = self.design
-        assert design is not None
-        old, err = np.fft.rfft(base), np.fft.rfft(e)
-        spectrum = old + self._gain * design.l() * err
-        spectrum[0] = old[0] + (self._gain * err[0] if sensor else 0.0)
-        return np.fft.irfft(design.q() * spectrum, n=base.size)
 
     # -------------------------------------------------------------------- files
     def to_dict(self) -> dict[str, Any]:

@@ -30,6 +30,7 @@ from .._kernels import play as K
 from .._validation import FloatArray
 from ..errors import ParameterError, ShapeError
 from ..model.model import HysteresisModel
+from .calibration import OutputMap
 from .compensator import (
     Compensator,
     CompensatorSettings,
@@ -169,6 +170,10 @@ class SelfSensingController:
         units); default 1e-4 of the model's output span.
     refresh_gain : float, default 0.5
         Fraction of the estimated bias error corrected per window, in (0, 1].
+    output_map : OutputMap, optional
+        Desired values are displacements, turned into the capacitor charge through
+        this map (:func:`~piezohyst.control.calibration.calibrate_gain`); the loop
+        still closes on the measured charge: the sensor is not needed.
 
     Examples
     --------
@@ -207,6 +212,7 @@ class SelfSensingController:
         hold_tolerance: float | None = None,
         refresh_gain: float = 0.5,
         flat_guard: bool = False,
+        output_map: OutputMap | None = None,
     ) -> None:
         fs = _gain(sample_rate, "sample_rate", 1e-300, math.inf)
         comp = Compensator(
@@ -218,6 +224,7 @@ class SelfSensingController:
             domain=domain,
             gain=gain,
             allow_extrapolation=allow_extrapolation,
+            output_map=output_map,
         )
         if not comp.inverse.closed_loop():
             msg = (
@@ -415,9 +422,10 @@ class SelfSensingController:
             The command (V): finite, inside ``[v_min, v_max]``.
         """
         comp = self.compensator
-        c = comp.inverse.controller_step(
-            float(desired), float(measured), (self.config, self.ctl, self.feedback)
-        )
+        d = float(desired)
+        if comp.charges is not None:  # metres through the output map, to the model's charge
+            d, _ = comp.charges.one(d, None)
+        c = comp.inverse.controller_step(d, float(measured), (self.config, self.ctl, self.feedback))
         comp.tally_one(c, "SelfSensingController")
         return c
 
@@ -443,6 +451,8 @@ class SelfSensingController:
             raise ShapeError(msg)
         out = np.empty_like(d)
         comp = self.compensator
+        if comp.charges is not None:
+            d = comp.charges.block(d)
         comp.inverse.controller_process(d, m, (self.config, self.ctl, self.feedback), out)
         comp.tally(out, "SelfSensingController")
         return out
@@ -501,6 +511,7 @@ def build_controller(
         gain=settings.gain,
         allow_extrapolation=settings.allow_extrapolation,
         refresh_leakage=refresh_leakage,
+        output_map=settings.output_map,
     )
 
 

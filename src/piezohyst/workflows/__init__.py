@@ -61,6 +61,7 @@ from ._base import (
 from .control_files import (
     Compensation,
     LoopRun,
+    calibrate_gain_file,
     calibrate_leakage_file,
     compensate_file,
     export_c_file,
@@ -73,6 +74,7 @@ __all__ = [
     "Compensation",
     "LoopRun",
     "Prediction",
+    "calibrate_gain_file",
     "calibrate_leakage_file",
     "compare_file",
     "compensate_file",

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import FloatArray, check_float, check_int
+from ..control.calibration import OutputMap, calibrate_gain
 from ..control.compensator import Compensator, CompensatorSettings
 from ..control.export import Precision, c_paths, write_c
 from ..control.leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
@@ -54,6 +55,7 @@ __all__ = [
     "Compensation",
     "LoopRun",
     "ReportResult",
+    "calibrate_gain_file",
     "calibrate_leakage_file",
     "compensate_file",
     "export_c_file",
@@ -278,7 +280,9 @@ def _reachable(
     x0 = float(model.initial_state_[0])
     rest, low, high = h.predict(np.array([x0, comp.v_min, comp.v_max]))
     values = np.array([low, high])
-    if settings.domain == "displacement" and settings.gain is not None:
+    if settings.output_map is not None:
+        values = settings.output_map.predict(values)
+    elif settings.domain == "displacement" and settings.gain is not None:
         values = settings.gain * (values - rest)
     return float(values.min()), float(values.max())
 
@@ -373,6 +377,60 @@ def calibrate_leakage_file(
     if out is not None:
         leak.save(out)
     return leak
+
+
+def calibrate_gain_file(
+    model_path: PathLike,
+    data: PathLike,
+    out: PathLike | None = None,
+    *,
+    displacement_column: str = "displacement",
+    displacement_unit: str | None = None,
+    data_spec: DataSpec | None = None,
+    force: bool = False,
+) -> OutputMap:
+    """Calibrate the charge -> displacement map from a record with a displacement sensor
+    (voltage, charge and displacement sampled together) and save it (JSON) to ``out``.
+
+    Parameters
+    ----------
+    model_path : str or os.PathLike
+        A model fitted on voltage -> charge.
+    data : str or os.PathLike
+        The record: its voltage, charge and time columns as ``data_spec`` names them,
+        and the displacement column.
+    out : str or os.PathLike, optional
+        Where to save the map.
+    displacement_column : str, default "displacement"
+    displacement_unit : str, optional
+        Its unit if its header does not say (um, nm, m...); converted to m.
+    data_spec : DataSpec, optional
+        Columns, units and window of the voltage and charge.
+    force : bool
+        Replace an existing ``out`` that piezohyst did not write.
+
+    Returns
+    -------
+    OutputMap
+    """
+    if out is not None:
+        guard_outputs([out], [data, model_path], force=force)
+    model = _load(model_path)
+    spec = data_spec or DataSpec()
+    rec = spec.read(data)
+    sensor = dataclasses.replace(
+        spec, output_column=displacement_column, output_unit=displacement_unit
+    ).read(data)
+    if rec.t is None:
+        msg = f"{data}: calibrate-gain needs the time column (or --sample-rate)"
+        raise DataFileError(msg)
+    assert rec.y is not None and sensor.y is not None
+    w = rec.window
+    unit = sensor.units[1] or "m"
+    om = calibrate_gain(model, rec.x[w], rec.y[w], sensor.y[w], rec.t[w], output_unit=unit)
+    if out is not None:
+        om.save(out)
+    return om
 
 
 @dataclass(frozen=True)

@@ -161,6 +161,7 @@ def learn_file(
         domain=settings.domain,
         gain=settings.gain,
         allow_extrapolation=settings.allow_extrapolation,
+        output_map=settings.output_map,
         lag=lag,
         learning_gain=learning_gain,
         cutoff=cutoff,

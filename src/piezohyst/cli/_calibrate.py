@@ -1,0 +1,165 @@
+"""The calibration commands: ``calibrate-leakage`` (holds) and ``calibrate-gain`` (a
+displacement sensor, once)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from ..control.leakage import LEAKAGE_TERMS
+from ..io import DataSpec
+from ._support import EXISTING, FORCE, OUT_FILE_JSON, Context, _data_options, _run
+
+
+def _settle(value: str) -> float | str:
+    """--settle: "auto" or a fraction in [0, 1)."""
+    if value == "auto":
+        return value
+    try:
+        fraction = float(value)
+    except ValueError:
+        fraction = -1.0
+    if not 0.0 <= fraction < 1.0:
+        msg = f"expected auto or a fraction in [0, 1), got {value!r}"
+        raise click.BadParameter(msg, param_hint="--settle")
+    return fraction
+
+
+@click.command("calibrate-leakage")
+@click.argument("data", type=EXISTING)
+@_data_options
+@click.option(
+    "--terms",
+    default=",".join(LEAKAGE_TERMS),
+    show_default=True,
+    help="Leakage terms to fit, separated by commas.",
+)
+@click.option(
+    "--min-hold",
+    type=click.FloatRange(0.0, min_open=True),
+    default=1.0,
+    show_default=True,
+    help="Shortest hold used, in s (after settling).",
+)
+@click.option(
+    "--settle",
+    default="auto",
+    show_default=True,
+    callback=lambda _c, _p, value: _settle(value),
+    help="Fraction of each hold skipped at its start, or auto: per hold, until its slope "
+    "agrees with its end (a hold still settling is then named).",
+)
+@OUT_FILE_JSON
+@FORCE
+@click.pass_obj
+def calibrate_leakage(
+    ctx: Context,
+    data: Path,
+    data_spec: DataSpec,
+    terms: str,
+    min_hold: float,
+    settle: float | str,
+    out: Path,
+    force: bool,
+) -> None:
+    """Calibrate the leakage current from the constant-voltage holds of a record.
+
+    While the voltage is held the hysteresis is still: the charge's slope on
+    each hold is the leakage current there. Record holds of several seconds
+    at several levels, up and down again (e.g. 0, 35, 70, 105, 140, 105, 70,
+    35, 0 V, 10 s each).
+
+    \b
+    Example:
+      piezohyst calibrate-leakage holds.csv -o leak.json
+    """
+    from ..workflows import calibrate_leakage_file
+
+    names = tuple(t.strip() for t in terms.split(",") if t.strip())
+    leak = _run(
+        ctx,
+        lambda: calibrate_leakage_file(
+            data,
+            out,
+            data_spec=data_spec,
+            terms=names,
+            min_duration=min_hold,
+            settle=settle,
+            force=force,
+        ),
+    )
+    errors = leak.stderr()
+    for name, (value, unit) in leak.coefficients().items():
+        sure = f" ± {errors[name]:.2g}" if errors.get(name) else ""
+        click.echo(f"{name:12s} {value:.4g}{sure} {unit}")
+    click.echo(
+        f"from {len(leak.holds)} holds at "
+        f"{', '.join(f'{h.voltage:.4g}' for h in leak.holds)} {leak.input_unit}; "
+        f"RMS misfit {leak.residual:.3g} {leak.output_unit}/s"
+    )
+    ctx.info(f"saved {out}")
+
+
+@click.command("calibrate-gain")
+@click.argument("model", type=EXISTING)
+@click.argument("data", type=EXISTING)
+@_data_options
+@click.option(
+    "--displacement-column",
+    default="displacement",
+    show_default=True,
+    help="The displacement sensor's column.",
+)
+@click.option(
+    "--displacement-unit",
+    default=None,
+    help="Its unit if the header does not say (m, um, nm); converted to m.",
+)
+@OUT_FILE_JSON
+@FORCE
+@click.pass_obj
+def calibrate_gain(
+    ctx: Context,
+    model: Path,
+    data: Path,
+    data_spec: DataSpec,
+    displacement_column: str,
+    displacement_unit: str | None,
+    out: Path,
+    force: bool,
+) -> None:
+    """Calibrate the map from the capacitor's charge to the displacement, once, from a
+    record with a displacement sensor (eq. 6-7: S = g D).
+
+    DATA holds voltage, charge and displacement sampled together; MODEL was
+    fitted on voltage -> charge (its growth is removed from the charge). The
+    map is linear (g, in m/C, with its standard error) unless the record's
+    evidence asks for curvature; a sensor delay and offset are found too.
+    Then compensate in metres with the sensor unplugged: --gain gain.json.
+
+    \b
+    Example:
+      piezohyst calibrate-gain model.json sensor.csv --displacement-column position -o gain.json
+    """
+    from ..workflows import calibrate_gain_file
+
+    om = _run(
+        ctx,
+        lambda: calibrate_gain_file(
+            model,
+            data,
+            out,
+            displacement_column=displacement_column,
+            displacement_unit=displacement_unit,
+            data_spec=data_spec,
+            force=force,
+        ),
+    )
+    click.echo(om.summary())
+    s_lo, s_hi = om.displacement_range()
+    click.echo(
+        f"holds for displacements [{s_lo:.4g}, {s_hi:.4g}] {om.output_unit}; "
+        f"{om.n_samples} samples (worth {om.n_effective} independent ones)"
+    )
+    ctx.info(f"saved {out}")
