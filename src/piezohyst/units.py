@@ -19,13 +19,36 @@ import numpy as np
 from ._validation import FloatArray
 from .errors import DataFileError
 
-__all__ = ["Role", "split_unit", "to_standard"]
+__all__ = ["LENGTHS", "Role", "is_length", "split_unit", "to_standard"]
 
 Role = Literal["time", "input", "output"]
 
 _IN_HEADER = re.compile(r"^\s*(?P<name>.*?\S)\s*(?:\[(?P<u1>[^\]]+)\]|\((?P<u2>[^)]+)\))\s*$")
 _TARGETS: dict[str, tuple[str, ...]] = {"time": ("s",), "input": ("V",), "output": ("C", "m")}
 _SAME = {"s", "V", "C", "m"}
+#: Units that mark an output as a displacement (a record's unit, or a model's output_unit)
+LENGTHS = frozenset(
+    {"m", "mm", "um", "µm", "μm", "nm", "pm", "micron", "microns", "metre", "meter"}
+)
+
+
+def is_length(unit: str | None) -> bool:
+    """True when ``unit`` is a length: the record is a displacement, not a charge.
+
+    Parameters
+    ----------
+    unit : str or None
+
+    Returns
+    -------
+    bool
+
+    Examples
+    --------
+    >>> is_length("um"), is_length("C"), is_length(None)
+    (True, False, False)
+    """
+    return unit is not None and unit.strip() in LENGTHS
 
 
 def split_unit(header: str) -> tuple[str, str | None]:

@@ -85,12 +85,16 @@ def _thresholds(value: object, name: str, owner: str) -> FloatArray | None:
 
 def _growth_terms(value: object, name: str, owner: str) -> tuple[str, ...] | None:
     """None for 'auto' (choose among the built-in ones), else distinct registered growth
-    terms, in the registry's order (:func:`~piezohyst.model.terms.growth_kinds`)."""
+    terms, in the registry's order (:func:`~piezohyst.model.terms.growth_kinds`); 'domain' is
+    the record's: the charge's leakage (``integral``), none on a displacement record (see
+    :func:`~piezohyst.model.fitting.identify_model`)."""
     kinds = growth_kinds()
     if isinstance(value, str):
+        if value == "domain":
+            return ("integral",)
         if value != "auto":
             msg = (
-                f"The '{name}' parameter of {owner} must be 'auto' or a sequence "
+                f"The '{name}' parameter of {owner} must be 'domain', 'auto' or a sequence "
                 f"of {list(kinds)}. Got {value!r} instead."
             )
             raise ParameterError(msg)

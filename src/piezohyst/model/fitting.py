@@ -32,6 +32,7 @@ from ..errors import (
 )
 from ..io.blocks import Blocks, Summary, array_blocks, block_dt
 from ..io.screening import screen
+from ..units import is_length
 from .cores.base import FitJob
 from .dynamics import InputDynamics, OutputDynamics
 from .dynamics_fit import profile_dynamics, search_dynamics
@@ -236,6 +237,9 @@ def identify_model(
         )
         raise InsufficientDataError(msg)
     terms, subsets = model._terms_to_fit(sm.x_range, params)
+    if is_length(model.output_unit) and _default_growth(model):
+        # a displacement does not see leaked charge: no growth term unless asked for by name
+        terms, subsets = [term for term in terms if not term.removed], None
     if not timed and any(term.rate_dependent for term in terms):
         as_time(None, sm.n, required=True, owner=type(model).__name__)  # raises
     job = FitJob(blocks, sm, terms, subsets, initial_state,
@@ -246,6 +250,16 @@ def identify_model(
     model._take(fit, **record_facts(sm), **mode)
     model._take(**score_model(model, blocks, sm))
     return sm
+
+
+def _default_growth(model: Any) -> bool:
+    """Whether the model's growth terms follow the record's domain: ``growth_terms`` left to
+    "domain" (the packed presets' default) or "auto", or fixed by the model (ActivePI's
+    integrator), not named by the user."""
+    params = model.get_params()
+    if "growth_terms" in params:
+        return params["growth_terms"] in ("domain", "auto")
+    return "terms" not in params or not params["terms"]  # PIModel's terms are named
 
 
 def score_model(model: Any, blocks: Blocks, sm: Summary) -> dict[str, float]:

@@ -561,7 +561,11 @@ class PreisachModel(HysteresisModel):
     nodes : int, default 16
         Grid nodes over the training voltage range, in [3, 60]; the density
         has ``(nodes - 1) nodes / 2`` cells.
-    growth_terms : "auto" or sequence of {"integral", "time", "abs_integral"}, default ("integral",)
+    growth_terms : "domain", "auto" or sequence of str, default "domain"
+        Among ``"integral"``, ``"time"``, ``"abs_integral"``. ``"domain"``: the
+        record's: ``("integral",)`` (the charge's leakage) on a charge record,
+        none on a displacement record (``output_unit`` a length: the displacement
+        does not see leaked charge; ``"auto"`` chooses none there either).
         Fitted jointly (its loops close: a drift can only be growth);
         ``"auto"``: the Prandtl-Ishlinskii proxy's cross-validation chooses them.
     creep : sequence of float, default ()
@@ -650,7 +654,7 @@ class PreisachModel(HysteresisModel):
         self,
         nodes: int = 16,
         *,
-        growth_terms: str | Sequence[str] = ("integral",),
+        growth_terms: str | Sequence[str] = "domain",
         creep: Sequence[float] = (),
         relaxation: float | None = None,
         relaxation_nodes: int = 12,
@@ -707,7 +711,11 @@ class DuhemModel(HysteresisModel):
     ----------
     grid : (int, int), default (8, 6)
         Nodes along the voltage and the output, each in [2, 40].
-    growth_terms : "auto" or sequence of {"integral", "time", "abs_integral"}, default ("integral",)
+    growth_terms : "domain", "auto" or sequence of str, default "domain"
+        Among ``"integral"``, ``"time"``, ``"abs_integral"``. ``"domain"``: the
+        record's: ``("integral",)`` (the charge's leakage) on a charge record,
+        none on a displacement record (``output_unit`` a length: the displacement
+        does not see leaked charge; ``"auto"`` chooses none there either).
         Growth terms (removed before compensating); ``"auto"`` chooses by the
         proxy's forward-chaining cross-validation (``selection_``).
     creep : sequence of float, default ()
@@ -758,7 +766,7 @@ class DuhemModel(HysteresisModel):
         self,
         grid: tuple[int, int] = (8, 6),
         *,
-        growth_terms: str | Sequence[str] = ("integral",),
+        growth_terms: str | Sequence[str] = "domain",
         creep: Sequence[float] = (),
         smoothing: float = 1e-3,
         min_slope: float = 0.02,
@@ -797,7 +805,11 @@ class BoucWenModel(HysteresisModel):
 
     Parameters
     ----------
-    growth_terms : "auto" or sequence of {"integral", "time", "abs_integral"}, default ("integral",)
+    growth_terms : "domain", "auto" or sequence of str, default "domain"
+        Among ``"integral"``, ``"time"``, ``"abs_integral"``. ``"domain"``: the
+        record's: ``("integral",)`` (the charge's leakage) on a charge record,
+        none on a displacement record (``output_unit`` a length: the displacement
+        does not see leaked charge; ``"auto"`` chooses none there either).
     creep : sequence of float, default ()
         Time constants (s) of kept creep lags, fitted with c0, alpha and the
         growth in the linear solve; inverted with the core by the compensator.
@@ -827,7 +839,7 @@ class BoucWenModel(HysteresisModel):
 
     def __init__(
         self,
-        growth_terms: str | Sequence[str] = ("integral",),
+        growth_terms: str | Sequence[str] = "domain",
         *,
         creep: Sequence[float] = (),
         min_slope: float = 1e-3,
