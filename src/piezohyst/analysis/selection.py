@@ -26,6 +26,7 @@ import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -40,6 +41,7 @@ from .comparison import compare_models
 
 __all__ = [
     "CANDIDATES",
+    "CREEP",
     "EVEN_BLOCKS",
     "FOLDS",
     "LOOP_CANDIDATES",
@@ -52,10 +54,13 @@ __all__ = [
     "Part",
     "Selection",
     "SelectionRow",
+    "candidate_model",
     "chosen",
+    "creep_constants",
     "fold_bounds",
     "forward_scores",
     "input_noise",
+    "is_candidate",
     "jackknife",
     "record_notes",
     "select_model",
@@ -66,7 +71,12 @@ __all__ = [
 ]
 
 #: Candidates, simplest first: a tie (within 2 %) goes to the earlier
-CANDIDATES = ("classical-pi", "active-pi", "generalized-pi", "bouc-wen", "preisach", "duhem")
+CANDIDATES = ("classical-pi", "active-pi", "generalized-pi", "bouc-wen", "preisach", "duhem",
+              "generalized-pi+creep", "bouc-wen+creep")  # fmt: skip
+#: A candidate name with this suffix: the model with creep operators whose time constants the
+#: record's time axis sets (:func:`creep_constants`; Kuhnen's modified PI model for the PI
+#: family, the field's standard for piezo displacement); skipped on a record without times
+CREEP = "+creep"
 #: Candidates for the self-sensing loop (``select_model(..., candidates=LOOP_CANDIDATES)``):
 #: the cores the loop runs compiled, less the Preisach model. Its Everett function is
 #: interpolated linearly between nodes, so after a reversal its slope stays at one value
@@ -241,12 +251,78 @@ class Selection:
         return "\n".join(lines + (["", *said] if said else []))
 
 
-def _candidate(name: str, operators: int, units: tuple[str, str]) -> HysteresisModel:
-    cls = model_class(name)
+def creep_constants(t: FloatArray) -> tuple[float, float, float]:
+    """Three creep time constants inside a record: a decade apart, the slowest a fifth of
+    its duration, none below ten samples (so each is seen to act, and none outlives the
+    record). Chosen from the time axis alone, never from scores.
+
+    Parameters
+    ----------
+    t : ndarray
+        The record's times (s).
+
+    Returns
+    -------
+    tuple of float
+    """
+    duration = float(t[-1] - t[0])
+    dt = duration / max(t.size - 1, 1)
+    slow = duration / 5.0
+    return tuple(max(slow / 10.0**k, 10.0 * dt) for k in (2, 1, 0))  # type: ignore[return-value]
+
+
+def candidate_model(
+    name: str,
+    operators: int,
+    units: tuple[str, str],
+    t: FloatArray | None = None,
+    **settings: Any,
+) -> HysteresisModel:
+    """The model a candidate name stands for, with its defaults: ``operators`` play operators
+    where it has them, and with :data:`CREEP` creep operators timed by the record ``t``.
+
+    Parameters
+    ----------
+    name : str
+        A model name (:func:`~piezohyst.model.persistence.model_names`), optionally with
+        :data:`CREEP`.
+    operators : int
+    units : (str, str)
+        Input and output units.
+    t : ndarray, optional
+        The record's times (for the creep time constants).
+    **settings
+        Further settings every candidate takes (``input_dynamics``).
+
+    Returns
+    -------
+    HysteresisModel
+    """
+    base = name.removesuffix(CREEP)
+    cls = model_class(base)
     accepted = cls().get_params()
-    extra = {"n_operators": operators} if "n_operators" in accepted else {}
-    model: HysteresisModel = cls(**extra, input_unit=units[0], output_unit=units[1])
+    extra: dict[str, Any] = {"n_operators": operators} if "n_operators" in accepted else {}
+    if base != name and t is not None:
+        extra["creep"] = creep_constants(t)
+    model: HysteresisModel = cls(**extra, **settings, input_unit=units[0], output_unit=units[1])
     return model
+
+
+def is_candidate(name: str) -> bool:
+    """A model name, or one with :data:`CREEP` whose model takes creep operators.
+
+    Parameters
+    ----------
+    name : str
+
+    Returns
+    -------
+    bool
+    """
+    base = name.removesuffix(CREEP)
+    if base not in model_names():
+        return False
+    return base == name or "creep" in model_class(base)().get_params()
 
 
 def fold_bounds(x: FloatArray) -> list[tuple[int, int]]:
@@ -557,24 +633,34 @@ def select_model(
         Every candidate failed.
     """
     names = list(dict.fromkeys(candidates))
-    unknown = [n for n in names if n not in model_names()]
+    unknown = [n for n in names if not is_candidate(n)]
     if unknown or not names:
-        msg = f"candidates must be model names from {model_names()}. Got {candidates!r}."
+        msg = (
+            f"candidates must be model names from {model_names()} (a name{CREEP}: with creep). "
+            f"Got {candidates!r}."
+        )
         raise ParameterError(msg)
     xs, ys = as_signal(x, "x"), as_signal(y, "y")
     same_length(xs, ys, "x", "y")
     ts = as_time(t, xs.size, required=False, owner="select_model")
+    if ts is None:  # creep operators need times: those candidates wait for a timed record
+        names = [n for n in names if not n.endswith(CREEP)] or names
     units = (input_unit, output_unit)
     turns = _turns(xs)
     rows = _forward(
-        {n: _candidate(n, operators, units) for n in names}, xs, ys, ts, initial_state, turns
+        {n: candidate_model(n, operators, units, ts) for n in names},
+        xs,
+        ys,
+        ts,
+        initial_state,
+        turns,
     )
     ranked = sorted(rows, key=lambda r: r.score)
     if not math.isfinite(ranked[0].score):
         msg = f"no candidate could be fitted: {ranked[0].name}: {ranked[0].error}"
         raise InsufficientDataError(msg)
     winner = chosen(rows)
-    model = _candidate(winner.name, operators, units)
+    model = candidate_model(winner.name, operators, units, ts)
     model.fit(xs, ys, t=ts, initial_state=initial_state)
     ranked = sorted(with_margins(rows, winner), key=lambda r: r.score)
     return Selection(model, winner.name, tuple(ranked), _record_notes(xs, turns))

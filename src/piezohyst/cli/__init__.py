@@ -334,9 +334,10 @@ def fit(
 @click.argument("data", type=EXISTING)
 @click.option(
     "--models",
-    default=",".join(model_names()),
+    default=",".join([*model_names(), "generalized-pi+creep", "bouc-wen+creep"]),
     show_default=True,
-    help="Models to compare, a comma list of " + ", ".join(model_names()) + ".",
+    help="Models to compare, a comma list of " + ", ".join(model_names()) + "; a name+creep "
+    "adds creep operators timed by the record (Kuhnen's modified PI: generalized-pi+creep).",
 )
 @operators_option(help="Play operators, for the models that have them.")
 @click.option(

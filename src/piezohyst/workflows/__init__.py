@@ -25,9 +25,12 @@ from .._version import __version__
 from ..analysis.comparison import Comparison, compare_models
 from ..analysis.selection import (
     CANDIDATES,
+    CREEP,
     Selection,
+    candidate_model,
     chosen,
     forward_scores,
+    is_candidate,
     record_notes,
     select_model,
     verdict,
@@ -390,8 +393,11 @@ def compare_file(
     out : str or os.PathLike, optional
         The table: ``.md`` (Markdown), ``.parquet``, or a text file (CSV).
     models : sequence of str, optional
-        CLI names (``piezohyst fit --model``); each with its default settings.
-        Default: every registered model (:func:`~piezohyst.model.models.model_names`).
+        CLI names (``piezohyst fit --model``); each with its default settings, and with
+        ``+creep`` creep operators timed by the record
+        (:func:`~piezohyst.analysis.selection.candidate_model`). Default: every registered
+        model (:func:`~piezohyst.model.models.model_names`) and the creep candidates of
+        :data:`~piezohyst.analysis.selection.CANDIDATES`.
     train : float
         Training fraction of ``data`` when there is no ``test_data``.
     test_data : str or os.PathLike, optional
@@ -411,11 +417,16 @@ def compare_file(
     -------
     Comparison
     """
-    names = list(dict.fromkeys(model_names() if models is None else models))
+    every = [*model_names(), *(n for n in CANDIDATES if n.endswith(CREEP))]  # creep: timed
+    names = list(dict.fromkeys(every if models is None else models))
     if not names:
         msg = "give at least one model to compare"
         raise ParameterError(msg)
-    classes = [model_class(name) for name in names]
+    for name in names:
+        if not is_candidate(name):
+            model_class(name.removesuffix(CREEP))  # names the unknown model
+            msg = f"{name!r}: the {name.removesuffix(CREEP)} model takes no creep operators"
+            raise ParameterError(msg)
     inputs = [data] if test_data is None else [data, test_data]
     if out is not None:
         guard_outputs([out], inputs, force=force)
@@ -424,15 +435,12 @@ def compare_file(
     assert rec.y is not None
     w = rec.window
     x_unit, y_unit = rec.units
-    estimators = {}
-    for name, cls in zip(names, classes, strict=True):
-        accepted = cls().get_params()
-        estimators[name] = cls(
-            **({"n_operators": operators} if "n_operators" in accepted else {}),
-            input_unit=x_unit or "V",
-            output_unit=y_unit or _default_unit(rec.names[1]),
-            input_dynamics=input_dynamics,
-        )
+    units = (x_unit or "V", y_unit or _default_unit(rec.names[1]))
+    times = None if rec.t is None else rec.t[w]
+    estimators = {
+        name: candidate_model(name, operators, units, times, input_dynamics=input_dynamics)
+        for name in names
+    }
     test = None
     if test_data is not None:
         trec = spec.read(test_data)
