@@ -37,6 +37,7 @@ from ..errors import ExtrapolationWarning, InsufficientDataError, ParameterError
 from ..io.screening import noise_level
 from ..model.model import HysteresisModel, InitialState
 from ..model.persistence import model_class, model_names
+from ..model.terms import creep_time_constants
 from .comparison import compare_models
 
 __all__ = [
@@ -252,9 +253,8 @@ class Selection:
 
 
 def creep_constants(t: FloatArray) -> tuple[float, float, float]:
-    """Three creep time constants inside a record: a decade apart, the slowest a fifth of
-    its duration, none below ten samples (so each is seen to act, and none outlives the
-    record). Chosen from the time axis alone, never from scores.
+    """Three creep time constants inside a record with times ``t``
+    (:func:`~piezohyst.model.terms.creep_time_constants`).
 
     Parameters
     ----------
@@ -265,10 +265,7 @@ def creep_constants(t: FloatArray) -> tuple[float, float, float]:
     -------
     tuple of float
     """
-    duration = float(t[-1] - t[0])
-    dt = duration / max(t.size - 1, 1)
-    slow = duration / 5.0
-    return tuple(max(slow / 10.0**k, 10.0 * dt) for k in (2, 1, 0))  # type: ignore[return-value]
+    return creep_time_constants(float(t[-1] - t[0]), t.size)
 
 
 def candidate_model(

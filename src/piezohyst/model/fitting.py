@@ -38,6 +38,7 @@ from .dynamics import InputDynamics, OutputDynamics
 from .dynamics_fit import profile_dynamics, search_dynamics
 from .estimator import _dynamics_kind, _output_kind
 from .state import InitialState, ModelState
+from .terms import Creep, creep_time_constants
 
 __all__ = [
     "fit_arrays",
@@ -236,9 +237,11 @@ def identify_model(
             "nothing to identify; is it the right column?"
         )
         raise InsufficientDataError(msg)
+    displacement = is_length(model.output_unit) and _default_growth(model)
+    if displacement:  # a displacement sees no leaked charge: what drifts in it is creep
+        params = {**params, **displacement_terms(params, sm, timed)}
     terms, subsets = model._terms_to_fit(sm.x_range, params)
-    if is_length(model.output_unit) and _default_growth(model):
-        # a displacement does not see leaked charge: no growth term unless asked for by name
+    if displacement:  # a growth term fixed by the model (ActivePI's integrator) goes too
         terms, subsets = [term for term in terms if not term.removed], None
     if not timed and any(term.rate_dependent for term in terms):
         as_time(None, sm.n, required=True, owner=type(model).__name__)  # raises
@@ -250,6 +253,21 @@ def identify_model(
     model._take(fit, **record_facts(sm), **mode)
     model._take(**score_model(model, blocks, sm))
     return sm
+
+
+def displacement_terms(params: dict[str, Any], sm: Summary, timed: bool) -> dict[str, Any]:
+    """The default terms of a displacement record: no growth terms (the displacement does not
+    see leaked charge), and creep operators timed by the record
+    (:func:`~piezohyst.model.terms.creep_time_constants`) where the model takes them, the
+    record has times and the user set none: the field's standard for a piezo's displacement
+    (Kuhnen's modified PI model), a drift that settles instead of a ramp the record cannot
+    support."""
+    out: dict[str, Any] = {}
+    if "growth_terms" in params:
+        out["growth_terms"] = ()
+    if "creep" in params and params["creep"] is None and timed and sm.n > 1:
+        out["creep"] = Creep(creep_time_constants(sm.t_last - sm.t_first, sm.n))
+    return out
 
 
 def _default_growth(model: Any) -> bool:

@@ -311,7 +311,9 @@ class GeneralizedPI(_PlayModel):
     growth_terms : "auto" or sequence of str, default "auto"
         Growth terms among ``"integral"`` (ohmic leakage), ``"time"`` (a
         constant bias current), ``"abs_integral"`` (leakage rising with the
-        voltage); ``()`` for none. ``"auto"`` fits every subset on the first
+        voltage); ``()`` for none. On a displacement record (``output_unit`` a
+        length) ``"auto"`` means none, with creep operators timed by the record
+        when ``creep`` is left empty. ``"auto"`` fits every subset on the first
         70 % of the record, scores it on the last 30 % (the model running
         through the whole record; one accumulation, subsets solved on
         sub-matrices) and keeps the best; ``"abs_integral"`` only beside
@@ -565,7 +567,9 @@ class PreisachModel(HysteresisModel):
         Among ``"integral"``, ``"time"``, ``"abs_integral"``. ``"domain"``: the
         record's: ``("integral",)`` (the charge's leakage) on a charge record,
         none on a displacement record (``output_unit`` a length: the displacement
-        does not see leaked charge; ``"auto"`` chooses none there either).
+        does not see leaked charge; ``"auto"`` chooses none there either), where
+        creep operators timed by the record take the drift instead when ``creep``
+        is left empty (:func:`~piezohyst.model.fitting.displacement_terms`).
         Fitted jointly (its loops close: a drift can only be growth);
         ``"auto"``: the Prandtl-Ishlinskii proxy's cross-validation chooses them.
     creep : sequence of float, default ()
@@ -715,7 +719,9 @@ class DuhemModel(HysteresisModel):
         Among ``"integral"``, ``"time"``, ``"abs_integral"``. ``"domain"``: the
         record's: ``("integral",)`` (the charge's leakage) on a charge record,
         none on a displacement record (``output_unit`` a length: the displacement
-        does not see leaked charge; ``"auto"`` chooses none there either).
+        does not see leaked charge; ``"auto"`` chooses none there either), where
+        creep operators timed by the record take the drift instead when ``creep``
+        is left empty (:func:`~piezohyst.model.fitting.displacement_terms`).
         Growth terms (removed before compensating); ``"auto"`` chooses by the
         proxy's forward-chaining cross-validation (``selection_``).
     creep : sequence of float, default ()
@@ -809,7 +815,9 @@ class BoucWenModel(HysteresisModel):
         Among ``"integral"``, ``"time"``, ``"abs_integral"``. ``"domain"``: the
         record's: ``("integral",)`` (the charge's leakage) on a charge record,
         none on a displacement record (``output_unit`` a length: the displacement
-        does not see leaked charge; ``"auto"`` chooses none there either).
+        does not see leaked charge; ``"auto"`` chooses none there either), where
+        creep operators timed by the record take the drift instead when ``creep``
+        is left empty (:func:`~piezohyst.model.fitting.displacement_terms`).
     creep : sequence of float, default ()
         Time constants (s) of kept creep lags, fitted with c0, alpha and the
         growth in the linear solve; inverted with the core by the compensator.

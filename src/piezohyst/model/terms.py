@@ -73,6 +73,7 @@ __all__ = [
     "Term",
     "TimeTerm",
     "coefficient_arrays",
+    "creep_time_constants",
     "growth_kinds",
     "make_term",
     "term_class",
@@ -520,6 +521,31 @@ class Asymmetry(Term):
         knots, s = self._knots()
         k = self.n_knots
         return StaticShape(knots, coefficients[:k].copy(), coefficients[k:].copy(), s)
+
+
+def creep_time_constants(duration: float, samples: int) -> tuple[float, float, float]:
+    """Three creep time constants inside a record: a decade apart, the slowest a fifth of
+    its duration, none below ten samples (each is seen to act, none outlives the record).
+    Chosen from the time axis alone, never from scores.
+
+    Parameters
+    ----------
+    duration : float
+        The record's length (s).
+    samples : int
+
+    Returns
+    -------
+    tuple of float
+
+    Examples
+    --------
+    >>> creep_time_constants(10.0, 10_001)
+    (0.02, 0.2, 2.0)
+    """
+    dt = duration / max(samples - 1, 1)
+    slow = duration / 5.0
+    return tuple(max(slow / 10.0**k, 10.0 * dt) for k in (2, 1, 0))  # type: ignore[return-value]
 
 
 class Creep(Term):
