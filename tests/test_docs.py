@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 import subprocess
 import sys
 from dataclasses import dataclass
@@ -24,6 +25,9 @@ ROOT = Path(__file__).resolve().parent.parent
 FILES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 FENCE = re.compile(r"^```(\w*)\s*$")
 SKIP = re.compile(r"<!--\s*docs-test:\s*skip\s+(.+?)\s*-->")
+#: A block that builds C (``export-c --shared``) runs where a C compiler is, else is skipped
+NEEDS_CC = re.compile(r"<!--\s*docs-test:\s*needs a C compiler\s*-->")
+HAS_CC = any(shutil.which(name) for name in ("cc", "gcc", "clang"))
 RUNNABLE = {"python", "sh", "bash", "console"}
 
 
@@ -48,14 +52,10 @@ def blocks(path: Path) -> list[Block]:
                 j += 1
             prev = next((lines[k] for k in range(start - 1, -1, -1) if lines[k].strip()), "")
             skip = SKIP.search(prev)
-            out.append(
-                Block(
-                    m.group(1),
-                    "\n".join(lines[start + 1 : j]),
-                    start + 1,
-                    skip.group(1) if skip else None,
-                )
-            )
+            reason = skip.group(1) if skip else None
+            if NEEDS_CC.search(prev) and not HAS_CC:
+                reason = "builds C, and this machine has no C compiler"
+            out.append(Block(m.group(1), "\n".join(lines[start + 1 : j]), start + 1, reason))
             i = j + 1
         else:
             i += 1

@@ -739,6 +739,12 @@ def fit_many_cmd(
     is_flag=True,
     help="Export the self-sensing controller (charge feedback; needs --sample-rate).",
 )
+@click.option(
+    "--shared",
+    is_flag=True,
+    help="Also build libNAME.so with the system C compiler: NAME_new/free/reset/process/"
+    "version, for LabVIEW, MATLAB loadlibrary, ctypes (docs/realtime.md).",
+)
 @_loop_options
 @FORCE
 @click.pass_obj
@@ -749,6 +755,7 @@ def export_c(
     use_float: bool,
     out: Path,
     controller: bool,
+    shared: bool,
     loop: LoopSettings,
     force: bool,
 ) -> None:
@@ -765,7 +772,7 @@ def export_c(
     """
     from ..workflows import export_c_file
 
-    c_path, h_path = _run(
+    paths = _run(
         ctx,
         lambda: export_c_file(
             model,
@@ -774,9 +781,10 @@ def export_c(
             precision="float" if use_float else "double",
             controller=loop if controller else None,
             force=force,
+            shared=shared,
         ),
     )
-    click.echo(f"{c_path}\n{h_path}")
+    click.echo("\n".join(str(p) for p in paths))
 
 
 @main.command("simulate-loop")

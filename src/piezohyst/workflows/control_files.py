@@ -23,6 +23,7 @@ from ..control.compensator import Compensator, CompensatorSettings
 from ..control.export import Precision, c_paths, write_c
 from ..control.leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
 from ..control.selfsensing import LoopSettings
+from ..control.shared import write_shared
 from ..errors import DataFileError, ParameterError
 from ..io import (
     DataSpec,
@@ -295,7 +296,8 @@ def export_c_file(
     precision: Precision = "double",
     controller: LoopSettings | None = None,
     force: bool = False,
-) -> tuple[Path, Path]:
+    shared: bool = False,
+) -> tuple[Path, ...]:
     """Write ``NAME.c`` and ``NAME.h`` for the model's compensator (:mod:`~.control.export`).
 
     Parameters
@@ -312,10 +314,14 @@ def export_c_file(
         Export the self-sensing controller instead of the feedforward compensator.
     force : bool, default False
         Replace existing files piezohyst did not write.
+    shared : bool, default False
+        Add the shared-library API and build ``libNAME.so`` beside the sources
+        (:mod:`~piezohyst.control.shared`).
 
     Returns
     -------
     tuple of Path
+        Source and header (and the library).
     """
     c_path, h_path, _ = c_paths(out)
     inputs: list[PathLike] = [model_path]
@@ -324,6 +330,8 @@ def export_c_file(
     guard_outputs([c_path, h_path], inputs, force=force)
     model = _load(model_path)
     built = settings.build(model) if controller is None else controller.build(settings, model)
+    if shared:
+        return write_shared(built, out, precision=precision)
     return write_c(built, out, precision=precision)
 
 
