@@ -139,7 +139,7 @@ def plants(seed: int, every_core: bool = False, flat_guard: bool = False) -> Non
     ``every_core``, the loop through each core the loop runs, not only the one chosen."""
     import warnings
 
-    from piezohyst.analysis.selection import LOOP_CANDIDATES, _candidate
+    from piezohyst.analysis.selection import LOOP_CANDIDATES, candidate_model
     from piezohyst.metrics import hysteresis_width
     from piezohyst.simulation import PLANTS, Bench, make_signal, run_loop
     from piezohyst.workflows.excitation import excitation
@@ -155,7 +155,7 @@ def plants(seed: int, every_core: bool = False, flat_guard: bool = False) -> Non
             warnings.simplefilter("ignore")
             leak = ph.calibrate_leakage(cal.t, cal.voltage, cal.charge)
             if every_core:
-                models = {c: _candidate(c, 10, ("V", "C")).fit(ident.voltage, ident.charge,
+                models = {c: candidate_model(c, 10, ("V", "C")).fit(ident.voltage, ident.charge,
                                                                t=ident.t)
                           for c in cores[1:]}  # fmt: skip
             else:

@@ -37,7 +37,7 @@ from piezohyst.analysis.selection import (
     TIE,
     WEIGHTS,
     SelectionRow,
-    _candidate,
+    candidate_model,
     with_margins,
 )
 
@@ -65,7 +65,7 @@ def row(job: tuple[str, str, int, str | None]) -> dict[str, Any]:
         warnings.simplefilter("ignore")
         for name in CANDIDATES:
             try:
-                m = _candidate(name, 10, ("V", out)).fit(x, y, t=t)
+                m = candidate_model(name, 10, ("V", out), t).fit(x, y, t=t)
                 e = float(ph.metrics.nrmse(yt[scored:], m.predict(xt, t=tt)[scored:]))
             except ph.PiezohystError:
                 e = math.inf

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 import piezohyst as ph
-from piezohyst.analysis.selection import CANDIDATES, TIE, _candidate
+from piezohyst.analysis.selection import CANDIDATES, TIE, candidate_model
 
 #: Fit origins (fractions of the record); every rule's folds start at one of them
 ORIGINS = (0.3, 0.4, 0.5, 0.6, 0.7, 0.75, 0.8, 0.9)
@@ -76,7 +76,7 @@ def measure(job: tuple[str, str, int, str | None]) -> Run:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             try:
-                m = _candidate(name, 10, ("V", unit_out)).fit(x, y, t=t)
+                m = candidate_model(name, 10, ("V", unit_out), t).fit(x, y, t=t)
                 p = m.predict(xt, t=tt)
                 run["test"][name] = float(ph.metrics.nrmse(yt[scored:], p[scored:]))
             except ph.PiezohystError:
@@ -85,7 +85,7 @@ def measure(job: tuple[str, str, int, str | None]) -> Run:
             for a in ORIGINS:
                 n = round(a * x.size)
                 try:
-                    m = _candidate(name, 10, ("V", unit_out)).fit(x[:n], y[:n], t=t[:n])
+                    m = candidate_model(name, 10, ("V", unit_out), t[:n]).fit(x[:n], y[:n], t=t[:n])
                     preds[a] = m.predict(x, t=t)
                 except ph.PiezohystError:
                     preds[a] = None
