@@ -32,7 +32,7 @@ lint: $(BIN)/.installed
 KERNEL_MODULES := */piezohyst/_kernels/*.py,*/piezohyst/simulation/_plant.py
 test: lint
 	@rm -f .coverage .coverage.*
-	$(BIN)/python -m pytest -n 2 -p no:cacheprovider --durations=10 --cov --cov-report=
+	$(BIN)/python -m pytest -n 2 -p no:cacheprovider -rs --durations=10 --cov --cov-report=
 	NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q -n 2 -p no:cacheprovider -m "kernels and not heavy" \
 		--cov --cov-append --cov-report= tests
 	@printf 'line coverage of src/, both runs combined (gate 90): '

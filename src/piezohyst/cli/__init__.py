@@ -745,6 +745,12 @@ def fit_many_cmd(
     help="Also build libNAME.so with the system C compiler: NAME_new/free/reset/process/"
     "version, for LabVIEW, MATLAB loadlibrary, ctypes (docs/realtime.md).",
 )
+@click.option(
+    "--mex",
+    is_flag=True,
+    help="OUT is a MEX gateway (NAME_mex.c) for MATLAB's mex and Octave's mkoctfile --mex: "
+    "v = NAME_mex(target), NAME_mex('reset').",
+)
 @_loop_options
 @FORCE
 @click.pass_obj
@@ -756,6 +762,7 @@ def export_c(
     out: Path,
     controller: bool,
     shared: bool,
+    mex: bool,
     loop: LoopSettings,
     force: bool,
 ) -> None:
@@ -782,6 +789,7 @@ def export_c(
             controller=loop if controller else None,
             force=force,
             shared=shared,
+            mex=mex,
         ),
     )
     click.echo("\n".join(str(p) for p in paths))

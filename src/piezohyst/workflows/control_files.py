@@ -23,7 +23,7 @@ from ..control.compensator import Compensator, CompensatorSettings
 from ..control.export import Precision, c_paths, write_c
 from ..control.leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
 from ..control.selfsensing import LoopSettings
-from ..control.shared import write_shared
+from ..control.shared import write_mex, write_shared
 from ..errors import DataFileError, ParameterError
 from ..io import (
     DataSpec,
@@ -297,6 +297,7 @@ def export_c_file(
     controller: LoopSettings | None = None,
     force: bool = False,
     shared: bool = False,
+    mex: bool = False,
 ) -> tuple[Path, ...]:
     """Write ``NAME.c`` and ``NAME.h`` for the model's compensator (:mod:`~.control.export`).
 
@@ -317,6 +318,8 @@ def export_c_file(
     shared : bool, default False
         Add the shared-library API and build ``libNAME.so`` beside the sources
         (:mod:`~piezohyst.control.shared`).
+    mex : bool, default False
+        ``out`` is a MEX gateway (``NAME_mex.c``), written with the step it includes.
 
     Returns
     -------
@@ -330,8 +333,13 @@ def export_c_file(
     guard_outputs([c_path, h_path], inputs, force=force)
     model = _load(model_path)
     built = settings.build(model) if controller is None else controller.build(settings, model)
+    if shared and mex:
+        msg = "--shared and --mex build different things: choose one"
+        raise ParameterError(msg)
     if shared:
         return write_shared(built, out, precision=precision)
+    if mex:
+        return write_mex(built, out, precision=precision)
     return write_c(built, out, precision=precision)
 
 
