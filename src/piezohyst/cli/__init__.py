@@ -719,82 +719,6 @@ def fit_many_cmd(
         sys.exit(1)
 
 
-@main.command("export-c")
-@click.argument("model", type=EXISTING)
-@_limit_options
-@click.option(
-    "--float", "use_float", is_flag=True, help="float arithmetic (MCUs without a double FPU)."
-)
-@click.option(
-    "-o",
-    "--out",
-    type=click.Path(dir_okay=False, path_type=Path),
-    default=Path("ph_comp.c"),
-    show_default=True,
-    callback=_suffix(".c", what="the compensator is C source"),
-    help="C file (the .h goes beside it).",
-)
-@click.option(
-    "--controller",
-    is_flag=True,
-    help="Export the self-sensing controller (charge feedback; needs --sample-rate).",
-)
-@click.option(
-    "--shared",
-    is_flag=True,
-    help="Also build libNAME.so with the system C compiler: NAME_new/free/reset/process/"
-    "version, for LabVIEW, MATLAB loadlibrary, ctypes (docs/realtime.md).",
-)
-@click.option(
-    "--mex",
-    is_flag=True,
-    help="OUT is a MEX gateway (NAME_mex.c) for MATLAB's mex and Octave's mkoctfile --mex: "
-    "v = NAME_mex(target), NAME_mex('reset').",
-)
-@_loop_options
-@FORCE
-@click.pass_obj
-def export_c(
-    ctx: Context,
-    model: Path,
-    settings: CompensatorSettings,
-    use_float: bool,
-    out: Path,
-    controller: bool,
-    shared: bool,
-    mex: bool,
-    loop: LoopSettings,
-    force: bool,
-) -> None:
-    """Write a dependency-free C99 compensator (NAME.c and NAME.h) for a microcontroller.
-
-    With --controller, the self-sensing controller: NAME_step(s, desired,
-    measured) takes the charge read at each sample as well.
-
-    \b
-    Examples:
-      piezohyst export-c model.json --v-min 0 --v-max 140 -o ph_comp.c
-      piezohyst export-c model.json --controller --leakage leak.json \\
-          --sample-rate 1000 -o ph_loop.c
-    """
-    from ..workflows import export_c_file
-
-    paths = _run(
-        ctx,
-        lambda: export_c_file(
-            model,
-            out,
-            settings=settings,
-            precision="float" if use_float else "double",
-            controller=loop if controller else None,
-            force=force,
-            shared=shared,
-            mex=mex,
-        ),
-    )
-    click.echo("\n".join(str(p) for p in paths))
-
-
 @main.command("simulate-loop")
 @click.argument("model", type=EXISTING)
 @click.argument("target", type=EXISTING)
@@ -908,10 +832,13 @@ def demo(ctx: Context, out: Path, operators: int, seed: int) -> None:
 
 
 from ._calibrate import calibrate_gain, calibrate_leakage  # noqa: E402 - after main
+from ._export import export_c, export_fmu  # noqa: E402 - registered after main
 from ._learn import learn  # noqa: E402 - registered after main is defined
 
 main.add_command(calibrate_leakage)
 main.add_command(calibrate_gain)
+main.add_command(export_c)
+main.add_command(export_fmu)
 main.add_command(learn)
 
 if __name__ == "__main__":  # pragma: no cover

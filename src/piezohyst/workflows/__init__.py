@@ -68,6 +68,7 @@ from .control_files import (
     calibrate_leakage_file,
     compensate_file,
     export_c_file,
+    export_fmu_file,
     model_report,
     simulate_loop_file,
 )
@@ -83,6 +84,7 @@ __all__ = [
     "compensate_file",
     "excite_file",
     "export_c_file",
+    "export_fmu_file",
     "fit_file",
     "guard_outputs",
     "model_report",

@@ -21,6 +21,7 @@ from .._validation import FloatArray, check_float, check_int
 from ..control.calibration import OutputMap, calibrate_gain
 from ..control.compensator import Compensator, CompensatorSettings
 from ..control.export import Precision, c_paths, write_c
+from ..control.fmu import write_fmu
 from ..control.leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
 from ..control.selfsensing import LoopSettings
 from ..control.shared import write_mex, write_shared
@@ -60,6 +61,7 @@ __all__ = [
     "calibrate_leakage_file",
     "compensate_file",
     "export_c_file",
+    "export_fmu_file",
     "model_report",
     "simulate_loop_file",
 ]
@@ -393,6 +395,54 @@ def calibrate_leakage_file(
     if out is not None:
         leak.save(out)
     return leak
+
+
+def export_fmu_file(
+    model_path: PathLike,
+    out: PathLike,
+    *,
+    settings: CompensatorSettings = _DEFAULT_SETTINGS,
+    precision: Precision = "double",
+    controller: LoopSettings | None = None,
+    force: bool = False,
+) -> Path:
+    """Write an FMI 2.0 Co-Simulation FMU of the model's compensator (:mod:`~.control.fmu`).
+
+    Parameters
+    ----------
+    model_path : str or os.PathLike
+        A saved model.
+    out : str or os.PathLike
+        The ``.fmu`` file.
+    settings : CompensatorSettings
+        Limits, domain, gain, slew rate and the sample rate (one step of the FMU).
+    precision : {"double", "float"}
+    controller : LoopSettings, optional
+        The self-sensing controller instead of the feedforward compensator.
+    force : bool, default False
+        Replace an existing file piezohyst did not write.
+
+    Returns
+    -------
+    Path
+    """
+    if Path(out).exists() and not force and not _our_fmu(Path(out)):
+        msg = f"{out} exists and piezohyst did not write it: pass --force to replace it"
+        raise ParameterError(msg)
+    model = _load(model_path)
+    built = settings.build(model) if controller is None else controller.build(settings, model)
+    return write_fmu(built, out, precision=precision)
+
+
+def _our_fmu(path: Path) -> bool:
+    """An FMU piezohyst wrote (its modelDescription names the tool): safe to replace."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as z:
+            return 'generationTool="piezohyst' in z.read("modelDescription.xml").decode()
+    except (OSError, KeyError, zipfile.BadZipFile, UnicodeDecodeError):
+        return False
 
 
 def calibrate_gain_file(

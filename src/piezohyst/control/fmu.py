@@ -1,0 +1,221 @@
+"""The compensator as an FMI 2.0 Co-Simulation FMU, for Simulink, dSPACE and any FMI host.
+
+Simulink's FMU Import block, dSPACE VEOS and SCALEXIO, OpenModelica and FMPy load an FMU
+through one C API. :func:`write_fmu` writes the exported step
+(:mod:`piezohyst.control.export`) with an FMI 2.0 Co-Simulation wrapper, builds it for the
+machine it runs on with the system C compiler, and zips ``modelDescription.xml``,
+``binaries/<platform>/NAME.so`` and ``sources/`` (to build for another platform):
+
+* input ``target`` (Real; the desired value in the model's output unit, or m), with
+  ``--controller`` a second input ``charge``; output ``voltage`` (Real, V);
+* one ``fmi2DoStep`` of ``1/sample_rate`` is one compensator step: a step of another size
+  is refused with ``fmi2Error`` and a log message, as is any call out of the standard's
+  order (a step before initialization, after terminate...), never a crash;
+* ``fmi2Reset`` goes back to the exported state: the same run again reproduces the first;
+* a NaN target holds the last command, inside the limits, as in Python;
+* the limits, slew and gain are baked into the step at export (constants of the C source),
+  so they are not FMU parameters: changing them means exporting again.
+
+The FMI 2.0 types are declared in the wrapper itself (the standard's ``fmi2Functions.h``
+names and signatures, with C linkage and default visibility), so the sources build with any
+C99 compiler and nothing else.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import zipfile
+from pathlib import Path
+from typing import TYPE_CHECKING, cast
+from xml.sax.saxutils import escape
+
+from .._version import __version__
+from ..errors import ParameterError
+from .compensator import Compensator
+from .export import Precision, export_c
+from .shared import _c_template, compiler
+
+if TYPE_CHECKING:
+    from .selfsensing import SelfSensingController
+
+__all__ = ["fmu_platform", "write_fmu"]
+
+#: Relative tolerance on the communication step size (the host's time arithmetic)
+STEP_TOLERANCE = 1e-6
+
+
+def fmu_platform() -> str:
+    """The FMI 2.0 platform folder for this machine (``linux64``, ``win64``, ``darwin64``).
+
+    Returns
+    -------
+    str
+    """
+    bits = "64" if sys.maxsize > 2**32 else "32"
+    name = {"win32": "win", "darwin": "darwin"}.get(sys.platform, "linux")
+    return f"{name}{bits}"
+
+
+def _wrapper(prefix: str, controller: bool, period: float, what: str) -> str:
+    """The FMI 2.0 Co-Simulation functions around the step."""
+    n_real = 3 if controller else 2
+    step_call = (
+        f"{prefix}_step(&c->s, ({prefix}_real)c->r[0], ({prefix}_real)c->r[2])"
+        if controller
+        else f"{prefix}_step(&c->s, ({prefix}_real)c->r[0])"
+    )
+    return _c_template("fmi2_cs.c").substitute(
+        what=what,
+        prefix=prefix,
+        period=repr(period),
+        n_real=n_real,
+        STEP_TOLERANCE=repr(STEP_TOLERANCE),
+        step_call=step_call,
+    )
+
+
+def _model_description(
+    name: str, guid: str, controller: bool, period: float, desired_unit: str, what: str
+) -> str:
+    charge = (
+        '    <ScalarVariable name="charge" valueReference="2" causality="input" '
+        'variability="continuous" description="the charge read at this step (model output '
+        'units)">\n      <Real start="0"/>\n    </ScalarVariable>\n'
+        if controller
+        else ""
+    )
+    return f"""<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription
+  fmiVersion="2.0"
+  modelName="{name}"
+  guid="{guid}"
+  description="{escape(what)}"
+  generationTool="piezohyst {__version__}"
+  variableNamingConvention="flat"
+  numberOfEventIndicators="0">
+  <CoSimulation
+    modelIdentifier="{name}"
+    needsExecutionTool="false"
+    canHandleVariableCommunicationStepSize="false"
+    canInterpolateInputs="false"
+    canRunAsynchronuously="false"
+    canBeInstantiatedOnlyOncePerProcess="false"
+    canNotUseMemoryManagementFunctions="true"
+    canGetAndSetFMUstate="false"
+    canSerializeFMUstate="false"
+    providesDirectionalDerivative="false">
+    <SourceFiles>
+      <File name="{name}.c"/>
+    </SourceFiles>
+  </CoSimulation>
+  <DefaultExperiment startTime="0" stepSize="{period!r}"/>
+  <ModelVariables>
+    <ScalarVariable name="target" valueReference="0" causality="input" variability="continuous" description="the desired value ({escape(desired_unit)})">
+      <Real start="0"/>
+    </ScalarVariable>
+    <ScalarVariable name="voltage" valueReference="1" causality="output" variability="discrete" initial="calculated" description="the command (V), inside the limits">
+      <Real/>
+    </ScalarVariable>
+{charge}  </ModelVariables>
+  <ModelStructure>
+    <Outputs>
+      <Unknown index="2"/>
+    </Outputs>
+    <InitialUnknowns>
+      <Unknown index="2" dependencies=""/>
+    </InitialUnknowns>
+  </ModelStructure>
+</fmiModelDescription>
+"""  # noqa: E501 - XML attributes on one line, as hosts write them
+
+
+def write_fmu(
+    compensator: Compensator | SelfSensingController,
+    path: str | os.PathLike[str],
+    *,
+    precision: Precision = "double",
+) -> Path:
+    """Write an FMI 2.0 Co-Simulation FMU of the compensator (or controller).
+
+    Parameters
+    ----------
+    compensator : Compensator or SelfSensingController
+        With its loop's ``sample_rate`` (one ``fmi2DoStep`` is one sample).
+    path : str or os.PathLike
+        The ``.fmu`` file; its stem names the model (a C identifier).
+    precision : {"double", "float"}
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ParameterError
+        No sample rate, an output mode, a model the C export does not cover, no C compiler.
+    """
+    from ..io import atomic_write
+
+    comp = cast(Compensator, getattr(compensator, "compensator", compensator))
+    controller = comp is not compensator
+    if comp.sample_rate is None:
+        msg = "an FMU steps at the loop's rate: give the sample rate (--sample-rate)"
+        raise ParameterError(msg)
+    if comp.mode.active:
+        msg = (
+            "the FMU takes one desired value per step: a model with an output mode needs the "
+            "next one too; export its sources (export-c) instead"
+        )
+        raise ParameterError(msg)
+    out = Path(path)
+    if out.suffix != ".fmu":
+        out = out.with_suffix(".fmu")
+    name = out.stem
+    if not name.isidentifier() or not name.isascii():
+        msg = f"the FMU's name {name!r} (its file name) must be a C identifier"
+        raise ParameterError(msg)
+    period = 1.0 / float(comp.sample_rate)
+    code = export_c(compensator, precision=precision, prefix=name)
+    kind = "self-sensing controller" if controller else "compensator"
+    what = f"{name}: the {kind} of a {type(comp.model).__name__}, {comp.sample_rate:g} Hz"
+    source = code.source + _wrapper(name, controller, period, what)
+    guid = "{" + hashlib.sha256((code.header + source).encode()).hexdigest()[:32] + "}"
+    source = source.replace(f'"{{{name}-GUID}}"', f'"{guid}"')
+    unit = "m" if comp.domain == "displacement" else comp.spec.output_unit
+    xml = _model_description(name, guid, controller, period, unit, what)
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        (folder / f"{name}.c").write_text(source, encoding="utf-8")
+        (folder / code.header_name).write_text(code.header, encoding="utf-8")
+        binary = folder / f"{name}{'.dll' if sys.platform == 'win32' else '.so'}"
+        cmd = [compiler(), "-std=c99", "-O2", "-shared", "-fPIC", "-fvisibility=hidden",
+               str(folder / f"{name}.c"), "-o", str(binary), "-lm"]  # fmt: skip
+        done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        if done.returncode != 0:
+            first = next((ln for ln in done.stderr.splitlines() if "error" in ln), done.stderr)
+            msg = f"building the FMU's binary failed: {first.strip()}"
+            raise ParameterError(msg)
+        buffer = folder / "fmu.zip"
+        with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as z:
+            z.writestr("modelDescription.xml", xml)
+            z.write(binary, f"binaries/{fmu_platform()}/{binary.name}")
+            z.write(folder / f"{name}.c", f"sources/{name}.c")
+            z.write(folder / code.header_name, f"sources/{code.header_name}")
+            z.writestr(
+                "documentation/index.html",
+                f"<html><body><h1>{escape(name)}</h1><p>{escape(what)}; built by piezohyst "
+                f"{__version__} on {platform.system()} {platform.machine()}. Build for another "
+                f"platform from sources/ (C99): cc -shared -fPIC -O2 {name}.c -o {name}.so -lm "
+                "(Linux), cl /LD /O2 (Windows).</p></body></html>",
+            )
+        data = buffer.read_bytes()
+
+        def write(target: Path) -> None:
+            target.write_bytes(data)
+
+        return atomic_write(out, write)
