@@ -69,6 +69,16 @@ def _configurations() -> dict[str, object]:
         "preisach-relaxing-creep": ph.Compensator(
             pre.fit(v, q, t=t), v_min=lo, v_max=hi, sample_rate=1e3
         ),
+        "play-asymmetry-creep": ph.Compensator(
+            ph.GeneralizedPI(6, creep=(0.05, 0.5), growth_terms=()).fit(v, q, t=t),
+            v_min=lo,
+            v_max=hi,
+            slew_rate=1e4,
+            sample_rate=1e3,
+        ),
+        "play-asymmetry": ph.Compensator(
+            ph.GeneralizedPI(6, growth_terms=()).fit(v, q, t=t), v_min=lo, v_max=hi
+        ),
     }
     return cfg
 

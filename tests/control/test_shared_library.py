@@ -160,3 +160,36 @@ def test_an_output_mode_is_refused_by_name(tmp_path: Path) -> None:
     comp.mode = type(comp.mode)(50.0, 0.1, 1e-3)  # as a model with a mechanical mode has
     with pytest.raises(ph.ParameterError, match="output mode"):
         write_shared(comp, tmp_path / "ph_comp.c")
+
+
+@pytest.mark.parametrize(
+    "settings",
+    [{"creep": (0.05, 0.5)}, {"asymmetry": 3}, {"asymmetry": 3, "creep": (0.05, 0.5, 5.0)}],
+    ids=["creep", "asymmetry", "both"],
+)
+def test_generalized_pi_with_asymmetry_and_creep_exports_too(
+    settings: dict[str, Any], record: Any, tmp_path: Path
+) -> None:
+    """Kuhnen's modified PI, the field's standard, in C: the bracketed Newton step of the
+    kernel beside the kept terms (issue 41: the C export grows to every kind)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = ph.GeneralizedPI(12, growth_terms=("integral",), **settings).fit(
+            record.voltage, record.charge, t=record.t
+        )
+    lo, hi = model.input_range_
+    comp = ph.Compensator(model, v_min=lo, v_max=hi, sample_rate=1000.0)
+    assert not comp.analytic  # the numeric path, not eq. 18
+    _, header, lib = write_shared(comp, tmp_path / "ph_comp.c")
+    so = _load(lib)
+    d = _desired(model)
+    s = so.ph_comp_new()
+    out = np.empty_like(d)
+    assert so.ph_comp_process(s, d, out, d.size) == 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ph.LimitWarning)
+        py = comp.process(d)
+    # tol: C and numba round apart (FMA, order, libm): 1e-9 V, issue 41's bar
+    np.testing.assert_allclose(out, py, rtol=0, atol=1e-9)
+    so.ph_comp_free(s)
+    assert ("c[" in header.read_text()) == ("creep" in settings)  # the lag states, if any

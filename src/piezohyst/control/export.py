@@ -146,12 +146,7 @@ def export_c(
         )
         raise ParameterError(msg)
     if not comp.analytic:
-        msg = (
-            "C export covers the analytic inverse (play operators and growth terms) and the "
-            "Duhem and Bouc-Wen cores; a model with asymmetry or creep terms runs in Python "
-            "(ph.Compensator) only."
-        )
-        raise ParameterError(msg)
+        return _numeric_c(comp, prefix, precision)
     tables = comp.inverse.tables
     config = _mapped(comp, comp.inverse.config, K.CFG_REFERENCE, K.CFG_INV_GAIN)
     state = comp.state
@@ -206,9 +201,69 @@ def export_c(
         output_unit=spec.output_unit, desired_unit=desired_unit, v_min=repr(comp.v_min),
         v_max=repr(comp.v_max), notes=_notes(comp), controller=int(controller is not None),
         dynamic=int(comp.dynamic), mode=int(comp.mode.active),
-        kind="compensator" if controller is None else "controller",
+        kind="compensator" if controller is None else "controller", lag_state="",
     )  # fmt: skip
     return CCode(header, _source(prefix, precision, lines, files), f"{prefix}.h")
+
+
+def _numeric_c(comp: Compensator, prefix: str, precision: Precision) -> CCode:
+    """C99 for play operators beside kept asymmetry or creep terms (GeneralizedPI): the
+    bracketed Newton step of ``_kernels.play.numeric_step`` (``play_numeric.c``)."""
+    if comp.mode.active:
+        msg = (
+            "C export of a model with asymmetry or creep takes no output mode yet: pass the "
+            "pre-inverted target (OutputDynamics.invert) or fit without the mode"
+        )
+        raise ParameterError(msg)
+    p = precision
+    e = comp.inverse
+    config = _mapped(comp, e.config, K.CFG_REFERENCE, K.CFG_INV_GAIN)
+    state = comp.state
+    n, n_static, n_lags = comp.n_operators, int(e.static.shape[1]), int(e.lags.shape[1])
+    step = float(config[K.CFG_MAX_STEP])
+    has_slew = int(np.isfinite(step))
+    upper = prefix.upper()
+    lines = [
+        f"#define N {upper}_N",
+        f"#define N_STATIC {n_static}",
+        f"#define N_LAGS {n_lags}",
+        f"#define HAS_SLEW {has_slew}",
+        "#define MODE 0",
+        f"static const real_t R[N] = {_array(e.tables[K.TAB_R], p)};",
+        f"static const real_t W[N] = {_array(e.tables[K.TAB_W], p)};",
+        f"static const real_t Z0[N] = {_array(state.operators, p)};",
+        *_constants(p, OFFSET=config[K.CFG_OFFSET], V_MIN=config[K.CFG_V_MIN],
+                    V_MAX=config[K.CFG_V_MAX], SCALE=config[K.CFG_INV_GAIN],
+                    REFERENCE=config[K.CFG_REFERENCE], LAST0=state.command),
+    ]  # fmt: skip
+    if has_slew:
+        lines += _constants(p, MAX_STEP=step)
+    if n_static:
+        lines += [
+            f"static const real_t STATIC_KNOT[N_STATIC] = {_array(e.static[0], p)};",
+            f"static const real_t STATIC_UP[N_STATIC] = {_array(e.static[1], p)};",
+            f"static const real_t STATIC_DOWN[N_STATIC] = {_array(e.static[2], p)};",
+            *_constants(p, STATIC_SCALE=config[K.CFG_STATIC_SCALE]),
+        ]
+    if n_lags:
+        lines += [
+            f"static const real_t LAG_G[N_LAGS] = {_array(e.lags[1], p)};",
+            f"static const real_t LAG_A[N_LAGS] = {_array(e.lags[2], p)};",
+            f"static const real_t C0[N_LAGS] = {_array(state.lags, p)};",
+        ]
+    spec = comp.spec
+    desired_unit = "m" if comp.domain == "displacement" else spec.output_unit
+    lag_state = f"\n    {prefix}_real c[{n_lags}];     /* creep lag states, V */" if n_lags else ""
+    header = _template("play.h").substitute(
+        _names(prefix, precision),
+        title="feedforward hysteresis compensator (play operators with asymmetry or creep)",
+        model=type(comp.model).__name__, n=n, input_unit=spec.input_unit,
+        output_unit=spec.output_unit, desired_unit=desired_unit, v_min=repr(comp.v_min),
+        v_max=repr(comp.v_max), notes=_notes(comp), controller=0, dynamic=0, mode=0,
+        kind="compensator", lag_state=lag_state,
+    )  # fmt: skip
+    source = _source(prefix, precision, lines, ["ieee.c", "play_numeric.c"])
+    return CCode(header, source, f"{prefix}.h")
 
 
 def _names(prefix: str, precision: Precision) -> dict[str, str]:
