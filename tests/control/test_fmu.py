@@ -41,6 +41,9 @@ def kinds(record: Any) -> dict[str, ph.HysteresisModel]:
             ),
             "duhem": ph.DuhemModel().fit(v, q, t=t),
             "bouc-wen": ph.BoucWenModel().fit(v, q, t=t),
+            "generalized-pi+creep": ph.GeneralizedPI(
+                12, growth_terms=("integral",), creep=(0.05, 0.5, 5.0)
+            ).fit(v, q, t=t),
         }
 
 
@@ -90,7 +93,8 @@ class Slave:
 
 
 @pytest.mark.parametrize(
-    "kind", ["active-pi", "preisach", "preisach+relaxation", "duhem", "bouc-wen"]
+    "kind",
+    ["active-pi", "generalized-pi+creep", "preisach", "preisach+relaxation", "duhem", "bouc-wen"],
 )
 def test_fmpy_validates_and_simulates_it_like_python(kind: str, kinds, tmp_path: Path) -> None:
     from fmpy import simulate_fmu

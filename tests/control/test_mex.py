@@ -42,21 +42,30 @@ fid = fopen('version.txt', 'w'); fprintf(fid, '%s\\n', ph_comp_mex('version')); 
 """
 
 
-@pytest.mark.parametrize("kind", ["active-pi", "preisach"])
+KINDS = {
+    "active-pi": lambda: ph.ActivePI(20),
+    "generalized-pi+creep": lambda: ph.GeneralizedPI(12, creep=(0.05, 0.5, 5.0)),
+    "preisach": lambda: ph.PreisachModel(),
+    "preisach+relaxation": lambda: ph.PreisachModel(relaxation=0.1, relaxation_nodes=8),
+    "duhem": lambda: ph.DuhemModel(),
+    "bouc-wen": lambda: ph.BoucWenModel(),
+}
+
+
+@pytest.mark.parametrize("kind", list(KINDS))
 def test_the_mex_gateway_in_octave(kind: str, tmp_path: Path) -> None:
     rec = ph.simulate(signal="decaying", duration=8.0, seed=3)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the fit's own notes are not under test
-        model = (ph.ActivePI(20) if kind == "active-pi" else ph.PreisachModel()).fit(
-            rec.voltage, rec.charge, t=rec.t
-        )
+        model = KINDS[kind]().fit(rec.voltage, rec.charge, t=rec.t)
     lo, hi = model.input_range_
     comp = ph.Compensator(model, v_min=lo, v_max=hi, sample_rate=1000.0)
     gate, _, _ = write_mex(comp, tmp_path / "ph_comp_mex.c")
     subprocess.run([MKOCTFILE, "--mex", gate.name], cwd=tmp_path, check=True,
                    capture_output=True, text=True)  # fmt: skip
     _, shape = make_signal("decaying", amplitude=1.0, duration=2.0)
-    d = model.hysteresis_.predict(lo + (hi - lo) * (0.5 + 0.45 * shape / np.abs(shape).max()))
+    v = lo + (hi - lo) * (0.5 + 0.45 * shape / np.abs(shape).max())
+    d = model.hysteresis_.predict(v, t=np.arange(v.size) / 1000.0)
     d[::97] = np.nan  # held: the last command
     np.savetxt(tmp_path / "target.txt", d, fmt="%.17g")
     (tmp_path / "script.m").write_text(SCRIPT)
