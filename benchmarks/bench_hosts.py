@@ -8,7 +8,10 @@ Run: ``python benchmarks/bench_hosts.py``. Measures
   leakage columns, the order by evidence and the Newey-West errors cost;
 * the shared library's ``ph_comp_process`` (ctypes, one call for a block) and one FMU
   step through FMPy, against ``Compensator.process`` and a NumPy loop over time (the
-  naive reference: eq. 18 written with NumPy per sample).
+  naive reference: eq. 18 written with NumPy per sample);
+* how long the controller in C stays with the Python controller in a closed loop on the
+  simulated bench (the charge read depends on the commands sent, so rounding differences
+  between the compiled kernel and C grow), and with a recorded charge fed open loop.
 
 Not a test: nothing here asserts a time.
 """
@@ -91,6 +94,49 @@ def main() -> None:
         f"NumPy reference {ref * 1e6:.2f} us (library x{ref / c_lib:.0f} faster; "
         f"FMPy's Python loop x{fmu / ref:.1f} of the reference)"
     )
+    controller_horizon()
+
+
+def controller_horizon() -> None:
+    """The C controller against the Python one, open loop and closed on the bench, 12 s."""
+    from piezohyst.simulation import Bench, make_signal
+
+    rec = ph.simulate(signal="decaying", duration=12.0, seed=3)
+    model = ph.ActivePI(20).fit(rec.voltage, rec.charge, t=rec.t)
+    lo, hi = model.input_range_
+    _, shape = make_signal("decaying", amplitude=1.0, duration=12.0)
+    v = lo + (hi - lo) * (0.5 + 0.45 * shape / np.abs(shape).max())
+    d = model.hysteresis_.predict(v, t=np.arange(v.size) / 1000.0)
+    with tempfile.TemporaryDirectory() as tmp:
+        ctl = ph.SelfSensingController(model, v_min=lo, v_max=hi, sample_rate=1000.0)
+        _, _, lib = write_shared(ctl, Path(tmp) / "ph_comp.c")
+        so = ctypes.CDLL(str(lib))
+        so.ph_comp_new.restype = ctypes.c_void_p
+        doubles = np.ctypeslib.ndpointer(dtype=np.float64, flags="C_CONTIGUOUS")
+        so.ph_comp_process.argtypes = [ctypes.c_void_p, doubles, doubles, doubles, ctypes.c_long]
+        charge = rec.charge[: d.size].copy()
+        out = np.empty_like(d)
+        so.ph_comp_process(so.ph_comp_new(), d, charge, out, d.size)
+        open_loop = float(np.max(np.abs(out - ctl.process(d, charge))))
+        python = ph.SelfSensingController(model, v_min=lo, v_max=hi, sample_rate=1000.0)
+        handle = so.ph_comp_new()
+        b1, b2 = Bench(seed=1), Bench(seed=1)
+        one = [np.empty(1) for _ in range(3)]
+        errors = np.empty(d.size)
+        for k in range(d.size):
+            v_py = python.step(float(d[k]), b1.reading.charge)
+            one[0][0], one[1][0] = d[k], b2.reading.charge
+            so.ph_comp_process(handle, one[0], one[1], one[2], 1)
+            b1.apply(v_py)
+            b2.apply(float(one[2][0]))
+            errors[k] = abs(v_py - one[2][0])
+    firsts = []
+    for limit in (1e-9, 1e-6, 1e-3):
+        bad = np.flatnonzero(errors > limit)
+        firsts.append(f"{limit:g} V at {bad[0] / 1000:.2f} s" if bad.size else f"{limit:g}: never")
+    print(f"controller in C against Python, 12 s: open loop (a recorded charge) max "
+          f"{open_loop:.2g} V; closed on the bench: first beyond {', '.join(firsts)}; max "
+          f"{errors.max():.3g} V")  # fmt: skip
 
 
 if __name__ == "__main__":
