@@ -14,7 +14,8 @@ import pytest
 
 import piezohyst as ph
 from piezohyst.control.fmu import write_fmu
-from piezohyst.simulation import make_signal
+
+from . import hosts
 
 fmpy = pytest.importorskip("fmpy", reason="FMPy is a test dependency (pyproject [test])")
 pytestmark = pytest.mark.skipif(
@@ -25,36 +26,16 @@ FS = 1000.0
 
 @pytest.fixture(scope="module")
 def record() -> Any:
-    return ph.simulate(signal="decaying", duration=12.0, seed=3)
+    return hosts.record()
 
 
 @pytest.fixture(scope="module")
 def kinds(record: Any) -> dict[str, ph.HysteresisModel]:
-    v, q, t = record.voltage, record.charge, record.t
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the fits' own notes are not under test
-        return {
-            "active-pi": ph.ActivePI(20).fit(v, q, t=t),
-            "preisach": ph.PreisachModel().fit(v, q, t=t),
-            "preisach+relaxation": ph.PreisachModel(relaxation=0.1, relaxation_nodes=8).fit(
-                v, q, t=t
-            ),
-            "duhem": ph.DuhemModel().fit(v, q, t=t),
-            "bouc-wen": ph.BoucWenModel().fit(v, q, t=t),
-            "generalized-pi+creep": ph.GeneralizedPI(
-                12, growth_terms=("integral",), creep=(0.05, 0.5, 5.0)
-            ).fit(v, q, t=t),
-        }
+    return hosts.fitted(record)
 
 
 def _desired(model: ph.HysteresisModel, n: int = 2000) -> np.ndarray:
-    """Decaying loops inside the identified region (a NaN now and then: held)."""
-    lo, hi = model.input_range_
-    _, shape = make_signal("decaying", amplitude=1.0, duration=n / FS)
-    v = lo + (hi - lo) * (0.5 + 0.45 * shape / np.abs(shape).max())
-    d = model.hysteresis_.predict(v, t=np.arange(v.size) / FS)
-    d[::89] = np.nan
-    return d[:n]
+    return hosts.desired(model, n, FS)
 
 
 class Slave:

@@ -16,7 +16,8 @@ import pytest
 
 import piezohyst as ph
 from piezohyst.control.shared import STATUS, write_shared
-from piezohyst.simulation import make_signal
+
+from . import hosts
 
 pytestmark = pytest.mark.skipif(
     shutil.which("cc") is None and shutil.which("gcc") is None, reason="no C compiler"
@@ -38,32 +39,17 @@ def _load(lib: Path, controller: bool = False) -> Any:
 
 @pytest.fixture(scope="module")
 def record() -> Any:
-    return ph.simulate(signal="decaying", duration=12.0, seed=3)
+    return hosts.record()
 
 
 @pytest.fixture(scope="module")
 def kinds(record: Any) -> dict[str, ph.HysteresisModel]:
-    v, q, t = record.voltage, record.charge, record.t
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the fits' own notes are not under test
-        return {
-            "active-pi": ph.ActivePI(20).fit(v, q, t=t),
-            "preisach": ph.PreisachModel().fit(v, q, t=t),
-            "preisach+relaxation": ph.PreisachModel(relaxation=0.1, relaxation_nodes=8).fit(
-                v, q, t=t
-            ),
-            "duhem": ph.DuhemModel().fit(v, q, t=t),
-            "bouc-wen": ph.BoucWenModel().fit(v, q, t=t),
-        }
+    return hosts.fitted(record, ["active-pi", "preisach", "preisach+relaxation", "duhem",
+                                 "bouc-wen"])  # fmt: skip
 
 
 def _desired(model: ph.HysteresisModel) -> np.ndarray:
-    lo, hi = model.input_range_
-    _, shape = make_signal("decaying", amplitude=1.0, duration=3.0)
-    v = lo + (hi - lo) * (0.5 + 0.45 * shape / np.abs(shape).max())
-    d = model.hysteresis_.predict(v, t=np.arange(v.size) / 1000.0)
-    d[::101] = np.nan  # held: the last command, as in Python
-    return d
+    return hosts.desired(model)
 
 
 @pytest.mark.parametrize(

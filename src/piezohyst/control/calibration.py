@@ -28,8 +28,6 @@ as JSON with a schema and a checksum, like a model file.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 import os
 import warnings
@@ -48,6 +46,7 @@ from ..errors import (
     NotInvertibleError,
     ParameterError,
 )
+from ..model.persistence import checksum
 
 __all__ = ["OUTPUT_MAP_FORMAT", "Charges", "OutputMap", "calibrate_gain"]
 
@@ -63,12 +62,6 @@ MIN_SAMPLES = 200
 MAX_DELAY = 0.05
 #: Share of the samples a sensor may sit at its extreme before it counts as saturated
 SATURATED_SHARE = 0.01
-
-
-def _checksum(body: dict[str, Any]) -> str:
-    content = {k: v for k, v in body.items() if k != "checksum"}
-    canon = json.dumps(content, sort_keys=True, separators=(",", ":"))
-    return "sha256:" + hashlib.sha256(canon.encode()).hexdigest()
 
 
 @dataclass(frozen=True)
@@ -363,7 +356,7 @@ class OutputMap:
             "gain": self.gain,  # for a reader: derived, not read back
             "gain_stderr": self.gain_stderr,
         }
-        body["checksum"] = _checksum(body)
+        body["checksum"] = checksum(body)
         return body
 
     @classmethod
@@ -391,7 +384,7 @@ class OutputMap:
             found = data.get("schema_version")
             msg = f"{where}: schema_version {found!r} is not {OUTPUT_MAP_VERSION}"
             raise ModelFileError(msg)
-        if "checksum" in data and data["checksum"] != _checksum(data):
+        if "checksum" in data and data["checksum"] != checksum(data):
             msg = (
                 f"{where}: checksum mismatch: the file was modified after it was saved "
                 '(delete the "checksum" field to accept a deliberate edit)'
@@ -431,9 +424,9 @@ class OutputMap:
         -------
         Path
         """
-        from ..io import atomic_write_text
+        from ..io import write_json
 
-        return atomic_write_text(path, json.dumps(self.to_dict(), indent=2) + "\n")
+        return write_json(path, self.to_dict())
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> OutputMap:
@@ -451,13 +444,9 @@ class OutputMap:
         ------
         ModelFileError
         """
-        p = Path(path)
-        try:
-            data = json.loads(p.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-            msg = f"{p}: cannot read an output map ({str(exc).splitlines()[0]})"
-            raise ModelFileError(msg) from None
-        return cls.from_dict(data, str(p))
+        from ..io import read_json
+
+        return cls.from_dict(read_json(path, "an output map"), str(path))
 
     def summary(self) -> str:
         """One line: the gain with its standard error, the curvature, delay and range.

@@ -24,7 +24,6 @@ record, measures the charge's slope on each, and fits the selected terms.
 from __future__ import annotations
 
 import itertools
-import json
 import math
 import os
 import warnings
@@ -405,9 +404,9 @@ class Leakage:
         -------
         Path
         """
-        from ..io import atomic_write_text
+        from ..io import write_json
 
-        return atomic_write_text(path, json.dumps(self.to_dict(), indent=2) + "\n")
+        return write_json(path, self.to_dict())
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> Leakage:
@@ -425,13 +424,10 @@ class Leakage:
         ------
         ModelFileError
         """
-        p = Path(path)
-        try:
-            data = json.loads(p.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-            msg = f"{p}: cannot read a leakage file ({str(exc).splitlines()[0]})"
-            raise ModelFileError(msg) from None
-        return cls.from_dict(data, str(p))
+        from ..io import read_json
+
+        data = read_json(path, "a leakage file")
+        return cls.from_dict(data, str(path))  # type: ignore[arg-type]
 
 
 def find_holds(

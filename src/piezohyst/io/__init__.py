@@ -50,7 +50,9 @@ from ._writers import (
     atomic_write,
     atomic_write_text,
     is_piezohyst_output,
+    read_json,
     write_blocks,
+    write_json,
     write_rows,
     write_table,
 )
@@ -75,9 +77,11 @@ __all__ = [
     "open_recording",
     "open_table",
     "parse_isolated",
+    "read_json",
     "read_recording",
     "read_table",
     "write_blocks",
+    "write_json",
     "write_rows",
     "write_table",
 ]

@@ -127,6 +127,54 @@ def atomic_folder(path: str | os.PathLike[str]) -> Iterator[Path]:
         raise
 
 
+def write_json(path: str | os.PathLike[str], data: object) -> Path:
+    """Write ``data`` as indented JSON, atomically (a model, leakage or map file).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    data : object
+        JSON-ready.
+
+    Returns
+    -------
+    Path
+    """
+    import json
+
+    return atomic_write_text(path, json.dumps(data, indent=2) + "\n")
+
+
+def read_json(path: str | os.PathLike[str], what: str) -> object:
+    """The JSON in ``path``, or a one-line ModelFileError naming the file and ``what`` it
+    should have been.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    what : str
+        "a leakage file", "an output map"...
+
+    Returns
+    -------
+    object
+
+    Raises
+    ------
+    ModelFileError
+    """
+    import json
+
+    from ..errors import ModelFileError
+
+    p = Path(path)
+    try:
+        return json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        msg = f"{p}: cannot read {what} ({str(exc).splitlines()[0]})"
+        raise ModelFileError(msg) from None
+
+
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
     """Write ``text`` (UTF-8) atomically; see :func:`atomic_write`.
 

@@ -33,6 +33,7 @@ from .terms import Term, make_term
 __all__ = [
     "SCHEMA",
     "SCHEMA_VERSION",
+    "checksum",
     "load_model",
     "model_class",
     "model_from_dict",
@@ -107,7 +108,17 @@ SCHEMA = "piezohyst-model"
 SCHEMA_VERSION = 2
 
 
-def _checksum(body: dict[str, Any]) -> str:
+def checksum(body: dict[str, Any]) -> str:
+    """A file body's checksum (every field but ``checksum``, canonical JSON, SHA-256).
+
+    Parameters
+    ----------
+    body : dict
+
+    Returns
+    -------
+    str
+    """
     content = {k: v for k, v in body.items() if k != "checksum"}
     canon = json.dumps(content, sort_keys=True, separators=(",", ":"), allow_nan=False)
     return "sha256:" + hashlib.sha256(canon.encode()).hexdigest()
@@ -158,7 +169,7 @@ def model_to_dict(model: Model) -> dict[str, Any]:
             "output_dynamics": model.output_dynamics_.to_dict(),
         },
     }
-    body["checksum"] = _checksum(body)
+    body["checksum"] = checksum(body)
     return body
 
 
@@ -351,7 +362,7 @@ def model_from_dict(data: Any, expected: type | None = None) -> Model:
             f"and {SCHEMA_VERSION}"
         )
         raise ModelFileError(msg)
-    if "checksum" in data and data["checksum"] != _checksum(data):
+    if "checksum" in data and data["checksum"] != checksum(data):
         msg = (
             "checksum mismatch: the file was modified after it was saved "
             '(delete the "checksum" field to accept a deliberate edit)'
