@@ -38,6 +38,9 @@ try, ph_comp_mex('bogus'); catch err, messages{end + 1} = err.message; end
 try, ph_comp_mex(1, 2, 3); catch err, messages{end + 1} = err.message; end
 try, ph_comp_mex([1 + 2i, 3]); catch err, messages{end + 1} = err.message; end
 fid = fopen('errors.txt', 'w'); fprintf(fid, '%s\\n', messages{:}); fclose(fid);
+ph_comp_mex('reset');
+[v, counts] = ph_comp_mex(t);
+fid = fopen('counts.txt', 'w'); fprintf(fid, '%d\\n', counts); fclose(fid);
 fid = fopen('version.txt', 'w'); fprintf(fid, '%s\\n', ph_comp_mex('version')); fclose(fid);
 """
 
@@ -84,3 +87,5 @@ def test_the_mex_gateway_in_octave(kind: str, tmp_path: Path) -> None:
     assert "usage" in errors[0] and "unknown command 'bogus'" in errors[1]
     assert "usage" in errors[2] and "usage" in errors[3]
     assert type(model).__name__ in (tmp_path / "version.txt").read_text()
+    counts = [int(x) for x in (tmp_path / "counts.txt").read_text().split()]
+    assert counts == [comp.nonfinite_count, comp.saturated_count]  # the limits say so

@@ -34,6 +34,7 @@ def _load(lib: Path, controller: bool = False) -> Any:
     so.ph_comp_process.argtypes = [ctypes.c_void_p, *arrays, ctypes.c_long]
     so.ph_comp_process.restype = ctypes.c_int
     so.ph_comp_version.restype = ctypes.c_char_p
+    so.ph_comp_counts.restype = ctypes.c_int
     return so
 
 
@@ -71,6 +72,10 @@ def test_the_library_reproduces_the_python_compensator(kind: str, kinds, tmp_pat
     # tol: C and numba round apart (FMA, order, libm): 1e-9 V, issue 41's bar
     np.testing.assert_allclose(out, py, rtol=0, atol=1e-9)
     assert np.all((out >= lo) & (out <= hi))
+    counts = (ctypes.c_ulong * 2)()
+    assert so.ph_comp_counts(ctypes.c_void_p(s), counts) == 0
+    assert (counts[0], counts[1]) == (comp.nonfinite_count, comp.saturated_count)
+    assert counts[0] == int(np.isnan(d).sum())  # the limits say when they bite
     so.ph_comp_reset(s)  # the exported state again: the same run, exactly
     again = np.empty_like(d)
     assert so.ph_comp_process(s, d, again, d.size) == 0
@@ -116,7 +121,7 @@ def test_handles_are_independent_and_bad_calls_return_a_code(kinds, tmp_path: Pa
         ours = [line.split()[-1] for line in listed.splitlines() if " T " in line]
         ours = [name for name in ours if name not in ("_init", "_fini")]
         assert sorted(ours) == sorted(
-            f"ph_comp_{n}" for n in ("new", "free", "reset", "process", "version")
+            f"ph_comp_{n}" for n in ("new", "free", "reset", "process", "counts", "version")
         )
 
 

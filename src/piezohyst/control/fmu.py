@@ -13,6 +13,8 @@ machine it runs on with the system C compiler, and zips ``modelDescription.xml``
   order (a step before initialization, after terminate...), never a crash;
 * ``fmi2Reset`` goes back to the exported state: the same run again reproduces the first;
 * a NaN target holds the last command, inside the limits, as in Python;
+* Integer outputs ``nonfinite`` and ``saturated`` count what the limits held since the last
+  reset (non-finite targets, targets out of reach), so the host sees when they bite;
 * the limits, slew and gain are baked into the step at export (constants of the C source),
   so they are not FMU parameters: changing them means exporting again.
 
@@ -89,6 +91,7 @@ def _model_description(
         if controller
         else ""
     )
+    first_count = 4 if controller else 3  # the counts follow target, voltage (and charge)
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription
   fmiVersion="2.0"
@@ -121,13 +124,23 @@ def _model_description(
     <ScalarVariable name="voltage" valueReference="1" causality="output" variability="discrete" initial="calculated" description="the command (V), inside the limits">
       <Real/>
     </ScalarVariable>
-{charge}  </ModelVariables>
+{charge}    <ScalarVariable name="nonfinite" valueReference="0" causality="output" variability="discrete" initial="calculated" description="non-finite targets since the last reset (the last command held)">
+      <Integer/>
+    </ScalarVariable>
+    <ScalarVariable name="saturated" valueReference="1" causality="output" variability="discrete" initial="calculated" description="targets out of reach since the last reset (the nearer voltage limit sent)">
+      <Integer/>
+    </ScalarVariable>
+  </ModelVariables>
   <ModelStructure>
     <Outputs>
       <Unknown index="2"/>
+      <Unknown index="{first_count}"/>
+      <Unknown index="{first_count + 1}"/>
     </Outputs>
     <InitialUnknowns>
       <Unknown index="2" dependencies=""/>
+      <Unknown index="{first_count}" dependencies=""/>
+      <Unknown index="{first_count + 1}" dependencies=""/>
     </InitialUnknowns>
   </ModelStructure>
 </fmiModelDescription>

@@ -240,12 +240,22 @@ static fmi2Status none(fmi2Component comp, const char *what)
     return refuse((ph_fmu_t *)comp, what);
 }
 
+/* the limits' counts since the last reset: 0 non-finite targets, 1 targets out of reach */
 FMI2_Export fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReference vr[],
                                       size_t nvr, fmi2Integer value[])
 {
-    (void)vr;
-    (void)value;
-    return nvr == 0 ? fmi2OK : none(comp, "fmi2GetInteger: the FMU has no integer variable");
+    ph_fmu_t *c = (ph_fmu_t *)comp;
+    size_t i;
+    if (c == NULL || (nvr > 0 && (vr == NULL || value == NULL))) {
+        return fmi2Error;
+    }
+    for (i = 0; i < nvr; ++i) {
+        if (vr[i] > 1) {
+            return refuse(c, "fmi2GetInteger: no variable with this value reference");
+        }
+        value[i] = (fmi2Integer)(vr[i] == 0 ? c->s.nonfinite : c->s.saturated);
+    }
+    return fmi2OK;
 }
 
 FMI2_Export fmi2Status fmi2GetBoolean(fmi2Component comp, const fmi2ValueReference vr[],
@@ -269,7 +279,7 @@ FMI2_Export fmi2Status fmi2SetInteger(fmi2Component comp, const fmi2ValueReferen
 {
     (void)vr;
     (void)value;
-    return nvr == 0 ? fmi2OK : none(comp, "fmi2SetInteger: the FMU has no integer variable");
+    return nvr == 0 ? fmi2OK : none(comp, "fmi2SetInteger: the counts are outputs");
 }
 
 FMI2_Export fmi2Status fmi2SetBoolean(fmi2Component comp, const fmi2ValueReference vr[],

@@ -2,7 +2,8 @@
  *
  * Build: MATLAB  mex ${name}.c           Octave  mkoctfile --mex ${name}.c
  * Use:   v = ${name}(${args});   commands (V) for a vector of desired values, the state
- *        kept between calls;   ${name}('reset') goes back to the exported state;
+ *        kept between calls; [v, counts] = ... also returns what the limits held since the
+ *        last reset: [non-finite targets, targets out of reach];   ${name}('reset') goes back to the exported state;
  *        ${name}('version') returns what was exported.
  * The step is ${prefix}.c (included: one translation unit, nothing else to link).
  */
@@ -40,7 +41,7 @@ void mexFunction(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
         mexErrMsgIdAndTxt("${name}:command", "${name}: unknown command '%s' (reset, version)",
                           command);
     }
-    if (nrhs != ${nargs} || nlhs > 1 || !mxIsDouble(prhs[0]) || mxIsComplex(prhs[0])
+    if (nrhs != ${nargs} || nlhs > 2 || !mxIsDouble(prhs[0]) || mxIsComplex(prhs[0])
         || mxIsSparse(prhs[0])) {
         mexErrMsgIdAndTxt("${name}:usage", "${name}: usage v = ${name}(${args}) with real double "
                           "vectors, or ${name}('reset')");
@@ -51,5 +52,10 @@ void mexFunction(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
     volts = mxGetPr(plhs[0]);
     for (k = 0; k < n; ++k) {
         volts[k] = (double)${prefix}_step(&state, (${prefix}_real)target[k]${measured});
+    }
+    if (nlhs == 2) { /* what the limits held since the last reset */
+        plhs[1] = mxCreateDoubleMatrix(1, 2, mxREAL);
+        mxGetPr(plhs[1])[0] = (double)state.nonfinite;
+        mxGetPr(plhs[1])[1] = (double)state.saturated;
     }
 }
