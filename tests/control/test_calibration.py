@@ -95,6 +95,9 @@ def test_the_butterfly_is_named_and_kept_to_its_branch() -> None:
     down = float(om.inverse([target], near=float(q.min()))[0])
     assert up > 0 > down
     assert om.predict([up])[0] == pytest.approx(target, rel=1e-9)  # tol: root polish
+    beyond = 2.0 * om.displacement_range()[1]  # no charge reaches it: said, never silent
+    with pytest.warns(ph.ExtrapolationWarning, match="out of reach"):
+        om.inverse([beyond], near=float(q.max()))
 
 
 def test_a_record_that_cannot_calibrate_is_refused_in_one_line() -> None:

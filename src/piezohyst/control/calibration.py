@@ -307,6 +307,7 @@ class OutputMap:
         ulo, uhi = lo - 0.05 * (hi - lo), hi + 0.05 * (hi - lo)
         qs = qs[(qs >= ulo) & (qs <= uhi)]
         if qs.size == 0:  # out of reach: the calibrated charge whose displacement is nearest
+            self._warn_outside(f"the displacement {target:.4g} {self.output_unit} (out of reach)")
             grid = np.linspace(lo, hi, 2049)
             return float(grid[np.argmin(np.abs(self._poly(self._u(grid)) - target))])
         if qs.size > 1 and near is None:
