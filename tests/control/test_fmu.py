@@ -113,7 +113,9 @@ def test_reset_reproduces_a_run_and_a_nan_target_holds(kinds, tmp_path: Path) ->
     assert np.array_equal(slave.run(d), first)
     held = slave.run(np.full(5, np.nan))
     assert np.all(held == first[-1]) and lo <= held[0] <= hi
-    nonfinite, saturated = slave.fmu.getInteger([slave.vr["nonfinite"], slave.vr["saturated"]])
+    nonfinite, saturated, _ = slave.fmu.getInteger(
+        [slave.vr["nonfinite"], slave.vr["saturated"], slave.vr["slewed"]]
+    )
     assert nonfinite == int(np.isnan(d).sum()) + 5  # the counts since the reset say so
     beyond = slave.run(np.array([1e3 * float(np.nanmax(np.abs(d)))]))  # far out of reach
     assert beyond[0] > first[-1]  # towards the upper limit (at most the slew limit's step)

@@ -53,6 +53,21 @@ def _desired(model: ph.HysteresisModel) -> np.ndarray:
     return hosts.desired(model)
 
 
+def _slew_cut(out: np.ndarray, comp: ph.Compensator) -> int:
+    """Commands that moved by the slew limit's whole step from the one before (the first
+    from the compensator's start), as the C step counts them: the approach included."""
+    if not np.isfinite(comp.max_step):
+        return 0
+    prev = np.concatenate([[_initial_command(comp)], out[:-1]])
+    return int(np.sum(np.abs(out - prev) >= comp.max_step * (1 - 1e-9)))
+
+
+def _initial_command(comp: ph.Compensator) -> float:
+    fresh = ph.Compensator(comp.model, v_min=comp.v_min, v_max=comp.v_max,
+                           sample_rate=comp.sample_rate, slew_rate=comp.slew_rate)  # fmt: skip
+    return fresh.last_command
+
+
 @pytest.mark.parametrize(
     "kind", ["active-pi", "preisach", "preisach+relaxation", "duhem", "bouc-wen"]
 )
@@ -72,9 +87,10 @@ def test_the_library_reproduces_the_python_compensator(kind: str, kinds, tmp_pat
     # tol: C and numba round apart (FMA, order, libm): 1e-9 V, issue 41's bar
     np.testing.assert_allclose(out, py, rtol=0, atol=1e-9)
     assert np.all((out >= lo) & (out <= hi))
-    counts = (ctypes.c_ulong * 2)()
+    counts = (ctypes.c_ulong * 3)()
     assert so.ph_comp_counts(ctypes.c_void_p(s), counts) == 0
     assert (counts[0], counts[1]) == (comp.nonfinite_count, comp.saturated_count)
+    assert counts[2] == _slew_cut(out, comp)  # every command the slew limit cut
     assert counts[0] == int(np.isnan(d).sum())  # the limits say when they bite
     so.ph_comp_reset(s)  # the exported state again: the same run, exactly
     again = np.empty_like(d)
@@ -184,3 +200,29 @@ def test_generalized_pi_with_asymmetry_and_creep_exports_too(
     np.testing.assert_allclose(out, py, rtol=0, atol=1e-9)
     so.ph_comp_free(s)
     assert ("c[" in header.read_text()) == ("creep" in settings)  # the lag states, if any
+
+
+@pytest.mark.parametrize("kind", ["active-pi", "preisach", "bouc-wen"])
+def test_a_trajectory_faster_than_the_slew_limit_is_counted(
+    kind: str, kinds, tmp_path: Path
+) -> None:
+    model = kinds[kind]
+    lo, hi = model.input_range_
+    comp = ph.Compensator(model, v_min=lo, v_max=hi, sample_rate=1000.0, slew_rate=2e3)
+    _, _, lib = write_shared(comp, tmp_path / "ph_comp.c")
+    so = _load(lib)
+    d = _desired(model)
+    d = np.ascontiguousarray(np.repeat(d[::20], 20))  # steps: the slew limit cuts each
+    s = so.ph_comp_new()
+    out = np.empty_like(d)
+    assert so.ph_comp_process(s, d, out, d.size) == 0
+    counts = (ctypes.c_ulong * 3)()
+    so.ph_comp_counts(ctypes.c_void_p(s), counts)
+    assert counts[2] == _slew_cut(out, comp) > 10  # the limit bit, and says so
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ph.LimitWarning)
+        py = comp.process(d)
+    # tol: C and numba round apart (FMA, order, libm): 1e-9 V, issue 41's bar
+    np.testing.assert_allclose(out, py, rtol=0, atol=1e-9)
+    assert comp.slew_limited_count <= counts[2]  # Python leaves the approach out
+    so.ph_comp_free(s)

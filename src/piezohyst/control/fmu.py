@@ -13,8 +13,9 @@ machine it runs on with the system C compiler, and zips ``modelDescription.xml``
   order (a step before initialization, after terminate...), never a crash;
 * ``fmi2Reset`` goes back to the exported state: the same run again reproduces the first;
 * a NaN target holds the last command, inside the limits, as in Python;
-* Integer outputs ``nonfinite`` and ``saturated`` count what the limits held since the last
-  reset (non-finite targets, targets out of reach), so the host sees when they bite;
+* Integer outputs ``nonfinite``, ``saturated`` and ``slewed`` count what the limits held
+  since the last reset (non-finite targets, targets out of reach, commands cut by the slew
+  limit), so the host sees when they bite;
 * the limits, slew and gain are baked into the step at export (constants of the C source),
   so they are not FMU parameters: changing them means exporting again.
 
@@ -130,17 +131,22 @@ def _model_description(
     <ScalarVariable name="saturated" valueReference="1" causality="output" variability="discrete" initial="calculated" description="targets out of reach since the last reset (the nearer voltage limit sent)">
       <Integer/>
     </ScalarVariable>
+    <ScalarVariable name="slewed" valueReference="2" causality="output" variability="discrete" initial="calculated" description="commands cut by the slew limit since the last reset">
+      <Integer/>
+    </ScalarVariable>
   </ModelVariables>
   <ModelStructure>
     <Outputs>
       <Unknown index="2"/>
       <Unknown index="{first_count}"/>
       <Unknown index="{first_count + 1}"/>
+      <Unknown index="{first_count + 2}"/>
     </Outputs>
     <InitialUnknowns>
       <Unknown index="2" dependencies=""/>
       <Unknown index="{first_count}" dependencies=""/>
       <Unknown index="{first_count + 1}" dependencies=""/>
+      <Unknown index="{first_count + 2}" dependencies=""/>
     </InitialUnknowns>
   </ModelStructure>
 </fmiModelDescription>

@@ -240,7 +240,8 @@ static fmi2Status none(fmi2Component comp, const char *what)
     return refuse((ph_fmu_t *)comp, what);
 }
 
-/* the limits' counts since the last reset: 0 non-finite targets, 1 targets out of reach */
+/* the limits' counts since the last reset: 0 non-finite targets, 1 targets out of reach,
+ * 2 commands cut by the slew limit */
 FMI2_Export fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReference vr[],
                                       size_t nvr, fmi2Integer value[])
 {
@@ -250,10 +251,12 @@ FMI2_Export fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReferen
         return fmi2Error;
     }
     for (i = 0; i < nvr; ++i) {
-        if (vr[i] > 1) {
+        if (vr[i] > 2) {
             return refuse(c, "fmi2GetInteger: no variable with this value reference");
         }
-        value[i] = (fmi2Integer)(vr[i] == 0 ? c->s.nonfinite : c->s.saturated);
+        value[i] = (fmi2Integer)(vr[i] == 0   ? c->s.nonfinite
+                                 : vr[i] == 1 ? c->s.saturated
+                                              : c->s.slewed);
     }
     return fmi2OK;
 }

@@ -3,7 +3,7 @@
  * Build: MATLAB  mex ${name}.c           Octave  mkoctfile --mex ${name}.c
  * Use:   v = ${name}(${args});   commands (V) for a vector of desired values, the state
  *        kept between calls; [v, counts] = ... also returns what the limits held since the
- *        last reset: [non-finite targets, targets out of reach];   ${name}('reset') goes back to the exported state;
+ *        last reset: [non-finite targets, targets out of reach, cut by the slew limit];   ${name}('reset') goes back to the exported state;
  *        ${name}('version') returns what was exported.
  * The step is ${prefix}.c (included: one translation unit, nothing else to link).
  */
@@ -54,8 +54,9 @@ void mexFunction(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
         volts[k] = (double)${prefix}_step(&state, (${prefix}_real)target[k]${measured});
     }
     if (nlhs == 2) { /* what the limits held since the last reset */
-        plhs[1] = mxCreateDoubleMatrix(1, 2, mxREAL);
+        plhs[1] = mxCreateDoubleMatrix(1, 3, mxREAL);
         mxGetPr(plhs[1])[0] = (double)state.nonfinite;
         mxGetPr(plhs[1])[1] = (double)state.saturated;
+        mxGetPr(plhs[1])[2] = (double)state.slewed;
     }
 }

@@ -50,15 +50,16 @@ PH_EXPORT int ${prefix}_process(${prefix}_t *s, const double *target, ${charge_a
 }
 
 /* What the limits held since the last reset: counts[0] non-finite targets (the last
- * command held), counts[1] targets out of reach (the nearer voltage limit sent).
- * 0; -1 for a NULL pointer. */
-PH_EXPORT int ${prefix}_counts(const ${prefix}_t *s, unsigned long counts[2])
+ * command held), counts[1] targets out of reach (the nearer voltage limit sent),
+ * counts[2] commands cut by the slew limit. 0; -1 for a NULL pointer. */
+PH_EXPORT int ${prefix}_counts(const ${prefix}_t *s, unsigned long counts[3])
 {
     if (s == NULL || counts == NULL) {
         return -1;
     }
     counts[0] = s->nonfinite;
     counts[1] = s->saturated;
+    counts[2] = s->slewed;
     return 0;
 }
 

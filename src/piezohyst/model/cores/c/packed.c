@@ -178,6 +178,7 @@ void PREFIX_init(PREFIX_t *s)
     s->last = LAST0;
     s->nonfinite = 0;
     s->saturated = 0;
+    s->slewed = 0;
     s->outside = 0;
     INIT_EXTRA(s);
 }
@@ -215,6 +216,11 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired)
     if (clamped && (u <= V_MIN || u >= V_MAX)) {
         s->saturated++;
     }
+#if HAS_SLEW && !DYNAMIC
+    else if (clamped) { /* held at the slew limit's bracket, inside the voltage limits */
+        s->slewed++;
+    }
+#endif
     x = u;
 #if DYNAMIC
     {
@@ -227,6 +233,9 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired)
         }
         x = min_real(max_real(x, V_MIN), V_MAX);
 #if HAS_SLEW
+        if (x > s->last + MAX_STEP || x < s->last - MAX_STEP) {
+            s->slewed++;
+        }
         x = min_real(max_real(x, s->last - MAX_STEP), s->last + MAX_STEP);
 #endif
         u = advance(s, x);

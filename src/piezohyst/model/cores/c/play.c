@@ -26,6 +26,7 @@ void PREFIX_init(PREFIX_t *s)
     s->last = LAST0;
     s->nonfinite = 0;
     s->saturated = 0;
+    s->slewed = 0;
     INIT_EXTRA(s);
 }
 
@@ -65,9 +66,11 @@ static real_t core_step(PREFIX_t *s, real_t q)
     if (v > s->last + MAX_STEP) {
         v = s->last + MAX_STEP;
         limited = 1;
+        s->slewed++;
     } else if (v < s->last - MAX_STEP) {
         v = s->last - MAX_STEP;
         limited = 1;
+        s->slewed++;
     }
 #endif
     for (i = 0; i < N; ++i) {

@@ -19,7 +19,8 @@ typedef struct {
     ${real} zeta[${upper}_N]; /* inverse operator states, output units */
     ${real} last;             /* last command, V */
     unsigned long nonfinite; /* NaN/inf desired values (last command held) */
-    unsigned long saturated; /* commands clipped to the limits */${lag_state}
+    unsigned long saturated; /* commands clipped to the limits */
+    unsigned long slewed;    /* commands cut by the slew limit */${lag_state}
 #if ${upper}_CONTROLLER
     /* feedback on the measured charge (see piezohyst.selfsensing) */
     ${real} integral;         /* integral action, model output units */

@@ -50,8 +50,10 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
 #if HAS_SLEW
     if (x > s->last + MAX_STEP) {
         x = s->last + MAX_STEP;
+        s->slewed++;
     } else if (x < s->last - MAX_STEP) {
         x = s->last - MAX_STEP;
+        s->slewed++;
     }
 #endif
     u = advance(s, x);

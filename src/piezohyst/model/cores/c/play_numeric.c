@@ -84,6 +84,7 @@ void PREFIX_init(PREFIX_t *s)
     s->last = LAST0;
     s->nonfinite = 0;
     s->saturated = 0;
+    s->slewed = 0;
 }
 
 real_t PREFIX_step(PREFIX_t *s, real_t desired)
@@ -129,8 +130,10 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired)
 #if HAS_SLEW
     if (v > s->last + MAX_STEP) {
         v = s->last + MAX_STEP;
+        s->slewed++;
     } else if (v < s->last - MAX_STEP) {
         v = s->last - MAX_STEP;
+        s->slewed++;
     }
 #endif
     for (i = 0; i < N; ++i) {
