@@ -172,3 +172,12 @@ def test_a_curved_map_is_refused_by_the_c_export(tmp_path: Path) -> None:
     comp = ph.Compensator(model, v_min=lo, v_max=hi, output_map=om)
     with pytest.raises(ph.ParameterError, match="curved"):
         write_c(comp, tmp_path / "c.c")
+
+
+def test_a_sensor_delay_is_found() -> None:
+    rec = ph.simulate(signal="multifreq", duration=10.0, seed=1)
+    model = _quiet_fit(ph.ActivePI(10), rec)
+    late = np.concatenate([np.full(7, rec.displacement[0]), rec.displacement[:-7]])  # 7 ms
+    om = ph.calibrate_gain(model, rec.voltage, rec.charge, late, rec.t)
+    assert om.delay == pytest.approx(0.007)  # tol: whole samples of 1 ms, rounding only
+    assert om.gain == pytest.approx(125.0, rel=0.005)  # the delay costs the gain nothing
