@@ -181,3 +181,22 @@ def test_a_sensor_delay_is_found() -> None:
     om = ph.calibrate_gain(model, rec.voltage, rec.charge, late, rec.t)
     assert om.delay == pytest.approx(0.007)  # tol: whole samples of 1 ms, rounding only
     assert om.gain == pytest.approx(125.0, rel=0.005)  # the delay costs the gain nothing
+
+
+def test_a_bank_takes_one_map_per_channel() -> None:
+    recs = [ph.simulate(signal="decaying", duration=6.0, seed=s) for s in (1, 2)]
+    models = [_quiet_fit(ph.ActivePI(8), r) for r in recs]
+    maps = [ph.calibrate_gain(m, r.voltage, r.charge, r.displacement, r.t)
+            for m, r in zip(models, recs, strict=True)]  # fmt: skip
+    bank = ph.ModelBank.from_models(models)
+    lo = max(m.input_range_[0] for m in models)
+    hi = min(m.input_range_[1] for m in models)
+    comp = ph.BankCompensator(bank, v_min=lo, v_max=hi, output_maps=maps)
+    s_lo, s_hi = maps[0].displacement_range()
+    desired = np.column_stack([np.linspace(s_lo, s_hi, 50)] * 2) * 0.8
+    out = np.array([comp.step(row) for row in desired])
+    for c in range(2):  # channel c is exactly its own compensator with its own map
+        alone = ph.Compensator(models[c], v_min=lo, v_max=hi, output_map=maps[c])
+        assert np.array_equal(out[:, c], alone.process(desired[:, c]))
+    with pytest.raises(ph.ShapeError, match="one map per channel"):
+        ph.BankCompensator(bank, v_min=lo, v_max=hi, output_maps=maps[:1])

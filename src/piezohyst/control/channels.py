@@ -25,6 +25,7 @@ from .._validation import FloatArray
 from ..errors import LimitWarning, ParameterError, ShapeError
 from ..model.bank import ModelBank
 from ..model.model import HysteresisModel
+from .calibration import OutputMap
 from .compensator import LIMIT_CHECK_FIRST, LIMIT_SHARE, Compensator, Domain
 from .leakage import Leakage
 from .selfsensing import SelfSensingController
@@ -266,6 +267,10 @@ class BankCompensator(ChannelBank[Compensator]):
     allow_extrapolation : bool, default False
         Limits beyond a channel's identified range are narrowed to it, with
         one warning naming how many channels were narrowed.
+    output_maps : sequence of OutputMap, optional
+        One charge -> displacement map per channel (:func:`~piezohyst.calibrate_gain`):
+        desired values in metres, through each channel's map, instead of ``gain``. The
+        channels then run one after another (their maps are not in the fused kernel).
 
     Examples
     --------
@@ -289,15 +294,23 @@ class BankCompensator(ChannelBank[Compensator]):
         domain: Domain = "charge",
         gain: float | ArrayLike | None = None,
         allow_extrapolation: bool = False,
+        output_maps: Sequence[OutputMap] | None = None,
     ) -> None:
         c = len(self._models(bank))
         lows, highs = per_channel(v_min, c, "v_min"), per_channel(v_max, c, "v_max")
         slews, gains = per_channel(slew_rate, c, "slew_rate"), per_channel(gain, c, "gain")
+        maps: list[OutputMap | None] = [None] * c
+        if output_maps is not None:
+            maps = list(output_maps)
+            if len(maps) != c:
+                msg = f"'output_maps' must hold one map per channel ({c}). Got {len(maps)}."
+                raise ShapeError(msg)
 
         def build(i: int, m: HysteresisModel) -> Compensator:
             return Compensator(m, v_min=lows[i], v_max=highs[i], slew_rate=slews[i],
                                sample_rate=sample_rate, domain=domain, gain=gains[i],
-                               allow_extrapolation=allow_extrapolation)  # fmt: skip
+                               allow_extrapolation=allow_extrapolation,
+                               output_map=maps[i])  # fmt: skip
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)
