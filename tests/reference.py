@@ -93,3 +93,14 @@ def ilc_update(
         for i in range(n):
             out[i] += weight * (new * cmath.exp(2j * math.pi * k * i / n)).real / n
     return out
+
+
+def slew_hulls(u: Sequence[float], step: float) -> tuple[list[float], list[float]]:
+    """The smallest sequence moving at most ``step`` per sample at or above ``u`` and the
+    largest at or below, over ``u`` repeated periodically: max_j / min_j over three periods of
+    ``u[j] -/+ step |k - j|`` (O(N^2) by definition)."""
+    n = len(u)
+    tiled = list(u) * 3
+    upper = [max(tiled[j] - step * abs(k - j) for j in range(3 * n)) for k in range(n, 2 * n)]
+    lower = [min(tiled[j] + step * abs(k - j) for j in range(3 * n)) for k in range(n, 2 * n)]
+    return upper, lower

@@ -1,6 +1,7 @@
 """Numba kernels of the signals around the hysteresis: the growth terms' running integral,
 creep lags, the input dynamics (delay and lag) and the output mode, reversal counting for
-the cross-validation folds, and the constant runs of leakage holds. Plain functions over
+the cross-validation folds, the constant runs of leakage holds, and the slew limit's hulls
+of a known command sequence. Plain functions over
 arrays and explicit state, the fastmath policy of :mod:`piezohyst._kernels`.
 """
 
@@ -254,6 +255,27 @@ def count_held(commands, prev, tol, counts, given, arrived):  # type: ignore[no-
             if held:
                 counts[c] += 1
             given[c] += 1
+
+
+@njit(cache=True)
+def slew_hull(u, step, upper, out):  # type: ignore[no-untyped-def]
+    """The tightest sequence that moves by at most ``step`` per sample on one side of ``u``.
+
+    ``upper``: the smallest such sequence at or above ``u``, ``out[k] = max_j (u[j] - step
+    |k - j|)``; else the largest at or below, ``min_j (u[j] + step |k - j|)``. Two passes
+    (forward, then backward), as a distance transform.
+    """
+    n = u.shape[0]
+    sign = -1.0 if upper else 1.0
+    for k in range(n):
+        v = u[k]
+        if k > 0:
+            w = out[k - 1] + sign * step
+            v = max(v, w) if upper else min(v, w)
+        out[k] = v
+    for k in range(n - 2, -1, -1):
+        w = out[k + 1] + sign * step
+        out[k] = max(out[k], w) if upper else min(out[k], w)
 
 
 def warm_up() -> None:

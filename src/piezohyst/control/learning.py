@@ -32,6 +32,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .._kernels import signal as S
 from ..errors import (
     LearningWarning,
     ModelFileError,
@@ -143,8 +144,26 @@ def _saturated(u: FloatArray, comp: Compensator) -> int:
     top, bottom = _at_limits(u, comp)
     slewed = np.zeros(u.size, dtype=bool)
     if math.isfinite(comp.max_step):
-        slewed[1:] = np.abs(np.diff(u)) >= comp.max_step * (1 - 1e-9)
+        slewed[1:] = np.abs(np.diff(u)) >= comp.max_step * (1 - 1e-6)
     return int(np.count_nonzero(top | bottom | slewed))
+
+
+def _centred_slew(u: FloatArray, step: float) -> FloatArray:
+    """A trial's commands within the slew limit, a cut move spread evenly around its sample.
+
+    The midpoint of the smallest sequence within the limit at or above the commands and the
+    largest at or below (both over the periodic trial): within the limit (the mean of two
+    sequences that are), inside the range the commands span, equal to them wherever they
+    keep to the limit, and never further from them than any sequence within the limit can
+    be (half the hulls' largest gap). A causal limiter starts every cut move late; a trial
+    is known before it is sent, so half of the move can come before its sample.
+    """
+    n = u.size
+    tiled = np.tile(u, 3)  # the trial runs after itself: its hulls are periodic
+    upper, lower = np.empty_like(tiled), np.empty_like(tiled)
+    S.slew_hull(tiled, step, True, upper)
+    S.slew_hull(tiled, step, False, lower)
+    return np.asarray(0.5 * (upper + lower)[n : 2 * n])
 
 
 def _anti_windup(e: FloatArray, u: FloatArray, comp: Compensator, sign: float) -> FloatArray:
@@ -294,6 +313,19 @@ class LearningCompensator:
             v_min=v_min,
             v_max=v_max,
             slew_rate=slew_rate,
+            sample_rate=sample_rate,
+            domain=domain,
+            gain=gain,
+            allow_extrapolation=allow_extrapolation,
+            output_map=output_map,
+        )
+        # the trial's commands before the slew limit, which the whole trial then meets at once
+        # (_centred_slew); the compensator above keeps the limit for a user's own use
+        self._free = Compensator(
+            model,
+            v_min=v_min,
+            v_max=v_max,
+            slew_rate=None,
             sample_rate=sample_rate,
             domain=domain,
             gain=gain,
@@ -451,14 +483,20 @@ class LearningCompensator:
 
     def _commands(self, previous: FloatArray, correction: FloatArray) -> FloatArray:
         """The compensator's commands for ``desired + correction`` after the history of
-        ``desired + previous`` (at least 1 s of it, from the model's initial state)."""
+        ``desired + previous`` (at least 1 s of it, from the model's initial state), within
+        the slew limit over the whole trial (:func:`_centred_slew`)."""
         assert self._desired is not None
         d = self._desired
-        comp = self.compensator
+        comp = self._free
         comp.reset()
         reps = max(1, math.ceil(self.sample_rate / d.size))
         comp.process(np.tile(d + previous, reps))
-        return comp.process(d + correction)
+        u = comp.process(d + correction)
+        step = self.compensator.max_step
+        if math.isfinite(step):  # a hair inside, so that rounding never steps over it
+            u = np.clip(_centred_slew(u, step * (1.0 - 1e-9)), self.compensator.v_min,
+                        self.compensator.v_max)  # fmt: skip
+        return u
 
     def command(self, desired: ArrayLike | None = None) -> FloatArray:
         """The voltages of the next trial.
