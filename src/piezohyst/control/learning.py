@@ -308,30 +308,13 @@ class LearningCompensator:
         output_map: OutputMap | None = None,
     ) -> None:
         self.model = model
-        self.compensator = Compensator(
-            model,
-            v_min=v_min,
-            v_max=v_max,
-            slew_rate=slew_rate,
-            sample_rate=sample_rate,
-            domain=domain,
-            gain=gain,
-            allow_extrapolation=allow_extrapolation,
-            output_map=output_map,
-        )
+        kept: dict[str, Any] = {"v_min": v_min, "v_max": v_max, "sample_rate": sample_rate,
+                                "domain": domain, "gain": gain, "output_map": output_map,
+                                "allow_extrapolation": allow_extrapolation}  # fmt: skip
+        self.compensator = Compensator(model, slew_rate=slew_rate, **kept)
         # the trial's commands before the slew limit, which the whole trial then meets at once
-        # (_centred_slew); the compensator above keeps the limit for a user's own use
-        self._free = Compensator(
-            model,
-            v_min=v_min,
-            v_max=v_max,
-            slew_rate=None,
-            sample_rate=sample_rate,
-            domain=domain,
-            gain=gain,
-            allow_extrapolation=allow_extrapolation,
-            output_map=output_map,
-        )
+        # (_centred_slew); the compensator above holds the limit
+        self._free = Compensator(model, slew_rate=None, **kept)
         #: The charge -> displacement map of the desired values (None: a gain or charge)
         self.output_map = output_map
         if leakage is None:
