@@ -124,6 +124,7 @@ def test_a_trial_meets_the_slew_limit_with_moves_centred(values: list[float], st
     assert np.all(np.abs(moves) <= step * (1 + 1e-12))
     assert got.min() >= u.min() - 1e-12 and got.max() <= u.max() + 1e-12
     if np.all(np.abs(np.diff(np.concatenate([u, u[:1]]))) <= step):
+        # tol: a sequence within the limit is its own hull, to the rounding of one step's sum
         np.testing.assert_allclose(got, u, rtol=0, atol=1e-12)
 
 
