@@ -14,6 +14,7 @@ from pathlib import Path
 import click
 
 from .._version import __version__
+from ..control.calibration import OutputMap
 from ..control.compensator import CompensatorSettings
 from ..control.selfsensing import LoopSettings
 from ..io import DataSpec
@@ -29,6 +30,7 @@ from ._support import (
     _command_line,
     _data_options,
     _fit_auto,
+    _gain_option,
     _limit_options,
     _loop_options,
     _model_options,
@@ -584,16 +586,44 @@ def compensate(
     required=True,
     help="Folder for the figures, metrics.json and report.md.",
 )
+@click.option(
+    "--gain",
+    default=None,
+    callback=lambda _c, _p, value: _gain_option(value),
+    help="Also the displacement predicted from the voltage, in metres: m/C, or the map "
+    "calibrate-gain wrote.",
+)
+@click.option(
+    "--displacement-column",
+    default=None,
+    help="A displacement sensor's column to score that displacement against (needs --gain).",
+)
+@click.option(
+    "--displacement-unit",
+    default=None,
+    help="Its unit if the header does not say (m, um, nm...).",
+)
 @FORCE
 @click.pass_obj
 def report(
-    ctx: Context, model: Path, data: Path, data_spec: DataSpec, out: Path, force: bool
+    ctx: Context,
+    model: Path,
+    data: Path,
+    data_spec: DataSpec,
+    out: Path,
+    gain: float | OutputMap | None,
+    displacement_column: str | None,
+    displacement_unit: str | None,
+    force: bool,
 ) -> None:
-    """Figures (loop, fit, residual, growth removal) and metrics of MODEL on DATA.
+    """Figures (loop, fit, residual, growth removal) and metrics of MODEL on DATA; with
+    --gain, the displacement in metres too.
 
     \b
     Example:
       piezohyst report model.json run2.csv --out model-report
+      piezohyst report model.json sensor.csv --gain gain.json \\
+          --displacement-column displacement --out report-m
     """
     from ..workflows import model_report
 
@@ -609,9 +639,14 @@ def report(
                 command=command,
                 force=force,
                 progress=progress,
+                gain=gain,
+                displacement_column=displacement_column,
+                displacement_unit=displacement_unit,
             ),
         )
-    click.echo(f"NRMSE {res.metrics['nrmse_pct']:.4g} %; report in {out / 'report.html'}")
+    metres = res.metrics.get("displacement_nrmse_offset_free_pct")
+    also = "" if metres is None else f"; displacement NRMSE {metres:.4g} % (offsets removed)"
+    click.echo(f"NRMSE {res.metrics['nrmse_pct']:.4g} %{also}; report in {out / 'report.html'}")
 
 
 @main.command("fit-many")

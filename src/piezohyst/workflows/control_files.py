@@ -9,6 +9,7 @@ import copy
 import dataclasses
 import itertools
 import math
+import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -25,7 +26,7 @@ from ..control.fmu import write_fmu
 from ..control.leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
 from ..control.selfsensing import LoopSettings
 from ..control.shared import write_mex, write_shared
-from ..errors import DataFileError, ParameterError
+from ..errors import DataFileError, ExtrapolationWarning, ParameterError
 from ..io import (
     DataSpec,
     Table,
@@ -643,8 +644,16 @@ def model_report(
     command: str | None = None,
     force: bool = False,
     progress: Progress = None,
+    gain: float | OutputMap | None = None,
+    displacement_column: str | None = None,
+    displacement_unit: str | None = None,
 ) -> ReportResult:
     """A report a lab can file on a model and a data file (HTML, Markdown, JSON, figures).
+
+    With ``gain`` (m/C, or the map :func:`calibrate_gain` identified) the report adds
+    the displacement the model predicts from the voltage (its capacitor charge, growth
+    removed, through the map), in metres; with ``displacement_column`` too, scored
+    against that sensor (the map's delay applied).
 
     Parameters
     ----------
@@ -663,6 +672,12 @@ def model_report(
         Replace an existing folder piezohyst did not write.
     progress : callable, optional
         Called with the rows read so far.
+    gain : float or OutputMap, optional
+        From the capacitor charge to displacement.
+    displacement_column : str, optional
+        A displacement sensor's column to score the displacement against (needs ``gain``).
+    displacement_unit : str, optional
+        Its unit if its header does not say (um, nm, m...); converted to m.
 
     Returns
     -------
@@ -673,7 +688,16 @@ def model_report(
     guard_outputs([out], [model_path, data], force=force)
     spec = data_spec or DataSpec()
     model = _load(model_path)
+    if displacement_column is not None and gain is None:
+        msg = ("a displacement column is scored through the map from charge to displacement: "
+               "give the gain (m/C) or the map calibrate-gain wrote")  # fmt: skip
+        raise ParameterError(msg)
     rec = spec.read(data, progress=progress)
+    sensor = None
+    if displacement_column is not None:
+        sensor = dataclasses.replace(
+            spec, output_column=displacement_column, output_unit=displacement_unit
+        ).read(data)
     w = rec.window  # the model runs over the whole record: the window's start has a history
     end = rec.x.size if w.stop is None else w.stop  # nothing after the window is run
     pred = predict_record(model, rec.x[:end], rec.t[:end])[w]
@@ -684,6 +708,10 @@ def model_report(
     with atomic_folder(out) as folder:  # all or nothing: Ctrl-C leaves no partial folder
         rep = _report(model, rec, pred, Report(f"{type(model).__name__} on {Path(data).name}",
                       folder), (x, y, t), (model_path, data, command))  # fmt: skip
+        if gain is not None:
+            charge = model.hysteresis_.predict(rec.x[:end], t=rec.t[:end])[w]
+            measured = None if sensor is None or sensor.y is None else sensor.y[w]
+            _in_metres(rep, x, t, charge, gain, measured)
         files = [Path(out) / f.name for f in rep.write()]
     return ReportResult({m.key: m.value for m in rep.metrics}, files)
 
@@ -786,6 +814,65 @@ def _report(
         rep.add(f"selection_{label}", f"held-out RMSE, growth {label}{mark}",
                 f"{score:.4g} {out_u}; per fold: {folds}")  # fmt: skip
     return rep
+
+
+def _in_metres(
+    rep: Any,
+    x: FloatArray,
+    t: FloatArray,
+    charge: FloatArray,
+    gain: float | OutputMap,
+    measured: FloatArray | None,
+) -> None:
+    """The displacement predicted from the voltage through the capacitor charge and the
+    map (or gain), in metres; scored against a sensor's reading when there is one."""
+    if isinstance(gain, OutputMap):
+        lo, hi = gain.charge_range
+        outside = int(np.count_nonzero((charge < lo) | (charge > hi)))
+        with warnings.catch_warnings():  # counted and reported below, not warned per call
+            warnings.simplefilter("ignore", ExtrapolationWarning)
+            s = gain.predict(charge)
+        rep.add("map", "map from charge to displacement", gain.summary())
+        rep.add("map_stderr_max", "the map's standard error, largest over this record",
+                float(np.max(gain.stderr(charge))), "m")  # fmt: skip
+        rep.add("samples_outside_map_range", "samples whose charge lies outside the map's "
+                "calibrated range (extended linearly)", outside)  # fmt: skip
+        dt = float(np.median(np.diff(t))) if t.size > 1 else math.inf
+        shift = min(round(gain.delay / dt), t.size // 2)
+    else:
+        s, shift = gain * (charge - charge[0]), 0  # a gain alone does not know the sensor's zero
+        rep.add("gain", "gain from charge to displacement", gain, "m/C")
+    band = {"color": "C0", "lw": 3.0, "alpha": 0.45, "zorder": 2}  # as the charge's figures
+    thin = {"color": "0.2", "lw": 0.8, "zorder": 3}
+    curves = [(x, s, "predicted from the charge", band)]
+    panels: list[dict[str, Any]] = [
+        {"curves": [(t, s, "predicted", band)], "xlabel": "time", "xunit": "s",
+         "ylabel": "displacement", "yunit": "m"},
+    ]  # fmt: skip
+    caption = "displacement predicted from the voltage through the charge model and the map"
+    if measured is not None:
+        n = t.size - shift  # the sensor reads the displacement ``shift`` samples late
+        got, want = s[:n], measured[shift:]
+        centred = (got - got.mean()) - (want - want.mean())
+        if isinstance(gain, OutputMap):
+            rep.add("displacement_nrmse_pct", "displacement NRMSE (the sensor's reading)",
+                    100 * nrmse(want, got), "%")  # fmt: skip
+        free = 100 * float(np.sqrt(np.mean(centred**2)) / np.ptp(want))
+        rep.add("displacement_nrmse_offset_free_pct", "displacement NRMSE, offsets removed",
+                free, "%")  # fmt: skip
+        rep.add("displacement_rmse_offset_free", "displacement RMSE, offsets removed",
+                float(np.sqrt(np.mean(centred**2))), "m")  # fmt: skip
+        curves.insert(0, (x[:n], want, "sensor", thin))
+        panels[0]["curves"].insert(0, (t[:n], want, "sensor", thin))
+        panels.append({"curves": [(t[:n], centred, "predicted - sensor, offsets removed",
+                                   {"lw": 0.7, "color": "C3"})], "xlabel": "time",
+                       "xunit": "s", "ylabel": "residual", "yunit": "m"})  # fmt: skip
+        caption += f" and the sensor (offset-free NRMSE {free:.3g} %)"
+    rep.figure("displacement_loop.png", "displacement against voltage, in metres", [
+        {"curves": curves, "xlabel": "input", "xunit": "V", "ylabel": "displacement",
+         "yunit": "m", "title": ""},
+    ])  # fmt: skip
+    rep.figure("displacement.png", caption, panels, stacked=True)
 
 
 def _setting(value: object) -> str:
