@@ -161,16 +161,49 @@ def test_a_linear_map_exports_to_c_like_python(kind: str, tmp_path: Path) -> Non
         compare_c_with_python(comp, desired, tmp_path, "double", hi, name="ph_comp")
 
 
-def test_a_curved_map_is_refused_by_the_c_export(tmp_path: Path) -> None:
+@pytest.mark.parametrize("kind", ["active-pi", "generalized-pi+creep", "preisach"])
+def test_a_curved_map_exports_to_c_like_python(kind: str, tmp_path: Path) -> None:
+    """The map's inverse in C (Newton from the chord, the linear extension beyond the
+    calibrated range) before each kind of step: the same commands as Python to 1e-9 V,
+    targets beyond the calibration and NaN included."""
+    from ..control.test_differential import CC, compare_c_with_python
+
+    if CC is None:
+        pytest.skip("no C compiler on this machine")
+    cal = ph.simulate(preset=CURVED, signal="multifreq", duration=10.0, seed=0)
+    made = {
+        "active-pi": lambda: ph.ActivePI(10),
+        "preisach": ph.PreisachModel,
+        "generalized-pi+creep": lambda: ph.GeneralizedPI(10, creep=(0.05, 0.5)),
+    }
+    model = _quiet_fit(made[kind](), cal)
+    om = ph.calibrate_gain(model, cal.voltage, cal.charge, cal.displacement, cal.t)
+    assert om.order == 2 and om.monotone
+    lo, hi = model.input_range_
+    comp = ph.Compensator(model, v_min=lo, v_max=hi, output_map=om, slew_rate=None,
+                          sample_rate=1000.0)  # fmt: skip
+    s_lo, s_hi = om.displacement_range()
+    desired = s_lo + (s_hi - s_lo) * (0.5 + 0.55 * np.sin(np.linspace(0, 12, 1500)))  # beyond
+    desired[::97] = np.nan
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ph.LimitWarning)  # the counts are compared instead
+        warnings.simplefilter("ignore", ph.ExtrapolationWarning)  # beyond the calibration
+        compare_c_with_python(comp, desired, tmp_path, "double", hi, name="ph_comp")
+
+
+def test_a_map_that_turns_is_refused_by_the_c_export(tmp_path: Path) -> None:
+    """The butterfly: a displacement at two charges needs the branch the actuator is on,
+    which a step of one target cannot know."""
     from piezohyst.control.export import write_c
 
-    cal = ph.simulate(preset=CURVED, signal="multifreq", duration=10.0, seed=0)
-    model = _quiet_fit(ph.ActivePI(10), cal)
-    om = ph.calibrate_gain(model, cal.voltage, cal.charge, cal.displacement, cal.t)
-    assert om.order == 2
-    lo, hi = model.input_range_
-    comp = ph.Compensator(model, v_min=lo, v_max=hi, output_map=om)
-    with pytest.raises(ph.ParameterError, match="curved"):
+    t = np.arange(4000) * 1e-3
+    v = 100.0 * np.sin(2 * np.pi * t)
+    model = ph.ClassicalPI.from_operator(ph.PIHysteresis([0.0, 20.0], [1e-8, 2e-9]))
+    q = model.predict(v)
+    with pytest.warns(UserWarning, match="butterfly"):
+        om = ph.calibrate_gain(model, v, q, 4e10 * q * q + 1e-12 * np.sin(7 * t), t)
+    comp = ph.Compensator(model, v_min=-100.0, v_max=100.0, output_map=om)
+    with pytest.raises(ph.ParameterError, match="turns"):
         write_c(comp, tmp_path / "c.c")
 
 

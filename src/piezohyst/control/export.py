@@ -129,11 +129,12 @@ def export_c(
         )
         raise ParameterError(msg)
     om = comp.output_map
-    if om is not None and om.order != 1:
+    if om is not None and not om.monotone:
         msg = (
-            f"C export takes a linear output map; this one is curved (order {om.order}, "
-            "calibrated on evidence): compensate in Python (output_map=), or export in charge "
-            "and map the targets to charge before the step"
+            "C export takes an output map that is monotone over its calibrated charges; this "
+            "one turns (the butterfly of bipolar drive), so a displacement has two charges and "
+            "the step would need the branch the actuator is on: compensate in Python "
+            "(output_map=), or export in charge and choose the branch before the step"
         )
         raise ParameterError(msg)
     source = comp.spec.operator.c_source  # the core's step in C, or None
@@ -203,7 +204,7 @@ def export_c(
         dynamic=int(comp.dynamic), mode=int(comp.mode.active),
         kind="compensator" if controller is None else "controller", lag_state="",
     )  # fmt: skip
-    return CCode(header, _source(prefix, precision, lines, files), f"{prefix}.h")
+    return CCode(header, _source(prefix, precision, lines, files, comp), f"{prefix}.h")
 
 
 def _numeric_c(comp: Compensator, prefix: str, precision: Precision) -> CCode:
@@ -262,7 +263,7 @@ def _numeric_c(comp: Compensator, prefix: str, precision: Precision) -> CCode:
         v_max=repr(comp.v_max), notes=_notes(comp), controller=0, dynamic=0, mode=0,
         kind="compensator", lag_state=lag_state,
     )  # fmt: skip
-    source = _source(prefix, precision, lines, ["ieee.c", "play_numeric.c"])
+    source = _source(prefix, precision, lines, ["ieee.c", "play_numeric.c"], comp)
     return CCode(header, source, f"{prefix}.h")
 
 
@@ -327,8 +328,37 @@ def _c_file(name: str) -> str:
     return (resources.files("piezohyst.model.cores") / "c" / name).read_text(encoding="utf-8")
 
 
-def _source(prefix: str, precision: Precision, lines: list[str], files: list[str]) -> str:
-    """The generated ``.c``: the preamble of parameters and names, then the shipped files."""
+def _target_map(comp: Compensator, precision: Precision) -> list[str]:
+    """The constants of ``map.c``: a curved output map's coefficients, range and edges (a
+    linear one is folded into REFERENCE and SCALE by :func:`_mapped`)."""
+    om = comp.output_map
+    if om is None or om.order == 1:
+        return ["#define CURVED_MAP 0"]
+    lo, hi, s_lo, s_hi, d_lo, d_hi = om._edges()
+    rising = s_hi > s_lo
+    low_end, high_end = (s_lo, s_hi) if rising else (s_hi, s_lo)
+    c = np.array(om.coefficients, dtype=np.float64)
+    tol = (1e-13 if precision == "double" else 1e-6) * max(abs(high_end - low_end), 1e-300)
+    return [
+        "#define CURVED_MAP 1",
+        f"#define MAP_ORDER {om.order}",
+        f"#define MAP_RISING {int(rising)}",
+        f"static const real_t MAP_C[{c.size}] = {_array(c, precision)};",
+        f"static const real_t MAP_DC[{c.size - 1}] = "
+        f"{_array(np.polynomial.polynomial.polyder(c), precision)};",
+        *_constants(precision, MAP_CENTER=om.center, MAP_SCALE=om.scale, MAP_LO=lo, MAP_HI=hi,
+                    MAP_S_LO=s_lo, MAP_S_HI=s_hi, MAP_D_LO=d_lo, MAP_D_HI=d_hi,
+                    MAP_LOW_END=low_end, MAP_HIGH_END=high_end, MAP_TOL=tol),
+    ]  # fmt: skip
+
+
+def _source(
+    prefix: str, precision: Precision, lines: list[str], files: list[str], comp: Compensator
+) -> str:
+    """The generated ``.c``: the preamble of parameters and names, the desired value's map
+    (``map.c``), then the shipped files."""
+    lines = lines + _target_map(comp, precision)
+    files = [files[0], "map.c", *files[1:]]  # after ieee.c, before the step that uses it
     libm = "#include <math.h>\n" if "boucwen.c" in files else ""
     names = "\n".join(f"#define PREFIX_{n} {prefix}_{n}" for n in ("t", "init", "step"))
     preamble = (
@@ -443,7 +473,7 @@ def _packed_c(comp: Compensator, prefix: str, precision: Precision) -> CCode:
         else "", notes=_notes(comp), ns=comp.n_operators, n_lags=n_lags,
         dynamic=int(comp.dynamic), mode=int(comp.mode.active),
     )  # fmt: skip
-    return CCode(header, _source(prefix, precision, lines, files), f"{prefix}.h")
+    return CCode(header, _source(prefix, precision, lines, files, comp), f"{prefix}.h")
 
 
 def _feedback_init(ctl: SelfSensingController, p: Precision) -> list[str]:
@@ -553,7 +583,7 @@ def _mapped(comp: Compensator, config: FloatArray, ref: int, scale: int) -> Floa
     """The step's config with a linear output map folded into its reference and scale: the
     charge for a desired displacement d is ``center + (d - c0) / g``."""
     om = comp.output_map
-    if om is None:
+    if om is None or om.order != 1:  # a curved map: inverted before the step (map.c)
         return config
     out = config.copy()
     out[scale] = 1.0 / om.gain

@@ -204,7 +204,7 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired)
         lags_advance(s, s->st[0]);
         return s->last;
     }
-    y = REFERENCE + desired * SCALE;
+    y = TARGET(desired);
 #if N_LAGS
     y -= lags_affine(s, &lin);
 #endif

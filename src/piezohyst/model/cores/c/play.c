@@ -91,6 +91,6 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
         s->nonfinite++;
         return s->last;
     }
-    return core_step(s, REFERENCE + desired * SCALE);
+    return core_step(s, TARGET(desired));
 }
 #endif

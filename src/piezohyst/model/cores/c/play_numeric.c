@@ -96,7 +96,7 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired)
         advance_lags(s, s->last);
         return s->last;
     }
-    q = REFERENCE + desired * SCALE;
+    q = TARGET(desired);
     y_lo = numeric_output(s, lo, &slope);
     y_hi = numeric_output(s, hi, &slope);
     if (q <= y_lo) {

@@ -1,0 +1,40 @@
+/* The desired value as the step's reference. Without an output map, or with a linear one
+ * folded into REFERENCE and SCALE, an affine map; with a curved map from capacitor charge to
+ * displacement (calibrate_gain, monotone over its calibrated charges), its inverse first, as
+ * OutputMap.inverse computes it: Newton's method from the chord, kept inside the calibrated
+ * range, and the linear extension from the range's edge beyond it. */
+#if CURVED_MAP
+static real_t map_horner(const real_t *c, int order, real_t u)
+{
+    real_t y = c[order];
+    for (int k = order - 1; k >= 0; --k) {
+        y = c[k] + y * u;
+    }
+    return y;
+}
+
+static real_t map_charge(real_t d)
+{
+    real_t q, f;
+    if (d < MAP_LOW_END) { /* below the calibrated displacements: the edge's tangent */
+        return MAP_RISING ? MAP_LO + (d - MAP_S_LO) / MAP_D_LO : MAP_HI + (d - MAP_S_HI) / MAP_D_HI;
+    }
+    if (d > MAP_HIGH_END) {
+        return MAP_RISING ? MAP_HI + (d - MAP_S_HI) / MAP_D_HI : MAP_LO + (d - MAP_S_LO) / MAP_D_LO;
+    }
+    q = MAP_LO + (MAP_HI - MAP_LO) * (d - MAP_S_LO) / (MAP_S_HI - MAP_S_LO);
+    for (int it = 0; it < 50; ++it) {
+        real_t u = (q - MAP_CENTER) / MAP_SCALE;
+        f = map_horner(MAP_C, MAP_ORDER, u) - d;
+        if ((f < 0 ? -f : f) <= MAP_TOL) {
+            break;
+        }
+        q = q - f / (map_horner(MAP_DC, MAP_ORDER - 1, u) / MAP_SCALE);
+        q = q < MAP_LO ? MAP_LO : (q > MAP_HI ? MAP_HI : q);
+    }
+    return q;
+}
+#define TARGET(d) (REFERENCE + map_charge(d) * SCALE)
+#else
+#define TARGET(d) (REFERENCE + (d) * SCALE)
+#endif
