@@ -105,11 +105,9 @@ def bench_step(channels: int, operators: int) -> None:
     # the single-channel one-sample kernel, called in a compiled loop (no Python per sample)
     step_state = single.kernel_state.copy()
     step_out = np.empty(long.size)
-    step_loop(long[:10], single.tables, single.config, step_state, step_out[:10])
-    per_step_single = (
-        best(lambda: step_loop(long, single.tables, single.config, step_state, step_out), 3)
-        / long.size
-    )
+    tabs, conf = single.inverse.tables, single.inverse.config
+    step_loop(long[:10], tabs, conf, step_state, step_out[:10])
+    per_step_single = best(lambda: step_loop(long, tabs, conf, step_state, step_out), 3) / long.size
     op_step = channels * operators / per_step
     op_proc = channels * operators / per_proc
     print(f"bank step, {channels} channels x {operators} operators:")
@@ -147,6 +145,39 @@ def bench_step(channels: int, operators: int) -> None:
     print(
         f"  self-sensing bank step: {per_ctl * 1e6:8.1f} us per step of all channels "
         f"({1 / per_ctl / 1e3:.1f} kHz)"
+    )
+    # targets in metres, one calibrated map per channel (calibrate_gain): the maps' inverse
+    # runs before the fused kernel; the reference is each channel's own compensator with its
+    # map, stepped one after another (how a bank with maps ran before)
+    rng = np.random.default_rng(3)
+    maps = []
+    for c in range(channels):
+        g = 125.0 * rng.uniform(0.9, 1.1)
+        lo, hi = float(qs[:, c].min()), float(qs[:, c].max())
+        centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+        maps.append(ph.OutputMap((g * centre, g * half), centre, half, ((0.0, 0.0),) * 2,
+                                 (lo, hi)))  # fmt: skip
+    mapped = ph.BankCompensator(bank, v_min=0.0, v_max=140.0, output_maps=maps)
+    metres = np.column_stack([m.predict(qs[:, c]) for c, m in enumerate(maps)])
+    mapped.step(metres[0], out=out)
+
+    def run_mapped() -> None:
+        for row in metres:
+            mapped.step(row, out=out)
+
+    alone = [mapped.channel(c) for c in range(channels)]
+
+    def run_alone() -> None:
+        for row in metres[:20]:
+            for c, ch in enumerate(alone):
+                out[c] = ch.step(float(row[c]))
+
+    per_map = best(run_mapped, 3) / steps
+    per_alone = best(run_alone, 1) / 20
+    print(
+        f"  with a linear map per channel: {per_map * 1e6:8.1f} us per step of all channels "
+        f"({1 / per_map / 1e3:.1f} kHz); each channel's compensator in turn "
+        f"{per_alone * 1e3:.2f} ms -> {per_alone / per_map:.0f}x"
     )
 
 

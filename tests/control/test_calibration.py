@@ -217,19 +217,33 @@ def test_a_sensor_delay_is_found() -> None:
 
 
 def test_a_bank_takes_one_map_per_channel() -> None:
-    recs = [ph.simulate(signal="decaying", duration=6.0, seed=s) for s in (1, 2)]
+    """Linear and curved maps, one per channel, run before the fused kernel: each channel
+    is exactly its own compensator with its own map, step by step and by the block."""
+    recs = [ph.simulate(signal="decaying", duration=6.0, seed=1),
+            ph.simulate(preset=CURVED, signal="multifreq", duration=6.0, seed=2)]  # fmt: skip
     models = [_quiet_fit(ph.ActivePI(8), r) for r in recs]
     maps = [ph.calibrate_gain(m, r.voltage, r.charge, r.displacement, r.t)
             for m, r in zip(models, recs, strict=True)]  # fmt: skip
+    assert [m.order for m in maps] == [1, 2]
     bank = ph.ModelBank.from_models(models)
     lo = max(m.input_range_[0] for m in models)
     hi = min(m.input_range_[1] for m in models)
     comp = ph.BankCompensator(bank, v_min=lo, v_max=hi, output_maps=maps)
-    s_lo, s_hi = maps[0].displacement_range()
-    desired = np.column_stack([np.linspace(s_lo, s_hi, 50)] * 2) * 0.8
-    out = np.array([comp.step(row) for row in desired])
+    assert comp.fused  # the maps do not take the channels out of the one kernel
+    ranges = [om.displacement_range() for om in maps]
+    desired = np.column_stack([np.linspace(a, b, 50) * 0.8 for a, b in ranges])
+    desired[7, 0] = np.nan  # held, counted
+    stepped = np.array([comp.step(row) for row in desired])
+    assert comp.nonfinite_count.tolist() == [1, 0]  # per channel
+    comp.reset()
+    out = comp.process(desired)
+    # tol: a curved map's Newton runs over a block until every sample has converged, over one
+    # sample it stops sooner: the charges part by an ulp, the commands by 1e-12 V
+    np.testing.assert_allclose(stepped, out, rtol=0, atol=1e-12 * hi)
     for c in range(2):  # channel c is exactly its own compensator with its own map
         alone = ph.Compensator(models[c], v_min=lo, v_max=hi, output_map=maps[c])
         assert np.array_equal(out[:, c], alone.process(desired[:, c]))
+    with pytest.warns(ph.ExtrapolationWarning, match="extended linearly"):
+        comp.step(np.array([2.0 * ranges[0][1], desired[0, 1]]))  # beyond the calibration
     with pytest.raises(ph.ShapeError, match="one map per channel"):
         ph.BankCompensator(bank, v_min=lo, v_max=hi, output_maps=maps[:1])

@@ -273,30 +273,21 @@ class OutputMap:
     def _invert_monotone(self, s: FloatArray) -> tuple[FloatArray, bool]:
         """The charges for displacements on a monotone map (vectorised Newton inside the
         calibrated range, the linear extension beyond it); and whether any lay beyond."""
-        lo, hi, s_lo, s_hi, d_lo, d_hi = self._edges()
-        rising = s_hi > s_lo
-        low_end, high_end = (s_lo, s_hi) if rising else (s_hi, s_lo)
-        finite = np.isfinite(s)
-        below = finite & (s < low_end)
-        above = finite & (s > high_end)
-        inside = np.clip(np.where(finite, s, low_end), low_end, high_end)
-        c = self.coefficients
         if self.order == 1:
-            q = self.center + self.scale * (inside - c[0]) / c[1]
-        else:  # Newton from the chord, kept inside the range; the map's slope never vanishes
-            q = lo + (hi - lo) * (inside - s_lo) / (s_hi - s_lo)
-            tol = 1e-13 * max(abs(high_end - low_end), 1e-300)
-            for _ in range(50):
-                f = self._poly(self._u(q)) - inside
-                if float(np.max(np.abs(f))) <= tol:
-                    break
-                q = np.clip(q - f / self.slope(q), lo, hi)
-        at_lo_end = below if rising else above
-        at_hi_end = above if rising else below
-        q = np.where(at_lo_end, lo + (s - s_lo) / d_lo, q)
-        q = np.where(at_hi_end, hi + (s - s_hi) / d_hi, q)
-        q = np.where(finite, q, np.nan)
-        return np.asarray(q), bool(np.any(below) or np.any(above))
+            c0, c1 = self.coefficients
+            return monotone_charges(s, self.center, self.scale, c0, c1, self._edges())
+        lo, hi, s_lo, s_hi, _, _ = edges = self._edges()
+        low_end, high_end = min(s_lo, s_hi), max(s_lo, s_hi)
+        inside = np.clip(np.where(np.isfinite(s), s, low_end), low_end, high_end)
+        # Newton from the chord, kept inside the range; the map's slope never vanishes
+        q = lo + (hi - lo) * (inside - s_lo) / (s_hi - s_lo)
+        tol = 1e-13 * max(abs(high_end - low_end), 1e-300)
+        for _ in range(50):
+            f = self._poly(self._u(q)) - inside
+            if float(np.max(np.abs(f))) <= tol:
+                break
+            q = np.clip(q - f / self.slope(q), lo, hi)
+        return monotone_charges(s, self.center, self.scale, math.nan, math.nan, edges, q)
 
     def _solve_branch(self, target: float, near: float | None, lo: float, hi: float) -> float:
         c = np.array(self.coefficients, dtype=np.float64)
@@ -548,6 +539,49 @@ class Charges:
         if preview is not None:
             ahead = self.output_map.inverse(np.asarray(preview, dtype=np.float64), self.last)
         return float(self.block(np.array([float(desired)]))[0]), ahead
+
+
+def monotone_charges(
+    s: Any, center: Any, scale: Any, c0: Any, c1: Any, edges: Any, inside_q: Any = None
+) -> tuple[FloatArray, bool]:
+    """Charges for displacements ``s`` on monotone maps, and whether any lay beyond their
+    calibrated displacements: inside, the linear map's ``center + scale (s - c0) / c1`` (or
+    ``inside_q``, a curved map's solution); beyond, the linear extension from the edge. Every
+    argument broadcasts, so one call serves a bank's channels, one map each.
+
+    Parameters
+    ----------
+    s : ndarray
+        Displacements (NaN or infinite: NaN).
+    center, scale, c0, c1 : float or ndarray
+        The maps' center and scale (C) and linear coefficients (m).
+    edges : tuple of (float or ndarray)
+        ``(lo, hi, s_lo, s_hi, d_lo, d_hi)``: the calibrated charges, their displacements
+        and the map's slopes there.
+    inside_q : ndarray, optional
+        The charges inside the range, already solved (a curved map).
+
+    Returns
+    -------
+    (ndarray, bool)
+    """
+    lo, hi, s_lo, s_hi, d_lo, d_hi = edges
+    rising = np.asarray(s_hi) > np.asarray(s_lo)
+    low_end, high_end = np.where(rising, s_lo, s_hi), np.where(rising, s_hi, s_lo)
+    finite = np.isfinite(s)
+    below = finite & (s < low_end)
+    above = finite & (s > high_end)
+    if inside_q is None:
+        inside = np.clip(np.where(finite, s, low_end), low_end, high_end)
+        q = center + scale * (inside - c0) / c1
+    else:
+        q = inside_q
+    at_lo_end = np.where(rising, below, above)
+    at_hi_end = np.where(rising, above, below)
+    q = np.where(at_lo_end, lo + (s - s_lo) / d_lo, q)
+    q = np.where(at_hi_end, hi + (s - s_hi) / d_hi, q)
+    q = np.where(finite, q, np.nan)
+    return np.asarray(q), bool(np.any(below) or np.any(above))
 
 
 def _newey_west(x: FloatArray, e: FloatArray) -> tuple[FloatArray, int]:

@@ -22,10 +22,10 @@ from numpy.typing import ArrayLike, NDArray
 from .._kernels import play as K
 from .._kernels import signal as S
 from .._validation import FloatArray
-from ..errors import LimitWarning, ParameterError, ShapeError
+from ..errors import ExtrapolationWarning, LimitWarning, ParameterError, ShapeError
 from ..model.bank import ModelBank
 from ..model.model import HysteresisModel
-from .calibration import OutputMap
+from .calibration import OutputMap, monotone_charges
 from .compensator import LIMIT_CHECK_FIRST, LIMIT_SHARE, Compensator, Domain
 from .leakage import Leakage
 from .selfsensing import SelfSensingController
@@ -269,8 +269,8 @@ class BankCompensator(ChannelBank[Compensator]):
         one warning naming how many channels were narrowed.
     output_maps : sequence of OutputMap, optional
         One charge -> displacement map per channel (:func:`~piezohyst.calibrate_gain`):
-        desired values in metres, through each channel's map, instead of ``gain``. The
-        channels then run one after another (their maps are not in the fused kernel).
+        desired values in metres, through each channel's map, instead of ``gain``. The maps
+        run before the fused kernel: the linear ones in one pass over the channels.
 
     Examples
     --------
@@ -325,8 +325,10 @@ class BankCompensator(ChannelBank[Compensator]):
                 stacklevel=2,
             )
         channels = self._channels
+        #: the output maps' inverse before the kernel (None without maps)
+        self._front = None if output_maps is None else _MapFront(channels)
         #: True when all channels run in the one parallel kernel
-        self.fused = all(ch.plain for ch in channels)
+        self.fused = all(ch.inverse.plain for ch in channels)
         if self.fused:
             # one array per quantity; each channel's compensator keeps views of its row,
             # so channel(i) stays live and identical to the bank's state
@@ -393,6 +395,8 @@ class BankCompensator(ChannelBank[Compensator]):
         (d,) = self._rows([desired], "'desired'", 1)
         out = self._out(out, d.shape)
         if self.fused:
+            if self._front is not None:
+                d = self._front(d)
             K.bank_step(d, self.tables, self.config, self._state, out)
             self._tally_step(out)
         else:
@@ -414,11 +418,52 @@ class BankCompensator(ChannelBank[Compensator]):
         (d,) = self._rows([desired], "'desired'", 2)
         out = np.empty_like(d)
         if self.fused:
+            if self._front is not None:
+                d = np.ascontiguousarray(self._front(d))
             K.bank_process(d, self.tables, self.config, self._state, out)
             self._tally(out)
         else:
             for i, ch in enumerate(self._channels):
                 out[:, i] = ch.process(np.ascontiguousarray(d[:, i]))
+        return out
+
+
+class _MapFront:
+    """Desired displacements as charges before a fused bank's kernel: each channel's output
+    map, the linear ones in one pass over the channels (the arithmetic of
+    :meth:`OutputMap.inverse`), a curved one through its channel's own front end."""
+
+    def __init__(self, channels: Sequence[Compensator]) -> None:
+        maps = [ch.output_map for ch in channels]
+        lin = [i for i, m in enumerate(maps) if m is not None and m.order == 1]
+        self.linear = np.array(lin, dtype=np.intp)
+        self.curved = [(i, ch.charges) for i, ch in enumerate(channels)
+                       if ch.output_map is not None and ch.output_map.order != 1]  # fmt: skip
+        chosen = [m for m in maps if m is not None and m.order == 1]
+        self.center = np.array([m.center for m in chosen])
+        self.scale = np.array([m.scale for m in chosen])
+        self.c0 = np.array([m.coefficients[0] for m in chosen])
+        self.c1 = np.array([m.coefficients[1] for m in chosen])
+        self.edges = tuple(np.array(col) for col in zip(*(m._edges() for m in chosen), strict=True))
+
+    def __call__(self, desired: FloatArray) -> FloatArray:
+        out = desired.copy()
+        if self.linear.size:
+            q, outside = monotone_charges(desired[..., self.linear], self.center, self.scale,
+                                          self.c0, self.c1, self.edges)  # fmt: skip
+            out[..., self.linear] = q
+            if outside:
+                warnings.warn(
+                    "BankCompensator: desired displacements lie outside their channels' "
+                    "calibrated ranges; each map is extended linearly from its edge there "
+                    "(calibrate over the full drive to hold it)",
+                    ExtrapolationWarning,
+                    stacklevel=3,
+                )
+        for i, charges in self.curved:
+            assert charges is not None
+            column = np.ascontiguousarray(desired[..., i]).reshape(-1)
+            out[..., i] = charges.block(column).reshape(desired[..., i].shape)
         return out
 
 
