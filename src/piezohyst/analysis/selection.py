@@ -498,6 +498,10 @@ def record_notes(x: FloatArray) -> tuple[str, ...]:
     return _record_notes(x, _turns(x))
 
 
+#: half-cycles all within this factor of their median length: a record of one frequency
+ONE_RATE = 2.0
+
+
 def _record_notes(x: FloatArray, turns: np.ndarray) -> tuple[str, ...]:
     notes = []
     if turns.size < MIN_TURNS:
@@ -516,6 +520,17 @@ def _record_notes(x: FloatArray, turns: np.ndarray) -> tuple[str, ...]:
                 "grid inside the loop is then a guess). Record loops of several amplitudes "
                 "(piezohyst excite) to choose for them."
             )
+    halves = np.diff(turns)[1:-1]  # the first and last may be cut by the record's ends
+    middle = float(np.median(halves)) if halves.size else 0.0
+    if halves.size >= 3 and np.all((halves >= middle / ONE_RATE) & (halves <= middle * ONE_RATE)):
+        notes.append(
+            "Every half-cycle lasts about as long as the others (within "
+            f"{ONE_RATE:g}x of their median): the record drives one frequency, where a "
+            "lag of the amplifier or sensor and hysteresis look alike, so the scores cannot "
+            "rank how the candidates follow another rate, and each holds the lag this drive "
+            "showed as loop width. Record several frequencies (piezohyst excite, or the "
+            "multifreq signal) to choose for other rates."
+        )
     return tuple(notes)
 
 
