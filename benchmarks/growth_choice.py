@@ -2,8 +2,10 @@
 proxy's forward chaining (``growth_terms="auto"``), held out, on the validation matrix's
 plants and splits (``docs/validation.md``) for the given batch units.
 
-Run: ``python benchmarks/growth_choice.py 4,5,6`` (units 4-6: where a default may be chosen;
-1-3 are the matrix's own). Prints the mean held-out NRMSE (%) over the units per cell.
+Run: ``python benchmarks/growth_choice.py 4,5,6 [TERMS]`` (units 4-6: where a default may be
+chosen; 1-3 are the matrix's own; TERMS, e.g. ``integral,abs_integral``, instead of the
+proxy's choice). Prints the mean held-out NRMSE (%) over the units per cell: the integral,
+then the alternative.
 
 Not a test: nothing here asserts a time.
 """
@@ -19,6 +21,8 @@ from piezohyst.workflows.excitation import excitation
 
 warnings.simplefilter("ignore")
 units = [int(u) for u in sys.argv[1].split(",")]
+#: the alternative to the presets' integral: "auto" (the proxy's forward chaining) or terms
+GROWTH: object = "auto" if len(sys.argv) < 3 else tuple(sys.argv[2].split(","))
 played = excitation(v_min=0.0, v_max=140.0, sample_rate=1000.0)
 designs = {
     "excite": lambda p, u: ph.simulate(played.voltage, played.t, preset=p, seed=u),
@@ -32,7 +36,7 @@ for design, rec in designs.items():
             tr = rec(p, u)
             te = ph.simulate(preset=p, signal="multi", duration=12.0, seed=u + 100)
             for cls in (ph.PreisachModel, ph.BoucWenModel, ph.DuhemModel):
-                for g in (("integral",), "auto"):
+                for g in (("integral",), GROWTH):
                     m = cls(growth_terms=g)
                     try:
                         m.fit(tr.voltage, tr.charge, t=tr.t)
@@ -40,7 +44,7 @@ for design, rec in designs.items():
                     except ph.PiezohystError:
                         e = np.inf
                     cells.setdefault(
-                        (cls.__name__[:-5], "int" if g != "auto" else "auto"), []
+                        (cls.__name__[:-5], "int" if g == ("integral",) else "alt"), []
                     ).append(100 * e)
         print(
             design,
