@@ -229,11 +229,11 @@ def design_learning(
     (``first_error``): among gains 0.2-1 and cutoffs from the trial's first
     harmonic to Nyquist (or no filter) whose worst case over every timing and
     slope allowed for contracts by at most 0.9 per trial (the contraction),
-    the one that minimises the error predicted after ten trials for an
-    actuator at the slow end of the slope's range: the
-    repeatable part of each harmonic shrinks by ``Q(1 - gain)`` per trial
-    towards what Q leaves, ``(1 - Q) / (1 - Q + Q gain)`` of it, and the noise
-    (read off the upper half of the band) adds what the correction carries.
+    the pair that minimises the error predicted after ten trials for an
+    actuator at the slow end of the slope's range: the repeatable part of
+    each harmonic shrinks by ``Q(1 - gain)`` per trial towards what Q leaves,
+    ``(1 - Q) / (1 - Q + Q gain)`` of it, and the noise (read off the upper
+    half of the band) adds what the correction carries.
     Without ``first_error``: gain 0.5 and the highest cutoff meeting the condition.
 
     Parameters
@@ -281,7 +281,7 @@ def design_learning(
     if first_error is None:  # before any trial: the plain gain, the widest band that converges
         gains = gains[np.argmin(np.abs(gains - 0.5))][None]
     power, noise = _spectra(first_error, samples)
-    options = []  # (not converging, score, gain, Q, contraction)
+    options = []  # (not converging, score, gain, cutoff, Q, contraction)
     for g in gains:
         worst = _worst(ratios, float(g), s)
         for c in cuts:
@@ -313,19 +313,14 @@ def design_learning(
     )
 
 
-def _per_harmonic(power: FloatArray, noise: float, q: Any, g: float, rho: float) -> Any:
-    """The error power at each harmonic after HORIZON trials of an actuator whose slope is
-    ``rho`` times the model's: what Q leaves of the repeatable part, what the trials have not
-    yet removed, and the noise the correction carries."""
+def _predicted(power: FloatArray, noise: float, q: FloatArray, g: float, rho: float) -> float:
+    """The error power after HORIZON trials of an actuator whose slope is ``rho`` times the
+    model's: what Q leaves of the repeatable part, what the trials have not yet removed, and
+    the noise the correction carries."""
     left = (1 - q) / np.maximum(1 - q + q * g * rho, 1e-300)
     after = left + (q * (1 - g * rho)) ** HORIZON * (1 - left)
     carried = (g * rho) ** 2 * q**2 / np.maximum(1 - q**2 * (1 - g * rho) ** 2, 1e-300)
-    return power * after**2 + noise * carried
-
-
-def _predicted(power: FloatArray, noise: float, q: FloatArray, g: float, rho: float) -> float:
-    """The error power after HORIZON trials, summed over the harmonics (the mean left out)."""
-    return float(np.sum(_per_harmonic(power, noise, q, g, rho)[1:]))
+    return float(np.sum(power[1:] * after[1:] ** 2) + noise * np.sum(carried[1:]))
 
 
 def _spectra(error: FloatArray | None, samples: int) -> tuple[FloatArray | None, float]:
