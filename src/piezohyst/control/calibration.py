@@ -155,7 +155,15 @@ class OutputMap:
         d = np.polynomial.polynomial.polyder(np.asarray(self.coefficients))
         return np.asarray(np.polynomial.polynomial.polyval(u, d), dtype=np.float64)
 
-    def _edges(self) -> tuple[float, float, float, float, float, float]:
+    def edges(self) -> tuple[float, float, float, float, float, float]:
+        """The calibrated range's edges: ``(lo, hi, s_lo, s_hi, d_lo, d_hi)``, the lowest and
+        highest calibrated charge (C), their displacements and the map's slope there (m/C),
+        where the linear extension beyond the range starts.
+
+        Returns
+        -------
+        tuple of float
+        """
         lo, hi = self.charge_range
         ul, uh = float(self._u(np.array(lo))), float(self._u(np.array(hi)))
         return (lo, hi, float(self._poly(np.array(ul))), float(self._poly(np.array(uh))),
@@ -190,7 +198,7 @@ class OutputMap:
         ndarray
         """
         q = np.asarray(charge, dtype=np.float64)
-        lo, hi, s_lo, s_hi, d_lo, d_hi = self._edges()
+        lo, hi, s_lo, s_hi, d_lo, d_hi = self.edges()
         inside = np.clip(q, lo, hi)
         s = self._poly(self._u(inside))
         below, above = q < lo, q > hi
@@ -275,8 +283,8 @@ class OutputMap:
         calibrated range, the linear extension beyond it); and whether any lay beyond."""
         if self.order == 1:
             c0, c1 = self.coefficients
-            return monotone_charges(s, self.center, self.scale, c0, c1, self._edges())
-        lo, hi, s_lo, s_hi, _, _ = edges = self._edges()
+            return monotone_charges(s, self.center, self.scale, c0, c1, self.edges())
+        lo, hi, s_lo, s_hi, _, _ = edges = self.edges()
         low_end, high_end = min(s_lo, s_hi), max(s_lo, s_hi)
         inside = np.clip(np.where(np.isfinite(s), s, low_end), low_end, high_end)
         # Newton from the chord, kept inside the range; the map's slope never vanishes

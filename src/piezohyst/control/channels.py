@@ -444,7 +444,7 @@ class _MapFront:
         self.scale = np.array([m.scale for m in chosen])
         self.c0 = np.array([m.coefficients[0] for m in chosen])
         self.c1 = np.array([m.coefficients[1] for m in chosen])
-        self.edges = tuple(np.array(col) for col in zip(*(m._edges() for m in chosen), strict=True))
+        self.edges = tuple(np.array(col) for col in zip(*(m.edges() for m in chosen), strict=True))
 
     def __call__(self, desired: FloatArray) -> FloatArray:
         out = desired.copy()

@@ -334,7 +334,7 @@ def _target_map(comp: Compensator, precision: Precision) -> list[str]:
     om = comp.output_map
     if om is None or om.order == 1:
         return ["#define CURVED_MAP 0"]
-    lo, hi, s_lo, s_hi, d_lo, d_hi = om._edges()
+    lo, hi, s_lo, s_hi, d_lo, d_hi = om.edges()
     rising = s_hi > s_lo
     low_end, high_end = (s_lo, s_hi) if rising else (s_hi, s_lo)
     c = np.array(om.coefficients, dtype=np.float64)
