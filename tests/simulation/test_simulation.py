@@ -120,6 +120,7 @@ def test_hysteresis_width_of_a_line_is_zero() -> None:
     assert hysteresis_width(x, 3 * x + 1) == pytest.approx(0.0, abs=1e-12)
 
 
+@pytest.mark.heavy  # two 300 s runs: compiled only (with the JIT off, 15 s under coverage)
 def test_a_long_record_never_clips_the_charge() -> None:
     """300 s of drive leak about 1e-5 C: past the ADC's 10 V on the 1 uF reference. The
     bench picks the next E6 capacitor, as a lab would, and nothing clips; without it the
