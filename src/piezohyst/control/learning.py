@@ -476,9 +476,8 @@ class LearningCompensator:
         comp.process(np.tile(d + previous, reps))
         u = comp.process(d + correction)
         step = self.compensator.max_step
-        if math.isfinite(step):  # a hair inside, so that rounding never steps over it
-            u = np.clip(_centred_slew(u, step * (1.0 - 1e-9)), self.compensator.v_min,
-                        self.compensator.v_max)  # fmt: skip
+        if math.isfinite(step):  # a hair inside, so that rounding never steps over it; the
+            u = _centred_slew(u, step * (1.0 - 1e-9))  # hulls stay inside the commands' range
         return u
 
     def command(self, desired: ArrayLike | None = None) -> FloatArray:
