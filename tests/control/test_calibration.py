@@ -154,11 +154,14 @@ def test_a_linear_map_exports_to_c_like_python(kind: str, tmp_path: Path) -> Non
     lo, hi = model.input_range_
     comp = ph.Compensator(model, v_min=lo, v_max=hi, output_map=om, slew_rate=None)
     s_lo, s_hi = om.displacement_range()
-    desired = s_lo + (s_hi - s_lo) * (0.5 + 0.4 * np.sin(np.linspace(0, 12, 1500)))
+    desired = s_lo + (s_hi - s_lo) * (0.5 + 0.55 * np.sin(np.linspace(0, 12, 1500)))  # beyond
     desired[::97] = np.nan
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ph.LimitWarning)  # the counts are compared instead
+        warnings.simplefilter("ignore", ph.ExtrapolationWarning)  # beyond the calibration
         compare_c_with_python(comp, desired, tmp_path, "double", hi, name="ph_comp")
+    beyond = int(np.count_nonzero((desired < s_lo) | (desired > s_hi)))
+    assert comp.extrapolated_count == beyond > 0  # C's fourth count equals it (compared)
 
 
 @pytest.mark.parametrize("kind", ["active-pi", "generalized-pi+creep", "preisach"])
@@ -189,6 +192,7 @@ def test_a_curved_map_exports_to_c_like_python(kind: str, tmp_path: Path) -> Non
         warnings.simplefilter("ignore", ph.LimitWarning)  # the counts are compared instead
         warnings.simplefilter("ignore", ph.ExtrapolationWarning)  # beyond the calibration
         compare_c_with_python(comp, desired, tmp_path, "double", hi, name="ph_comp")
+    assert comp.extrapolated_count > 0  # counted alike in C (compared): never silent
 
 
 def test_a_map_that_turns_is_refused_by_the_c_export(tmp_path: Path) -> None:
@@ -243,7 +247,11 @@ def test_a_bank_takes_one_map_per_channel() -> None:
     for c in range(2):  # channel c is exactly its own compensator with its own map
         alone = ph.Compensator(models[c], v_min=lo, v_max=hi, output_map=maps[c])
         assert np.array_equal(out[:, c], alone.process(desired[:, c]))
+    assert comp.extrapolated_count.tolist() == [0, 0]  # 0.8 of each range: inside
     with pytest.warns(ph.ExtrapolationWarning, match="extended linearly"):
         comp.step(np.array([2.0 * ranges[0][1], desired[0, 1]]))  # beyond the calibration
+    with pytest.warns(ph.ExtrapolationWarning, match="outside the calibrated"):
+        comp.step(np.array([desired[0, 0], 2.0 * ranges[1][1]]))  # the curved one beyond
+    assert comp.extrapolated_count.tolist() == [1, 1]  # counted per channel, as in C
     with pytest.raises(ph.ShapeError, match="one map per channel"):
         ph.BankCompensator(bank, v_min=lo, v_max=hi, output_maps=maps[:1])

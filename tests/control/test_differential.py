@@ -495,7 +495,7 @@ def compare_c_with_python(
     # differences; float: its 1e-7 precision over the range
     np.testing.assert_allclose(c_cmds, py, rtol=0, atol=atol)
     counts = tuple(int(x) for x in lines[desired.size].split())
-    assert counts == (comp.nonfinite_count, comp.saturated_count)
+    assert counts == (comp.nonfinite_count, comp.saturated_count, comp.extrapolated_count)
     return c_cmds
 
 

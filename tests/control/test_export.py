@@ -34,7 +34,7 @@ int main(void)
         NAME_real d = (NAME_real)strtod(line, NULL);
         printf("%.17g\n", (double)NAME_step(&s, d));
     }
-    printf("%lu %lu\n", s.nonfinite, s.saturated);
+    printf("%lu %lu %lu\n", s.nonfinite, s.saturated, s.extrapolated);
     return 0;
 }
 """
@@ -100,13 +100,13 @@ def test_double_matches_python(tmp_path: Path, slew: float | None) -> None:
     kwargs = {} if slew is None else {"slew_rate": slew, "sample_rate": 1000.0}
     comp = ph.Compensator(model, v_min=0.0, v_max=140.0, **kwargs)  # type: ignore[arg-type]
     values = desired_values(model)
-    c_cmds, (nonfinite, saturated) = run_c(tmp_path, comp, values, "double")
+    c_cmds, (nonfinite, saturated, extrapolated) = run_c(tmp_path, comp, values, "double")
     py = comp.process(values)
     # tol: C and numba round apart (FMA, order); 1e-9 V covers a replay of ulp differences over the
     # record
     np.testing.assert_allclose(c_cmds, py, rtol=0, atol=1e-9)
     assert (nonfinite, saturated) == (comp.nonfinite_count, comp.saturated_count)
-    assert nonfinite > 0 and saturated > 0
+    assert nonfinite > 0 and saturated > 0 and extrapolated == comp.extrapolated_count == 0
     assert np.all((c_cmds >= 0.0) & (c_cmds <= 140.0))
 
 
@@ -116,7 +116,7 @@ def test_nan_guard_survives_fast_math(tmp_path: Path, precision: str) -> None:
     model = fitted_model()
     comp = ph.Compensator(model, v_min=0.0, v_max=140.0)
     values = desired_values(model)
-    cmds, (nonfinite, _) = run_c(tmp_path, comp, values, precision, ("-O2", "-ffast-math"))
+    cmds, (nonfinite, *_) = run_c(tmp_path, comp, values, precision, ("-O2", "-ffast-math"))
     bad = ~np.isfinite(values)
     assert nonfinite == int(bad.sum()) > 0
     held = np.flatnonzero(bad)
@@ -175,7 +175,8 @@ int main(void)
         NAME_real m = (NAME_real)strtod(rest, NULL);
         printf("%.17g\n", (double)NAME_step(&s, d, m));
     }
-    printf("%lu %lu %lu %lu\n", s.nonfinite, s.saturated, s.faults, s.refreshes);
+    printf("%lu %lu %lu %lu %lu\n", s.nonfinite, s.saturated, s.faults, s.refreshes,
+           s.extrapolated);
     return 0;
 }
 """
@@ -254,6 +255,7 @@ def test_controller_matches_python(
         ctl.saturated_count,
         ctl.measurement_faults,
         ctl.leakage_refreshes,
+        ctl.extrapolated_count,
     )
     assert ctl.measurement_faults > 0 and (ctl.leakage_refreshes > 0) == refresh
 

@@ -89,4 +89,5 @@ def test_the_mex_gateway_in_octave(kind: str, tmp_path: Path) -> None:
     assert type(model).__name__ in (tmp_path / "version.txt").read_text()
     counts = [int(x) for x in (tmp_path / "counts.txt").read_text().split()]
     assert counts[:2] == [comp.nonfinite_count, comp.saturated_count]  # the limits say so
-    assert len(counts) == 3 and counts[2] >= comp.slew_limited_count  # C counts the approach
+    assert len(counts) == 4 and counts[2] >= comp.slew_limited_count  # C counts the approach
+    assert counts[3] == comp.extrapolated_count  # beyond an output map's range: none here

@@ -87,11 +87,12 @@ def test_the_library_reproduces_the_python_compensator(kind: str, kinds, tmp_pat
     # tol: C and numba round apart (FMA, order, libm): 1e-9 V, issue 41's bar
     np.testing.assert_allclose(out, py, rtol=0, atol=1e-9)
     assert np.all((out >= lo) & (out <= hi))
-    counts = (ctypes.c_ulong * 3)()
+    counts = (ctypes.c_ulong * 4)()
     assert so.ph_comp_counts(ctypes.c_void_p(s), counts) == 0
     assert (counts[0], counts[1]) == (comp.nonfinite_count, comp.saturated_count)
     assert counts[2] == _slew_cut(out, comp)  # every command the slew limit cut
     assert counts[0] == int(np.isnan(d).sum())  # the limits say when they bite
+    assert counts[3] == comp.extrapolated_count == 0  # no output map: nothing beyond it
     so.ph_comp_reset(s)  # the exported state again: the same run, exactly
     again = np.empty_like(d)
     assert so.ph_comp_process(s, d, again, d.size) == 0
@@ -216,7 +217,7 @@ def test_a_trajectory_faster_than_the_slew_limit_is_counted(
     s = so.ph_comp_new()
     out = np.empty_like(d)
     assert so.ph_comp_process(s, d, out, d.size) == 0
-    counts = (ctypes.c_ulong * 3)()
+    counts = (ctypes.c_ulong * 4)()
     so.ph_comp_counts(ctypes.c_void_p(s), counts)
     assert counts[2] == _slew_cut(out, comp) > 10  # the limit bit, and says so
     with warnings.catch_warnings():

@@ -324,13 +324,24 @@ def test_compensation_through_the_mode(mode_models: tuple[ph.ClassicalPI, ph.Cla
 
 
 @pytest.mark.skipif(CC is None, reason="no C compiler")
-@pytest.mark.parametrize("precision", ["double", "float"])
+@pytest.mark.parametrize(("precision", "curved"), [("double", False), ("float", False),
+                                                   ("double", True)])  # fmt: skip
+@pytest.mark.filterwarnings("ignore::piezohyst.errors.ExtrapolationWarning")  # compared instead
 def test_exported_c_inverts_the_mode_like_python(
-    mode_models: tuple[ph.ClassicalPI, ph.ClassicalPI], tmp_path: Path, precision: str
-) -> None:
+    mode_models: tuple[ph.ClassicalPI, ph.ClassicalPI], tmp_path: Path, precision: str,
+    curved: bool,
+) -> None:  # fmt: skip
     full, _ = mode_models  # a lag and a mode
     lo, hi = full.input_range_
-    comp = ph.Compensator(full, v_min=lo, v_max=hi, sample_rate=1000.0, slew_rate=5e4)
+    top, bottom = (float(q) for q in full.operator_.predict(np.array([140.0, 0.0])))
+    om = None
+    if curved:  # targets through a curved map first, then the mode, as the compensator does
+        c, h = 0.5 * (top + bottom), 0.5 * (top - bottom)
+        om = ph.OutputMap((2.0 * c, 2.0 * h, 0.3 * h), c, h, ((0.0,) * 3,) * 3,
+                          (bottom, top), input_unit="m", output_unit="m")  # fmt: skip
+        assert om.monotone and om.order == 2
+    comp = ph.Compensator(full, v_min=lo, v_max=hi, sample_rate=1000.0, slew_rate=5e4,
+                          output_map=om)  # fmt: skip
     c_path, h_path = write_c(comp, tmp_path / "modec.c", precision=precision)  # type: ignore[arg-type]
     assert "desired value of the next sample" in h_path.read_text()
     (tmp_path / "main.c").write_text(
@@ -338,12 +349,15 @@ def test_exported_c_inverts_the_mode_like_python(
         "int main(void){char l[128];modec_t s;modec_init(&s);"
         "while(fgets(l,sizeof l,stdin)){char*e;double d=strtod(l,&e);double n=strtod(e,NULL);"
         'printf("%.17g\\n",(double)modec_step(&s,(modec_real)d,(modec_real)n));}'
-        'printf("%lu %lu\\n",s.nonfinite,s.saturated);return 0;}\n'
+        'printf("%lu %lu %lu\\n",s.nonfinite,s.saturated,s.extrapolated);return 0;}\n'
     )
     exe = _compile(c_path, tmp_path)
     t = np.arange(1500) * DT
-    top, bottom = (float(q) for q in full.operator_.predict(np.array([140.0, 0.0])))
     desired = bottom + (top - bottom) * (0.3 + 0.4 * np.sin(2 * np.pi * 40 * t) ** 2)
+    if om is not None:  # the same charges in the map's units, some beyond its range
+        desired = om.predict(desired)
+        s_lo, s_hi = om.displacement_range()
+        desired[300:340] = s_hi + 0.02 * (s_hi - s_lo)
     desired[::97] = np.nan  # gaps, and no preview at some samples
     nxt = np.append(desired[1:], np.nan)
     nxt[5::50] = np.nan
@@ -360,7 +374,9 @@ def test_exported_c_inverts_the_mode_like_python(
     assert tuple(int(v) for v in out[desired.size].split()) == (
         comp.nonfinite_count,
         comp.saturated_count,
+        comp.extrapolated_count,
     )
+    assert comp.extrapolated_count == (40 if curved else 0)  # beyond the map: each counted
 
 
 @pytest.mark.parametrize(

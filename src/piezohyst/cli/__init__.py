@@ -567,6 +567,12 @@ def compensate(
         f"trajectory, {comp.saturated_count} held by the voltage limits, "
         f"{comp.slew_limited_count} by the slew limit ({slew}), {comp.nonfinite_count} for "
         "non-finite desired values"
+        + (
+            f"; {comp.extrapolated_count} beyond the output map's calibrated range (the map "
+            "extended linearly there)"
+            if comp.output_map is not None
+            else ""
+        )
     )
     if result.preamble:
         ctx.info(

@@ -477,6 +477,12 @@ class Charges:
     def __init__(self, output_map: OutputMap) -> None:
         self.output_map = output_map
         self.last: float | None = None
+        #: desired displacements beyond the calibrated ones since the last reset (the map
+        #: extended linearly from its edge there, or out of reach on a map that turns)
+        self.outside = 0
+        lo_s, hi_s = (output_map.edges()[2:4] if output_map.monotone
+                      else output_map.displacement_range())  # fmt: skip
+        self._reach = (min(lo_s, hi_s), max(lo_s, hi_s))
 
     @classmethod
     def of(cls, output_map: Any, gain: float | None) -> Charges | None:
@@ -511,8 +517,9 @@ class Charges:
         return cls(output_map)
 
     def reset(self) -> None:
-        """Forget the branch (a compensator's reset)."""
+        """Forget the branch and the count (a compensator's reset)."""
         self.last = None
+        self.outside = 0
 
     def block(self, desired: FloatArray) -> FloatArray:
         """The charges for a block of desired displacements (NaN stays NaN).
@@ -526,6 +533,9 @@ class Charges:
         ndarray
         """
         q = self.output_map.inverse(desired, near=self.last)
+        low, high = self._reach
+        beyond = np.isfinite(desired) & ((desired < low) | (desired > high))  # NaN, inf: held
+        self.outside += int(np.count_nonzero(beyond))
         done = q[np.isfinite(q)]
         if done.size:
             self.last = float(done[-1])

@@ -52,6 +52,9 @@ class _Channel(Protocol):
     @property
     def nonfinite_count(self) -> int: ...
 
+    @property
+    def extrapolated_count(self) -> int: ...
+
     def reset(self) -> None: ...
 
 
@@ -212,6 +215,12 @@ class ChannelBank(Generic[C]):
     def saturated_count(self) -> NDArray[np.int64]:
         """Per channel: commands clipped to the limits."""
         return np.array([ch.saturated_count for ch in self._channels], dtype=np.int64)
+
+    @property
+    def extrapolated_count(self) -> NDArray[np.int64]:
+        """Per channel: desired displacements beyond its output map's calibrated range (see
+        :attr:`Compensator.extrapolated_count`)."""
+        return np.array([ch.extrapolated_count for ch in self._channels], dtype=np.int64)
 
     def _rows(self, arrays: Sequence[ArrayLike], names: str, ndim: int) -> list[FloatArray]:
         """The per-channel inputs as float arrays of one shape, ``(C,)`` or ``(samples, C)``."""
@@ -440,6 +449,7 @@ class _MapFront:
         self.curved = [(i, ch.charges) for i, ch in enumerate(channels)
                        if ch.output_map is not None and ch.output_map.order != 1]  # fmt: skip
         chosen = [m for m in maps if m is not None and m.order == 1]
+        self.counted = [channels[i].charges for i in lin]  # each linear channel's count
         self.center = np.array([m.center for m in chosen])
         self.scale = np.array([m.scale for m in chosen])
         self.c0 = np.array([m.coefficients[0] for m in chosen])
@@ -453,6 +463,7 @@ class _MapFront:
                                           self.c0, self.c1, self.edges)  # fmt: skip
             out[..., self.linear] = q
             if outside:
+                self._count(desired[..., self.linear])
                 warnings.warn(
                     "BankCompensator: desired displacements lie outside their channels' "
                     "calibrated ranges; each map is extended linearly from its edge there "
@@ -460,11 +471,22 @@ class _MapFront:
                     ExtrapolationWarning,
                     stacklevel=3,
                 )
-        for i, charges in self.curved:
+        for i, charges in self.curved:  # counted by the channel's own front end
             assert charges is not None
             column = np.ascontiguousarray(desired[..., i]).reshape(-1)
             out[..., i] = charges.block(column).reshape(desired[..., i].shape)
         return out
+
+    def _count(self, desired: FloatArray) -> None:
+        """Add the desired values beyond each linear channel's calibrated displacements to
+        that channel's count (:attr:`Compensator.extrapolated_count`)."""
+        s_lo, s_hi = self.edges[2], self.edges[3]
+        low, high = np.minimum(s_lo, s_hi), np.maximum(s_lo, s_hi)
+        beyond = np.isfinite(desired) & ((desired < low) | (desired > high))
+        per = beyond.reshape(-1, self.linear.size).sum(axis=0)
+        for charges, n in zip(self.counted, per, strict=True):
+            assert charges is not None
+            charges.outside += int(n)
 
 
 class BankController(ChannelBank[SelfSensingController]):

@@ -335,6 +335,13 @@ class Compensator:
         """Commands that would have left the identified region (held unless extrapolating)."""
         return int(self.inverse.outside_count())
 
+    @property
+    def extrapolated_count(self) -> int:
+        """Desired displacements beyond the output map's calibrated range since the last reset
+        (the map is extended linearly from its edge there; 0 without a map). The C export's
+        fourth count is the same."""
+        return 0 if self.charges is None else self.charges.outside
+
     def reset(
         self, state: CompensatorState | ArrayLike | None = None, *, voltage: float | None = None
     ) -> None:

@@ -329,26 +329,31 @@ def _c_file(name: str) -> str:
 
 
 def _target_map(comp: Compensator, precision: Precision) -> list[str]:
-    """The constants of ``map.c``: a curved output map's coefficients, range and edges (a
-    linear one is folded into REFERENCE and SCALE by :func:`_mapped`)."""
+    """The constants of ``map.c``: any output map's calibrated displacements (beyond them a
+    desired value is counted), and a curved map's coefficients and edges (a linear one is
+    folded into REFERENCE and SCALE by :func:`_mapped`)."""
     om = comp.output_map
-    if om is None or om.order == 1:
-        return ["#define CURVED_MAP 0"]
+    if om is None:
+        return ["#define HAS_MAP 0", "#define CURVED_MAP 0"]
     lo, hi, s_lo, s_hi, d_lo, d_hi = om.edges()
     rising = s_hi > s_lo
     low_end, high_end = (s_lo, s_hi) if rising else (s_hi, s_lo)
+    ends = _constants(precision, MAP_LOW_END=low_end, MAP_HIGH_END=high_end)
+    if om.order == 1:
+        return ["#define HAS_MAP 1", "#define CURVED_MAP 0", *ends]
     c = np.array(om.coefficients, dtype=np.float64)
     tol = (1e-13 if precision == "double" else 1e-6) * max(abs(high_end - low_end), 1e-300)
     return [
+        "#define HAS_MAP 1",
         "#define CURVED_MAP 1",
+        *ends,
         f"#define MAP_ORDER {om.order}",
         f"#define MAP_RISING {int(rising)}",
         f"static const real_t MAP_C[{c.size}] = {_array(c, precision)};",
         f"static const real_t MAP_DC[{c.size - 1}] = "
         f"{_array(np.polynomial.polynomial.polyder(c), precision)};",
         *_constants(precision, MAP_CENTER=om.center, MAP_SCALE=om.scale, MAP_LO=lo, MAP_HI=hi,
-                    MAP_S_LO=s_lo, MAP_S_HI=s_hi, MAP_D_LO=d_lo, MAP_D_HI=d_hi,
-                    MAP_LOW_END=low_end, MAP_HIGH_END=high_end, MAP_TOL=tol),
+                    MAP_S_LO=s_lo, MAP_S_HI=s_hi, MAP_D_LO=d_lo, MAP_D_HI=d_hi, MAP_TOL=tol),
     ]  # fmt: skip
 
 

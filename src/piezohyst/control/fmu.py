@@ -13,9 +13,10 @@ machine it runs on with the system C compiler, and zips ``modelDescription.xml``
   order (a step before initialization, after terminate...), never a crash;
 * ``fmi2Reset`` goes back to the exported state: the same run again reproduces the first;
 * a NaN target holds the last command, inside the limits, as in Python;
-* Integer outputs ``nonfinite``, ``saturated`` and ``slewed`` count what the limits held
-  since the last reset (non-finite targets, targets out of reach, commands cut by the slew
-  limit), so the host sees when they bite;
+* Integer outputs ``nonfinite``, ``saturated``, ``slewed`` and ``extrapolated`` count what
+  the limits held since the last reset (non-finite targets, targets out of reach, commands
+  cut by the slew limit, targets beyond the output map's calibrated range), so the host
+  sees when they bite;
 * the limits, slew and gain are baked into the step at export (constants of the C source),
   so they are not FMU parameters: changing them means exporting again.
 
@@ -134,6 +135,9 @@ def _model_description(
     <ScalarVariable name="slewed" valueReference="2" causality="output" variability="discrete" initial="calculated" description="commands cut by the slew limit since the last reset">
       <Integer/>
     </ScalarVariable>
+    <ScalarVariable name="extrapolated" valueReference="3" causality="output" variability="discrete" initial="calculated" description="targets beyond the output map's calibrated range since the last reset (the map extended linearly; 0 without a map)">
+      <Integer/>
+    </ScalarVariable>
   </ModelVariables>
   <ModelStructure>
     <Outputs>
@@ -141,12 +145,14 @@ def _model_description(
       <Unknown index="{first_count}"/>
       <Unknown index="{first_count + 1}"/>
       <Unknown index="{first_count + 2}"/>
+      <Unknown index="{first_count + 3}"/>
     </Outputs>
     <InitialUnknowns>
       <Unknown index="2" dependencies=""/>
       <Unknown index="{first_count}" dependencies=""/>
       <Unknown index="{first_count + 1}" dependencies=""/>
       <Unknown index="{first_count + 2}" dependencies=""/>
+      <Unknown index="{first_count + 3}" dependencies=""/>
     </InitialUnknowns>
   </ModelStructure>
 </fmiModelDescription>

@@ -382,6 +382,12 @@ class SelfSensingController:
         return self.compensator.nonfinite_count
 
     @property
+    def extrapolated_count(self) -> int:
+        """Desired displacements beyond the output map's calibrated range (see
+        :attr:`Compensator.extrapolated_count`)."""
+        return self.compensator.extrapolated_count
+
+    @property
     def measurement_faults(self) -> int:
         """Non-finite measurements (that sample ran on feedforward alone)."""
         return int(self.feedback[K.CS_FAULTS])

@@ -11,9 +11,9 @@ system C compiler, exporting only ``NAME_``-prefixed symbols:
 * ``int NAME_process(NAME_t *, const double *target, double *volts, long n)`` (the
   controller's takes ``const double *charge`` after ``target``): ``n`` commands, 0 on
   success, -1 for a NULL pointer, -2 for ``n < 0``; no allocation, no callbacks;
-* ``int NAME_counts(const NAME_t *, unsigned long counts[3])``: what the limits held since
+* ``int NAME_counts(const NAME_t *, unsigned long counts[4])``: what the limits held since
   the last reset (non-finite targets, targets out of reach, commands cut by the slew
-  limit): a host sees when they bite;
+  limit, targets beyond the output map's calibrated range): a host sees when they bite;
 * ``const char *NAME_version(void)``: what was exported, by which piezohyst.
 
 The conventions are those of liblsl, OSQP and the NI-DAQmx C API: state per handle, integer
@@ -93,7 +93,7 @@ extern "C" {{
 void {prefix}_free({prefix}_t *s);
 void {prefix}_reset({prefix}_t *s);
 int {prefix}_process({prefix}_t *s, const double *target, {charge_arg}double *volts, long n);
-int {prefix}_counts(const {prefix}_t *s, unsigned long counts[3]);
+int {prefix}_counts(const {prefix}_t *s, unsigned long counts[4]);
 const char *{prefix}_version(void);
 #ifdef __cplusplus
 }}

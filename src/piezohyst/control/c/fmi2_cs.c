@@ -241,7 +241,7 @@ static fmi2Status none(fmi2Component comp, const char *what)
 }
 
 /* the limits' counts since the last reset: 0 non-finite targets, 1 targets out of reach,
- * 2 commands cut by the slew limit */
+ * 2 commands cut by the slew limit, 3 targets beyond the output map's calibrated range */
 FMI2_Export fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReference vr[],
                                       size_t nvr, fmi2Integer value[])
 {
@@ -251,12 +251,13 @@ FMI2_Export fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReferen
         return fmi2Error;
     }
     for (i = 0; i < nvr; ++i) {
-        if (vr[i] > 2) {
+        if (vr[i] > 3) {
             return refuse(c, "fmi2GetInteger: no variable with this value reference");
         }
         value[i] = (fmi2Integer)(vr[i] == 0   ? c->s.nonfinite
                                  : vr[i] == 1 ? c->s.saturated
-                                              : c->s.slewed);
+                                 : vr[i] == 2 ? c->s.slewed
+                                              : c->s.extrapolated);
     }
     return fmi2OK;
 }

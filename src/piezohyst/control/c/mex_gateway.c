@@ -54,9 +54,10 @@ void mexFunction(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
         volts[k] = (double)${prefix}_step(&state, (${prefix}_real)target[k]${measured});
     }
     if (nlhs == 2) { /* what the limits held since the last reset */
-        plhs[1] = mxCreateDoubleMatrix(1, 3, mxREAL);
+        plhs[1] = mxCreateDoubleMatrix(1, 4, mxREAL);
         mxGetPr(plhs[1])[0] = (double)state.nonfinite;
         mxGetPr(plhs[1])[1] = (double)state.saturated;
         mxGetPr(plhs[1])[2] = (double)state.slewed;
+        mxGetPr(plhs[1])[3] = (double)state.extrapolated;
     }
 }

@@ -51,8 +51,9 @@ PH_EXPORT int ${prefix}_process(${prefix}_t *s, const double *target, ${charge_a
 
 /* What the limits held since the last reset: counts[0] non-finite targets (the last
  * command held), counts[1] targets out of reach (the nearer voltage limit sent),
- * counts[2] commands cut by the slew limit. 0; -1 for a NULL pointer. */
-PH_EXPORT int ${prefix}_counts(const ${prefix}_t *s, unsigned long counts[3])
+ * counts[2] commands cut by the slew limit, counts[3] targets beyond the output map's
+ * calibrated range (the map extended linearly; 0 without a map). 0; -1 for a NULL pointer. */
+PH_EXPORT int ${prefix}_counts(const ${prefix}_t *s, unsigned long counts[4])
 {
     if (s == NULL || counts == NULL) {
         return -1;
@@ -60,6 +61,7 @@ PH_EXPORT int ${prefix}_counts(const ${prefix}_t *s, unsigned long counts[3])
     counts[0] = s->nonfinite;
     counts[1] = s->saturated;
     counts[2] = s->slewed;
+    counts[3] = s->extrapolated;
     return 0;
 }
 

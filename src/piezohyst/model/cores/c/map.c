@@ -2,7 +2,10 @@
  * folded into REFERENCE and SCALE, an affine map; with a curved map from capacitor charge to
  * displacement (calibrate_gain, monotone over its calibrated charges), its inverse first, as
  * OutputMap.inverse computes it: Newton's method from the chord, kept inside the calibrated
- * range, and the linear extension from the range's edge beyond it. */
+ * range, and the linear extension from the range's edge beyond it. With any map, a desired
+ * value beyond the calibrated displacements is counted (s->extrapolated), as the
+ * compensator's extrapolated_count. With an output mode, mode.c maps the desired values
+ * before the mode's inverse (the compensator's order) and the step takes charges. */
 #if CURVED_MAP
 static real_t map_horner(const real_t *c, int order, real_t u)
 {
@@ -34,7 +37,18 @@ static real_t map_charge(real_t d)
     }
     return q;
 }
-#define TARGET(d) (REFERENCE + map_charge(d) * SCALE)
+#define MAP_D(d) map_charge(d)
 #else
-#define TARGET(d) (REFERENCE + (d) * SCALE)
+#define MAP_D(d) (d)
+#endif
+#if HAS_MAP /* NaN compares false: not counted (the step counts it as non-finite) */
+#define MAP_COUNT(s, d) ((d) < MAP_LOW_END || (d) > MAP_HIGH_END ? (void)(s)->extrapolated++ \
+                                                                 : (void)0)
+#else
+#define MAP_COUNT(s, d) ((void)(s))
+#endif
+#if MODE
+#define TARGET(s, d) (REFERENCE + (d) * SCALE)
+#else
+#define TARGET(s, d) (MAP_COUNT(s, d), REFERENCE + MAP_D(d) * SCALE)
 #endif

@@ -2,12 +2,20 @@
  * sample): y + 2 zeta/w y' + y''/w^2 from differences, half a sample before the end. */
 real_t PREFIX_step(PREFIX_t *s, real_t desired, real_t next)
 {
-    real_t b0 = non_finite(s->e2) ? desired : s->e2;
-    real_t b1 = non_finite(s->e1) ? desired : s->e1;
-    real_t nxt = non_finite(next) ? 2.0 * desired - b1 : next;
-    real_t mid = 0.5 * (desired + b1);
-    real_t d1 = (desired - b1) / MODE_DT;
-    real_t d2 = ((nxt - desired) - (b1 - b0)) / (2.0 * MODE_DT * MODE_DT);
+    real_t b0, b1, nxt, mid, d1, d2;
+    if (!non_finite(desired)) { /* the output map first (map.c): the mode acts on charges */
+        MAP_COUNT(s, desired);
+        desired = MAP_D(desired);
+    }
+    if (!non_finite(next)) {
+        next = MAP_D(next);
+    }
+    b0 = non_finite(s->e2) ? desired : s->e2;
+    b1 = non_finite(s->e1) ? desired : s->e1;
+    nxt = non_finite(next) ? 2.0 * desired - b1 : next;
+    mid = 0.5 * (desired + b1);
+    d1 = (desired - b1) / MODE_DT;
+    d2 = ((nxt - desired) - (b1 - b0)) / (2.0 * MODE_DT * MODE_DT);
     s->e2 = s->e1;
     s->e1 = desired;
     return hysteresis_step(s, mid + MODE_K1 * d1 + d2 / MODE_W2);

@@ -179,6 +179,7 @@ void PREFIX_init(PREFIX_t *s)
     s->nonfinite = 0;
     s->saturated = 0;
     s->slewed = 0;
+    s->extrapolated = 0;
     s->outside = 0;
     INIT_EXTRA(s);
 }
@@ -204,7 +205,7 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired)
         lags_advance(s, s->st[0]);
         return s->last;
     }
-    y = TARGET(desired);
+    y = TARGET(s, desired);
 #if N_LAGS
     y -= lags_affine(s, &lin);
 #endif

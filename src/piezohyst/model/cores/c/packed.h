@@ -21,6 +21,7 @@ typedef struct {
     unsigned long nonfinite; /* NaN/inf desired values (last command held) */
     unsigned long saturated; /* desired values out of reach (the nearer limit sent) */
     unsigned long slewed;    /* commands cut by the slew limit */
+    unsigned long extrapolated; /* desired values beyond the output map's calibrated range */
     unsigned long outside;   /* commands that would leave the identified region */
 #if ${upper}_DYNAMIC
     ${real} w, u;               /* input dynamics: after the fractional delay, after the lag (V) */

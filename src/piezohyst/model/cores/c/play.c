@@ -27,6 +27,7 @@ void PREFIX_init(PREFIX_t *s)
     s->nonfinite = 0;
     s->saturated = 0;
     s->slewed = 0;
+    s->extrapolated = 0;
     INIT_EXTRA(s);
 }
 
@@ -91,6 +92,6 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
         s->nonfinite++;
         return s->last;
     }
-    return core_step(s, TARGET(desired));
+    return core_step(s, TARGET(s, desired));
 }
 #endif

@@ -20,7 +20,8 @@ typedef struct {
     ${real} last;             /* last command, V */
     unsigned long nonfinite; /* NaN/inf desired values (last command held) */
     unsigned long saturated; /* commands clipped to the limits */
-    unsigned long slewed;    /* commands cut by the slew limit */${lag_state}
+    unsigned long slewed;    /* commands cut by the slew limit */
+    unsigned long extrapolated; /* desired values beyond the output map's calibrated range */${lag_state}
 #if ${upper}_CONTROLLER
     /* feedback on the measured charge (see piezohyst.selfsensing) */
     ${real} integral;         /* integral action, model output units */

@@ -59,7 +59,7 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired, real_t measured)
         hold_reset(s);
         return s->last;
     }
-    d = TARGET(desired);
+    d = TARGET(s, desired);
     integral = s->integral + KI * e;
     u = d + KP * e + integral;
     if (non_finite(u)) {

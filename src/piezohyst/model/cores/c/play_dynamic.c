@@ -26,7 +26,7 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
         inverse_states(s);
         return s->last;
     }
-    q = clamp(TARGET(desired), OFFSET - BOUND, OFFSET + BOUND);
+    q = clamp(TARGET(s, desired), OFFSET - BOUND, OFFSET + BOUND);
     target = INV_OFFSET;
     for (i = 0; i < N; ++i) {
         s->zeta[i] = clamp(s->zeta[i], q - RI[i], q + RI[i]);

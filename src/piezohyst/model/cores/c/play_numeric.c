@@ -85,6 +85,7 @@ void PREFIX_init(PREFIX_t *s)
     s->nonfinite = 0;
     s->saturated = 0;
     s->slewed = 0;
+    s->extrapolated = 0;
 }
 
 real_t PREFIX_step(PREFIX_t *s, real_t desired)
@@ -96,7 +97,7 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired)
         advance_lags(s, s->last);
         return s->last;
     }
-    q = TARGET(desired);
+    q = TARGET(s, desired);
     y_lo = numeric_output(s, lo, &slope);
     y_hi = numeric_output(s, hi, &slope);
     if (q <= y_lo) {
