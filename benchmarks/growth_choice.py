@@ -7,9 +7,17 @@ chosen; 1-3 are the matrix's own; TERMS, e.g. ``integral,abs_integral``, instead
 proxy's choice). Prints the mean held-out NRMSE (%) over the units per cell: the integral,
 then the alternative.
 
+``python benchmarks/growth_choice.py 4,5,6 own [CLASSES]``: the integral against the
+integral and ``abs_integral``, and the choice between them by each model's *own* forward
+chaining inside the training record (fitted on the first 40 %, then on everything before
+each of four later blocks, each block predicted from the record's start; the larger set
+must beat the smaller by 0.1 %, as the proxy's rule): one fit per fold and candidate.
+CLASSES: e.g. ``PreisachModel`` (default: Preisach, Bouc-Wen and Duhem).
+
 Not a test: nothing here asserts a time.
 """
 
+import itertools
 import sys
 import warnings
 
@@ -21,6 +29,7 @@ from piezohyst.workflows.excitation import excitation
 
 warnings.simplefilter("ignore")
 units = [int(u) for u in sys.argv[1].split(",")]
+OWN = len(sys.argv) > 2 and sys.argv[2] == "own"
 #: the alternative to the presets' integral: "auto" (the proxy's forward chaining) or terms
 GROWTH: object = "auto" if len(sys.argv) < 3 else tuple(sys.argv[2].split(","))
 played = excitation(v_min=0.0, v_max=140.0, sample_rate=1000.0)
@@ -28,6 +37,52 @@ designs = {
     "excite": lambda p, u: ph.simulate(played.voltage, played.t, preset=p, seed=u),
     "decaying": lambda p, u: ph.simulate(preset=p, signal="decaying", duration=40.0, seed=u),
 }
+
+
+def own_score(cls: type, terms: tuple[str, ...], x: np.ndarray, y: np.ndarray,
+              t: np.ndarray) -> float:  # fmt: skip
+    """Pooled RMSE of forward chaining with the model's own fits (the proxy's folds)."""
+    first = int(0.4 * x.size)
+    edges = [first + (x.size - first) * j // 4 for j in range(5)]
+    sse, count = 0.0, 0
+    for a, b in itertools.pairwise(edges):
+        try:
+            m = cls(growth_terms=terms).fit(x[:a], y[:a], t=t[:a])
+            r = m.predict(x[:b], t=t[:b])[a:b] - y[a:b]
+        except ph.PiezohystError:
+            return np.inf
+        sse, count = sse + float(r @ r), count + b - a
+    return float(np.sqrt(sse / count))
+
+
+def own(classes: list[type]) -> None:
+    both = ("integral", "abs_integral")
+    for design, rec in designs.items():
+        for plant in PLANTS:
+            cells: dict[str, list[tuple[float, float, float, int]]] = {}
+            for u in units:
+                p = batch_unit(PLANTS[plant], u)
+                tr = rec(p, u)
+                te = ph.simulate(preset=p, signal="multi", duration=12.0, seed=u + 100)
+                for cls in classes:
+                    err, score = [], []
+                    for g in (("integral",), both):
+                        m = cls(growth_terms=g).fit(tr.voltage, tr.charge, t=tr.t)
+                        err.append(100 * ph.metrics.nrmse(te.charge, m.predict(te.voltage, t=te.t)))
+                        score.append(own_score(cls, g, tr.voltage, tr.charge, tr.t))
+                    pick = int(score[1] < score[0] * (1 - 1e-3))
+                    cells.setdefault(cls.__name__[:-5], []).append((*err[:2], err[pick], pick))
+            print(design, plant, " | ".join(
+                f"{k}: integral {np.mean([c[0] for c in v]):.2f}, both "
+                f"{np.mean([c[1] for c in v]):.2f}, own choice {np.mean([c[2] for c in v]):.2f} "
+                f"(picks {[c[3] for c in v]})" for k, v in cells.items()), flush=True)  # fmt: skip
+
+
+if OWN:
+    names = sys.argv[3].split(",") if len(sys.argv) > 3 else ["PreisachModel", "BoucWenModel",
+                                                               "DuhemModel"]  # fmt: skip
+    own([getattr(ph, n) for n in names])
+    sys.exit()
 for design, rec in designs.items():
     for plant in PLANTS:
         cells: dict[tuple[str, str], list[float]] = {}

@@ -64,6 +64,20 @@ def test_a_displacement_record_gets_no_growth_terms_and_no_default_ramps_away(cr
     assert "integral" in named.growth_coefficients()  # asked for by name: kept
 
 
+def test_every_default_holds_out_within_3x_of_the_best_default() -> None:
+    """Issue 40's bar for a record of another lab's kind, on the Preisach plant: no default
+    ramps away, none is far behind. (On the Bouc-Wen plants the generating class fits them to
+    0.012-0.016 %, 74-131x below the rest; on the two-state plant the play family's loops
+    miss its shape, 0.48 % for Preisach against 5.4 % for classical PI: spreads of the
+    plants, measured and said in the issue's note, not a default ramping away.)"""
+    t, v, s = _record("preisach")
+    errors = {name: _held_out(cls(output_unit="m"), t, v, s) for name, cls in DEFAULTS.items()}
+    best = min(errors.values())
+    # measured 0.40-0.98 %, 2.4x; before the domain rule the Preisach default ramped to 178 %
+    # on the issue's measured record
+    assert max(errors.values()) <= 3.0 * best, errors
+
+
 @pytest.mark.parametrize("plant", ["bouc-wen-creep-lag", "preisach"])
 def test_model_choice_reaches_the_fields_standard(plant: str, creeping) -> None:
     t, v, s = creeping if plant == "bouc-wen-creep-lag" else _record(plant)
