@@ -39,6 +39,32 @@ __all__ = ["Compensator", "CompensatorSettings", "CompensatorState"]
 Domain = Literal["charge", "displacement"]
 
 
+def _narrowed(
+    limits: tuple[float, float], trained: tuple[float, float], allow: bool
+) -> tuple[float, float]:
+    """The limits kept inside the voltages the model was identified on (unless ``allow``)."""
+    v_min, v_max = limits
+    lo, hi = trained
+    if allow or math.isnan(lo) or math.isnan(hi) or (v_min >= lo and v_max <= hi):
+        return limits
+    new_lo, new_hi = max(v_min, lo), min(v_max, hi)
+    if not new_lo < new_hi:
+        msg = (
+            f"The limits [{v_min:g}, {v_max:g}] V do not overlap the voltages the "
+            f"model was identified on, [{lo:g}, {hi:g}] V; pass allow_extrapolation=True "
+            "to use the model outside them."
+        )
+        raise ParameterError(msg)
+    warnings.warn(
+        f"Compensator limits [{v_min:g}, {v_max:g}] V narrowed to "
+        f"[{new_lo:g}, {new_hi:g}] V, the voltages the model was identified on: a model "
+        "is not trusted outside them (pass allow_extrapolation=True to keep the limits).",
+        UserWarning,
+        stacklevel=3,
+    )
+    return new_lo, new_hi
+
+
 class Compensator:
     r"""Feedforward hysteresis compensator for any fitted model.
 
@@ -169,7 +195,10 @@ class Compensator:
         self.allow_extrapolation = allow_extrapolation
         #: The limits asked for, when they were narrowed to the training range (else None).
         self.requested_limits: tuple[float, float] | None = None
-        self._narrow_to(spec.input_range)
+        narrowed = _narrowed((self.v_min, self.v_max), spec.input_range, allow_extrapolation)
+        if narrowed != (self.v_min, self.v_max):
+            self.requested_limits = (self.v_min, self.v_max)
+            self.v_min, self.v_max = narrowed
         max_step = math.inf
         if isinstance(slew_rate, str):
             if slew_rate != "trained":
@@ -250,32 +279,6 @@ class Compensator:
         """The largest command change per sample (V; inf: no slew limit)."""
         return self._max_step
 
-    def _narrow_to(self, trained: tuple[float, float]) -> None:
-        """Keep every command inside the voltages the model was identified on."""
-        lo, hi = trained
-        if self.allow_extrapolation or math.isnan(lo) or math.isnan(hi):
-            return
-        if self.v_min >= lo and self.v_max <= hi:
-            return
-        new_lo, new_hi = max(self.v_min, lo), min(self.v_max, hi)
-        if not new_lo < new_hi:
-            msg = (
-                f"The limits [{self.v_min:g}, {self.v_max:g}] V do not overlap the voltages the "
-                f"model was identified on, [{lo:g}, {hi:g}] V; pass allow_extrapolation=True "
-                "to use the model outside them."
-            )
-            raise ParameterError(msg)
-        self.requested_limits = (self.v_min, self.v_max)
-        warnings.warn(
-            f"Compensator limits [{self.v_min:g}, {self.v_max:g}] V narrowed to "
-            f"[{new_lo:g}, {new_hi:g}] V, the voltages the model was identified on: a model "
-            "is not trusted outside them (pass allow_extrapolation=True to keep the limits).",
-            UserWarning,
-            stacklevel=3,
-        )
-        self.v_min, self.v_max = new_lo, new_hi
-
-    # ----------------------------------------------------------------- state
     @property
     def n_operators(self) -> int:
         """Values in the core's state (play operators: their number)."""
