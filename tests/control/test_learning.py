@@ -285,6 +285,16 @@ def test_the_file_loop_is_the_in_memory_loop(tmp_path: Path) -> None:
     ph.write_table(tmp_path / "old.csv", {**cols, "voltage": old.get("voltage") + noisy - sent})
     res = runner.invoke(main, [*base[:2], str(tmp_path / "old.csv"), *base[2:]])
     assert res.exit_code == 1 and "a recording of another trial or run" in res.output
+    # --no-probe: the lead-in without the probe's sines, as the class with probe=False
+    res = runner.invoke(main, [*base[:2], "--state", str(tmp_path / "plain.json"), "-o",
+                               str(tmp_path / "plain.csv"), "--slew-rate", "30000",
+                               "--no-probe", "--desired", str(tmp_path / "scan.csv")])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    plain = ph.LearningCompensator(model, v_min=lo, v_max=hi, sample_rate=RATE,
+                                   slew_rate=30e3, probe=False)  # fmt: skip
+    lead = ph.read_table(tmp_path / "plain.csv").get("command")
+    np.testing.assert_array_equal(lead, plain.command(d))
+    assert not np.array_equal(lead, mem[0])  # the default lead-in carries the probe
 
 
 def test_learn_writes_over_a_file_it_did_not_write_only_with_force(tmp_path: Path) -> None:

@@ -90,6 +90,12 @@ def _auto_or_float(value: str) -> float | Literal["auto"]:
     is_flag=True,
     help="Learn from the first trial too (the actuator already runs the scan).",
 )
+@click.option(
+    "--no-probe",
+    is_flag=True,
+    help="Send the lead-in without its probe (small sines whose response measures the "
+    "loop's timing; give it on every call of a run).",
+)
 @_limit_options
 @click.option(
     "-o",
@@ -117,6 +123,7 @@ def learn(
     voltage_tolerance: float | None,
     sensor: bool,
     no_lead_in: bool,
+    no_probe: bool,
     settings: CompensatorSettings,
     out: Path,
     force: bool,
@@ -157,6 +164,7 @@ def learn(
             reading_column=reading_column,
             sensor=sensor,
             lead_in=not no_lead_in,
+            probe=not no_probe,
             voltage_tolerance=voltage_tolerance,
             force=force,
         ),

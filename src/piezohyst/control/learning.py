@@ -46,6 +46,7 @@ from .calibration import OutputMap
 from .compensator import Compensator, Domain
 from .leakage import Leakage
 from .learning_design import LearningDesign, design_learning
+from .learning_probe import Response, probe_bins, probe_signal, response
 
 FloatArray = np.ndarray
 
@@ -197,6 +198,60 @@ def _update(
     return np.fft.irfft(design.q() * spectrum, n=base.size)
 
 
+def _ramp_in(u: FloatArray, last: float, step: float, d: FloatArray) -> FloatArray:
+    """Bring ``u`` into the trajectory from the ``last`` command at the slew limit (in place);
+    the samples whose history differs from the trajectory's (the ramp, and until its
+    extremes wipe the actuator's memory out) as a mask."""
+    clamped = np.zeros(u.size, dtype=bool)
+    prev = last
+    for k in range(u.size):
+        if abs(u[k] - prev) <= step * (1 + 1e-12):
+            break
+        u[k] = prev + math.copysign(step, u[k] - prev)
+        clamped[k] = True
+        prev = float(u[k])
+    if clamped.any():
+        after = np.arange(d.size) > int(np.flatnonzero(clamped)[-1])
+        near = 0.01 * float(np.ptp(d))  # within 1 % of an extreme: the memory is wiped
+        hi = np.flatnonzero(after & (d >= d.max() - near))
+        lo = np.flatnonzero(after & (d <= d.min() + near))
+        wiped = max(int(hi[0]) if hi.size else d.size, int(lo[0]) if lo.size else d.size)
+        clamped[: wiped + 1] = True
+    return clamped
+
+
+def _lead(data: Any, n: int) -> tuple[FloatArray, FloatArray] | None:
+    """The lead-in's readings and usable mask from a saved state (None: none kept)."""
+    if data is None:
+        return None
+    seen = np.array([math.nan if v is None else v for v in data[0]], dtype=np.float64)
+    usable = np.zeros(n, dtype=bool)
+    usable[np.array(data[1], dtype=int)] = True
+    return seen, usable
+
+
+def _lead_probe(d: FloatArray) -> tuple[np.ndarray, FloatArray]:
+    """The harmonics of the lead-in's probe and its sines (:mod:`.learning_probe`)."""
+    bins = probe_bins(d)
+    return bins, probe_signal(bins, d.size, float(np.ptp(d)))
+
+
+def _probed(
+    lead: tuple[FloatArray, FloatArray] | None, measured: FloatArray, ok: FloatArray,
+    bins: np.ndarray, d: FloatArray,
+) -> Response | None:  # fmt: skip
+    """The loop's response to the lead-in's probe (None without one)."""
+    return None if lead is None else response(lead[0], measured, lead[1] & ok, bins, d)
+
+
+def _lead_data(lead: tuple[FloatArray, FloatArray] | None) -> list[Any] | None:
+    """The lead-in's readings (NaN as null) and usable indices, JSON-ready."""
+    if lead is None:
+        return None
+    seen = [float(v) if math.isfinite(v) else None for v in lead[0]]
+    return [seen, np.flatnonzero(lead[1]).tolist()]
+
+
 def _desired_gain(settings: dict[str, Any], om: OutputMap | None) -> tuple[float | None, bool]:
     """Desired units per model output unit (an output map's at its center), and whether the
     desired values are a displacement."""
@@ -257,6 +312,11 @@ class LearningCompensator:
         plants, an error of 11 % where the scan's own was 0.75 %; learned from, it
         cost a trial to undo). False learns from it too (the actuator already runs
         the scan).
+    probe : bool, default True
+        The lead-in carries eight small sines (0.2 % of the span each, between
+        the scan's harmonics; :mod:`~piezohyst.control.learning_probe`): the next
+        trial's readings without them give the loop's phase there, and the law then
+        allows only for the timings that agree with it (``design.probed``).
     output_map : OutputMap, optional
         Desired values in metres through this map (instead of ``gain``): the charge
         readings are turned into displacement with it, curvature included.
@@ -306,6 +366,7 @@ class LearningCompensator:
         voltage: float | None = None,
         lead_in: bool = True,
         output_map: OutputMap | None = None,
+        probe: bool = True,
     ) -> None:
         self.model = model
         kept: dict[str, Any] = {"v_min": v_min, "v_max": v_max, "sample_rate": sample_rate,
@@ -338,6 +399,7 @@ class LearningCompensator:
             "lag_tolerance": float(lag_tolerance),
             "slope_error": float(slope_error),
             "lead_in": _flag(lead_in, "lead_in"),
+            "probe": _flag(probe, "probe"),
         }
         # checks every design setting now (a one-sample trial stands in for the trajectory)
         design_learning(model, **self._design_args(2))
@@ -392,6 +454,8 @@ class LearningCompensator:
                 raise ParameterError(msg)
             self._last = v
         self._leaked = 0.0
+        self._probe, self._bins = np.zeros(0), np.zeros(0, dtype=int)  # the lead-in's sines
+        self._lead: tuple[FloatArray, FloatArray] | None = None  # its readings, and usable
         self._gain = 0.5
         self._first = True  # the law is chosen from the first trial learned from
         self.history: list[Trial] = []
@@ -456,6 +520,8 @@ class LearningCompensator:
             self._correction = np.zeros(d.size)
             self._previous = np.zeros(d.size)
             self.design = design_learning(self.model, **self._design_args(d.size))
+            if self.settings["probe"] and self.settings["lead_in"]:
+                self._bins, self._probe = _lead_probe(d)
         elif d.size != self._desired.size or not np.array_equal(d, self._desired):
             msg = (
                 "this learner belongs to another trajectory: every trial repeats the first "
@@ -512,25 +578,10 @@ class LearningCompensator:
             raise ParameterError(msg)
         if desired is not None:
             self._set_trajectory(desired)
-        u = self._commands(self._previous, self._correction)
-        clamped = np.zeros(u.size, dtype=bool)
-        step, prev = self.compensator.max_step, self._last
-        for k in range(u.size):  # into the trajectory from the last command, at the slew limit
-            if abs(u[k] - prev) <= step * (1 + 1e-12):
-                break
-            u[k] = prev + math.copysign(step, u[k] - prev)
-            clamped[k] = True
-            prev = float(u[k])
-        if clamped.any():  # the history differs until the trajectory's extremes wipe it out
-            d = self._desired
-            assert d is not None
-            last = int(np.flatnonzero(clamped)[-1])
-            after = np.arange(d.size) > last
-            near = 0.01 * float(np.ptp(d))  # within 1 % of an extreme: the memory is wiped
-            hi = np.flatnonzero(after & (d >= d.max() - near))
-            lo = np.flatnonzero(after & (d <= d.min() + near))
-            wiped = max(int(hi[0]) if hi.size else d.size, int(lo[0]) if lo.size else d.size)
-            clamped[: wiped + 1] = True
+        probing = self._probe.size and self.trials == 0  # the lead-in carries the probe
+        u = self._commands(self._previous, self._correction + (self._probe if probing else 0.0))
+        assert self._desired is not None
+        clamped = _ramp_in(u, self._last, self.compensator.max_step, self._desired)
         self._pending, self._clamped = u.copy(), clamped
         self._last = float(u[-1])
         return u
@@ -590,6 +641,9 @@ class LearningCompensator:
         saturated = _saturated(u, self.compensator)
         self._previous = self._correction  # what this trial sent: the next trial's history
         lead_in = self.settings["lead_in"] and index == 0  # the arrival, not the scan's response
+        if lead_in and self._probe.size:
+            self._previous = self._correction + self._probe
+            self._lead = (measured.copy(), ok.copy())
         if lead_in or learned < d.size // 2:
             if not lead_in:
                 warnings.warn(
@@ -619,7 +673,10 @@ class LearningCompensator:
             )
         rolled = False
         if self._first:  # the law, chosen from the first trial learned from
-            self.design = design_learning(self.model, **self._design_args(d.size), first_error=e)
+            loop = _probed(self._lead, measured, ok, self._bins, d)
+            self.design = design_learning(self.model, **self._design_args(d.size), first_error=e,
+                                          measured=loop)  # fmt: skip
+            self._lead = None
             self._gain = self.design.gain
             self._first = False
         assert self.design is not None
@@ -705,6 +762,7 @@ class LearningCompensator:
             "gain": self._gain,
             "first": self._first,
             "resend": self._resend,
+            "lead": _lead_data(self._lead),
             "design": None if self.design is None else asdict(self.design),
             "history": [asdict(t) for t in self.history],
         }
@@ -753,6 +811,7 @@ class LearningCompensator:
             self._gain = float(data["gain"])
             self._first = bool(data["first"])
             self._resend = bool(data["resend"])
+            self._lead = _lead(data.get("lead"), n)
             self.design = None if data["design"] is None else LearningDesign(**data["design"])
             self.history = [Trial(**t) for t in data["history"]]
         except (KeyError, TypeError, ValueError, IndexError) as exc:

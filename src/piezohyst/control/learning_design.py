@@ -11,6 +11,7 @@ import numpy as np
 
 from .._validation import check_float
 from ..model.dynamics import filter_response
+from .learning_probe import Response
 
 FloatArray = np.ndarray
 
@@ -28,6 +29,15 @@ HORIZON = 10
 #: points on the edge of the identified delay and lag's 95 % region where the response is
 #: evaluated (with its centre)
 ELLIPSE_POINTS = 24
+#: with a probe's response, the region is sampled inside too, on rings at these fractions
+RINGS = (1 / 3, 2 / 3, 1.0)
+#: a timing agrees with the probe where its phase lies within the noise's reach and this
+#: (rad, 5 degrees: what a local slope varying along the scan may turn) of the measured one
+PROBE_MARGIN = math.radians(5.0)
+#: the measured response, within this many standard errors of noise (in any direction of the
+#: complex plane: beyond 4, 3e-4 per sine), turns the phase by at most asin(4 stderr); a
+#: sine whose noise could reach the response itself (4 stderr >= 1) rules nothing out
+PROBE_SIGMAS = 4.0
 
 
 @dataclass(frozen=True)
@@ -85,6 +95,9 @@ class LearningDesign:
     lag_error : float
         The relative 95 % bound on the model's identified lag (or a lag it was
         given by hand), and a stated ``lag``'s tolerance.
+    probed : bool
+        Whether the lead-in's probe narrowed the timings allowed for (to those whose
+        phase agrees with the loop's measured one).
     """
 
     gain: float
@@ -99,6 +112,7 @@ class LearningDesign:
     sample_rate: float
     samples: int
     lag_error: float = 0.0
+    probed: bool = False
 
     def frequencies(self) -> FloatArray:
         """The harmonics of the trial (Hz), as :func:`numpy.fft.rfftfreq` gives them.
@@ -138,6 +152,7 @@ class LearningDesign:
         lag = f", inverting a {self.lag * 1e3:.3g} ms lag" if self.lag > 0 else ""
         sure = "converges monotonically" if self.contraction < 1 else "may NOT converge"
         lags = f", a lag error of {self.lag_error:.0%}" if self.lag_error > 0 else ""
+        lags += " (as the lead-in's probe measured the loop)" if self.probed else ""
         return (
             f"learning gain {self.gain:.3g}, {cut}{lag}; allowing a delay error of "
             f"{self.timing * 1e3:.3g} ms{lags} and a slope error of {self.slope_error:.0%}: "
@@ -166,15 +181,22 @@ def _worst(ratios: Any, gain: float, slope_error: float) -> FloatArray:
 
 
 def _allowed(
-    model: Any, lag: float, tolerance: float, dt: float, f: FloatArray
-) -> tuple[float, float, Any]:
-    """The delay error allowed for (s), the lag's relative error, and the response of every
-    timing allowed for over the one the law assumes: shape (timings, harmonics).
+    model: Any, lag: float, tolerance: float, dt: float, f: FloatArray,
+    measured: Response | None = None,
+) -> tuple[float, float, Any, bool]:  # fmt: skip
+    """The delay error allowed for (s), the lag's relative error, the response of every
+    timing allowed for over the one the law assumes: shape (timings, harmonics), and
+    whether a probe's response narrowed them.
 
     The model's identified delay and lag anywhere in their joint 95 % region (the ellipse of
     their covariance: a delay and a lag the record could not tell apart are anti-correlated),
     or within ``tolerance`` of each when stated by hand; a stated ``lag`` within
-    ``tolerance``; and half a sample for the instant a reading stands for (a pure shift)."""
+    ``tolerance``; and half a sample for the instant a reading stands for (a pure shift).
+    With ``measured`` (the lead-in's probe, :mod:`~piezohyst.control.learning_probe`), only
+    the delays and lags (identified, or stated by hand) whose phase agrees with the measured
+    one at every probed harmonic, within what :data:`PROBE_SIGMAS` standard errors of noise
+    can turn it and :data:`PROBE_MARGIN` (the reading's half sample and a stated lag's
+    tolerance stay allowed for); all of them where none does."""
     delay = tau = 0.0
     offsets = np.zeros((1, 2))  # (delay, tau) off the model's, s
     dyn = getattr(model, "input_dynamics_", None)
@@ -185,24 +207,41 @@ def _allowed(
             w, v = np.linalg.eigh(cov)  # the 95 % ellipse's axes
             turn = np.linspace(0.0, 2 * np.pi, ELLIPSE_POINTS, endpoint=False)
             unit = np.stack([np.cos(turn), np.sin(turn)], axis=1)
-            ring = 1.96 * unit * np.sqrt(np.maximum(w, 0.0)) @ v.T
-            offsets = np.vstack([offsets, ring])
+            radii = RINGS if measured is not None else (1.0,)  # inside too, to narrow it
+            rings = [1.96 * r * unit * np.sqrt(np.maximum(w, 0.0)) @ v.T for r in radii]
+            offsets = np.vstack([offsets, *rings])
         else:  # stated by hand: trusted to the tolerance
             box = np.array([[a, b] for a in (-1, 0, 1) for b in (-1, 0, 1)], dtype=float)
             offsets = box * tolerance * np.array([delay, tau])
-    delay_err = float(np.max(np.abs(offsets[:, 0]))) + 0.5 * dt
-    lag_error = float(np.max(np.abs(offsets[:, 1]))) / tau if tau > 0 else 0.0
     shifts = np.array([-0.5 * dt, 0.0, 0.5 * dt])
     lags = np.unique([lag * (1.0 - tolerance), lag, lag * (1.0 + tolerance)])
     assumed = filter_response(delay, tau, dt, f) * filter_response(0.0, lag, dt, f)
-    ratios = []
+    ratios, rows = [], []
     for d_off, t_off in offsets:
         dyn_r = filter_response(delay, max(tau + t_off, 0.0), dt, f) / assumed
         for shift in shifts:
             for stated in lags:
                 ratios.append(np.exp(-2j * np.pi * f * (d_off + shift)) * dyn_r
                               * filter_response(0.0, stated, dt, f))  # fmt: skip
-    return delay_err, max(lag_error, tolerance if lag > 0 else 0.0), np.array(ratios)
+                rows.append((abs(d_off + shift), abs(t_off) / tau if tau > 0 else 0.0,
+                             abs(stated - lag) / lag if lag > 0 else 0.0))  # fmt: skip
+    table, kept = np.array(ratios), np.ones(len(ratios), dtype=bool)
+    narrowed = False
+    if measured is not None and offsets.shape[0] > 1:  # the identified timing's region only:
+        # the reading's half sample and a stated lag's tolerance stay allowed for
+        bound = PROBE_SIGMAS * measured.phase_stderr  # the noise's reach over the response
+        sure = bound < 1.0  # where the response stood out of it
+        seen = (measured.ratio * _l(f[measured.bins], lag, dt))[sure]
+        off = np.abs(np.angle(table[:, measured.bins[sure]] / seen[None, :]))
+        agree = np.all(off <= np.arcsin(bound[sure])[None, :] + PROBE_MARGIN, axis=1)
+        per = agree.reshape(offsets.shape[0], -1)  # rows: offsets x shifts x stated lags
+        near = per[:, shifts.size // 2 * lags.size + lags.size // 2]  # no shift, the lag stated
+        if sure.any() and near.any() and not near.all():
+            kept, narrowed = np.repeat(near, per.shape[1]), True
+    err = np.array(rows)[kept]
+    delay_err = float(np.max(err[:, 0]))
+    lag_error = float(max(np.max(err[:, 1]), np.max(err[:, 2])))
+    return delay_err, lag_error, table[kept], narrowed
 
 
 def _noise_gain(q: FloatArray, gain: float) -> float:
@@ -222,6 +261,7 @@ def design_learning(
     lag_tolerance: float = 0.25,
     slope_error: float = 0.5,
     first_error: FloatArray | None = None,
+    measured: Response | None = None,
 ) -> LearningDesign:
     """The learning law for a model and a trial (see :class:`LearningDesign`).
 
@@ -257,6 +297,9 @@ def design_learning(
         How far (relative) the model's local slope may be off, in [0, 1).
     first_error : ndarray, optional
         The first trial's error (its offset removed where it is not learned).
+    measured : Response, optional
+        The loop's response to the lead-in's probe: only the timings it agrees with are
+        allowed for (all of them where it agrees with none).
 
     Returns
     -------
@@ -271,7 +314,7 @@ def design_learning(
     s = check_float(slope_error, "slope_error", owner, 0.0, 0.99)
     dt = 1.0 / rate
     f = np.fft.rfftfreq(samples, dt)
-    timing, lag_error, ratios = _allowed(model, tau, tol, dt, f)
+    timing, lag_error, ratios, narrowed = _allowed(model, tau, tol, dt, f, measured)
     if cutoff == "auto":
         cuts = np.concatenate([np.geomspace(rate / samples, rate / 2, 60), [math.inf]])
     else:
@@ -310,6 +353,7 @@ def design_learning(
         sample_rate=rate,
         samples=int(samples),
         lag_error=lag_error,
+        probed=narrowed,
     )
 
 

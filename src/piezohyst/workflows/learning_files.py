@@ -72,6 +72,7 @@ def learn_file(
     sensor: bool = False,
     tolerance: float = 1e-4,
     lead_in: bool = True,
+    probe: bool = True,
     voltage_tolerance: float | None = None,
     force: bool = False,
 ) -> LearnFileResult:
@@ -101,7 +102,7 @@ def learn_file(
         domain and gain.
     leakage : path, optional
         A leakage file (:func:`~piezohyst.control.leakage.calibrate_leakage`); default the model's.
-    lag, learning_gain, cutoff, lead_in
+    lag, learning_gain, cutoff, lead_in, probe
         See :class:`~piezohyst.LearningCompensator`.
     voltage_tolerance : float, optional
         How far (V) the recorded voltage may stray from the commands; default from
@@ -166,6 +167,7 @@ def learn_file(
         learning_gain=learning_gain,
         cutoff=cutoff,
         lead_in=lead_in,
+        probe=probe,
     )
     trial = None
     check: dict[str, float] = {}
