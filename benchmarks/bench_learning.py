@@ -1,6 +1,7 @@
 """Learning from repetition: its targets on the bench behind a 4 ms amplifier, and its cost.
 
-Run: ``python benchmarks/bench_learning.py [--trials 10] [--figure learning.png]``.
+Run: ``python benchmarks/bench_learning.py [--trials 10] [--figure learning.png]``
+(``--plants [--only PLANT] [--slew V/s]`` for part 3).
 
 1. Targets (issue 27), on the bench's amplifier-lag preset ``T226-H4-203X-amp4ms`` with
    0.1 % noise on the charge: the leakage calibrated from 10 s holds up and down; an
@@ -38,6 +39,8 @@ from piezohyst.simulation import PRESETS, Bench, make_signal
 from piezohyst.workflows.excitation import excitation
 
 RATE = 1000.0
+#: the amplifier's slew limit (V/s); --slew changes it
+SLEW = 30e3
 
 
 def rig(preset: object = None, seed: int = 0) -> dict[str, object]:
@@ -84,7 +87,7 @@ def run(r: dict[str, object], model: ph.HysteresisModel, f: float, trials: int, 
         domain="displacement",
         gain=p.gain,
         lag=lag,
-        slew_rate=30e3,  # type: ignore[attr-defined]
+        slew_rate=SLEW,  # type: ignore[attr-defined]
     )
     bench = Bench(p, seed=seed, voltage=ilc.last_command)  # type: ignore[arg-type]
     scores, loops = [], []
@@ -121,13 +124,17 @@ def dense_update(
 
 
 def main() -> None:
+    global SLEW
     ap = argparse.ArgumentParser()
     ap.add_argument("--trials", type=int, default=10)
     ap.add_argument("--figure", default=None, help="write a figure (error per trial, loops)")
     ap.add_argument("--plants", action="store_true", help="the plants of other physics instead")
+    ap.add_argument("--only", default=None, help="with --plants: this plant alone")
+    ap.add_argument("--slew", type=float, default=SLEW, help="the slew limit, V/s (30e3)")
     args = ap.parse_args()
+    SLEW = args.slew
     if args.plants:
-        plants(args.trials)
+        plants(args.trials, args.only)
         return
     r = rig()
     print(f"bench {r['preset'].name} with 0.1 % charge noise; trials of 1 s; widths and "  # type: ignore[attr-defined]
@@ -212,7 +219,7 @@ def main() -> None:
         print(f"figure: {args.figure}")
 
 
-def plants(trials: int) -> None:
+def plants(trials: int, only: str | None = None) -> None:
     from piezohyst.simulation import PLANTS
 
     print(f"after {trials} trials: width, offset-free NRMSE of the true displacement, range over "
@@ -220,6 +227,8 @@ def plants(trials: int) -> None:
     print("| plant | model | scan | from the charge | from the laser |")
     print("|---|---|---|---|---|")
     for name, preset in PLANTS.items():
+        if only is not None and name != only:
+            continue
         if preset.amp_tau == 0:
             preset = replace(preset, amp_tau=4e-3)
         rigs = [rig(preset, seed) for seed in range(3)]

@@ -51,6 +51,8 @@ def test_the_probe_sits_between_the_scans_harmonics() -> None:
     others = np.delete(spec, bins)
     assert others.max() <= 1e-9 * spec[bins].max()  # nothing else: periodic over the trial
     assert probe_bins(_scan()[:50]).size == 0  # too short a trial: no probe
+    slow = probe_bins(_scan(1.0))  # one cycle a trial: every harmonic is the scan's
+    assert slow.size == 8 and np.unique(slow).size == 8 and slow.min() >= 2
 
 
 @pytest.mark.parametrize("seed", range(5))

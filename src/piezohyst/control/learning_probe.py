@@ -36,6 +36,9 @@ FREQUENCIES = 8
 USABLE = 0.5
 #: the drift fitted beside the sines reaches up to the lowest sine's frequency over this
 DRIFT = 3.0
+#: the scan's harmonics fitted beside the sines, the lowest this many (a slow scan has
+#: hundreds, and its error is small there; a 10 Hz scan of 1000 samples has 49)
+HARMONICS = 64
 #: the start of the lead-in not used (of the trial): the actuator's arrival leaves a transient
 #: whose fast part reaches the sines (on the two-state capacitor it doubled their phases'
 #: errors when the first 200 ms were used)
@@ -82,10 +85,12 @@ def probe_bins(desired: FloatArray) -> np.ndarray:
     low = max(math.ceil(1.5 * k0), 2)
     if top <= low:
         return np.zeros(0, dtype=int)
-    bins = []
+    bins: list[int] = []
     for k in np.geomspace(low, top, FREQUENCIES):
         b = round(float(k))
-        while b in bins or b % k0 == 0:  # distinct, off the scan's harmonics
+        # distinct, off the scan's harmonics (a scan of one cycle a trial has every harmonic:
+        # its own error is the same in both trials and falls out of their difference)
+        while b in bins or (k0 > 1 and b % k0 == 0):
             b += 1
         if b < n // 2:
             bins.append(b)
@@ -173,7 +178,9 @@ def response(
     u = (k - first + 0.5) / length
     columns += [np.cos(math.pi * j * u) for j in range(slow + 1)]
     k0 = scan_bin(desired)
-    for h in range(k0, n // 2, k0):  # the scan's own harmonics: what else the trials differ by
+    probed = set(bins.tolist())
+    scan = [h for h in range(k0, n // 2, k0) if h not in probed][:HARMONICS]
+    for h in scan:  # the scan's own harmonics: what else the two trials differ by
         columns += [np.cos(2 * math.pi * h * x), np.sin(2 * math.pi * h * x)]
     a = np.column_stack(columns)
     diff = (with_probe - without)[ok]
