@@ -24,16 +24,18 @@ lint: $(BIN)/.installed
 	$(BIN)/lint-imports
 
 # The tests, as CI runs them (.ci/run calls this target):
-#  1. every test once, compiled, on two workers, under coverage: numba's compiled kernels are
-#     invisible to coverage, so their lines count in step 2 only;
+#  1. every test once, compiled, on two workers (a file's tests on one: its module fixtures
+#     are built once), under coverage: numba's compiled kernels are invisible to coverage, so
+#     their lines count in step 2 only;
 #  2. the tests marked `kernels` (the kernels on small inputs) again with the JIT off, under
-#     coverage: what sees the kernels' Python lines (no end-to-end test runs uninterpreted);
+#     coverage: what sees the kernels' Python lines (no end-to-end test runs uninterpreted;
+#     Hypothesis tries a quarter of its examples there, tests/conftest.py);
 #  3. two gates on the combined data: all of src/ and the kernel modules, each >= 90 %.
 KERNEL_MODULES := */piezohyst/_kernels/*.py,*/piezohyst/simulation/_plant.py
 test: lint
 	@rm -f .coverage .coverage.*
-	$(BIN)/python -m pytest -n 2 -p no:cacheprovider -rs --durations=10 --cov --cov-report=
-	NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q -n 2 -p no:cacheprovider -m "kernels and not heavy" \
+	$(BIN)/python -m pytest -n 2 --dist loadfile -p no:cacheprovider -rs --durations=10 --cov --cov-report=
+	NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q -n 2 --dist loadfile -p no:cacheprovider -m "kernels and not heavy" \
 		--cov --cov-append --cov-report= tests
 	@printf 'line coverage of src/, both runs combined (gate 90): '
 	@$(BIN)/coverage report --fail-under=90 --format=total

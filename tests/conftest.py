@@ -2,9 +2,13 @@
 
 ``ci`` (the default, and what ``make test`` runs): derandomized, so every run of the suite
 tries the same examples on every machine, and no example database, so nothing a previous
-run found changes what this one tries. ``dev`` (``HYPOTHESIS_PROFILE=dev``): random,
-five times the examples, with the database, for a longer hunt before a change lands.
-A ``--hypothesis-seed`` on the command line picks the examples of either.
+run found changes what this one tries. With the JIT off (``make test``'s second run, which
+exists to see the kernels' Python lines, each example interpreted and traced by coverage)
+the ``ci`` profile tries a quarter of the examples: the compiled run has searched with all
+of them, and the first examples Hypothesis tries (the shrunk, simplest, and edge cases)
+reach the lines. ``dev`` (``HYPOTHESIS_PROFILE=dev``): random, five times the examples,
+with the database, for a longer hunt before a change lands. A ``--hypothesis-seed`` on the
+command line picks the examples of either.
 """
 
 from __future__ import annotations
@@ -16,7 +20,9 @@ from hypothesis import HealthCheck, settings
 
 # Kernels compile on first call (numba): no per-example deadline.
 _COMMON = {"deadline": None, "suppress_health_check": [HealthCheck.too_slow]}
-settings.register_profile("ci", max_examples=60, derandomize=True, database=None, **_COMMON)
+_JIT_OFF = os.environ.get("NUMBA_DISABLE_JIT", "0") not in ("", "0")
+settings.register_profile("ci", max_examples=15 if _JIT_OFF else 60, derandomize=True,
+                          database=None, **_COMMON)  # fmt: skip
 settings.register_profile("dev", max_examples=300, **_COMMON)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
