@@ -267,8 +267,8 @@ class OutputMap:
         s = np.asarray(displacement, dtype=np.float64)
         flat = s.reshape(-1)
         if self.monotone:
-            out, outside = self._invert_monotone(flat)
-            if outside:
+            out, beyond = self._invert_monotone(flat)
+            if beyond.any():
                 self._warn_outside(f"displacements {np.nanmin(flat):.4g} to {np.nanmax(flat):.4g}")
             return out.reshape(s.shape)
         out = np.full(flat.shape, np.nan)
@@ -278,7 +278,7 @@ class OutputMap:
                 out[i] = near = self._solve_branch(float(target), near, lo, hi)
         return out.reshape(s.shape)
 
-    def _invert_monotone(self, s: FloatArray) -> tuple[FloatArray, bool]:
+    def _invert_monotone(self, s: FloatArray) -> tuple[FloatArray, FloatArray]:
         """The charges for displacements on a monotone map (vectorised Newton inside the
         calibrated range, the linear extension beyond it); and whether any lay beyond."""
         if self.order == 1:
@@ -561,11 +561,11 @@ class Charges:
 
 def monotone_charges(
     s: Any, center: Any, scale: Any, c0: Any, c1: Any, edges: Any, inside_q: Any = None
-) -> tuple[FloatArray, bool]:
-    """Charges for displacements ``s`` on monotone maps, and whether any lay beyond their
-    calibrated displacements: inside, the linear map's ``center + scale (s - c0) / c1`` (or
-    ``inside_q``, a curved map's solution); beyond, the linear extension from the edge. Every
-    argument broadcasts, so one call serves a bank's channels, one map each.
+) -> tuple[FloatArray, FloatArray]:
+    """Charges for displacements ``s`` on monotone maps, and which (finite ones) lay beyond
+    their calibrated displacements: inside, the linear map's ``center + scale (s - c0) / c1``
+    (or ``inside_q``, a curved map's solution); beyond, the linear extension from the edge.
+    Every argument broadcasts, so one call serves a bank's channels, one map each.
 
     Parameters
     ----------
@@ -581,7 +581,7 @@ def monotone_charges(
 
     Returns
     -------
-    (ndarray, bool)
+    (ndarray, ndarray of bool)
     """
     lo, hi, s_lo, s_hi, d_lo, d_hi = edges
     rising = np.asarray(s_hi) > np.asarray(s_lo)
@@ -599,7 +599,7 @@ def monotone_charges(
     q = np.where(at_lo_end, lo + (s - s_lo) / d_lo, q)
     q = np.where(at_hi_end, hi + (s - s_hi) / d_hi, q)
     q = np.where(finite, q, np.nan)
-    return np.asarray(q), bool(np.any(below) or np.any(above))
+    return np.asarray(q), np.asarray(below | above)
 
 
 def _newey_west(x: FloatArray, e: FloatArray) -> tuple[FloatArray, int]:

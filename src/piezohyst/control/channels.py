@@ -459,11 +459,14 @@ class _MapFront:
     def __call__(self, desired: FloatArray) -> FloatArray:
         out = desired.copy()
         if self.linear.size:
-            q, outside = monotone_charges(desired[..., self.linear], self.center, self.scale,
-                                          self.c0, self.c1, self.edges)  # fmt: skip
+            q, beyond = monotone_charges(desired[..., self.linear], self.center, self.scale,
+                                         self.c0, self.c1, self.edges)  # fmt: skip
             out[..., self.linear] = q
-            if outside:
-                self._count(desired[..., self.linear])
+            if beyond.any():
+                per = beyond.reshape(-1, self.linear.size).sum(axis=0)
+                for charges, n in zip(self.counted, per, strict=True):  # each channel's count
+                    assert charges is not None
+                    charges.outside += int(n)
                 warnings.warn(
                     "BankCompensator: desired displacements lie outside their channels' "
                     "calibrated ranges; each map is extended linearly from its edge there "
@@ -476,17 +479,6 @@ class _MapFront:
             column = np.ascontiguousarray(desired[..., i]).reshape(-1)
             out[..., i] = charges.block(column).reshape(desired[..., i].shape)
         return out
-
-    def _count(self, desired: FloatArray) -> None:
-        """Add the desired values beyond each linear channel's calibrated displacements to
-        that channel's count (:attr:`Compensator.extrapolated_count`)."""
-        s_lo, s_hi = self.edges[2], self.edges[3]
-        low, high = np.minimum(s_lo, s_hi), np.maximum(s_lo, s_hi)
-        beyond = np.isfinite(desired) & ((desired < low) | (desired > high))
-        per = beyond.reshape(-1, self.linear.size).sum(axis=0)
-        for charges, n in zip(self.counted, per, strict=True):
-            assert charges is not None
-            charges.outside += int(n)
 
 
 class BankController(ChannelBank[SelfSensingController]):

@@ -128,11 +128,15 @@ def probe_signal(bins: np.ndarray, samples: int, span: float) -> FloatArray:
     """
     k = np.arange(samples)
     out = np.zeros(samples)
-    m = bins.size
-    for j, b in enumerate(bins):
-        phase = -math.pi * j * (j + 1) / max(m, 1)
+    for b, phase in zip(bins, _phases(bins.size), strict=True):
         out += np.cos(2 * math.pi * b * k / samples + phase)
     return AMPLITUDE * span * out
+
+
+def _phases(m: int) -> FloatArray:
+    """Schroeder's phases of ``m`` sines (a low crest factor): the probe's, and its fit's."""
+    j = np.arange(m)
+    return -math.pi * j * (j + 1) / max(m, 1)
 
 
 def response(
@@ -168,8 +172,7 @@ def response(
     x = k / n
     m = bins.size
     columns = []
-    for j, b in enumerate(bins):
-        phase = -math.pi * j * (j + 1) / max(m, 1)
+    for b, phase in zip(bins, _phases(m), strict=True):
         columns += [np.cos(2 * math.pi * b * x + phase), np.sin(2 * math.pi * b * x + phase)]
     # what the lead-in's arrival leaves: a slow drift (creep, relaxation), below a third of the
     # lowest sine; a cosine series over the usable stretch (a drift need not be periodic)
