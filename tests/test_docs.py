@@ -7,19 +7,31 @@ must appear in what the command printed, so the docs cannot drift from the
 code. A block preceded by ``<!-- docs-test: skip REASON -->`` is not run (the
 reason must say why: hardware, measured data not shipped, or a command that
 would run this test suite itself).
+
+A console line that is a plain ``piezohyst`` command (no pipe, redirection,
+variable or second command) runs in this process, through the CLI's own entry
+point (``click``'s runner, warnings shown as a user's process shows them): the
+same code path without starting Python and loading the compiled kernels again
+for each of the ~40 documented commands. Every other line runs in ``bash``; the
+installed console script itself is run as a subprocess in tests/cli.
 """
 
 from __future__ import annotations
 
 import os
 import re
+import shlex
 import shutil
 import subprocess
 import sys
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from click.testing import CliRunner
+
+from piezohyst.cli import main as cli_main
 
 ROOT = Path(__file__).resolve().parent.parent
 FILES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
@@ -29,6 +41,8 @@ SKIP = re.compile(r"<!--\s*docs-test:\s*skip\s+(.+?)\s*-->")
 NEEDS_CC = re.compile(r"<!--\s*docs-test:\s*needs a C compiler\s*-->")
 HAS_CC = any(shutil.which(name) for name in ("cc", "gcc", "clang"))
 RUNNABLE = {"python", "sh", "bash", "console"}
+#: what makes a console line need a shell
+SHELL_SYNTAX = re.compile(r"[|&;<>$`*?(){}\[\]~]")
 
 
 @dataclass(frozen=True)
@@ -70,6 +84,22 @@ def _env(tmp: Path) -> dict[str, str]:
     return env
 
 
+def _in_process(command: str) -> tuple[int, str] | None:
+    """Exit status and output of a plain ``piezohyst`` command run in this process (None:
+    the line needs a shell)."""
+    if SHELL_SYNTAX.search(command):
+        return None
+    args = shlex.split(command)
+    if not args or args[0] != "piezohyst":
+        return None
+    with warnings.catch_warnings():
+        warnings.resetwarnings()  # as a user's process: the suite's warnings-as-errors off
+        res = CliRunner().invoke(cli_main, args[1:], prog_name="piezohyst")
+    if res.exception is not None and not isinstance(res.exception, SystemExit):
+        raise res.exception
+    return res.exit_code, res.output
+
+
 def _run_console(block: Block, cwd: Path, where: str) -> None:
     commands: list[tuple[str, list[str]]] = []
     for line in block.text.splitlines():
@@ -82,13 +112,15 @@ def _run_console(block: Block, cwd: Path, where: str) -> None:
         if command.strip() == "echo $?":
             got = f"{last_status}"
         else:
-            res = subprocess.run(
-                ["bash", "-c", command], cwd=cwd, env=_env(cwd), capture_output=True, text=True
-            )
-            last_status = res.returncode
-            got = res.stdout + res.stderr
+            ran = _in_process(command)
+            if ran is None:
+                res = subprocess.run(
+                    ["bash", "-c", command], cwd=cwd, env=_env(cwd), capture_output=True, text=True
+                )
+                ran = (res.returncode, res.stdout + res.stderr)
+            last_status, got = ran
             if not any(e.startswith("error:") for e in expected):
-                assert res.returncode == 0, f"{where}: `{command}` failed:\n{got}"
+                assert last_status == 0, f"{where}: `{command}` failed:\n{got}"
         for line in expected:
             if line.strip():
                 assert line.strip() in got, f"{where}: `{command}` did not print {line!r}:\n{got}"
