@@ -17,6 +17,7 @@ def demo_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, 
     out = tmp_path_factory.mktemp("demo") / "report"
     result = CliRunner().invoke(main, ["demo", "--out", str(out)])
     assert result.exit_code == 0, result.output
+    (out.parent / "console.txt").write_text(result.output)  # what the user saw
     return out, json.loads((out / "metrics.json").read_text())
 
 
@@ -75,6 +76,26 @@ def test_demo_compares_the_models(demo_run: tuple[Path, dict[str, Any]]) -> None
             )
             assert by[(model, exc)]["width_after_S_pct"] <= 1.5
     assert "## Model comparison" in (out / "report.md").read_text()
+
+
+def test_the_limits_that_bite_name_the_model_they_bit(
+    demo_run: tuple[Path, dict[str, Any]],
+) -> None:
+    """The classical model's charge drifts, so its compensator asks for voltages beyond the
+    bench's: the report's column counts what the limits held, and the console's warnings say
+    whose commands they were."""
+    out, m = demo_run
+    by = {(r["model"], r["excitation"]): r for r in m["model_comparison"]}
+    for exc in ("hold", "levels"):
+        classical = by[("classical PI", exc)]
+        assert classical["held_voltage_pct"] + classical["held_slew_pct"] > 1.0  # it bit
+        for model in ("active PI (paper)", "generalized PI"):
+            assert by[(model, exc)]["held_voltage_pct"] + by[(model, exc)]["held_slew_pct"] < 1.0
+    assert "held: voltage / slew" in (out / "report.md").read_text()
+    said = [line for line in (out.parent / "console.txt").read_text().splitlines()
+            if "limit" in line and "held" in line]  # fmt: skip
+    assert said  # a limit that bites says so
+    assert all(line.startswith("warning: classical PI, identified on ") for line in said), said
 
 
 def test_demo_goes_beyond_pi_on_minor_loops(demo_run: tuple[Path, dict[str, Any]]) -> None:
