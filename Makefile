@@ -8,12 +8,10 @@ OUT    ?= demo-report
 
 .PHONY: demo test lint bench clean
 
-# --no-compile: pip would byte-compile every installed package (16 s of the install measured on a
-# 2-core machine); Python compiles the modules a run imports, once, when it first imports them.
 $(BIN)/.installed: pyproject.toml
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "piezohyst needs Python >= 3.11, found " + sys.version.split()[0]'
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check --no-compile -e '.[test]'
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[test]'
 	@touch $@
 
 demo: $(BIN)/.installed
