@@ -48,7 +48,7 @@ UNCOMPILED = bool(numba.config.DISABLE_JIT)
 
 @pytest.fixture(scope="module")
 def record() -> Any:
-    return ph.simulate(signal="decaying", duration=6.0 if UNCOMPILED else 24.0, seed=3)
+    return ph.simulate(signal="decaying", duration=3.0 if UNCOMPILED else 24.0, seed=3)
 
 
 @pytest.fixture(scope="module")
