@@ -32,10 +32,13 @@ lint: $(BIN)/.installed
 #     Hypothesis tries a quarter of its examples there, tests/conftest.py);
 #  3. two gates on the combined data: all of src/ and the kernel modules, each >= 90 %.
 KERNEL_MODULES := */piezohyst/_kernels/*.py,*/piezohyst/simulation/_plant.py
+# Each worker's BLAS on one thread: the two workers fill the two cores, and BLAS threads on top
+# had four threads share two (the compiled run, warm: 142-145 s with them, 125-127 s without)
+ONE_THREAD := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 test: lint
 	@rm -f .coverage .coverage.*
-	$(BIN)/python -m pytest -n 2 --dist loadfile -p no:cacheprovider -rs --durations=10 --cov --cov-report=
-	NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q -n 2 --dist loadfile -p no:cacheprovider -m "kernels and not heavy" \
+	$(ONE_THREAD) $(BIN)/python -m pytest -n 2 --dist loadfile -p no:cacheprovider -rs --durations=10 --cov --cov-report=
+	$(ONE_THREAD) NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q -n 2 --dist loadfile -p no:cacheprovider -m "kernels and not heavy" \
 		--cov --cov-append --cov-report= tests
 	@printf 'line coverage of src/, both runs combined (gate 90): '
 	@$(BIN)/coverage report --fail-under=90 --format=total
