@@ -96,6 +96,11 @@ def test_the_limits_that_bite_name_the_model_they_bit(
             if "limit" in line and "held" in line]  # fmt: skip
     assert said  # a limit that bites says so
     assert all(line.startswith("warning: classical PI, identified on ") for line in said), said
+    # and every warning the demo prints names what it is about (the extrapolations too)
+    warned = [line for line in (out.parent / "console.txt").read_text().splitlines()
+              if line.startswith("warning:")]  # fmt: skip
+    named = ("warning: classical PI, identified on ", "warning: minor loops, ")
+    assert all(line.startswith(named) for line in warned), warned
 
 
 def test_demo_goes_beyond_pi_on_minor_loops(demo_run: tuple[Path, dict[str, Any]]) -> None:

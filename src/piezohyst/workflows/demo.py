@@ -317,12 +317,12 @@ def _model_comparison(
     return rows
 
 
-def _said_by(who: str, work: Callable[..., Any], *args: Any) -> Any:
-    """``work(*args)``, each warning it gives said again with ``who`` in front (a report
+def _said_by(who: str, work: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+    """``work(*args, **kwargs)``, each warning it gives said again with ``who`` in front (a report
     runs many compensators: a limit that bites names the one it bit)."""
     with warnings.catch_warnings(record=True) as said:
         warnings.simplefilter("always")
-        out = work(*args)
+        out = work(*args, **kwargs)
     for w in said:
         warnings.warn(f"{who}: {w.message}", w.category, stacklevel=3)
     return out
@@ -371,12 +371,13 @@ def _minor_loop_study(*, gain: float, seed: int, preset: str) -> dict[str, Any]:
             keep = slice(0, None) if label == "decaying" else slice(int(2 * p.rate), None)
             widths[label] = 100 * hysteresis_width(gain * q_des[keep], run.displacement[1:][keep])
             outside[label] = int(getattr(comp, "outside_count", 0))
+        predicted = _said_by(f"minor loops, {name} on the held-out record", model.predict,
+                             held.voltage, t=held.t)  # fmt: skip
         rows.append(
             {
                 "model": name,
                 "train_nrmse_pct": 100 * model.nrmse_,
-                "heldout_nrmse_pct": 100
-                * nrmse(held.charge, model.predict(held.voltage, t=held.t)),
+                "heldout_nrmse_pct": 100 * nrmse(held.charge, predicted),
                 "width_decaying_S_pct": widths["decaying"],
                 "width_steady_S_pct": widths["steady"],
                 "outside_region": outside,
