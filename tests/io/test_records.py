@@ -304,6 +304,34 @@ def test_a_mat_struct_of_signals_and_a_matrix_of_columns(
     assert fits == pytest.approx([direct] * 3, rel=1e-9)
 
 
+def test_a_nested_struct_s_fields_are_named_as_matlab_writes_them(
+    tmp_path: Path, bench: ph.simulation.BenchRecord
+) -> None:
+    """A struct holding another struct is read as paths (run/Vout); a MATLAB user writes the
+    field run.Vout, and both name the same column (the time too); a field that is not there
+    is refused by name, listing the ones that are."""
+    from scipy.io import savemat
+
+    t, v, q = bench.t[:3000], bench.voltage[:3000], bench.charge[:3000]
+    savemat(tmp_path / "n.mat", {"run": {"time": t, "Vout": v, "Q": q, "meta": {"rate": 1e3}}})
+    runner = CliRunner()
+    fits = []
+    for k, sep in enumerate((".", "/")):
+        cols = [f"run{sep}Vout", f"run{sep}Q", f"run{sep}time"]
+        args = ["--input", cols[0], "--output", cols[1], "--time", cols[2]]
+        out = str(tmp_path / f"m{k}.json")
+        res = runner.invoke(main, ["fit", str(tmp_path / "n.mat"), *args, "--model",
+                                   "classical-pi", "-o", out])  # fmt: skip
+        assert res.exit_code == 0, res.output
+        fits.append(ph.load_model(out).nrmse_)
+    assert fits[0] == fits[1]  # the same column, read the same way
+    args = ["--input", "run.Vx", "--output", "run.Q", "--time", "run.time"]
+    wrong = runner.invoke(main, ["fit", str(tmp_path / "n.mat"), *args, "-o",
+                                 str(tmp_path / "x.json")])  # fmt: skip
+    assert wrong.exit_code == 1
+    assert "no column 'run.Vx'; available: 'run/time', 'run/Vout', 'run/Q'" in wrong.output
+
+
 def test_a_second_file_holding_one_signal_needs_no_name(
     tmp_path: Path, bench: ph.simulation.BenchRecord
 ) -> None:

@@ -626,11 +626,8 @@ def open_recording(
                 "given too; use one of them"
             )
             raise DataFileError(msg)
-    elif time is not None and (time in table or (time != "time" and time.isdigit())):
-        t_name = table.resolve(time)
-    elif time is not None and time != "time":
-        table.resolve(time)  # raises: names the available columns
-        raise AssertionError  # pragma: no cover
+    elif time is not None and (time in table or time != "time"):  # a named one must be there
+        t_name = table.resolve(time)  # (resolve names the available columns where it is not)
     elif table.time_step is not None:
         step = table.time_step
     elif t_start is None and t_stop is None:  # enough for a rate-independent model

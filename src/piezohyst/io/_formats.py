@@ -11,7 +11,7 @@ import dataclasses
 import io as _io
 import logging
 import re
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Container, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -76,7 +76,8 @@ class Table:
         return self.units.get(name)
 
     def resolve(self, key: str) -> str:
-        """A column name from a name or a 0-based index given as digits.
+        """A column name from a name or a 0-based index given as digits (a nested MATLAB
+        field also as MATLAB writes it: ``run.Vout`` for ``run/Vout``).
 
         Parameters
         ----------
@@ -91,6 +92,9 @@ class Table:
         bare, unit = split_unit(key)
         if unit is not None and bare in self._getters and self.units.get(bare) == unit:
             return bare
+        field = _dotted(key, self._getters)  # a MATLAB struct's field as MATLAB writes it
+        if field is not None:
+            return field
         if key.strip().lstrip("-").isdigit():
             i = int(key)
             if 0 <= i < len(self.columns):
@@ -682,6 +686,13 @@ RATE_NAMES = ("fs", "rate", "sample_rate", "sampling_rate", "samplerate", "sampl
 STEP_NAMES = ("dt", "ts", "sample_interval", "sampling_interval", "wf_increment")
 
 
+def _dotted(key: str, columns: Container[str]) -> str | None:
+    """The column ``key`` names as MATLAB writes a nested field (``run.Vout`` for the column
+    ``run/Vout``), or None."""
+    path = key.replace(".", "/")
+    return path if "." in key and path in columns else None
+
+
 def _grouped(
     path: Path, found: Mapping[str, object], kind: str, group: str | None, channels: Sequence[str]
 ) -> Table:
@@ -706,7 +717,8 @@ def _grouped(
         }
     else:
         picked = dict(columns)
-        asked = [c.rpartition("/")[0] for c in channels if c in columns]
+        named = [c if c in columns else _dotted(c, columns) for c in channels]
+        asked = [c.rpartition("/")[0] for c in named if c is not None and c in columns]
         home = asked[0] if asked else (groups[0] if len(groups) == 1 else None)
     table = _table_from_arrays(path, picked, kind)
     units = {
