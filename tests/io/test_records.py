@@ -332,6 +332,22 @@ def test_a_nested_struct_s_fields_are_named_as_matlab_writes_them(
     assert "no column 'run.Vx'; available: 'run/time', 'run/Vout', 'run/Q'" in wrong.output
 
 
+def test_a_time_column_named_with_its_unit(
+    tmp_path: Path, bench: ph.simulation.BenchRecord
+) -> None:
+    """'--time "t [s]"' names the column t whose header gives it in s, as '--input "v [V]"'
+    names v (it ended in an internal error when the time was the one named so)."""
+    data = tmp_path / "u.csv"
+    n = 3000
+    rows = np.column_stack([bench.t[:n], bench.voltage[:n], bench.charge[:n]])
+    data.write_text(
+        "t [s],v [V],q [C]\n" + "\n".join(",".join(f"{x!r}" for x in r.tolist()) for r in rows)
+    )
+    res = CliRunner().invoke(main, ["fit", str(data), "--input", "v [V]", "--output", "q",
+                                    "--time", "t [s]", "-o", str(tmp_path / "m.json")])  # fmt: skip
+    assert res.exit_code == 0, res.output
+
+
 def test_a_second_file_holding_one_signal_needs_no_name(
     tmp_path: Path, bench: ph.simulation.BenchRecord
 ) -> None:
