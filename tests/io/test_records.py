@@ -332,6 +332,31 @@ def test_a_nested_struct_s_fields_are_named_as_matlab_writes_them(
     assert "no column 'run.Vx'; available: 'run/time', 'run/Vout', 'run/Q'" in wrong.output
 
 
+def test_a_column_in_one_group_is_found_by_its_own_name(
+    tmp_path: Path, bench: ph.simulation.BenchRecord
+) -> None:
+    """An HDF5 file whose one group holds time, voltage and charge fits with no names (and the
+    charge in C, its default unit); where two groups each hold a voltage, the name is
+    ambiguous and refused, listing the paths."""
+    import h5py
+
+    t, v, q = bench.t[:3000], bench.voltage[:3000], bench.charge[:3000]
+    with h5py.File(tmp_path / "one.h5", "w") as h:
+        g = h.create_group("run 1")
+        g["time"], g["voltage"], g["charge"] = t, v, q
+    with h5py.File(tmp_path / "two.h5", "w") as h:
+        for name in ("run 1", "run 2"):
+            g = h.create_group(name)
+            g["time"], g["voltage"], g["charge"] = t, v, q
+    runner = CliRunner()
+    res = runner.invoke(main, ["fit", str(tmp_path / "one.h5"), "-o", str(tmp_path / "a.json")])
+    assert res.exit_code == 0, res.output
+    assert ph.load_model(tmp_path / "a.json").output_unit == "C"
+    res = runner.invoke(main, ["fit", str(tmp_path / "two.h5"), "-o", str(tmp_path / "b.json")])
+    assert res.exit_code == 1
+    assert "no column 'voltage'; available: 'run 1/charge'" in res.output
+
+
 def test_a_time_column_named_with_its_unit(
     tmp_path: Path, bench: ph.simulation.BenchRecord
 ) -> None:

@@ -611,8 +611,9 @@ def open_recording(
     if output is not None and (output_required or output in table or output != "charge"):
         y_name = table.resolve(output)
     time = time_column
-    if time == "time" and time not in table:  # the default name in any case ('Time', aixACCT)
-        time = next((c for c in table.columns if c.lower() == "time"), time)
+    if time == "time" and time not in table:  # the default name in any case ('Time', aixACCT),
+        # or in the file's one group that has it
+        time = next((c for c in table.columns if c.lower() == "time"), table.find(time) or time)
     t_name: str | None = None
     step: float | None = None
     untimed = False

@@ -11,7 +11,7 @@ import dataclasses
 import io as _io
 import logging
 import re
-from collections.abc import Callable, Container, Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -75,6 +75,22 @@ class Table:
         """
         return self.units.get(name)
 
+    def find(self, key: str) -> str | None:
+        """The column ``key`` names (:meth:`resolve`), or None where there is none.
+
+        Parameters
+        ----------
+        key : str
+
+        Returns
+        -------
+        str or None
+        """
+        try:
+            return self.resolve(key)
+        except DataFileError:
+            return None
+
     def resolve(self, key: str) -> str:
         """A column name from a name or a 0-based index given as digits (a nested MATLAB
         field also as MATLAB writes it: ``run.Vout`` for ``run/Vout``).
@@ -92,7 +108,7 @@ class Table:
         bare, unit = split_unit(key)
         if unit is not None and bare in self._getters and self.units.get(bare) == unit:
             return bare
-        field = _dotted(key, self._getters)  # a MATLAB struct's field as MATLAB writes it
+        field = _field(key, self._getters)  # a nested field by MATLAB's name, or its own
         if field is not None:
             return field
         if key.strip().lstrip("-").isdigit():
@@ -686,11 +702,16 @@ RATE_NAMES = ("fs", "rate", "sample_rate", "sampling_rate", "samplerate", "sampl
 STEP_NAMES = ("dt", "ts", "sample_interval", "sampling_interval", "wf_increment")
 
 
-def _dotted(key: str, columns: Container[str]) -> str | None:
-    """The column ``key`` names as MATLAB writes a nested field (``run.Vout`` for the column
-    ``run/Vout``), or None."""
+def _field(key: str, columns: Iterable[str]) -> str | None:
+    """The column of a grouped file ``key`` names without being its path, or None: a nested
+    field as MATLAB writes it (``run.Vout`` for ``run/Vout``), or the short name of the one
+    column that has it (``voltage`` for ``run 1/voltage`` when no other group has one)."""
+    names = list(columns)
     path = key.replace(".", "/")
-    return path if "." in key and path in columns else None
+    if "." in key and path in names:
+        return path
+    short = [c for c in names if "/" in c and c.rpartition("/")[2] == key]
+    return short[0] if len(short) == 1 else None
 
 
 def _grouped(
@@ -717,7 +738,7 @@ def _grouped(
         }
     else:
         picked = dict(columns)
-        named = [c if c in columns else _dotted(c, columns) for c in channels]
+        named = [c if c in columns else _field(c, columns) for c in channels]
         asked = [c.rpartition("/")[0] for c in named if c is not None and c in columns]
         home = asked[0] if asked else (groups[0] if len(groups) == 1 else None)
     table = _table_from_arrays(path, picked, kind)
