@@ -337,7 +337,8 @@ def test_a_column_in_one_group_is_found_by_its_own_name(
 ) -> None:
     """An HDF5 file whose one group holds time, voltage and charge fits with no names (and the
     charge in C, its default unit); where two groups each hold a voltage, the name is
-    ambiguous and refused, listing the paths."""
+    ambiguous and refused, listing the paths; a TDMS file's 'Voltage' and 'Charge' are found
+    by the default names."""
     import h5py
 
     t, v, q = bench.t[:3000], bench.voltage[:3000], bench.charge[:3000]
@@ -355,6 +356,16 @@ def test_a_column_in_one_group_is_found_by_its_own_name(
     res = runner.invoke(main, ["fit", str(tmp_path / "two.h5"), "-o", str(tmp_path / "b.json")])
     assert res.exit_code == 1
     assert "no column 'voltage'; available: 'run 1/charge'" in res.output
+    # a LabVIEW file's channels named in capitals: the default names find them
+    from nptdms import ChannelObject, TdmsWriter
+
+    wave = {"wf_increment": 1e-3}
+    with TdmsWriter(tmp_path / "lv.tdms") as w:
+        w.write_segment([ChannelObject("Measure", "Voltage", v, properties=wave),
+                         ChannelObject("Measure", "Charge", q, properties=wave)])  # fmt: skip
+    res = runner.invoke(main, ["fit", str(tmp_path / "lv.tdms"), "-o", str(tmp_path / "c.json")])
+    assert res.exit_code == 0, res.output
+    assert ph.load_model(tmp_path / "c.json").output_unit == "C"
 
 
 def test_a_time_column_named_with_its_unit(

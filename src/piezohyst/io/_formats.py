@@ -703,15 +703,22 @@ STEP_NAMES = ("dt", "ts", "sample_interval", "sampling_interval", "wf_increment"
 
 
 def _field(key: str, columns: Iterable[str]) -> str | None:
-    """The column of a grouped file ``key`` names without being its path, or None: a nested
-    field as MATLAB writes it (``run.Vout`` for ``run/Vout``), or the short name of the one
-    column that has it (``voltage`` for ``run 1/voltage`` when no other group has one)."""
+    """The column ``key`` names without being it, or None: a nested field as MATLAB writes
+    it (``run.Vout`` for ``run/Vout``); the short name of the one column that has it
+    (``voltage`` for ``run 1/voltage`` when no other group has one); else the one column
+    whose name, or short name, is ``key`` in another case (``Voltage`` for ``voltage``, as a
+    LabVIEW channel is often named)."""
     names = list(columns)
     path = key.replace(".", "/")
     if "." in key and path in names:
         return path
-    short = [c for c in names if "/" in c and c.rpartition("/")[2] == key]
-    return short[0] if len(short) == 1 else None
+    for same in (str.__eq__, lambda a, b: a.casefold() == b.casefold()):
+        hits = {c for c in names if same(c, key) or same(c.rpartition("/")[2], key)}
+        if len(hits) == 1:
+            return hits.pop()
+        if hits:
+            return None  # more than one: the name does not say which
+    return None
 
 
 def _grouped(

@@ -75,7 +75,8 @@ _DEFAULT_SETTINGS = CompensatorSettings()  # frozen: safe as a shared default
 def _default_unit(column: str | None) -> str:
     """The unit of an output column that names none: piezohyst's own names (a grouped file's
     too: ``run 1/charge``), else arbitrary."""
-    return {"charge": "C", "displacement": "m"}.get((column or "").rpartition("/")[2], "a.u.")
+    short = (column or "").rpartition("/")[2].casefold()
+    return {"charge": "C", "displacement": "m"}.get(short, "a.u.")
 
 
 def _check_measured_unit(unit: str | None, model: HysteresisModel, data: PathLike) -> None:
