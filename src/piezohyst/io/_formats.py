@@ -92,8 +92,9 @@ class Table:
             return None
 
     def resolve(self, key: str) -> str:
-        """A column name from a name or a 0-based index given as digits (a nested MATLAB
-        field also as MATLAB writes it: ``run.Vout`` for ``run/Vout``).
+        """A column name from a name or a 0-based index given as digits; where only one
+        column fits, also a nested MATLAB field as MATLAB writes it (``run.Vout`` for
+        ``run/Vout``), a grouped file's column by its own name, or a name in another case.
 
         Parameters
         ----------
@@ -746,7 +747,7 @@ def _grouped(
     else:
         picked = dict(columns)
         named = [c if c in columns else _field(c, columns) for c in channels]
-        asked = [c.rpartition("/")[0] for c in named if c is not None and c in columns]
+        asked = [c.rpartition("/")[0] for c in named if c is not None]
         home = asked[0] if asked else (groups[0] if len(groups) == 1 else None)
     table = _table_from_arrays(path, picked, kind)
     units = {
