@@ -26,7 +26,7 @@ from ..control.fmu import write_fmu
 from ..control.leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
 from ..control.selfsensing import LoopSettings
 from ..control.shared import write_mex, write_shared
-from ..errors import DataFileError, ExtrapolationWarning, ParameterError
+from ..errors import DataFileError, ExtrapolationWarning, LimitWarning, ParameterError
 from ..io import (
     DataSpec,
     Table,
@@ -253,9 +253,11 @@ def _needed_span(comp: Compensator, desired: Iterator[FloatArray]) -> tuple[floa
     probe = copy.deepcopy(comp)
     probe.precondition(3)  # from a preconditioned state, as the commands will be
     lo, hi = math.inf, -math.inf
-    for values in desired:
-        commands = probe.process(values)
-        lo, hi = min(lo, float(commands.min())), max(hi, float(commands.max()))
+    with warnings.catch_warnings():  # the limits that bite are said once, by the real run
+        warnings.simplefilter("ignore", LimitWarning)
+        for values in desired:
+            commands = probe.process(values)
+            lo, hi = min(lo, float(commands.min())), max(hi, float(commands.max()))
     if not lo < hi:
         return comp.v_min, comp.v_max
     margin = PRECONDITION_MARGIN * (hi - lo)
