@@ -78,6 +78,29 @@ def test_compensation_in_metres_with_the_sensor_unplugged() -> None:
     assert np.allclose([step.step(float(d)) for d in desired[:300]], commands[:300], atol=1e-9)
 
 
+def test_a_loop_beyond_the_map_is_warned_once_and_every_target_counted() -> None:
+    """Stepped one sample at a time (a control loop), targets beyond the calibrated range
+    warn once, not at every sample (3000 lines of it from simulate-loop before), and each is
+    counted; a reset starts the run, and its one warning, again."""
+    rec = ph.simulate(signal="multi", duration=8.0, seed=1)
+    model = _quiet_fit(ph.ActivePI(), rec)
+    om = ph.calibrate_gain(model, rec.voltage, rec.charge, rec.displacement, rec.t)
+    lo, hi = om.displacement_range()
+    desired = hi + (hi - lo) * np.linspace(0.01, 0.05, 200)  # every one beyond
+    lims = model.input_range_
+    comp = ph.Compensator(model, v_min=lims[0], v_max=lims[1], sample_rate=1000.0,
+                          output_map=om, slew_rate=None)  # fmt: skip
+    for _ in range(2):
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always")
+            for d in desired:
+                comp.step(float(d))
+        beyond = [w for w in said if issubclass(w.category, ph.ExtrapolationWarning)]
+        assert len(beyond) == 1 and "not said again" in str(beyond[0].message)
+        assert comp.extrapolated_count == desired.size
+        comp.reset()
+
+
 def test_the_butterfly_is_named_and_kept_to_its_branch() -> None:
     rng = np.random.default_rng(0)
     t = np.arange(4000) * 1e-3

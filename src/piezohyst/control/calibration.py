@@ -480,6 +480,7 @@ class Charges:
         #: desired displacements beyond the calibrated ones since the last reset (the map
         #: extended linearly from its edge there, or out of reach on a map that turns)
         self.outside = 0
+        self._said = False  # the first of them since the last reset was warned about
         lo_s, hi_s = (output_map.edges()[2:4] if output_map.monotone
                       else output_map.displacement_range())  # fmt: skip
         self._reach = (min(lo_s, hi_s), max(lo_s, hi_s))
@@ -520,6 +521,7 @@ class Charges:
         """Forget the branch and the count (a compensator's reset)."""
         self.last = None
         self.outside = 0
+        self._said = False
 
     def block(self, desired: FloatArray) -> FloatArray:
         """The charges for a block of desired displacements (NaN stays NaN).
@@ -532,10 +534,20 @@ class Charges:
         -------
         ndarray
         """
-        q = self.output_map.inverse(desired, near=self.last)
+        with warnings.catch_warnings():  # said here, once a run (a loop steps sample by sample)
+            warnings.simplefilter("ignore", ExtrapolationWarning)
+            q = self.output_map.inverse(desired, near=self.last)
         low, high = self._reach
         beyond = np.isfinite(desired) & ((desired < low) | (desired > high))  # NaN, inf: held
         self.outside += int(np.count_nonzero(beyond))
+        if beyond.any() and not self._said:
+            self._said = True
+            far = desired[beyond]
+            self.output_map._warn_outside(
+                f"desired displacements from {far.min():.4g} to {far.max():.4g} "
+                f"{self.output_map.output_unit} (the first since the start: later ones are "
+                "counted, extrapolated_count, not said again)"
+            )
         done = q[np.isfinite(q)]
         if done.size:
             self.last = float(done[-1])
