@@ -363,6 +363,16 @@ def test_command_line_loop(tmp_path: Path) -> None:
         *common, "-o", tmp_path / "ff.csv",
     )  # fmt: skip
     assert code == 0, err
+    # the same target in uC, as its header says: read as compensate reads it, the same run
+    ph.write_table(tmp_path / "target_uc.csv", {"time": t, "desired": target * 1e6},
+                   units={"time": "s", "desired": "uC"})  # fmt: skip
+    code, uc_out, err = run(
+        "simulate-loop", tmp_path / "m.json", tmp_path / "target_uc.csv", "--feedforward",
+        *common, "-o", tmp_path / "ff_uc.csv",
+    )  # fmt: skip
+    assert code == 0, err
+    # tol: the target scaled by 1e6 and back, rounding only: the same printed width
+    assert uc_out.split("width")[1] == ff_out.split("width")[1]
     code, cl_out, err = run(
         "simulate-loop", tmp_path / "m.json", tmp_path / "target.csv",
         "--leakage", tmp_path / "leak.json", *common, "-o", tmp_path / "cl.csv",
