@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -238,6 +239,24 @@ def test_a_target_out_of_reach_says_which_limit(slow_model: ph.ActivePI) -> None
     comp = ph.Compensator(slow_model, v_min=20.0, v_max=120.0, slew_rate=None)
     with pytest.warns(ph.errors.LimitWarning, match=r"voltage limits \[20, 120\] V held"):
         comp.process(_scan(slow_model, 0.5, 0.0, 1.0))
+
+
+def test_a_share_held_never_exceeds_the_commands_given(slow_model: ph.ActivePI) -> None:
+    """A target out of reach from the first sample, approached at the slew limit: the voltage
+    limits held every command, the approach too, so their share is of every command (it read
+    'held 800 of 164 commands (487.8 %)': the slew limit's count starts on the trajectory)."""
+    lo, hi = slow_model.input_range_
+    comp = ph.Compensator(slow_model, v_min=lo, v_max=hi, sample_rate=1000.0,
+                          slew_rate=0.2 * (hi - lo))  # fmt: skip
+    beyond = float(slow_model.hysteresis_.predict(np.array([hi]))[0]) * 10.0
+    with pytest.warns(ph.errors.LimitWarning) as said:
+        for _ in range(2000):
+            comp.step(beyond)
+    text = str(said[0].message)
+    held, given = (
+        int(n) for n in re.search(r"voltage limits .* held (\d+) of (\d+)", text).groups()
+    )
+    assert 0 < held <= given, text
 
 
 def test_the_shell_counts_what_the_limits_held(tmp_path: Path, slow_model: ph.ActivePI) -> None:

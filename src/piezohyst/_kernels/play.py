@@ -266,14 +266,17 @@ def compensator_step(desired, tables, config, state):  # type: ignore[no-untyped
 
 
 # A compensator's tally of the commands the slew limit held: [last command, the limit per
-# sample less rounding (inf: none), commands held, commands given, arrived]. Counting starts
-# when the commands first arrive on the trajectory (a command the limit did not hold): the
-# ramp from rest, or from the end of a precondition cycle, is the limit doing its job.
+# sample less rounding (inf: none), commands held, commands given, arrived, every command].
+# Counting starts when the commands first arrive on the trajectory (a command the limit did
+# not hold): the ramp from rest, or from the end of a precondition cycle, is the limit doing
+# its job. The last entry counts from the reset on (what the voltage limits' count is of).
 TALLY_PREV = 0
 TALLY_TOL = 1
 TALLY_HELD = 2
 TALLY_GIVEN = 3
 TALLY_ARRIVED = 4
+TALLY_ALL = 5
+TALLY_SIZE = 6
 
 
 @njit(cache=True, fastmath=FASTMATH)
@@ -281,6 +284,7 @@ def tally_command(c, tally):  # type: ignore[no-untyped-def]
     """Count command ``c`` in ``tally`` (see ``TALLY_PREV``); returns ``c``."""
     held = abs(c - tally[TALLY_PREV]) >= tally[TALLY_TOL]
     tally[TALLY_PREV] = c
+    tally[TALLY_ALL] += 1.0
     if tally[TALLY_ARRIVED] == 0.0:
         if held:
             return c

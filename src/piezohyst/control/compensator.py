@@ -627,19 +627,21 @@ class Compensator:
     def _count_reset(self) -> None:
         """The counters of commands held by the limits, from zero."""
         tol = self._max_step * (1.0 - 1e-9) if math.isfinite(self._max_step) else math.inf
-        self._tally = np.array([self.last_command, tol, 0.0, 0.0, 0.0])
+        self._tally = np.zeros(K.TALLY_SIZE)
+        self._tally[[K.TALLY_PREV, K.TALLY_TOL]] = self.last_command, tol
         self._until_check = LIMIT_CHECK_FIRST  # steps until the next look at the counts
         self._limits_warned = False
 
     def _check_limits(self, owner: str) -> None:
         """Warn once when the limits held more than :data:`LIMIT_SHARE` of the commands."""
-        issued = self.command_count
-        self._until_check = max(issued, LIMIT_CHECK_FIRST)  # again when they have doubled
-        if self._limits_warned or issued < LIMIT_CHECK_FIRST:
+        given = int(self._tally[K.TALLY_ALL])  # the approach too: the voltage limits bite there
+        self._until_check = max(given, LIMIT_CHECK_FIRST)  # again when they have doubled
+        if self._limits_warned or given < LIMIT_CHECK_FIRST:
             return
         message = limits_message(
-            owner, issued, self.saturated_count, self.slew_limited_count,
+            owner, self.command_count, self.saturated_count, self.slew_limited_count,
             (self.v_min, self.v_max), self._max_step, self.sample_rate, self.slew_rate,
+            given=given,
         )  # fmt: skip
         if message:
             self._limits_warned = True
@@ -665,6 +667,8 @@ def limits_message(
     max_step: float,
     sample_rate: float | None,
     slew_rate: float | None,
+    *,
+    given: int | None = None,
 ) -> str:
     """The warning when the voltage or slew limits held over :data:`LIMIT_SHARE` of the
     commands (empty when they did not): the counts and the setting to change.
@@ -673,7 +677,11 @@ def limits_message(
     ----------
     owner : str
     issued, saturated, slewed : int
-        Commands given; held by the voltage limits; held by the slew limit.
+        Commands given on the trajectory (the slew limit's count is of these); held by the
+        voltage limits; held by the slew limit.
+    given : int, optional
+        Every command given, the approach to the trajectory too (the voltage limits' count
+        is of these); default ``issued``.
     limits : (float, float)
         ``v_min, v_max`` (V).
     max_step : float
@@ -694,10 +702,11 @@ def limits_message(
             "default the training record's fastest change); set slew_rate (--slew-rate) to "
             "what the amplifier allows, or identify on faster loops"
         )
-    if saturated > LIMIT_SHARE * issued:
+    total = max(issued, saturated if given is None else given)
+    if saturated > LIMIT_SHARE * total:
         parts.append(
-            f"the voltage limits [{limits[0]:g}, {limits[1]:g}] V held {saturated} of {issued} "
-            f"commands ({100 * saturated / issued:.1f} %): the target is out of reach there; "
+            f"the voltage limits [{limits[0]:g}, {limits[1]:g}] V held {saturated} of {total} "
+            f"commands ({100 * saturated / total:.1f} %): the target is out of reach there; "
             "widen v_min/v_max (--v-min/--v-max) if the actuator allows, or lower the target"
         )
     return f"{owner}: {'; '.join(parts)}" if parts else ""
