@@ -295,6 +295,16 @@ def test_the_file_loop_is_the_in_memory_loop(tmp_path: Path) -> None:
     lead = ph.read_table(tmp_path / "plain.csv").get("command")
     np.testing.assert_array_equal(lead, plain.command(d))
     assert not np.array_equal(lead, mem[0])  # the default lead-in carries the probe
+    # the scan in uC against time in ms, as their headers say: read as compensate reads them
+    ph.write_table(tmp_path / "scan_uc.csv", {"time": t * 1e3, "desired": d * 1e6},
+                   units={"time": "ms", "desired": "uC"})  # fmt: skip
+    res = runner.invoke(main, [*base[:2], "--state", str(tmp_path / "uc.json"), "-o",
+                               str(tmp_path / "uc.csv"), "--slew-rate", "30000",
+                               "--desired", str(tmp_path / "scan_uc.csv")])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    # tol: the scan scaled by 1e6 and back (one rounding each way), through the inverse
+    np.testing.assert_allclose(ph.read_table(tmp_path / "uc.csv").get("command"), mem[0],
+                               rtol=0, atol=1e-9 * (hi - lo))  # fmt: skip
 
 
 def test_learn_writes_over_a_file_it_did_not_write_only_with_force(tmp_path: Path) -> None:

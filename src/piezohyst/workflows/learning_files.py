@@ -22,6 +22,7 @@ from ..errors import DataFileError, ModelFileError, ParameterError
 from ..io import Table, read_table, write_table
 from ..io.screening import NOISE_REACH, noise_level
 from ..model.persistence import load_model
+from ..units import Role, to_standard
 from ._base import guard_outputs
 
 __all__ = ["LearnFileResult", "learn_file", "recording_check"]
@@ -45,13 +46,21 @@ class LearnFileResult:
     commands: np.ndarray
 
 
-def _column(table: Table, name: str, what: str) -> np.ndarray:
-    if name not in table:
+def _column(table: Table, name: str, what: str, role: Role, expected: str | None = None) -> Any:
+    """The column in the unit piezohyst works in (its header's: um, uC, ms), refused when it is
+    not the ``expected`` unit's kind."""
+    found = table.find(name)
+    if found is None:
         msg = (
             f"{table.path}: no column {name!r} for the {what} (columns: {', '.join(table.columns)})"
         )
         raise DataFileError(msg)
-    return table.get(name, finite=False)
+    where = f"{table.path}: column {found!r}"
+    values, unit = to_standard(table.get(found, finite=False), table.unit(found), role, where)
+    if expected is not None and unit is not None and unit != expected:
+        msg = f"{where}: the {what} is in {unit!r}, the learner expects {expected!r}"
+        raise DataFileError(msg)
+    return values
 
 
 def learn_file(
@@ -134,9 +143,11 @@ def learn_file(
             )
             raise ParameterError(msg)
         table = read_table(Path(desired))
-        d = _column(table, column, "desired trajectory")
+        metres = settings.domain == "displacement" or settings.output_map is not None
+        wanted = "m" if metres else model.output_unit
+        d = _column(table, column, "desired trajectory", "output", wanted)
         if rate is None:
-            t = _column(table, "time", "time (or give --sample-rate)")
+            t = _column(table, "time", "time (or give --sample-rate)", "time")
             rate = float(f"{(t.size - 1) / (t[-1] - t[0]):.12g}")  # 1000.0, not 999.9999999999
     else:
         if desired is not None:
@@ -180,7 +191,7 @@ def learn_file(
         sent = learner.pending
         assert sent is not None
         recording = read_table(rec)
-        v = _column(recording, voltage_column, "voltage sent")
+        v = _column(recording, voltage_column, "voltage sent", "input", "V")
         if v.size != sent.size:
             msg = f"{rec}: {v.size} rows, but trial {learner.trials} sent {sent.size} commands"
             raise DataFileError(msg)
@@ -195,7 +206,8 @@ def learn_file(
                 "(--voltage-tolerance sets what is allowed)"
             )
             raise DataFileError(msg)
-        y = _column(recording, reading_column, "reading")
+        y = _column(recording, reading_column, "reading", "output",
+                    "m" if sensor else model.output_unit)  # fmt: skip
         trial = learner.learn(displacement=y) if sensor else learner.learn(y)
     else:
         assert d is not None
