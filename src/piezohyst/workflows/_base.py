@@ -6,16 +6,19 @@ import os
 import warnings
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 from .._validation import FloatArray
 from ..control.compensator import CompensatorSettings
 from ..errors import DataFileError, OverwriteError
 from ..io import (
+    Table,
     is_piezohyst_output,
 )
 from ..metrics import clipped
 from ..model.model import HysteresisModel
 from ..model.persistence import load_model
+from ..units import Role, to_standard
 
 PathLike = str | os.PathLike[str]
 
@@ -70,6 +73,29 @@ def guard_outputs(
 
 
 _DEFAULT_SETTINGS = CompensatorSettings()  # frozen: safe as a shared default
+
+
+def desired_unit(settings: CompensatorSettings, model: HysteresisModel) -> str:
+    """The unit a desired trajectory is in: m in the displacement domain or through an output
+    map, else the model's output unit."""
+    metres = settings.domain == "displacement" or settings.output_map is not None
+    return "m" if metres else model.output_unit
+
+
+def standard_column(table: Table, name: str, what: str, role: Role, expected: str | None) -> Any:
+    """A column in the unit piezohyst works in (its header's: um, uC, ms, as ``compensate``
+    reads a target), refused where that is not of ``expected``'s kind (None: any)."""
+    found = table.find(name)
+    if found is None:
+        columns = ", ".join(table.columns)
+        msg = f"{table.path}: no column {name!r} for the {what} (columns: {columns})"
+        raise DataFileError(msg)
+    where = f"{table.path}: column {found!r}"
+    values, unit = to_standard(table.get(found, finite=False), table.unit(found), role, where)
+    if expected is not None and unit is not None and unit != expected:
+        msg = f"{where}: the {what} is in {unit!r}, where {expected!r} is expected"
+        raise DataFileError(msg)
+    return values
 
 
 def _default_unit(column: str | None) -> str:

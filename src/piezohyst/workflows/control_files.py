@@ -50,7 +50,9 @@ from ._base import (
     _check_measured_unit,
     _default_unit,
     _load,
+    desired_unit,
     guard_outputs,
+    standard_column,
     warn_clipped,
 )
 
@@ -585,12 +587,8 @@ def simulate_loop_file(
     model = _load(model_path)
     table = read_table(target)
     name = _desired_column(table, column, target)
-    where = f"{target}: column {name!r}"  # in its header's unit (um, nm): as compensate reads it
-    desired, unit = to_standard(table.get(name, finite=False), table.unit(name), "output", where)
-    expected = "m" if settings.domain == "displacement" else model.output_unit
-    if unit is not None and unit != expected:
-        msg = f"{target}: the desired column is in {unit!r}, the controller expects {expected!r}"
-        raise DataFileError(msg)
+    desired = standard_column(table, name, "desired trajectory", "output",
+                              desired_unit(settings, model))  # fmt: skip
     fs = settings.sample_rate or p.rate
     if abs(fs - p.rate) > 1e-9 * p.rate:
         msg = f"the bench {preset} samples at {p.rate:g} Hz; the loop rate must be the same"

@@ -19,11 +19,10 @@ from ..control.compensator import CompensatorSettings
 from ..control.leakage import Leakage
 from ..control.learning import LearningCompensator, Trial
 from ..errors import DataFileError, ModelFileError, ParameterError
-from ..io import Table, read_table, write_table
+from ..io import read_table, write_table
 from ..io.screening import NOISE_REACH, noise_level
 from ..model.persistence import load_model
-from ..units import Role, to_standard
-from ._base import guard_outputs
+from ._base import desired_unit, guard_outputs, standard_column
 
 __all__ = ["LearnFileResult", "learn_file", "recording_check"]
 
@@ -44,23 +43,6 @@ class LearnFileResult:
     learner: LearningCompensator
     trial: Trial | None
     commands: np.ndarray
-
-
-def _column(table: Table, name: str, what: str, role: Role, expected: str | None = None) -> Any:
-    """The column in the unit piezohyst works in (its header's: um, uC, ms), refused when it is
-    not the ``expected`` unit's kind."""
-    found = table.find(name)
-    if found is None:
-        msg = (
-            f"{table.path}: no column {name!r} for the {what} (columns: {', '.join(table.columns)})"
-        )
-        raise DataFileError(msg)
-    where = f"{table.path}: column {found!r}"
-    values, unit = to_standard(table.get(found, finite=False), table.unit(found), role, where)
-    if expected is not None and unit is not None and unit != expected:
-        msg = f"{where}: the {what} is in {unit!r}, the learner expects {expected!r}"
-        raise DataFileError(msg)
-    return values
 
 
 def learn_file(
@@ -143,11 +125,10 @@ def learn_file(
             )
             raise ParameterError(msg)
         table = read_table(Path(desired))
-        metres = settings.domain == "displacement" or settings.output_map is not None
-        wanted = "m" if metres else model.output_unit
-        d = _column(table, column, "desired trajectory", "output", wanted)
+        d = standard_column(table, column, "desired trajectory", "output",
+                            desired_unit(settings, model))  # fmt: skip
         if rate is None:
-            t = _column(table, "time", "time (or give --sample-rate)", "time")
+            t = standard_column(table, "time", "time (or give --sample-rate)", "time", "s")
             rate = float(f"{(t.size - 1) / (t[-1] - t[0]):.12g}")  # 1000.0, not 999.9999999999
     else:
         if desired is not None:
@@ -191,7 +172,7 @@ def learn_file(
         sent = learner.pending
         assert sent is not None
         recording = read_table(rec)
-        v = _column(recording, voltage_column, "voltage sent", "input", "V")
+        v = standard_column(recording, voltage_column, "voltage sent", "input", "V")
         if v.size != sent.size:
             msg = f"{rec}: {v.size} rows, but trial {learner.trials} sent {sent.size} commands"
             raise DataFileError(msg)
@@ -206,8 +187,8 @@ def learn_file(
                 "(--voltage-tolerance sets what is allowed)"
             )
             raise DataFileError(msg)
-        y = _column(recording, reading_column, "reading", "output",
-                    "m" if sensor else model.output_unit)  # fmt: skip
+        y = standard_column(recording, reading_column, "reading", "output",
+                            "m" if sensor else model.output_unit)  # fmt: skip
         trial = learner.learn(displacement=y) if sensor else learner.learn(y)
     else:
         assert d is not None
