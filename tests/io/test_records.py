@@ -259,6 +259,26 @@ def test_a_share_held_never_exceeds_the_commands_given(slow_model: ph.ActivePI) 
     assert 0 < held <= given, text
 
 
+def test_a_bank_says_when_the_voltage_limits_hold_the_approach(slow_model: ph.ActivePI) -> None:
+    """The fused bank as the single compensator above: a channel's target out of reach,
+    approached at the slew limit, never reaches the trajectory; the bank counted only commands
+    on it, so the voltage limits held all 2000 commands of channel 0 without a word."""
+    lo, hi = slow_model.input_range_
+    bank = ph.ModelBank.from_models([slow_model, slow_model])
+    comps = ph.BankCompensator(bank, v_min=lo, v_max=hi, sample_rate=1000.0,
+                               slew_rate=0.2 * (hi - lo))  # fmt: skip
+    assert comps.fused
+    q_hi = float(slow_model.hysteresis_.predict(np.array([hi]))[0])
+    with pytest.warns(ph.errors.LimitWarning) as said:
+        for _ in range(2000):
+            comps.step(np.array([10.0 * q_hi, 0.0]))
+    text = str(said[0].message)
+    assert "voltage limits held more than 1 % of the commands on 1 of 2 channels" in text, text
+    held, given = (int(n) for n in re.search(r"channel 0, (\d+) of (\d+)", text).groups())
+    assert 0 < held <= given, text
+    assert comps.saturated_count[0] == 2000
+
+
 def test_the_shell_counts_what_the_limits_held(tmp_path: Path, slow_model: ph.ActivePI) -> None:
     slow_model.save(tmp_path / "m.json")
     ph.io.write_table(tmp_path / "scan.csv", {"time": np.arange(2000) * 1e-3,

@@ -116,7 +116,7 @@ class ChannelBank(Generic[C]):
         self._arrived = np.zeros(len(self._channels), dtype=np.bool_)  # on the trajectory
         self._recent = np.empty((TALLY_ROWS, len(self._channels)))  # steps not yet counted
         self._pending = 0
-        self._issued = 0
+        self._sent = 0  # every step's commands since the reset, the approach too
         self._check_at = LIMIT_CHECK_FIRST
         self._limits_warned = False
 
@@ -148,14 +148,17 @@ class ChannelBank(Generic[C]):
         if self._pending and commands is not self._recent:
             self._flush()
         S.count_held(commands, self._prev, self._tol, self._held, self._given, self._arrived)
-        self._issued = int(self._given.max())
-        if self._limits_warned or self._issued < self._check_at:
+        self._sent += commands.shape[0]
+        if self._limits_warned or self._sent < self._check_at:
             return
-        self._check_at = 2 * self._issued
-        held = {"slew limit": self._held, "voltage limits": self.saturated_count}
-        given = self._given
+        self._check_at = 2 * self._sent
+        # the slew limit's share is of the commands on the trajectory; the voltage limits'
+        # of every command, the approach too (they bite there: as Compensator's tally)
+        sent = np.full(len(self._channels), self._sent, dtype=np.int64)
+        held = {"slew limit": (self._held, self._given),
+                "voltage limits": (self.saturated_count, sent)}  # fmt: skip
         parts = []
-        for what, counts in held.items():
+        for what, (counts, given) in held.items():
             over = np.flatnonzero((counts > LIMIT_SHARE * given) & (given >= LIMIT_CHECK_FIRST))
             if over.size:
                 worst = int(over[np.argmax(counts[over])])
