@@ -563,10 +563,10 @@ def compensate(
         f"{comp.max_step * result.sample_rate:.4g} V/s" if math.isfinite(comp.max_step) else "none"
     )
     click.echo(
-        f"commands in [{comp.v_min:g}, {comp.v_max:g}] V; of the {comp.command_count} on the "
-        f"trajectory, {comp.saturated_count} held by the voltage limits, "
-        f"{comp.slew_limited_count} by the slew limit ({slew}), {comp.nonfinite_count} for "
-        "non-finite desired values"
+        f"commands in [{comp.v_min:g}, {comp.v_max:g}] V; of the {comp.sent_count} sent, "
+        f"{comp.saturated_count} held by the voltage limits; of the {comp.command_count} on "
+        f"the trajectory, {comp.slew_limited_count} by the slew limit ({slew}); "
+        f"{comp.nonfinite_count} for non-finite desired values"
         + (
             f"; {comp.extrapolated_count} beyond the output map's calibrated range (the map "
             "extended linearly there)"

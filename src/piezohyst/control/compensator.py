@@ -624,6 +624,12 @@ class Compensator:
         first that reached the trajectory on (see :attr:`slew_limited_count`)."""
         return int(self._tally[K.TALLY_GIVEN])
 
+    @property
+    def sent_count(self) -> int:
+        """Every command given since the last reset, the approach included: what
+        :attr:`saturated_count`'s share is of (the voltage limits bite on the approach too)."""
+        return int(self._tally[K.TALLY_ALL])
+
     def _count_reset(self) -> None:
         """The counters of commands held by the limits, from zero."""
         tol = self._max_step * (1.0 - 1e-9) if math.isfinite(self._max_step) else math.inf
@@ -634,7 +640,7 @@ class Compensator:
 
     def _check_limits(self, owner: str) -> None:
         """Warn once when the limits held more than :data:`LIMIT_SHARE` of the commands."""
-        given = int(self._tally[K.TALLY_ALL])  # the approach too: the voltage limits bite there
+        given = self.sent_count
         self._until_check = max(given, LIMIT_CHECK_FIRST)  # again when they have doubled
         if self._limits_warned or given < LIMIT_CHECK_FIRST:
             return

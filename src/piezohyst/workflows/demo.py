@@ -299,7 +299,6 @@ def _model_comparison(
                                sample_rate=p.rate)  # fmt: skip
             command = _said_by(f"{name}, identified on {excitation}", comp.process, d_des)
             run = simulate(command, t, preset=preset, seed=seed + 400)
-            given = max(comp.command_count, 1)
             rows.append(
                 {
                     "model": name,
@@ -309,8 +308,8 @@ def _model_comparison(
                     * nrmse(valid.charge, model.predict(valid.voltage, t=valid.t)),
                     "width_after_S_pct": 100 * hysteresis_width(d_des, run.displacement),
                     "tracking_nrmse_after_S_pct": 100 * nrmse(d_des, run.displacement),
-                    "held_voltage_pct": 100 * comp.saturated_count / given,
-                    "held_slew_pct": 100 * comp.slew_limited_count / given,
+                    "held_voltage_pct": 100 * comp.saturated_count / max(comp.sent_count, 1),
+                    "held_slew_pct": 100 * comp.slew_limited_count / max(comp.command_count, 1),
                     "growth": _growth_text(model),
                 }
             )
