@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import subprocess
 import sys
 import warnings
@@ -492,6 +493,14 @@ def test_calibrate_gain_then_compensate_in_metres_from_its_file(workdir: Path) -
     assert res.exit_code == 0, res.output
     out = ph.io.read_table(workdir / "command_m.csv")
     assert np.all((out.get("command") >= 0.0) & (out.get("command") <= 140.0))
+    # beyond the calibrated range: said once (the dry run that sizes the precondition cycle
+    # said it too), and counted in the summary
+    ph.write_table(workdir / "far_m.csv", {"time": t, "desired": lo + 1.3 * (hi - lo) * t / 2})
+    res = run("compensate", workdir / "model.json", workdir / "far_m.csv", "--gain", gain,
+              "-o", workdir / "command_far.csv")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert res.stderr.count("warning: OutputMap: desired displacements") == 1, res.stderr
+    assert re.search(r"; [1-9]\d* beyond the output map's calibrated range", res.stdout)
     res = run("compensate", workdir / "model.json", workdir / "target_m.csv", "--gain",
               workdir / "run.csv", "-o", workdir / "bad.csv")  # fmt: skip
     assert_clean_error(res, code=2)

@@ -255,8 +255,9 @@ def _needed_span(comp: Compensator, desired: Iterator[FloatArray]) -> tuple[floa
     probe = copy.deepcopy(comp)
     probe.precondition(3)  # from a preconditioned state, as the commands will be
     lo, hi = math.inf, -math.inf
-    with warnings.catch_warnings():  # the limits that bite are said once, by the real run
-        warnings.simplefilter("ignore", LimitWarning)
+    with warnings.catch_warnings():  # limits that bite and extrapolation: said once, by the
+        warnings.simplefilter("ignore", LimitWarning)  # real run, with its own counts
+        warnings.simplefilter("ignore", ExtrapolationWarning)
         for values in desired:
             commands = probe.process(values)
             lo, hi = min(lo, float(commands.min())), max(hi, float(commands.max()))
