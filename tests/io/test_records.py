@@ -239,6 +239,18 @@ def test_a_target_out_of_reach_says_which_limit(slow_model: ph.ActivePI) -> None
     comp = ph.Compensator(slow_model, v_min=20.0, v_max=120.0, slew_rate=None)
     with pytest.warns(ph.errors.LimitWarning, match=r"voltage limits \[20, 120\] V held"):
         comp.process(_scan(slow_model, 0.5, 0.0, 1.0))
+    # and on which side: a scan reaching only past the top, then only below the bottom (it
+    # said "lower the target" for both)
+    for lo, hi, side in ((0.3, 1.0, "beyond what v_max reaches"), (0.0, 0.7, "below what v_min")):
+        comp = ph.Compensator(slow_model, v_min=20.0, v_max=120.0, slew_rate=None)
+        with pytest.warns(ph.errors.LimitWarning) as said:
+            comp.process(_scan(slow_model, 0.5, lo, hi))
+        text = str(said[0].message)
+        assert side in text, text
+        at_low, at_high = (
+            int(n) for n in re.search(r"(\d+) at v_min, (\d+) at v_max", text).groups()
+        )
+        assert (at_low == 0) == (side.startswith("beyond")) and at_low + at_high > 0, text
 
 
 def test_a_share_held_never_exceeds_the_commands_given(slow_model: ph.ActivePI) -> None:

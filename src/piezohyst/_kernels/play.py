@@ -269,14 +269,20 @@ def compensator_step(desired, tables, config, state):  # type: ignore[no-untyped
 # sample less rounding (inf: none), commands held, commands given, arrived, every command].
 # Counting starts when the commands first arrive on the trajectory (a command the limit did
 # not hold): the ramp from rest, or from the end of a precondition cycle, is the limit doing
-# its job. The last entry counts from the reset on (what the voltage limits' count is of).
+# its job. Every command from the reset on (what the voltage limits' count is of), and of
+# those, the commands at each voltage limit (``TALLY_LOW``/``TALLY_HIGH`` hold v_min, v_max):
+# which side a target out of reach is on.
 TALLY_PREV = 0
 TALLY_TOL = 1
 TALLY_HELD = 2
 TALLY_GIVEN = 3
 TALLY_ARRIVED = 4
 TALLY_ALL = 5
-TALLY_SIZE = 6
+TALLY_LOW = 6
+TALLY_HIGH = 7
+TALLY_AT_LOW = 8
+TALLY_AT_HIGH = 9
+TALLY_SIZE = 10
 
 
 @njit(cache=True, fastmath=FASTMATH)
@@ -285,6 +291,10 @@ def tally_command(c, tally):  # type: ignore[no-untyped-def]
     held = abs(c - tally[TALLY_PREV]) >= tally[TALLY_TOL]
     tally[TALLY_PREV] = c
     tally[TALLY_ALL] += 1.0
+    if c <= tally[TALLY_LOW]:
+        tally[TALLY_AT_LOW] += 1.0
+    elif c >= tally[TALLY_HIGH]:
+        tally[TALLY_AT_HIGH] += 1.0
     if tally[TALLY_ARRIVED] == 0.0:
         if held:
             return c

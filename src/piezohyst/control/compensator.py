@@ -635,6 +635,7 @@ class Compensator:
         tol = self._max_step * (1.0 - 1e-9) if math.isfinite(self._max_step) else math.inf
         self._tally = np.zeros(K.TALLY_SIZE)
         self._tally[[K.TALLY_PREV, K.TALLY_TOL]] = self.last_command, tol
+        self._tally[[K.TALLY_LOW, K.TALLY_HIGH]] = self.v_min, self.v_max
         self._until_check = LIMIT_CHECK_FIRST  # steps until the next look at the counts
         self._limits_warned = False
 
@@ -644,10 +645,11 @@ class Compensator:
         self._until_check = max(given, LIMIT_CHECK_FIRST)  # again when they have doubled
         if self._limits_warned or given < LIMIT_CHECK_FIRST:
             return
+        sides = int(self._tally[K.TALLY_AT_LOW]), int(self._tally[K.TALLY_AT_HIGH])
         message = limits_message(
             owner, self.command_count, self.saturated_count, self.slew_limited_count,
             (self.v_min, self.v_max), self._max_step, self.sample_rate, self.slew_rate,
-            given=given,
+            given=given, sides=sides,
         )  # fmt: skip
         if message:
             self._limits_warned = True
@@ -675,6 +677,7 @@ def limits_message(
     slew_rate: float | None,
     *,
     given: int | None = None,
+    sides: tuple[int, int] | None = None,
 ) -> str:
     """The warning when the voltage or slew limits held over :data:`LIMIT_SHARE` of the
     commands (empty when they did not): the counts and the setting to change.
@@ -688,6 +691,9 @@ def limits_message(
     given : int, optional
         Every command given, the approach to the trajectory too (the voltage limits' count
         is of these); default ``issued``.
+    sides : (int, int), optional
+        Of those, the commands at ``v_min`` and at ``v_max``: the message names the side
+        a target out of reach is on (the one with more).
     limits : (float, float)
         ``v_min, v_max`` (V).
     max_step : float
@@ -710,10 +716,17 @@ def limits_message(
         )
     total = max(issued, saturated if given is None else given)
     if saturated > LIMIT_SHARE * total:
+        reach, change = "the target is out of reach there", "v_min/v_max (--v-min/--v-max)"
+        if sides is not None and max(sides) > 0:
+            low = sides[0] >= sides[1]
+            reach = (f"{sides[0]} at v_min, {sides[1]} at v_max: the target is "
+                     + ("below what v_min reaches" if low else "beyond what v_max reaches")
+                     + " there")  # fmt: skip
+            change = "v_min (--v-min)" if low else "v_max (--v-max)"
         parts.append(
             f"the voltage limits [{limits[0]:g}, {limits[1]:g}] V held {saturated} of {total} "
-            f"commands ({100 * saturated / total:.1f} %): the target is out of reach there; "
-            "widen v_min/v_max (--v-min/--v-max) if the actuator allows, or lower the target"
+            f"commands ({100 * saturated / total:.1f} %; {reach}); widen {change} if the "
+            "actuator allows, or bring the target within reach"
         )
     return f"{owner}: {'; '.join(parts)}" if parts else ""
 
