@@ -14,6 +14,13 @@ each of four later blocks, each block predicted from the record's start; the lar
 must beat the smaller by 0.1 %, as the proxy's rule): one fit per fold and candidate.
 CLASSES: e.g. ``PreisachModel`` (default: Preisach, Bouc-Wen and Duhem).
 
+``python benchmarks/growth_choice.py 4,5,6 rise``: whether a record's design decides the rise
+(a rule that needs no fit): per training record (``excite``; 12 s of ``decaying``), the
+variance inflation of the x|x| integral given the integral, time and an offset
+(:func:`inflation`), and per unit and model the held-out NRMSE with the integral, then with
+the integral and its rise, and the rise found over the conductance (``r2/r1``: the
+conductance's relative rise at the top of the range; the bench's truth +0.5, Bouc-Wen's +1).
+
 Not a test: nothing here asserts a time.
 """
 
@@ -30,6 +37,7 @@ from piezohyst.workflows.excitation import excitation
 warnings.simplefilter("ignore")
 units = [int(u) for u in sys.argv[1].split(",")]
 OWN = len(sys.argv) > 2 and sys.argv[2] == "own"
+RISE = len(sys.argv) > 2 and sys.argv[2] == "rise"
 #: the alternative to the presets' integral: "auto" (the proxy's forward chaining) or terms
 GROWTH: object = "auto" if len(sys.argv) < 3 else tuple(sys.argv[2].split(","))
 played = excitation(v_min=0.0, v_max=140.0, sample_rate=1000.0)
@@ -78,6 +86,40 @@ def own(classes: list[type]) -> None:
                 f"(picks {[c[3] for c in v]})" for k, v in cells.items()), flush=True)  # fmt: skip
 
 
+def inflation(x: np.ndarray, t: np.ndarray) -> float:
+    """Variance inflation factor of the x|x| integral given the integral, time and an offset:
+    1 / (1 - R^2) of that regression (1: independent of them; large: not separable)."""
+    dt = np.diff(t, prepend=t[0])
+    cols = np.column_stack([t - t[0], np.cumsum(x * dt), np.cumsum(x * np.abs(x) * dt)])
+    corr = np.corrcoef(cols, rowvar=False)
+    return float(np.linalg.inv(corr)[2, 2])
+
+
+def rise() -> None:
+    both = ("integral", "abs_integral")
+    for design in ("excite", "decaying 12 s"):
+        for plant in PLANTS:
+            row = []
+            for u in units:
+                p = batch_unit(PLANTS[plant], u)
+                tr = (designs["excite"](p, u) if design == "excite" else
+                      ph.simulate(preset=p, signal="decaying", duration=12.0, seed=u))  # fmt: skip
+                te = ph.simulate(preset=p, signal="multi", duration=12.0, seed=u + 100)
+                row.append(f"unit {u} (VIF {inflation(tr.voltage, tr.t):.0f})")
+                for cls in (ph.PreisachModel, ph.BoucWenModel, ph.DuhemModel):
+                    err = []
+                    for g in (("integral",), both):
+                        m = cls(growth_terms=g).fit(tr.voltage, tr.charge, t=tr.t)
+                        err.append(100 * ph.metrics.nrmse(te.charge, m.predict(te.voltage, t=te.t)))
+                    c = m.growth_coefficients()
+                    ratio = c["abs_integral"][0] / c["integral"][0]
+                    row.append(f"{cls.__name__[:-5]} {err[0]:.2f} -> {err[1]:.2f} ({ratio:+.2f})")
+            print(design, plant, " | ".join(row), flush=True)
+
+
+if RISE:
+    rise()
+    sys.exit()
 if OWN:
     names = sys.argv[3].split(",") if len(sys.argv) > 3 else ["PreisachModel", "BoucWenModel",
                                                                "DuhemModel"]  # fmt: skip
