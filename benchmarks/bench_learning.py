@@ -1,7 +1,8 @@
 """Learning from repetition: its targets on the bench behind a 4 ms amplifier, and its cost.
 
 Run: ``python benchmarks/bench_learning.py [--trials 10] [--figure learning.png]``
-(``--plants [--only PLANT] [--slew V/s]`` for part 3).
+(``--plants [--only PLANT] [--slew V/s]`` for part 3; ``--noise-gate G``: the learner's
+``noise_gate``; ``--anatomy [--only PLANT]``: the error left, repeating or not).
 
 1. Targets (issue 27), on the bench's amplifier-lag preset ``T226-H4-203X-amp4ms`` with
    0.1 % noise on the charge: the leakage calibrated from 10 s holds up and down; an
@@ -41,6 +42,8 @@ from piezohyst.workflows.excitation import excitation
 RATE = 1000.0
 #: the amplifier's slew limit (V/s); --slew changes it
 SLEW = 30e3
+#: the learner's noise_gate; --noise-gate changes it
+GATE = 0.0
 
 
 def rig(preset: object = None, seed: int = 0) -> dict[str, object]:
@@ -88,6 +91,7 @@ def run(r: dict[str, object], model: ph.HysteresisModel, f: float, trials: int, 
         gain=p.gain,
         lag=lag,
         slew_rate=SLEW,  # type: ignore[attr-defined]
+        noise_gate=GATE,
     )
     bench = Bench(p, seed=seed, voltage=ilc.last_command)  # type: ignore[arg-type]
     scores, loops = [], []
@@ -124,15 +128,24 @@ def dense_update(
 
 
 def main() -> None:
-    global SLEW
+    global SLEW, GATE
     ap = argparse.ArgumentParser()
     ap.add_argument("--trials", type=int, default=10)
     ap.add_argument("--figure", default=None, help="write a figure (error per trial, loops)")
     ap.add_argument("--plants", action="store_true", help="the plants of other physics instead")
     ap.add_argument("--only", default=None, help="with --plants: this plant alone")
+    ap.add_argument(
+        "--anatomy",
+        action="store_true",
+        help="where the error left lies (one plant: --only, default duhem)",
+    )
     ap.add_argument("--slew", type=float, default=SLEW, help="the slew limit, V/s (30e3)")
+    ap.add_argument("--noise-gate", type=float, default=GATE, help="the learner's noise_gate (0)")
     args = ap.parse_args()
-    SLEW = args.slew
+    SLEW, GATE = args.slew, args.noise_gate
+    if args.anatomy:
+        anatomy(args.trials, args.only or "duhem")
+        return
     if args.plants:
         plants(args.trials, args.only)
         return
@@ -217,6 +230,31 @@ def main() -> None:
         fig.tight_layout()
         fig.savefig(args.figure, dpi=110)
         print(f"figure: {args.figure}")
+
+
+def anatomy(trials: int, plant: str = "duhem") -> None:
+    """``--anatomy``: where the error left after learning lies, ``ActivePI`` with identified
+    dynamics at 40 Hz from the charge on one plant: per trial, the displacement error's part
+    that repeats every cycle of the trial and the part that does not (RMS, % of the span),
+    seeds 0-2, and seed 0 with the charge's noise off."""
+    from piezohyst.simulation import PLANTS
+
+    preset = replace(PLANTS[plant], amp_tau=4e-3)
+    for seed, noise in ((0, True), (1, True), (2, True), (0, False)):
+        r = rig(preset, seed)
+        if not noise:
+            r = {**r, "preset": replace(r["preset"], amp_noise=0.0)}  # type: ignore[type-var]
+        *_, loops, desired, _ = run(r, r["dynamic"], 40.0, trials, 0.0, seed=3 + seed)  # type: ignore[arg-type]
+        parts = []
+        for s in loops:
+            e = (desired - desired.mean()) - (s - s.mean())
+            cycle = np.tile(e.reshape(40, -1).mean(axis=0), 40)  # 40 cycles in the trial
+            rms = [100 * np.sqrt(np.mean(p**2)) / np.ptp(desired) for p in (cycle, e - cycle)]
+            parts.append(f"{rms[0]:.2f}/{rms[1]:.2f}")
+        print(
+            f"seed {seed}{'' if noise else ', no noise'}: repeating/not per trial (%):",
+            " ".join(parts),
+        )
 
 
 def plants(trials: int, only: str | None = None) -> None:

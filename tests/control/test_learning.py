@@ -205,6 +205,44 @@ def test_a_trial_whose_error_grew_is_rolled_back(pi_model: ph.ClassicalPI) -> No
     np.testing.assert_allclose(ilc.correction, want, rtol=0, atol=1e-12 * np.ptp(d))
 
 
+def test_a_noise_gate_keeps_the_noise_out_of_the_commands(
+    pi_model: ph.ClassicalPI, tmp_path: Path
+) -> None:
+    """Readings that are the desired plus white noise hold nothing to learn: without a gate
+    the correction takes the noise in (the commands then carry it); with ``noise_gate=9`` a
+    bin of noise alone passes with probability exp(-9), so the correction stays zero. A
+    repeating error (a slope 10 % short) is learned with the gate as without."""
+    d = cosine(pi_model, n=256, cycles=8)
+    sigma = 1e-3 * float(np.ptp(d))
+    kw = {"v_min": 0.0, "v_max": 140.0, "sample_rate": RATE, "slew_rate": None,
+          "learning_gain": 0.5, "cutoff": 200.0, "lead_in": False}  # fmt: skip
+    corrections, errors = {}, {}
+    for gate in (0.0, 9.0):
+        for plant in ("noise", "slope"):
+            ilc = ph.LearningCompensator(pi_model, noise_gate=gate, **kw)  # type: ignore[arg-type]
+            rng = np.random.default_rng(7)
+            for _ in range(6):
+                ilc.command(d)
+                y = d if plant == "noise" else 0.9 * (d + ilc.correction)  # 10 % short
+                ilc.learn(y + sigma * rng.standard_normal(d.size))
+            corrections[gate, plant] = float(np.sqrt(np.mean(ilc.correction**2)))
+            errors[gate, plant] = [t.error for t in ilc.history]
+    assert corrections[0.0, "noise"] > 0.2 * sigma  # the noise learned: 0.72 sigma measured
+    assert corrections[9.0, "noise"] == 0.0  # 6 trials x 128 bins at exp(-9): 0.09 expected
+    # tol: both learn the slope's repeating error; the gate leaves out what is within 3x the
+    # noise in a bin (0.19 sigma of amplitude per harmonic), far below the first error
+    assert errors[9.0, "slope"][-1] < 0.2 * errors[9.0, "slope"][0]
+    assert errors[9.0, "slope"][-1] < errors[0.0, "slope"][-1] + 3 * sigma / np.ptp(d)
+    # the setting is the learner's: saved with it, and a learner without it refuses the state
+    gated = ph.LearningCompensator(pi_model, noise_gate=9.0, **kw)  # type: ignore[arg-type]
+    gated.command(d)
+    gated.save(tmp_path / "g.json")
+    with pytest.raises(ph.ModelFileError, match="another model, leakage or settings"):
+        ph.LearningCompensator(pi_model, **kw).load(tmp_path / "g.json")  # type: ignore[arg-type]
+    with pytest.raises(ph.errors.ParameterError, match="noise_gate"):
+        ph.LearningCompensator(pi_model, noise_gate=-1.0, **kw)  # type: ignore[arg-type]
+
+
 @pytest.mark.filterwarnings("ignore::piezohyst.errors.LearningWarning")  # rollbacks resume too
 def test_a_saved_learner_resumes_exactly(pi_model: ph.ClassicalPI, tmp_path: Path) -> None:
     d = cosine(pi_model, n=200, cycles=4)

@@ -96,6 +96,16 @@ def _auto_or_float(value: str) -> float | Literal["auto"]:
     help="Send the lead-in without its probe (small sines whose response measures the "
     "loop's timing; give it on every call of a run).",
 )
+@click.option(
+    "--noise-gate",
+    type=click.FloatRange(min=0.0, max=100.0),
+    default=0.0,
+    show_default=True,
+    help="Learn a frequency of the error only where its power is above this many times the "
+    "measurement noise's (9: three times its amplitude): the commands then carry less of the "
+    "noise (less jitter), the loop may be wider (see LearningCompensator); give it on every "
+    "call of a run.",
+)
 @_limit_options
 @click.option(
     "-o",
@@ -124,6 +134,7 @@ def learn(
     sensor: bool,
     no_lead_in: bool,
     no_probe: bool,
+    noise_gate: float,
     settings: CompensatorSettings,
     out: Path,
     force: bool,
@@ -165,6 +176,7 @@ def learn(
             sensor=sensor,
             lead_in=not no_lead_in,
             probe=not no_probe,
+            noise_gate=noise_gate,
             voltage_tolerance=voltage_tolerance,
             force=force,
         ),

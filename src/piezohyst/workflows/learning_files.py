@@ -64,6 +64,7 @@ def learn_file(
     tolerance: float = 1e-4,
     lead_in: bool = True,
     probe: bool = True,
+    noise_gate: float = 0.0,
     voltage_tolerance: float | None = None,
     force: bool = False,
 ) -> LearnFileResult:
@@ -93,7 +94,7 @@ def learn_file(
         domain and gain.
     leakage : path, optional
         A leakage file (:func:`~piezohyst.control.leakage.calibrate_leakage`); default the model's.
-    lag, learning_gain, cutoff, lead_in, probe
+    lag, learning_gain, cutoff, lead_in, probe, noise_gate
         See :class:`~piezohyst.LearningCompensator`.
     voltage_tolerance : float, optional
         How far (V) the recorded voltage may stray from the commands; default from
@@ -160,6 +161,7 @@ def learn_file(
         cutoff=cutoff,
         lead_in=lead_in,
         probe=probe,
+        noise_gate=noise_gate,
     )
     trial = None
     check: dict[str, float] = {}
