@@ -104,6 +104,8 @@ def test_bad_fleets_are_refused_before_any_work(line: list[Path], tmp_path: Path
         fit_many(line, tmp_path / "x", operators=0)
     with pytest.raises(ph.ParameterError, match="'growth_terms' setting does not apply"):
         fit_many(line, tmp_path / "x", model="classical-pi", growth_terms=("time",))
+    with pytest.raises(ph.ParameterError, match="'creep' setting does not apply"):
+        fit_many(line, tmp_path / "x", model="active-pi", creep=(0.1,))
     (tmp_path / "y").mkdir()
     (tmp_path / "y" / "summary.csv").write_text("my notes\n")
     with pytest.raises(ph.errors.OverwriteError, match="piezohyst did not write"):
@@ -123,6 +125,26 @@ def test_cli_fit_many_reports_failures_and_outliers(line: list[Path], tmp_path: 
     assert len(list((tmp_path / "out").glob("unit*.json"))) == 7
     res = run("fit-many", line[0], "-o", tmp_path / "o2", "--channel", "voltage")
     assert res.exit_code == 2 and "expected IN:OUT" in res.output
+
+
+def test_cli_fit_many_takes_the_terms_fit_takes(line: list[Path], tmp_path: Path) -> None:
+    """Every unit with the same growth terms and creep operators as `fit` would give one (the
+    field's standard, PI with creep, for a line of actuators); they were fit's alone."""
+    res = run("fit-many", *line[:2], "-o", tmp_path / "g", "--model", "generalized-pi",
+              "--operators", "6", "--growth", "integral", "--creep", "0.1,1",
+              "--workers", "1")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    for unit in ("unit0", "unit1"):
+        model = ph.load_model(tmp_path / "g" / f"{unit}.json")
+        assert model.growth_terms_ == ("integral",)
+        np.testing.assert_array_equal(model.creep_taus_, [0.1, 1.0])
+        alone = ph.GeneralizedPI(6, growth_terms=("integral",), creep=(0.1, 1.0))
+        rec = ph.read_table(line[int(unit[-1])])
+        alone.fit(rec.get("voltage"), rec.get("charge"), t=rec.get("time"))
+        # tol: the same fit from the same file (a CSV's decimal digits, read the same way)
+        assert model.nrmse_ == pytest.approx(alone.nrmse_, rel=1e-9)
+    res = run("fit-many", line[0], "-o", tmp_path / "a", "--creep", "0.1")
+    assert res.exit_code == 1 and "'creep' setting does not apply to active-pi" in res.output
 
 
 def test_the_same_command_runs_on_a_dask_cluster(line: list[Path], tmp_path: Path) -> None:

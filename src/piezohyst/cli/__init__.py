@@ -40,8 +40,10 @@ from ._support import (
     initial_state_option,
     input_dynamics_option,
     operators_option,
+    parse_terms,
     progress_steps,
     rows_progress,
+    terms_options,
     working,
 )
 
@@ -215,19 +217,7 @@ def excite(
 @_model_options(
     "Model to identify (auto: each scored inside the record, the best kept).", auto=True
 )
-@click.option(
-    "--growth",
-    default="auto",
-    show_default=True,
-    help="generalized-pi, preisach, duhem, bouc-wen: growth terms, 'auto', 'none' or a comma "
-    "list of "
-    "integral,time,abs_integral.",
-)
-@click.option(
-    "--creep",
-    default="",
-    help="generalized-pi, preisach, duhem, bouc-wen: creep time constants in s, e.g. 0.1,1,10.",
-)
+@terms_options
 @click.option(
     "--relaxation",
     type=float,
@@ -286,15 +276,7 @@ def fit(
     """
     from ..workflows import fit_file
 
-    try:
-        taus = tuple(float(c) for c in creep.split(",") if c.strip())
-    except ValueError:
-        raise click.BadParameter(f"expected numbers separated by commas, got {creep!r}",
-                                 param_hint="--creep") from None  # fmt: skip
-    terms: str | tuple[str, ...] = growth
-    if growth != "auto":
-        terms = () if growth == "none" else tuple(g.strip() for g in growth.split(",") if g.strip())
-
+    terms, taus = parse_terms(growth, creep)
     if model_name == "auto":
         _fit_auto(ctx, data, operators, initial_state, data_spec, out, force)
         return
@@ -665,6 +647,11 @@ def report(
     help="Folder for one model per unit (<unit>.json) and the summary.",
 )
 @_model_options("Model to identify for every unit.")
+@terms_options
+@input_dynamics_option(
+    "Delay/lag between the logged command and the piezo, identified with each unit's model "
+    "(record several drive frequencies)."
+)
 @click.option(
     "--channel",
     "channels",
@@ -700,6 +687,9 @@ def fit_many_cmd(
     out_dir: Path,
     model_name: str,
     operators: int,
+    growth: str,
+    creep: str,
+    input_dynamics: str,
     channels: tuple[str, ...],
     summary: Path | None,
     scheduler: str | None,
@@ -720,9 +710,11 @@ def fit_many_cmd(
       piezohyst fit-many line/*.csv --operators 20 -o models/
       piezohyst fit-many mirror.parquet --channel v0:q0 --channel v1:q1 -o m/
       piezohyst fit-many units/*.csv -o models/ --scheduler tcp://10.0.0.5:8786
+      piezohyst fit-many line/*.csv --model generalized-pi --creep 0.1,1,10 -o m/
     """
     from ..workflows.fleet import fit_many
 
+    terms, taus = parse_terms(growth, creep)
     pairs: list[tuple[str, str]] = []
     for c in channels:
         x_col, sep, y_col = c.partition(":")
@@ -737,6 +729,9 @@ def fit_many_cmd(
                 out_dir,
                 model=model_name,
                 operators=operators,
+                growth_terms=terms,
+                creep=taus,
+                input_dynamics=input_dynamics,
                 data_spec=data_spec,
                 channels=pairs,
                 summary=summary,

@@ -510,6 +510,37 @@ def input_dynamics_option(help: str) -> Decorator:
                         show_default=True, help=help)  # fmt: skip
 
 
+def terms_options(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """--growth and --creep, shared by fit and fit-many (see :func:`parse_terms`)."""
+    fn = click.option(
+        "--creep",
+        default="",
+        help="generalized-pi, preisach, duhem, bouc-wen: creep time constants in s, e.g. 0.1,1,10.",
+    )(fn)
+    return click.option(
+        "--growth",
+        default="auto",
+        show_default=True,
+        help="generalized-pi, preisach, duhem, bouc-wen: growth terms, 'auto', 'none' or a "
+        "comma list of integral,time,abs_integral.",
+    )(fn)
+
+
+def parse_terms(growth: str, creep: str) -> tuple[str | tuple[str, ...], tuple[float, ...]]:
+    """--growth and --creep as the models take them: the growth terms ('auto', or a tuple;
+    'none' the empty one) and the creep time constants (s)."""
+    try:
+        taus = tuple(float(c) for c in creep.split(",") if c.strip())
+    except ValueError:
+        raise click.BadParameter(f"expected numbers separated by commas, got {creep!r}",
+                                 param_hint="--creep") from None  # fmt: skip
+    if growth == "auto":
+        return growth, taus
+    if growth == "none":
+        return (), taus
+    return tuple(g.strip() for g in growth.split(",") if g.strip()), taus
+
+
 def initial_state_option(choices: list[str], help: str) -> Decorator:
     """--initial-state: where a model starts (the first choice is the default)."""
     return click.option("--initial-state", type=click.Choice(choices), default=choices[0],

@@ -284,6 +284,7 @@ def fit_many(
     data_spec: DataSpec | None = None,
     channels: Sequence[tuple[str, str]] = (),
     growth_terms: str | Sequence[str] = "auto",
+    creep: Sequence[float] = (),
     input_dynamics: str = "none",
     summary: PathLike | None = None,
     scheduler: str | None = None,
@@ -300,7 +301,7 @@ def fit_many(
     out_dir : path
         Folder for the models (``<unit>.json``) and, by default, the summary
         (``summary.csv``).
-    model, operators, growth_terms, input_dynamics
+    model, operators, growth_terms, creep, input_dynamics
         As for :func:`~piezohyst.workflows.fit_file`, shared by all units.
     data_spec : DataSpec, optional
         Columns, units, window and rate shared by all files.
@@ -335,6 +336,7 @@ def fit_many(
         "model": model,
         "operators": operators,
         "growth_terms": growth_terms,
+        "creep": tuple(creep),
         "input_dynamics": input_dynamics,
     }
     # a bad setting is one error now, not the same error in every row
@@ -377,11 +379,13 @@ def fit_file_check(settings: dict[str, Any]) -> None:
     elif settings["operators"] != 10:
         msg = f"the 'operators' setting does not apply to {settings['model']}"
         raise ParameterError(msg)
-    if "growth_terms" in params:
-        trial["growth_terms"] = settings["growth_terms"]
-    elif settings["growth_terms"] not in ("auto", ()):
-        msg = f"the 'growth_terms' setting does not apply to {settings['model']}"
-        raise ParameterError(msg)
+    for name, default in (("growth_terms", "auto"), ("creep", ())):
+        value = settings.get(name, default)
+        if name in params:
+            trial[name] = value
+        elif value not in (default, ()):
+            msg = f"the {name!r} setting does not apply to {settings['model']}"
+            raise ParameterError(msg)
     cls(**trial).check_params()
 
 
