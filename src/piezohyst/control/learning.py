@@ -185,6 +185,24 @@ def _flag(value: object, name: str) -> bool:
     return value
 
 
+def _readings(
+    charge: ArrayLike | None, displacement: ArrayLike | None, sent: int
+) -> tuple[FloatArray, bool]:
+    """A trial's readings as floats, one per command sent, and whether a sensor's."""
+    if (charge is None) == (displacement is None):
+        msg = "learn() takes the measured charge or a sensor's displacement (one of them)"
+        raise ParameterError(msg)
+    try:
+        y = np.array(charge if charge is not None else displacement, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        msg = f"the readings must be numbers ({exc})."
+        raise ShapeError(msg) from None
+    if y.size != sent:
+        msg = f"one reading per command: the trial sent {sent}, got {y.size} readings"
+        raise ShapeError(msg)
+    return y.reshape(-1), displacement is not None
+
+
 def _digest(values: Any) -> str:
     return hashlib.sha256(values).hexdigest()[:16]
 
@@ -335,15 +353,9 @@ class LearningCompensator:
         readings are turned into displacement with it, curvature included.
     noise_gate : float, default 0
         Learn a frequency of the error only where its power is above this many times
-        the measurement noise's (estimated from the first trial learned from; 9: three
-        times its amplitude, where a frequency of noise alone passes once in 8000).
-        0 learns every frequency below the cutoff, the noise too: the commands then
-        carry it (with 0.1 % noise on the charge, 0.7-0.8 % of error that changes
-        from cycle to cycle on the Duhem plant at 40 Hz), and it dithers the
-        reversals, which narrows the loop. On the plants of ``docs/benchmarks.md``
-        (identified dynamics, from the charge) 9 lowered the NRMSE in 19 of 20 rows
-        and widened the loop in 13: choose it where the position's jitter matters
-        more than the loop's width.
+        the measurement noise's (9: three times its amplitude). 0 learns the noise too,
+        and the commands carry it, which dithers the loop narrower; 9 lowered the NRMSE
+        on 19 of 20 plant rows and widened the loop on 13 (``docs/realtime.md``).
 
     Attributes
     ----------
@@ -643,21 +655,9 @@ class LearningCompensator:
         if self._pending is None:
             msg = "learn() needs a trial: call command() and send its voltages first"
             raise ParameterError(msg)
-        if (charge is None) == (displacement is None):
-            msg = "learn() takes the measured charge or a sensor's displacement (one of them)"
-            raise ParameterError(msg)
-        sensor = displacement is not None
-        raw = charge if charge is not None else displacement
-        try:
-            y = np.array(raw, dtype=np.float64).reshape(-1)
-        except (TypeError, ValueError) as exc:
-            msg = f"the readings must be numbers ({exc})."
-            raise ShapeError(msg) from None
         u, d = self._pending, self._desired
         assert d is not None
-        if y.size != u.size:
-            msg = f"one reading per command: the trial sent {u.size}, got {y.size} readings"
-            raise ShapeError(msg)
+        y, sensor = _readings(charge, displacement, u.size)
         ok = np.isfinite(y) & ~self._clamped
         measured, bound = self._measured(y, u, sensor)
         e = d - measured
