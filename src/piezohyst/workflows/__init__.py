@@ -237,6 +237,22 @@ def select_file(
     return sel
 
 
+def model_terms(
+    model: str, accepted: dict[str, Any], growth_terms: str | Sequence[str], creep: Sequence[float]
+) -> dict[str, Any]:
+    """The growth terms and creep operators as settings of ``model`` (whose parameters are
+    ``accepted``); either set away from its default where the model has no such setting is
+    refused by name."""
+    extra: dict[str, Any] = {}
+    for name, value, default in (("growth_terms", growth_terms, "auto"), ("creep", creep, ())):
+        if name in accepted:
+            extra[name] = tuple(value) if name == "creep" else value
+        elif (value if isinstance(value, str) else tuple(value)) != default:
+            msg = f"the {name!r} setting does not apply to {model}"
+            raise ParameterError(msg)
+    return extra
+
+
 def fit_file(
     data: PathLike,
     out: PathLike | None = None,
@@ -298,13 +314,7 @@ def fit_file(
         guard_outputs([out], [data], force=force)
     cls = model_class(model)
     accepted = cls().get_params()
-    extra: dict[str, Any] = {}
-    for name, value, default in (("growth_terms", growth_terms, "auto"), ("creep", creep, ())):
-        if name in accepted:
-            extra[name] = tuple(value) if name == "creep" else value
-        elif (value if isinstance(value, str) else tuple(value)) != default:
-            msg = f"the {name!r} setting does not apply to {model}"
-            raise ParameterError(msg)
+    extra = model_terms(model, accepted, growth_terms, creep)
     if relaxation is not None:
         if "relaxation" not in accepted:
             msg = f"the 'relaxation' setting does not apply to {model} (preisach has it)"

@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import ParameterError, PiezohystError
 from ..io import DataSpec, write_rows
 from ..model.bank import model_width
-from . import fit_file, guard_outputs
+from . import fit_file, guard_outputs, model_terms
 
 __all__ = ["FleetResult", "Unit", "fit_many", "units_of"]
 
@@ -379,13 +379,8 @@ def fit_file_check(settings: dict[str, Any]) -> None:
     elif settings["operators"] != 10:
         msg = f"the 'operators' setting does not apply to {settings['model']}"
         raise ParameterError(msg)
-    for name, default in (("growth_terms", "auto"), ("creep", ())):
-        value = settings.get(name, default)
-        if name in params:
-            trial[name] = value
-        elif value not in (default, ()):
-            msg = f"the {name!r} setting does not apply to {settings['model']}"
-            raise ParameterError(msg)
+    trial.update(model_terms(settings["model"], params, settings.get("growth_terms", "auto"),
+                             settings.get("creep", ())))  # fmt: skip
     cls(**trial).check_params()
 
 
