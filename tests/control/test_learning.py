@@ -333,6 +333,24 @@ def test_the_file_loop_is_the_in_memory_loop(tmp_path: Path) -> None:
     lead = ph.read_table(tmp_path / "plain.csv").get("command")
     np.testing.assert_array_equal(lead, plain.command(d))
     assert not np.array_equal(lead, mem[0])  # the default lead-in carries the probe
+    # --noise-gate: kept in the state as the class keeps it; a later call without it is
+    # another learner's, refused
+    res = runner.invoke(main, [*base[:2], "--state", str(tmp_path / "gate.json"), "-o",
+                               str(tmp_path / "gate.csv"), "--slew-rate", "30000",
+                               "--noise-gate", "9",
+                               "--desired", str(tmp_path / "scan.csv")])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    kept = json.loads((tmp_path / "gate.json").read_text())
+    gated = ph.LearningCompensator(model, v_min=lo, v_max=hi, sample_rate=RATE,
+                                   slew_rate=30e3, noise_gate=9.0)  # fmt: skip
+    gated.restore(kept, "gate.json")  # the same settings: the class resumes the CLI's state
+    got = bench_b.run(ph.read_table(tmp_path / "gate.csv").get("command"))
+    ph.write_table(tmp_path / "gated0.csv", {"time": got.t, "voltage": got.voltage,
+                                             "charge": got.charge})  # fmt: skip
+    res = runner.invoke(main, [*base[:2], str(tmp_path / "gated0.csv"), "--state",
+                               str(tmp_path / "gate.json"), "-o", str(tmp_path / "gate.csv"),
+                               "--slew-rate", "30000"])  # fmt: skip
+    assert res.exit_code == 1 and "another model, leakage or settings" in res.output
     # the scan in uC against time in ms, as their headers say: read as compensate reads them
     ph.write_table(tmp_path / "scan_uc.csv", {"time": t * 1e3, "desired": d * 1e6},
                    units={"time": "ms", "desired": "uC"})  # fmt: skip
