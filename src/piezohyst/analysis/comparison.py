@@ -183,6 +183,14 @@ class Comparison:
                 f"| {r.test_rmse:.4g} | {100 * r.test_width:.3g} % | {r.absorbed or '-'} "
                 f"| {r.notes} |"
             )
+        ok = [r for r in ranked if not r.error]
+        if self.recommended and ok and ok[0].name != self.recommended:
+            pick = next((r for r in ok if r.name == self.recommended), None)
+            theirs = "no fit" if pick is None else f"{100 * pick.test_nrmse:.4g} %"
+            lines += ["", f"Recommended: {self.recommended}, chosen inside the training part "
+                      "alone (forward chaining); the held-out part, which the choice never "
+                      f"saw, ranks {ok[0].name} first ({100 * ok[0].test_nrmse:.4g} % against "
+                      f"{theirs})."]  # fmt: skip
         if self.recommendation_notes:
             lines += ["", *self.recommendation_notes]
         return "\n".join(lines)
