@@ -508,3 +508,38 @@ def test_calibrate_gain_then_compensate_in_metres_from_its_file(workdir: Path) -
     res = run("calibrate-gain", workdir / "model.json", workdir / "run.csv",
               "--displacement-column", "voltage", "-o", workdir / "g2.json")  # fmt: skip
     assert_clean_error(res, "the displacement")
+
+
+def test_compensate_with_the_fields_pi_with_creep(tmp_path: Path) -> None:
+    """A generalized PI fitted on a displacement record takes creep operators timed by the
+    record (Kuhnen's PI with creep, what `compare` offers there); `compensate` with it refused
+    a trajectory well inside reach: the dry run that sizes the precondition cycle started
+    from a full-range cycle, the creep it left put the target below what 0 V reached, the
+    cycle grew to the full range, every command sat at 0 V, and the refusal's own estimate
+    of the reachable range then stopped on the model's need for time stamps."""
+    rec = ph.simulate(signal="decaying", duration=12.0, frequency=1.0, seed=5)
+    ph.write_table(tmp_path / "disp.csv", {"time": rec.t, "voltage": rec.voltage,
+                                           "x": rec.displacement * 1e6},
+                   units={"time": "s", "voltage": "V", "x": "um"})  # fmt: skip
+    res = run("fit", tmp_path / "disp.csv", "--output", "x", "--model", "generalized-pi",
+              "-o", tmp_path / "g.json")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    model = ph.load_model(tmp_path / "g.json")
+    assert model.hysteresis_.rate_dependent_ and model.creep_taus_.size  # creep, kept
+    t = np.arange(3000) / 1000.0
+    ph.write_table(tmp_path / "target.csv",
+                   {"time": t, "desired": 10.0 + 30.0 * (0.5 - 0.5 * np.cos(4 * np.pi * t))},
+                   units={"time": "s", "desired": "um"})  # fmt: skip
+    res = run("compensate", tmp_path / "g.json", tmp_path / "target.csv", "-o",
+              tmp_path / "command.csv")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "of the 3000 sent, 0 held by the voltage limits" in res.stdout
+    lo, hi = model.input_range_
+    sent = ph.read_table(tmp_path / "command.csv").get("command")
+    assert lo <= sent.min() and sent.max() <= hi
+    # a target mostly out of reach is refused with the range the limits reach (it stopped on
+    # the model's need for time stamps)
+    ph.write_table(tmp_path / "far.csv", {"time": t, "desired": np.full(t.size, 1000.0)},
+                   units={"time": "s", "desired": "um"})  # fmt: skip
+    res = run("compensate", tmp_path / "g.json", tmp_path / "far.csv", "-o", tmp_path / "f.csv")
+    assert_clean_error(res, "are out of reach of", "which reaches about")

@@ -253,7 +253,8 @@ def _needed_span(comp: Compensator, desired: Iterator[FloatArray]) -> tuple[floa
     """The voltages a trajectory's commands cover (a dry run on a copy), with a margin,
     inside the limits; the whole limits when it has no finite command."""
     probe = copy.deepcopy(comp)
-    probe.precondition(3)  # from a preconditioned state, as the commands will be
+    if not comp.model.hysteresis_.rate_dependent_:  # preconditioned, as the commands will be
+        probe.precondition(3)  # (a full-range cycle leaves creep high: a target looks out of reach)
     lo, hi = math.inf, -math.inf
     with warnings.catch_warnings():  # limits that bite and extrapolation: said once, by the
         warnings.simplefilter("ignore", LimitWarning)  # real run, with its own counts
@@ -287,7 +288,8 @@ def _reachable(
     """Roughly the desired values the limits reach: the outputs at v_min and v_max from rest."""
     h = model.hysteresis_
     x0 = float(model.initial_state_[0])
-    rest, low, high = h.predict(np.array([x0, comp.v_min, comp.v_max]))
+    slowly = np.array([0.0, 1e6, 2e6])  # s apart: what creep terms settle to
+    rest, low, high = h.predict(np.array([x0, comp.v_min, comp.v_max]), t=slowly)
     values = np.array([low, high])
     if settings.output_map is not None:
         values = settings.output_map.predict(values)
