@@ -236,7 +236,8 @@ class Compensator:
                  (spec.relaxation is not None, "a relaxation term")]  # fmt: skip
         for needed, what in timed:
             if needed and sample_rate is None:
-                msg = f"A model with {what} needs the loop's sample_rate (Hz). Got None."
+                msg = (f"A model with {what} needs the loop's sample_rate (Hz, --sample-rate). "
+                       "Got None.")  # fmt: skip
                 raise ParameterError(msg)
         self.model = model
         self.spec = spec
