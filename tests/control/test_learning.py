@@ -181,6 +181,28 @@ def test_missing_readings_are_not_learned_from(pi_model: ph.ClassicalPI) -> None
     assert trial.skipped and ilc.trials == 2 and ilc.skipped == 1
 
 
+def test_a_model_of_the_displacement_learns_from_the_sensor_without_a_gain() -> None:
+    """A model identified on a displacement record (output in m, the field's PI with creep
+    among them) is the sensor's own units: its readings are learned as they are (it asked
+    for a gain in m per model output unit, which is 1 there)."""
+    h = ph.PIHysteresis([0.0, 20.0, 50.0], [1e-6, 5e-7, 3e-7])  # m per V
+    model = ph.ClassicalPI.from_operator(h, output_unit="m")
+    d = cosine(model)
+    ilc = ph.LearningCompensator(model, v_min=0.0, v_max=140.0, sample_rate=RATE,
+                                 slew_rate=None, learning_gain=1.0, cutoff=math.inf,
+                                 lead_in=False)  # fmt: skip
+    ilc.command(d)
+    ilc.learn(displacement=d - 1e-6)  # 1 um short everywhere
+    # tol: one FFT round trip of a constant
+    np.testing.assert_allclose(ilc.correction, 1e-6, rtol=1e-9)
+    charge = ph.ClassicalPI.from_operator(ph.PIHysteresis([0.0], [1e-8]))  # output in C
+    other = ph.LearningCompensator(charge, v_min=0.0, v_max=140.0, sample_rate=RATE,
+                                   slew_rate=None, lead_in=False)  # fmt: skip
+    other.command(cosine(charge))
+    with pytest.raises(ph.errors.ParameterError, match="needs the gain"):
+        other.learn(displacement=cosine(charge))
+
+
 def test_a_trial_whose_error_grew_is_rolled_back(pi_model: ph.ClassicalPI) -> None:
     """The update is undone: the last good correction is sent again and measured anew, and
     learning goes on from that measurement with half the gain."""

@@ -747,6 +747,8 @@ class LearningCompensator:
         g, as_displacement = _desired_gain(self.settings, self.output_map)
         span = float(np.ptp(d))
         if sensor:
+            if g is None and self.model.output_unit == "m":  # the model's output is the sensor's
+                return y, 0.0
             if g is None:
                 msg = "learning from a displacement needs the gain (m per model output unit)"
                 raise ParameterError(msg)
