@@ -19,13 +19,22 @@ import numpy as np
 from ._validation import FloatArray
 from .errors import DataFileError
 
-__all__ = ["LENGTHS", "Role", "is_length", "split_unit", "to_standard"]
+__all__ = ["LENGTHS", "Role", "is_length", "split_unit", "suffix_units", "to_standard"]
 
 Role = Literal["time", "input", "output"]
 
 _IN_HEADER = re.compile(r"^\s*(?P<name>.*?\S)\s*(?:\[(?P<u1>[^\]]+)\]|\((?P<u2>[^)]+)\))\s*$")
 _TARGETS: dict[str, tuple[str, ...]] = {"time": ("s",), "input": ("V",), "output": ("C", "m")}
 _SAME = {"s", "V", "C", "m"}
+#: Units a column's name may end in after an underscore (``time_s``, ``voltage_mV``): time,
+#: voltage, charge and length with the prefixes records use; no other (``v_in`` is not in
+#: inches, ``channel_A`` not in amperes)
+SUFFIX_UNITS = frozenset(
+    [p + u for u in ("s",) for p in ("", "m", "u", "µ", "n")]
+    + [p + u for u in ("V",) for p in ("", "m", "u", "µ", "k")]
+    + [p + u for u in ("C",) for p in ("", "m", "u", "µ", "n", "p")]
+    + [p + u for u in ("m",) for p in ("", "m", "u", "µ", "n", "p")]
+)
 #: Units that mark an output as a displacement (a record's unit, or a model's output_unit)
 LENGTHS = frozenset(
     {"m", "mm", "um", "µm", "μm", "nm", "pm", "micron", "microns", "metre", "meter"}
@@ -77,6 +86,47 @@ def split_unit(header: str) -> tuple[str, str | None]:
 
 
 @cache
+def _suffix_unit(name: str) -> tuple[str, str] | None:
+    """``voltage_mV`` -> ``("voltage", "mV")`` where the suffix is in :data:`SUFFIX_UNITS`."""
+    stem, sep, unit = name.rpartition("_")
+    if sep and stem.strip("_") and unit in SUFFIX_UNITS:
+        return stem, unit
+    return None
+
+
+def suffix_units(columns: list[str]) -> dict[str, tuple[str, str]]:
+    """The columns named ``name_unit`` (``time_s``, ``voltage_V``, ``displacement_nm``, as
+    exports from scripts often are): each such column's name and unit, by its header.
+
+    Only the units of :data:`SUFFIX_UNITS` count, and only where the name says it
+    unambiguously: not where a column of that name exists, where two columns share it
+    (``voltage_V`` and ``voltage_mV``), or where a column of the same stem ends in
+    something else (``channel_A``, ``channel_B``, ``channel_C``: channel names).
+
+    Parameters
+    ----------
+    columns : list of str
+
+    Returns
+    -------
+    dict
+        ``{header: (name, unit)}``.
+
+    Examples
+    --------
+    >>> suffix_units(["time_s", "voltage_V", "charge_nC", "v_in"])
+    {'time_s': ('time', 's'), 'voltage_V': ('voltage', 'V'), 'charge_nC': ('charge', 'nC')}
+    >>> suffix_units(["channel_A", "channel_B", "channel_C"])
+    {}
+    """
+    found = {c: hit for c in columns if (hit := _suffix_unit(c)) is not None}
+    stems = [stem for stem, _ in found.values()]
+    taken = set(columns)
+    others = {c.rpartition("_")[0] for c in columns if c not in found and "_" in c}
+    return {c: (stem, unit) for c, (stem, unit) in found.items()
+            if stems.count(stem) == 1 and stem not in taken and stem not in others}  # fmt: skip
+
+
 def _registry() -> Any:
     import pint
 

@@ -436,6 +436,38 @@ def test_a_time_column_named_with_its_unit(
     assert res.exit_code == 0, res.output
 
 
+def test_columns_named_with_a_unit_suffix(
+    tmp_path: Path, bench: ph.simulation.BenchRecord
+) -> None:
+    """A script's export names its columns ``time_s, voltage_V, charge_nC`` (the PZT set's
+    CSVs do): the default names find them, in their units, as ``time [s]`` headers are (it
+    was "no column 'voltage'"); the header as written still names its column; a channel
+    letter, an inch or an ampere is not read as a unit."""
+    n = 3000
+    rows = np.column_stack([1e3 * bench.t[:n], bench.voltage[:n], 1e9 * bench.charge[:n],
+                            np.zeros(n)])  # fmt: skip
+    data = tmp_path / "s.csv"
+    data.write_text("time_ms,voltage_V,charge_nC,current_A\n"
+                    + "\n".join(",".join(f"{x!r}" for x in r.tolist()) for r in rows))  # fmt: skip
+    rec = ph.read_recording(data)
+    np.testing.assert_allclose(rec.t, bench.t[:n], rtol=1e-12)  # ms -> s
+    np.testing.assert_allclose(rec.y, bench.charge[:n], rtol=1e-12)  # nC -> C
+    assert rec.units == ("V", "C")
+    same = ph.read_recording(data, input_column="voltage_V", output_column="charge_nC",
+                             time_column="time_ms")  # fmt: skip
+    np.testing.assert_array_equal(same.y, rec.y)
+    res = CliRunner().invoke(main, ["fit", str(data), "-o", str(tmp_path / "m.json")])
+    assert res.exit_code == 0, res.output
+    assert ph.load_model(tmp_path / "m.json").output_unit == "C"
+    table = ph.io.read_table(data)
+    assert table.columns == ["time", "voltage", "charge", "current_A"]  # amperes: no role
+    odd = tmp_path / "odd.csv"
+    odd.write_text("v_in,channel_A,channel_B,channel_C,voltage,voltage_V\n1,2,3,4,5,6\n2,3,4,5,6,7\n")
+    assert ph.io.read_table(odd).columns == ["v_in", "channel_A", "channel_B", "channel_C",
+                                            "voltage", "voltage_V"]  # fmt: skip
+    assert ph.io.read_table(odd).units == {}
+
+
 def test_a_second_file_holding_one_signal_needs_no_name(
     tmp_path: Path, bench: ph.simulation.BenchRecord
 ) -> None:

@@ -43,6 +43,7 @@ from ._formats import (
     _read_text,
     _read_text_careful,
     estimated_rows,
+    with_suffix_units,
 )
 from ._isolate import parse_isolated
 from ._writers import (
@@ -166,7 +167,7 @@ def _reading(p: Path, reader: Callable[[], Table]) -> Table:
     """Run a reader; anything but a DataFileError becomes one naming the file and format."""
     kind = p.suffix.lstrip(".").upper() or "text"
     try:
-        return reader()
+        return with_suffix_units(reader())
     except DataFileError:
         raise
     except Exception as exc:
@@ -208,7 +209,7 @@ def open_table(
         head = _read_head(p)
         plan = None if b"\x00" in head else _csv_plan(p, head, skip_rows)
         if plan is not None:
-            return _lazy_csv(p, plan, group, channels, skip_rows)
+            return with_suffix_units(_lazy_csv(p, plan, group, channels, skip_rows))
     return read_table(p, group=group, channels=channels, skip_rows=skip_rows)
 
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from .._validation import FloatArray
 from ..errors import DataFileError
-from ..units import split_unit
+from ..units import split_unit, suffix_units
 
 CSV_SUFFIXES = {".csv", ".tsv", ".txt", ".dat", ""}
 MARKER = "# written by piezohyst"  # first line of every CSV piezohyst writes
@@ -107,6 +107,8 @@ class Table:
         if key in self._getters:
             return key
         bare, unit = split_unit(key)
+        if unit is None:  # the header as the file wrote it, where its unit suffix was read
+            bare, unit = suffix_units([key]).get(key, (key, None))
         if unit is not None and bare in self._getters and self.units.get(bare) == unit:
             return bare
         field = _field(key, self._getters)  # a nested field by MATLAB's name, or its own
@@ -651,6 +653,31 @@ def _table_from_arrays(path: Path, arrays: Mapping[str, object], kind: str) -> T
     return Table(path, list(columns), {k: _constant(v) for k, v in columns.items()})
 
 
+def with_suffix_units(table: Table) -> Table:
+    """``table`` with its columns named ``name_unit`` (``time_s``, ``voltage_V``, see
+    :func:`~piezohyst.units.suffix_units`) as ``name`` in ``unit``, as ``name [unit]``
+    headers are (a unit the file states otherwise is kept)."""
+    found = suffix_units(list(table.columns))
+    if not found:
+        return table
+    new = {c: found[c][0] if c in found else c for c in table.columns}
+    old = {n: c for c, n in new.items()}
+    units = {new.get(c, c): u for c, u in table.units.items()}
+    for c, (name, unit) in found.items():
+        units.setdefault(name, unit)
+    stream = table._stream
+    if stream is not None:
+        inner = stream
+
+        def stream(names: Sequence[str]) -> Iterator[dict[str, FloatArray]]:
+            for batch in inner([old.get(n, n) for n in names]):
+                yield {new.get(k, k): v for k, v in batch.items()}
+
+    getters = {new[c]: table._getters[c] for c in table.columns}
+    return dataclasses.replace(table, columns=[new[c] for c in table.columns],
+                               _getters=getters, units=units, _stream=stream)  # fmt: skip
+
+
 def _constant(values: FloatArray) -> Callable[[], FloatArray]:
     return lambda: values
 
@@ -859,10 +886,12 @@ def _choose_group(
     wanted = [c for c in channels if not c.strip().isdigit()]
     for need in (wanted, wanted[:1]):  # every named channel, else at least the first
         for name, columns in groups.items():
-            bare = {split_unit(c)[0] for c in columns} | set(columns)
+            bare = ({split_unit(c)[0] for c in columns} | set(columns)
+                    | {name for name, _ in suffix_units(list(columns)).values()})
             if columns and need and all(c in bare or split_unit(c)[0] in bare for c in need):
                 return name
-    timed = (n for n, c in groups.items() if any(split_unit(k)[0].lower() == "time" for k in c))
+    timed = (n for n, c in groups.items()
+             if any(split_unit(k)[0].lower() == "time" or k.lower().startswith("time_") for k in c))
     return next(timed, next((n for n, cols in groups.items() if cols), names[0]))
 
 
