@@ -391,7 +391,9 @@ def pzt_displacement_map(data: Path) -> str:
         "voltage alone, through the charge model (a Preisach model of voltage → polarisation "
         "fitted on the calibration period, started from the state the earlier periods left) "
         "and the map. Beside it, the displacement-only fit: the same model fitted on voltage "
-        "→ displacement directly on the calibration period. Periods joined as above; each "
+        "→ displacement directly on the calibration period (with the displacement's sign "
+        "turned where it falls as the voltage rises, as it does below the coercive field: a "
+        "model rises with its input, and refuses a falling record). Periods joined as above; each "
         "held-out period compared after removing its mean offset (the instrument's zero per "
         "record). The map's order is chosen by evidence (a term kept at 5 standard errors).",
         "",
@@ -408,9 +410,14 @@ def pzt_displacement_map(data: Path) -> str:
             om = ph.calibrate_gain(charge, v[train], p[train], d[train], t[train],
                                    output_unit="nm")  # fmt: skip
         through = om.predict(charge.predict(v, t=t))
+        # below the coercive field this sample's displacement falls as the voltage rises
+        # (a model rises with its input, and refuses it): fitted with its sign turned
+        dv, dd = np.diff(v[train]), np.diff(d[train])
+        sign = -1.0 if float(dv @ dd) < 0 else 1.0
         direct = ph.PreisachModel(output_unit="nm", growth_terms=())
-        direct.fit(v[train], d[train], t=t[train], initial_state=start_from(direct, v, train, 0))
-        alone = direct.predict(v, t=t)
+        direct.fit(v[train], sign * d[train], t=t[train],
+                   initial_state=start_from(direct, v, train, 0))  # fmt: skip
+        alone = sign * direct.predict(v, t=t)
         cells: list[str] = []
         for pred in (through, alone):
             for k, part in enumerate(parts):
@@ -971,9 +978,12 @@ def main() -> None:
   The Preisach model (any minor loop shape) and Bouc-Wen do far better (6.1/9.8 % and
   7.9/12.2 %); still, identify at the amplitudes you will use.
 - **Displacement from the charge (PZT).** Calibrated on the sub-coercive 800 V period, where the
-  map is linear, the displacement of the 1000 and 1200 V periods follows from the voltage
-  through the charge model to 4.3 and 11.8 %, where a model of voltage → displacement fitted on
-  the same period leaves 32-33 %: the charge carries the hysteresis, the map is simple. Past
+  map is linear (and negative: this sample's displacement falls as the voltage rises there),
+  the displacement of the 1000 and 1200 V periods follows from the voltage through the charge
+  model to 4.3 and 11.8 %, where a model of voltage → displacement fitted on the same period
+  (its sign turned) leaves 6.7 and 13.0 %: the charge carries the hysteresis, the map is
+  simple. (Before models refused a falling record, the direct fit here was a flat line at
+  32-33 %, which this note once read as the charge's advantage.) Past
   the coercive field (1400 V) the map turns (the butterfly, found and named by calibration;
   order 2 on evidence) and the same route leaves 24-29 % on the smaller periods, whose
   polarisation never switches: a map calibrated on switching loops is not the map of minor

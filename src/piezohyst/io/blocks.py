@@ -77,6 +77,11 @@ class Summary:
         Fastest input change (input units per s); NaN without times.
     max_step : float
         Largest input change from one sample to the next (input units).
+    co_move : float
+        The correlation of the input's and the output's changes from sample to sample
+        (about zero: a drift does not move with the input): near 1 where the output rises
+        with the input, negative where it falls (a sensor counting the other way), near 0
+        where it does both (the butterfly of bipolar drive); NaN where either never moves.
     """
 
     n: int
@@ -90,6 +95,7 @@ class Summary:
     t_last: float = float("nan")
     max_slew_rate: float = float("nan")
     max_step: float = float("nan")
+    co_move: float = float("nan")
 
     @classmethod
     def of(cls, blocks: Blocks) -> Summary:
@@ -114,12 +120,18 @@ class Summary:
         x_hi = y_hi = -np.inf
         slew = np.nan
         jump = 0.0
+        moves = np.zeros(3)  # sums of dx dy, dx^2, dy^2
+        y_last = np.nan
         for x, y, t in blocks():
             if x.size == 0:
                 continue
             if n == 0:
                 x0, y0 = float(x[0]), float(y[0])
                 t0 = np.nan if t is None else float(t[0])
+            dx = np.diff(x, prepend=x[0] if n == 0 else x_last)
+            dy = np.diff(y, prepend=y[0] if n == 0 else y_last)
+            moves += (float(dx @ dy), float(dx @ dx), float(dy @ dy))
+            y_last = float(y[-1])
             x_lo, x_hi = min(x_lo, float(x.min())), max(x_hi, float(x.max()))
             if x.size > 1:
                 jump = max(jump, float(np.max(np.abs(np.diff(x)))))
@@ -139,7 +151,9 @@ class Summary:
         if n == 0:
             msg = "the record holds no samples"
             raise InsufficientDataError(msg)
-        return cls(n, x0, x_lo, x_hi, y0, y_lo, y_hi, t0, t1, slew, jump if n > 1 else np.nan)
+        both = moves[1] * moves[2]
+        co = float(moves[0] / np.sqrt(both)) if both > 0 else np.nan
+        return cls(n, x0, x_lo, x_hi, y0, y_lo, y_hi, t0, t1, slew, jump if n > 1 else np.nan, co)
 
     @property
     def x_range(self) -> FloatArray:

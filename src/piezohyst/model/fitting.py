@@ -50,6 +50,11 @@ __all__ = [
 ]
 
 SCORE_PIECE = 1 << 16  # samples per piece when scoring a fit (2 MB of temporaries)
+#: A record whose input and output changes correlate below minus this falls as its input
+#: rises (``Summary.co_move``): no model here can follow it. Measured PZT periods whose
+#: displacement falls: -0.86; their butterflies (rising and falling): +0.17..+0.20; rising
+#: loops +0.5..+0.84. Noise on either signal pulls the correlation towards 0, never below it.
+FALLING = 0.5
 
 
 def fit_arrays(
@@ -235,6 +240,14 @@ def identify_model(
         msg = (
             f"the output never moves (constant at {sm.y_min:g} {model.output_unit}): "
             "nothing to identify; is it the right column?"
+        )
+        raise InsufficientDataError(msg)
+    if sm.co_move < -FALLING:
+        msg = (
+            f"the output falls as the input rises (their changes correlate at "
+            f"{sm.co_move:.2f}): every model here rises with its input; negate the output "
+            "(a sensor that counts the other way, or an actuator poled against the field) "
+            "and the model's predictions with it"
         )
         raise InsufficientDataError(msg)
     displacement = is_length(model.output_unit) and _default_growth(model)
