@@ -436,9 +436,7 @@ def test_a_time_column_named_with_its_unit(
     assert res.exit_code == 0, res.output
 
 
-def test_columns_named_with_a_unit_suffix(
-    tmp_path: Path, bench: ph.simulation.BenchRecord
-) -> None:
+def test_columns_named_with_a_unit_suffix(tmp_path: Path, bench: ph.simulation.BenchRecord) -> None:
     """A script's export names its columns ``time_s, voltage_V, charge_nC`` (the PZT set's
     CSVs do): the default names find them, in their units, as ``time [s]`` headers are (it
     was "no column 'voltage'"); the header as written still names its column; a channel
@@ -462,7 +460,9 @@ def test_columns_named_with_a_unit_suffix(
     table = ph.io.read_table(data)
     assert table.columns == ["time", "voltage", "charge", "current_A"]  # amperes: no role
     odd = tmp_path / "odd.csv"
-    odd.write_text("v_in,channel_A,channel_B,channel_C,voltage,voltage_V\n1,2,3,4,5,6\n2,3,4,5,6,7\n")
+    odd.write_text(
+        "v_in,channel_A,channel_B,channel_C,voltage,voltage_V\n1,2,3,4,5,6\n2,3,4,5,6,7\n"
+    )
     assert ph.io.read_table(odd).columns == ["v_in", "channel_A", "channel_B", "channel_C",
                                             "voltage", "voltage_V"]  # fmt: skip
     assert ph.io.read_table(odd).units == {}

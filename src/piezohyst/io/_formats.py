@@ -663,7 +663,7 @@ def with_suffix_units(table: Table) -> Table:
     new = {c: found[c][0] if c in found else c for c in table.columns}
     old = {n: c for c, n in new.items()}
     units = {new.get(c, c): u for c, u in table.units.items()}
-    for c, (name, unit) in found.items():
+    for name, unit in found.values():
         units.setdefault(name, unit)
     stream = table._stream
     if stream is not None:
@@ -886,13 +886,24 @@ def _choose_group(
     wanted = [c for c in channels if not c.strip().isdigit()]
     for need in (wanted, wanted[:1]):  # every named channel, else at least the first
         for name, columns in groups.items():
-            bare = ({split_unit(c)[0] for c in columns} | set(columns)
-                    | {name for name, _ in suffix_units(list(columns)).values()})
+            bare = (
+                {split_unit(c)[0] for c in columns}
+                | set(columns)
+                | {name for name, _ in suffix_units(list(columns)).values()}
+            )
             if columns and need and all(c in bare or split_unit(c)[0] in bare for c in need):
                 return name
-    timed = (n for n, c in groups.items()
-             if any(split_unit(k)[0].lower() == "time" or k.lower().startswith("time_") for k in c))
+    timed = (
+        n
+        for n, c in groups.items()
+        if any(split_unit(k)[0].lower() == "time" or k in _timed_suffix(c) for k in c)
+    )
     return next(timed, next((n for n, cols in groups.items() if cols), names[0]))
+
+
+def _timed_suffix(columns: Iterable[str]) -> set[str]:
+    """The columns named ``time_unit`` (``time_ms``) among ``columns``."""
+    return {c for c, (name, _) in suffix_units(list(columns)).items() if name.lower() == "time"}
 
 
 def _read_tdms(path: Path, group: str | None, channels: Sequence[str] = ()) -> Table:
