@@ -154,7 +154,7 @@ def test_models_beyond_pi_from_the_shell(workdir: Path, model: str) -> None:
                                atol=1e-6 * np.ptp(wanted))  # fmt: skip
     res = run("export-c", out, "-o", workdir / f"{model}_c.c")
     assert res.exit_code == 0, res.output
-    res = run("report", out, loops, "--out", workdir / f"{model}-report")
+    res = run("report", out, loops, "-o", workdir / f"{model}-report")
     assert res.exit_code == 0, res.output
     res = run("fit", loops, "--model", model, "--operators", "12", "-o", workdir / "x.json")
     assert_clean_error(res, "'operators' setting does not apply")
@@ -543,3 +543,17 @@ def test_compensate_with_the_fields_pi_with_creep(tmp_path: Path) -> None:
                    units={"time": "s", "desired": "um"})  # fmt: skip
     res = run("compensate", tmp_path / "g.json", tmp_path / "far.csv", "-o", tmp_path / "f.csv")
     assert_clean_error(res, "are out of reach of", "which reaches about")
+
+
+def test_every_command_that_writes_takes_o() -> None:
+    """``-o`` names what a command writes, on every command that writes something (``report
+    -o`` was "No such option"; ``demo`` and ``report`` took ``--out`` alone)."""
+    import click
+
+    writers = {}
+    for name, command in main.commands.items():
+        for param in command.params:
+            if isinstance(param, click.Option) and param.name in ("out", "out_dir"):
+                writers[name] = param.opts
+    assert {"fit", "report", "demo", "compensate", "export-c"} <= writers.keys()
+    assert all("-o" in opts for opts in writers.values()), writers

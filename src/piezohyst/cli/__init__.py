@@ -569,6 +569,7 @@ def compensate(
 @click.argument("data", type=EXISTING)
 @_data_options
 @click.option(
+    "-o",
     "--out",
     type=click.Path(file_okay=False, path_type=Path),
     required=True,
@@ -826,6 +827,7 @@ def simulate_loop(
 
 @main.command()
 @click.option(
+    "-o",
     "--out",
     type=click.Path(file_okay=False, path_type=Path),
     default=Path("demo-report"),
