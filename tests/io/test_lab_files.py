@@ -217,3 +217,34 @@ def test_output_names_say_what_is_written(
     res = run(*args, "-o", tmp_path / out)
     assert res.exit_code == 2 and expected in res.output, res.output
     assert not (tmp_path / out).exists()
+
+
+def test_a_units_row_under_the_header_and_a_byte_order_mark(
+    tmp_path: Path, rec: ph.simulation.Recording
+) -> None:
+    """An oscilloscope's export puts the units in a row of their own under the header
+    (PicoScope: ``Time,Channel A,Channel B`` then ``(ms),(V),(nC)``, then a blank line): read
+    as ``Time (ms)`` (it took the units row for the header: "no column 'Channel A'; available:
+    '(ms)', '(V)', '(nC)'"). Excel's 'CSV UTF-8' opens with a byte-order mark, which hid the
+    time column ('\\ufefftime'). Both, in memory and streamed, in every delimiter's reader."""
+    rows = "".join(f"{1e3 * t:.3f},{v:.6f},{1e9 * q:.6f}\n"
+                   for t, v, q in zip(rec.t, rec.voltage, rec.charge, strict=True))  # fmt: skip
+    (tmp_path / "pico.csv").write_text("Time,Channel A,Channel B\n(ms),(V),(nC)\n\n" + rows)
+    (tmp_path / "pico.txt").write_text(
+        "Time Channel_A Channel_B\n(ms) (V) (nC)\n" + rows.replace(",", " ")
+    )
+    (tmp_path / "bom.csv").write_text(
+        "\ufefftime [ms],voltage [V],charge [nC]\n" + rows, encoding="utf-8"
+    )
+    for name, x, y in (("pico.csv", "Channel A", "Channel B"),
+                       ("pico.txt", "Channel_A", "Channel_B"),
+                       ("bom.csv", "voltage", "charge")):  # fmt: skip
+        for read in (ph.io.read_table, ph.io.open_table):
+            table = read(tmp_path / name)
+            assert table.columns[0].lower() == "time" and table.units[table.columns[0]] == "ms"
+        got = ph.io.read_recording(tmp_path / name, input_column=x, output_column=y)
+        # tol: the file prints 3 decimals of ms, 6 of volts and of nC
+        np.testing.assert_allclose(got.t, rec.t, atol=5e-7)
+        np.testing.assert_allclose(got.x, rec.voltage, atol=5e-7)
+        np.testing.assert_allclose(got.y, rec.charge, atol=5e-16)
+        assert got.units == ("V", "C")

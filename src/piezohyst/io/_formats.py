@@ -323,6 +323,16 @@ def _cells(line: str, delim: str | None) -> list[str]:
     return line.split() if delim is None else next(csv.reader([line], delimiter=delim))
 
 
+_BRACKETED = re.compile(r"^\s*(?:\([^()]*\)|\[[^\[\]]*\])\s*$")
+
+
+def _units_row(cells: list[str]) -> bool:
+    """A row of units under a header, as oscilloscope and DAQ exports write (PicoScope:
+    ``(ms),(V),(V)``): every cell a bracketed unit (or empty, not all)."""
+    filled = [c for c in cells if c.strip()]
+    return bool(filled) and all(_BRACKETED.match(c) for c in filled)
+
+
 def _numeric_row(cells: list[str]) -> bool:
     filled = [c.strip() for c in cells if c.strip()]
     return bool(filled) and all(_is_number(c) or _DECIMAL_COMMA.match(c) for c in filled)
@@ -353,6 +363,8 @@ def _table_start(lines: list[tuple[int, str]], look: int = 200) -> int:
     if first == 0 or any(_numeric_row(cells) for cells in top[:first]):
         return 0
     above = top[first - 1]
+    if first >= 2 and _units_row(above) and len(top[first - 2]) == width:
+        return first - 2  # a header, then its units (under it), then the data
     key_value = _KEY_VALUE.match(lines[first - 1][1]) is not None
     if key_value and (len(above) != width or above[0].rstrip().endswith((":", "="))):
         return first  # no header: the preamble runs up to the data
@@ -420,7 +432,7 @@ def _csv_plan(path: Path, head: bytes, skip_rows: int = 0) -> _CsvPlan | None:
     if head[:2] in (b"\xff\xfe", b"\xfe\xff") or b"PiezoResult" in head[:64]:
         return None
     try:
-        text = head.decode("utf-8")
+        text = head.decode("utf-8-sig")  # Excel's 'CSV UTF-8' opens with a byte-order mark
         encoding = "utf8"
     except UnicodeDecodeError:
         text, encoding = head.decode("latin-1"), "latin1"
@@ -446,6 +458,8 @@ def _csv_plan(path: Path, head: bytes, skip_rows: int = 0) -> _CsvPlan | None:
         return None
     first = next(csv.reader([body[0][1]], delimiter=delim))
     has_header = any(c.strip() and not _is_number(c.strip()) for c in first)
+    if has_header and len(body) > 2 and _units_row(next(csv.reader([body[1][1]], delimiter=delim))):
+        has_header, body = True, body[1:]  # the units row under the header: skipped too
     decimal_comma = delim != "," and _decimal_commas(
         [(n, next(csv.reader([ln], delimiter=delim))) for n, ln in body[:50]]
     )
@@ -567,6 +581,11 @@ def _table_from_lines(path: Path, lines: list[tuple[int, str]]) -> Table:
     first = rows[0][1]
     has_header = any(c and not _is_number(c) for c in first)
     units: dict[str, str] = {}
+    below = has_header and len(rows) > 2 and len(rows[1][1]) == len(first)
+    if below and _units_row(rows[1][1]) and not _units_row(first):  # a units row: one header
+        first = [f"{c} {u.strip()}" if u.strip() else c for c, u in zip(first, rows[1][1],
+                                                                         strict=True)]  # fmt: skip
+        rows = rows[1:]
     if has_header:
         split = [split_unit(c) if c else (f"col{i}", None) for i, c in enumerate(first)]
         bare = [name for name, _ in split]
