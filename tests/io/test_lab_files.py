@@ -248,3 +248,31 @@ def test_a_units_row_under_the_header_and_a_byte_order_mark(
         np.testing.assert_allclose(got.x, rec.voltage, atol=5e-7)
         np.testing.assert_allclose(got.y, rec.charge, atol=5e-16)
         assert got.units == ("V", "C")
+
+
+def test_a_time_column_of_timestamps(tmp_path: Path, rec: ph.simulation.Recording) -> None:
+    """A logger writes its clock (``2026-11-27 10:00:00.125``): read as the seconds from the
+    first row's, in memory and streamed (it was "'2026-11-27 10:00:00.000' at row 1 ... is
+    not a number"); a cell that is not a timestamp is still named by its row."""
+    from datetime import datetime, timedelta
+
+    start = datetime(2026, 11, 27, 23, 59, 58)  # across midnight
+    stamps = [(start + timedelta(seconds=float(t))).isoformat(sep=sep, timespec="milliseconds")
+              for t, sep in zip(rec.t, "T " * rec.t.size, strict=False)]  # fmt: skip
+    rows = [f"{s},{v:.6f},{q:.6e}"
+            for s, v, q in zip(stamps, rec.voltage, rec.charge, strict=True)]  # fmt: skip
+    (tmp_path / "clock.csv").write_text("time,voltage,charge\n" + "\n".join(rows) + "\n")
+    for read in (ph.io.read_table, ph.io.open_table):
+        # tol: the clock prints milliseconds; the times are n/1000 s
+        np.testing.assert_allclose(read(tmp_path / "clock.csv").get("time"), rec.t, atol=1e-9)
+    res = run("fit", tmp_path / "clock.csv", "--operators", "8", "-o", tmp_path / "m.json")
+    assert res.exit_code == 0, res.output
+    rows[500] = "27/11/2026 10:00:00," + rows[500].split(",", 1)[1]
+    (tmp_path / "bad.csv").write_text("time,voltage,charge\n" + "\n".join(rows) + "\n")
+    one_line_error(run("fit", tmp_path / "bad.csv", "-o", tmp_path / "b.json"),
+                   "'27/11/2026 10:00:00' at row 501 (line 502 of the file), column 'time' "
+                   "is not a timestamp, as the rows above are")  # fmt: skip
+    rows[500] = "2026-11-27T10:00:00Z," + rows[500].split(",", 1)[1]  # one with an offset
+    (tmp_path / "mixed.csv").write_text("time,voltage,charge\n" + "\n".join(rows) + "\n")
+    one_line_error(run("fit", tmp_path / "mixed.csv", "-o", tmp_path / "x.json"),
+                   "column 'time' mixes timestamps with and without a UTC offset")  # fmt: skip

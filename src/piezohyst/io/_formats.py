@@ -13,6 +13,7 @@ import logging
 import re
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from datetime import datetime, timedelta
 from pathlib import Path
 
 import numpy as np
@@ -323,6 +324,7 @@ def _cells(line: str, delim: str | None) -> list[str]:
     return line.split() if delim is None else next(csv.reader([line], delimiter=delim))
 
 
+_ISO_DATE = re.compile(r"^\s*\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}")
 _BRACKETED = re.compile(r"^\s*(?:\([^()]*\)|\[[^\[\]]*\])\s*$")
 
 
@@ -622,19 +624,53 @@ def _table_from_lines(path: Path, lines: list[tuple[int, str]]) -> Table:
             except ValueError:
                 if _own_blanks(path, cells):  # piezohyst leaves a cell empty on purpose
                     return np.array([c or "nan" for c in cells], dtype=np.float64)
+                stamps = _timestamps(cells)
+                if stamps is not None:  # a logger's clock: seconds from the first row
+                    return stamps
+                clock = bool(_ISO_DATE.match(cells[0]))  # then name the first that is not
                 for k, cell in enumerate(cells):
-                    if not _is_number(cell):
+                    if not (_is_timestamp(cell) if clock else _is_number(cell)):
                         shown = repr(cell) if cell else "an empty value"
+                        what = "a timestamp, as the rows above are" if clock else "a number"
                         msg = (
                             f"{path}: {shown} at row {k + 1} (line {line_numbers[k]} of the "
-                            f"file), column {names[j]!r} is not a number"
+                            f"file), column {names[j]!r} is not {what}"
                         )
                         raise DataFileError(msg) from None
+                if clock:  # every cell a timestamp, some with an offset and some without
+                    msg = (
+                        f"{path}: column {names[j]!r} mixes timestamps with and without a UTC "
+                        "offset: their differences are not defined"
+                    )
+                    raise DataFileError(msg) from None
                 raise  # pragma: no cover
 
         return convert
 
     return Table(path, names, {name: getter(j) for j, name in enumerate(names)}, units=units)
+
+
+def _timestamps(cells: list[str]) -> FloatArray | None:
+    """A column of ISO 8601 timestamps (``2026-11-27 10:00:00.125``, a ``T`` between date
+    and time, an offset or ``Z`` allowed), as a logger writes its clock: the seconds from the
+    first row's (exact to the microsecond; the absolute date is not kept, so float64 loses
+    nothing). None where any cell is not one."""
+    if not cells or not _ISO_DATE.match(cells[0]):
+        return None
+    try:
+        stamps = [datetime.fromisoformat(c.strip().replace("Z", "+00:00")) for c in cells]
+        first = stamps[0]
+        return np.array([(s - first) / timedelta(microseconds=1) for s in stamps]) * 1e-6
+    except (ValueError, TypeError):  # not a timestamp, or naive and aware mixed
+        return None
+
+
+def _is_timestamp(cell: str) -> bool:
+    try:
+        datetime.fromisoformat(cell.strip().replace("Z", "+00:00"))
+    except ValueError:
+        return False
+    return bool(_ISO_DATE.match(cell))
 
 
 def _own_blanks(path: Path, cells: list[str]) -> bool:
