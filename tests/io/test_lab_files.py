@@ -276,3 +276,27 @@ def test_a_time_column_of_timestamps(tmp_path: Path, rec: ph.simulation.Recordin
     (tmp_path / "mixed.csv").write_text("time,voltage,charge\n" + "\n".join(rows) + "\n")
     one_line_error(run("fit", tmp_path / "mixed.csv", "-o", tmp_path / "x.json"),
                    "column 'time' mixes timestamps with and without a UTC offset")  # fmt: skip
+
+
+LVM_HEAD = (
+    "LabVIEW Measurement\t\nWriter_Version\t2\nReader_Version\t2\nSeparator\tTab\n"
+    "Decimal_Separator\t.\nMulti_Headings\tNo\nX_Columns\tOne\nTime_Pref\tRelative\n"
+    "Operator\tuser\nDate\t2026/11/27\nTime\t10:00:00.000\n***End_of_Header***\t\n\t\n"
+    "Channels\t2\t\nSamples\t3000\t3000\t\nDate\t2026/11/27\t2026/11/27\t\n"
+    "Time\t10:00:00.000\t10:00:00.000\t\nX_Dimension\tTime\tTime\t\n"
+    "X0\t0.0000000000000000E+0\t0.0000000000000000E+0\t\nDelta_X\t0.001000\t0.001000\t\n"
+    "***End_of_Header***\t\nX_Value\tVoltage\tCharge\tComment\n"
+)
+
+
+def test_a_labview_measurement_file(tmp_path: Path, rec: ph.simulation.Recording) -> None:
+    """LabVIEW's 'Write To Measurement File' (.lvm): two header blocks, then ``X_Value`` for
+    the time; fitted with the default names (it was "no time column 'time'")."""
+    rows = "".join(f"{t:.6f}\t{v:.6f}\t{q:.6e}\t\n"
+                   for t, v, q in zip(rec.t, rec.voltage, rec.charge, strict=True))  # fmt: skip
+    (tmp_path / "run.lvm").write_text(LVM_HEAD + rows)
+    got = ph.io.read_recording(tmp_path / "run.lvm")
+    np.testing.assert_allclose(got.t, rec.t, atol=5e-7)  # tol: 6 decimals printed
+    np.testing.assert_allclose(got.y, rec.charge, rtol=5e-7)  # tol: 7 significant digits
+    res = run("fit", tmp_path / "run.lvm", "--operators", "8", "-o", tmp_path / "m.json")
+    assert res.exit_code == 0, res.output

@@ -613,8 +613,10 @@ def open_recording(
         y_name = table.resolve(output)
     time = time_column
     if time == "time" and time not in table:  # the default name in any case ('Time', aixACCT),
-        # or in the file's one group that has it
-        time = next((c for c in table.columns if c.lower() == "time"), table.find(time) or time)
+        # or in the file's one group that has it, or LabVIEW's name for it (its .lvm files)
+        time = next((c for c in table.columns if c.lower() == "time"), table.find(time)) or next(
+            (c for c in table.columns if c.lower() == "x_value"), time
+        )
     t_name: str | None = None
     step: float | None = None
     untimed = False
