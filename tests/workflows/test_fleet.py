@@ -127,6 +127,19 @@ def test_cli_fit_many_reports_failures_and_outliers(line: list[Path], tmp_path: 
     assert res.exit_code == 2 and "expected IN:OUT" in res.output
 
 
+def test_cli_fit_many_expands_a_pattern_the_shell_did_not(line: list[Path], tmp_path: Path) -> None:
+    """``fit-many line/*.csv`` from a Windows prompt arrives as the pattern itself ("no such
+    file"): it is expanded, in order of the names; a pattern that matches nothing is named."""
+    folder = line[0].parent
+    res = run("fit-many", folder / "unit[01].csv", "-o", tmp_path / "p", "--operators", "6",
+              "--workers", "1")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "fitted 2 of 2 units" in res.output
+    assert sorted(p.name for p in (tmp_path / "p").glob("*.json")) == ["unit0.json", "unit1.json"]
+    res = run("fit-many", folder / "nothing*.csv", "-o", tmp_path / "q")
+    assert res.exit_code == 2 and "no file matches" in res.output
+
+
 def test_cli_fit_many_takes_the_terms_fit_takes(line: list[Path], tmp_path: Path) -> None:
     """Every unit with the same growth terms and creep operators as `fit` would give one (the
     field's standard, PI with creep, for a line of actuators); they were fit's alone."""

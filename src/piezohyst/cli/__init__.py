@@ -7,6 +7,7 @@ traceback only under ``--debug``.
 
 from __future__ import annotations
 
+import glob
 import math
 import sys
 from pathlib import Path
@@ -638,6 +639,22 @@ def report(
     click.echo(f"NRMSE {res.metrics['nrmse_pct']:.4g} %{also}; report in {out / 'report.html'}")
 
 
+def _expand_patterns(records: tuple[Path, ...]) -> tuple[Path, ...]:
+    """RECORDS with each pattern no file is named by (``line/*.csv``, which a Windows shell
+    passes on as it is) replaced by the files it matches, in order of their names."""
+    out: list[Path] = []
+    for record in records:
+        text = str(record)
+        if record.exists() or not any(ch in text for ch in "*?["):
+            out.append(record)
+            continue
+        found = sorted(Path(m) for m in glob.glob(text))
+        if not found:
+            raise click.BadParameter(f"no file matches {text!r}", param_hint="RECORDS")
+        out.extend(found)
+    return tuple(dict.fromkeys(out))
+
+
 @main.command("fit-many")
 @click.argument("records", nargs=-1, required=True, type=EXISTING)
 @click.option(
@@ -716,6 +733,7 @@ def fit_many_cmd(
     from ..workflows.fleet import fit_many
 
     terms, taus = parse_terms(growth, creep)
+    records = _expand_patterns(records)
     pairs: list[tuple[str, str]] = []
     for c in channels:
         x_col, sep, y_col = c.partition(":")
