@@ -85,7 +85,6 @@ def split_unit(header: str) -> tuple[str, str | None]:
     return m.group("name"), unit or None
 
 
-@cache
 def _suffix_unit(name: str) -> tuple[str, str] | None:
     """``voltage_mV`` -> ``("voltage", "mV")`` where the suffix is in :data:`SUFFIX_UNITS`."""
     stem, sep, unit = name.rpartition("_")
@@ -127,6 +126,7 @@ def suffix_units(columns: list[str]) -> dict[str, tuple[str, str]]:
             if stems.count(stem) == 1 and stem not in taken and stem not in others}  # fmt: skip
 
 
+@cache
 def _registry() -> Any:
     import pint
 

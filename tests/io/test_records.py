@@ -468,6 +468,14 @@ def test_columns_named_with_a_unit_suffix(tmp_path: Path, bench: ph.simulation.B
     assert ph.io.read_table(odd).units == {}
 
 
+def test_the_unit_registry_is_built_once() -> None:
+    """pint's registry takes 0.2-2 s to build: one per process, whatever converts (a
+    decorator moved onto the wrong function once rebuilt it for every column, 2.5 s a read)."""
+    from piezohyst import units
+
+    assert units._registry() is units._registry()
+
+
 def test_a_second_file_holding_one_signal_needs_no_name(
     tmp_path: Path, bench: ph.simulation.BenchRecord
 ) -> None:
