@@ -13,7 +13,6 @@ import logging
 import re
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from datetime import datetime, timedelta
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +20,7 @@ import numpy as np
 from .._validation import FloatArray
 from ..errors import DataFileError
 from ..units import split_unit, suffix_units
+from ._cells import ISO_DATE, is_timestamp, timestamps, units_row
 
 CSV_SUFFIXES = {".csv", ".tsv", ".txt", ".dat", ""}
 MARKER = "# written by piezohyst"  # first line of every CSV piezohyst writes
@@ -324,17 +324,6 @@ def _cells(line: str, delim: str | None) -> list[str]:
     return line.split() if delim is None else next(csv.reader([line], delimiter=delim))
 
 
-_ISO_DATE = re.compile(r"^\s*\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}")
-_BRACKETED = re.compile(r"^\s*(?:\([^()]*\)|\[[^\[\]]*\])\s*$")
-
-
-def _units_row(cells: list[str]) -> bool:
-    """A row of units under a header, as oscilloscope and DAQ exports write (PicoScope:
-    ``(ms),(V),(V)``): every cell a bracketed unit (or empty, not all)."""
-    filled = [c for c in cells if c.strip()]
-    return bool(filled) and all(_BRACKETED.match(c) for c in filled)
-
-
 def _numeric_row(cells: list[str]) -> bool:
     filled = [c.strip() for c in cells if c.strip()]
     return bool(filled) and all(_is_number(c) or _DECIMAL_COMMA.match(c) for c in filled)
@@ -365,7 +354,7 @@ def _table_start(lines: list[tuple[int, str]], look: int = 200) -> int:
     if first == 0 or any(_numeric_row(cells) for cells in top[:first]):
         return 0
     above = top[first - 1]
-    if first >= 2 and _units_row(above) and len(top[first - 2]) == width:
+    if first >= 2 and units_row(above) and len(top[first - 2]) == width:
         return first - 2  # a header, then its units (under it), then the data
     key_value = _KEY_VALUE.match(lines[first - 1][1]) is not None
     if key_value and (len(above) != width or above[0].rstrip().endswith((":", "="))):
@@ -460,7 +449,7 @@ def _csv_plan(path: Path, head: bytes, skip_rows: int = 0) -> _CsvPlan | None:
         return None
     first = next(csv.reader([body[0][1]], delimiter=delim))
     has_header = any(c.strip() and not _is_number(c.strip()) for c in first)
-    if has_header and len(body) > 2 and _units_row(next(csv.reader([body[1][1]], delimiter=delim))):
+    if has_header and len(body) > 2 and units_row(next(csv.reader([body[1][1]], delimiter=delim))):
         has_header, body = True, body[1:]  # the units row under the header: skipped too
     decimal_comma = delim != "," and _decimal_commas(
         [(n, next(csv.reader([ln], delimiter=delim))) for n, ln in body[:50]]
@@ -584,7 +573,7 @@ def _table_from_lines(path: Path, lines: list[tuple[int, str]]) -> Table:
     has_header = any(c and not _is_number(c) for c in first)
     units: dict[str, str] = {}
     below = has_header and len(rows) > 2 and len(rows[1][1]) == len(first)
-    if below and _units_row(rows[1][1]) and not _units_row(first):  # a units row: one header
+    if below and units_row(rows[1][1]) and not units_row(first):  # a units row: one header
         first = [f"{c} {u.strip()}" if u.strip() else c for c, u in zip(first, rows[1][1],
                                                                          strict=True)]  # fmt: skip
         rows = rows[1:]
@@ -624,12 +613,12 @@ def _table_from_lines(path: Path, lines: list[tuple[int, str]]) -> Table:
             except ValueError:
                 if _own_blanks(path, cells):  # piezohyst leaves a cell empty on purpose
                     return np.array([c or "nan" for c in cells], dtype=np.float64)
-                stamps = _timestamps(cells)
+                stamps = timestamps(cells)
                 if stamps is not None:  # a logger's clock: seconds from the first row
                     return stamps
-                clock = bool(_ISO_DATE.match(cells[0]))  # then name the first that is not
+                clock = bool(ISO_DATE.match(cells[0]))  # then name the first that is not
                 for k, cell in enumerate(cells):
-                    if not (_is_timestamp(cell) if clock else _is_number(cell)):
+                    if not (is_timestamp(cell) if clock else _is_number(cell)):
                         shown = repr(cell) if cell else "an empty value"
                         what = "a timestamp, as the rows above are" if clock else "a number"
                         msg = (
@@ -648,29 +637,6 @@ def _table_from_lines(path: Path, lines: list[tuple[int, str]]) -> Table:
         return convert
 
     return Table(path, names, {name: getter(j) for j, name in enumerate(names)}, units=units)
-
-
-def _timestamps(cells: list[str]) -> FloatArray | None:
-    """A column of ISO 8601 timestamps (``2026-11-27 10:00:00.125``, a ``T`` between date
-    and time, an offset or ``Z`` allowed), as a logger writes its clock: the seconds from the
-    first row's (exact to the microsecond; the absolute date is not kept, so float64 loses
-    nothing). None where any cell is not one."""
-    if not cells or not _ISO_DATE.match(cells[0]):
-        return None
-    try:
-        stamps = [datetime.fromisoformat(c.strip().replace("Z", "+00:00")) for c in cells]
-        first = stamps[0]
-        return np.array([(s - first) / timedelta(microseconds=1) for s in stamps]) * 1e-6
-    except (ValueError, TypeError):  # not a timestamp, or naive and aware mixed
-        return None
-
-
-def _is_timestamp(cell: str) -> bool:
-    try:
-        datetime.fromisoformat(cell.strip().replace("Z", "+00:00"))
-    except ValueError:
-        return False
-    return bool(_ISO_DATE.match(cell))
 
 
 def _own_blanks(path: Path, cells: list[str]) -> bool:
