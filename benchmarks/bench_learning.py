@@ -2,7 +2,8 @@
 
 Run: ``python benchmarks/bench_learning.py [--trials 10] [--figure learning.png]``
 (``--plants [--only PLANT] [--slew V/s]`` for part 3; ``--noise-gate G``: the learner's
-``noise_gate``; ``--anatomy [--only PLANT]``: the error left, repeating or not).
+``noise_gate``; ``--anatomy [--only PLANT]``: the error left, repeating or not; ``--carried``:
+the noise the correction carries, measured against the design's figure, on every plant).
 
 1. Targets (issue 27), on the bench's amplifier-lag preset ``T226-H4-203X-amp4ms`` with
    0.1 % noise on the charge: the leakage calibrated from 10 s holds up and down; an
@@ -141,8 +142,14 @@ def main() -> None:
     )
     ap.add_argument("--slew", type=float, default=SLEW, help="the slew limit, V/s (30e3)")
     ap.add_argument("--noise-gate", type=float, default=GATE, help="the learner's noise_gate (0)")
+    ap.add_argument(
+        "--carried", action="store_true", help="the noise the correction carries, every plant"
+    )
     args = ap.parse_args()
     SLEW, GATE = args.slew, args.noise_gate
+    if args.carried:
+        carried(args.trials)
+        return
     if args.anatomy:
         anatomy(args.trials, args.only or "duhem")
         return
@@ -255,6 +262,33 @@ def anatomy(trials: int, plant: str = "duhem") -> None:
             f"seed {seed}{'' if noise else ', no noise'}: repeating/not per trial (%):",
             " ".join(parts),
         )
+
+
+def carried(trials: int) -> None:
+    """``--carried``: on every plant (seed 0, 40 Hz, ``ActivePI`` with identified dynamics,
+    from the charge), the correction's part that differs from cycle to cycle after the
+    trials against what the design says it carries (``noise_gain`` times the noise), its
+    power by band over the measurement noise's, and the commands a trial at the slew limit."""
+    from piezohyst.simulation import PLANTS
+
+    bands = ((1, 40), (40, 100), (100, 250), (250, 500))
+    print("| plant | noise | carried: designed | measured | power over the noise's, "
+          + ", ".join(f"{a}-{b} Hz" for a, b in bands) + " | slew-limited a trial |")  # fmt: skip
+    print("|---|---|---|---|---|---|")
+    f = np.fft.rfftfreq(int(RATE), 1.0 / RATE)  # one-second trials
+    for name, preset in PLANTS.items():
+        preset = replace(preset, amp_tau=4e-3) if preset.amp_tau == 0 else preset
+        r = rig(preset, 0)
+        ilc, _, _, desired, _ = run(r, r["dynamic"], 40.0, trials, 0.0)  # type: ignore[arg-type]
+        span, d = float(np.ptp(desired)), ilc.design
+        c = ilc.correction
+        rest = c - np.tile(c.reshape(40, -1).mean(axis=0), 40)  # 40 cycles in the trial
+        power = np.abs(np.fft.rfft(rest)) ** 2 / rest.size  # per bin; white noise: its variance
+        ratio = [float(np.mean(power[(f >= a) & (f < b)])) / d.noise**2 for a, b in bands]
+        designed = 100 * d.noise * d.noise_gain / span
+        print(f"| {name} | {100 * d.noise / span:.3f} % | {designed:.3f} % | "
+              f"{100 * np.std(rest) / span:.3f} % | " + ", ".join(f"{x:.2g}" for x in ratio)
+              + f" | {ilc.history[-1].saturated} |")  # fmt: skip
 
 
 def plants(trials: int, only: str | None = None) -> None:
