@@ -61,6 +61,10 @@ def without_time(blocks: Blocks) -> Blocks:
     return lambda: ((x, y, None) for x, y, _ in blocks())
 
 
+#: the sample strides over which :attr:`Summary.co_move` correlates the changes
+MOVE_STRIDES = (1, 8, 64)
+
+
 @dataclass(frozen=True)
 class Summary:
     """What a fit needs to know of a whole record before it reads it again.
@@ -78,9 +82,11 @@ class Summary:
     max_step : float
         Largest input change from one sample to the next (input units).
     co_move : float
-        The correlation of the input's and the output's changes from sample to sample
-        (about zero: a drift does not move with the input): near 1 where the output rises
-        with the input, negative where it falls (a sensor counting the other way), near 0
+        The correlation of the input's and the output's changes (about zero: a drift does
+        not move with the input), the largest over changes across 1, 8 and 64 samples (at
+        one sample, noise of both channels from one source can move them together, or
+        apart, more than the drive does): near 1 where the output rises with the input,
+        negative where it falls at every scale (a sensor counting the other way), near 0
         where it does both (the butterfly of bipolar drive); NaN where either never moves.
     """
 
@@ -120,18 +126,22 @@ class Summary:
         x_hi = y_hi = -np.inf
         slew = np.nan
         jump = 0.0
-        moves = np.zeros(3)  # sums of dx dy, dx^2, dy^2
-        y_last = np.nan
+        moves = np.zeros((len(MOVE_STRIDES), 3))  # per stride: sums of dx dy, dx^2, dy^2
+        tail_x = tail_y = np.zeros(0)  # the last samples before the block, for the strides
         for x, y, t in blocks():
             if x.size == 0:
                 continue
             if n == 0:
                 x0, y0 = float(x[0]), float(y[0])
                 t0 = np.nan if t is None else float(t[0])
-            dx = np.diff(x, prepend=x[0] if n == 0 else x_last)
-            dy = np.diff(y, prepend=y[0] if n == 0 else y_last)
-            moves += (float(dx @ dy), float(dx @ dx), float(dy @ dy))
-            y_last = float(y[-1])
+            ext_x, ext_y = np.concatenate([tail_x, x]), np.concatenate([tail_y, y])
+            for row, stride in enumerate(MOVE_STRIDES):
+                dx, dy = ext_x[stride:] - ext_x[:-stride], ext_y[stride:] - ext_y[:-stride]
+                done = max(tail_x.size - stride, 0)  # pairs counted with the block before
+                dx, dy = dx[done:], dy[done:]
+                moves[row] += (float(dx @ dy), float(dx @ dx), float(dy @ dy))
+            keep = max(MOVE_STRIDES)
+            tail_x, tail_y = ext_x[-keep:].copy(), ext_y[-keep:].copy()
             x_lo, x_hi = min(x_lo, float(x.min())), max(x_hi, float(x.max()))
             if x.size > 1:
                 jump = max(jump, float(np.max(np.abs(np.diff(x)))))
@@ -151,8 +161,9 @@ class Summary:
         if n == 0:
             msg = "the record holds no samples"
             raise InsufficientDataError(msg)
-        both = moves[1] * moves[2]
-        co = float(moves[0] / np.sqrt(both)) if both > 0 else np.nan
+        both = moves[:, 1] * moves[:, 2]
+        moving = both > 0
+        co = float(np.max(moves[moving, 0] / np.sqrt(both[moving]))) if moving.any() else np.nan
         return cls(n, x0, x_lo, x_hi, y0, y_lo, y_hi, t0, t1, slew, jump if n > 1 else np.nan, co)
 
     @property
