@@ -300,3 +300,21 @@ def test_a_labview_measurement_file(tmp_path: Path, rec: ph.simulation.Recording
     np.testing.assert_allclose(got.y, rec.charge, rtol=5e-7)  # tol: 7 significant digits
     res = run("fit", tmp_path / "run.lvm", "--operators", "8", "-o", tmp_path / "m.json")
     assert res.exit_code == 0, res.output
+
+
+def test_hdf5_units_attributes(tmp_path: Path, rec: ph.simulation.Recording) -> None:
+    """An HDF5 writer states each dataset's unit in its ``units`` attribute (NeXus, h5py
+    scripts): time in ms and charge in nC were read as s and 'a.u.' without a word (a 1 kHz
+    record taken for 1 Hz). Read and converted, as text or bytes, in a group or not."""
+    import h5py
+
+    with h5py.File(tmp_path / "u.h5", "w") as h:
+        g = h.create_group("run")
+        g.create_dataset("time", data=1e3 * rec.t).attrs["units"] = "ms"
+        g.create_dataset("voltage", data=rec.voltage).attrs["unit"] = np.bytes_(b"V")
+        g.create_dataset("charge", data=1e9 * rec.charge).attrs["units"] = "nC"
+    for group in (None, "run"):
+        got = ph.io.read_recording(tmp_path / "u.h5", group=group)
+        assert got.units == ("V", "C")
+        np.testing.assert_allclose(got.t, rec.t, rtol=1e-12)  # tol: ms -> s, one rounding
+        np.testing.assert_allclose(got.y, rec.charge, rtol=1e-12)

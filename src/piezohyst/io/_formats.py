@@ -803,6 +803,15 @@ def _grouped(
         for k, v in found.items()
         if isinstance(v, str) and k.endswith("_unit") and k[: -len("_unit")] in table
     }
+    for key, value in found.items():  # an HDF5 dataset's 'units' attribute
+        if not (isinstance(value, str) and key.endswith("@unit")):
+            continue
+        owner = key[: -len("@unit")]
+        short = owner.rpartition("/")[2] if owner.rpartition("/")[0] == home else ""
+        for name in (owner, short):
+            if name and name in table:
+                units.setdefault(name, value)
+                break
     return dataclasses.replace(
         table,
         units=units,

@@ -32,17 +32,28 @@ def _numeric(arrays: dict[str, Any]) -> dict[str, np.ndarray]:
     return out
 
 
-def hdf5_arrays(path: str) -> dict[str, np.ndarray]:
-    """Every numeric dataset of an HDF5 file holding at least one value, by its path, and
-    every numeric attribute as ``path@name`` (``@name`` for the file's own)."""
+#: a dataset's text attribute that states its unit (NeXus and most writers: ``units``)
+UNIT_ATTRIBUTES = ("units", "unit", "unit_string")
+
+
+def hdf5_arrays(path: str) -> dict[str, Any]:
+    """Every numeric dataset of an HDF5 file holding at least one value, by its path, every
+    numeric attribute as ``path@name`` (``@name`` for the file's own), and the unit a
+    dataset's ``units`` attribute states as the text ``path@unit``."""
     import h5py
 
     arrays: dict[str, Any] = {}
+    units: dict[str, str] = {}
     with h5py.File(path, "r") as fh:
 
         def attributes(name: str, obj: Any) -> None:
             for key, value in obj.attrs.items():
                 arrays[f"{name}@{key}"] = np.asarray(value) if np.isscalar(value) else value
+                text = np.asarray(value).reshape(-1)[:1]
+                if key.lower() in UNIT_ATTRIBUTES and text.size and text.dtype.kind in "SUO":
+                    word = text[0].decode("latin-1") if isinstance(text[0], bytes) else text[0]
+                    if isinstance(word, str) and word.strip():
+                        units[f"{name}@unit"] = word.strip()
 
         def visit(name: str, obj: object) -> None:
             if isinstance(obj, h5py.Dataset) and obj.dtype.kind in "biuf" and obj.size >= 1:
@@ -51,7 +62,7 @@ def hdf5_arrays(path: str) -> dict[str, np.ndarray]:
 
         attributes("", fh)
         fh.visititems(visit)
-    return _numeric(arrays)
+    return {**_numeric(arrays), **units}
 
 
 def mat_arrays(path: str) -> dict[str, Any]:
