@@ -318,3 +318,20 @@ def test_hdf5_units_attributes(tmp_path: Path, rec: ph.simulation.Recording) -> 
         assert got.units == ("V", "C")
         np.testing.assert_allclose(got.t, rec.t, rtol=1e-12)  # tol: ms -> s, one rounding
         np.testing.assert_allclose(got.y, rec.charge, rtol=1e-12)
+
+
+def test_a_time_column_in_ms_without_a_unit_is_named(
+    tmp_path: Path, rec: ph.simulation.Recording
+) -> None:
+    """A time column counting milliseconds with no unit anywhere was read as seconds without
+    a word (a 1 kHz record fitted as 1 Hz: its leakage 1000x too small, its trained slew
+    1000x too slow). Integer steps of 1 s or more with no unit stated are named; a stated
+    unit says nothing."""
+    pairs = zip(rec.voltage, rec.charge, strict=True)
+    rows = "".join(f"{n},{v:.6f},{q:.6e}\n" for n, (v, q) in enumerate(pairs))
+    (tmp_path / "ms.csv").write_text("time,voltage,charge\n" + rows)
+    with pytest.warns(ph.errors.RecordWarning, match=r"steps by 1 and states no unit: read as "
+                      r"seconds, the record is sampled at 1 Hz; if it counts ms"):  # fmt: skip
+        ph.io.read_recording(tmp_path / "ms.csv")
+    got = ph.io.read_recording(tmp_path / "ms.csv", time_unit="ms")  # said: no warning
+    np.testing.assert_allclose(got.t, rec.t, atol=1e-12)  # tol: n/1000 two ways

@@ -403,6 +403,15 @@ class RecordingStream:
             warnings.warn(message, RecordWarning, stacklevel=3)
         if found.holes:
             warnings.warn(found.hole_message(str(self.path)), RecordWarning, stacklevel=3)
+        step = found.interval
+        if t_name is not None and self._source_units[0] is None and step >= 1 and step % 1 == 0:
+            warnings.warn(
+                f"{self.path}: the time column {t_name!r} steps by {step:g} and states no "
+                f"unit: read as seconds, the record is sampled at {1 / step:g} Hz; if it "
+                "counts ms or us, say so (--time-unit ms, or a header 'time [ms]')",
+                RecordWarning,
+                stacklevel=3,
+            )
         return found
 
     def blocks(self, progress: Callable[[int], None] | None = None) -> Iterator[Block]:
