@@ -335,3 +335,24 @@ def test_a_time_column_in_ms_without_a_unit_is_named(
         ph.io.read_recording(tmp_path / "ms.csv")
     got = ph.io.read_recording(tmp_path / "ms.csv", time_unit="ms")  # said: no warning
     np.testing.assert_allclose(got.t, rec.t, atol=1e-12)  # tol: n/1000 two ways
+
+
+def test_an_output_in_um_without_a_unit_is_named(
+    tmp_path: Path, rec: ph.simulation.Recording
+) -> None:
+    """A column named displacement (or charge) with no unit is taken in m (or C); one in µm
+    (nC) was fitted as hundreds of metres (coulombs) without a word. A span no piezo has in
+    the assumed unit is named; the unit given, nothing is."""
+    for column, values, unit in (("displacement", 1e6 * rec.displacement, "um"),
+                                 ("charge", 1e9 * rec.charge, "nC")):  # fmt: skip
+        rows = "".join(f"{t:.4f},{v:.6f},{y:.6f}\n"
+                       for t, v, y in zip(rec.t, rec.voltage, values, strict=True))  # fmt: skip
+        (tmp_path / "u.csv").write_text(f"time,voltage,{column}\n" + rows)
+        res = run("fit", tmp_path / "u.csv", "--output", column, "--model", "classical-pi",
+                  "-o", tmp_path / "m.json", "--force")  # fmt: skip
+        assert res.exit_code == 0, res.output
+        assert f"column '{column}' states no unit and spans" in res.output
+        assert unit in res.output.split("states no unit")[1].split("give the unit")[0]
+        res = run("fit", tmp_path / "u.csv", "--output", column, "--output-unit", unit,
+                  "--model", "classical-pi", "-o", tmp_path / "m.json", "--force")  # fmt: skip
+        assert res.exit_code == 0 and "states no unit" not in res.output, res.output

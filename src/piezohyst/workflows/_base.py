@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import math
 import os
 import warnings
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -98,6 +99,11 @@ def standard_column(table: Table, name: str, what: str, role: Role, expected: st
     return values
 
 
+#: Spans of an output no piezo reaches in the unit assumed from the column's name: 1 cm
+#: (amplified stages move up to a few mm), 10 mC (a large stack at full voltage holds a few)
+IMPLAUSIBLE = {"m": 0.01, "C": 0.01}
+
+
 def _default_unit(column: str | None) -> str:
     """The unit of an output column that names none: piezohyst's own names (a grouped file's
     too: ``run 1/charge``), else arbitrary."""
@@ -131,8 +137,33 @@ CLIP_SHARE = 0.01
 def warn_clipped(
     chunks: Iterable[FloatArray], column: str | None, unit: str | None, data: PathLike
 ) -> None:
-    """Warn when a measured channel sits at its top or bottom in flat runs (clipped)."""
-    count, which, level, first, n = clipped(chunks)
+    """Warn when a measured channel sits at its top or bottom in flat runs (clipped), and
+    when a column whose unit piezohyst assumes from its name (:func:`_default_unit`) spans
+    more than any piezo's does in that unit (:data:`IMPLAUSIBLE`)."""
+    extremes = [math.inf, -math.inf]
+
+    def seen() -> Iterator[FloatArray]:
+        for chunk in chunks:
+            if chunk.size:
+                extremes[:] = (
+                    min(extremes[0], float(chunk.min())),
+                    max(extremes[1], float(chunk.max())),
+                )
+            yield chunk
+
+    count, which, level, first, n = clipped(seen())
+    assumed = _default_unit(column) if unit is None else None
+    if assumed in IMPLAUSIBLE and extremes[1] - extremes[0] > IMPLAUSIBLE[assumed]:
+        name = {"m": "metres", "C": "coulombs"}[assumed]
+        usual = {"m": "um or nm", "C": "uC or nC"}[assumed]
+        warnings.warn(
+            f"{data}: column {column!r} states no unit and spans "
+            f"{extremes[1] - extremes[0]:.4g}, read as {name}; no piezo's does: if it is in "
+            f"{usual}, give the unit (--output-unit {usual.split()[0]}, or a header "
+            f"'{column} [{usual.split()[0]}]')",
+            UserWarning,
+            stacklevel=3,
+        )
     if n and count >= CLIP_SHARE * n:
         warnings.warn(
             f"{data}: column {column!r} sits at its {which} ({level:.6g} {unit or ''}) on "
