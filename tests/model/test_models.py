@@ -232,6 +232,7 @@ def test_fit_never_yields_a_non_invertible_model(x: np.ndarray, ncols: int) -> N
     assert model.operator_.is_invertible
 
 
+@pytest.mark.heavy  # fits that check a refusal, not a kernel's paths (23 s with the JIT off)
 @pytest.mark.parametrize("cls", [ph.ActivePI, ph.PreisachModel, ph.BoucWenModel])
 def test_an_output_that_falls_as_the_input_rises_is_refused(cls: type) -> None:
     """A displacement sensor counting the other way (the PZT set's interferometer falls as
