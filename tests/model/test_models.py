@@ -232,24 +232,26 @@ def test_fit_never_yields_a_non_invertible_model(x: np.ndarray, ncols: int) -> N
     assert model.operator_.is_invertible
 
 
-@pytest.mark.heavy  # fits that check a refusal, not a kernel's paths (23 s with the JIT off)
 @pytest.mark.parametrize("cls", [ph.ActivePI, ph.PreisachModel, ph.BoucWenModel])
 def test_an_output_that_falls_as_the_input_rises_is_refused(cls: type) -> None:
     """A displacement sensor counting the other way (the PZT set's interferometer falls as
     the voltage rises below the coercive field): every model rises with its input, and fitted
-    anyway each gave a flat line, 24-31 % NRMSE, without a word. Refused, naming why; the same
-    record with the output's sign turned fits; a butterfly (rising and falling) still fits."""
-    t, v = excitation(20.0)
-    rec = ph.simulate(v, t, seed=0)
-    y = rec.capacitor_charge
+    anyway each gave a flat line, 24-31 % NRMSE, without a word. Refused before any fit,
+    naming why; the same record with the output's sign turned fits; a butterfly (rising and
+    falling) and a record whose channels share a reference's noise with opposite signs are
+    not refused."""
+    t, v = excitation(6.0)
+    y = ph.simulate(v, t, seed=0).capacitor_charge
     said = r"falls as the input rises \(their changes correlate at -0\.[5-9]\d\)"
     with pytest.raises(ph.InsufficientDataError, match=said):
         cls().fit(v, -y, t=t)
+    if cls is not ph.ActivePI:
+        return  # the fits below are the refusal's other side, the same for every model
     assert cls().fit(v, y, t=t).nrmse_ < 0.05
     x = v - 0.5 * (v.max() + v.min())  # bipolar: strain rises with |x|
     cls(output_unit="m").fit(x, 1e-12 * x**2, t=t)  # fits (poorly), no refusal
     # a shared reference's noise, in the measured voltage with one sign and in the charge
-    # with the other: from sample to sample the two fall together (-0.99), over 8 and 64
+    # with the other: from sample to sample the two fall together (-0.9), over 8 and 64
     # samples the drive shows; not refused
     common = 0.5 * np.random.default_rng(1).standard_normal(v.size)
     cls().fit(v - common, y + 1e-8 * common, t=t)
