@@ -356,3 +356,12 @@ def test_an_output_in_um_without_a_unit_is_named(
         res = run("fit", tmp_path / "u.csv", "--output", column, "--output-unit", unit,
                   "--model", "classical-pi", "-o", tmp_path / "m.json", "--force")  # fmt: skip
         assert res.exit_code == 0 and "states no unit" not in res.output, res.output
+    # the input in mV, read as volts: 140 kV, which no piezo amplifier drives
+    rows = "".join(f"{t:.4f},{1e3 * v:.3f},{q:.6e}\n"
+                   for t, v, q in zip(rec.t, rec.voltage, rec.charge, strict=True))  # fmt: skip
+    (tmp_path / "mv.csv").write_text("time,voltage,charge\n" + rows)
+    for command, option, out in (("fit", "--model", "mv.json"), ("compare", "--models", "mv.md")):
+        res = run(command, tmp_path / "mv.csv", option, "classical-pi", "-o", tmp_path / out)
+        assert res.exit_code == 0, res.output
+        assert "column 'voltage' states no unit and spans" in res.output
+        assert "if it is in mV, give the unit (--input-unit mV" in res.output

@@ -59,6 +59,7 @@ from ._base import (
     _default_unit,
     _load,
     guard_outputs,
+    warn_assumed_volts,
     warn_clipped,
 )
 from .control_files import (
@@ -226,6 +227,7 @@ def select_file(
     assert rec.y is not None
     w = rec.window
     warn_clipped([rec.y[w]], rec.names[1], rec.units[1], data)
+    warn_assumed_volts(float(np.ptp(rec.x[w])), rec.units[0], rec.names[0], data)
     start = _continuing(rec, initial_state)
     sel = select_model(
         rec.x[w], rec.y[w], rec.t[w], candidates=candidates, operators=operators,
@@ -342,6 +344,7 @@ def fit_file(
         y_win = rec.y[w]
         warn_clipped([y_win], rec.names[1], rec.units[1], data)
         start_dyn = _continuing(rec, initial_state)
+        warn_assumed_volts(float(np.ptp(rec.x[w])), x_unit, stream.names[0], data)
         fitted_dyn: HysteresisModel = estimator.fit(
             rec.x[w], rec.y[w], t=rec.t[w], initial_state=start_dyn
         )
@@ -370,6 +373,8 @@ def fit_file(
     except TimeAxisError:  # a rate-dependent term, and the file gives no time
         stream.require_time(f"{type(estimator).__name__}'s rate-dependent terms")
         raise
+    lo, hi = fitted.input_range_
+    warn_assumed_volts(hi - lo, x_unit, stream.names[0], data)
     if isinstance(start, str) and start == "rest":
         x_head, _, t_head = next(iter(window()))
         _mid_loop_hint(x_head[:2], None if t_head is None else t_head[:2], fitted)
@@ -447,6 +452,7 @@ def compare_file(
     assert rec.y is not None
     w = rec.window
     x_unit, y_unit = rec.units
+    warn_assumed_volts(float(np.ptp(rec.x[w])), x_unit, rec.names[0], data)
     units = (x_unit or "V", y_unit or _default_unit(rec.names[1]))
     times = None if rec.t is None else rec.t[w]
     estimators = {

@@ -104,6 +104,23 @@ def standard_column(table: Table, name: str, what: str, role: Role, expected: st
 IMPLAUSIBLE = {"m": 0.01, "C": 0.01}
 
 
+#: An input span (V) no piezo amplifier drives: a column in mV read as volts
+VOLTS_IMPLAUSIBLE = 2e4
+
+
+def warn_assumed_volts(span: float, unit: str | None, column: str | None, data: PathLike) -> None:
+    """Warn when an input that states no unit (taken in V) spans more than any piezo
+    amplifier drives (:data:`VOLTS_IMPLAUSIBLE`): millivolts, most likely."""
+    if unit is None and span > VOLTS_IMPLAUSIBLE:
+        warnings.warn(
+            f"{data}: column {column!r} states no unit and spans {span:.4g}, read as volts; "
+            "no piezo amplifier drives that: if it is in mV, give the unit (--input-unit mV, "
+            f"or a header '{column} [mV]')",
+            UserWarning,
+            stacklevel=3,
+        )
+
+
 def _default_unit(column: str | None) -> str:
     """The unit of an output column that names none: piezohyst's own names (a grouped file's
     too: ``run 1/charge``), else arbitrary."""
