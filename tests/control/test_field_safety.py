@@ -202,6 +202,25 @@ def test_a_target_without_times_needs_a_sample_rate(lab: Path) -> None:
     assert res.exit_code == 0, res.output
 
 
+def test_a_sample_rate_that_contradicts_the_targets_times_is_refused(lab: Path) -> None:
+    """The target's time column at 1 kHz and --sample-rate 5000: the commands were computed
+    at one rate (slew, lags) and written at the other's times, without a word. Refused,
+    naming both; the rate the file has is accepted."""
+    args = ("compensate", lab / "model.json", lab / "target.csv", "-o", lab / "sr.csv")
+    said = "the time column steps at 1000 Hz, and the sample rate given is 5000 Hz"
+    one_line_error(run(*args, "--sample-rate", "5000"), said)
+    assert not (lab / "sr.csv").exists()
+    res = run(*args, "--sample-rate", "1000")
+    assert res.exit_code == 0, res.output
+    # the simulated loop played any target at the bench's 1 kHz: one timed at 5 kHz ran 5x slow
+    target = ph.io.read_table(lab / "target.csv")
+    ph.write_table(
+        lab / "fast.csv", {"time": target.get("time") / 5, "desired": target.get("desired")}
+    )
+    one_line_error(run("simulate-loop", lab / "model.json", lab / "fast.csv", "-o", lab / "l.csv"),
+                   "the time column steps at 5000 Hz and the bench", "resample it")  # fmt: skip
+
+
 # ------------------------------------------------------------------- Python
 def test_the_compensator_narrows_wide_limits_with_one_warning(lab: Path) -> None:
     model = ph.load_model(lab / "model.json")

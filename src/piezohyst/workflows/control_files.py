@@ -189,10 +189,19 @@ def compensate_file(
     head = next(batches)  # the sample rate comes from the first batch
     t_unit = table.unit("time") if timed else None
     fs = settings.sample_rate
-    if fs is None:
+    if timed:
         steps = np.diff(to_standard(head["time"], t_unit, "time", f"{target}: column 'time'")[0])
-        fs = 1.0 / float(np.median(steps)) if steps.size and np.all(steps > 0) else 1.0
-        fs = float(f"{fs:.12g}")  # 1000.0, not 999.9999999999991 from times written in ms
+        file_fs = 1.0 / float(np.median(steps)) if steps.size and np.all(steps > 0) else None
+        if fs is not None and file_fs is not None and abs(file_fs - fs) > 1e-3 * fs:
+            msg = (
+                f"{target}: the time column steps at {file_fs:.6g} Hz, and the sample rate "
+                f"given is {fs:g} Hz: the commands would be timed by one and written at the "
+                "other; give the rate of the file's time column, or leave it out"
+            )
+            raise DataFileError(msg)
+        if fs is None:  # 1000.0, not 999.9999999999991 from times written in ms
+            fs = float(f"{file_fs:.12g}") if file_fs is not None else 1.0
+    assert fs is not None  # untimed without a rate was refused above
     comp = dataclasses.replace(settings, sample_rate=fs).build(model)  # slew: "trained"
     start = present_voltage
     if start is None:  # at rest: 0 V, or the nearer limit
@@ -596,6 +605,16 @@ def simulate_loop_file(
     if abs(fs - p.rate) > 1e-9 * p.rate:
         msg = f"the bench {preset} samples at {p.rate:g} Hz; the loop rate must be the same"
         raise ParameterError(msg)
+    if "time" in table:  # a target timed at another rate would be played at the bench's
+        t = to_standard(table.get("time"), table.unit("time"), "time", f"{target}: column 'time'")
+        steps = np.diff(t[0])
+        if steps.size and np.all(steps > 0) and abs(1 / np.median(steps) - fs) > 1e-3 * fs:
+            msg = (
+                f"{target}: the time column steps at {1 / np.median(steps):.6g} Hz and the "
+                f"bench {preset} samples at {fs:g} Hz: the target would be played at the "
+                "bench's rate; resample it to that rate"
+            )
+            raise DataFileError(msg)
     settings = dataclasses.replace(settings, sample_rate=fs)
     ctl = settings.build(model) if loop is None else loop.build(settings, model)
     bench = Bench(
