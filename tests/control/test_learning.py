@@ -304,6 +304,12 @@ def test_the_file_loop_is_the_in_memory_loop(tmp_path: Path) -> None:
     runner = CliRunner()
     base = ["learn", str(tmp_path / "model.json"), "--state", str(tmp_path / "s.json"),
             "-o", str(tmp_path / "next.csv"), "--slew-rate", "30000"]  # fmt: skip
+    # a sample rate that contradicts the trajectory's time column is refused, naming both
+    res = runner.invoke(main, [*base, "--desired", str(tmp_path / "scan.csv"),
+                               "--sample-rate", "5000"])  # fmt: skip
+    assert res.exit_code == 1 and "steps at 1000 Hz, and the sample rate given is 5000" in (
+        res.output
+    )
     res = runner.invoke(main, [*base, "--desired", str(tmp_path / "scan.csv")])
     assert res.exit_code == 0, res.output
     for j in range(3):

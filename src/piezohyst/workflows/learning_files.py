@@ -128,9 +128,17 @@ def learn_file(
         table = read_table(Path(desired))
         d = standard_column(table, column, "desired trajectory", "output",
                             desired_unit(settings, model))  # fmt: skip
-        if rate is None:
+        if rate is None or "time" in table:
             t = standard_column(table, "time", "time (or give --sample-rate)", "time", "s")
-            rate = float(f"{(t.size - 1) / (t[-1] - t[0]):.12g}")  # 1000.0, not 999.9999999999
+            timed = float(f"{(t.size - 1) / (t[-1] - t[0]):.12g}")  # 1000.0, not 999.9999999999
+            if rate is not None and abs(timed - rate) > 1e-3 * rate:
+                msg = (
+                    f"{desired}: the time column steps at {timed:.6g} Hz, and the sample rate "
+                    f"given is {rate:g} Hz: the trials would be timed by one and recorded at "
+                    "the other; give the rate of the file's time column, or leave it out"
+                )
+                raise DataFileError(msg)
+            rate = timed
     else:
         if desired is not None:
             msg = f"{state_path} already holds a trajectory: --desired starts a run (new file)"
