@@ -623,9 +623,8 @@ def open_recording(
     time = time_column
     if time == "time" and time not in table:  # the default name in any case ('Time', aixACCT),
         # or in the file's one group that has it, or LabVIEW's name for it (its .lvm files)
-        time = next((c for c in table.columns if c.lower() == "time"), table.find(time)) or next(
-            (c for c in table.columns if c.lower() == "x_value"), time
-        )
+        named = {c.lower(): c for c in reversed(table.columns)}  # the first of a name
+        time = named.get("time") or table.find(time) or named.get("x_value", time)
     t_name: str | None = None
     step: float | None = None
     untimed = False

@@ -450,7 +450,7 @@ def _csv_plan(path: Path, head: bytes, skip_rows: int = 0) -> _CsvPlan | None:
     first = next(csv.reader([body[0][1]], delimiter=delim))
     has_header = any(c.strip() and not _is_number(c.strip()) for c in first)
     if has_header and len(body) > 2 and units_row(next(csv.reader([body[1][1]], delimiter=delim))):
-        has_header, body = True, body[1:]  # the units row under the header: skipped too
+        body = body[1:]  # the units row under the header: skipped too
     decimal_comma = delim != "," and _decimal_commas(
         [(n, next(csv.reader([ln], delimiter=delim))) for n, ln in body[:50]]
     )
@@ -919,7 +919,7 @@ def _choose_group(
             bare = (
                 {split_unit(c)[0] for c in columns}
                 | set(columns)
-                | {name for name, _ in suffix_units(list(columns)).values()}
+                | {stem for stem, _ in suffix_units(list(columns)).values()}
             )
             if columns and need and all(c in bare or split_unit(c)[0] in bare for c in need):
                 return name
