@@ -356,6 +356,18 @@ def test_an_output_in_um_without_a_unit_is_named(
         res = run("fit", tmp_path / "u.csv", "--output", column, "--output-unit", unit,
                   "--model", "classical-pi", "-o", tmp_path / "m.json", "--force")  # fmt: skip
         assert res.exit_code == 0 and "states no unit" not in res.output, res.output
+    # calibrate-gain's displacement column in um: a gain of 1.25e8 m/C, without a word
+    rows = "".join(f"{t:.4f},{v:.6f},{q:.6e},{1e6 * d:.6f}\n" for t, v, q, d in
+                   zip(rec.t, rec.voltage, rec.charge, rec.displacement, strict=True))  # fmt: skip
+    (tmp_path / "cal.csv").write_text("time,voltage,charge,displacement\n" + rows)
+    model = ph.ActivePI(8).fit(rec.voltage, rec.charge, t=rec.t)
+    q = tmp_path / "q.json"
+    model.save(q)
+    res = run("calibrate-gain", q, tmp_path / "cal.csv", "-o", tmp_path / "g.json")
+    assert res.exit_code == 0, res.output
+    assert "column 'displacement' states no unit" in res.output and "--displacement-unit" in (
+        res.output
+    )
     # the input in mV, read as volts: 140 kV, which no piezo amplifier drives
     rows = "".join(f"{t:.4f},{1e3 * v:.3f},{q:.6e}\n"
                    for t, v, q in zip(rec.t, rec.voltage, rec.charge, strict=True))  # fmt: skip

@@ -104,6 +104,24 @@ def standard_column(table: Table, name: str, what: str, role: Role, expected: st
 IMPLAUSIBLE = {"m": 0.01, "C": 0.01}
 
 
+def warn_assumed_span(
+    span: float, assumed: str, column: str | None, data: PathLike, option: str = "--output-unit"
+) -> None:
+    """Warn when an output that states no unit, taken in ``assumed`` (m or C), spans more
+    than any piezo's does in it (:data:`IMPLAUSIBLE`): micrometres or nanocoulombs, most
+    likely; ``option`` is the one that says the unit."""
+    if assumed in IMPLAUSIBLE and span > IMPLAUSIBLE[assumed]:
+        name = {"m": "metres", "C": "coulombs"}[assumed]
+        usual = {"m": "um or nm", "C": "uC or nC"}[assumed]
+        warnings.warn(
+            f"{data}: column {column!r} states no unit and spans {span:.4g}, read as {name}; "
+            f"no piezo's does: if it is in {usual}, give the unit ({option} "
+            f"{usual.split()[0]}, or a header '{column} [{usual.split()[0]}]')",
+            UserWarning,
+            stacklevel=4,
+        )
+
+
 #: An input span (V) no piezo amplifier drives: a column in mV read as volts
 VOLTS_IMPLAUSIBLE = 2e4
 
@@ -169,18 +187,8 @@ def warn_clipped(
             yield chunk
 
     count, which, level, first, n = clipped(seen())
-    assumed = _default_unit(column) if unit is None else None
-    if assumed in IMPLAUSIBLE and extremes[1] - extremes[0] > IMPLAUSIBLE[assumed]:
-        name = {"m": "metres", "C": "coulombs"}[assumed]
-        usual = {"m": "um or nm", "C": "uC or nC"}[assumed]
-        warnings.warn(
-            f"{data}: column {column!r} states no unit and spans "
-            f"{extremes[1] - extremes[0]:.4g}, read as {name}; no piezo's does: if it is in "
-            f"{usual}, give the unit (--output-unit {usual.split()[0]}, or a header "
-            f"'{column} [{usual.split()[0]}]')",
-            UserWarning,
-            stacklevel=3,
-        )
+    if unit is None:
+        warn_assumed_span(extremes[1] - extremes[0], _default_unit(column), column, data)
     if n and count >= CLIP_SHARE * n:
         warnings.warn(
             f"{data}: column {column!r} sits at its {which} ({level:.6g} {unit or ''}) on "

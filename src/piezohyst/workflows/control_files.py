@@ -53,6 +53,7 @@ from ._base import (
     desired_unit,
     guard_outputs,
     standard_column,
+    warn_assumed_span,
     warn_clipped,
 )
 
@@ -510,6 +511,9 @@ def calibrate_gain_file(
     assert rec.y is not None and sensor.y is not None
     w = rec.window
     unit = sensor.units[1] or "m"
+    if sensor.units[1] is None:
+        span = float(np.ptp(sensor.y[w]))
+        warn_assumed_span(span, "m", displacement_column, data, "--displacement-unit")
     om = calibrate_gain(model, rec.x[w], rec.y[w], sensor.y[w], rec.t[w], output_unit=unit)
     if out is not None:
         om.save(out)
