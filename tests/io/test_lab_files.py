@@ -377,3 +377,20 @@ def test_an_output_in_um_without_a_unit_is_named(
         assert res.exit_code == 0, res.output
         assert "column 'voltage' states no unit and spans" in res.output
         assert "if it is in mV, give the unit (--input-unit mV" in res.output
+
+
+def test_a_tdms_channel_of_timestamps(tmp_path: Path, rec: ph.simulation.Recording) -> None:
+    """LabVIEW logs its clock as a TDMS channel of timestamps: it was dropped as not numeric,
+    and the error then said "no time column" of a file with one. Read as seconds from its
+    first sample, as a text file's timestamps are."""
+    from nptdms import ChannelObject, TdmsWriter
+
+    clock = np.datetime64("2026-11-27T23:59:58") + np.round(rec.t * 1e6).astype("timedelta64[us]")
+    with TdmsWriter(tmp_path / "log.tdms") as w:
+        w.write_segment([ChannelObject("Log", "Time", clock),
+                         ChannelObject("Log", "Voltage", rec.voltage),
+                         ChannelObject("Log", "Charge", rec.charge)])  # fmt: skip
+    got = ph.io.read_recording(tmp_path / "log.tdms")
+    # tol: whole microseconds (n ms exactly) back to seconds, a few ulp
+    np.testing.assert_allclose(got.t, rec.t, atol=1e-12)
+    np.testing.assert_array_equal(got.y, rec.charge)

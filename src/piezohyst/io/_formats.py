@@ -972,9 +972,14 @@ def _read_tdms(path: Path, group: str | None, channels: Sequence[str] = ()) -> T
     units: dict[str, str] = {}
     step: float | None = None
     for channel in chosen.channels():
-        arrays[channel.name] = channel[:]
+        values = np.asarray(channel[:])
         if str(channel.properties.get("unit_string", "")).strip():
             units[channel.name] = str(channel.properties["unit_string"]).strip()
+        if values.dtype.kind == "M" and values.size:  # a channel of timestamps (LabVIEW's
+            # clock): seconds from its first, as a text file's ISO timestamps are read
+            values = (values - values[0]) / np.timedelta64(1, "us") * 1e-6
+            units[channel.name] = "s"
+        arrays[channel.name] = values
         inc = channel.properties.get("wf_increment")
         if step is None and inc is not None and float(inc) > 0:
             step = float(inc)
