@@ -9,6 +9,8 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from .._validation import FloatArray
 from ..control.compensator import CompensatorSettings
 from ..errors import DataFileError, OverwriteError
@@ -120,6 +122,32 @@ def warn_assumed_span(
             UserWarning,
             stacklevel=4,
         )
+
+
+def time_rate(t: FloatArray) -> float | None:
+    """The sample rate (Hz) of a time column (s): one over its median step, rounded to 12
+    digits (1000.0, not 999.9999999999991 from times written in ms); None where it does not
+    increase."""
+    steps = np.diff(t)
+    if not (steps.size and np.all(steps > 0)):
+        return None
+    return float(f"{1.0 / float(np.median(steps)):.12g}")
+
+
+#: what a sample rate given beside a time column it contradicts would do
+ONE_RATE = (
+    "the values would be computed at one rate and written at the other's times; give the "
+    "rate of the file's time column, or leave it out"
+)
+
+
+def check_rate(where: PathLike, timed: float | None, rate: float, against: str) -> None:
+    """Refuse a file whose time column steps at another rate than ``rate`` (Hz), the one its
+    values will be computed or played at: ``against`` (after the file's rate) says whose
+    rate it is and what would follow."""
+    if timed is not None and abs(timed - rate) > 1e-3 * rate:
+        msg = f"{where}: the time column steps at {timed:.6g} Hz{against}"
+        raise DataFileError(msg)
 
 
 #: An input span (V) no piezo amplifier drives: a column in mV read as volts

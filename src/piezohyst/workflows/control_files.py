@@ -45,14 +45,17 @@ from ..simulation import DEFAULT_PRESET, PRESETS, Bench, BenchRecord, run_loop
 from ..units import to_standard
 from ._base import (
     _DEFAULT_SETTINGS,
+    ONE_RATE,
     PathLike,
     Progress,
     _check_measured_unit,
     _default_unit,
     _load,
+    check_rate,
     desired_unit,
     guard_outputs,
     standard_column,
+    time_rate,
     warn_assumed_span,
     warn_clipped,
 )
@@ -191,17 +194,12 @@ def compensate_file(
     t_unit = table.unit("time") if timed else None
     fs = settings.sample_rate
     if timed:
-        steps = np.diff(to_standard(head["time"], t_unit, "time", f"{target}: column 'time'")[0])
-        file_fs = 1.0 / float(np.median(steps)) if steps.size and np.all(steps > 0) else None
-        if fs is not None and file_fs is not None and abs(file_fs - fs) > 1e-3 * fs:
-            msg = (
-                f"{target}: the time column steps at {file_fs:.6g} Hz, and the sample rate "
-                f"given is {fs:g} Hz: the commands would be timed by one and written at the "
-                "other; give the rate of the file's time column, or leave it out"
-            )
-            raise DataFileError(msg)
-        if fs is None:  # 1000.0, not 999.9999999999991 from times written in ms
-            fs = float(f"{file_fs:.12g}") if file_fs is not None else 1.0
+        file_fs = time_rate(
+            to_standard(head["time"], t_unit, "time", f"{target}: column 'time'")[0]
+        )
+        if fs is not None:
+            check_rate(target, file_fs, fs, f", and the sample rate given is {fs:g} Hz: {ONE_RATE}")
+        fs = fs if fs is not None else (file_fs if file_fs is not None else 1.0)
     assert fs is not None  # untimed without a rate was refused above
     comp = dataclasses.replace(settings, sample_rate=fs).build(model)  # slew: "trained"
     start = present_voltage
@@ -611,14 +609,10 @@ def simulate_loop_file(
         raise ParameterError(msg)
     if "time" in table:  # a target timed at another rate would be played at the bench's
         t = to_standard(table.get("time"), table.unit("time"), "time", f"{target}: column 'time'")
-        steps = np.diff(t[0])
-        if steps.size and np.all(steps > 0) and abs(1 / np.median(steps) - fs) > 1e-3 * fs:
-            msg = (
-                f"{target}: the time column steps at {1 / np.median(steps):.6g} Hz and the "
-                f"bench {preset} samples at {fs:g} Hz: the target would be played at the "
-                "bench's rate; resample it to that rate"
-            )
-            raise DataFileError(msg)
+        played = "the target would be played at the bench's rate; resample it to that rate"
+        check_rate(
+            target, time_rate(t[0]), fs, f" and the bench {preset} samples at {fs:g} Hz: {played}"
+        )
     settings = dataclasses.replace(settings, sample_rate=fs)
     ctl = settings.build(model) if loop is None else loop.build(settings, model)
     bench = Bench(

@@ -22,7 +22,7 @@ from ..errors import DataFileError, ModelFileError, ParameterError
 from ..io import read_table, write_table
 from ..io.screening import NOISE_REACH, noise_level
 from ..model.persistence import load_model
-from ._base import desired_unit, guard_outputs, standard_column
+from ._base import ONE_RATE, check_rate, desired_unit, guard_outputs, standard_column
 
 __all__ = ["LearnFileResult", "learn_file", "recording_check"]
 
@@ -131,13 +131,10 @@ def learn_file(
         if rate is None or "time" in table:
             t = standard_column(table, "time", "time (or give --sample-rate)", "time", "s")
             timed = float(f"{(t.size - 1) / (t[-1] - t[0]):.12g}")  # 1000.0, not 999.9999999999
-            if rate is not None and abs(timed - rate) > 1e-3 * rate:
-                msg = (
-                    f"{desired}: the time column steps at {timed:.6g} Hz, and the sample rate "
-                    f"given is {rate:g} Hz: the trials would be timed by one and recorded at "
-                    "the other; give the rate of the file's time column, or leave it out"
+            if rate is not None:
+                check_rate(
+                    desired, timed, rate, f", and the sample rate given is {rate:g} Hz: {ONE_RATE}"
                 )
-                raise DataFileError(msg)
             rate = timed
     else:
         if desired is not None:
