@@ -52,8 +52,9 @@ __all__ = [
 SCORE_PIECE = 1 << 16  # samples per piece when scoring a fit (2 MB of temporaries)
 #: A record whose input and output changes correlate below minus this falls as its input
 #: rises (``Summary.co_move``, the largest over changes across 1, 8 and 64 samples): no
-#: model here can follow it. Measured PZT periods whose displacement falls: -0.86; their
-#: butterflies (rising and falling): +0.17..+0.20; rising loops +0.5..+0.84. Independent
+#: model here can follow it. Measured on the PZT periods: displacement falling (800-1200 V)
+#: -0.74..-0.86; its butterflies (1400 V, rising and falling) +0.35..+0.45; the
+#: polarisation's rising loops +0.50..+0.84. Independent
 #: noise pulls the correlation towards 0; noise shared by both channels with opposite signs
 #: (one reference in both) can pull it below at one sample, not over 64 where the drive shows.
 FALLING = 0.5
