@@ -65,9 +65,7 @@ def fit_in_memory(core: type[Core], job: FitJob, solve: Solve) -> CoreFit:
     proxy: list[FloatArray] | None = None
     selection = None
     if terms and (select or core.growth_from_proxy):
-        n_fixed = len(job.subsets[0]) if job.subsets else 0  # the kept terms: in every subset
-        terms, proxy, selection = growth_proxy(x, y, t, terms, select, job.initial_state,
-                                               n_fixed)  # fmt: skip
+        terms, proxy, selection = growth_proxy(x, y, t, terms, job.subsets, job.initial_state)
     fitted, coefs = solve(Solving(x, y, t if terms else None, terms, job.params,
                                   job.initial_state, proxy))  # fmt: skip
     return CoreFit(fitted, tuple(terms), tuple(coefs), selection)

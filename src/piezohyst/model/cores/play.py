@@ -11,7 +11,6 @@ kernels in :mod:`piezohyst._kernels`.
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -657,9 +656,8 @@ def growth_proxy(
     y: FloatArray,
     t: FloatArray | None,
     terms: list[Term],
-    select: bool,
+    subsets: list[tuple[int, ...]] | None,
     initial_state: Any,
-    n_fixed: int = 0,
 ) -> tuple[list[Term], list[FloatArray], Any]:
     """Growth terms identified jointly with play operators (a proxy for another core).
 
@@ -677,9 +675,9 @@ def growth_proxy(
     t : ndarray or None
         Its times.
     terms : list of Term
-    select : bool
+    subsets : list of tuple of int, or None
+        The term combinations to choose among (indices into ``terms``); None: all kept.
     initial_state : any
-    n_fixed : int
 
     Returns
     -------
@@ -692,16 +690,9 @@ def growth_proxy(
     z0 = np.full(thr.size, float(x[0]))
     if isinstance(initial_state, str) and initial_state == "periodic":
         z0 = periodic_state(array_blocks(x, x, None), thr, float(x[0]))
-    subsets = None
-    if select:
-        base = tuple(range(n_fixed))
-        subsets = [
-            base + combo for size in range(len(terms) - n_fixed + 1)
-            for combo in itertools.combinations(range(n_fixed, len(terms)), size)
-        ]  # fmt: skip
     sol = identify(PlayCore(thr), terms, blocks, sm, z0, min_slope=1e-3, subsets=subsets)
     fit = solution_fit(PlayCore(thr).build(sol.core, z0), terms, sol)
-    return list(fit.terms), list(fit.coefs), fit.selection if select else None
+    return list(fit.terms), list(fit.coefs), None if subsets is None else fit.selection
 
 
 def default_thresholds(x: ArrayLike, n_operators: int) -> FloatArray:
