@@ -271,7 +271,18 @@ def write(path: Path, text: str) -> Path:
     [
         ("", ["the file is empty"]),
         ("time,voltage,charge\n", ["header but no data rows"]),
-        ("time,voltage,q\n0,1,2\n0.1,2,3\n", ["no column 'charge'", "'time', 'voltage', 'q'"]),
+        (
+            "time,voltage,q\n0,1,2\n0.1,2,3\n",
+            [
+                "no column 'charge'",
+                "'time', 'voltage', 'q'",
+                "name the output column with --output",
+            ],
+        ),
+        (  # an oscilloscope's channels: which option names them
+            "TIME,CH1,CH2\n0,1,2\n0.1,2,3\n",
+            ["no column 'voltage'", "name the input column with --input (input_column=)"],
+        ),
         (
             "time,voltage,charge\n0,1,2\n0.1,x,3\n",
             ["'x' at row 2 (line 3 of the file), column 'voltage'"],

@@ -615,11 +615,11 @@ def open_recording(
         only = other.columns[0] if len(other.columns) == 1 else None  # its one signal: no name
         name = only if only is not None and output not in other else other.resolve(output)
         table, output = _joined(table, other, name)
-    x_name = table.resolve(input_column)
+    x_name = _named(table, input_column, "input")
     y_name: str | None = None
     # the default output may be absent (predicting needs no output); a named one may not
     if output is not None and (output_required or output in table or output != "charge"):
-        y_name = table.resolve(output)
+        y_name = _named(table, output, "output")
     time = time_column
     if time == "time" and time not in table:  # the default name in any case ('Time', aixACCT),
         # or in the file's one group that has it, or LabVIEW's name for it (its .lvm files)
@@ -639,7 +639,7 @@ def open_recording(
             )
             raise DataFileError(msg)
     elif time is not None and (time in table or time != "time"):  # a named one must be there
-        t_name = table.resolve(time)  # (resolve names the available columns where it is not)
+        t_name = _named(table, time, "time")  # (names the available columns where it is not)
     elif table.time_step is not None:
         step = table.time_step
     elif t_start is None and t_stop is None:  # enough for a rate-independent model
@@ -671,6 +671,16 @@ def open_recording(
         keep_outliers=bool(keep_outliers),
         untimed=untimed,
     )
+
+
+def _named(table: Table, name: str, role: str) -> str:
+    """The column ``name`` resolves to; where there is none, the error says which setting names
+    the ``role``'s column (an oscilloscope's CH1, CH2 are no voltage and charge by name)."""
+    try:
+        return table.resolve(name)
+    except DataFileError as exc:
+        msg = f"{exc}; name the {role} column with --{role} ({role}_column=)"
+        raise DataFileError(msg) from None
 
 
 def _joined(table: Table, other: Table, name: str) -> tuple[Table, str]:
