@@ -4,6 +4,7 @@ input and output in two files, targets in their own unit, outputs that cannot be
 from __future__ import annotations
 
 import tempfile
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -394,3 +395,30 @@ def test_a_tdms_channel_of_timestamps(tmp_path: Path, rec: ph.simulation.Recordi
     # tol: whole microseconds (n ms exactly) back to seconds, a few ulp
     np.testing.assert_allclose(got.t, rec.t, atol=1e-12)
     np.testing.assert_array_equal(got.y, rec.charge)
+
+
+def test_a_spreadsheet_workbook_is_named_not_read_as_text(
+    tmp_path: Path, rec: ph.simulation.Recording
+) -> None:
+    """An Excel workbook was read as text: 'the file has a header but no data rows'. By its
+    suffix or, renamed, by its first bytes (a zip archive, an OLE2 file), it is refused in a
+    line that says what to do; an .npz (a zip too) is still read."""
+    zipped = tmp_path / "book.xlsx"
+    with zipfile.ZipFile(zipped, "w") as z:  # what an .xlsx is: a zip of XML parts
+        z.writestr("xl/workbook.xml", "<workbook/>")
+    (tmp_path / "renamed.csv").write_bytes(zipped.read_bytes())
+    (tmp_path / "old.xls").write_bytes(b"\xd0\xcf\x11\xe0" + bytes(508))
+    (tmp_path / "run.zip").write_bytes(zipped.read_bytes())
+    cases = {
+        "book.xlsx": "a .xlsx workbook",
+        "renamed.csv": "a zip archive",
+        "old.xls": "a .xls workbook",
+        "run.zip": "unzip it",
+    }
+    for name, said in cases.items():
+        one_line_error(run("fit", tmp_path / name, "-o", tmp_path / "m.json"), said)
+        with pytest.raises(ph.DataFileError, match="not a table piezohyst reads"):
+            ph.io.open_table(tmp_path / name)
+    one_line_error(run("fit", tmp_path / "book.xlsx", "-o", tmp_path / "m.json"), "CSV UTF-8")
+    np.savez(tmp_path / "run.npz", time=rec.t, voltage=rec.voltage, charge=rec.charge)
+    assert ph.io.read_table(tmp_path / "run.npz").columns == ["time", "voltage", "charge"]

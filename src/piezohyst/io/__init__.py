@@ -127,6 +127,7 @@ def read_table(
     p = _existing(path)
     suffix = p.suffix.lower()
     _check_skip(p, skip_rows)
+    _refuse_workbook(p)
     readers: dict[str, Callable[[], Table]] = {
         ".npz": lambda: _read_npz(p),
         ".mat": lambda: _read_mat(p, group, channels),
@@ -146,6 +147,28 @@ def _check_skip(p: Path, skip_rows: int) -> None:
         raise DataFileError(msg)
     if skip_rows and p.suffix.lower() not in CSV_SUFFIXES:
         msg = f"{p}: rows can be skipped in text files only, not in {p.suffix} files"
+        raise DataFileError(msg)
+
+
+#: Spreadsheet workbooks by suffix, and the first bytes of their two containers (a zip
+#: archive: .xlsx, .ods; an OLE2 compound file: .xls)
+WORKBOOKS = (".xlsx", ".xlsm", ".xls", ".ods", ".numbers")
+WORKBOOK_MAGIC = {b"PK\x03\x04": "a zip archive", b"\xd0\xcf\x11\xe0": "an OLE2 compound file"}
+
+
+def _refuse_workbook(p: Path) -> None:
+    """A spreadsheet workbook is refused in one line (it was read as text, and the error
+    then spoke of a header without data rows)."""
+    with p.open("rb") as f:
+        head = f.read(4)
+    container = WORKBOOK_MAGIC.get(head)
+    if p.suffix.lower() in WORKBOOKS or (container and p.suffix.lower() != ".npz"):
+        what = f"a {p.suffix} workbook" if p.suffix.lower() in WORKBOOKS else container
+        advice = (
+            "unzip it and give the file inside" if p.suffix.lower() == ".zip"
+            else "save the sheet as CSV (in Excel: File > Save As > CSV UTF-8) and give that file"
+        )  # fmt: skip
+        msg = f"{p}: {what}, not a table piezohyst reads: {advice}"
         raise DataFileError(msg)
 
 
@@ -203,6 +226,7 @@ def open_table(
     p = _existing(path)
     suffix = p.suffix.lower()
     _check_skip(p, skip_rows)
+    _refuse_workbook(p)
     if suffix == ".parquet":
         return _reading(p, lambda: _lazy_parquet(p))
     if suffix in CSV_SUFFIXES:
