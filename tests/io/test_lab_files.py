@@ -422,3 +422,27 @@ def test_a_spreadsheet_workbook_is_named_not_read_as_text(
     one_line_error(run("fit", tmp_path / "book.xlsx", "-o", tmp_path / "m.json"), "CSV UTF-8")
     np.savez(tmp_path / "run.npz", time=rec.t, voltage=rec.voltage, charge=rec.charge)
     assert ph.io.read_table(tmp_path / "run.npz").columns == ["time", "voltage", "charge"]
+
+
+def test_a_spreadsheets_empty_rows_are_passed_over_and_a_time_that_repeats_is_explained(
+    tmp_path: Path, rec: ph.simulation.Recording
+) -> None:
+    """Excel writes an emptied row as ',,' (it was 'an empty value at row N ... is not a
+    number'); a row with no value carries nothing and is passed over. A time that repeats
+    or goes back is still refused, saying which it is."""
+    cols = zip(rec.t, rec.voltage, rec.charge, strict=True)
+    lines = [f"{t:.4f},{v:.6f},{q:.9e}" for t, v, q in cols]
+    body = [*lines[:1000], ",,", *lines[1000:], ",,", ",,"]
+    (tmp_path / "sheet.csv").write_text("time,voltage,charge\n" + "\n".join(body) + "\n")
+    for read in (ph.io.read_table, ph.io.open_table):
+        table = read(tmp_path / "sheet.csv")
+        # tol: the file prints 6 decimals of volts
+        np.testing.assert_allclose(table.get("voltage"), rec.voltage, atol=5e-7)
+    twice = [*lines[:1000], lines[999], *lines[1000:]]
+    (tmp_path / "twice.csv").write_text("time,voltage,charge\n" + "\n".join(twice) + "\n")
+    one_line_error(run("fit", tmp_path / "twice.csv", "-o", tmp_path / "m.json"),
+                   "time is not increasing at row 1001", "a sample logged twice")  # fmt: skip
+    runs = [*lines[:1500], *lines[:1500]]
+    (tmp_path / "runs.csv").write_text("time,voltage,charge\n" + "\n".join(runs) + "\n")
+    one_line_error(run("fit", tmp_path / "runs.csv", "-o", tmp_path / "m.json"),
+                   "at row 1501", "two records in one file")  # fmt: skip

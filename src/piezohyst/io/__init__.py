@@ -581,10 +581,15 @@ def check_increasing(
     steps = np.diff(t)
     if steps.size and np.any(steps <= 0):
         i = int(np.argmax(steps <= 0)) + 1
+        why = (
+            "the same time twice: a sample logged twice, or a clock too coarse for the rate"
+            if t[i] == t[i - 1]
+            else "the time goes back: two records in one file? give each its own"
+        )
         msg = (
             f"{where}: time is not increasing at row {start + i + 1}"
             f"{'' if column is None else f', column {column!r}'} "
-            f"({float(t[i - 1])!r} then {float(t[i])!r})"
+            f"({float(t[i - 1])!r} then {float(t[i])!r}: {why})"
         )
         raise DataFileError(msg)
 

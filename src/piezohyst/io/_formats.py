@@ -592,6 +592,7 @@ def _table_from_lines(path: Path, lines: list[tuple[int, str]]) -> Table:
         body = rows
     if len(set(names)) != len(names):
         names = [f"{c}_{i}" if names.count(c) > 1 else c for i, c in enumerate(names)]
+    body = [(n, cells) for n, cells in body if any(cells)]  # ',,': a spreadsheet's empty row
     if not body:
         msg = f"{path}: the file has a header but no data rows"
         raise DataFileError(msg)
