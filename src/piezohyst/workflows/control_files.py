@@ -10,7 +10,7 @@ import dataclasses
 import itertools
 import math
 import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -208,7 +208,7 @@ def compensate_file(
     comp.reset(voltage=start)
     preamble = np.empty(0)
     if precondition:  # a cycle over what the trajectory needs, with a margin
-        span = _needed_span(comp, (desired_of(b[name]) for b in table.batches(keys)))
+        span = _needed_span(comp, lambda: (desired_of(b[name]) for b in table.batches(keys)))
         preamble = comp.precondition(max(3, round(fs)), span)
     finite = 0
 
@@ -257,12 +257,36 @@ def compensate_file(
 PRECONDITION_MARGIN = 0.1
 
 
-def _needed_span(comp: Compensator, desired: Iterator[FloatArray]) -> tuple[float, float]:
-    """The voltages a trajectory's commands cover (a dry run on a copy), with a margin,
-    inside the limits; the whole limits when it has no finite command."""
+def _needed_span(
+    comp: Compensator, desired: Callable[[], Iterator[FloatArray]]
+) -> tuple[float, float]:
+    """The voltages a trajectory's commands cover, with a margin, inside the limits, found by
+    dry runs on copies: first from where the commands start, then after a cycle over that
+    span, as the real run will send them (grown to cover both); the whole limits when the
+    commands have no finite value.
+
+    The dry run had started after a cycle over the whole range: on an actuator that keeps a
+    large remanence (the bench's, 52 um at 0 V after a full cycle), a target below it looked
+    out of reach, the real cycle then covered the whole range too and made it so."""
+    span = _commands_span(comp, desired(), None)
+    for _ in range(2):  # a cycle over the span moves the commands a little: cover them too
+        if span is None:
+            break
+        after = _commands_span(comp, desired(), span)
+        if after is None or (span[0] <= after[0] and after[1] <= span[1]):
+            break
+        span = (min(span[0], after[0]), max(span[1], after[1]))
+    return (comp.v_min, comp.v_max) if span is None else span
+
+
+def _commands_span(
+    comp: Compensator, desired: Iterator[FloatArray], cycle: tuple[float, float] | None
+) -> tuple[float, float] | None:
+    """A dry run's commands on a copy (after a precondition cycle over ``cycle`` if given):
+    their span with :data:`PRECONDITION_MARGIN`, inside the limits; None when none is finite."""
     probe = copy.deepcopy(comp)
-    if not comp.model.hysteresis_.rate_dependent_:  # preconditioned, as the commands will be
-        probe.precondition(3)  # (a full-range cycle leaves creep high: a target looks out of reach)
+    if cycle is not None:
+        probe.precondition(3, cycle)
     lo, hi = math.inf, -math.inf
     with warnings.catch_warnings():  # limits that bite and extrapolation: said once, by the
         warnings.simplefilter("ignore", LimitWarning)  # real run, with its own counts
@@ -271,7 +295,7 @@ def _needed_span(comp: Compensator, desired: Iterator[FloatArray]) -> tuple[floa
             commands = probe.process(values)
             lo, hi = min(lo, float(commands.min())), max(hi, float(commands.max()))
     if not lo < hi:
-        return comp.v_min, comp.v_max
+        return None
     margin = PRECONDITION_MARGIN * (hi - lo)
     return max(comp.v_min, lo - margin), min(comp.v_max, hi + margin)
 
