@@ -378,7 +378,7 @@ def test_the_file_loop_is_the_in_memory_loop(tmp_path: Path) -> None:
     res = runner.invoke(main, [*base[:2], str(tmp_path / "gated0.csv"), "--state",
                                str(tmp_path / "gate.json"), "-o", str(tmp_path / "gate.csv"),
                                "--slew-rate", "30000"])  # fmt: skip
-    assert res.exit_code == 1 and "another model, leakage or settings" in res.output
+    assert res.exit_code == 1 and "--noise-gate 0.0, where the first call gave 9.0" in res.output
     # the scan in uC against time in ms, as their headers say: read as compensate reads them
     ph.write_table(tmp_path / "scan_uc.csv", {"time": t * 1e3, "desired": d * 1e6},
                    units={"time": "ms", "desired": "uC"})  # fmt: skip
@@ -593,3 +593,28 @@ def test_the_command_line_skips_lost_readings_written_nan(
     trial = learned.learn(np.where((np.arange(d.size) >= 50) & (np.arange(d.size) < 60),
                                    np.nan, q))  # fmt: skip
     assert f"learned from {trial.learned} samples" in res.output and trial.learned <= d.size - 10
+
+
+def test_a_call_with_other_settings_than_the_runs_first_is_told_which(
+    pi_model: ph.ClassicalPI, tmp_path: Path
+) -> None:
+    """A later call must give the options of the run's first: it was refused as 'made with
+    another model, leakage or settings', which named none of them."""
+    pi_model.save(tmp_path / "m.json")
+    d = cosine(pi_model, n=200, cycles=4)
+    ph.write_table(tmp_path / "scan.csv", {"time": np.arange(d.size) / RATE, "desired": d})
+    base = ["learn", str(tmp_path / "m.json"), "--state", str(tmp_path / "s.json"), "-o",
+            str(tmp_path / "next.csv"), "--v-min", "0", "--v-max", "140", "--slew-rate",
+            "20000"]  # fmt: skip
+    runner = CliRunner()
+    first = runner.invoke(main, [*base, "--lag", "0.002", "--desired", str(tmp_path / "scan.csv")])
+    assert first.exit_code == 0, first.output
+    u = ph.read_table(tmp_path / "next.csv").get("command")
+    ph.write_table(tmp_path / "t0.csv", {"voltage": u, "charge": pi_model.hysteresis_.predict(u)})
+    res = runner.invoke(main, [*base[:2], str(tmp_path / "t0.csv"), *base[2:], "--cutoff", "90"])
+    assert res.exit_code == 1
+    said = ("--lag 0.0, where the first call gave 0.002; --cutoff 90.0, where the first call "
+            "gave 'auto'; give every call of a run the options of its first")  # fmt: skip
+    assert said in res.output
+    res = runner.invoke(main, [*base[:2], str(tmp_path / "t0.csv"), *base[2:], "--lag", "0.002"])
+    assert res.exit_code == 0, res.output

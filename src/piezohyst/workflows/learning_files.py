@@ -7,6 +7,7 @@ writes the next trial's commands; the learner's state lives in a JSON file betwe
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from dataclasses import dataclass
@@ -171,7 +172,7 @@ def learn_file(
     trial = None
     check: dict[str, float] = {}
     if not first:
-        learner.restore(saved, str(state_path))
+        _restore(learner, saved, state_path)
         if recorded is None:
             msg = f"{state_path} waits for trial {learner.trials}'s recording (RECORDED)"
             raise ParameterError(msg)
@@ -205,10 +206,71 @@ def learn_file(
     write_table(out, {"time": t, "command": commands, "desired": desired_now})
     payload: dict[str, Any] = learner.to_dict()
     payload["sample_rate"] = rate
+    payload["run"] = _run_settings(learner)  # readable: what a later call must give again
     if check:  # how the last recording's voltage was matched to the commands, for the record
         payload["recording_check"] = check
     learner.save_dict(state_path, payload)
     return LearnFileResult(learner, trial, commands)
+
+
+#: The command line's option for each of a run's settings (``learn``)
+RUN_OPTIONS = {
+    "model": "MODEL", "leakage": "--leakage", "output_map": "--gain FILE", "gain": "--gain",
+    "domain": "--domain", "v_min": "--v-min", "v_max": "--v-max", "slew_rate": "--slew-rate",
+    "allow_extrapolation": "--allow-extrapolation", "lag": "--lag",
+    "learning_gain": "--learning-gain", "cutoff": "--cutoff", "lead_in": "--no-lead-in",
+    "probe": "--no-probe", "noise_gate": "--noise-gate",
+}  # fmt: skip
+
+
+def _run_settings(learner: LearningCompensator) -> dict[str, Any]:
+    """A run's settings as the command line gives them (files by a digest of their contents)."""
+
+    def digest(data: Any) -> str:
+        return hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode()).hexdigest()[
+            :12
+        ]
+
+    out = {k: v for k, v in learner.settings.items() if k in RUN_OPTIONS}
+    out["noise_gate"] = learner.settings.get("noise_gate", 0.0)
+    out["model"] = digest(learner.model.to_dict())
+    out["leakage"] = digest(learner.leakage.to_dict())
+    out["output_map"] = None if learner.output_map is None else digest(learner.output_map.to_dict())
+    return out
+
+
+def _restore(learner: LearningCompensator, saved: Any, state_path: Path) -> None:
+    """Continue the run in ``saved``; where this call's settings are not its first call's,
+    say which options differ (the state's digest alone could not)."""
+    try:
+        learner.restore(saved, str(state_path))
+    except ModelFileError:
+        was = saved.get("run") if isinstance(saved, dict) else None
+        if not isinstance(was, dict):
+            raise
+        now = _run_settings(learner)
+        diff = [
+            _differs(k, was.get(k), now.get(k)) for k in RUN_OPTIONS if was.get(k) != now.get(k)
+        ]
+        if not diff:
+            raise
+        msg = (
+            f"{state_path}: this call's settings are not the run's: {'; '.join(diff)}; give "
+            "every call of a run the options of its first"
+        )
+        raise ModelFileError(msg) from None
+
+
+def _differs(key: str, was: Any, now: Any) -> str:
+    """One setting a call gave otherwise than its run's first call, as the option's name."""
+    option = RUN_OPTIONS[key]
+    if key not in ("model", "leakage", "output_map"):
+        return f"{option} {now!r}, where the first call gave {was!r}"
+    if now is None:
+        return f"{option} not given, where the first call gave one"
+    if was is None:
+        return f"{option} given, where the first call gave none"
+    return f"{option}: another file than the first call's"
 
 
 def recording_check(
