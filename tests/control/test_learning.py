@@ -618,3 +618,19 @@ def test_a_call_with_other_settings_than_the_runs_first_is_told_which(
     assert said in res.output
     res = runner.invoke(main, [*base[:2], str(tmp_path / "t0.csv"), *base[2:], "--lag", "0.002"])
     assert res.exit_code == 0, res.output
+
+
+def test_a_trial_the_limits_hold_says_which_limit_and_its_option(pi_model: ph.ClassicalPI) -> None:
+    """'N of M commands at the voltage or slew limit' named neither; now each count, the
+    slew limit's rate and the options that set them."""
+    d = cosine(pi_model, n=200, cycles=4)
+    cases = ((140.0, 1e3, "moved by the whole slew limit (1000 V/s; --slew-rate"),
+             (40.0, 20e3, "at v_max 40 V and 0 at v_min 0 V (--v-max"))  # fmt: skip
+    for v_max, slew, said in cases:
+        ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=v_max, sample_rate=RATE,
+                                     slew_rate=slew, lead_in=False)  # fmt: skip
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")  # the compensator's own LimitWarning too
+            ilc.learn(pi_model.hysteresis_.predict(ilc.command(d)))
+        learned = [str(w.message) for w in caught if w.category is LearningWarning]
+        assert any("the limits held" in m and said in m for m in learned), learned

@@ -141,13 +141,40 @@ def _at_limits(u: FloatArray, comp: Compensator) -> tuple[FloatArray, FloatArray
     return top, bottom
 
 
-def _saturated(u: FloatArray, comp: Compensator) -> int:
-    """Commands at a voltage limit or moved by the whole slew limit."""
+def _held(u: FloatArray, comp: Compensator) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Commands at the top limit, at the bottom one, and moved by the whole slew limit."""
     top, bottom = _at_limits(u, comp)
     slewed = np.zeros(u.size, dtype=bool)
     if math.isfinite(comp.max_step):
         slewed[1:] = np.abs(np.diff(u)) >= comp.max_step * (1 - 1e-6)
+    return top, bottom, slewed
+
+
+def _saturated(u: FloatArray, comp: Compensator) -> int:
+    """Commands at a voltage limit or moved by the whole slew limit."""
+    top, bottom, slewed = _held(u, comp)
     return int(np.count_nonzero(top | bottom | slewed))
+
+
+def _limits_said(index: int, u: FloatArray, comp: Compensator) -> str:
+    """The warning of a trial whose commands the limits held: how many each limit held, and
+    the option that sets it."""
+    top, bottom, slewed = _held(u, comp)
+    parts = []
+    if slewed.any():
+        rate = f"{comp.max_step * comp.sample_rate:.4g} V/s" if comp.sample_rate else "its"
+        parts.append(f"{np.count_nonzero(slewed)} moved by the whole slew limit ({rate}; "
+                     "--slew-rate, slew_rate)")  # fmt: skip
+    if top.any() or bottom.any():
+        parts.append(f"{np.count_nonzero(top)} at v_max {comp.v_max:g} V and "
+                     f"{np.count_nonzero(bottom)} at v_min {comp.v_min:g} V "
+                     "(--v-max, --v-min)")  # fmt: skip
+    held = _saturated(u, comp)
+    return (
+        f"trial {index}: the limits held {held} of {u.size} commands ({'; '.join(parts)}): "
+        "the trajectory asks for more than the actuator and amplifier give, and learning "
+        "cannot remove the error that leaves"
+    )
 
 
 def _centred_slew(u: FloatArray, step: float) -> FloatArray:
@@ -692,13 +719,7 @@ class LearningCompensator:
         flipped = as_displacement and g is not None and g < 0
         e = _anti_windup(e, u, self.compensator, -1.0 if flipped else 1.0)
         if saturated > SATURATED * u.size:
-            warnings.warn(
-                f"trial {index}: {saturated} of {u.size} commands at the voltage or slew limit: "
-                "the trajectory asks for more than the actuator and amplifier give, and "
-                "learning cannot remove the error that leaves",
-                LearningWarning,
-                stacklevel=2,
-            )
+            warnings.warn(_limits_said(index, u, self.compensator), LearningWarning, stacklevel=2)
         rolled = False
         if self._first:  # the law, chosen from the first trial learned from
             loop = _probed(self._lead, measured, ok, self._bins, d)
