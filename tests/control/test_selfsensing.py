@@ -95,7 +95,8 @@ def test_calibration_refuses_what_holds_cannot_tell(tmp_path: Path) -> None:
     assert leak.conductance == pytest.approx(1e-9, rel=1e-6) and leak.bias == 0.0
     with pytest.raises(ph.ParameterError, match="distinct names"):
         ph.calibrate_leakage(t, v, q, terms=("ohmic",))
-    with pytest.raises(ph.InsufficientDataError, match="0 hold"):
+    # it said '0 hold(s) at 0 distinct voltage(s) (none V)'
+    with pytest.raises(ph.InsufficientDataError, match=r"^no hold \(the voltage steady"):
         ph.calibrate_leakage(t, np.sin(t), q, terms=("bias",))
     leak.save(tmp_path / "leak.json")
     back = ph.Leakage.load(tmp_path / "leak.json")

@@ -613,12 +613,16 @@ def calibrate_leakage(
     choosing = select and len(chosen) > 1
     need_levels, need_holds = (1, 2) if choosing else (len(by_voltage), len(chosen))
     if len(levels) < need_levels or len(found) < need_holds:
-        where = ", ".join(f"{lv:.4g}" for lv in levels) or "none"
+        where = ", ".join(f"{lv:.4g}" for lv in levels)
+        seen = (
+            f"{len(found)} hold(s) at {len(levels)} distinct voltage(s) ({where} {input_unit})"
+            if found else "no hold (the voltage steady for seconds) in the record"
+        )  # fmt: skip
         msg = (
-            f"{len(found)} hold(s) at {len(levels)} distinct voltage(s) ({where} {input_unit}) "
-            f"cannot determine {len(chosen)} leakage term(s) ({', '.join(chosen)}): record "
-            "holds of several seconds at more levels, up and down again (e.g. 0, 25, 50, 75, "
-            "100, 75, 50, 25, 0 % of the range), or ask for fewer terms"
+            f"{seen}: too few to determine {len(chosen)} leakage term(s) "
+            f"({', '.join(chosen)}): record holds of several seconds at more levels, up and "
+            "down again (e.g. 0, 25, 50, 75, 100, 75, 50, 25, 0 % of the range), or ask for "
+            "fewer terms"
         )
         raise InsufficientDataError(msg)
     if settling and holds is None:
