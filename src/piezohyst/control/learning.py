@@ -169,7 +169,7 @@ def _limits_said(index: int, u: FloatArray, comp: Compensator) -> str:
         parts.append(f"{np.count_nonzero(top)} at v_max {comp.v_max:g} V and "
                      f"{np.count_nonzero(bottom)} at v_min {comp.v_min:g} V "
                      "(--v-max, --v-min)")  # fmt: skip
-    held = _saturated(u, comp)
+    held = int(np.count_nonzero(top | bottom | slewed))
     return (
         f"trial {index}: the limits held {held} of {u.size} commands ({'; '.join(parts)}): "
         "the trajectory asks for more than the actuator and amplifier give, and learning "

@@ -226,7 +226,6 @@ def open_table(
     p = _existing(path)
     suffix = p.suffix.lower()
     _check_skip(p, skip_rows)
-    _refuse_workbook(p)
     if suffix == ".parquet":
         return _reading(p, lambda: _lazy_parquet(p))
     if suffix in CSV_SUFFIXES:
