@@ -598,3 +598,22 @@ def test_compensate_a_target_below_the_remanence_of_a_full_cycle(tmp_path: Path)
     err -= err.mean()  # a number gain's zero is the model's rest: 0.3 um off the plant's
     # measured 0.3 % of the target's span (the model's own error on this plant)
     assert np.sqrt(np.mean(err**2)) < 0.01 * np.ptp(desired[on])
+
+
+def test_a_folder_output_named_like_a_file_is_refused(tmp_path: Path) -> None:
+    """`fit-many -o fleet.csv` made a folder named fleet.csv with the models inside; `report`
+    and `demo` alike. Refused before any work, naming a folder to give instead."""
+    rec = ph.simulate(duration=3.0, seed=2)
+    ph.write_table(tmp_path / "u1.csv", {"time": rec.t, "voltage": rec.voltage,
+                                         "charge": rec.charge})  # fmt: skip
+    assert run("fit", tmp_path / "u1.csv", "-o", tmp_path / "m.json").exit_code == 0
+    for args, name in (
+        (("fit-many", tmp_path / "u1.csv", "-o"), "fleet.csv"),
+        (("report", tmp_path / "m.json", tmp_path / "u1.csv", "-o"), "rep.html"),
+        (("demo", "-o"), "demo.md"),
+    ):
+        res = run(*args, tmp_path / name)
+        assert_clean_error(res, f"the name of a {Path(name).suffix} file", "give a folder name")
+        assert not (tmp_path / name).exists()
+    res = run("fit-many", tmp_path / "u1.csv", "-o", tmp_path / "fleet")
+    assert res.exit_code == 0 and "saved 1 model in" in res.output

@@ -769,7 +769,9 @@ def fit_many_cmd(
         click.echo(f"  failed  {row['unit']}: {row['error']}")
     for row in result.outliers:
         click.echo(f"  outlier {row['unit']}: {row['outlier']} (NRMSE {row['nrmse'] * 100:.3f} %)")
-    ctx.info(f"saved {ok} models in {out_dir} and the summary {result.summary}")
+    ctx.info(
+        f"saved {ok} model{'' if ok == 1 else 's'} in {out_dir} and the summary {result.summary}"
+    )
     if result.failed:
         sys.exit(1)
 

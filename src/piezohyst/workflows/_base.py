@@ -13,7 +13,7 @@ import numpy as np
 
 from .._validation import FloatArray
 from ..control.compensator import CompensatorSettings
-from ..errors import DataFileError, OverwriteError
+from ..errors import DataFileError, OverwriteError, ParameterError
 from ..io import (
     Table,
     is_piezohyst_output,
@@ -73,6 +73,40 @@ def guard_outputs(
             kind = "folder" if out.is_dir() else "file"
             msg = f"{out}: an existing {kind} that piezohyst did not write; not replacing it"
             raise OverwriteError(msg, replaceable=True)
+
+
+#: Suffixes of files piezohyst reads or writes: a folder output named so is a slip
+FILE_SUFFIXES = frozenset({".csv", ".tsv", ".txt", ".json", ".npz", ".parquet", ".mat", ".tdms",
+                           ".h5", ".hdf5", ".html", ".md", ".png", ".pdf", ".svg", ".c", ".h",
+                           ".fmu", ".zip", ".xlsx"})  # fmt: skip
+
+
+def check_folder(out: PathLike, what: str) -> Path:
+    """The folder ``out`` a command writes ``what`` into, refused where its name is a file's
+    (``-o fleet.csv`` made a folder named so, the models and the summary inside it).
+
+    Parameters
+    ----------
+    out : path
+    what : str
+        What goes into it, for the message.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ParameterError
+    """
+    p = Path(out)
+    if not p.is_dir() and p.suffix.lower() in FILE_SUFFIXES:
+        msg = (
+            f"{p}: the name of a {p.suffix} file, but {what} go into a folder: give a folder "
+            f"name (such as {p.with_suffix('')})"
+        )
+        raise ParameterError(msg)
+    return p
 
 
 _DEFAULT_SETTINGS = CompensatorSettings()  # frozen: safe as a shared default

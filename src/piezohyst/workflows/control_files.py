@@ -51,6 +51,7 @@ from ._base import (
     _check_measured_unit,
     _default_unit,
     _load,
+    check_folder,
     check_rate,
     desired_unit,
     guard_outputs,
@@ -734,7 +735,9 @@ def model_report(
     """
     from ..analysis.report import Report
 
-    guard_outputs([out], [model_path, data], force=force)
+    guard_outputs(
+        [check_folder(out, "the figures and the report")], [model_path, data], force=force
+    )
     spec = data_spec or DataSpec()
     model = _load(model_path)
     if displacement_column is not None and gain is None:

@@ -49,6 +49,7 @@ from ..simulation import (
     run_loop,
     simulate,
 )
+from ._base import check_folder
 from .demo_learning import learning_figure, learning_study
 from .demo_report import render_report
 
@@ -456,7 +457,7 @@ def run_demo(
     seed = check_int(seed, "seed", "run_demo", 0, 2**32 - 1)
     say: Step = step or (lambda _msg: None)
     started = time.perf_counter()
-    out_dir = Path(out)
+    out_dir = check_folder(out, "the figures, metrics.json and report.md")
     out_dir.mkdir(parents=True, exist_ok=True)
     preset = DEFAULT_PRESET
     p = PRESETS[preset]

@@ -28,6 +28,7 @@ from ..errors import ParameterError, PiezohystError
 from ..io import DataSpec, write_rows
 from ..model.bank import model_width
 from . import fit_file, guard_outputs, model_terms
+from ._base import check_folder
 
 __all__ = ["FleetResult", "Unit", "fit_many", "units_of"]
 
@@ -323,8 +324,8 @@ def fit_many(
     -------
     FleetResult
     """
+    out = check_folder(out_dir, "one model per unit and the summary")
     units = units_of(records, channels, data_spec)
-    out = Path(out_dir)
     table = Path(summary) if summary is not None else out / "summary.csv"
     targets = [_model_path(out, u) for u in units]
     guard_outputs([*targets, table], [u.path for u in units], force=force)
