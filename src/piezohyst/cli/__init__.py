@@ -841,6 +841,10 @@ def simulate_loop(
     line = f"{what}: width desired->displacement {100 * run.width:.3g} %"
     if math.isfinite(run.nrmse):
         line += f", tracking NRMSE {100 * run.nrmse:.3g} %"
+    if run.arrived:
+        line += (
+            f" (the first {run.arrived} samples, the ramp from rest at the slew limit, left out)"
+        )
     click.echo(f"{line}; {run.saturated} samples saturated")
     ctx.info(f"saved {out}")
 

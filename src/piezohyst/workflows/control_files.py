@@ -24,7 +24,7 @@ from ..control.compensator import Compensator, CompensatorSettings
 from ..control.export import Precision, c_paths, write_c
 from ..control.fmu import write_fmu
 from ..control.leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
-from ..control.selfsensing import LoopSettings
+from ..control.selfsensing import LoopSettings, SelfSensingController
 from ..control.shared import write_mex, write_shared
 from ..errors import DataFileError, ExtrapolationWarning, LimitWarning, ParameterError
 from ..io import (
@@ -554,11 +554,16 @@ class LoopRun:
     desired : ndarray
         The desired trajectory.
     width : float
-        Hysteresis width desired → laser displacement (fraction of the span).
+        Hysteresis width desired → laser displacement (fraction of the span), from the
+        sample the commands reached the trajectory on (see ``arrived``).
     nrmse : float
-        Tracking NRMSE desired → laser displacement (displacement domain; else NaN).
+        Tracking NRMSE desired → laser displacement (displacement domain; else NaN), the same.
     saturated : int
         Commands clipped to the limits.
+    arrived : int
+        Samples before the commands reached the trajectory (the ramp from rest at the slew
+        limit), left out of ``width`` and ``nrmse``: the ramp's error is the limit's, not the
+        controller's (on the bench's 5-35 um target, 9 % NRMSE with it, 0.8 % without).
     """
 
     record: BenchRecord
@@ -566,6 +571,7 @@ class LoopRun:
     width: float
     nrmse: float
     saturated: int
+    arrived: int = 0
 
 
 def simulate_loop_file(
@@ -661,12 +667,15 @@ def simulate_loop_file(
             "displacement": "m",
         },
     )
+    comp = ctl.compensator if isinstance(ctl, SelfSensingController) else ctl
+    arrived = comp.sent_count - comp.command_count  # the ramp from rest at the slew limit
     ok = np.isfinite(desired)
+    ok[:arrived] = False
     width = hysteresis_width(desired[ok], rec.displacement[ok])
     err = (
         nrmse(desired[ok], rec.displacement[ok]) if settings.domain == "displacement" else math.nan
     )
-    return LoopRun(rec, desired, width, err, ctl.saturated_count)
+    return LoopRun(rec, desired, width, err, ctl.saturated_count, arrived)
 
 
 @dataclass(frozen=True)
