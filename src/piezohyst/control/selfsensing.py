@@ -468,6 +468,17 @@ class SelfSensingController:
         """Commands held back by the slew limit (see :meth:`Compensator.tally`)."""
         return self.compensator.slew_limited_count
 
+    @property
+    def command_count(self) -> int:
+        """Commands sent from the first that reached the trajectory on (see
+        :attr:`Compensator.command_count`)."""
+        return self.compensator.command_count
+
+    @property
+    def sent_count(self) -> int:
+        """Every command sent since the last reset, the approach included."""
+        return self.compensator.sent_count
+
 
 def build_controller(
     settings: CompensatorSettings,

@@ -24,7 +24,7 @@ from ..control.compensator import Compensator, CompensatorSettings
 from ..control.export import Precision, c_paths, write_c
 from ..control.fmu import write_fmu
 from ..control.leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
-from ..control.selfsensing import LoopSettings, SelfSensingController
+from ..control.selfsensing import LoopSettings
 from ..control.shared import write_mex, write_shared
 from ..errors import DataFileError, ExtrapolationWarning, LimitWarning, ParameterError
 from ..io import (
@@ -667,8 +667,7 @@ def simulate_loop_file(
             "displacement": "m",
         },
     )
-    comp = ctl.compensator if isinstance(ctl, SelfSensingController) else ctl
-    arrived = comp.sent_count - comp.command_count  # the ramp from rest at the slew limit
+    arrived = ctl.sent_count - ctl.command_count  # the ramp from rest at the slew limit
     ok = np.isfinite(desired)
     ok[:arrived] = False
     width = hysteresis_width(desired[ok], rec.displacement[ok])
