@@ -570,6 +570,20 @@ def test_every_command_that_writes_takes_o() -> None:
     assert all("-o" in opts for opts in writers.values()), writers
 
 
+def _bench_model_and_low_target(tmp_path: Path, *, first: int) -> ph.simulation.Recording:
+    """The bench's model (ActivePI from 20 s of decaying loops) in m.json, and target.csv: a
+    2 Hz sine over 5-35 um, 2 s at 1 kHz from sample ``first``; returns the fitted record."""
+    rec = ph.simulate(signal="decaying", duration=20.0, seed=1)
+    ph.write_table(tmp_path / "run.csv", {"time": rec.t, "voltage": rec.voltage,
+                                          "charge": rec.charge})  # fmt: skip
+    assert run("fit", tmp_path / "run.csv", "-o", tmp_path / "m.json").exit_code == 0
+    t = (first + np.arange(2000)) / 1000.0
+    ph.write_table(tmp_path / "target.csv",
+                   {"time": t, "desired": 20.0 + 15.0 * np.sin(4 * np.pi * t)},
+                   units={"time": "s", "desired": "um"})  # fmt: skip
+    return rec
+
+
 def test_compensate_a_target_below_the_remanence_of_a_full_cycle(tmp_path: Path) -> None:
     """The bench's actuator keeps 52 um at 0 V after a full-range cycle (of 295 um). A 5-35 um
     target, in reach from rest, was refused as out of reach ('check the units'): the dry run
@@ -577,14 +591,7 @@ def test_compensate_a_target_below_the_remanence_of_a_full_cycle(tmp_path: Path)
     0 V, so the real cycle covered the whole range too and put the target out of reach. Now
     the cycle covers what the commands need, and on the simulated plant the displacement
     follows the target once the first 0.25 s (the ramp-in from the cycle's end) is past."""
-    rec = ph.simulate(signal="decaying", duration=20.0, seed=1)
-    ph.write_table(tmp_path / "run.csv", {"time": rec.t, "voltage": rec.voltage,
-                                          "charge": rec.charge})  # fmt: skip
-    assert run("fit", tmp_path / "run.csv", "-o", tmp_path / "m.json").exit_code == 0
-    t = np.arange(2000) / 1000.0
-    ph.write_table(tmp_path / "target.csv",
-                   {"time": t, "desired": 20.0 + 15.0 * np.sin(4 * np.pi * t)},
-                   units={"time": "s", "desired": "um"})  # fmt: skip
+    rec = _bench_model_and_low_target(tmp_path, first=0)
     res = run("compensate", tmp_path / "m.json", tmp_path / "target.csv", "--domain",
               "displacement", "--gain", "125", "-o", tmp_path / "command.csv")  # fmt: skip
     assert res.exit_code == 0, res.output
@@ -623,14 +630,7 @@ def test_simulate_loop_scores_the_tracking_from_where_the_commands_arrive(tmp_pa
     """A target that starts at 20 um is reached from rest at the trained slew limit (230 V/s):
     counted in, that ramp's error made the printed tracking NRMSE 9 % where the loop tracks to
     under 1 %. It is left out, and the line says how many samples it took."""
-    rec = ph.simulate(signal="decaying", duration=20.0, seed=1)
-    ph.write_table(tmp_path / "run.csv", {"time": rec.t, "voltage": rec.voltage,
-                                          "charge": rec.charge})  # fmt: skip
-    assert run("fit", tmp_path / "run.csv", "-o", tmp_path / "m.json").exit_code == 0
-    t = (1 + np.arange(2000)) / 1000.0
-    ph.write_table(tmp_path / "target.csv",
-                   {"time": t, "desired": 20.0 + 15.0 * np.sin(4 * np.pi * t)},
-                   units={"time": "s", "desired": "um"})  # fmt: skip
+    _bench_model_and_low_target(tmp_path, first=1)
     res = run("simulate-loop", tmp_path / "m.json", tmp_path / "target.csv", "--domain",
               "displacement", "--gain", "125", "-o", tmp_path / "loop.csv")  # fmt: skip
     assert res.exit_code == 0, res.output
