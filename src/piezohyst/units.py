@@ -19,7 +19,15 @@ import numpy as np
 from ._validation import FloatArray
 from .errors import DataFileError
 
-__all__ = ["LENGTHS", "Role", "is_length", "split_unit", "suffix_units", "to_standard"]
+__all__ = [
+    "LENGTHS",
+    "Role",
+    "is_length",
+    "scaled",
+    "split_unit",
+    "suffix_units",
+    "to_standard",
+]
 
 Role = Literal["time", "input", "output"]
 
@@ -133,6 +141,85 @@ def _registry() -> Any:
     return pint.UnitRegistry()
 
 
+#: what a column may be once scaled, by role, for messages
+_WANTED = {"input": "a voltage (V)", "output": "a charge (C) or a displacement (m)"}
+
+
+def scaled(
+    scale: str | float | None, unit: str | None, role: Literal["input", "output"], option: str
+) -> tuple[float, str | None]:
+    """What one unit of a column logged by a DAQ is worth: the factor to multiply it by and the
+    unit it is then in (converted further by :func:`to_standard`).
+
+    A DAQ logs volts: an amplifier's monitor at 1/100 of the piezo's voltage (``100``), a
+    displacement sensor's output (``"10 um/V"``), a Sawyer-Tower circuit's output across its
+    reference capacitor (``"4.7 uF"``, charge = capacitance x voltage), a sensor counting the
+    other way (``-1``, or ``"-10 um/V"``). A scale with a unit multiplies the column's unit
+    (``unit``, or V where the column states none); a plain number keeps it.
+
+    Parameters
+    ----------
+    scale : str, float or None
+        The column's scale (None: 1).
+    unit : str or None
+        The column's unit, from its header or as declared.
+    role : {"input", "output"}
+        What the column is: the scaled unit must be a voltage, or a charge or length.
+    option : str
+        The option's name, for messages (``--output-scale``, ``output_scale``).
+
+    Returns
+    -------
+    tuple
+        The factor and the unit the scaled values are in.
+
+    Raises
+    ------
+    DataFileError
+        A scale that cannot be read, is zero or not finite, or that makes the column
+        something it cannot be (``10 um/V`` on an input).
+
+    Examples
+    --------
+    >>> scaled("10 um/V", None, "output", "--output-scale")
+    (1e-05, 'm')
+    >>> scaled(100, "V", "input", "--input-scale")
+    (100.0, 'V')
+    """
+    if scale is None:
+        return 1.0, unit
+    ureg = _registry()
+    try:
+        quantity = ureg.Quantity(scale) if isinstance(scale, str) else ureg.Quantity(float(scale))
+        factor = float(quantity.magnitude)
+    except Exception:  # pint raises several kinds for text it cannot read
+        msg = f"{option} {scale!r} cannot be read: give a number or a quantity (100, 10 um/V)"
+        raise DataFileError(msg) from None
+    if not (np.isfinite(factor) and factor != 0.0):
+        msg = f"{option} {scale!r} must be a finite number other than 0"
+        raise DataFileError(msg)
+    if quantity.dimensionless:
+        return float(f"{quantity.to('').magnitude:.15g}"), unit
+    column = unit if unit is not None else "V"  # a DAQ's channel is in volts
+    try:
+        total = quantity * ureg.Quantity(1.0, column)
+    except Exception:
+        msg = f"{option} {scale!r}: the column's unit {column!r} is not understood"
+        raise DataFileError(msg) from None
+    for target in _TARGETS[role]:
+        if total.dimensionality == ureg.Quantity(1.0, target).dimensionality:
+            # to 15 digits, as declared: 10 um/V is 1e-05 m/V, not 9.999999999999999e-06
+            return float(f"{total.to(target).magnitude:.15g}"), target
+    hint = {
+        "input": "an amplifier's monitor's scale is a plain number (100 for 1/100)",
+        "output": "a sensor's scale is per volt (10 um/V); a Sawyer-Tower circuit's is its "
+        "reference capacitance (4.7 uF)",
+    }
+    gives = f"{option} {scale!r} on a column in {column} gives {total.units:~}"
+    msg = f"{gives}, not {_WANTED[role]}: {hint[role]}"
+    raise DataFileError(msg)
+
+
 def to_standard(
     values: FloatArray, unit: str | None, role: Role, where: str
 ) -> tuple[FloatArray, str | None]:
@@ -184,10 +271,9 @@ def to_standard(
     wrong = {"input": ("A", "C", "s", "m"), "output": ("A", "s")}[role]  # (a sensor's V is fine)
     for other in wrong:
         if quantity.dimensionality == ureg.Quantity(1.0, other).dimensionality:
-            wanted = {"input": "a voltage (V)", "output": "a charge (C) or a displacement (m)"}
             msg = (
                 f"{where} is in {unit!r}, a unit of {quantity.dimensionality}, not "
-                f"{wanted[role]}: check the column or its unit"
+                f"{_WANTED[role]}: check the column or its unit"
             )
             raise DataFileError(msg)
     return values, unit

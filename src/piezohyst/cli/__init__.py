@@ -593,6 +593,11 @@ def compensate(
     default=None,
     help="Its unit if the header does not say (m, um, nm...).",
 )
+@click.option(
+    "--displacement-scale",
+    default=None,
+    help="What one unit of it is worth, for a sensor logged in V: '10 um/V'.",
+)
 @FORCE
 @click.pass_obj
 def report(
@@ -604,6 +609,7 @@ def report(
     gain: float | OutputMap | None,
     displacement_column: str | None,
     displacement_unit: str | None,
+    displacement_scale: str | None,
     force: bool,
 ) -> None:
     """Figures (loop, fit, residual, growth removal) and metrics of MODEL on DATA; with
@@ -632,6 +638,7 @@ def report(
                 gain=gain,
                 displacement_column=displacement_column,
                 displacement_unit=displacement_unit,
+                displacement_scale=displacement_scale,
             ),
         )
     metres = res.metrics.get("displacement_nrmse_offset_free_pct")

@@ -116,6 +116,11 @@ def calibrate_leakage(
     default=None,
     help="Its unit if the header does not say (m, um, nm); converted to m.",
 )
+@click.option(
+    "--displacement-scale",
+    default=None,
+    help="What one unit of it is worth, for a sensor logged in V: '10 um/V'.",
+)
 @OUT_FILE_JSON
 @FORCE
 @click.pass_obj
@@ -126,6 +131,7 @@ def calibrate_gain(
     data_spec: DataSpec,
     displacement_column: str,
     displacement_unit: str | None,
+    displacement_scale: str | None,
     out: Path,
     force: bool,
 ) -> None:
@@ -152,6 +158,7 @@ def calibrate_gain(
             out,
             displacement_column=displacement_column,
             displacement_unit=displacement_unit,
+            displacement_scale=displacement_scale,
             data_spec=data_spec,
             force=force,
         ),

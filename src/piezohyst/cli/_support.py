@@ -187,8 +187,8 @@ def _run(ctx: Context, fn: Callable[[], Any]) -> Any:
 
 # ---------------------------------------------------------------- shared options
 def _data_options(fn: Callable[..., Any]) -> Callable[..., Any]:
-    """--input/--output/--time/--rate/--group/--skip-rows/--output-file/--t-start/--t-stop and
-    the units, gathered into one DataSpec."""
+    """--input/--output/--time/--rate/--group/--skip-rows/--output-file/--t-start/--t-stop, the
+    units and the scales, gathered into one DataSpec."""
     options = [
         click.option(
             "--input",
@@ -256,6 +256,19 @@ def _data_options(fn: Callable[..., Any]) -> Callable[..., Any]:
             help="Unit of the time column (default: its header's, or s).",
         ),
         click.option(
+            "--input-scale",
+            default=None,
+            help="What one unit of the input column is worth: 100 for an amplifier's monitor "
+            "at 1/100 of the piezo's voltage.",
+        ),
+        click.option(
+            "--output-scale",
+            default=None,
+            help="What one unit of the output column is worth, for a channel logged in V: "
+            "'10 um/V' (a sensor), '4.7 uF' (a Sawyer-Tower's reference capacitor), -1 (a "
+            "sensor counting the other way).",
+        ),
+        click.option(
             "--keep-outliers",
             is_flag=True,
             default=False,
@@ -279,6 +292,8 @@ def _data_options(fn: Callable[..., Any]) -> Callable[..., Any]:
         input_unit: str | None,
         output_unit: str | None,
         time_unit: str | None,
+        input_scale: str | None,
+        output_scale: str | None,
         keep_outliers: bool,
         **kwargs: Any,
     ) -> Any:
@@ -296,6 +311,8 @@ def _data_options(fn: Callable[..., Any]) -> Callable[..., Any]:
             skip_rows,
             output_file,
             keep_outliers,
+            input_scale,
+            output_scale,
         )
         return fn(*args, data_spec=spec, **kwargs)
 

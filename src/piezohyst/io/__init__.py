@@ -23,7 +23,7 @@ import numpy as np
 
 from .._validation import FloatArray
 from ..errors import DataFileError, RecordWarning
-from ..units import split_unit, to_standard
+from ..units import scaled, split_unit, to_standard
 from ._formats import (
     BATCH_ROWS,
     CSV_SUFFIXES,
@@ -349,6 +349,7 @@ class RecordingStream:
     keep_outliers: bool = False
     _screened: dict[str, Screen] = field(default_factory=dict, repr=False, compare=False)
     untimed: bool = False
+    _scales: tuple[float, float] = field(default=(1.0, 1.0), repr=False)
 
     def require_time(self, why: str) -> None:
         """Raise unless the record has a time axis (a column, a rate or a stated interval).
@@ -490,10 +491,13 @@ class RecordingStream:
             t_s, _ = to_standard(t, t_unit, "time", f"{where} {t_name!r}")
             if start == 0 and m > 1:
                 self._check_interval(t_s)
+            x_scale, y_scale = self._scales  # a DAQ's volts to the column's unit
+            x = x if x_scale == 1.0 else x * x_scale
             x, _ = to_standard(x, x_unit, "input", f"{where} {x_name!r}")
             y = None
             if y_name is not None:
-                y, _ = to_standard(batch[y_name], y_unit, "output", f"{where} {y_name!r}")
+                y = batch[y_name] if y_scale == 1.0 else batch[y_name] * y_scale
+                y, _ = to_standard(y, y_unit, "output", f"{where} {y_name!r}")
             yield Block(start, t_s, x, y)
             start += m
             if progress is not None:
@@ -610,6 +614,8 @@ def open_recording(
     skip_rows: int = 0,
     output_file: str | os.PathLike[str] | None = None,
     keep_outliers: bool = False,
+    input_scale: str | float | None = None,
+    output_scale: str | float | None = None,
 ) -> RecordingStream:
     """A recording to read block by block (arguments as :func:`read_recording`).
 
@@ -621,6 +627,7 @@ def open_recording(
     path : str or os.PathLike
     input_column, output_column, time_column, rate, group, output_required
     t_start, t_stop, input_unit, output_unit, time_unit, skip_rows, output_file, keep_outliers
+    input_scale, output_scale
         See :func:`read_recording`.
 
     Returns
@@ -674,11 +681,14 @@ def open_recording(
         step, untimed = 1.0, True
     else:
         raise DataFileError(no_time_message(table.path, table.columns, "a time window"))
-    source = (
-        _unit(table, t_name, time_unit),
-        _unit(table, x_name, input_unit),
-        None if y_name is None else _unit(table, y_name, output_unit),
+    x_scale, x_source = scaled(
+        input_scale, _unit(table, x_name, input_unit), "input", "input scale"
     )
+    y_scale, y_source = 1.0, None
+    if y_name is not None:
+        y_source = _unit(table, y_name, output_unit)
+        y_scale, y_source = scaled(output_scale, y_source, "output", "output scale")
+    source = (_unit(table, t_name, time_unit), x_source, y_source)
     where = f"{table.path}: column"
     empty = np.empty(0)
     to_standard(empty, source[0], "time", f"{where} {t_name!r}")  # an unknown time unit fails now
@@ -698,6 +708,7 @@ def open_recording(
         step,
         keep_outliers=bool(keep_outliers),
         untimed=untimed,
+        _scales=(x_scale, y_scale),
     )
 
 
@@ -810,6 +821,11 @@ def read_recording(
         Keep the isolated outliers (an ADC glitch) that are otherwise named in a
         :class:`~piezohyst.errors.RecordWarning` and replaced by their
         neighbours' mean (:mod:`piezohyst.io.screening`).
+    input_scale, output_scale : str or float, optional
+        What one unit of the column is worth, for channels a DAQ logs in volts: an
+        amplifier's monitor at 1/100 (``100``), a sensor (``"10 um/V"``), a Sawyer-Tower
+        circuit's reference capacitor (``"4.7 uF"``), a sensor counting the other way
+        (``-1``). See :func:`piezohyst.units.scaled`.
 
     Returns
     -------
@@ -893,6 +909,8 @@ class DataSpec:
         A second file holding the output column, row for row.
     keep_outliers : bool
         Keep the isolated outliers the record's check finds.
+    input_scale, output_scale : str, float or None
+        What one unit of the column is worth (``100``, ``"10 um/V"``, ``"4.7 uF"``).
     """
 
     input_column: str = "voltage"
@@ -908,6 +926,8 @@ class DataSpec:
     skip_rows: int = 0
     output_file: str | None = None
     keep_outliers: bool = False
+    input_scale: str | float | None = None
+    output_scale: str | float | None = None
 
     def open(
         self, path: str | os.PathLike[str], *, output_required: bool = True
@@ -941,6 +961,8 @@ class DataSpec:
             skip_rows=self.skip_rows,
             output_file=self.output_file,
             keep_outliers=self.keep_outliers,
+            input_scale=self.input_scale,
+            output_scale=self.output_scale,
         )
 
     def read(

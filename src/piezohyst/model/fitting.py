@@ -249,8 +249,9 @@ def identify_model(
         msg = (
             f"the output falls as the input rises (their changes correlate at "
             f"{sm.co_move:.2f}): every model here rises with its input; negate the output "
-            "(a sensor that counts the other way, or an actuator poled against the field) "
-            "and the model's predictions with it"
+            "(a sensor that counts the other way, or an actuator poled against the field: "
+            "--output-scale -1 or -10 um/V, output_scale= where the record is read) and the "
+            "model's predictions with it"
         )
         raise InsufficientDataError(msg)
     displacement = is_length(model.output_unit) and _default_growth(model)

@@ -486,6 +486,14 @@ def _our_fmu(path: Path) -> bool:
         return False
 
 
+def _sensor_spec(
+    spec: DataSpec, column: str, unit: str | None, scale: str | float | None
+) -> DataSpec:
+    """``spec`` reading the displacement sensor's column as its output: its own unit and
+    scale (never the charge channel's)."""
+    return dataclasses.replace(spec, output_column=column, output_unit=unit, output_scale=scale)
+
+
 def calibrate_gain_file(
     model_path: PathLike,
     data: PathLike,
@@ -493,6 +501,7 @@ def calibrate_gain_file(
     *,
     displacement_column: str = "displacement",
     displacement_unit: str | None = None,
+    displacement_scale: str | float | None = None,
     data_spec: DataSpec | None = None,
     force: bool = False,
 ) -> OutputMap:
@@ -511,8 +520,10 @@ def calibrate_gain_file(
     displacement_column : str, default "displacement"
     displacement_unit : str, optional
         Its unit if its header does not say (um, nm, m...); converted to m.
+    displacement_scale : str or float, optional
+        What one unit of it is worth, for a sensor logged in V (``"10 um/V"``).
     data_spec : DataSpec, optional
-        Columns, units and window of the voltage and charge.
+        Columns, units, scales and window of the voltage and charge.
     force : bool
         Replace an existing ``out`` that piezohyst did not write.
 
@@ -525,9 +536,9 @@ def calibrate_gain_file(
     model = _load(model_path)
     spec = data_spec or DataSpec()
     rec = spec.read(data)
-    sensor = dataclasses.replace(
-        spec, output_column=displacement_column, output_unit=displacement_unit
-    ).read(data)
+    sensor = _sensor_spec(spec, displacement_column, displacement_unit, displacement_scale).read(
+        data
+    )
     if rec.t is None:
         msg = f"{data}: calibrate-gain needs the time column (or --sample-rate)"
         raise DataFileError(msg)
@@ -705,6 +716,7 @@ def model_report(
     gain: float | OutputMap | None = None,
     displacement_column: str | None = None,
     displacement_unit: str | None = None,
+    displacement_scale: str | float | None = None,
 ) -> ReportResult:
     """A report a lab can file on a model and a data file (HTML, Markdown, JSON, figures).
 
@@ -736,6 +748,8 @@ def model_report(
         A displacement sensor's column to score the displacement against (needs ``gain``).
     displacement_unit : str, optional
         Its unit if its header does not say (um, nm, m...); converted to m.
+    displacement_scale : str or float, optional
+        What one unit of it is worth, for a sensor logged in V (``"10 um/V"``).
 
     Returns
     -------
@@ -755,8 +769,8 @@ def model_report(
     rec = spec.read(data, progress=progress)
     sensor = None
     if displacement_column is not None:
-        sensor = dataclasses.replace(
-            spec, output_column=displacement_column, output_unit=displacement_unit
+        sensor = _sensor_spec(
+            spec, displacement_column, displacement_unit, displacement_scale
         ).read(data)
     w = rec.window  # the model runs over the whole record: the window's start has a history
     end = rec.x.size if w.stop is None else w.stop  # nothing after the window is run
