@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -338,8 +339,23 @@ def test_the_file_loop_is_the_in_memory_loop(tmp_path: Path) -> None:
     noisy = sent + np.random.default_rng(7).normal(0.0, 0.01, sent.size)
     ph.write_table(tmp_path / "measured.csv", {"time": got.t, "voltage": noisy,
                                                "charge": got.charge})  # fmt: skip
+    shutil.copy(tmp_path / "s.json", tmp_path / "s_daq.json")
     res = runner.invoke(main, [*base[:2], str(tmp_path / "measured.csv"), *base[2:]])
     assert res.exit_code == 0, res.output
+    # the same recording as the DAQ logs it, in volts (a 1/100 monitor, a Sawyer-Tower's
+    # output across 4.7 uF), scaled: the same next trial
+    ph.write_table(tmp_path / "daq.csv", {"time": got.t, "AI0": noisy / 100,
+                                          "AI1": got.charge / 4.7e-6})  # fmt: skip
+    res = runner.invoke(main, [*base[:2], str(tmp_path / "daq.csv"), "--state",
+                               str(tmp_path / "s_daq.json"), "-o", str(tmp_path / "next_daq.csv"),
+                               "--slew-rate", "30000", "--voltage-column", "AI0",
+                               "--voltage-scale", "100", "--reading-column", "AI1",
+                               "--reading-scale", "4.7 uF"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    # tol: the readings scaled there and back (a rounding each way), through the inverse
+    np.testing.assert_allclose(ph.read_table(tmp_path / "next_daq.csv").get("command"),
+                               ph.read_table(tmp_path / "next.csv").get("command"),
+                               rtol=0, atol=1e-9 * (hi - lo))  # fmt: skip
     check = json.loads((tmp_path / "s.json").read_text())["recording_check"]
     # tol: a MAD estimate of 10 mV from 250 samples scatters by about 10 %
     assert check["noise_V"] == pytest.approx(0.01, rel=0.25)

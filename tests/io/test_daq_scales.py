@@ -26,8 +26,9 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, ph.simulation
     """The same bench record twice: as physical columns, and as the DAQ's volts."""
     d = tmp_path_factory.mktemp("daq")
     rec = ph.simulate(signal="multi", duration=6.0, seed=3)
-    ph.write_table(d / "physical.csv", {"time": rec.t, "voltage": rec.voltage,
-                                        "charge": rec.charge, "displacement": rec.displacement})  # fmt: skip
+    physical = {"time": rec.t, "voltage": rec.voltage, "charge": rec.charge,
+                "displacement": rec.displacement}  # fmt: skip
+    ph.write_table(d / "physical.csv", physical)
     ph.write_table(d / "daq.csv", {"time": rec.t, "AI0": rec.voltage / MONITOR,
                                    "AI1": rec.charge / C_REF,
                                    "AI2": -rec.displacement / SENSOR})  # fmt: skip

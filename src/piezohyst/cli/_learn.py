@@ -76,6 +76,17 @@ def _auto_or_float(value: str) -> float | Literal["auto"]:
     help="The recording's column learned from.",
 )
 @click.option(
+    "--voltage-scale",
+    default=None,
+    help="What one unit of the voltage column is worth: 100 for an amplifier's monitor at 1/100.",
+)
+@click.option(
+    "--reading-scale",
+    default=None,
+    help="What one unit of the reading column is worth, for a channel logged in V: '4.7 uF' "
+    "(a Sawyer-Tower's reference capacitor), '10 um/V' (a sensor, with --sensor).",
+)
+@click.option(
     "--voltage-tolerance",
     type=click.FloatRange(min=0.0),
     default=None,
@@ -130,6 +141,8 @@ def learn(
     cutoff: str,
     voltage_column: str,
     reading_column: str,
+    voltage_scale: str | None,
+    reading_scale: str | None,
     voltage_tolerance: float | None,
     sensor: bool,
     no_lead_in: bool,
@@ -173,6 +186,8 @@ def learn(
             cutoff=_auto_or_float(cutoff),
             voltage_column=voltage_column,
             reading_column=reading_column,
+            voltage_scale=voltage_scale,
+            reading_scale=reading_scale,
             sensor=sensor,
             lead_in=not no_lead_in,
             probe=not no_probe,

@@ -21,7 +21,7 @@ from ..io import (
 from ..metrics import clipped
 from ..model.model import HysteresisModel
 from ..model.persistence import load_model
-from ..units import Role, to_standard
+from ..units import Role, scaled, to_standard
 
 PathLike = str | os.PathLike[str]
 
@@ -119,16 +119,30 @@ def desired_unit(settings: CompensatorSettings, model: HysteresisModel) -> str:
     return "m" if metres else model.output_unit
 
 
-def standard_column(table: Table, name: str, what: str, role: Role, expected: str | None) -> Any:
+def standard_column(
+    table: Table,
+    name: str,
+    what: str,
+    role: Role,
+    expected: str | None,
+    scale: tuple[str, str | float | None] | None = None,
+) -> Any:
     """A column in the unit piezohyst works in (its header's: um, uC, ms, as ``compensate``
-    reads a target), refused where that is not of ``expected``'s kind (None: any)."""
+    reads a target), refused where that is not of ``expected``'s kind (None: any).
+
+    ``scale``: the option's name and what one unit of the column is worth (a DAQ's volts,
+    :func:`piezohyst.units.scaled`)."""
     found = table.find(name)
     if found is None:
         columns = ", ".join(table.columns)
         msg = f"{table.path}: no column {name!r} for the {what} (columns: {columns})"
         raise DataFileError(msg)
     where = f"{table.path}: column {found!r}"
-    values, unit = to_standard(table.get(found, finite=False), table.unit(found), role, where)
+    values, unit = table.get(found, finite=False), table.unit(found)
+    if scale is not None and scale[1] is not None and role != "time":
+        factor, unit = scaled(scale[1], unit, role, scale[0])
+        values = values * factor
+    values, unit = to_standard(values, unit, role, where)
     if expected is not None and unit is not None and unit != expected:
         msg = f"{where}: the {what} is in {unit!r}, where {expected!r} is expected"
         raise DataFileError(msg)

@@ -61,6 +61,8 @@ def learn_file(
     cutoff: float | Literal["auto"] = "auto",
     voltage_column: str = "voltage",
     reading_column: str = "charge",
+    voltage_scale: str | float | None = None,
+    reading_scale: str | float | None = None,
     sensor: bool = False,
     tolerance: float = 1e-4,
     lead_in: bool = True,
@@ -97,6 +99,10 @@ def learn_file(
         A leakage file (:func:`~piezohyst.control.leakage.calibrate_leakage`); default the model's.
     lag, learning_gain, cutoff, lead_in, probe, noise_gate
         See :class:`~piezohyst.LearningCompensator`.
+    voltage_scale, reading_scale : str or float, optional
+        What one unit of the recording's voltage or reading column is worth, for channels
+        a DAQ logs in volts (a 1/100 monitor: ``100``; a Sawyer-Tower's ``"4.7 uF"``; a
+        sensor's ``"10 um/V"``; :func:`piezohyst.units.scaled`).
     voltage_tolerance : float, optional
         How far (V) the recorded voltage may stray from the commands; default from
         its noise (:func:`recording_check`, what it found kept in the state file).
@@ -180,7 +186,8 @@ def learn_file(
         sent = learner.pending
         assert sent is not None
         recording = read_table(rec)
-        v = standard_column(recording, voltage_column, "voltage sent", "input", "V")
+        v = standard_column(recording, voltage_column, "voltage sent", "input", "V",
+                            ("voltage scale", voltage_scale))  # fmt: skip
         if v.size != sent.size:
             msg = f"{rec}: {v.size} rows, but trial {learner.trials} sent {sent.size} commands"
             raise DataFileError(msg)
@@ -196,7 +203,8 @@ def learn_file(
             )
             raise DataFileError(msg)
         y = standard_column(recording, reading_column, "reading", "output",
-                            "m" if sensor else model.output_unit)  # fmt: skip
+                            "m" if sensor else model.output_unit,
+                            ("reading scale", reading_scale))  # fmt: skip
         trial = learner.learn(displacement=y) if sensor else learner.learn(y)
     else:
         assert d is not None
