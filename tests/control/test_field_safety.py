@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -520,3 +521,30 @@ def test_an_aixacct_table_finds_its_time_column(tmp_path: Path) -> None:
               "classical-pi", "-o", tmp_path / "trap.json")  # fmt: skip
     assert res.exit_code == 0, res.output
     assert ph.load_model(tmp_path / "trap.json").train_window_ == (0.0, 0.399)
+
+
+def test_a_voltage_limit_counts_commands_sent_at_it_not_the_loops_approach(lab: Path) -> None:
+    """The self-sensing loop's ramp from rest to a target mid-range: its feedback asks beyond
+    140 V while the slew limit holds the commands far below it. Those were counted as held
+    by the voltage limits (134 of them), and the loop warned 'the target is out of reach' of
+    a target it then tracked at 0.5 % width. A command counts where it is sent at a limit (as
+    the other cores count); a target beyond v_max still counts, and names its side."""
+    from piezohyst.simulation import Bench
+    from piezohyst.simulation.loop import run_loop
+
+    model = ph.load_model(lab / "model.json")
+    lo, hi = model.input_range_
+    t = np.arange(3000) / 1000.0
+    mid = model.hysteresis_.predict(70.0 + 60.0 * np.sin(2 * np.pi * t))  # from 70 V at once
+    for scale, held in ((1.0, False), (1.15, True)):
+        ctl = ph.SelfSensingController(model, v_min=lo, v_max=hi, sample_rate=1000.0)
+        bench = Bench(ph.simulation.PRESETS["T226-H4-203X"], voltage=ctl.last_command, seed=0)
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always", ph.LimitWarning)
+            rec = run_loop(ctl, scale * mid, bench)
+        voltage = [str(w.message) for w in said if "voltage limits" in str(w.message)]
+        at_limit = int(np.sum((rec.voltage <= lo) | (rec.voltage >= hi)))
+        assert ctl.saturated_count <= at_limit  # each one sent at a limit
+        assert (ctl.saturated_count > 0) == held and bool(voltage) == held, voltage
+        if held:
+            assert "at v_max: the target is beyond what v_max reaches" in voltage[0]

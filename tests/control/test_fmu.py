@@ -113,13 +113,17 @@ def test_reset_reproduces_a_run_and_a_nan_target_holds(kinds, tmp_path: Path) ->
     assert np.array_equal(slave.run(d), first)
     held = slave.run(np.full(5, np.nan))
     assert np.all(held == first[-1]) and lo <= held[0] <= hi
-    nonfinite, saturated, _ = slave.fmu.getInteger(
-        [slave.vr["nonfinite"], slave.vr["saturated"], slave.vr["slewed"]]
-    )
+    counts = ["nonfinite", "saturated", "slewed"]
+    nonfinite, saturated, slewed = slave.fmu.getInteger([slave.vr[k] for k in counts])
     assert nonfinite == int(np.isnan(d).sum()) + 5  # the counts since the reset say so
-    beyond = slave.run(np.array([1e3 * float(np.nanmax(np.abs(d)))]))  # far out of reach
-    assert beyond[0] > first[-1]  # towards the upper limit (at most the slew limit's step)
-    assert slave.fmu.getInteger([slave.vr["saturated"]])[0] == saturated + 1
+    far = 1e3 * float(np.nanmax(np.abs(d)))  # far out of reach
+    beyond = slave.run(np.full(int(np.ceil((hi - first[-1]) / comp.max_step)) + 3, far))
+    assert beyond[0] > first[-1]  # towards the upper limit, by the slew limit's step
+    assert beyond[-1] == hi
+    # held by the slew limit on the way, then at the voltage limit: each counted once
+    steps = int(np.sum(beyond < hi))
+    got = slave.fmu.getInteger([slave.vr["saturated"], slave.vr["slewed"]])
+    assert list(got) == [saturated + beyond.size - steps, slewed + steps]
     slave.close()
 
 

@@ -180,11 +180,11 @@ def _limit(v, last, config, state):  # type: ignore[no-untyped-def]
     lo = config[CFG_V_MIN]
     hi = config[CFG_V_MAX]
     acted = False
+    over = False
     if v < lo or v > hi:
         # count real overshoots, not a limit reached exactly but for rounding
         tol = 1e-12 * (hi - lo)
-        if v < lo - tol or v > hi + tol:
-            state[end + ST_SATURATED] += 1.0
+        over = v < lo - tol or v > hi + tol
         v = min(max(v, lo), hi)
         acted = True
     step = config[CFG_MAX_STEP]
@@ -194,6 +194,8 @@ def _limit(v, last, config, state):  # type: ignore[no-untyped-def]
     elif v < last - step:
         v = last - step
         acted = True
+    elif over:  # held by a voltage limit: sent at it (not where the slew limit held it first)
+        state[end + ST_SATURATED] += 1.0
     return v, acted
 
 
@@ -231,11 +233,11 @@ def _step_at(c, desired, tables, config, state):  # type: ignore[no-untyped-def]
     limited = False
     lo = config[c, CFG_V_MIN]
     hi = config[c, CFG_V_MAX]
+    over = False
     if v < lo or v > hi:
         # count real overshoots, not a limit reached exactly but for rounding
         tol = 1e-12 * (hi - lo)
-        if v < lo - tol or v > hi + tol:
-            state[c, end + ST_SATURATED] += 1.0
+        over = v < lo - tol or v > hi + tol
         v = min(max(v, lo), hi)
         limited = True
     step = config[c, CFG_MAX_STEP]
@@ -245,6 +247,8 @@ def _step_at(c, desired, tables, config, state):  # type: ignore[no-untyped-def]
     elif v < last - step:
         v = last - step
         limited = True
+    elif over:  # held by a voltage limit: sent at it (not where the slew limit held it first)
+        state[c, end + ST_SATURATED] += 1.0
     for i in range(n):
         state[c, i] = min(max(state[c, i], v - tables[c, TAB_R, i]), v + tables[c, TAB_R, i])
     if limited:
@@ -481,9 +485,9 @@ def compensator_process(desired, tables, config, state, out):  # type: ignore[no
             continue
         v = x
         limited = False
+        over = False
         if v < lo or v > hi:
-            if v < lo - tol or v > hi + tol:
-                saturated += 1.0
+            over = v < lo - tol or v > hi + tol
             v = min(max(v, lo), hi)
             limited = True
         if v > last + step:
@@ -492,6 +496,8 @@ def compensator_process(desired, tables, config, state, out):  # type: ignore[no
         elif v < last - step:
             v = last - step
             limited = True
+        elif over:  # sent at the voltage limit (see _limit)
+            saturated += 1.0
         for i in range(n):
             state[i] = min(max(state[i], v - r[i]), v + r[i])
         if limited:
@@ -583,13 +589,13 @@ def numeric_step(desired, tables, static, lags, config, state):  # type: ignore[
             v = trial if lo < trial < hi else 0.5 * (lo + hi)
     # the limits are inside the bracket; _limit counts only unreachable targets
     tol = 1e-12 * (y_hi - y_lo)
-    if q < y_lo - tol or q > y_hi + tol:
-        state[end + ST_SATURATED] += 1.0
     step = config[CFG_MAX_STEP]
     if v > last + step:
         v = last + step
     elif v < last - step:
         v = last - step
+    elif q < y_lo - tol or q > y_hi + tol:  # sent at the voltage limit (see _limit)
+        state[end + ST_SATURATED] += 1.0
     for i in range(n):
         state[i] = min(max(state[i], v - tables[TAB_R, i]), v + tables[TAB_R, i])
     for k in range(m):

@@ -331,7 +331,9 @@ class Compensator:
 
     @property
     def saturated_count(self) -> int:
-        """Samples whose command was clipped to ``[v_min, v_max]`` (out of reach)."""
+        """Samples whose command was sent at ``v_min`` or ``v_max`` because the target was
+        beyond it (out of reach); a command the slew limit held before it reached a limit
+        counts in :attr:`slew_limited_count` (on the trajectory) or not at all (the approach)."""
         return int(self.inverse.saturated_count())
 
     @property

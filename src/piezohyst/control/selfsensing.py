@@ -373,7 +373,8 @@ class SelfSensingController:
 
     @property
     def saturated_count(self) -> int:
-        """Commands clipped to the limits."""
+        """Commands sent at a voltage limit because the loop asked beyond it (see
+        :attr:`Compensator.saturated_count`)."""
         return self.compensator.saturated_count
 
     @property

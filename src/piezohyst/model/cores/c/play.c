@@ -42,7 +42,7 @@ void PREFIX_init(PREFIX_t *s)
 static real_t core_step(PREFIX_t *s, real_t q)
 {
     real_t x, v;
-    int i, limited = 0;
+    int i, limited = 0, over = 0;
     q = clamp(q, OFFSET - BOUND, OFFSET + BOUND);
     x = INV_OFFSET;
     for (i = 0; i < N; ++i) {
@@ -57,9 +57,7 @@ static real_t core_step(PREFIX_t *s, real_t q)
     }
     if (v < V_MIN || v > V_MAX) {
         /* count real overshoots, not a limit reached exactly but for rounding */
-        if (v < V_MIN - SAT_TOL || v > V_MAX + SAT_TOL) {
-            s->saturated++;
-        }
+        over = v < V_MIN - SAT_TOL || v > V_MAX + SAT_TOL;
         v = clamp(v, V_MIN, V_MAX);
         limited = 1;
     }
@@ -72,8 +70,11 @@ static real_t core_step(PREFIX_t *s, real_t q)
         v = s->last - MAX_STEP;
         limited = 1;
         s->slewed++;
-    }
+    } else
 #endif
+    if (over) { /* sent at the voltage limit, not where the slew limit held it first */
+        s->saturated++;
+    }
     for (i = 0; i < N; ++i) {
         s->z[i] = clamp(s->z[i], v - R[i], v + R[i]);
     }

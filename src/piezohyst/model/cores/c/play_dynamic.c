@@ -16,7 +16,7 @@ static real_t abs_real(real_t x)
 STEP_SIGNATURE(PREFIX_t *s, real_t desired)
 {
     real_t q, target, w_target, x, u;
-    int i;
+    int i, over = 0;
     if (non_finite(desired)) { /* hold: the piezo keeps settling on the last command */
         s->nonfinite++;
         u = advance(s, s->last);
@@ -42,9 +42,7 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
         return s->last;
     }
     if (x < V_MIN || x > V_MAX) {
-        if (x < V_MIN - SAT_TOL || x > V_MAX + SAT_TOL) {
-            s->saturated++;
-        }
+        over = x < V_MIN - SAT_TOL || x > V_MAX + SAT_TOL;
         x = clamp(x, V_MIN, V_MAX);
     }
 #if HAS_SLEW
@@ -54,8 +52,11 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
     } else if (x < s->last - MAX_STEP) {
         x = s->last - MAX_STEP;
         s->slewed++;
-    }
+    } else
 #endif
+    if (over) { /* sent at the voltage limit (see play.c) */
+        s->saturated++;
+    }
     u = advance(s, x);
     for (i = 0; i < N; ++i) {
         s->z[i] = clamp(s->z[i], u - R[i], u + R[i]);

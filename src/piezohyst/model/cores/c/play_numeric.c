@@ -125,9 +125,6 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired)
         }
     }
     tol = (real_t)1e-12 * (y_hi - y_lo);
-    if (q < y_lo - tol || q > y_hi + tol) {
-        s->saturated++;
-    }
 #if HAS_SLEW
     if (v > s->last + MAX_STEP) {
         v = s->last + MAX_STEP;
@@ -135,8 +132,11 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired)
     } else if (v < s->last - MAX_STEP) {
         v = s->last - MAX_STEP;
         s->slewed++;
-    }
+    } else
 #endif
+    if (q < y_lo - tol || q > y_hi + tol) { /* sent at the voltage limit (see play.c) */
+        s->saturated++;
+    }
     for (i = 0; i < N; ++i) {
         s->z[i] = clamp(s->z[i], v - R[i], v + R[i]);
     }
