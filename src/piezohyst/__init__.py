@@ -54,7 +54,6 @@ from .analysis.selection import Selection, select_model
 from .control.calibration import OutputMap, calibrate_gain
 from .control.channels import BankCompensator, BankController
 from .control.compensator import Compensator, CompensatorState
-from .control.leakage import Leakage, calibrate_leakage
 from .control.learning import LearningCompensator
 from .control.selfsensing import ControllerState, SelfSensingController
 from .errors import (
@@ -82,6 +81,7 @@ from .model.cores.boucwen import BoucWenHysteresis
 from .model.cores.duhem import DuhemHysteresis
 from .model.cores.play import PIHysteresis, default_thresholds
 from .model.cores.preisach import PreisachHysteresis
+from .model.leakage import Leakage, calibrate_leakage
 from .model.model import History, HysteresisModel, InverseSpec, ModelState
 from .model.models import (
     ActivePI,

@@ -776,7 +776,7 @@ def calibrate_gain(
 
 def _leak_columns(v: FloatArray, q: FloatArray, t: FloatArray) -> FloatArray:
     """The leakage shapes the model's growth terms may have missed (the terms of
-    :data:`~piezohyst.control.leakage.LEAKAGE_TERMS`: ohmic, voltage-dependent, a bias
+    :data:`~piezohyst.model.leakage.LEAKAGE_TERMS`: ohmic, voltage-dependent, a bias
     current, the reference capacitor's discharge), each integrated by the backward
     rectangle rule the growth terms use (eq. 13) and scaled to its span. The displacement
     does not see leaked charge, so their coefficients take up whatever leakage the charge

@@ -24,10 +24,10 @@ from .._kernels import signal as S
 from .._validation import FloatArray
 from ..errors import ExtrapolationWarning, LimitWarning, ParameterError, ShapeError
 from ..model.bank import ModelBank
+from ..model.leakage import Leakage
 from ..model.model import HysteresisModel
 from .calibration import OutputMap, monotone_charges
 from .compensator import LIMIT_CHECK_FIRST, LIMIT_SHARE, Compensator, Domain
-from .leakage import Leakage
 from .selfsensing import SelfSensingController
 
 __all__ = ["BankCompensator", "BankController", "ChannelBank", "per_channel"]

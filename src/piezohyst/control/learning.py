@@ -43,9 +43,9 @@ from ..errors import (
 )
 from ..io import atomic_write_text
 from ..metrics import hysteresis_width
+from ..model.leakage import Leakage
 from .calibration import OutputMap
 from .compensator import Compensator, Domain
-from .leakage import Leakage
 from .learning_design import LearningDesign, design_learning
 from .learning_probe import Response, probe_bins, probe_signal, response
 

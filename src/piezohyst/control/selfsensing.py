@@ -29,6 +29,7 @@ from numpy.typing import ArrayLike
 from .._kernels import play as K
 from .._validation import FloatArray
 from ..errors import ParameterError, ShapeError
+from ..model.leakage import Leakage
 from ..model.model import HysteresisModel
 from .calibration import OutputMap
 from .compensator import (
@@ -36,7 +37,6 @@ from .compensator import (
     CompensatorSettings,
     CompensatorState,
 )
-from .leakage import Leakage
 
 __all__ = [
     "ControllerState",
@@ -123,7 +123,7 @@ class SelfSensingController:
     leakage : Leakage, optional
         The leakage to subtract from the measured charge; default the model's
         growth terms (:meth:`Leakage.from_model`). Calibrate it from holds
-        (:func:`~piezohyst.control.leakage.calibrate_leakage`) for the best result.
+        (:func:`~piezohyst.model.leakage.calibrate_leakage`) for the best result.
     ki : float, default 0.5
         Integral gain per sample, in [0, 1.9]: 1 removes a constant error in
         one sample but passes the measurement noise; the loop's bandwidth is

@@ -581,7 +581,7 @@ class HysteresisModel(Fitted, Estimator):
             Times (s).
         leakage : Leakage, optional
             Remove this leakage (e.g. calibrated from holds,
-            :func:`~piezohyst.control.leakage.calibrate_leakage`) instead of the
+            :func:`~piezohyst.model.leakage.calibrate_leakage`) instead of the
             model's growth terms; needs ``t``.
 
         Returns

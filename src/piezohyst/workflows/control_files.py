@@ -23,7 +23,6 @@ from ..control.calibration import OutputMap, calibrate_gain
 from ..control.compensator import Compensator, CompensatorSettings
 from ..control.export import Precision, c_paths, write_c
 from ..control.fmu import write_fmu
-from ..control.leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
 from ..control.selfsensing import LoopSettings
 from ..control.shared import write_mex, write_shared
 from ..errors import DataFileError, ExtrapolationWarning, LimitWarning, ParameterError
@@ -39,6 +38,7 @@ from ..io import (
     write_table,
 )
 from ..metrics import hysteresis_width, nrmse, rmse
+from ..model.leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
 from ..model.model import HysteresisModel
 from ..model.state import predict_record
 from ..simulation import DEFAULT_PRESET, PRESETS, Bench, BenchRecord, run_loop
@@ -407,9 +407,9 @@ def calibrate_leakage_file(
     data_spec : DataSpec, optional
         Columns, units and window.
     terms : sequence of str
-        Leakage terms to fit (see :func:`~piezohyst.control.leakage.calibrate_leakage`).
+        Leakage terms to fit (see :func:`~piezohyst.model.leakage.calibrate_leakage`).
     min_duration, settle
-        Hold detection and trim (see :func:`~piezohyst.control.leakage.calibrate_leakage`).
+        Hold detection and trim (see :func:`~piezohyst.model.leakage.calibrate_leakage`).
     force : bool
         Replace an existing ``out`` that piezohyst did not write.
 

@@ -25,11 +25,11 @@ import numpy as np
 from .._validation import FloatArray, check_int
 from .._version import __version__
 from ..control.compensator import Compensator
-from ..control.leakage import Leakage, calibrate_leakage
 from ..control.selfsensing import SelfSensingController
 from ..errors import ExtrapolationWarning
 from ..io import atomic_write_text
 from ..metrics import hysteresis_width, nrmse, rmse
+from ..model.leakage import Leakage, calibrate_leakage
 from ..model.models import (
     ActivePI,
     BoucWenModel,

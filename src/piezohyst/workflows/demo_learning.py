@@ -12,9 +12,9 @@ from typing import Any
 
 import numpy as np
 
-from ..control.leakage import Leakage
 from ..control.learning import LearningCompensator
 from ..metrics import hysteresis_width, rmse
+from ..model.leakage import Leakage
 from ..model.models import HysteresisModel
 from ..plotting import save_panels
 from ..simulation import Bench, BenchPreset
