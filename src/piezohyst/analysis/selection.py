@@ -614,6 +614,7 @@ def select_model(
     initial_state: InitialState = "rest",
     input_unit: str = "V",
     output_unit: str = "C",
+    input_dynamics: str = "none",
 ) -> Selection:
     """Choose a model for a record: each candidate with its defaults, scored by forward
     chaining inside the record (:data:`FOLDS`), the best refitted on all of it.
@@ -632,6 +633,11 @@ def select_model(
         Where the record starts (a History: the input before it).
     input_unit, output_unit : str
         The models' units.
+    input_dynamics : str, default "none"
+        The amplifier's or sensor's lag every candidate identifies with its hysteresis
+        (``"auto"``, ``"first-order"``...; see :class:`~piezohyst.HysteresisModel`): on a
+        record of several drive frequencies, the candidates are then scored on their
+        hysteresis, not on how much of the lag each absorbs.
 
     Returns
     -------
@@ -659,8 +665,9 @@ def select_model(
         names = [n for n in names if not n.endswith(CREEP)] or names
     units = (input_unit, output_unit)
     turns = _turns(xs)
+    dyn = {} if input_dynamics == "none" else {"input_dynamics": input_dynamics}
     rows = _forward(
-        {n: candidate_model(n, operators, units, ts) for n in names},
+        {n: candidate_model(n, operators, units, ts, **dyn) for n in names},
         xs,
         ys,
         ts,
@@ -672,7 +679,7 @@ def select_model(
         msg = f"no candidate could be fitted: {ranked[0].name}: {ranked[0].error}"
         raise InsufficientDataError(msg)
     winner = chosen(rows)
-    model = candidate_model(winner.name, operators, units, ts)
+    model = candidate_model(winner.name, operators, units, ts, **dyn)
     model.fit(xs, ys, t=ts, initial_state=initial_state)
     ranked = sorted(with_margins(rows, winner), key=lambda r: r.score)
     return Selection(model, winner.name, tuple(ranked), _record_notes(xs, turns))

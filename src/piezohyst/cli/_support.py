@@ -588,11 +588,13 @@ def _fit_auto(
     data: Path,
     operators: int,
     initial_state: str,
+    input_dynamics: str,
     data_spec: DataSpec,
     out: Path,
     force: bool,
-) -> None:
-    """fit --model auto: every model scored inside the record, the best saved."""
+) -> HysteresisModel:
+    """fit --model auto: every model scored inside the record (each with the input dynamics
+    asked for), the best saved; returns it."""
     from ..workflows import select_file
 
     with (
@@ -607,6 +609,7 @@ def _fit_auto(
                 data_spec=data_spec,
                 operators=operators,
                 initial_state=initial_state,
+                input_dynamics=input_dynamics,
                 force=force,
                 progress=progress,
             ),
@@ -615,6 +618,7 @@ def _fit_auto(
 
     click.echo(describe(sel.model))
     ctx.info(f"saved {out}")
+    return cast(HysteresisModel, sel.model)
 
 
 def describe(model: HysteresisModel) -> str:

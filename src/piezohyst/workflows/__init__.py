@@ -192,6 +192,7 @@ def select_file(
     operators: int = 10,
     initial_state: str = "rest",
     candidates: Sequence[str] = CANDIDATES,
+    input_dynamics: str = "none",
     force: bool = False,
     progress: Progress = None,
 ) -> Selection:
@@ -212,6 +213,9 @@ def select_file(
         Where the record (or its window) starts.
     candidates : sequence of str
         Model names to choose among.
+    input_dynamics : str, default "none"
+        The lag every candidate identifies with its hysteresis (see
+        :func:`~piezohyst.analysis.selection.select_model`).
     force : bool
         Replace an existing ``out`` piezohyst did not write.
     progress : callable, optional
@@ -232,7 +236,7 @@ def select_file(
     sel = select_model(
         rec.x[w], rec.y[w], rec.t[w], candidates=candidates, operators=operators,
         initial_state=start, input_unit=rec.units[0] or "V",
-        output_unit=rec.units[1] or _default_unit(rec.names[1]),
+        output_unit=rec.units[1] or _default_unit(rec.names[1]), input_dynamics=input_dynamics,
     )  # fmt: skip
     if out is not None:
         sel.model.save(out)
