@@ -86,7 +86,8 @@ def _thresholds(value: object, name: str, owner: str) -> FloatArray | None:
 def _growth_terms(value: object, name: str, owner: str) -> tuple[str, ...] | None:
     """None for 'auto' (choose among the built-in ones), else distinct registered growth
     terms, in the registry's order (:func:`~piezohyst.model.terms.growth_kinds`); 'domain' is
-    the record's: the charge's leakage (``integral``), none on a displacement record (see
+    the record's: the charge's leakage (``integral``, and ``abs_integral`` where the record's
+    holds show its rise), none on a displacement record (see
     :func:`~piezohyst.model.fitting.identify_model`)."""
     kinds = growth_kinds()
     if isinstance(value, str):

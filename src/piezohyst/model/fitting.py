@@ -27,6 +27,7 @@ from ..errors import (
     IdentifiabilityWarning,
     InsufficientDataError,
     ParameterError,
+    PiezohystError,
     RecordWarning,
     TimeAxisError,
 )
@@ -37,6 +38,7 @@ from .cores.base import FitJob
 from .dynamics import InputDynamics, OutputDynamics
 from .dynamics_fit import profile_dynamics, search_dynamics
 from .estimator import _dynamics_kind, _output_kind
+from .leakage import calibrate_leakage
 from .state import InitialState, ModelState
 from .terms import Creep, creep_time_constants
 
@@ -257,6 +259,13 @@ def identify_model(
     displacement = is_length(model.output_unit) and _default_growth(model)
     if displacement:  # a displacement sees no leaked charge: what drifts in it is creep
         params = {**params, **displacement_terms(params, sm, timed)}
+    elif (
+        model.get_params().get("growth_terms") == "domain"
+        and "growth_terms" not in (overrides or {})
+        and timed
+        and holds_show_rise(blocks, sm)
+    ):  # the charge's leak, and its rise with the voltage where the holds show one
+        params = {**params, "growth_terms": ("integral", "abs_integral")}
     terms, subsets = model._terms_to_fit(sm.x_range, params)
     if displacement:  # a growth term fixed by the model (ActivePI's integrator) goes too
         terms, subsets = [term for term in terms if not term.removed], None
@@ -285,6 +294,56 @@ def displacement_terms(params: dict[str, Any], sm: Summary, timed: bool) -> dict
     if "creep" in params and params["creep"] is None and timed and sm.n > 1:
         out["creep"] = Creep(creep_time_constants(sm.t_last - sm.t_first, sm.n))
     return out
+
+
+#: The rise of the leak's conductance with the voltage (``abs_integral``) joins a charge
+#: record's default growth (``growth_terms="domain"``) where the record's holds determine it
+#: beyond this many standard errors (:func:`holds_show_rise`)
+HOLDS_RISE_SIGMAS = 3.0
+#: Samples the holds are read from at most: a longer record is averaged in groups
+HOLDS_SAMPLES = 1 << 20
+
+
+def holds_show_rise(blocks: Blocks, sm: Summary) -> bool:
+    """Whether the record's constant-voltage holds show the leak's conductance rising with the
+    voltage: :func:`~piezohyst.model.leakage.calibrate_leakage` on the record chooses its
+    ``quadratic`` term, beyond :data:`HOLDS_RISE_SIGMAS` of its standard errors.
+
+    On a hold the hysteresis is still, so the charge's slope is the leak alone; a fit over
+    the whole record cannot tell the rise from a model's misfit (a model of another class
+    takes it to draw what it lacks), and a record without holds (one frequency at decaying
+    amplitude) leaves it undetermined. Holds still settling (relaxation, creep) are refused
+    by the calibration: no rise then. Measured on units 4-6 of the plants' batches
+    (``docs/benchmarks.md``, "The rise where the holds show it")."""
+    if sm.n < 3 or not math.isfinite(sm.t_first):
+        return False
+    group = -(-sm.n // HOLDS_SAMPLES)
+    t, x, y = _averaged(blocks, group)
+    with warnings.catch_warnings():  # the calibration's notes on its holds are not the fit's
+        warnings.simplefilter("ignore")
+        try:
+            leak = calibrate_leakage(t, x, y)
+        except PiezohystError:  # no holds, too few, or still settling
+            return False
+    stderr = leak.stderr().get("quadratic", 0.0)
+    return bool(leak.quadratic > HOLDS_RISE_SIGMAS * stderr)
+
+
+def _averaged(blocks: Blocks, group: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The record's times, inputs and outputs, averaged in consecutive groups of ``group``
+    samples (1: as they are); a last partial group is dropped."""
+    parts: list[FloatArray] = []
+    carry = np.zeros((3, 0))
+    for x, y, t in blocks():
+        if t is None:  # an untimed record has no holds to read
+            return np.zeros(0), np.zeros(0), np.zeros(0)
+        rows = np.concatenate([carry, np.vstack([t, x, y])], axis=1)
+        whole = rows.shape[1] // group * group
+        if whole:
+            parts.append(rows[:, :whole].reshape(3, -1, group).mean(axis=2))
+        carry = rows[:, whole:]
+    t, x, y = np.concatenate(parts, axis=1) if parts else np.zeros((3, 0))
+    return t, x, y
 
 
 def _default_growth(model: Any) -> bool:

@@ -565,7 +565,9 @@ class PreisachModel(HysteresisModel):
         has ``(nodes - 1) nodes / 2`` cells.
     growth_terms : "domain", "auto" or sequence of str, default "domain"
         Among ``"integral"``, ``"time"``, ``"abs_integral"``. ``"domain"``: the
-        record's: ``("integral",)`` (the charge's leakage) on a charge record,
+        record's: ``("integral",)`` (the charge's leakage) on a charge record, with
+        ``"abs_integral"`` (its conductance rising with the voltage) where the record's
+        holds show that rise (:func:`~piezohyst.model.fitting.holds_show_rise`), and
         none on a displacement record (``output_unit`` a length: the displacement
         does not see leaked charge; ``"auto"`` chooses none there either), where
         creep operators timed by the record take the drift instead when ``creep``
@@ -717,7 +719,9 @@ class DuhemModel(HysteresisModel):
         Nodes along the voltage and the output, each in [2, 40].
     growth_terms : "domain", "auto" or sequence of str, default "domain"
         Among ``"integral"``, ``"time"``, ``"abs_integral"``. ``"domain"``: the
-        record's: ``("integral",)`` (the charge's leakage) on a charge record,
+        record's: ``("integral",)`` (the charge's leakage) on a charge record, with
+        ``"abs_integral"`` (its conductance rising with the voltage) where the record's
+        holds show that rise (:func:`~piezohyst.model.fitting.holds_show_rise`), and
         none on a displacement record (``output_unit`` a length: the displacement
         does not see leaked charge; ``"auto"`` chooses none there either), where
         creep operators timed by the record take the drift instead when ``creep``
@@ -813,7 +817,9 @@ class BoucWenModel(HysteresisModel):
     ----------
     growth_terms : "domain", "auto" or sequence of str, default "domain"
         Among ``"integral"``, ``"time"``, ``"abs_integral"``. ``"domain"``: the
-        record's: ``("integral",)`` (the charge's leakage) on a charge record,
+        record's: ``("integral",)`` (the charge's leakage) on a charge record, with
+        ``"abs_integral"`` (its conductance rising with the voltage) where the record's
+        holds show that rise (:func:`~piezohyst.model.fitting.holds_show_rise`), and
         none on a displacement record (``output_unit`` a length: the displacement
         does not see leaked charge; ``"auto"`` chooses none there either), where
         creep operators timed by the record take the drift instead when ``creep``
