@@ -1,7 +1,7 @@
 """Learning from repetition: its targets on the bench behind a 4 ms amplifier, and its cost.
 
 Run: ``python benchmarks/bench_learning.py [--trials 10] [--figure learning.png]``
-(``--plants [--only PLANT] [--slew V/s]`` for part 3; ``--noise-gate G``: the learner's
+(``--plants [--only PLANT] [--slew V/s] [--chosen]`` for part 3; ``--noise-gate G``: the learner's
 ``noise_gate``; ``--anatomy [--only PLANT]``: the error left, repeating or not; ``--carried``:
 the noise the correction carries, measured against the design's figure, on every plant).
 
@@ -21,7 +21,9 @@ the noise the correction carries, measured against the design's figure, on every
    identified input dynamics, and ``ActivePI`` without them and the lag stated (all
    identified on 30 s of ``multifreq``: 0.5, 5 and 20 Hz), learning from the charge
    (sensorless) and from the laser (a sensor, for comparison): after 10 trials, the range
-   over the seeds.
+   over the seeds. ``--chosen``: instead, the model ``select_model`` chooses on that record
+   with ``input_dynamics="auto"`` (what ``piezohyst fit --model auto --input-dynamics auto``
+   saves), per seed.
 
 Not a test: nothing here asserts a time.
 """
@@ -136,6 +138,11 @@ def main() -> None:
     ap.add_argument("--plants", action="store_true", help="the plants of other physics instead")
     ap.add_argument("--only", default=None, help="with --plants: this plant alone")
     ap.add_argument(
+        "--chosen",
+        action="store_true",
+        help="with --plants: the model fit --model auto --input-dynamics auto chooses",
+    )
+    ap.add_argument(
         "--anatomy",
         action="store_true",
         help="where the error left lies (one plant: --only, default duhem)",
@@ -152,6 +159,9 @@ def main() -> None:
         return
     if args.anatomy:
         anatomy(args.trials, args.only or "duhem")
+        return
+    if args.plants and args.chosen:
+        chosen_rows(args.trials, args.only)
         return
     if args.plants:
         plants(args.trials, args.only)
@@ -289,6 +299,49 @@ def carried(trials: int) -> None:
         print(f"| {name} | {100 * d.noise / span:.3f} % | {designed:.3f} % | "
               f"{100 * np.std(rest) / span:.3f} % | " + ", ".join(f"{x:.2g}" for x in ratio)
               + f" | {ilc.history[-1].saturated} |")  # fmt: skip
+
+
+def chosen_rows(trials: int, only: str | None = None) -> None:
+    """``--plants --chosen``: the model a lab would identify, ``piezohyst fit --model auto
+    --input-dynamics auto`` on the same 30 s of ``multifreq`` (every candidate identifying
+    the amplifier's lag, the best by forward chaining inside the record), learning at 10
+    and 40 Hz from the charge and from the laser, seeds 0-2."""
+    from piezohyst.analysis.selection import select_model
+    from piezohyst.simulation import PLANTS
+
+    print(f"after {trials} trials, the model select_model chose (input dynamics auto) per "
+          "seed: width, offset-free NRMSE of the true displacement, seeds 0-2")  # fmt: skip
+    print("| plant | chosen (seeds 0-2) | scan | from the charge | from the laser |")
+    print("|---|---|---|---|---|")
+    for name, preset in PLANTS.items():
+        if only is not None and name != only:
+            continue
+        if preset.amp_tau == 0:
+            preset = replace(preset, amp_tau=4e-3)
+        rigs, picks = [], []
+        for seed in range(3):
+            r = rig(preset, seed)
+            t, v = make_signal("multifreq", amplitude=140.0, frequency=0.5, duration=30.0)
+            multi = ph.simulate(v, t, preset=r["preset"], seed=4 + 10 * seed)  # rig()'s record
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                sel = select_model(multi.voltage, multi.charge, multi.t, input_dynamics="auto")
+            r["chosen"] = sel.model
+            rigs.append(r)
+            picks.append(sel.name)
+        for f in (10.0, 40.0):
+            cells = []
+            for sensor in (False, True):
+                got, backs = [], 0
+                for seed, r in enumerate(rigs):
+                    ilc, scores, *_ = run(r, r["chosen"], f, trials, 0.0, sensor, seed=3 + seed)  # type: ignore[arg-type]
+                    got.append(scores[-1])
+                    backs += ilc.rollbacks
+                w = [100 * g[0] for g in got]
+                e = [100 * g[1] for g in got]
+                cells.append(f"{min(w):.2f}-{max(w):.2f} %, {min(e):.2f}-{max(e):.2f} % ({backs})")
+            print(f"| {name} | {', '.join(picks)} | {f:g} Hz | {cells[0]} | {cells[1]} |",
+                  flush=True)  # fmt: skip
 
 
 def plants(trials: int, only: str | None = None) -> None:

@@ -279,7 +279,7 @@ def fit(
 
     terms, taus = parse_terms(growth, creep)
     if model_name == "auto":
-        given = {"--growth": growth != "auto", "--creep": bool(taus),
+        given = {"--growth": growth != "default", "--creep": bool(taus),
                  "--relaxation": relaxation is not None,
                  "--output-dynamics": output_dynamics != "none"}  # fmt: skip
         named = [option for option, set_ in given.items() if set_]

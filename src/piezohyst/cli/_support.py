@@ -536,22 +536,24 @@ def terms_options(fn: Callable[..., Any]) -> Callable[..., Any]:
     )(fn)
     return click.option(
         "--growth",
-        default="auto",
+        default="default",
         show_default=True,
-        help="generalized-pi, preisach, duhem, bouc-wen: growth terms, 'auto', 'none' or a "
-        "comma list of integral,time,abs_integral.",
+        help="generalized-pi, preisach, duhem, bouc-wen: growth terms, 'default' (the model's: "
+        "on a charge the leak's integral, with its rise where the record's holds show one; "
+        "generalized-pi chooses by forward chaining), 'auto', 'none' or a comma list of "
+        "integral,time,abs_integral.",
     )(fn)
 
 
 def parse_terms(growth: str, creep: str) -> tuple[str | tuple[str, ...], tuple[float, ...]]:
-    """--growth and --creep as the models take them: the growth terms ('auto', or a tuple;
-    'none' the empty one) and the creep time constants (s)."""
+    """--growth and --creep as the models take them: the growth terms ('default', 'auto', or a
+    tuple; 'none' the empty one) and the creep time constants (s)."""
     try:
         taus = tuple(float(c) for c in creep.split(",") if c.strip())
     except ValueError:
         raise click.BadParameter(f"expected numbers separated by commas, got {creep!r}",
                                  param_hint="--creep") from None  # fmt: skip
-    if growth == "auto":
+    if growth in ("auto", "default"):
         return growth, taus
     if growth == "none":
         return (), taus

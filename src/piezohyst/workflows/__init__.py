@@ -248,11 +248,13 @@ def model_terms(
 ) -> dict[str, Any]:
     """The growth terms and creep operators as settings of ``model`` (whose parameters are
     ``accepted``); either set away from its default where the model has no such setting is
-    refused by name."""
+    refused by name. ``growth_terms="default"`` leaves the model's own default (the
+    presets' ``"domain"``, generalized PI's ``"auto"``)."""
     extra: dict[str, Any] = {}
-    for name, value, default in (("growth_terms", growth_terms, "auto"), ("creep", creep, ())):
+    for name, value, default in (("growth_terms", growth_terms, "default"), ("creep", creep, ())):
         if name in accepted:
-            extra[name] = tuple(value) if name == "creep" else value
+            if not (isinstance(value, str) and value == "default"):
+                extra[name] = tuple(value) if name == "creep" else value
         elif (value if isinstance(value, str) else tuple(value)) != default:
             msg = f"the {name!r} setting does not apply to {model}"
             raise ParameterError(msg)
@@ -266,7 +268,7 @@ def fit_file(
     model: str = "active-pi",
     operators: int = 10,
     data_spec: DataSpec | None = None,
-    growth_terms: str | Sequence[str] = "auto",
+    growth_terms: str | Sequence[str] = "default",
     creep: Sequence[float] = (),
     relaxation: float | None = None,
     input_dynamics: str = "none",
@@ -294,8 +296,8 @@ def fit_file(
         Columns and samples (default: voltage, charge, time).
     growth_terms, creep
         Settings of models that have them (``growth_terms``: every model but
-        the classical and active PI; ``creep``: ``generalized-pi`` and the
-        models on a packed core: Preisach, Duhem, Bouc-Wen).
+        the classical and active PI, ``"default"`` its own default; ``creep``:
+        ``generalized-pi`` and the models on a packed core: Preisach, Duhem, Bouc-Wen).
     relaxation : float, optional
         ``preisach``: time constant (s) of a relaxing part of the hysteresis
         (see :class:`~piezohyst.PreisachModel`).

@@ -284,7 +284,7 @@ def fit_many(
     operators: int = 10,
     data_spec: DataSpec | None = None,
     channels: Sequence[tuple[str, str]] = (),
-    growth_terms: str | Sequence[str] = "auto",
+    growth_terms: str | Sequence[str] = "default",
     creep: Sequence[float] = (),
     input_dynamics: str = "none",
     summary: PathLike | None = None,
@@ -380,7 +380,7 @@ def fit_file_check(settings: dict[str, Any]) -> None:
     elif settings["operators"] != 10:
         msg = f"the 'operators' setting does not apply to {settings['model']}"
         raise ParameterError(msg)
-    trial.update(model_terms(settings["model"], params, settings.get("growth_terms", "auto"),
+    trial.update(model_terms(settings["model"], params, settings.get("growth_terms", "default"),
                              settings.get("creep", ())))  # fmt: skip
     cls(**trial).check_params()
 
