@@ -330,18 +330,23 @@ def chosen_rows(trials: int, only: str | None = None) -> None:
             rigs.append(r)
             picks.append(sel.name)
         for f in (10.0, 40.0):
-            cells = []
-            for sensor in (False, True):
-                got, backs = [], 0
-                for seed, r in enumerate(rigs):
-                    ilc, scores, *_ = run(r, r["chosen"], f, trials, 0.0, sensor, seed=3 + seed)  # type: ignore[arg-type]
-                    got.append(scores[-1])
-                    backs += ilc.rollbacks
-                w = [100 * g[0] for g in got]
-                e = [100 * g[1] for g in got]
-                cells.append(f"{min(w):.2f}-{max(w):.2f} %, {min(e):.2f}-{max(e):.2f} % ({backs})")
+            cells = [_cell(rigs, "chosen", f, trials, 0.0, sensor) for sensor in (False, True)]
             print(f"| {name} | {', '.join(picks)} | {f:g} Hz | {cells[0]} | {cells[1]} |",
                   flush=True)  # fmt: skip
+
+
+def _cell(rigs: list[dict[str, object]], key: str, f: float, trials: int, lag: float,
+          sensor: bool) -> str:  # fmt: skip
+    """One table cell: width and NRMSE after ``trials``, the range over the rigs' seeds, and
+    the rollbacks in all."""
+    got, backs = [], 0
+    for seed, r in enumerate(rigs):
+        ilc, scores, *_ = run(r, r[key], f, trials, lag, sensor, seed=3 + seed)  # type: ignore[arg-type]
+        got.append(scores[-1])
+        backs += ilc.rollbacks
+    w = [100 * g[0] for g in got]
+    e = [100 * g[1] for g in got]
+    return f"{min(w):.2f}-{max(w):.2f} %, {min(e):.2f}-{max(e):.2f} % ({backs})"
 
 
 def plants(trials: int, only: str | None = None) -> None:
@@ -361,18 +366,7 @@ def plants(trials: int, only: str | None = None) -> None:
                                 ("bw", "BoucWen, auto", 0.0),
                                 ("plain", "ActivePI(10) + lag=4 ms stated", 4e-3)):  # fmt: skip
             for f in (10.0, 40.0):
-                cells = []
-                for sensor in (False, True):
-                    got, backs = [], 0
-                    for seed, r in enumerate(rigs):
-                        ilc, scores, *_ = run(r, r[key], f, trials, lag, sensor, seed=3 + seed)  # type: ignore[arg-type]
-                        got.append(scores[-1])
-                        backs += ilc.rollbacks
-                    w = [100 * g[0] for g in got]
-                    e = [100 * g[1] for g in got]
-                    cells.append(
-                        f"{min(w):.2f}-{max(w):.2f} %, {min(e):.2f}-{max(e):.2f} % ({backs})"
-                    )
+                cells = [_cell(rigs, key, f, trials, lag, sensor) for sensor in (False, True)]
                 print(f"| {name} | {label} | {f:g} Hz | {cells[0]} | {cells[1]} |")
 
 

@@ -279,12 +279,9 @@ class PlayInverse(Inverse):
                 "fit a PreisachModel(relaxation=...) instead"
             )
             raise ParameterError(msg)
-        if dyn.active and not spec.analytic:
-            msg = (
-                "A model with input dynamics is compensated with the analytic inverse only: fit "
-                "it without asymmetry or creep terms."
-            )
-            raise ParameterError(msg)
+        refused = spec.dynamics_refused
+        if refused is not None:
+            raise ParameterError(refused)
         #: True when eq. 18's analytic inverse runs (no Newton solve); fixed by the model
         self.analytic = spec.analytic
         self.plain = spec.analytic and not dyn.active and not self.settings.mode_active
