@@ -50,8 +50,9 @@ def test_the_holds_rise_joins_the_default_and_predicts_held_out(preisach_plant) 
     rise = _fit(ph.PreisachModel, "domain", train).growth_coefficients()
     ratio = rise["abs_integral"][0] / rise["integral"][0]
     assert 0.2 < ratio < 0.8, ratio  # the truth +0.5, drawn per unit around it
-    for cls in (ph.DuhemModel, ph.BoucWenModel):  # the other presets' "domain" alike
-        assert "abs_integral" in _fit(cls, "domain", train).growth_coefficients(), cls
+    # the other presets' "domain" alike (the Duhem model's is the same rule, in the same fit
+    # function; its fit costs 2 s here)
+    assert "abs_integral" in _fit(ph.BoucWenModel, "domain", train).growth_coefficients()
 
 
 def test_no_rise_without_holds_or_where_they_still_settle() -> None:
