@@ -33,6 +33,7 @@ from __future__ import annotations
 import argparse
 import time
 import warnings
+from collections.abc import Iterator
 from dataclasses import replace
 
 import numpy as np
@@ -307,17 +308,12 @@ def chosen_rows(trials: int, only: str | None = None) -> None:
     the amplifier's lag, the best by forward chaining inside the record), learning at 10
     and 40 Hz from the charge and from the laser, seeds 0-2."""
     from piezohyst.analysis.selection import select_model
-    from piezohyst.simulation import PLANTS
 
     print(f"after {trials} trials, the model select_model chose (input dynamics auto) per "
           "seed: width, offset-free NRMSE of the true displacement, seeds 0-2")  # fmt: skip
     print("| plant | chosen (seeds 0-2) | scan | from the charge | from the laser |")
     print("|---|---|---|---|---|")
-    for name, preset in PLANTS.items():
-        if only is not None and name != only:
-            continue
-        if preset.amp_tau == 0:
-            preset = replace(preset, amp_tau=4e-3)
+    for name, preset in lagged_plants(only):
         rigs, picks = [], []
         for seed in range(3):
             r = rig(preset, seed)
@@ -349,18 +345,21 @@ def _cell(rigs: list[dict[str, object]], key: str, f: float, trials: int, lag: f
     return f"{min(w):.2f}-{max(w):.2f} %, {min(e):.2f}-{max(e):.2f} % ({backs})"
 
 
-def plants(trials: int, only: str | None = None) -> None:
+def lagged_plants(only: str | None = None) -> Iterator[tuple[str, object]]:
+    """Every plant of other physics (or ``only``), each behind a 4 ms amplifier lag."""
     from piezohyst.simulation import PLANTS
 
+    for name, preset in PLANTS.items():
+        if only is None or name == only:
+            yield name, (replace(preset, amp_tau=4e-3) if preset.amp_tau == 0 else preset)
+
+
+def plants(trials: int, only: str | None = None) -> None:
     print(f"after {trials} trials: width, offset-free NRMSE of the true displacement, range over "
           "seeds 0-2 (rollbacks in all)")  # fmt: skip
     print("| plant | model | scan | from the charge | from the laser |")
     print("|---|---|---|---|---|")
-    for name, preset in PLANTS.items():
-        if only is not None and name != only:
-            continue
-        if preset.amp_tau == 0:
-            preset = replace(preset, amp_tau=4e-3)
+    for name, preset in lagged_plants(only):
         rigs = [rig(preset, seed) for seed in range(3)]
         for key, label, lag in (("dynamic", "ActivePI(10), auto", 0.0),
                                 ("bw", "BoucWen, auto", 0.0),
