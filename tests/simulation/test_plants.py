@@ -291,7 +291,8 @@ def test_the_self_sensing_loop_on_each_plant(name: str) -> None:
     # 3-10 it is 0.07-0.43 % (median 0.21 %; the true displacement's alike, so not the
     # laser's noise), and seed 3 gives 0.21 % here, 0.32 % with another CPU's rounding. The
     # other plants' spread over those seeds: at most 0.24 %. Issue 26's 0.3 % is met on the
-    # Duhem plant for the median draw, not every draw (docs/benchmarks.md, session 25).
+    # Duhem plant for the median draw, not every draw: the transients where the decaying
+    # signal restarts its full-range loops set the width there (docs/benchmarks.md).
     assert hysteresis_width(desired, s) <= (0.005 if name == "duhem" else 0.003)
     assert ctl.saturated_count == 0
     drift = np.sqrt(np.mean((desired[-third:] - s[-third:]) ** 2))
