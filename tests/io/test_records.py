@@ -258,14 +258,19 @@ def test_a_share_held_never_exceeds_the_commands_given(slow_model: ph.ActivePI) 
     the range), then held at v_max: the voltage limits' share is of every command, the
     approach too (it read 'held 800 of 164 commands (487.8 %)': the slew limit's count starts
     on the trajectory). A command counts as held by a voltage limit where it is sent at the
-    limit, not where the slew limit held it first (as the other cores count)."""
+    limit, not where the slew limit held it first (as the other cores count). The approach
+    itself is said first, at its 100th command (it went unsaid until v_max)."""
     lo, hi = slow_model.input_range_
     comp = ph.Compensator(slow_model, v_min=lo, v_max=hi, sample_rate=1000.0,
                           slew_rate=0.2 * (hi - lo))  # fmt: skip
     beyond = float(slow_model.hysteresis_.predict(np.array([hi]))[0]) * 10.0
     with pytest.warns(ph.errors.LimitWarning) as said:
         sent = np.array([comp.step(beyond) for _ in range(8000)])
-    text = str(said[0].message)
+    assert len(said) == 2, [str(w.message) for w in said]
+    first = str(said[0].message)
+    assert "has held all 100 commands since the start and they have not reached" in first
+    assert f"(now at {lo + 100 * 0.2 * (hi - lo) / 1000.0:.4g} V)" in first, first
+    text = str(said[1].message)
     held, given = (
         int(n) for n in re.search(r"voltage limits .* held (\d+) of (\d+)", text).groups()
     )
@@ -277,7 +282,9 @@ def test_a_share_held_never_exceeds_the_commands_given(slow_model: ph.ActivePI) 
 def test_a_bank_says_when_the_voltage_limits_hold_the_approach(slow_model: ph.ActivePI) -> None:
     """The fused bank as the single compensator above: a channel's target out of reach,
     approached at the slew limit, never reaches the trajectory; the bank counted only commands
-    on it, so the voltage limits held channel 0's commands at v_max without a word."""
+    on it, so the voltage limits held channel 0's commands at v_max without a word (and the
+    approach itself went unsaid until then: now said when the first 64-step block past its
+    100th command is counted)."""
     lo, hi = slow_model.input_range_
     bank = ph.ModelBank.from_models([slow_model, slow_model])
     comps = ph.BankCompensator(bank, v_min=lo, v_max=hi, sample_rate=1000.0,
@@ -287,7 +294,11 @@ def test_a_bank_says_when_the_voltage_limits_hold_the_approach(slow_model: ph.Ac
     with pytest.warns(ph.errors.LimitWarning) as said:
         # checked at every doubling of the commands: 8192 is the first after the 5 s approach
         sent = np.array([comps.step(np.array([10.0 * q_hi, 0.0]))[0] for _ in range(9000)])
-    text = str(said[0].message)
+    assert len(said) == 2, [str(w.message) for w in said]
+    assert "held every command of 1 of 2 channels since the start (128 on channel 0)" in str(
+        said[0].message
+    )
+    text = str(said[1].message)
     assert "voltage limits held more than 1 % of the commands on 1 of 2 channels" in text, text
     held, given = (int(n) for n in re.search(r"channel 0, (\d+) of (\d+)", text).groups())
     assert 0 < held <= given, text
@@ -571,6 +582,39 @@ def test_the_report_names_its_windows_and_the_zero_baseline(
     assert bad.exit_code == 0, bad.output
     verdict = json.loads((tmp_path / "bad" / "metrics.json").read_text())["metrics"]["verdict"]
     assert verdict["value"].startswith("worse than predicting zero")
+
+
+def test_an_approach_that_never_arrives_says_so(slow_model: ph.ActivePI) -> None:
+    """A target inside the range but far from rest, approached at a slow slew limit (0.1 V a
+    sample) over a run too short to arrive: every command was held by the slew limit and
+    none by a voltage limit, and nothing was said (the approach is not counted, so that a
+    ramp from rest is not a fault). An approach still under way after 100 commands is said,
+    once, by the compensator, the bank and the controller; one that arrives is not."""
+    lo, hi = slow_model.input_range_
+    q_lo, q_hi = (float(q) for q in slow_model.hysteresis_.predict(np.array([lo, hi])))
+    target = np.full(500, q_lo + 0.8 * (q_hi - q_lo))  # about 110 V: 1100 samples away
+    kept = {"v_min": lo, "v_max": hi, "sample_rate": 1000.0, "slew_rate": 100.0}
+    comp = ph.Compensator(slow_model, **kept)
+    with pytest.warns(ph.errors.LimitWarning) as said:
+        sent = comp.process(target)
+    assert len(said) == 1 and "has held all 500 commands since the start" in str(said[0].message)
+    assert f"(now at {sent[-1]:.4g} V)" in str(said[0].message)
+    np.testing.assert_allclose(np.diff(sent), 0.1, rtol=1e-9)  # every one held
+    assert comp.approach_count == 500 and comp.slew_limited_count == comp.saturated_count == 0
+    bank = ph.BankCompensator(ph.ModelBank.from_models([slow_model, slow_model]), **kept)
+    with pytest.warns(
+        ph.errors.LimitWarning, match=r"1 of 2 channels since the start \(500 on channel 0\)"
+    ):
+        bank.process(np.column_stack([target, np.full(500, q_lo)]))  # channel 1 sits there
+    ctl = ph.SelfSensingController(slow_model, **kept)
+    with pytest.warns(ph.errors.LimitWarning, match="SelfSensingController: the slew limit "
+                      r"\(100 V/s\) has held all 500"):  # fmt: skip
+        ctl.process(target, np.full(500, q_lo))
+    near = ph.Compensator(slow_model, **kept)  # a ramp of 50 commands arrives: not said
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        near.process(np.full(500, float(slow_model.hysteresis_.predict(np.array([5.0]))[0])))
+    assert 0 < near.approach_count < 100
 
 
 def test_the_controller_and_the_bank_say_when_a_limit_bites(slow_model: ph.ActivePI) -> None:

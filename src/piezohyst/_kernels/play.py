@@ -275,7 +275,8 @@ def compensator_step(desired, tables, config, state):  # type: ignore[no-untyped
 # not hold): the ramp from rest, or from the end of a precondition cycle, is the limit doing
 # its job. Every command from the reset on (what the voltage limits' count is of), and of
 # those, the commands at each voltage limit (``TALLY_LOW``/``TALLY_HIGH`` hold v_min, v_max):
-# which side a target out of reach is on.
+# which side a target out of reach is on. ``TALLY_APPROACH``: the commands the limit held
+# before they arrived (an approach that does not arrive is the limit biting: warned of).
 TALLY_PREV = 0
 TALLY_TOL = 1
 TALLY_HELD = 2
@@ -286,7 +287,8 @@ TALLY_LOW = 6
 TALLY_HIGH = 7
 TALLY_AT_LOW = 8
 TALLY_AT_HIGH = 9
-TALLY_SIZE = 10
+TALLY_APPROACH = 10
+TALLY_SIZE = 11
 
 
 @njit(cache=True, fastmath=FASTMATH)
@@ -301,6 +303,7 @@ def tally_command(c, tally):  # type: ignore[no-untyped-def]
         tally[TALLY_AT_HIGH] += 1.0
     if tally[TALLY_ARRIVED] == 0.0:
         if held:
+            tally[TALLY_APPROACH] += 1.0
             return c
         tally[TALLY_ARRIVED] = 1.0
     if held:

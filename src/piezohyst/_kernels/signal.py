@@ -238,18 +238,20 @@ def lag_filter(x, dt, tau, state, out):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def count_held(commands, prev, tol, counts, given, arrived):  # type: ignore[no-untyped-def]
+def count_held(commands, prev, tol, counts, given, arrived, approach):  # type: ignore[no-untyped-def]
     """Per channel, the commands that moved by the slew limit: ``commands`` (samples, C),
     ``prev`` (C,) the commands before (updated to the last row), ``tol`` (C,) the limit
     per sample less rounding (inf: none), ``counts`` and ``given`` (C,) incremented; a
     channel counts from its first command the limit did not hold (``arrived`` (C,) set
-    then: the approach to the trajectory is not counted, as ``_kernels.tally_command``)."""
+    then: the approach to the trajectory is not counted, as ``_kernels.tally_command``, but
+    ``approach`` (C,) counts the commands the limit held before the channel arrived)."""
     for k in range(commands.shape[0]):
         for c in range(commands.shape[1]):
             held = abs(commands[k, c] - prev[c]) >= tol[c]
             prev[c] = commands[k, c]
             if not arrived[c]:
                 if held:
+                    approach[c] += 1
                     continue
                 arrived[c] = True
             if held:

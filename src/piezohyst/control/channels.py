@@ -114,6 +114,8 @@ class ChannelBank(Generic[C]):
         self._held = np.zeros(len(self._channels), dtype=np.int64)
         self._given = np.zeros(len(self._channels), dtype=np.int64)
         self._arrived = np.zeros(len(self._channels), dtype=np.bool_)  # on the trajectory
+        self._approach = np.zeros(len(self._channels), dtype=np.int64)  # held before it
+        self._approach_warned = False
         self._recent = np.empty((TALLY_ROWS, len(self._channels)))  # steps not yet counted
         self._pending = 0
         self._sent = 0  # every step's commands since the reset, the approach too
@@ -147,8 +149,23 @@ class ChannelBank(Generic[C]):
         when on some channel they held more than :data:`LIMIT_SHARE` of its commands."""
         if self._pending and commands is not self._recent:
             self._flush()
-        S.count_held(commands, self._prev, self._tol, self._held, self._given, self._arrived)
+        S.count_held(commands, self._prev, self._tol, self._held, self._given, self._arrived,
+                     self._approach)  # fmt: skip
         self._sent += commands.shape[0]
+        away = np.flatnonzero(~self._arrived & (self._approach >= LIMIT_CHECK_FIRST))
+        if away.size and not self._approach_warned:  # a ramp that arrives is not counted
+            self._approach_warned = True
+            worst = int(away[np.argmax(self._approach[away])])
+            warnings.warn(
+                f"{type(self).__name__}: the slew limit has held every command of {away.size} "
+                f"of {len(self)} channels since the start ({int(self._approach[worst])} on "
+                f"channel {worst}) and they have not reached the trajectory: the target runs "
+                "ahead of what the limit lets them follow; set slew_rate to what the "
+                "amplifiers allow, start nearer the trajectory (precondition), or slow the "
+                "target",
+                LimitWarning,
+                stacklevel=3,
+            )
         if self._limits_warned or self._sent < self._check_at:
             return
         self._check_at = 2 * self._sent
@@ -386,6 +403,8 @@ class BankCompensator(ChannelBank[Compensator]):
         self._flush()
         self._prev = self.last_command  # a cycle at the slew limit by design: not counted,
         self._arrived[:] = False  # nor the ramp from its end to the trajectory
+        self._approach[:] = 0  # (unless it is long)
+        self._approach_warned = False
         return out
 
     def step(self, desired: ArrayLike, out: FloatArray | None = None) -> FloatArray:

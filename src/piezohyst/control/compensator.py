@@ -409,6 +409,8 @@ class Compensator:
         cycle = self.inverse.precondition(self._cycle(samples, span))
         self._tally[K.TALLY_PREV] = self.last_command  # a cycle at the slew limit: not counted
         self._tally[K.TALLY_ARRIVED] = 0.0  # nor the ramp from its end to the trajectory
+        self._tally[K.TALLY_APPROACH] = 0.0  # (unless it does not arrive)
+        self._approach_warned = False
         return cycle
 
     def _cycle(self, samples: int, span: tuple[float, float] | None = None) -> FloatArray:
@@ -425,28 +427,14 @@ class Compensator:
                 f"low < high. Got {span!r}."
             )
             raise ParameterError(msg)
-        knots = [start, high, low, start]
-        legs = np.abs(np.diff(knots))
-        step = self._max_step
-        # every leg ends exactly on its knot: reaching v_max and v_min is what wipes history
-        share = legs / max(float(legs.sum()), 1e-300)
-        counts = np.maximum(np.round(share * (samples - 1)).astype(int), 1)
-        if math.isfinite(step):
-            counts = np.maximum(counts, np.ceil(legs / step * (1 + 1e-12)).astype(int))
-        pieces = [
-            np.linspace(a, b, int(m) + 1)[1:]
-            for a, b, m in zip(knots[:-1], knots[1:], counts, strict=True)
-        ]
+        settle = 0
         if self.dynamic:  # hold each extreme until the lagging piezo voltage has reached it
             dyn = self.inverse.dyn
             gain = dyn[K.DYN_GAIN_B]  # the lag's (creep terms of other cores follow)
             settle = int(np.ceil(-np.log(1e-9) / -np.log1p(-gain))) if gain > 0 else 0
             settle += 1 if dyn[K.DYN_FRACTION] != 0 else 0  # the fraction: one sample
             settle += self.delay_samples
-            for j in (0, 1):
-                pieces[j] = np.concatenate([pieces[j], np.full(settle, knots[j + 1])])
-        cycle = np.concatenate(pieces)
-        return cycle
+        return _cycle_commands([start, high, low, start], samples, self._max_step, settle)
 
     # -------------------------------------------------------------- commands
     def _through_mode(self, desired: FloatArray, preview: ArrayLike | None) -> FloatArray:
@@ -622,6 +610,12 @@ class Compensator:
         return int(self._tally[K.TALLY_HELD])
 
     @property
+    def approach_count(self) -> int:
+        """Commands the slew limit held before they reached the trajectory (since the reset
+        or the precondition cycle; warned of from :data:`LIMIT_CHECK_FIRST` on, not arrived)."""
+        return int(self._tally[K.TALLY_APPROACH])
+
+    @property
     def command_count(self) -> int:
         """Commands given by :meth:`step` and :meth:`process` since the last reset, from the
         first that reached the trajectory on (see :attr:`slew_limited_count`)."""
@@ -641,11 +635,17 @@ class Compensator:
         self._tally[[K.TALLY_LOW, K.TALLY_HIGH]] = self.v_min, self.v_max
         self._until_check = LIMIT_CHECK_FIRST  # steps until the next look at the counts
         self._limits_warned = False
+        self._approach_warned = False
 
     def _check_limits(self, owner: str) -> None:
-        """Warn once when the limits held more than :data:`LIMIT_SHARE` of the commands."""
+        """Warn once when the limits held more than :data:`LIMIT_SHARE` of the commands, and
+        once when :data:`LIMIT_CHECK_FIRST` held ones have not reached the trajectory."""
         given = self.sent_count
         self._until_check = max(given, LIMIT_CHECK_FIRST)  # again when they have doubled
+        late = not (self._approach_warned or self._tally[K.TALLY_ARRIVED])
+        if late and self.approach_count >= LIMIT_CHECK_FIRST:
+            self._approach_warned = True
+            warnings.warn(approach_message(owner, self), LimitWarning, stacklevel=4)
         if self._limits_warned or given < LIMIT_CHECK_FIRST:
             return
         sides = int(self._tally[K.TALLY_AT_LOW]), int(self._tally[K.TALLY_AT_HIGH])
@@ -667,6 +667,50 @@ class Compensator:
 LIMIT_SHARE = 0.01
 #: Commands given before the first check (then at every doubling, and after each block)
 LIMIT_CHECK_FIRST = 100
+
+
+def _cycle_commands(knots: list[float], samples: int, step: float, settle: int) -> FloatArray:
+    """Straight legs through ``knots`` sharing ``samples``, none faster than ``step`` per
+    sample, each ending exactly on its knot (reaching v_max and v_min is what wipes history)
+    and the first two extremes held ``settle`` samples more."""
+    legs = np.abs(np.diff(knots))
+    share = legs / max(float(legs.sum()), 1e-300)
+    counts = np.maximum(np.round(share * (samples - 1)).astype(int), 1)
+    if math.isfinite(step):
+        counts = np.maximum(counts, np.ceil(legs / step * (1 + 1e-12)).astype(int))
+    pieces = [
+        np.linspace(a, b, int(m) + 1)[1:]
+        for a, b, m in zip(knots[:-1], knots[1:], counts, strict=True)
+    ]
+    for j in (0, 1):
+        pieces[j] = np.concatenate([pieces[j], np.full(settle, knots[j + 1])])
+    return np.concatenate(pieces)
+
+
+def approach_message(owner: str, comp: Compensator) -> str:
+    """The warning when the slew limit has held every command since the start (or the last
+    precondition cycle), :data:`LIMIT_CHECK_FIRST` or more, and they have not reached the
+    trajectory: the target runs ahead of them (a ramp from rest that arrives is not counted).
+
+    Parameters
+    ----------
+    owner : str
+    comp : Compensator
+        Its approach so far (:attr:`Compensator.approach_count`, the last command, the limit).
+
+    Returns
+    -------
+    str
+    """
+    step, rate = comp.max_step, comp.sample_rate
+    per_s = f"{step * rate:.4g} V/s" if rate else f"{step:.4g} V/sample"
+    return (
+        f"{owner}: the slew limit ({per_s}) has held all {comp.approach_count} commands since "
+        f"the start and they have not reached the trajectory (now at {comp.last_command:.4g} "
+        "V): the target runs ahead of what the limit lets them follow; set slew_rate "
+        "(--slew-rate) to what the amplifier allows, start nearer the trajectory "
+        "(precondition), or slow the target"
+    )
 
 
 def limits_message(
