@@ -228,8 +228,10 @@ def _node(p, i, j):  # type: ignore[no-untyped-def]
 
 @njit(cache=True, fastmath=FASTMATH)
 def everett(p, a, b):  # type: ignore[no-untyped-def]
-    """(E(a, b), dE/da, dE/db): bilinear inside the grid, continued beyond it with the slope
-    ``p[PR_S_OUT]`` (the smallest reversible slope; 0: the smallest slope)."""
+    """(E(a, b), dE/da, dE/db) for a <= b: bilinear inside the grid, continued beyond it with
+    the slope ``p[PR_S_OUT]`` (the smallest reversible slope; 0: the smallest slope) over
+    the part of [a, b] outside the grid (both ends beyond the same side too: a branch that
+    turns above the grid falls at that slope, not flat, until it re-enters)."""
     n = p[DU_NV]
     lo = p[DU_V_LO]
     h = p[DU_V_STEP]
@@ -239,11 +241,15 @@ def everett(p, a, b):  # type: ignore[no-untyped-def]
     da_out = 0.0
     db_out = 0.0
     if b > hi:
-        extra += s_out * (b - hi)
+        extra += s_out * (b - max(a, hi))
         db_out = s_out
     if a < lo:
-        extra += s_out * (lo - a)
+        extra += s_out * (min(b, lo) - a)
         da_out = -s_out
+    if a > hi:
+        da_out = -s_out
+    if b < lo:
+        db_out = s_out
     i, fa, inside_a = _cell(a, lo, h, n)
     j, fb, inside_b = _cell(b, lo, h, n)
     e00 = _node(p, i, j)
@@ -489,7 +495,8 @@ def core_inverse(p, cfg, st, y, lo, hi, trial, lin):  # type: ignore[no-untyped-
             slope0 = _branch_slope(p, v0, top, s > 0.0)
     slope0 += lin + slow_slope
     s_min += lin
-    v = v0 + dy / slope0
+    # (a zero slope heads for the bracket's end, as the C step's IEEE division does)
+    v = v0 + dy / slope0 if slope0 != 0.0 else v0 + s * math.inf
     if abs(v - v0) <= HOLD_RES * (2.0 * abs(v0) + 1.0):
         # a move below the solve's own resolution (the output's rounding on a held
         # target): hold, or rounding dithers the command and a Preisach core's stack fills

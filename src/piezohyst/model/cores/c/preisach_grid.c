@@ -22,20 +22,26 @@ static void cell(real_t u, int *i, real_t *frac, int *inside)
 /* the Everett function at nodes, antisymmetric below the diagonal */
 static real_t node(int i, int j) { return i <= j ? EV[i * NN + j] : -EV[j * NN + i]; }
 
-/* E(a, b), bilinear, continued with the slope S_OUT beyond the grid; *da, *db its
- * derivatives */
+/* E(a, b) for a <= b, bilinear, continued with the slope S_OUT over the part of [a, b]
+ * beyond the grid (both ends beyond one side too); *da, *db its derivatives */
 static real_t everett(real_t a, real_t b, real_t *da, real_t *db)
 {
     real_t hi = V_LO + H * (NN - 1.0), extra = 0, fa, fb, e00, e01, e10, e11;
     real_t da_out = 0, db_out = 0;
     int i, j, in_a, in_b;
     if (b > hi) {
-        extra += S_OUT * (b - hi);
+        extra += S_OUT * (b - max_real(a, hi));
         db_out = S_OUT;
     }
     if (a < V_LO) {
-        extra += S_OUT * (V_LO - a);
+        extra += S_OUT * (min_real(b, V_LO) - a);
         da_out = -S_OUT;
+    }
+    if (a > hi) {
+        da_out = -S_OUT;
+    }
+    if (b < V_LO) {
+        db_out = S_OUT;
     }
     cell(a, &i, &fa, &in_a);
     cell(b, &j, &fb, &in_b);
