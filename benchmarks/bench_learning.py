@@ -3,7 +3,8 @@
 Run: ``python benchmarks/bench_learning.py [--trials 10] [--figure learning.png]``
 (``--plants [--only PLANT] [--slew V/s] [--chosen]`` for part 3; ``--noise-gate G``: the learner's
 ``noise_gate``; ``--anatomy [--only PLANT]``: the error left, repeating or not; ``--carried``:
-the noise the correction carries, measured against the design's figure, on every plant).
+the noise the correction carries, measured against the design's figure, on every plant;
+``--run-on``: how far each plant's charge runs on past a voltage reversal, and the models').
 
 1. Targets (issue 27), on the bench's amplifier-lag preset ``T226-H4-203X-amp4ms`` with
    0.1 % noise on the charge: the leakage calibrated from 10 s holds up and down; an
@@ -153,8 +154,12 @@ def main() -> None:
     ap.add_argument(
         "--carried", action="store_true", help="the noise the correction carries, every plant"
     )
+    ap.add_argument("--run-on", action="store_true", help="the charge's run-on past reversals")
     args = ap.parse_args()
     SLEW, GATE = args.slew, args.noise_gate
+    if args.run_on:
+        run_on()
+        return
     if args.carried:
         carried(args.trials)
         return
@@ -300,6 +305,55 @@ def carried(trials: int) -> None:
         print(f"| {name} | {100 * d.noise / span:.3f} % | {designed:.3f} % | "
               f"{100 * np.std(rest) / span:.3f} % | " + ", ".join(f"{x:.2g}" for x in ratio)
               + f" | {ilc.history[-1].saturated} |")  # fmt: skip
+
+
+def _run_on(q: np.ndarray, v: np.ndarray) -> tuple[float, float]:
+    """After the top reversal of one triangle cycle: how far the charge still rises (% of
+    the loop's span) and how many volts into the descent it peaks."""
+    top = int(np.argmax(v))
+    after = q[top:]
+    k = int(np.argmax(after[: after.size // 2]))
+    return 100 * float(after[k] - after[0]) / float(np.ptp(q)), float(v[top] - v[top + k])
+
+
+def run_on(amplitudes: tuple[float, ...] = (10.0, 20.0, 28.0, 40.0)) -> None:
+    """``--run-on``: every plant's capacitor charge over slow triangles about 70 V (the
+    learning scans' middle; 0.025 V per sample, amplifier lag and noise off), after a full
+    0-140 V cycle: how far it runs on past the top reversal; and the models identified for
+    the learning rows (seed 0, the hysteresis alone, at the middle amplitude)."""
+    n = 4000  # samples per triangle cycle
+
+    def triangle(amp: float) -> tuple[np.ndarray, np.ndarray]:
+        tri = 70.0 + amp * (2 * np.abs(((np.arange(3 * n) / n) % 1) * 2 - 1) - 1)
+        v = np.concatenate([np.linspace(0, 140, 2000), np.linspace(140, 0, 2000),
+                            np.linspace(0, 70.0 - amp, 1000), tri])  # fmt: skip
+        return v, np.arange(v.size) / RATE
+
+    late = slice(5000 + 2 * n, 5000 + 3 * n)  # the last cycle
+    print("charge still rising past the top reversal: % of the loop's span, over how many V")
+    print("| plant | " + " | ".join(f"{2 * a:g} V loop" for a in amplitudes) + " |")
+    print("|---|" + "---|" * len(amplitudes))
+    for name, preset in lagged_plants():
+        quiet = replace(preset, amp_noise=0.0, amp_tau=0.0)  # type: ignore[type-var]
+        cells = []
+        for amp in amplitudes:
+            v, t = triangle(amp)
+            q = ph.simulate(v, t, preset=quiet, seed=0).capacitor_charge
+            rise, volts = _run_on(q[late], v[late])
+            cells.append(f"{rise:.2f} % over {volts:.2f} V")
+        print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
+    v, t = triangle(amplitudes[len(amplitudes) // 2])
+    print("\nthe models identified for the learning rows (seed 0), hysteresis alone:")
+    for name, preset in lagged_plants():
+        r = rig(preset, 0)
+        cells = []
+        for key in ("dynamic", "bw"):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                q = r[key].hysteresis_.predict(v, t=t)  # type: ignore[attr-defined]
+            rise, volts = _run_on(q[late], v[late])
+            cells.append(f"{key} {rise:.2f} % over {volts:.2f} V")
+        print(f"{name}: " + ", ".join(cells), flush=True)
 
 
 def chosen_rows(trials: int, only: str | None = None) -> None:
