@@ -92,3 +92,80 @@ def test_a_scale_that_cannot_hold_is_one_line_naming_it(files) -> None:
     one_line_error(res, "the output falls as the input rises", "--output-scale -1")
     res = run(*base, "--input-scale", "100", "--output-scale", "-1", "--force")
     assert res.exit_code == 0, res.output
+
+
+AMP = 14.0  # the amplifier's gain: the DAQ plays 0-10 V for 0-140 V
+
+
+def test_the_commands_a_daq_plays_are_written_in_its_volts(files, tmp_path: Path) -> None:
+    """A DAQ plays 0-10 V into an amplifier of gain 14: ``--command-scale 14`` writes what
+    ``excite`` and ``compensate`` give divided by it, the rest unchanged (the limits and the
+    slew rate stay the piezo's). The commands were piezo volts only: a file played as written
+    asked the amplifier for 14 times the voltage."""
+    _, rec = files
+    kw = ("--v-min", "0", "--v-max", "140", "--sample-rate", "1000", "--kind", "multifreq")
+    for name, extra in (("plain", ()), ("daq", ("--command-scale", "14"))):
+        res = run("excite", *kw, *extra, "-o", tmp_path / f"e_{name}.csv")
+        assert res.exit_code == 0, res.output
+    plain, daq = (ph.read_table(tmp_path / f"e_{n}.csv").get("voltage") for n in ("plain", "daq"))
+    # tol: one division, rounded once
+    np.testing.assert_allclose(daq, plain / AMP, rtol=1e-15, atol=0)
+    assert daq.max() == pytest.approx(10.0, rel=1e-12) and plain.max() == 140.0
+    model = ph.ActivePI(8).fit(rec.voltage, rec.charge, t=rec.t)
+    model.save(tmp_path / "m.json")
+    q = np.asarray(model.hysteresis_.predict(rec.voltage[:2000]))
+    ph.write_table(tmp_path / "target.csv", {"time": rec.t[:2000], "desired": q})
+    for name, extra in (("plain", ()), ("daq", ("--command-scale", "-14"))):  # inverting
+        res = run("compensate", tmp_path / "m.json", tmp_path / "target.csv", *extra,
+                  "-o", tmp_path / f"c_{name}.csv")  # fmt: skip
+        assert res.exit_code == 0, res.output
+    assert "written in the DAQ's volts: the piezo's divided by -14" in res.output
+    plain, daq = (ph.read_table(tmp_path / f"c_{n}.csv").get("command") for n in ("plain", "daq"))
+    np.testing.assert_allclose(daq, -plain / AMP, rtol=1e-15, atol=0)  # as above
+    res = run("excite", *kw, "--command-scale", "10 um/V", "-o", tmp_path / "bad.csv")
+    one_line_error(res, "not a voltage (V)")
+
+
+def test_a_learning_run_writes_its_commands_in_the_daqs_volts_every_call(
+    files, tmp_path: Path
+) -> None:
+    """``learn --command-scale 14`` writes every trial's commands divided by 14, keeps the
+    gain in the state file and refuses a later call that forgets it (its commands would be 14
+    times too large at the amplifier); the recording's voltage column stays the piezo's."""
+    _, rec = files
+    model = ph.ActivePI(8).fit(rec.voltage, rec.charge, t=rec.t)
+    model.save(tmp_path / "m.json")
+    lo, hi = (float(x) for x in model.hysteresis_.predict(np.array([40.0, 100.0])))
+    k = np.arange(200)
+    scan = lo + (hi - lo) * 0.5 * (1 - np.cos(2 * np.pi * 4 * k / k.size))
+    ph.write_table(tmp_path / "scan.csv", {"time": k / 1000.0, "desired": scan})
+    base = [
+        "learn",
+        tmp_path / "m.json",
+        "--state",
+        tmp_path / "s.json",
+        "-o",
+        tmp_path / "next.csv",
+        "--v-min",
+        "0",
+        "--v-max",
+        "140",
+        "--slew-rate",
+        "20000",
+    ]
+    res = run(*base, "--desired", tmp_path / "scan.csv", "--command-scale", "14")
+    assert res.exit_code == 0, res.output
+    written = ph.read_table(tmp_path / "next.csv").get("command")
+    pending = ph.LearningCompensator(model, v_min=0.0, v_max=140.0, sample_rate=1000.0,
+                                     slew_rate=20e3)  # fmt: skip
+    sent = pending.command(scan)
+    np.testing.assert_allclose(written, sent / AMP, rtol=1e-15, atol=0)  # one division
+    assert json.loads((tmp_path / "s.json").read_text())["command_scale"] == AMP
+    played = sent  # the amplifier's output, logged in piezo volts
+    q = np.asarray(model.hysteresis_.predict(played))
+    ph.write_table(tmp_path / "t0.csv", {"voltage": played, "charge": q})
+    res = run(*base[:2], tmp_path / "t0.csv", *base[2:])
+    one_line_error(res, "divided by --command-scale 14", "this call gives 1")
+    res = run(*base[:2], tmp_path / "t0.csv", *base[2:], "--command-scale", "14")
+    assert res.exit_code == 0, res.output
+    assert np.abs(ph.read_table(tmp_path / "next.csv").get("command")).max() <= 140.0 / AMP

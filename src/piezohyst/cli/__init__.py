@@ -23,6 +23,7 @@ from ..model.models import model_names
 from ..simulation.signals import SIGNALS
 from ..workflows.excitation import KINDS
 from ._support import (
+    COMMAND_SCALE,
     EXISTING,
     FORCE,
     OUT_FILE,
@@ -168,6 +169,7 @@ def simulate(
     callback=_suffix(".csv", ".mat", ".tdms", ".npz", ".parquet", what="an excitation file"),
     help="Output file (.csv, .mat, .tdms, .npz or .parquet).",
 )
+@COMMAND_SCALE
 @FORCE
 @click.pass_obj
 def excite(
@@ -180,6 +182,7 @@ def excite(
     frequency: float,
     hold: float,
     out: Path,
+    command_scale: str | None,
     force: bool,
 ) -> None:
     """Write a voltage excitation to play on the rig: time,voltage (s, V).
@@ -207,9 +210,12 @@ def excite(
             frequency=frequency,
             hold=hold,
             force=force,
+            command_scale=command_scale,
         ),
     )
     click.echo(exc.summary())
+    if command_scale is not None:
+        ctx.info(f"written in the DAQ's volts: the piezo's divided by {command_scale}")
     ctx.info(f"saved {out}")
 
 
@@ -504,6 +510,7 @@ def predict(
     help="Added to every desired value, in the target's unit (a target relative to another zero).",
 )
 @OUT_FILE
+@COMMAND_SCALE
 @FORCE
 @click.pass_obj
 def compensate(
@@ -517,6 +524,7 @@ def compensate(
     target_unit: str | None,
     target_offset: float,
     out: Path,
+    command_scale: str | None,
     force: bool,
 ) -> None:
     """Feedforward voltage for the desired trajectory in TARGET; write time,command,desired.
@@ -552,6 +560,7 @@ def compensate(
                 target_offset=target_offset,
                 force=force,
                 progress=progress,
+                command_scale=command_scale,
             ),
         )
     comp = result.compensator
@@ -575,6 +584,8 @@ def compensate(
             f"{result.preamble} samples ({result.preamble / result.sample_rate:.3g} s) of "
             "ramp-in and preconditioning come first"
         )
+    if command_scale is not None:
+        ctx.info(f"written in the DAQ's volts: the piezo's divided by {command_scale}")
     ctx.info(f"saved {out}")
 
 

@@ -9,7 +9,7 @@ from typing import Literal
 import click
 
 from ..control.compensator import CompensatorSettings
-from ._support import EXISTING, FORCE, Context, _limit_options, _run
+from ._support import COMMAND_SCALE, EXISTING, FORCE, Context, _limit_options, _run
 
 
 def _auto_or_float(value: str) -> float | Literal["auto"]:
@@ -126,6 +126,7 @@ def _auto_or_float(value: str) -> float | Literal["auto"]:
     required=True,
     help="The next trial's commands (CSV: time, command, desired).",
 )
+@COMMAND_SCALE
 @FORCE
 @click.pass_obj
 def learn(
@@ -150,6 +151,7 @@ def learn(
     noise_gate: float,
     settings: CompensatorSettings,
     out: Path,
+    command_scale: str | None,
     force: bool,
 ) -> None:
     """Learn from the trial RECORDED and write the next trial's commands.
@@ -194,6 +196,7 @@ def learn(
             noise_gate=noise_gate,
             voltage_tolerance=voltage_tolerance,
             force=force,
+            command_scale=command_scale,
         ),
     )
     trial, learner = result.trial, result.learner

@@ -468,6 +468,14 @@ FORCE = click.option(
     "--force", is_flag=True, help="Replace an existing output that piezohyst did not write."
 )
 
+COMMAND_SCALE = click.option(
+    "--command-scale",
+    default=None,
+    help="The amplifier's gain, piezo volts per volt the DAQ plays (14; -14 for an inverting "
+    "one): the voltages are written divided by it; --v-min, --v-max and --slew-rate stay the "
+    "piezo's.",
+)
+
 
 def _suffix(*allowed: str, what: str) -> Callable[[click.Context, click.Parameter, Any], Any]:
     """A click callback refusing a file name whose suffix ``what`` cannot be written as."""

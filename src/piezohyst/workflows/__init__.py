@@ -58,6 +58,7 @@ from ._base import (
     _check_measured_unit,
     _default_unit,
     _load,
+    command_gain,
     guard_outputs,
     warn_assumed_volts,
     warn_clipped,
@@ -156,12 +157,16 @@ def excite_file(
     frequency: float = 1.0,
     hold: float = 5.0,
     force: bool = False,
+    command_scale: str | float | None = None,
 ) -> Excitation:
     """Write an excitation to play on the rig: ``time,voltage`` (s, V) as CSV, MAT, TDMS,
     NPZ or Parquet (see :func:`piezohyst.workflows.excitation.excitation` for the arguments).
 
-    ``force`` replaces an existing file piezohyst did not write (see :func:`guard_outputs`).
+    ``force`` replaces an existing file piezohyst did not write (see :func:`guard_outputs`);
+    ``command_scale``, the amplifier's gain, writes the voltage in the volts the DAQ plays
+    (the piezo's divided by it; :func:`~piezohyst.workflows._base.command_gain`).
     """
+    gain = command_gain(command_scale)
     guard_outputs([out], [], force=force)
     exc = excitation(
         kind,
@@ -172,7 +177,8 @@ def excite_file(
         frequency=frequency,
         hold=hold,
     )
-    write_table(out, {"time": exc.t, "voltage": exc.voltage}, units={"time": "s", "voltage": "V"})
+    write_table(out, {"time": exc.t, "voltage": exc.voltage / gain},
+                units={"time": "s", "voltage": "V"})  # fmt: skip
     return exc
 
 

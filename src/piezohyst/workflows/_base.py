@@ -119,6 +119,13 @@ def desired_unit(settings: CompensatorSettings, model: HysteresisModel) -> str:
     return "m" if metres else model.output_unit
 
 
+def command_gain(scale: str | float | None) -> float:
+    """Piezo volts per volt written: the amplifier's gain that ``--command-scale`` gives (a
+    DAQ plays 0-10 V into an amplifier of gain 14: ``14``; an inverting one: ``-14``). Commands
+    and excitations are written divided by it, in the volts the DAQ plays; 1 without one."""
+    return 1.0 if scale is None else scaled(scale, "V", "input", "--command-scale")[0]
+
+
 def standard_column(
     table: Table,
     name: str,

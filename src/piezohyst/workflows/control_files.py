@@ -53,6 +53,7 @@ from ._base import (
     _load,
     check_folder,
     check_rate,
+    command_gain,
     desired_unit,
     guard_outputs,
     standard_column,
@@ -107,6 +108,7 @@ def compensate_file(
     target_offset: float = 0.0,
     force: bool = False,
     progress: Progress = None,
+    command_scale: str | float | None = None,
 ) -> Compensation:
     """Feedforward voltage for a desired trajectory; writes ``time,command,desired``.
 
@@ -153,11 +155,15 @@ def compensate_file(
         Replace an existing ``out`` that piezohyst did not write.
     progress : callable, optional
         Called with the rows of the target read so far.
+    command_scale : str or float, optional
+        The amplifier's gain (piezo V per V the DAQ plays): the command column is written
+        divided by it; the limits and the slew rate stay the piezo's.
 
     Returns
     -------
     Compensation
     """
+    gain = command_gain(command_scale)
     guard_outputs([out], [model_path, target], force=force)
     model = _load(model_path)
     table = open_table(target)
@@ -230,11 +236,11 @@ def compensate_file(
                 n = preamble.size
                 yield {  # k / fs from the first time: -1.001, not -1.001000000000001
                     "time": t[0] + np.arange(-n, 0) / fs,
-                    "command": preamble,
+                    "command": preamble / gain,
                     "desired": np.full(n, np.nan),  # written empty: nothing is desired there
                 }
             finite += int(np.count_nonzero(np.isfinite(desired)))
-            yield {"time": t, "command": comp.process(desired), "desired": desired}
+            yield {"time": t, "command": comp.process(desired) / gain, "desired": desired}
             row += desired.size
             if progress is not None:
                 progress(row)

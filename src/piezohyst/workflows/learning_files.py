@@ -23,7 +23,14 @@ from ..io import read_table, write_table
 from ..io.screening import NOISE_REACH, noise_level
 from ..model.leakage import Leakage
 from ..model.persistence import load_model
-from ._base import ONE_RATE, check_rate, desired_unit, guard_outputs, standard_column
+from ._base import (
+    ONE_RATE,
+    check_rate,
+    command_gain,
+    desired_unit,
+    guard_outputs,
+    standard_column,
+)
 
 __all__ = ["LearnFileResult", "learn_file", "recording_check"]
 
@@ -70,6 +77,7 @@ def learn_file(
     noise_gate: float = 0.0,
     voltage_tolerance: float | None = None,
     force: bool = False,
+    command_scale: str | float | None = None,
 ) -> LearnFileResult:
     """One trial of learning through files.
 
@@ -108,11 +116,16 @@ def learn_file(
         its noise (:func:`recording_check`, what it found kept in the state file).
     force : bool, default False
         Replace an ``out`` that piezohyst did not write.
+    command_scale : str or float, optional
+        The amplifier's gain (piezo V per V the DAQ plays): the commands are written divided
+        by it (the recording's voltage column stays the piezo's, through ``voltage_scale``).
+        Kept in the state: every call of a run must give the same.
 
     Returns
     -------
     LearnFileResult
     """
+    written = command_gain(command_scale)
     settings = settings or CompensatorSettings()
     state_path, out = Path(state_path), Path(out)
     inputs = [p for p in (model_path, recorded, desired, leakage, state_path) if p is not None]
@@ -152,6 +165,12 @@ def learn_file(
         except (OSError, ValueError) as exc:
             msg = f"{state_path}: cannot read the learning state ({exc})"
             raise ModelFileError(msg) from None
+        kept = float(saved.get("command_scale", 1.0)) if isinstance(saved, dict) else 1.0
+        if kept != written:  # commands 14 times the intended would reach the amplifier
+            msg = (f"{state_path}: this run writes its commands divided by --command-scale "
+                   f"{kept:g} (the amplifier's gain); this call gives {written:g}: give the "
+                   "same on every call of a run")  # fmt: skip
+            raise ParameterError(msg)
         if rate is None:  # the rate the run was started with
             rate = float(saved.get("sample_rate", 0.0)) if isinstance(saved, dict) else 0.0
             if not rate > 0:
@@ -211,9 +230,11 @@ def learn_file(
     commands = learner.command(d)
     desired_now = learner.desired
     t = np.arange(commands.size) / rate
-    write_table(out, {"time": t, "command": commands, "desired": desired_now})
+    write_table(out, {"time": t, "command": commands / written, "desired": desired_now})
     payload: dict[str, Any] = learner.to_dict()
     payload["sample_rate"] = rate
+    if written != 1.0:  # only when set: the states saved before it existed resume
+        payload["command_scale"] = written
     payload["run"] = _run_settings(learner)  # readable: what a later call must give again
     if check:  # how the last recording's voltage was matched to the commands, for the record
         payload["recording_check"] = check
