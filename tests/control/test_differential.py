@@ -850,31 +850,35 @@ def test_a_play_operator_model_refuses_a_relaxation_term() -> None:
         ph.Compensator(model, v_min=0.0, v_max=100.0, sample_rate=1e3)
 
 
-def test_a_preisach_branch_that_turns_beyond_the_grid_falls_at_the_outer_slope(
+def test_a_preisach_branch_beyond_the_grid_keeps_its_slope_and_its_loops_close(
     tmp_path: Path,
 ) -> None:
-    """Beyond the grid the Everett function continues with the smallest reversible slope
-    over the part of [a, b] outside it. A branch turning above the grid (with input
-    dynamics the piezo voltage passes the grid's top, fitted on the lagged voltage) counted
-    only the part above the grid's edge: from the turn down to the edge it was flat, and the
-    compensator's Newton guess divided by that zero slope (a ZeroDivisionError from
-    ``Compensator.process`` on a fitted model). The C step continued alike."""
+    """Beyond the grid each branch continues at its slope at the edge. The continuation was
+    the smallest reversible slope counted from the edge, so E(v, v) was not 0 there: a branch
+    turning above the grid stayed flat down to the edge, a loop there did not close (each
+    excursion ratcheted the output up), and the compensator's Newton guess divided by the
+    flat branch's zero slope (a ZeroDivisionError from ``Compensator.process`` on a model
+    chosen with identified dynamics, whose grid spans the lagged voltage, short of the
+    commands' range). Python and the exported C alike."""
     nodes = np.linspace(0.0, 100.0, 11)
     k, c = np.meshgrid(np.arange(10.0), np.arange(10.0), indexing="ij")
     density = np.triu(2e-8 * np.exp(-((c - k) ** 2) / 4.0))
     core = ph.PreisachHysteresis(nodes, density, np.zeros(D.RV_SIZE))
     core = ph.PreisachHysteresis(nodes, density, core.rest_state(0.0))
     model = ph.PreisachModel.from_operator(core)
-    s_out = float(core.packed[D.PR_S_OUT])
     v = np.concatenate([np.linspace(0.0, 120.0, 121), np.linspace(119.0, 90.0, 30)])
     q = model.predict(v)
-    top, edge = 120, int(np.flatnonzero(v == 100.0)[-1])  # the turn, and the grid's top after
-    # tol: sums of a few products of 1e-8-sized nodes: rounding, 1e-12 relative
-    assert (q[top] - q[edge]) / 20.0 == pytest.approx(s_out, rel=1e-12)  # was 0: flat
-    assert q[top] - q[top - 20] == pytest.approx(s_out * 20.0, rel=1e-12)  # rising alike
+    top = 120
+    # tol: bilinear sums of a few 1e-8-sized nodes: rounding, 1e-9 relative of a step
+    assert q[101] - q[100] == pytest.approx(q[100] - q[99], rel=1e-9)  # the edge's slope on
+    assert q[top] - q[top + 1] == pytest.approx(density[-1, -1] / 10.0, rel=1e-9)  # turned: the
+    # edge's reversible slope (its diagonal cell's density per volt)
+    assert np.all(np.diff(q[top:]) < 0)  # falling all the way (was flat down to the edge)
+    again = model.predict(np.concatenate([v[: top + 1], [110.0, 120.0]]))
+    assert again[-1] == pytest.approx(q[top], rel=1e-12)  # the loop closes (was ratcheting)
     comp = ph.Compensator(model, v_min=0.0, v_max=130.0, slew_rate=None)
-    # tol: the solve stops within 1e-12 of each step's change; over the slope s_out that is
-    # far below 1e-9 V
+    # tol: the solve stops within 1e-12 of each step's change; over slopes >= 1e-10 C/V that
+    # is far below 1e-9 V
     np.testing.assert_allclose(comp.process(q), v, rtol=0, atol=1e-9)
     if CC is not None:  # the exported C step agrees there too
         compare_c_with_python(ph.Compensator(model, v_min=0.0, v_max=130.0, slew_rate=None),

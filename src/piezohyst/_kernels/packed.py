@@ -61,7 +61,7 @@ DU_Q_LO = 5
 DU_Q_STEP = 6
 DU_DV_MAX = 7  # largest Euler sub-step (V)
 DU_F_MIN = 8  # the smallest slope (bounds the inverse's bracket)
-PR_S_OUT = 5  # Preisach: the slope beyond the grid (0: the smallest slope)
+PR_S_OUT = 5  # Preisach: the smallest reversible slope (kept in the layout; not used now)
 DU_UP = 9
 # Bouc-Wen: p = [kind, c0, alpha, beta, gamma, n, offset, dv_max, g_max, s_min]
 BW_C0 = 1
@@ -228,38 +228,31 @@ def _node(p, i, j):  # type: ignore[no-untyped-def]
 
 @njit(cache=True, fastmath=FASTMATH)
 def everett(p, a, b):  # type: ignore[no-untyped-def]
-    """(E(a, b), dE/da, dE/db) for a <= b: bilinear inside the grid, continued beyond it with
-    the slope ``p[PR_S_OUT]`` (the smallest reversible slope; 0: the smallest slope) over
-    the part of [a, b] outside the grid (both ends beyond the same side too: a branch that
-    turns above the grid falls at that slope, not flat, until it re-enters)."""
+    """(E(a, b), dE/da, dE/db): bilinear inside the grid, and beyond it each branch continued
+    at its slope at the edge: ``E(a, b) = E(a', b') + (b - b') E_b(a', b') + (a - a') E_a(a',
+    b')`` with ``a', b'`` the ends clamped into the grid. So E(v, v) = 0 everywhere (a loop
+    beyond the grid closes, a turn there does not jump), a branch rising past the edge keeps
+    its own slope there, and one turning beyond it falls at the edge's reversible slope."""
     n = p[DU_NV]
     lo = p[DU_V_LO]
     h = p[DU_V_STEP]
     hi = lo + h * (n - 1.0)
-    s_out = p[PR_S_OUT] if p[PR_S_OUT] > 0.0 else p[DU_F_MIN]
-    extra = 0.0
-    da_out = 0.0
-    db_out = 0.0
-    if b > hi:
-        extra += s_out * (b - max(a, hi))
-        db_out = s_out
-    if a < lo:
-        extra += s_out * (min(b, lo) - a)
-        da_out = -s_out
-    if a > hi:
-        da_out = -s_out
-    if b < lo:
-        db_out = s_out
-    i, fa, inside_a = _cell(a, lo, h, n)
-    j, fb, inside_b = _cell(b, lo, h, n)
+    ca = min(max(a, lo), hi)
+    cb = min(max(b, lo), hi)
+    i, fa, _ = _cell(ca, lo, h, n)
+    j, fb, _ = _cell(cb, lo, h, n)
     e00 = _node(p, i, j)
     e01 = _node(p, i, j + 1)
     e10 = _node(p, i + 1, j)
     e11 = _node(p, i + 1, j + 1)
     e = (1.0 - fa) * ((1.0 - fb) * e00 + fb * e01) + fa * ((1.0 - fb) * e10 + fb * e11)
-    dea = ((1.0 - fb) * (e10 - e00) + fb * (e11 - e01)) / h if inside_a else da_out
-    deb = ((1.0 - fa) * (e01 - e00) + fa * (e11 - e10)) / h if inside_b else db_out
-    return e + extra, dea, deb
+    dea = ((1.0 - fb) * (e10 - e00) + fb * (e11 - e01)) / h
+    deb = ((1.0 - fa) * (e01 - e00) + fa * (e11 - e10)) / h
+    cross = (e11 - e10 - e01 + e00) / (h * h)  # d2E/da db inside the cell
+    da, db = a - ca, b - cb  # how far each end lies beyond the grid (0 inside)
+    out_a = dea + (db * cross if da == 0.0 else 0.0)  # an end inside moves E_b's point
+    out_b = deb + (da * cross if db == 0.0 else 0.0)
+    return e + db * deb + da * dea, out_a, out_b
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")

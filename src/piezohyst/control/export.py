@@ -566,9 +566,7 @@ def write_c(
 def _preisach_constants(packed: np.ndarray, precision: Precision, prefix: str = "") -> str:
     """A Preisach core's grid and Everett table as C constants (names after ``prefix``)."""
     n = int(packed[D.DU_NV])
-    out = float(packed[D.PR_S_OUT]) or float(packed[D.DU_F_MIN])  # the slope beyond the grid
     lit = [_literal(float(packed[k]), precision) for k in (D.DU_V_LO, D.DU_V_STEP, D.DU_F_MIN)]
-    lit.append(_literal(out, precision))
     # the smallest slope bounds the main core's bracket; a slow core's is not needed
     bracket = [] if prefix else [f"static const real_t S_MIN = {lit[2]};"]
     return "\n".join(
@@ -577,7 +575,6 @@ def _preisach_constants(packed: np.ndarray, precision: Precision, prefix: str = 
             f"static const real_t {prefix}V_LO = {lit[0]};",
             f"static const real_t {prefix}H = {lit[1]};",
             *bracket,
-            f"static const real_t {prefix}S_OUT = {lit[3]};",
             f"static const real_t {prefix}EV[{prefix}NN * {prefix}NN] = "
             f"{_array(packed[D.DU_UP : D.DU_UP + n * n], precision)};",
         ]

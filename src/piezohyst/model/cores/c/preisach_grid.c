@@ -22,36 +22,33 @@ static void cell(real_t u, int *i, real_t *frac, int *inside)
 /* the Everett function at nodes, antisymmetric below the diagonal */
 static real_t node(int i, int j) { return i <= j ? EV[i * NN + j] : -EV[j * NN + i]; }
 
-/* E(a, b) for a <= b, bilinear, continued with the slope S_OUT over the part of [a, b]
- * beyond the grid (both ends beyond one side too); *da, *db its derivatives */
+/* E(a, b), bilinear, and beyond the grid each branch continued at its slope at the edge:
+ * E(a', b') + (b - b') E_b(a', b') + (a - a') E_a(a', b'), a' and b' clamped into the grid
+ * (as _kernels.packed.everett); *da, *db its derivatives */
 static real_t everett(real_t a, real_t b, real_t *da, real_t *db)
 {
-    real_t hi = V_LO + H * (NN - 1.0), extra = 0, fa, fb, e00, e01, e10, e11;
-    real_t da_out = 0, db_out = 0;
+    real_t hi = V_LO + H * (NN - 1.0), ca, cb, fa, fb, e00, e01, e10, e11, e, dea, deb, cross;
+    real_t xa, xb;
     int i, j, in_a, in_b;
-    if (b > hi) {
-        extra += S_OUT * (b - max_real(a, hi));
-        db_out = S_OUT;
-    }
-    if (a < V_LO) {
-        extra += S_OUT * (min_real(b, V_LO) - a);
-        da_out = -S_OUT;
-    }
-    if (a > hi) {
-        da_out = -S_OUT;
-    }
-    if (b < V_LO) {
-        db_out = S_OUT;
-    }
-    cell(a, &i, &fa, &in_a);
-    cell(b, &j, &fb, &in_b);
+    ca = min_real(max_real(a, V_LO), hi);
+    cb = min_real(max_real(b, V_LO), hi);
+    cell(ca, &i, &fa, &in_a);
+    cell(cb, &j, &fb, &in_b);
     e00 = node(i, j);
     e01 = node(i, j + 1);
     e10 = node(i + 1, j);
     e11 = node(i + 1, j + 1);
-    *da = in_a ? ((1 - fb) * (e10 - e00) + fb * (e11 - e01)) / H : da_out;
-    *db = in_b ? ((1 - fa) * (e01 - e00) + fa * (e11 - e10)) / H : db_out;
-    return (1 - fa) * ((1 - fb) * e00 + fb * e01) + fa * ((1 - fb) * e10 + fb * e11) + extra;
+    e = (1 - fa) * ((1 - fb) * e00 + fb * e01) + fa * ((1 - fb) * e10 + fb * e11);
+    dea = ((1 - fb) * (e10 - e00) + fb * (e11 - e01)) / H;
+    deb = ((1 - fa) * (e01 - e00) + fa * (e11 - e10)) / H;
+    cross = (e11 - e10 - e01 + e00) / (H * H);
+    xa = a - ca;
+    xb = b - cb;
+    *da = dea + (xa == 0 ? xb * cross : 0);
+    *db = deb + (xb == 0 ? xa * cross : 0);
+    (void)in_a;
+    (void)in_b;
+    return e + xb * deb + xa * dea;
 }
 
 /* the output change along a branch from u0 to u1 with reversal point top */

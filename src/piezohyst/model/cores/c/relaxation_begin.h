@@ -11,4 +11,3 @@
 #define EV SLOW_EV
 #define V_LO SLOW_V_LO
 #define H SLOW_H
-#define S_OUT SLOW_S_OUT

@@ -9,4 +9,3 @@
 #undef EV
 #undef V_LO
 #undef H
-#undef S_OUT
