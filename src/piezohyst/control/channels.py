@@ -152,8 +152,10 @@ class ChannelBank(Generic[C]):
         S.count_held(commands, self._prev, self._tol, self._held, self._given, self._arrived,
                      self._approach)  # fmt: skip
         self._sent += commands.shape[0]
-        away = np.flatnonzero(~self._arrived & (self._approach >= LIMIT_CHECK_FIRST))
-        if away.size and not self._approach_warned:  # a ramp that arrives is not counted
+        away = np.empty(0, dtype=np.int64)
+        if not self._approach_warned:  # a ramp that arrives is not counted
+            away = np.flatnonzero(~self._arrived & (self._approach >= LIMIT_CHECK_FIRST))
+        if away.size:
             self._approach_warned = True
             worst = int(away[np.argmax(self._approach[away])])
             warnings.warn(
