@@ -166,6 +166,11 @@ def test_a_learning_run_writes_its_commands_in_the_daqs_volts_every_call(
     ph.write_table(tmp_path / "t0.csv", {"voltage": played, "charge": q})
     res = run(*base[:2], tmp_path / "t0.csv", *base[2:])
     one_line_error(res, "divided by --command-scale 14", "this call gives 1")
+    state = json.loads((tmp_path / "s.json").read_text())
+    (tmp_path / "bad.json").write_text(json.dumps({**state, "command_scale": "14"}))
+    res = run(*base[:2], tmp_path / "t0.csv", "--state", tmp_path / "bad.json", *base[4:],
+              "--command-scale", "14")  # fmt: skip
+    one_line_error(res, "a damaged learning state (command_scale '14')")
     res = run(*base[:2], tmp_path / "t0.csv", *base[2:], "--command-scale", "14")
     assert res.exit_code == 0, res.output
     assert np.abs(ph.read_table(tmp_path / "next.csv").get("command")).max() <= 140.0 / AMP

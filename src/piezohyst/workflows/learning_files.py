@@ -165,7 +165,10 @@ def learn_file(
         except (OSError, ValueError) as exc:
             msg = f"{state_path}: cannot read the learning state ({exc})"
             raise ModelFileError(msg) from None
-        kept = float(saved.get("command_scale", 1.0)) if isinstance(saved, dict) else 1.0
+        kept = saved.get("command_scale", 1.0) if isinstance(saved, dict) else 1.0
+        if not isinstance(kept, (int, float)) or isinstance(kept, bool):
+            msg = f"{state_path}: a damaged learning state (command_scale {kept!r})"
+            raise ModelFileError(msg)
         if kept != written:  # commands 14 times the intended would reach the amplifier
             msg = (f"{state_path}: this run writes its commands divided by --command-scale "
                    f"{kept:g} (the amplifier's gain); this call gives {written:g}: give the "
