@@ -10,7 +10,7 @@ from numpy.typing import ArrayLike
 
 from ._validation import FloatArray, as_signal, same_length
 
-__all__ = ["CLIP_RUN", "clipped", "hysteresis_width", "nrmse", "rmse"]
+__all__ = ["CLIP_RUN", "clipped", "hysteresis_width", "nrmse", "rmse", "run_on"]
 
 
 def rmse(measured: ArrayLike, predicted: ArrayLike) -> float:
@@ -195,3 +195,69 @@ class _Runs:
             self._close(self.run_start, self.run)
             self.run = 0
         return self.count, self.first
+
+
+def run_on(
+    x: ArrayLike, y: ArrayLike, *, swing: float = 0.2, window: float = 0.15
+) -> tuple[float, float, int]:
+    """How far the output keeps moving the old way after the input turns.
+
+    At every turn of ``x`` that ends a monotone run over at least ``swing`` of its range,
+    the output's furthest excursion past its value at the turn, in the direction it was
+    moving, while ``x`` comes back by up to ``window`` of its range. A hysteresis whose
+    branches rise with the input (every model here) gives 0 (the noise aside); a lag between
+    ``x`` and what drives the output, creep, or a law whose branches fall just past a
+    reversal give more.
+
+    Parameters
+    ----------
+    x, y : array_like, shape (N,)
+        Input (the piezo's voltage: with a lag identified, the lagged one) and output
+        (growth removed).
+    swing, window : float
+        Fractions of ``x``'s range.
+
+    Returns
+    -------
+    tuple
+        The median excursion as a fraction of ``y``'s span, the median input distance
+        from the turn to where it peaks, and the number of turns measured (0: none, and
+        NaN for the two figures).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> x = np.concatenate([np.linspace(0, 1, 101), np.linspace(0.99, 0, 100)] * 2)
+    >>> y = np.concatenate([x[:1], x[:-1]])           # the output a sample late
+    >>> share, dx, turns = run_on(x, y)
+    >>> round(share, 3), round(dx, 3), turns
+    (0.01, 0.01, 3)
+    """
+    xs = as_signal(x, "x")
+    ys = as_signal(y, "y")
+    same_length(xs, ys, "x", "y")
+    span_x, span_y = float(np.ptp(xs)), float(np.ptp(ys))
+    none = (math.nan, math.nan, 0)
+    if xs.size < 3 or span_x <= 0 or span_y <= 0:
+        return none
+    direction = np.sign(np.diff(xs))
+    moving = np.flatnonzero(direction != 0)
+    if moving.size < 2:
+        return none
+    turns = moving[1:][direction[moving[1:]] != direction[moving[:-1]]]  # first step back
+    shares, dists = [], []
+    start = int(moving[0])
+    for k in turns:
+        d = float(direction[start])
+        if d * (xs[k] - xs[start]) >= swing * span_x:
+            back = np.abs(xs[k:] - xs[k])
+            stop = int(np.argmax(back > window * span_x)) if np.any(back > window * span_x) else 0
+            if stop > 1:
+                seg = d * (ys[k : k + stop] - ys[k])
+                j = int(np.argmax(seg))
+                shares.append(max(float(seg[j]), 0.0) / span_y)
+                dists.append(float(back[j]))
+        start = int(k)
+    if not shares:
+        return none
+    return float(np.median(shares)), float(np.median(dists)), len(shares)

@@ -37,7 +37,7 @@ from ..io import (
     write_blocks,
     write_table,
 )
-from ..metrics import hysteresis_width, nrmse, rmse
+from ..metrics import hysteresis_width, nrmse, rmse, run_on
 from ..model.leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
 from ..model.model import HysteresisModel
 from ..model.state import predict_record
@@ -876,6 +876,13 @@ def _report(
          "xlabel": "time", "xunit": "s", "ylabel": "residual", "yunit": out_u},
     ], stacked=True)  # fmt: skip
     growth = model.growth_coefficients()
+    dyn = model.input_dynamics_  # the piezo's voltage, where a lag was identified
+    driven = dyn.apply(rec.x, np.r_[0.0, np.diff(rec.t)])[0][w] if dyn.active else x
+    share, far, turns = run_on(driven, y - model.growth(rec.x, t=rec.t)[w] if growth else y)
+    if turns:  # what no model whose branches rise with the input can follow
+        rep.add("run_on_pct", f"output's run-on past the input's turns (median of {turns} "
+                "turns; rising branches: none)", 100 * share, "%")  # fmt: skip
+        rep.add("run_on_input", "the input's way back where the run-on peaks", far, in_u)
     if growth:
         pure = y - model.growth(rec.x, t=rec.t)[w]
         for k, (v, u) in growth.items():
