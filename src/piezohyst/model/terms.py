@@ -691,7 +691,7 @@ class Relaxation(Term):
             raise ParameterError(msg)
         lo, hi = self.v_range
         n = self.nodes
-        # a Preisach core's packed head; beyond the grid the branches stay flat (slope 0)
+        # a Preisach core's packed head (beyond the grid each branch keeps its edge slope)
         return np.array([D.KIND_PREISACH, n, n, lo, (hi - lo) / (n - 1), 0.0, 0.0, 0.0, 0.0])
 
     @property

@@ -148,7 +148,7 @@ class PreisachHysteresis(PackedCore):
         object.__setattr__(self, "initial_state", z0)
         h = (nodes[-1] - nodes[0]) / (n - 1)
         s_min = float(branch_sums(mu).min()) / h  # a true lower bound: the solve's bracket
-        s_out = float(np.diag(mu).min()) / h  # beyond the grid: the smallest reversible slope
+        s_out = float(np.diag(mu).min()) / h  # the smallest reversible slope (kept in the layout)
         head = [D.KIND_PREISACH, n, n, nodes[0], h, s_out, 0.0, 0.0, s_min]
         packed = np.concatenate([head, D.everett_nodes(mu).ravel()])
         packed.flags.writeable = False
