@@ -54,13 +54,16 @@ def test_the_median_is_the_naive_one(knots: list[float], lag: int) -> None:
 def test_rising_branches_run_on_nowhere_and_the_duhem_plant_does() -> None:
     t, v = make_signal("multifreq", amplitude=140.0, frequency=0.5, duration=10.0)
     pi = ph.ClassicalPI(8).fit(v, 1e-8 * v + 1e-10 * (v - 70.0) ** 2 / 70.0)  # any rising PI
-    assert run_on(v, pi.predict(v))[0] == 0.0
+    # tol: a branch that rises moves the output the new way from the first step back; only
+    # rounding (1e-12 of the span) could show the old way
+    assert run_on(v, pi.predict(v))[0] <= 1e-12
     quiet = {name: replace(PLANTS[name], amp_noise=0.0) for name in ("duhem", "preisach")}
     duhem = run_on(v, ph.simulate(v, t, preset=quiet["duhem"], seed=0).capacitor_charge)
     # measured: 0.71 % of the span over 5.1 V (the median of 165 turns of multifreq's loop
     # sizes); the bench's triangles give 2.35-2.61 % at 40-56 V loops (docs/benchmarks.md)
     assert 0.004 < duhem[0] < 0.012 and 3.0 < duhem[1] < 7.0
-    assert run_on(v, ph.simulate(v, t, preset=quiet["preisach"], seed=0).capacitor_charge)[0] == 0.0
+    preisach = ph.simulate(v, t, preset=quiet["preisach"], seed=0).capacitor_charge
+    assert run_on(v, preisach)[0] <= 1e-12  # as above
 
 
 def test_the_report_says_how_far_the_output_runs_on(tmp_path: Path) -> None:
