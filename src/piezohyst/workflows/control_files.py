@@ -878,13 +878,13 @@ def _report(
     growth = model.growth_coefficients()
     dyn = model.input_dynamics_  # the piezo's voltage, where a lag was identified
     driven = dyn.apply(rec.x, np.r_[0.0, np.diff(rec.t)])[0][w] if dyn.active else x
-    share, far, turns = run_on(driven, y - model.growth(rec.x, t=rec.t)[w] if growth else y)
+    pure = y - model.growth(rec.x, t=rec.t)[w] if growth else y  # eq. 19: growth removed
+    share, far, turns = run_on(driven, pure)
     if turns:  # what no model whose branches rise with the input can follow
         rep.add("run_on_pct", f"output's run-on past the input's turns (median of {turns} "
                 "turns; rising branches: none)", 100 * share, "%")  # fmt: skip
         rep.add("run_on_input", "the input's way back where the run-on peaks", far, in_u)
     if growth:
-        pure = y - model.growth(rec.x, t=rec.t)[w]
         for k, (v, u) in growth.items():
             rep.add(f"growth_{k}", f"growth term {k}", v, u)
         rep.add("hysteresis_width_growth_removed_pct", "hysteresis width, growth removed",
