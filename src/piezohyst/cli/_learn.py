@@ -117,6 +117,16 @@ def _auto_or_float(value: str) -> float | Literal["auto"]:
     "noise (less jitter), the loop may be wider (see LearningCompensator); give it on every "
     "call of a run.",
 )
+@click.option(
+    "--law",
+    type=click.Choice(["harmonic", "jacobian"]),
+    default="harmonic",
+    show_default=True,
+    help="How the error is learned: harmonic corrects the reference through the model's "
+    "inverse; jacobian moves the commands through the model's Jacobian along them (an "
+    "actuator whose output runs on past its reversals; trials of up to 4000 samples); give "
+    "it on every call of a run.",
+)
 @_limit_options
 @click.option(
     "-o",
@@ -149,6 +159,7 @@ def learn(
     no_lead_in: bool,
     no_probe: bool,
     noise_gate: float,
+    law: str,
     settings: CompensatorSettings,
     out: Path,
     command_scale: str | None,
@@ -194,6 +205,7 @@ def learn(
             lead_in=not no_lead_in,
             probe=not no_probe,
             noise_gate=noise_gate,
+            law=law,  # type: ignore[arg-type]
             voltage_tolerance=voltage_tolerance,
             force=force,
             command_scale=command_scale,

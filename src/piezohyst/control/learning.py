@@ -43,10 +43,12 @@ from ..errors import (
 )
 from ..io import atomic_write_text
 from ..metrics import hysteresis_width
+from ..model.dynamics import filter_response
 from ..model.leakage import Leakage
 from .calibration import OutputMap
 from .compensator import Compensator, Domain
 from .learning_design import LearningDesign, design_learning
+from .learning_jacobian import MAX_SAMPLES, damped_step, trial_jacobian
 from .learning_probe import Response, probe_bins, probe_signal, response
 
 FloatArray = np.ndarray
@@ -239,6 +241,17 @@ def _digest(values: Any) -> str:
 GATE_MAX = 100.0
 
 
+def _gated(design: LearningDesign, e: FloatArray, gate: float) -> Any:
+    """The spectrum of ``e`` without the bins whose power is below ``gate`` times the
+    measurement noise's per bin (``design.noise``; see ``noise_gate``)."""
+    err = np.fft.rfft(e)
+    if gate > 0 and math.isfinite(design.noise) and design.noise > 0:
+        quiet = np.abs(err) ** 2 < gate * design.noise**2 * e.size
+        quiet[0] = False  # a sensor's offset is learned whole
+        err[quiet] = 0.0
+    return err
+
+
 def _update(
     design: LearningDesign, gain: float, base: FloatArray, e: FloatArray, sensor: bool,
     gate: float = 0.0,
@@ -246,11 +259,7 @@ def _update(
     """``Q (base + gain L e)``, over the periodic trial; the mean is kept for a charge. With a
     ``gate``, the bins of ``e`` whose power is below ``gate`` times the measurement noise's
     per bin (``design.noise``) are not learned (see ``noise_gate``)."""
-    old, err = np.fft.rfft(base), np.fft.rfft(e)
-    if gate > 0 and math.isfinite(design.noise) and design.noise > 0:
-        quiet = np.abs(err) ** 2 < gate * design.noise**2 * e.size
-        quiet[0] = False  # a sensor's offset is learned whole
-        err[quiet] = 0.0
+    old, err = np.fft.rfft(base), _gated(design, e, gate)
     spectrum = old + gain * design.l() * err
     spectrum[0] = old[0] + (gain * err[0] if sensor else 0.0)
     return np.fft.irfft(design.q() * spectrum, n=base.size)
@@ -318,6 +327,70 @@ def _desired_gain(settings: dict[str, Any], om: OutputMap | None) -> tuple[float
     return settings["gain"], settings["domain"] == "displacement"
 
 
+def _measured(
+    y: FloatArray, u: FloatArray, sensor: bool, d: FloatArray, leaked: float,
+    learner: LearningCompensator,
+) -> tuple[FloatArray, float, float]:  # fmt: skip
+    """The readings in the desired's units (leakage removed from a charge), the leakage's 95 %
+    bound over the trial (fraction of the span), and the charge leaked by the trial's end."""
+    g, as_displacement = _desired_gain(learner.settings, learner.output_map)
+    span = float(np.ptp(d))
+    if sensor:
+        if g is None and learner.model.output_unit == "m":  # the model's output is the sensor's
+            return y, 0.0, leaked
+        if g is None:
+            msg = "learning from a displacement needs the gain (m per model output unit)"
+            raise ParameterError(msg)
+        return (y if as_displacement else y / g), 0.0, leaked
+    ok = np.isfinite(y)
+    q = _periodic_fill(np.where(ok, y, 0.0), ok) if ok.any() else np.zeros_like(y)
+    dt = 1.0 / learner.sample_rate
+    leak = leaked + np.cumsum(learner.leakage.current(u, q) * dt)
+    sigma = learner.leakage.current_stderr(u, q)
+    scale = abs(g) if as_displacement and g is not None else 1.0
+    bound = 2.0 * float(np.mean(sigma)) * u.size * dt * scale / span
+    h = np.where(ok, y, np.nan) - leak
+    if learner.output_map is not None:  # the capacitor charge as metres, curvature included
+        return learner.output_map.predict(h), bound, float(leak[-1])
+    return (h * g if as_displacement and g is not None else h), bound, float(leak[-1])
+
+
+def _responder(learner: LearningCompensator, sensor: bool) -> Any:
+    """Commands -> the model's output in the desired's units, the trial run after itself (its
+    input dynamics, a stated lag, the gain or map included; offset-free from a charge)."""
+    s, n = learner.settings, learner.desired.size
+    g, as_displacement = _desired_gain(s, learner.output_map)
+    freqs = np.fft.rfftfreq(n, 1.0 / s["sample_rate"])
+    lagged = filter_response(0.0, s["lag"], 1.0 / s["sample_rate"], freqs) if s["lag"] > 0 else None
+    t = np.arange(2 * n) / s["sample_rate"]
+    model = learner.model.hysteresis_
+
+    def respond(u: FloatArray) -> FloatArray:
+        v = u if lagged is None else np.fft.irfft(lagged * np.fft.rfft(u), n=n)
+        with warnings.catch_warnings():  # the limits were checked where the commands were made
+            warnings.simplefilter("ignore")
+            q = np.asarray(model.predict(np.tile(v, 2), t))[n:]
+        y = (learner.output_map.predict(q) if learner.output_map is not None
+             else q * g if as_displacement and g is not None else q)  # fmt: skip
+        return np.asarray(y) if sensor else np.asarray(y - np.mean(y))
+
+    return respond
+
+
+def _jacobian_step(
+    learner: LearningCompensator, u: FloatArray, e: FloatArray, sensor: bool
+) -> FloatArray:
+    """The Jacobian law's move of the commands (see :mod:`.learning_jacobian`)."""
+    design, s = learner.design, learner.settings
+    assert design is not None
+    err = _gated(design, e, s.get("noise_gate", 0.0))
+    if not sensor:
+        err[0] = 0.0
+    ef = np.fft.irfft(design.q() * err, n=e.size)
+    jac = trial_jacobian(_responder(learner, sensor), u, s["v_max"] - s["v_min"])
+    return np.asarray(damped_step(jac, ef))
+
+
 class LearningCompensator:
     r"""A feedforward compensator that learns from repetition (iterative learning control).
 
@@ -383,6 +456,12 @@ class LearningCompensator:
         the measurement noise's (9: three times its amplitude). 0 learns the noise too,
         and the commands carry it, which dithers the loop narrower; 9 lowered the NRMSE
         on 19 of 20 plant rows and widened the loop on 13 (``docs/realtime.md``).
+    law : {"harmonic", "jacobian"}
+        How the error is learned: ``"harmonic"`` corrects the reference, each harmonic
+        through the model's inverse; ``"jacobian"`` moves the commands through the model's
+        Jacobian along them (:mod:`~piezohyst.control.learning_jacobian`: for an actuator
+        whose output runs on past its reversals; trials of up to 4000 samples, a second or
+        so of computing per 1000).
 
     Attributes
     ----------
@@ -431,6 +510,7 @@ class LearningCompensator:
         output_map: OutputMap | None = None,
         probe: bool = True,
         noise_gate: float = 0.0,
+        law: Literal["harmonic", "jacobian"] = "harmonic",
     ) -> None:
         self.model = model
         kept: dict[str, Any] = {"v_min": v_min, "v_max": v_max, "sample_rate": sample_rate,
@@ -468,6 +548,11 @@ class LearningCompensator:
         gate = check_float(noise_gate, "noise_gate", "LearningCompensator", 0.0, GATE_MAX)
         if gate > 0:  # only when set: the states saved before it existed resume
             self.settings["noise_gate"] = gate
+        if law not in ("harmonic", "jacobian"):
+            msg = f"'law' must be 'harmonic' or 'jacobian'. Got {law!r}."
+            raise ParameterError(msg)
+        if law != "harmonic":  # the same: the states saved before it existed resume
+            self.settings["law"] = law
         # checks every design setting now (a one-sample trial stands in for the trajectory)
         design_learning(model, **self._design_args(2))
         self._fingerprint = self._make_fingerprint()
@@ -582,6 +667,10 @@ class LearningCompensator:
             msg = "'desired' must move: a constant trajectory has nothing to learn."
             raise ParameterError(msg)
         _check_periodic(d)
+        if self.settings.get("law") == "jacobian" and d.size > MAX_SAMPLES:
+            msg = (f"law='jacobian' learns trials of up to {MAX_SAMPLES} samples (its Jacobian "
+                   f"is n x n): this one has {d.size}; law='harmonic' learns any")  # fmt: skip
+            raise ParameterError(msg)
         if self._desired is None:
             self._desired = d.copy()
             self._correction = np.zeros(d.size)
@@ -597,7 +686,9 @@ class LearningCompensator:
             raise ParameterError(msg)
         return self._desired
 
-    def _commands(self, previous: FloatArray, correction: FloatArray) -> FloatArray:
+    def _commands(
+        self, previous: FloatArray, correction: Any, volts: FloatArray | None = None
+    ) -> FloatArray:
         """The compensator's commands for ``desired + correction`` after the history of
         ``desired + previous`` (at least 1 s of it, from the model's initial state), within
         the slew limit over the whole trial (:func:`_centred_slew`)."""
@@ -608,6 +699,8 @@ class LearningCompensator:
         reps = max(1, math.ceil(self.sample_rate / d.size))
         comp.process(np.tile(d + previous, reps))
         u = comp.process(d + correction)
+        if volts is not None:  # the Jacobian law's correction, inside the limits
+            u = np.clip(u + volts, self.compensator.v_min, self.compensator.v_max)
         step = self.compensator.max_step
         if math.isfinite(step):  # a hair inside, so that rounding never steps over it; the
             u = _centred_slew(u, step * (1.0 - 1e-9))  # hulls stay inside the commands' range
@@ -646,8 +739,12 @@ class LearningCompensator:
         if desired is not None:
             self._set_trajectory(desired)
         probing = self._probe.size and self.trials == 0  # the lead-in carries the probe
-        u = self._commands(self._previous, self._correction + (self._probe if probing else 0.0))
+        probe = self._probe if probing else 0.0
         assert self._desired is not None
+        if self.settings.get("law") == "jacobian":  # a correction in volts, after a periodic d
+            u = self._commands(np.zeros(self._desired.size), probe, self._correction)
+        else:
+            u = self._commands(self._previous, self._correction + probe)
         clamped = _ramp_in(u, self._last, self.compensator.max_step, self._desired)
         self._pending, self._clamped = u.copy(), clamped
         self._last = float(u[-1])
@@ -686,7 +783,7 @@ class LearningCompensator:
         assert d is not None
         y, sensor = _readings(charge, displacement, u.size)
         ok = np.isfinite(y) & ~self._clamped
-        measured, bound = self._measured(y, u, sensor)
+        measured, bound, self._leaked = _measured(y, u, sensor, d, self._leaked, self)
         e = d - measured
         if not sensor:
             e = e - (e[ok].mean() if ok.any() else 0.0)
@@ -750,8 +847,12 @@ class LearningCompensator:
             self._good = (self._correction.copy(), error)
             self._resend = False
             assert self.design is not None
-            self._correction = _update(self.design, self._gain, self._correction, e, sensor,
-                                       self.settings.get("noise_gate", 0.0))  # fmt: skip
+            if self.settings.get("law") == "jacobian":
+                step = _jacobian_step(self, u, e, sensor)  # a new array: _previous keeps its own
+                self._correction = self._correction + self._gain * step
+            else:
+                self._correction = _update(self.design, self._gain, self._correction, e, sensor,
+                                           self.settings.get("noise_gate", 0.0))  # fmt: skip
         trial = Trial(index, error, width, learned, self._gain, rolled, False, bound, saturated)
         self._close(trial)
         return trial
@@ -759,33 +860,6 @@ class LearningCompensator:
     def _close(self, trial: Trial) -> None:
         self.history.append(trial)
         self._pending = None
-
-    def _measured(self, y: FloatArray, u: FloatArray, sensor: bool) -> tuple[FloatArray, float]:
-        """The readings in the desired's units (leakage removed from a charge), and the
-        leakage's 95 % bound over the trial (fraction of the span)."""
-        d = self._desired
-        assert d is not None
-        g, as_displacement = _desired_gain(self.settings, self.output_map)
-        span = float(np.ptp(d))
-        if sensor:
-            if g is None and self.model.output_unit == "m":  # the model's output is the sensor's
-                return y, 0.0
-            if g is None:
-                msg = "learning from a displacement needs the gain (m per model output unit)"
-                raise ParameterError(msg)
-            return (y if as_displacement else y / g), 0.0
-        ok = np.isfinite(y)
-        q = _periodic_fill(np.where(ok, y, 0.0), ok) if ok.any() else np.zeros_like(y)
-        dt = 1.0 / self.sample_rate
-        leaked = self._leaked + np.cumsum(self.leakage.current(u, q) * dt)
-        self._leaked = float(leaked[-1])
-        sigma = self.leakage.current_stderr(u, q)
-        scale = abs(g) if as_displacement and g is not None else 1.0
-        bound = 2.0 * float(np.mean(sigma)) * u.size * dt * scale / span
-        h = np.where(ok, y, np.nan) - leaked
-        if self.output_map is not None:  # the capacitor charge as metres, curvature included
-            return self.output_map.predict(h), bound
-        return (h * g if as_displacement and g is not None else h), bound
 
     # -------------------------------------------------------------------- files
     def to_dict(self) -> dict[str, Any]:

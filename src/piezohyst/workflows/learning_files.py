@@ -75,6 +75,7 @@ def learn_file(
     lead_in: bool = True,
     probe: bool = True,
     noise_gate: float = 0.0,
+    law: Literal["harmonic", "jacobian"] = "harmonic",
     voltage_tolerance: float | None = None,
     force: bool = False,
     command_scale: str | float | None = None,
@@ -105,7 +106,7 @@ def learn_file(
         domain and gain.
     leakage : path, optional
         A leakage file (:func:`~piezohyst.model.leakage.calibrate_leakage`); default the model's.
-    lag, learning_gain, cutoff, lead_in, probe, noise_gate
+    lag, learning_gain, cutoff, lead_in, probe, noise_gate, law
         See :class:`~piezohyst.LearningCompensator`.
     voltage_scale, reading_scale : str or float, optional
         What one unit of the recording's voltage or reading column is worth, for channels
@@ -196,6 +197,7 @@ def learn_file(
         lead_in=lead_in,
         probe=probe,
         noise_gate=noise_gate,
+        law=law,
     )
     trial = None
     check: dict[str, float] = {}
@@ -251,7 +253,7 @@ RUN_OPTIONS = {
     "domain": "--domain", "v_min": "--v-min", "v_max": "--v-max", "slew_rate": "--slew-rate",
     "allow_extrapolation": "--allow-extrapolation", "lag": "--lag",
     "learning_gain": "--learning-gain", "cutoff": "--cutoff", "lead_in": "--no-lead-in",
-    "probe": "--no-probe", "noise_gate": "--noise-gate",
+    "probe": "--no-probe", "noise_gate": "--noise-gate", "law": "--law",
 }  # fmt: skip
 
 
@@ -265,6 +267,7 @@ def _run_settings(learner: LearningCompensator) -> dict[str, Any]:
 
     out = {k: v for k, v in learner.settings.items() if k in RUN_OPTIONS}
     out["noise_gate"] = learner.settings.get("noise_gate", 0.0)
+    out["law"] = learner.settings.get("law", "harmonic")
     out["model"] = digest(learner.model.to_dict())
     out["leakage"] = digest(learner.leakage.to_dict())
     out["output_map"] = None if learner.output_map is None else digest(learner.output_map.to_dict())

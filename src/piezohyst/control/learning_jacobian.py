@@ -1,0 +1,98 @@
+r"""The Jacobian learning law (``LearningCompensator(law="jacobian")``).
+
+The harmonic law (:mod:`piezohyst.control.learning_design`) learns a correction of the
+reference: each harmonic of the error, turned into volts by the model's inverse, that is
+by its local slope. It converges while the actuator's slope over the model's stays near 1
+(:attr:`~piezohyst.control.learning_design.LearningDesign.slope_error`). An actuator whose
+output runs on past a reversal (``metrics.run_on``: the charge still rises while the
+voltage already falls) has a negative slope there over every model that can be inverted,
+and the inverse of a model whose branch is flat just past a reversal turns a small
+reference change into a large voltage step, which the slew limit then cuts.
+
+This law learns the commands themselves. After each trial it takes the model's Jacobian
+along the trial's commands, :math:`J_{kj} = \partial y_k / \partial u_j` (the trial run
+after itself, the model's input dynamics and a stated lag included: a command moves the
+output at its own sample, through the lag at the next ones, and through the memory of a
+reversal it sets over the rest of the trial), and moves the commands by the damped
+least-squares step
+
+.. math:: \delta u = \gamma\,(J^\top J + \lambda I)^{-1} J^\top Q e,
+
+with :math:`\gamma` and :math:`Q` from the same design as the harmonic law and
+:math:`\lambda` = :data:`DAMPING` times :math:`J`'s largest singular value squared; the
+commands then meet the voltage and slew limits. Each singular direction of the output moves
+by :math:`\gamma\,\sigma^2/(\sigma^2 + \lambda) \le \gamma` of its error, so the step never
+amplifies the measurement noise in the output, and where the model is flat the damping
+keeps the voltage from jumping.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+FloatArray = np.ndarray
+
+__all__ = ["DAMPING", "MAX_SAMPLES", "damped_step", "trial_jacobian"]
+
+#: :math:`\lambda` over the Jacobian's largest singular value squared: among 1e-4, 1e-3 and
+#: 1e-2, on the bench behind its 4 ms amplifier (seed 0, ActivePI with identified dynamics, 10
+#: and 40 Hz scans: 1e-2 left the widest loops there), the one with the smaller step where the
+#: model is flat of the two that tied (``docs/benchmarks.md`` says what else was seen first)
+DAMPING = 1e-3
+#: the longest trial this law learns: its Jacobian is a dense n x n matrix (4000: 128 MB)
+MAX_SAMPLES = 4000
+#: the finite-difference step, V per V of the commands' range (at least 1 mV)
+STEP = 1e-5
+
+
+def trial_jacobian(
+    respond: Callable[[FloatArray], FloatArray], u: FloatArray, span: float
+) -> FloatArray:
+    """The Jacobian of ``respond`` at ``u`` by forward differences, one column per command.
+
+    Parameters
+    ----------
+    respond : callable
+        Commands (one trial) -> outputs (one per command).
+    u : ndarray
+        The trial's commands (V).
+    span : float
+        V, the commands' range: the step is ``STEP`` of it, at least 1 mV.
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+    """
+    n = u.size
+    h = max(STEP * span, 1e-3)
+    y0 = respond(u)
+    jac = np.empty((n, n))
+    moved = u.copy()
+    for j in range(n):
+        moved[j] = u[j] + h
+        jac[:, j] = respond(moved) - y0
+        moved[j] = u[j]
+    return jac / h
+
+
+def damped_step(jac: FloatArray, e: FloatArray, damping: float = DAMPING) -> FloatArray:
+    r""":math:`(J^\top J + \lambda I)^{-1} J^\top e`, :math:`\lambda` = ``damping`` times
+    :math:`J`'s largest singular value squared (by its SVD; zero where ``J`` is).
+
+    Parameters
+    ----------
+    jac : ndarray, shape (m, n)
+    e : ndarray, shape (m,)
+    damping : float
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    u_, s, vt = np.linalg.svd(jac, full_matrices=False)
+    if s.size == 0 or not s[0] > 0:
+        return np.zeros(jac.shape[1])
+    lam = damping * s[0] ** 2
+    return np.asarray(vt.T @ ((s / (s**2 + lam)) * (u_.T @ e)))

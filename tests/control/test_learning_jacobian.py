@@ -1,0 +1,265 @@
+"""The Jacobian learning law (issue 40, item 6): its Jacobian and step against plain
+references, the learner's wiring against a naive model, the safety rules and files, and the
+plant whose charge runs on past every reversal."""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import piezohyst as ph
+from piezohyst.cli import main
+from piezohyst.control.learning_jacobian import MAX_SAMPLES, damped_step, trial_jacobian
+from piezohyst.errors import LearningWarning, ParameterError
+from piezohyst.metrics import hysteresis_width
+from piezohyst.simulation import PLANTS, Bench, make_signal
+from piezohyst.workflows.excitation import excitation
+
+from .. import reference
+
+RATE = 1000.0
+R, W = [0.0, 20.0, 50.0], [1e-8, 5e-9, 3e-9]
+
+
+@pytest.fixture(scope="module")
+def pi_model() -> ph.ClassicalPI:
+    return ph.ClassicalPI.from_operator(ph.PIHysteresis(R, W))
+
+
+def cosine(model: ph.ClassicalPI, n: int = 64, cycles: int = 2) -> np.ndarray:
+    top = float(model.hysteresis_.predict([0.0, 140.0])[-1])
+    return top * (0.3 + 0.2 * (1 - np.cos(2 * np.pi * cycles * np.arange(n) / n)))
+
+
+def test_the_jacobian_of_a_linear_response_is_its_matrix() -> None:
+    rng = np.random.default_rng(0)
+    a = np.tril(rng.standard_normal((12, 12)))
+    u = rng.uniform(0, 100, 12)
+    jac = trial_jacobian(lambda x: a @ x, u, span=100.0)
+    # tol: forward differences of a linear map are exact but for rounding: |a||u| eps / step
+    np.testing.assert_allclose(jac, a, rtol=0, atol=1e3 * 12 * 100 * 2.2e-16 / 1e-3)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    m=st.integers(2, 9),
+    n=st.integers(1, 9),
+    seed=st.integers(0, 2**32 - 1),
+    damping=st.sampled_from([1e-4, 1e-2, 1.0]),
+)
+def test_the_step_is_the_damped_least_squares_solution(
+    m: int, n: int, seed: int, damping: float
+) -> None:
+    """(J'J + lambda I)^-1 J'e with lambda = damping |J|^2, and the output it moves never
+    exceeds the error (every singular direction moves by s^2 / (s^2 + lambda) <= 1 of it)."""
+    rng = np.random.default_rng(seed)
+    jac = rng.standard_normal((m, n)) * rng.uniform(0.1, 10)
+    e = rng.standard_normal(m)
+    lam = damping * np.linalg.norm(jac, 2) ** 2
+    want = np.linalg.solve(jac.T @ jac + lam * np.eye(n), jac.T @ e)
+    got = damped_step(jac, e, damping)
+    # tol: the normal equations' condition number, at most 1 + 1 / damping, times rounding
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * (1 + 1 / damping) * (
+        np.abs(want).max() + 1))  # fmt: skip
+    assert np.linalg.norm(jac @ got) <= np.linalg.norm(e) * (1 + 1e-12)
+    np.testing.assert_array_equal(damped_step(np.zeros((m, n)), e), np.zeros(n))
+
+
+def naive_jacobian(u: np.ndarray, h: float) -> np.ndarray:
+    """The classical PI's response to the trial run after itself (second period, offset-free),
+    differenced one command at a time, from the paper's recursion (tests/reference.py)."""
+    n = u.size
+
+    def respond(x: np.ndarray) -> np.ndarray:
+        y = reference.classical_pi(list(np.tile(x, 2)), R, W, [float(x[0])] * len(R))
+        y2 = np.asarray(y[n:])
+        return y2 - y2.mean()
+
+    y0 = respond(u)
+    cols = []
+    for j in range(n):
+        x = u.copy()
+        x[j] += h
+        cols.append((respond(x) - y0) / h)
+    return np.array(cols).T
+
+
+def test_the_learner_moves_its_commands_by_the_models_jacobian_step(
+    pi_model: ph.ClassicalPI,
+) -> None:
+    """One trial, gain 1, no filter: the correction (V) is the damped step through the
+    Jacobian of the trial's own commands, written out from the naive model."""
+    d = cosine(pi_model, n=48, cycles=2)
+    ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
+                                 slew_rate=None, learning_gain=1.0, cutoff=math.inf,
+                                 lead_in=False, law="jacobian")  # fmt: skip
+    u = ilc.command(d)
+    y = pi_model.hysteresis_.predict(u * 0.97 + 1.0)  # an actuator a little off the model
+    ilc.learn(y)
+    e = d - y
+    e = e - e.mean()  # the charge's zero is not learned
+    want = damped_step(naive_jacobian(u, max(1e-5 * 140.0, 1e-3)), e)
+    # tol: the model's kernel against the naive recursion differenced with a 1 mV step:
+    # rounding of outputs ~1e-7 C over 1e-3 V, through the step's gain (<= 1 / (2 sqrt(lambda)))
+    np.testing.assert_allclose(ilc.correction, want, rtol=1e-6, atol=1e-6 * np.abs(want).max())
+    assert np.abs(want).max() > 0.1  # a real move, in volts
+    # the next trial sends the feedforward plus that move
+    u2 = ilc.command()
+    np.testing.assert_allclose(u2, np.clip(u + want, 0.0, 140.0), rtol=0, atol=1e-9)
+
+
+@pytest.mark.filterwarnings("ignore::piezohyst.errors.LearningWarning")  # a random plant
+def test_every_command_of_the_jacobian_law_is_safe(pi_model: ph.ClassicalPI) -> None:
+    """Inside the limits and within the slew limit, from rest into the first trial and across
+    trials, whatever the readings."""
+    d = cosine(pi_model, n=120, cycles=4)
+    ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
+                                 slew_rate=20e3, voltage=130.0, law="jacobian")  # fmt: skip
+    sent = [ilc.last_command]
+    rng = np.random.default_rng(0)
+    for _ in range(6):
+        u = ilc.command(d)
+        sent += list(u)
+        y = pi_model.hysteresis_.predict(np.clip(u + rng.normal(0, 3, u.size), 0, 140))
+        ilc.learn(y * (1 + 0.3 * rng.standard_normal(u.size)))
+    v = np.asarray(sent)
+    assert np.isfinite(v).all() and v.min() >= 0.0 and v.max() <= 140.0
+    assert np.abs(np.diff(v)).max() <= 20.0 * (1 + 1e-9)  # 20e3 V/s at 1 kHz
+
+
+def test_what_the_jacobian_law_refuses(pi_model: ph.ClassicalPI) -> None:
+    kw = {"v_min": 0.0, "v_max": 140.0, "sample_rate": RATE}
+    with pytest.raises(ParameterError, match="'law' must be 'harmonic' or 'jacobian'"):
+        ph.LearningCompensator(pi_model, law="newton", **kw)  # type: ignore[arg-type]
+    ilc = ph.LearningCompensator(pi_model, law="jacobian", **kw)  # type: ignore[arg-type]
+    long = cosine(pi_model, n=MAX_SAMPLES + 2, cycles=3)
+    with pytest.raises(ParameterError, match=f"up to {MAX_SAMPLES} samples.*law='harmonic'"):
+        ilc.command(long)
+    assert ph.LearningCompensator(pi_model, **kw).command(long).size == long.size  # type: ignore[arg-type]
+
+
+@pytest.mark.filterwarnings("ignore::piezohyst.errors.LearningWarning")  # rollbacks resume too
+def test_a_saved_jacobian_learner_resumes_exactly(pi_model: ph.ClassicalPI, tmp_path: Path) -> None:
+    d = cosine(pi_model, n=100, cycles=4)
+    kw = {"v_min": 0.0, "v_max": 140.0, "sample_rate": RATE, "slew_rate": 20e3}
+    whole = ph.LearningCompensator(pi_model, law="jacobian", **kw)  # type: ignore[arg-type]
+    path = tmp_path / "learn.json"
+    rng = np.random.default_rng(4)
+    for j in range(4):
+        u = whole.command(d)
+        y = pi_model.hysteresis_.predict(u) * (1 + 0.02 * rng.standard_normal(u.size))
+        whole.learn(y)
+        again = ph.LearningCompensator(pi_model, law="jacobian", **kw)  # type: ignore[arg-type]
+        if j:
+            again.load(path)
+            np.testing.assert_array_equal(again.command(), u)  # the same trial, to the bit
+            again.learn(y)
+            np.testing.assert_array_equal(again.correction, whole.correction)
+        whole.save(path)
+    harmonic = ph.LearningCompensator(pi_model, **kw)  # type: ignore[arg-type]
+    with pytest.raises(ph.ModelFileError, match="another model, leakage or settings"):
+        harmonic.load(path)  # a correction in volts is not a reference's
+
+
+def test_the_command_line_learns_with_the_jacobian_law_and_holds_a_run_to_it(
+    pi_model: ph.ClassicalPI, tmp_path: Path
+) -> None:
+    """``--law jacobian`` through files, as in memory; a later call without it is refused,
+    naming the option."""
+    pi_model.save(tmp_path / "m.json")
+    d = cosine(pi_model, n=100, cycles=4)
+    ph.write_table(tmp_path / "scan.csv", {"time": np.arange(d.size) / RATE, "desired": d})
+    base = ["learn", str(tmp_path / "m.json"), "--state", str(tmp_path / "s.json"), "-o",
+            str(tmp_path / "next.csv"), "--v-min", "0", "--v-max", "140", "--slew-rate",
+            "20000", "--no-lead-in"]  # fmt: skip
+    runner = CliRunner()
+    first = runner.invoke(
+        main, [*base, "--law", "jacobian", "--desired", str(tmp_path / "scan.csv")]
+    )
+    assert first.exit_code == 0, first.output
+    u = ph.read_table(tmp_path / "next.csv").get("command")
+    y = pi_model.hysteresis_.predict(u * 0.97 + 1.0)
+    ph.write_table(tmp_path / "t0.csv", {"voltage": u, "charge": y})
+    res = runner.invoke(main, [*base[:2], str(tmp_path / "t0.csv"), *base[2:]])
+    assert res.exit_code == 1
+    assert "--law 'harmonic', where the first call gave 'jacobian'" in res.output
+    res = runner.invoke(main, [*base[:2], str(tmp_path / "t0.csv"), *base[2:], "--law", "jacobian"])
+    assert res.exit_code == 0, res.output
+    ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
+                                 slew_rate=20e3, lead_in=False, law="jacobian")  # fmt: skip
+    np.testing.assert_array_equal(ilc.command(d), u)
+    ilc.learn(y)
+    np.testing.assert_array_equal(ph.read_table(tmp_path / "next.csv").get("command"),
+                                  ilc.command())  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def duhem() -> dict[str, object]:
+    """The Duhem capacitor (its charge runs on past every reversal) behind a 4 ms amplifier,
+    0.1 % noise on the charge; leakage from 10 s holds, ActivePI(10) with identified input
+    dynamics from 30 s of multifreq (what ``benchmarks/bench_learning.py --plants`` runs)."""
+    plant = replace(PLANTS["duhem"], amp_tau=4e-3)
+    played = excitation(v_min=0.0, v_max=140.0, sample_rate=RATE)
+    span = np.ptp(ph.simulate(played.voltage, played.t, preset=plant, seed=1).capacitor_charge)
+    p = replace(plant, amp_noise=1e-3 * span / plant.c_ref)
+    ident = ph.simulate(played.voltage, played.t, preset=p, seed=1)
+    holds = excitation("holds", v_min=0.0, v_max=140.0, sample_rate=RATE, hold=10.0)
+    cal = ph.simulate(holds.voltage, holds.t, preset=p, seed=2)
+    t, v = make_signal("multifreq", amplitude=140.0, frequency=0.5, duration=30.0)
+    multi = ph.simulate(v, t, preset=p, seed=4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the calibration says how sure it is
+        leak = ph.calibrate_leakage(cal.t, cal.voltage, cal.charge)
+        model = ph.ActivePI(n_operators=10, input_dynamics="auto").fit(
+            multi.voltage, multi.charge, t=multi.t
+        )
+    q = ident.charge - leak.charge(ident.voltage, ident.t, ident.charge)
+    vv = ident.voltage
+    top = float(q[vv >= vv.max() - 1e-9].min() - q[0])
+    bottom = float(q[vv <= vv.min() + 1e-9].max() - q[0])
+    lo, hi = bottom + 0.3 * (top - bottom), top - 0.3 * (top - bottom)
+    return {"preset": p, "leak": leak, "model": model, "range": (lo, hi)}
+
+
+def scan40(rig: dict[str, object], law: str, trials: int = 11) -> tuple[float, float]:
+    """Trials of one second of a 40 Hz sine over the middle 40 % of the charge, learned from
+    the charge; the width and offset-free NRMSE of the true displacement after the last."""
+    p, model = rig["preset"], rig["model"]
+    lo, hi = rig["range"]  # type: ignore[misc]
+    desired = p.gain * (0.5 * (lo + hi) + 0.5 * (hi - lo) * np.sin(  # type: ignore[attr-defined]
+        2 * np.pi * 40.0 * np.arange(int(RATE)) / RATE))  # fmt: skip
+    v_min, v_max = model.input_range_  # type: ignore[attr-defined]
+    ilc = ph.LearningCompensator(model, v_min=v_min, v_max=v_max, sample_rate=RATE,
+                                 leakage=rig["leak"], domain="displacement",  # type: ignore[arg-type]
+                                 gain=p.gain, slew_rate=30e3, law=law)  # type: ignore[arg-type, attr-defined]  # fmt: skip
+    bench = Bench(p, seed=3, voltage=ilc.last_command)  # type: ignore[arg-type]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", LearningWarning)  # the slew limit's count, each trial
+        for _ in range(trials):
+            rec = bench.run(ilc.command(desired))
+            ilc.learn(rec.charge)
+    s = rec.true_displacement
+    e = (desired - desired.mean()) - (s - s.mean())
+    return hysteresis_width(desired, s), float(np.sqrt(np.mean(e**2)) / np.ptp(desired))
+
+
+@pytest.mark.heavy
+def test_on_a_plant_whose_charge_runs_on_the_jacobian_law_meets_the_40_hz_bar(
+    duhem: dict[str, object],
+) -> None:
+    """Issue 40, item 6: <= 1 % width and NRMSE at 40 Hz after 10 trials. The harmonic law
+    stalls here (its inverse asks the slew limit for the run-on's corners): measured over
+    seeds 0-2 (this is seed 0), 0.82-0.85 % width and 0.37-0.38 % NRMSE, where the harmonic
+    law leaves 0.93-1.03 % and 0.83-0.88 % (``docs/benchmarks.md``)."""
+    width, nrmse = scan40(duhem, "jacobian")
+    assert width <= 0.01 and nrmse <= 0.01
+    harmonic = scan40(duhem, "harmonic")
+    assert width < harmonic[0]
