@@ -158,9 +158,9 @@ def _saturated(u: FloatArray, comp: Compensator) -> int:
     return int(np.count_nonzero(top | bottom | slewed))
 
 
-def _limits_said(index: int, u: FloatArray, comp: Compensator) -> str:
+def _limits_said(index: int, u: FloatArray, comp: Compensator, law: str = "harmonic") -> str:
     """The warning of a trial whose commands the limits held: how many each limit held, and
-    the option that sets it."""
+    the option that sets it (and, where the harmonic law met the slew limit, the other law)."""
     top, bottom, slewed = _held(u, comp)
     parts = []
     if slewed.any():
@@ -176,6 +176,12 @@ def _limits_said(index: int, u: FloatArray, comp: Compensator) -> str:
         f"trial {index}: the limits held {held} of {u.size} commands ({'; '.join(parts)}): "
         "the trajectory asks for more than the actuator and amplifier give, and learning "
         "cannot remove the error that leaves"
+        + (
+            " (if the output runs on past its reversals, report's run-on row: law='jacobian', "
+            "--law jacobian, learns without asking the amplifier for those steps)"
+            if slewed.any() and law == "harmonic"
+            else ""
+        )
     )
 
 
@@ -816,7 +822,8 @@ class LearningCompensator:
         flipped = as_displacement and g is not None and g < 0
         e = _anti_windup(e, u, self.compensator, -1.0 if flipped else 1.0)
         if saturated > SATURATED * u.size:
-            warnings.warn(_limits_said(index, u, self.compensator), LearningWarning, stacklevel=2)
+            said = _limits_said(index, u, self.compensator, self.settings.get("law", "harmonic"))
+            warnings.warn(said, LearningWarning, stacklevel=2)
         rolled = False
         if self._first:  # the law, chosen from the first trial learned from
             loop = _probed(self._lead, measured, ok, self._bins, d)
