@@ -7,7 +7,6 @@ import json
 import math
 import shutil
 import warnings
-from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -17,13 +16,10 @@ from click.testing import CliRunner
 import piezohyst as ph
 from piezohyst.cli import main
 from piezohyst.errors import LearningWarning
-from piezohyst.metrics import hysteresis_width
-from piezohyst.simulation import PLANTS, Bench, BenchPreset, BenchRecord, make_signal
-from piezohyst.workflows.excitation import excitation
+from piezohyst.simulation import PLANTS, Bench
 
 from .. import reference
-
-RATE = 1000.0
+from .learning_rigs import RATE, Rig, make_rig, scan
 
 
 @pytest.fixture(scope="module")
@@ -267,9 +263,12 @@ def test_a_noise_gate_keeps_the_noise_out_of_the_commands(
 
 
 @pytest.mark.filterwarnings("ignore::piezohyst.errors.LearningWarning")  # rollbacks resume too
-def test_a_saved_learner_resumes_exactly(pi_model: ph.ClassicalPI, tmp_path: Path) -> None:
+@pytest.mark.parametrize("law", ["harmonic", "jacobian"])
+def test_a_saved_learner_resumes_exactly(
+    pi_model: ph.ClassicalPI, tmp_path: Path, law: str
+) -> None:
     d = cosine(pi_model, n=200, cycles=4)
-    kw = {"v_min": 0.0, "v_max": 140.0, "sample_rate": RATE, "slew_rate": 20e3}
+    kw = {"v_min": 0.0, "v_max": 140.0, "sample_rate": RATE, "slew_rate": 20e3, "law": law}
     whole = ph.LearningCompensator(pi_model, **kw)  # type: ignore[arg-type]
     path = tmp_path / "learn.json"
     rng = np.random.default_rng(4)
@@ -287,6 +286,10 @@ def test_a_saved_learner_resumes_exactly(pi_model: ph.ClassicalPI, tmp_path: Pat
     other = ph.LearningCompensator(pi_model, **{**kw, "v_max": 120.0})  # type: ignore[arg-type]
     with pytest.raises(ph.ModelFileError, match="another model, leakage or settings"):
         other.load(path)
+    other_law = "harmonic" if law == "jacobian" else "jacobian"  # a correction in volts is not
+    other = ph.LearningCompensator(pi_model, **{**kw, "law": other_law})  # type: ignore[arg-type]
+    with pytest.raises(ph.ModelFileError, match="another model, leakage or settings"):
+        other.load(path)  # a reference's, nor the other way round
 
 
 def test_the_file_loop_is_the_in_memory_loop(tmp_path: Path) -> None:
@@ -430,78 +433,11 @@ def test_learn_writes_over_a_file_it_did_not_write_only_with_force(tmp_path: Pat
 PLANT = PLANTS["bouc-wen-creep-lag"]
 
 
-@dataclass
-class Rig:
-    preset: BenchPreset
-    leak: ph.Leakage
-    model: ph.BoucWenModel
-    ident: BenchRecord
-    range: tuple[float, float]
-
-
 @pytest.fixture(scope="module")
 def rig() -> Rig:
     """The plant with 0.1 % noise on the charge, its leakage calibrated from 10 s holds up and
     down, a Bouc-Wen model with identified input dynamics from 30 s of multifreq."""
-    played = excitation(v_min=0.0, v_max=140.0, sample_rate=RATE)
-    span = np.ptp(ph.simulate(played.voltage, played.t, preset=PLANT, seed=1).capacitor_charge)
-    p = replace(PLANT, amp_noise=1e-3 * span / PLANT.c_ref)
-    ident = ph.simulate(played.voltage, played.t, preset=p, seed=1)
-    holds = excitation("holds", v_min=0.0, v_max=140.0, sample_rate=RATE, hold=10.0)
-    cal = ph.simulate(holds.voltage, holds.t, preset=p, seed=2)
-    t, v = make_signal("multifreq", amplitude=140.0, frequency=0.5, duration=30.0)
-    multi = ph.simulate(v, t, preset=p, seed=4)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the relaxing plant's calibration says how sure it is
-        leak = ph.calibrate_leakage(cal.t, cal.voltage, cal.charge)
-        model = ph.BoucWenModel(input_dynamics="auto").fit(multi.voltage, multi.charge, t=multi.t)
-    # the scan's range: the charge (leakage removed) the record reached at its lowest and highest
-    # voltage from every history in it (as the self-sensing loop's test), its middle 40 %
-    q = ident.charge - leak.charge(ident.voltage, ident.t, ident.charge)
-    vv = ident.voltage
-    top = float(q[vv >= vv.max() - 1e-9].min() - q[0])
-    bottom = float(q[vv <= vv.min() + 1e-9].max() - q[0])
-    middle = (bottom + 0.3 * (top - bottom), top - 0.3 * (top - bottom))
-    return Rig(p, leak, model, ident, middle)
-
-
-def scan(
-    rig: Rig, model: ph.HysteresisModel, f: float, trials: int, *, lag: float = 0.0,
-    gap: int | None = None, sensor: bool = False,
-) -> tuple[ph.LearningCompensator, list[tuple[float, float]]]:  # fmt: skip
-    """Trials of one second of a sine at ``f``, continuous; per trial the width and the
-    offset-free NRMSE of the true displacement."""
-    p = rig.preset
-    lo, hi = rig.range
-    shape = np.sin(2 * np.pi * f * np.arange(int(RATE)) / RATE)
-    desired = p.gain * (0.5 * (lo + hi) + 0.5 * (hi - lo) * shape)
-    v_min, v_max = model.input_range_
-    ilc = ph.LearningCompensator(model, v_min=v_min, v_max=v_max, sample_rate=RATE,
-                                 leakage=rig.leak, domain="displacement", gain=p.gain,
-                                 lag=lag, slew_rate=30e3)  # fmt: skip
-    bench = Bench(p, seed=3, voltage=ilc.last_command)
-    scores = []
-    for j in range(trials):
-        u = ilc.command(desired)
-        assert np.isfinite(u).all() and v_min <= u.min() and u.max() <= v_max
-        rec = bench.run(u)
-        y = rec.charge.copy()
-        if gap is not None and j == gap:
-            y[::3] = np.nan  # a third of the readings lost, everywhere in the trial
-            y[300:500] = np.nan
-        if sensor:  # the laser's reading; its first update learns the offset and may overshoot
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", LearningWarning)
-                ilc.learn(displacement=rec.displacement)
-        else:
-            with warnings.catch_warnings():
-                warnings.simplefilter("error", LearningWarning)  # no rollback expected
-                ilc.learn(y)
-        s = rec.true_displacement
-        e = (desired - desired.mean()) - (s - s.mean())
-        scores.append((hysteresis_width(desired, s),
-                       float(np.sqrt(np.mean(e**2)) / np.ptp(desired))))  # fmt: skip
-    return ilc, scores
+    return make_rig(PLANT, lambda: ph.BoucWenModel(input_dynamics="auto"))
 
 
 @pytest.mark.heavy

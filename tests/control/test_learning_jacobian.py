@@ -1,6 +1,7 @@
 """The Jacobian learning law (issue 40, item 6): its Jacobian and step against plain
-references, the learner's wiring against a naive model, the safety rules and files, and the
-plant whose charge runs on past every reversal."""
+references, the learner's wiring against a naive model, the safety rules and the command
+line (its saved state resumes: tests/control/test_learning.py), and the plant whose charge
+runs on past every reversal."""
 
 from __future__ import annotations
 
@@ -19,13 +20,11 @@ import piezohyst as ph
 from piezohyst.cli import main
 from piezohyst.control.learning_jacobian import MAX_SAMPLES, damped_step, trial_jacobian
 from piezohyst.errors import LearningWarning, ParameterError
-from piezohyst.metrics import hysteresis_width
-from piezohyst.simulation import PLANTS, Bench, make_signal
-from piezohyst.workflows.excitation import excitation
+from piezohyst.simulation import PLANTS
 
 from .. import reference
+from .learning_rigs import RATE, Rig, make_rig, scan
 
-RATE = 1000.0
 R, W = [0.0, 20.0, 50.0], [1e-8, 5e-9, 3e-9]
 
 
@@ -146,29 +145,6 @@ def test_what_the_jacobian_law_refuses(pi_model: ph.ClassicalPI) -> None:
     assert ph.LearningCompensator(pi_model, **kw).command(long).size == long.size  # type: ignore[arg-type]
 
 
-@pytest.mark.filterwarnings("ignore::piezohyst.errors.LearningWarning")  # rollbacks resume too
-def test_a_saved_jacobian_learner_resumes_exactly(pi_model: ph.ClassicalPI, tmp_path: Path) -> None:
-    d = cosine(pi_model, n=100, cycles=4)
-    kw = {"v_min": 0.0, "v_max": 140.0, "sample_rate": RATE, "slew_rate": 20e3}
-    whole = ph.LearningCompensator(pi_model, law="jacobian", **kw)  # type: ignore[arg-type]
-    path = tmp_path / "learn.json"
-    rng = np.random.default_rng(4)
-    for j in range(4):
-        u = whole.command(d)
-        y = pi_model.hysteresis_.predict(u) * (1 + 0.02 * rng.standard_normal(u.size))
-        whole.learn(y)
-        again = ph.LearningCompensator(pi_model, law="jacobian", **kw)  # type: ignore[arg-type]
-        if j:
-            again.load(path)
-            np.testing.assert_array_equal(again.command(), u)  # the same trial, to the bit
-            again.learn(y)
-            np.testing.assert_array_equal(again.correction, whole.correction)
-        whole.save(path)
-    harmonic = ph.LearningCompensator(pi_model, **kw)  # type: ignore[arg-type]
-    with pytest.raises(ph.ModelFileError, match="another model, leakage or settings"):
-        harmonic.load(path)  # a correction in volts is not a reference's
-
-
 def test_the_command_line_learns_with_the_jacobian_law_and_holds_a_run_to_it(
     pi_model: ph.ClassicalPI, tmp_path: Path
 ) -> None:
@@ -219,64 +195,23 @@ def test_a_harmonic_trial_the_slew_limit_holds_names_the_other_law(
 
 
 @pytest.fixture(scope="module")
-def duhem() -> dict[str, object]:
+def duhem() -> Rig:
     """The Duhem capacitor (its charge runs on past every reversal) behind a 4 ms amplifier,
-    0.1 % noise on the charge; leakage from 10 s holds, ActivePI(10) with identified input
-    dynamics from 30 s of multifreq (what ``benchmarks/bench_learning.py --plants`` runs)."""
+    ActivePI(10) with identified input dynamics (what ``bench_learning.py --plants`` runs)."""
     plant = replace(PLANTS["duhem"], amp_tau=4e-3)
-    played = excitation(v_min=0.0, v_max=140.0, sample_rate=RATE)
-    span = np.ptp(ph.simulate(played.voltage, played.t, preset=plant, seed=1).capacitor_charge)
-    p = replace(plant, amp_noise=1e-3 * span / plant.c_ref)
-    ident = ph.simulate(played.voltage, played.t, preset=p, seed=1)
-    holds = excitation("holds", v_min=0.0, v_max=140.0, sample_rate=RATE, hold=10.0)
-    cal = ph.simulate(holds.voltage, holds.t, preset=p, seed=2)
-    t, v = make_signal("multifreq", amplitude=140.0, frequency=0.5, duration=30.0)
-    multi = ph.simulate(v, t, preset=p, seed=4)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the calibration says how sure it is
-        leak = ph.calibrate_leakage(cal.t, cal.voltage, cal.charge)
-        model = ph.ActivePI(n_operators=10, input_dynamics="auto").fit(
-            multi.voltage, multi.charge, t=multi.t
-        )
-    q = ident.charge - leak.charge(ident.voltage, ident.t, ident.charge)
-    vv = ident.voltage
-    top = float(q[vv >= vv.max() - 1e-9].min() - q[0])
-    bottom = float(q[vv <= vv.min() + 1e-9].max() - q[0])
-    lo, hi = bottom + 0.3 * (top - bottom), top - 0.3 * (top - bottom)
-    return {"preset": p, "leak": leak, "model": model, "range": (lo, hi)}
-
-
-def scan40(rig: dict[str, object], law: str, trials: int = 11) -> tuple[float, float]:
-    """Trials of one second of a 40 Hz sine over the middle 40 % of the charge, learned from
-    the charge; the width and offset-free NRMSE of the true displacement after the last."""
-    p, model = rig["preset"], rig["model"]
-    lo, hi = rig["range"]  # type: ignore[misc]
-    desired = p.gain * (0.5 * (lo + hi) + 0.5 * (hi - lo) * np.sin(  # type: ignore[attr-defined]
-        2 * np.pi * 40.0 * np.arange(int(RATE)) / RATE))  # fmt: skip
-    v_min, v_max = model.input_range_  # type: ignore[attr-defined]
-    ilc = ph.LearningCompensator(model, v_min=v_min, v_max=v_max, sample_rate=RATE,
-                                 leakage=rig["leak"], domain="displacement",  # type: ignore[arg-type]
-                                 gain=p.gain, slew_rate=30e3, law=law)  # type: ignore[arg-type, attr-defined]  # fmt: skip
-    bench = Bench(p, seed=3, voltage=ilc.last_command)  # type: ignore[arg-type]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", LearningWarning)  # the slew limit's count, each trial
-        for _ in range(trials):
-            rec = bench.run(ilc.command(desired))
-            ilc.learn(rec.charge)
-    s = rec.true_displacement
-    e = (desired - desired.mean()) - (s - s.mean())
-    return hysteresis_width(desired, s), float(np.sqrt(np.mean(e**2)) / np.ptp(desired))
+    return make_rig(plant, lambda: ph.ActivePI(n_operators=10, input_dynamics="auto"))
 
 
 @pytest.mark.heavy
 def test_on_a_plant_whose_charge_runs_on_the_jacobian_law_meets_the_40_hz_bar(
-    duhem: dict[str, object],
+    duhem: Rig,
 ) -> None:
     """Issue 40, item 6: <= 1 % width and NRMSE at 40 Hz after 10 trials. The harmonic law
     stalls here (its inverse asks the slew limit for the run-on's corners): measured over
     seeds 0-2 (this is seed 0), 0.82-0.85 % width and 0.37-0.38 % NRMSE, where the harmonic
     law leaves 0.93-1.03 % and 0.83-0.88 % (``docs/benchmarks.md``)."""
-    width, nrmse = scan40(duhem, "jacobian")
+    _, jacobian = scan(duhem, duhem.model, 40.0, 11, law="jacobian", strict=False)
+    width, nrmse = jacobian[-1]
     assert width <= 0.01 and nrmse <= 0.01
-    harmonic = scan40(duhem, "harmonic")
-    assert width < harmonic[0]
+    _, harmonic = scan(duhem, duhem.model, 40.0, 11, strict=False)  # the slew limit's warning
+    assert width < harmonic[-1][0]
