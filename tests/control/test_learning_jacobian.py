@@ -138,6 +138,10 @@ def test_what_the_jacobian_law_refuses(pi_model: ph.ClassicalPI) -> None:
     kw = {"v_min": 0.0, "v_max": 140.0, "sample_rate": RATE}
     with pytest.raises(ParameterError, match="'law' must be 'harmonic' or 'jacobian'"):
         ph.LearningCompensator(pi_model, law="newton", **kw)  # type: ignore[arg-type]
+    with pytest.raises(
+        ParameterError, match=r"with a stated lag learned a 40 Hz scan worse.*input_dynamics"
+    ):
+        ph.LearningCompensator(pi_model, law="jacobian", lag=4e-3, **kw)  # type: ignore[arg-type]
     ilc = ph.LearningCompensator(pi_model, law="jacobian", **kw)  # type: ignore[arg-type]
     long = cosine(pi_model, n=MAX_SAMPLES + 2, cycles=3)
     with pytest.raises(ParameterError, match=f"up to {MAX_SAMPLES} samples.*law='harmonic'"):

@@ -43,7 +43,6 @@ from ..errors import (
 )
 from ..io import atomic_write_text
 from ..metrics import hysteresis_width
-from ..model.dynamics import filter_response
 from ..model.leakage import Leakage
 from .calibration import OutputMap
 from .compensator import Compensator, Domain
@@ -363,16 +362,13 @@ def _measured(
 
 def _responder(learner: LearningCompensator, sensor: bool) -> Any:
     """Commands -> the model's output in the desired's units, the trial run after itself (its
-    input dynamics, a stated lag, the gain or map included; offset-free from a charge)."""
+    input dynamics, the gain or map included; offset-free from a charge)."""
     s, n = learner.settings, learner.desired.size
     g, as_displacement = _desired_gain(s, learner.output_map)
-    freqs = np.fft.rfftfreq(n, 1.0 / s["sample_rate"])
-    lagged = filter_response(0.0, s["lag"], 1.0 / s["sample_rate"], freqs) if s["lag"] > 0 else None
     t = np.arange(2 * n) / s["sample_rate"]
     model = learner.model.hysteresis_
 
-    def respond(u: FloatArray) -> FloatArray:
-        v = u if lagged is None else np.fft.irfft(lagged * np.fft.rfft(u), n=n)
+    def respond(v: FloatArray) -> FloatArray:
         with warnings.catch_warnings():  # the limits were checked where the commands were made
             warnings.simplefilter("ignore")
             q = np.asarray(model.predict(np.tile(v, 2), t))[n:]
@@ -466,8 +462,7 @@ class LearningCompensator:
         How the error is learned: ``"harmonic"`` corrects the reference, each harmonic
         through the model's inverse; ``"jacobian"`` moves the commands through the model's
         Jacobian along them (:mod:`~piezohyst.control.learning_jacobian`: for an actuator
-        whose output runs on past its reversals; trials of up to 4000 samples, a second or
-        so of computing per 1000).
+        whose output runs on past its reversals; up to 4000 samples; no lag=).
 
     Attributes
     ----------
@@ -556,6 +551,11 @@ class LearningCompensator:
             self.settings["noise_gate"] = gate
         if law not in ("harmonic", "jacobian"):
             msg = f"'law' must be 'harmonic' or 'jacobian'. Got {law!r}."
+            raise ParameterError(msg)
+        if law == "jacobian" and lag > 0:
+            msg = ("law='jacobian' with a stated lag learned a 40 Hz scan worse than the harmonic "
+                   "law on every plant (docs/benchmarks.md): identify the lag with the model "
+                   "(input_dynamics='auto') or use law='harmonic'")  # fmt: skip
             raise ParameterError(msg)
         if law != "harmonic":  # the same: the states saved before it existed resume
             self.settings["law"] = law

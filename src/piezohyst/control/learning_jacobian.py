@@ -11,9 +11,10 @@ reference change into a large voltage step, which the slew limit then cuts.
 
 This law learns the commands themselves. After each trial it takes the model's Jacobian
 along the trial's commands, :math:`J_{kj} = \partial y_k / \partial u_j` (the trial run
-after itself, the model's input dynamics and a stated lag included: a command moves the
-output at its own sample, through the lag at the next ones, and through the memory of a
-reversal it sets over the rest of the trial), and moves the commands by the damped
+after itself, the model's input dynamics included: a command moves the output at its own
+sample, through the lag at the next ones, and through the memory of a reversal it sets over
+the rest of the trial; a lag the model does not hold is refused, identify it with the model),
+and moves the commands by the damped
 least-squares step
 
 .. math:: \delta u = \gamma\,(J^\top J + \lambda I)^{-1} J^\top Q e,
