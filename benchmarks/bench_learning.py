@@ -4,7 +4,9 @@ Run: ``python benchmarks/bench_learning.py [--trials 10] [--figure learning.png]
 (``--plants [--only PLANT] [--slew V/s] [--chosen]`` for part 3; ``--noise-gate G``: the learner's
 ``noise_gate``; ``--anatomy [--only PLANT]``: the error left, repeating or not; ``--carried``:
 the noise the correction carries, measured against the design's figure, on every plant;
-``--run-on``: how far each plant's charge runs on past a voltage reversal, and the models').
+``--run-on``: how far each plant's charge runs on past a voltage reversal, and the models';
+``--floor [--only PLANT]``: the best periodic command within the limits on each plant, and
+an idealised Jacobian law).
 
 1. Targets (issue 27), on the bench's amplifier-lag preset ``T226-H4-203X-amp4ms`` with
    0.1 % noise on the charge: the leakage calibrated from 10 s holds up and down; an
@@ -49,6 +51,8 @@ RATE = 1000.0
 SLEW = 30e3
 #: the learner's noise_gate; --noise-gate changes it
 GATE = 0.0
+#: the learner's law; --law changes it
+LAW = "harmonic"
 
 
 def rig(preset: object = None, seed: int = 0) -> dict[str, object]:
@@ -97,6 +101,7 @@ def run(r: dict[str, object], model: ph.HysteresisModel, f: float, trials: int, 
         lag=lag,
         slew_rate=SLEW,  # type: ignore[attr-defined]
         noise_gate=GATE,
+        law=LAW,
     )
     bench = Bench(p, seed=seed, voltage=ilc.last_command)  # type: ignore[arg-type]
     scores, loops = [], []
@@ -133,7 +138,7 @@ def dense_update(
 
 
 def main() -> None:
-    global SLEW, GATE
+    global SLEW, GATE, LAW
     ap = argparse.ArgumentParser()
     ap.add_argument("--trials", type=int, default=10)
     ap.add_argument("--figure", default=None, help="write a figure (error per trial, loops)")
@@ -151,12 +156,19 @@ def main() -> None:
     )
     ap.add_argument("--slew", type=float, default=SLEW, help="the slew limit, V/s (30e3)")
     ap.add_argument("--noise-gate", type=float, default=GATE, help="the learner's noise_gate (0)")
+    ap.add_argument("--law", default=LAW, help="the learner's law (harmonic, jacobian)")
     ap.add_argument(
         "--carried", action="store_true", help="the noise the correction carries, every plant"
     )
     ap.add_argument("--run-on", action="store_true", help="the charge's run-on past reversals")
+    ap.add_argument(
+        "--floor", action="store_true", help="the best command within the limits, per plant"
+    )
     args = ap.parse_args()
-    SLEW, GATE = args.slew, args.noise_gate
+    SLEW, GATE, LAW = args.slew, args.noise_gate, args.law
+    if args.floor:
+        floor_rows(args.trials, args.only)
+        return
     if args.run_on:
         run_on()
         return
@@ -172,6 +184,10 @@ def main() -> None:
     if args.plants:
         plants(args.trials, args.only)
         return
+    if LAW != "harmonic":
+        print("(--law applies to --plants, --chosen, --anatomy and --carried; this table and the "
+              "cost below run each law as they say)")  # fmt: skip
+        LAW = "harmonic"
     r = rig()
     print(f"bench {r['preset'].name} with 0.1 % charge noise; trials of 1 s; widths and "  # type: ignore[attr-defined]
           "offset-free NRMSE of the true displacement")  # fmt: skip
@@ -231,6 +247,32 @@ def main() -> None:
     sim = (time.perf_counter() - t0) / 10
     print(f"a whole trial (command + learn, 1000 samples, ActivePI with input dynamics): "
           f"{(per - sim) * 1e3:.1f} ms, {(per - sim) / n * 1e6:.1f} us per sample")  # fmt: skip
+    jac = ph.LearningCompensator(ilc.model, v_min=ilc.compensator.v_min,
+                                 v_max=ilc.compensator.v_max, sample_rate=RATE,
+                                 leakage=r["leak"], domain="displacement",  # type: ignore[arg-type]
+                                 gain=r["preset"].gain, slew_rate=SLEW,  # type: ignore[attr-defined]
+                                 law="jacobian")  # fmt: skip
+    bench = Bench(r["preset"], seed=9, voltage=jac.last_command)  # type: ignore[arg-type]
+    jac.learn(bench.run(jac.command(ilc.desired)).charge)  # the lead-in: nothing learned
+    t0 = time.perf_counter()
+    for _ in range(3):
+        jac.learn(bench.run(jac.command()).charge)
+    per_jac = (time.perf_counter() - t0) / 3 - sim
+    from piezohyst.control.learning_jacobian import damped_step
+
+    big = rng.standard_normal((n, n))
+    t0 = time.perf_counter()
+    damped_step(big, e)
+    svd_t = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    lam = 1e-3 * np.linalg.norm(big, 2) ** 2
+    np.linalg.solve(big.T @ big + lam * np.eye(n), big.T @ e)  # the naive normal equations
+    normal_t = time.perf_counter() - t0
+    ratio = per_jac / (per - sim)
+    print(f"the same trial with law='jacobian': {per_jac * 1e3:.0f} ms ({ratio:.0f}x "
+          f"the harmonic law's); its damped step alone (Cholesky, Lanczos) {svd_t * 1e3:.0f} "
+          f"ms against {normal_t * 1e3:.0f} ms for the normal equations in NumPy "
+          f"({normal_t / svd_t:.2f}x; their largest singular value included)")  # fmt: skip
     if args.figure:
         import matplotlib
 
@@ -361,8 +403,6 @@ def chosen_rows(trials: int, only: str | None = None) -> None:
     --input-dynamics auto`` on the same 30 s of ``multifreq`` (every candidate identifying
     the amplifier's lag, the best by forward chaining inside the record), learning at 10
     and 40 Hz from the charge and from the laser, seeds 0-2."""
-    from piezohyst.analysis.selection import select_model
-
     print(f"after {trials} trials, the model select_model chose (input dynamics auto) per "
           "seed: width, offset-free NRMSE of the true displacement, seeds 0-2")  # fmt: skip
     print("| plant | chosen (seeds 0-2) | scan | from the charge | from the laser |")
@@ -370,19 +410,152 @@ def chosen_rows(trials: int, only: str | None = None) -> None:
     for name, preset in lagged_plants(only):
         rigs, picks = [], []
         for seed in range(3):
-            r = rig(preset, seed)
-            t, v = make_signal("multifreq", amplitude=140.0, frequency=0.5, duration=30.0)
-            multi = ph.simulate(v, t, preset=r["preset"], seed=4 + 10 * seed)  # rig()'s record
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                sel = select_model(multi.voltage, multi.charge, multi.t, input_dynamics="auto")
-            r["chosen"] = sel.model
+            r, pick = chosen_rig(preset, seed)
             rigs.append(r)
-            picks.append(sel.name)
+            picks.append(pick)
         for f in (10.0, 40.0):
             cells = [_cell(rigs, "chosen", f, trials, 0.0, sensor) for sensor in (False, True)]
             print(f"| {name} | {', '.join(picks)} | {f:g} Hz | {cells[0]} | {cells[1]} |",
                   flush=True)  # fmt: skip
+
+
+def chosen_rig(preset: object, seed: int) -> tuple[dict[str, object], str]:
+    """``rig(preset, seed)`` with the model ``select_model`` chooses on its 30 s of
+    ``multifreq`` with ``input_dynamics="auto"`` (as ``r["chosen"]``), and that model's name."""
+    from piezohyst.analysis.selection import select_model
+
+    r = rig(preset, seed)
+    t, v = make_signal("multifreq", amplitude=140.0, frequency=0.5, duration=30.0)
+    multi = ph.simulate(v, t, preset=r["preset"], seed=4 + 10 * seed)  # rig()'s record
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sel = select_model(multi.voltage, multi.charge, multi.t, input_dynamics="auto")
+    r["chosen"] = sel.model
+    return r, sel.name
+
+
+#: the idealised Jacobian law's regularisation (of the Jacobian's largest singular value
+#: squared) and its gain: a one-off choice (0.001-0.1 and 0.5-1 were run on the Duhem and
+#: Preisach plants' seed 0), not a design
+JAC_LAMBDA, JAC_GAIN = 0.01, 1.0
+#: periods run before the one scored: every plant's loop has settled (the commands periodic)
+SETTLE = 12
+
+
+def _periodic(r: dict[str, object], f: float) -> dict[str, object]:
+    """One period of the scan of ``run()`` and the chosen model's feedforward command for it
+    (the compensator's, no slew limit), on the rig's plant with its noise off."""
+    p = replace(r["preset"], amp_noise=0.0)  # type: ignore[type-var]
+    lo, hi = r["range"]  # type: ignore[misc]
+    n = round(RATE / f)
+    desired = p.gain * (0.5 * (lo + hi) + 0.5 * (hi - lo) * np.sin(2 * np.pi * np.arange(n) / n))
+    model = r["chosen"]
+    v_min, v_max = model.input_range_  # type: ignore[attr-defined]
+    comp = ph.Compensator(model, v_min=v_min, v_max=v_max, sample_rate=RATE,
+                          domain="displacement", gain=p.gain, slew_rate=None)  # fmt: skip
+    u = comp.process(np.tile(desired, SETTLE))[-n:]
+    return {"plant": p, "desired": desired, "u": u, "model": model, "bounds": (v_min, v_max)}
+
+
+def _settled(u: np.ndarray, respond) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """The last period's response to ``u`` repeated ``SETTLE`` times from rest."""
+    t = np.arange(SETTLE * u.size) / RATE
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return np.asarray(respond(np.tile(u, SETTLE), t))[-u.size :]
+
+
+def _scored(desired: np.ndarray, s: np.ndarray) -> tuple[float, float]:
+    e = (desired - desired.mean()) - (s - s.mean())
+    return (100 * hysteresis_width(np.tile(desired, 2), np.tile(s, 2)),
+            100 * float(np.sqrt(np.mean(e**2)) / np.ptp(desired)))  # fmt: skip
+
+
+def _within_slew(u: np.ndarray, du: np.ndarray, step: float) -> np.ndarray:
+    """The move nearest ``du`` (least squares) that keeps ``u + du`` within the slew limit,
+    over the periodic trial."""
+    from scipy.optimize import minimize
+
+    def gaps(x: np.ndarray) -> np.ndarray:
+        w = u + x
+        return step - np.abs(np.diff(np.r_[w, w[0]]))
+
+    if gaps(du).min() >= 0:
+        return du
+    res = minimize(lambda x: float(np.sum((x - du) ** 2)), np.zeros_like(du),
+                   jac=lambda x: 2 * (x - du), method="SLSQP",
+                   constraints=[{"type": "ineq", "fun": gaps}])  # fmt: skip
+    return np.asarray(res.x)
+
+
+def floor_rows(trials: int, only: str | None = None) -> None:
+    """``--floor``: what the bars ask of the command, per plant, on the chosen model's rigs
+    (seeds 0-2), the plant's noise off and the loop periodic (one period of the scan
+    repeated until settled). An idealised Jacobian law, ``u += (J'J + lambda |J|^2 I)^-1 J'
+    e``, ``J`` the chosen model's Jacobian along the commands (finite differences, its lag
+    included: the effect of each command on every later output, through the memory of its
+    reversals too), the move brought within the slew limit, learning from the true
+    displacement plus 0.1 % of the span's noise averaged over a second's periods; then the
+    plant's own gradient from where that law ends, on the squared error, within the slew
+    limit and the model's voltage range (a lower error the commands can reach; its width
+    may be larger)."""
+    from scipy.optimize import minimize
+
+    step = SLEW / RATE
+    print("noise off, periodic: width, NRMSE of the true displacement (range over seeds 0-2)")
+    print(f"| plant | chosen | scan | feedforward | Jacobian law after {trials} trials | "
+          "best found within the limits |")  # fmt: skip
+    print("|---|---|---|---|---|---|")
+    for name, preset in lagged_plants(only):
+        picked = [chosen_rig(preset, seed) for seed in range(3)]
+        for f in (10.0, 40.0):
+            ff, best, law = [], [], []
+            for seed, (r, _) in enumerate(picked):
+                k = _periodic(r, f)
+                p, d, u0, model = k["plant"], k["desired"], k["u"], k["model"]
+                n = d.size
+
+                def plant(v: np.ndarray, t: np.ndarray, p=p) -> np.ndarray:  # type: ignore[no-untyped-def]
+                    return ph.simulate(v, t, preset=p, seed=0).true_displacement
+
+                def mod(v: np.ndarray, t: np.ndarray, model=model, p=p) -> np.ndarray:  # type: ignore[no-untyped-def]
+                    return p.gain * model.hysteresis_.predict(v, t)
+
+                ff.append(_scored(d, _settled(u0, plant)))
+
+                def cost(u: np.ndarray, d=d, plant=plant) -> float:  # type: ignore[no-untyped-def]
+                    s = _settled(u, plant)
+                    e = (d - d.mean()) - (s - s.mean())
+                    return float(np.mean(e**2) / np.ptp(d) ** 2) * 1e4
+
+                rng = np.random.default_rng(seed)
+                u = u0.copy()
+                for _ in range(trials):
+                    s = _settled(u, plant)
+                    s = s + 1e-3 * np.ptp(d) * rng.standard_normal(n) / np.sqrt(RATE / n)
+                    e = (d - d.mean()) - (s - s.mean())
+                    y0, h = _settled(u, mod), 1e-3
+                    jac = np.empty((n, n))
+                    for i in range(n):
+                        du = np.zeros(n)
+                        du[i] = h
+                        jac[:, i] = (_settled(u + du, mod) - y0) / h
+                    jac -= jac.mean(axis=0)  # the offset-free output's
+                    lam = JAC_LAMBDA * np.linalg.norm(jac, 2) ** 2
+                    du = np.linalg.solve(jac.T @ jac + lam * np.eye(n), jac.T @ e) * JAC_GAIN
+                    u = u + _within_slew(u, du, step)
+                law.append(_scored(d, _settled(u, plant)))
+                res = minimize(cost, u, method="SLSQP", bounds=[k["bounds"]] * n,
+                               constraints=[{"type": "ineq", "fun": lambda x: step - np.abs(
+                                   np.diff(np.r_[x, x[0]]))}],
+                               options={"maxiter": 500, "eps": 1e-4})  # fmt: skip
+                best.append(_scored(d, _settled(res.x, plant)))
+            cells = []
+            for got in (ff, law, best):
+                w, e = [g[0] for g in got], [g[1] for g in got]
+                cells.append(f"{min(w):.2f}-{max(w):.2f} %, {min(e):.2f}-{max(e):.2f} %")
+            chosen = ", ".join(x[1] for x in picked)
+            print(f"| {name} | {chosen} | {f:g} Hz | {' | '.join(cells)} |", flush=True)
 
 
 def _cell(rigs: list[dict[str, object]], key: str, f: float, trials: int, lag: float,
@@ -418,6 +591,8 @@ def plants(trials: int, only: str | None = None) -> None:
         for key, label, lag in (("dynamic", "ActivePI(10), auto", 0.0),
                                 ("bw", "BoucWen, auto", 0.0),
                                 ("plain", "ActivePI(10) + lag=4 ms stated", 4e-3)):  # fmt: skip
+            if lag and LAW == "jacobian":  # refused: the lag is identified with the model
+                continue
             for f in (10.0, 40.0):
                 cells = [_cell(rigs, key, f, trials, lag, sensor) for sensor in (False, True)]
                 print(f"| {name} | {label} | {f:g} Hz | {cells[0]} | {cells[1]} |")

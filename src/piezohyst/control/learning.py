@@ -462,7 +462,7 @@ class LearningCompensator:
         How the error is learned: ``"harmonic"`` corrects the reference, each harmonic
         through the model's inverse; ``"jacobian"`` moves the commands through the model's
         Jacobian along them (:mod:`~piezohyst.control.learning_jacobian`: for an actuator
-        whose output runs on past its reversals; up to 4000 samples; no lag=).
+        whose output runs on past its reversals; up to 4000 samples, 0.2-0.7 s per 1000; no lag=).
 
     Attributes
     ----------
