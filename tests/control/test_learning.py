@@ -281,7 +281,12 @@ def test_a_saved_learner_resumes_exactly(
             again.load(path)
             np.testing.assert_array_equal(again.command(), u)  # the same trial, to the bit
             again.learn(y)
-            np.testing.assert_array_equal(again.correction, whole.correction)
+            if law == "harmonic":  # FFTs: the same sums in the same order, to the bit
+                np.testing.assert_array_equal(again.correction, whole.correction)
+            else:  # tol: the step's BLAS products may sum in another order (memory alignment):
+                # rounding of n = 200 terms through normal equations of condition <= 1001
+                np.testing.assert_allclose(again.correction, whole.correction, rtol=1e-10,
+                                           atol=1e-10 * np.abs(whole.correction).max())  # fmt: skip
         whole.save(path)
     other = ph.LearningCompensator(pi_model, **{**kw, "v_max": 120.0})  # type: ignore[arg-type]
     with pytest.raises(ph.ModelFileError, match="another model, leakage or settings"):

@@ -112,6 +112,7 @@ def test_the_learner_moves_its_commands_by_the_models_jacobian_step(
     assert np.abs(want).max() > 0.1  # a real move, in volts
     # the next trial sends the feedforward plus that move
     u2 = ilc.command()
+    # tol: the same sum formed twice, the feedforward's rounding (1e-13 V on 140 V) well inside
     np.testing.assert_allclose(u2, np.clip(u + want, 0.0, 140.0), rtol=0, atol=1e-9)
 
 

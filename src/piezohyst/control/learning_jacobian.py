@@ -32,8 +32,6 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve
-from scipy.sparse.linalg import eigsh
 
 FloatArray = np.ndarray
 
@@ -98,6 +96,9 @@ def damped_step(jac: FloatArray, e: FloatArray, damping: float = DAMPING) -> Flo
     -------
     ndarray, shape (n,)
     """
+    from scipy.linalg import cho_factor, cho_solve  # here: import piezohyst stays light
+    from scipy.sparse.linalg import eigsh
+
     n = jac.shape[1]
     gram = jac.T @ jac
     if n < 8 or not np.any(gram):
