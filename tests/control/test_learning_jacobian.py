@@ -116,6 +116,33 @@ def test_the_learner_moves_its_commands_by_the_models_jacobian_step(
     np.testing.assert_allclose(u2, np.clip(u + want, 0.0, 140.0), rtol=0, atol=1e-9)
 
 
+def test_a_sensors_offset_is_learned_as_a_shift_of_every_command(
+    pi_model: ph.ClassicalPI,
+) -> None:
+    """Learned through the Jacobian, a constant error spread into a 28 V peak-to-peak
+    correction on the creep-lag plant while the offset fell slowly; it is learned as one
+    shift of the commands, by the model's mean response to it."""
+    gain = 2.0e3  # m/C
+    d = cosine(pi_model, n=64, cycles=2) * gain
+    ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
+                                 slew_rate=None, domain="displacement", gain=gain,
+                                 learning_gain=1.0, cutoff=math.inf, lead_in=False,
+                                 law="jacobian")  # fmt: skip
+    u = ilc.command(d)
+    ilc.learn(displacement=d - 1e-6)  # 1 um short everywhere: an offset only a sensor sees
+    c = ilc.correction
+    # tol: a constant error has no part the damped step moves (rounding of the FFT of a constant)
+    assert np.ptp(c) <= 1e-9 * np.abs(c).max()
+
+    # the model's periodic response to the shifted trial: 1 um higher on average, to the
+    # first order of a 1 mV difference quotient (the branches are piecewise linear)
+    def mean_out(v: np.ndarray) -> float:
+        y = pi_model.hysteresis_.predict(np.tile(v, 2))[v.size :]
+        return float(np.mean(y)) * gain
+
+    np.testing.assert_allclose(mean_out(u + c) - mean_out(u), 1e-6, rtol=0.05)
+
+
 @pytest.mark.filterwarnings("ignore::piezohyst.errors.LearningWarning")  # a random plant
 def test_every_command_of_the_jacobian_law_is_safe(pi_model: ph.ClassicalPI) -> None:
     """Inside the limits and within the slew limit, from rest into the first trial and across

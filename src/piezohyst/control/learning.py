@@ -47,7 +47,7 @@ from ..model.leakage import Leakage
 from .calibration import OutputMap
 from .compensator import Compensator, Domain
 from .learning_design import LearningDesign, design_learning
-from .learning_jacobian import MAX_SAMPLES, damped_step, trial_jacobian
+from .learning_jacobian import MAX_SAMPLES, damped_step, trial_jacobian, uniform_shift
 from .learning_probe import Response, probe_bins, probe_signal, response
 
 FloatArray = np.ndarray
@@ -386,11 +386,14 @@ def _jacobian_step(
     design, s = learner.design, learner.settings
     assert design is not None
     err = _gated(design, e, s.get("noise_gate", 0.0))
-    if not sensor:
-        err[0] = 0.0
+    offset = float(err[0].real) / e.size if sensor else 0.0  # a sensor's: learned as a shift
+    err[0] = 0.0
     ef = np.fft.irfft(design.q() * err, n=e.size)
-    jac = trial_jacobian(_responder(learner, sensor), u, s["v_max"] - s["v_min"])
-    return np.asarray(damped_step(jac, ef))
+    respond = _responder(learner, sensor)
+    jac = trial_jacobian(respond, u, s["v_max"] - s["v_min"])
+    jac -= jac.mean(axis=0)  # the rest, offset-free
+    shift = uniform_shift(respond, u, offset) if offset else 0.0
+    return np.asarray(damped_step(jac, ef)) + shift
 
 
 class LearningCompensator:

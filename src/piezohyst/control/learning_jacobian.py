@@ -35,7 +35,7 @@ import numpy as np
 
 FloatArray = np.ndarray
 
-__all__ = ["DAMPING", "MAX_SAMPLES", "damped_step", "trial_jacobian"]
+__all__ = ["DAMPING", "MAX_SAMPLES", "damped_step", "trial_jacobian", "uniform_shift"]
 
 #: :math:`\lambda` over the Jacobian's largest singular value squared: among 1e-4, 1e-3 and
 #: 1e-2, on the bench behind its 4 ms amplifier (seed 0, ActivePI with identified dynamics, 10
@@ -110,3 +110,30 @@ def damped_step(jac: FloatArray, e: FloatArray, damping: float = DAMPING) -> Flo
         return np.zeros(n)
     factor = cho_factor(gram + damping * top * np.eye(n))
     return np.asarray(cho_solve(factor, jac.T @ e))
+
+
+def uniform_shift(
+    respond: Callable[[FloatArray], FloatArray], u: FloatArray, offset: float, h: float = 1e-3
+) -> float:
+    """The one shift of every command that moves the output's mean by ``offset`` (a sensor's
+    offset), by the mean response to a shift of ``h`` volts: a hysteresis is not additive, so
+    the Jacobian's row sums (one sample at a time) are not that response. 0 where it is none.
+
+    Parameters
+    ----------
+    respond : callable
+        Commands (one trial) -> outputs.
+    u : ndarray
+        The trial's commands (V).
+    offset : float
+        The output's mean to add.
+    h : float
+        V, the shift the response is measured with.
+
+    Returns
+    -------
+    float
+        V.
+    """
+    slope = float(np.mean(respond(u + h) - respond(u))) / h
+    return offset / slope if slope != 0 else 0.0
