@@ -501,6 +501,8 @@ def floor_rows(trials: int, only: str | None = None) -> None:
     may be larger)."""
     from scipy.optimize import minimize
 
+    from piezohyst.control.learning_jacobian import damped_step, trial_jacobian
+
     step = SLEW / RATE
     print("noise off, periodic: width, NRMSE of the true displacement (range over seeds 0-2)")
     print(f"| plant | chosen | scan | feedforward | Jacobian law after {trials} trials | "
@@ -534,15 +536,9 @@ def floor_rows(trials: int, only: str | None = None) -> None:
                     s = _settled(u, plant)
                     s = s + 1e-3 * np.ptp(d) * rng.standard_normal(n) / np.sqrt(RATE / n)
                     e = (d - d.mean()) - (s - s.mean())
-                    y0, h = _settled(u, mod), 1e-3
-                    jac = np.empty((n, n))
-                    for i in range(n):
-                        du = np.zeros(n)
-                        du[i] = h
-                        jac[:, i] = (_settled(u + du, mod) - y0) / h
+                    jac = trial_jacobian(lambda v, mod=mod: _settled(v, mod), u, 0.0)  # 1 mV
                     jac -= jac.mean(axis=0)  # the offset-free output's
-                    lam = JAC_LAMBDA * np.linalg.norm(jac, 2) ** 2
-                    du = np.linalg.solve(jac.T @ jac + lam * np.eye(n), jac.T @ e) * JAC_GAIN
+                    du = damped_step(jac, e, JAC_LAMBDA) * JAC_GAIN
                     u = u + _within_slew(u, du, step)
                 law.append(_scored(d, _settled(u, plant)))
                 res = minimize(cost, u, method="SLSQP", bounds=[k["bounds"]] * n,

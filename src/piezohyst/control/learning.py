@@ -360,9 +360,9 @@ def _measured(
     return (h * g if as_displacement and g is not None else h), bound, float(leak[-1])
 
 
-def _responder(learner: LearningCompensator, sensor: bool) -> Any:
+def _responder(learner: LearningCompensator) -> Any:
     """Commands -> the model's output in the desired's units, the trial run after itself (its
-    input dynamics, the gain or map included; offset-free from a charge)."""
+    input dynamics, the gain or map included)."""
     s, n = learner.settings, learner.desired.size
     g, as_displacement = _desired_gain(s, learner.output_map)
     t = np.arange(2 * n) / s["sample_rate"]
@@ -374,7 +374,7 @@ def _responder(learner: LearningCompensator, sensor: bool) -> Any:
             q = np.asarray(model.predict(np.tile(v, 2), t))[n:]
         y = (learner.output_map.predict(q) if learner.output_map is not None
              else q * g if as_displacement and g is not None else q)  # fmt: skip
-        return np.asarray(y) if sensor else np.asarray(y - np.mean(y))
+        return np.asarray(y)
 
     return respond
 
@@ -389,7 +389,7 @@ def _jacobian_step(
     offset = float(err[0].real) / e.size if sensor else 0.0  # a sensor's: learned as a shift
     err[0] = 0.0
     ef = np.fft.irfft(design.q() * err, n=e.size)
-    respond = _responder(learner, sensor)
+    respond = _responder(learner)
     jac = trial_jacobian(respond, u, s["v_max"] - s["v_min"])
     jac -= jac.mean(axis=0)  # the rest, offset-free
     shift = uniform_shift(respond, u, offset) if offset else 0.0
