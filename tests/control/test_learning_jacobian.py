@@ -18,7 +18,12 @@ from hypothesis import strategies as st
 
 import piezohyst as ph
 from piezohyst.cli import main
-from piezohyst.control.learning_jacobian import MAX_SAMPLES, damped_step, trial_jacobian
+from piezohyst.control.learning_jacobian import (
+    MAX_SAMPLES,
+    TOP_TOL,
+    damped_step,
+    trial_jacobian,
+)
 from piezohyst.errors import LearningWarning, ParameterError
 from piezohyst.simulation import PLANTS
 
@@ -70,6 +75,53 @@ def test_the_step_is_the_damped_least_squares_solution(
         np.abs(want).max() + 1))  # fmt: skip
     assert np.linalg.norm(jac @ got) <= np.linalg.norm(e) * (1 + 1e-12)
     np.testing.assert_array_equal(damped_step(np.zeros((m, n)), e), np.zeros(n))
+
+
+FIXTURE = Path(__file__).parents[1] / "fixtures" / "jacobian"
+
+
+def recorded_jacobian() -> np.ndarray:
+    """The Jacobian of a recorded trial on which Lanczos at full precision did not converge:
+    an ActivePI without input dynamics (its largest singular value repeats), the learner's
+    responder (the trial run after itself, in metres at 125 m/C, offset-free)."""
+    model = ph.load_model(FIXTURE / "model.json")
+    u = np.loadtxt(FIXTURE / "commands.txt")
+    n = u.size
+    t = np.arange(2 * n) / 1000.0
+
+    def respond(x: np.ndarray) -> np.ndarray:
+        return np.asarray(model.hysteresis_.predict(np.tile(x, 2), t))[n:] * 125.0
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the commands' range is the model's: nothing to say
+        jac = trial_jacobian(respond, u, float(np.ptp(model.input_range_)))
+    return jac - jac.mean(axis=0)
+
+
+def test_the_step_on_a_jacobian_whose_largest_value_repeats(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The recorded trial's step is the damped least-squares one; and where Lanczos does not
+    converge at all, every eigenvalue is computed instead of the learner failing."""
+    jac = recorded_jacobian()
+    e = np.sin(np.arange(jac.shape[0]) * 0.25) * 1e-7
+    gram = jac.T @ jac
+    top = np.linalg.eigvalsh(gram)[-1]
+    want = np.linalg.solve(gram + 1e-3 * top * np.eye(gram.shape[0]), jac.T @ e)
+    got = damped_step(jac, e)
+    scale = np.abs(want).max()
+    # tol: lambda is known to TOP_TOL (relative), which moves the step by at most that much
+    # of it, plus the normal equations' rounding (condition number <= 1 + 1 / damping)
+    np.testing.assert_allclose(got, want, rtol=0, atol=(TOP_TOL + 1e-12 * 1001) * scale)
+
+    import scipy.sparse.linalg as sla
+
+    def stalls(*args: object, **kwargs: object) -> None:
+        raise sla.ArpackNoConvergence("no convergence", np.array([]), np.array([]))
+
+    monkeypatch.setattr(sla, "eigsh", stalls)
+    # tol: the same normal equations with the exact largest eigenvalue: their rounding only
+    np.testing.assert_allclose(damped_step(jac, e), want, rtol=0, atol=1e-12 * 1001 * scale)
 
 
 def naive_jacobian(u: np.ndarray, h: float) -> np.ndarray:
