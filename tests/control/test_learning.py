@@ -38,7 +38,7 @@ def test_the_law_is_the_one_written_out(pi_model: ph.ClassicalPI) -> None:
     d = cosine(pi_model)
     ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
                                  slew_rate=None, lag=3e-3, learning_gain=0.6,
-                                 cutoff=120.0, lead_in=False)  # fmt: skip
+                                 cutoff=120.0, lead_in=False, law="harmonic")  # fmt: skip
     rng = np.random.default_rng(1)
     c = np.zeros(d.size)
     for _ in range(2):
@@ -59,7 +59,8 @@ def test_a_sensor_is_learned_with_its_offset(pi_model: ph.ClassicalPI) -> None:
     gain = 2.0e3  # m/C
     ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
                                  slew_rate=None, domain="displacement", gain=gain,
-                                 learning_gain=1.0, cutoff=math.inf, lead_in=False)  # fmt: skip
+                                 learning_gain=1.0, cutoff=math.inf, lead_in=False,
+                                 law="harmonic")  # fmt: skip
     ilc.command(d * gain)
     s = d * gain - 1e-6  # 1 um short everywhere: an offset only a sensor sees
     ilc.learn(displacement=s)
@@ -107,7 +108,7 @@ def test_every_command_is_safe_across_trials(pi_model: ph.ClassicalPI) -> None:
     actuator into the first trial and from each trial into the next."""
     d = cosine(pi_model, n=200, cycles=4)
     ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
-                                 slew_rate=20e3, voltage=130.0)  # fmt: skip
+                                 slew_rate=20e3, voltage=130.0, law="harmonic")  # fmt: skip
     sent = [ilc.last_command]  # the actuator sits at 130 V: the first trial ramps down
     rng = np.random.default_rng(0)
     for _ in range(6):
@@ -123,7 +124,7 @@ def test_every_command_is_safe_across_trials(pi_model: ph.ClassicalPI) -> None:
 
 def test_what_a_trial_refuses(pi_model: ph.ClassicalPI) -> None:
     d = cosine(pi_model)
-    ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE)
+    ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE, law="harmonic")
     ramp = np.linspace(d.min(), d.max(), 64)
     with pytest.raises(ph.ParameterError, match="not periodic over the trial: it jumps"):
         ilc.command(ramp)
@@ -139,10 +140,10 @@ def test_what_a_trial_refuses(pi_model: ph.ClassicalPI) -> None:
         ilc.command(d * 1.01)
     with pytest.raises(ph.ParameterError, match="'voltage' must lie inside the limits"):
         ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
-                               voltage=150.0)  # fmt: skip
+                               voltage=150.0, law="harmonic")  # fmt: skip
     with pytest.raises(ph.ParameterError, match="learning_gain"):
         ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
-                               learning_gain=1.5)  # fmt: skip
+                               learning_gain=1.5, law="harmonic")  # fmt: skip
 
 
 def test_missing_readings_are_not_learned_from(pi_model: ph.ClassicalPI) -> None:
@@ -153,7 +154,7 @@ def test_missing_readings_are_not_learned_from(pi_model: ph.ClassicalPI) -> None
     for fill in (np.nan, 1.0):
         ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
                                      slew_rate=None, learning_gain=0.5,
-                                     cutoff=200.0, lead_in=False)  # fmt: skip
+                                     cutoff=200.0, lead_in=False, law="harmonic")  # fmt: skip
         ilc.command(d)
         y = 0.95 * d
         y[40:44] = fill
@@ -187,14 +188,14 @@ def test_a_model_of_the_displacement_learns_from_the_sensor_without_a_gain() -> 
     d = cosine(model)
     ilc = ph.LearningCompensator(model, v_min=0.0, v_max=140.0, sample_rate=RATE,
                                  slew_rate=None, learning_gain=1.0, cutoff=math.inf,
-                                 lead_in=False)  # fmt: skip
+                                 lead_in=False, law="harmonic")  # fmt: skip
     ilc.command(d)
     ilc.learn(displacement=d - 1e-6)  # 1 um short everywhere
     # tol: one FFT round trip of a constant
     np.testing.assert_allclose(ilc.correction, 1e-6, rtol=1e-9)
     charge = ph.ClassicalPI.from_operator(ph.PIHysteresis([0.0], [1e-8]))  # output in C
     other = ph.LearningCompensator(charge, v_min=0.0, v_max=140.0, sample_rate=RATE,
-                                   slew_rate=None, lead_in=False)  # fmt: skip
+                                   slew_rate=None, lead_in=False, law="harmonic")  # fmt: skip
     other.command(cosine(charge))
     with pytest.raises(ph.errors.ParameterError, match="needs the gain"):
         other.learn(displacement=cosine(charge))
@@ -206,7 +207,7 @@ def test_a_trial_whose_error_grew_is_rolled_back(pi_model: ph.ClassicalPI) -> No
     d = cosine(pi_model)
     ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
                                  slew_rate=None, learning_gain=0.8,
-                                 cutoff=100.0, lead_in=False)  # fmt: skip
+                                 cutoff=100.0, lead_in=False, law="harmonic")  # fmt: skip
     ilc.command(d)
     ilc.learn(0.9 * d)
     ilc.command()
@@ -233,7 +234,7 @@ def test_a_noise_gate_keeps_the_noise_out_of_the_commands(
     repeating error (a slope 10 % short) is learned with the gate as without."""
     d = cosine(pi_model, n=256, cycles=8)
     sigma = 1e-3 * float(np.ptp(d))
-    kw = {"v_min": 0.0, "v_max": 140.0, "sample_rate": RATE, "slew_rate": None,
+    kw = {"v_min": 0.0, "v_max": 140.0, "sample_rate": RATE, "slew_rate": None, "law": "harmonic",
           "learning_gain": 0.5, "cutoff": 200.0, "lead_in": False}  # fmt: skip
     corrections, errors = {}, {}
     for gate in (0.0, 9.0):
@@ -308,11 +309,14 @@ def test_the_file_loop_is_the_in_memory_loop(tmp_path: Path) -> None:
     d = q[0] + (q[1] - q[0]) * (0.4 + 0.2 * np.sin(2 * np.pi * 5 * np.arange(n) / n))
     t = np.arange(n) / RATE
     ph.write_table(tmp_path / "scan.csv", {"time": t, "desired": d})
-    ilc = ph.LearningCompensator(model, v_min=lo, v_max=hi, sample_rate=RATE, slew_rate=30e3)
+    ilc = ph.LearningCompensator(
+        model, v_min=lo, v_max=hi, sample_rate=RATE, slew_rate=30e3, law="harmonic"
+    )
     mem, bench_a, bench_b = [], Bench(seed=2), Bench(seed=2)
     runner = CliRunner()
     base = ["learn", str(tmp_path / "model.json"), "--state", str(tmp_path / "s.json"),
-            "-o", str(tmp_path / "next.csv"), "--slew-rate", "30000"]  # fmt: skip
+            "-o", str(tmp_path / "next.csv"), "--slew-rate", "30000",
+            "--law", "harmonic"]  # fmt: skip
     # a sample rate that contradicts the trajectory's time column is refused, naming both
     res = runner.invoke(main, [*base, "--desired", str(tmp_path / "scan.csv"),
                                "--sample-rate", "5000"])  # fmt: skip
@@ -358,7 +362,7 @@ def test_the_file_loop_is_the_in_memory_loop(tmp_path: Path) -> None:
                                str(tmp_path / "s_daq.json"), "-o", str(tmp_path / "next_daq.csv"),
                                "--slew-rate", "30000", "--voltage-column", "AI0",
                                "--voltage-scale", "100", "--reading-column", "AI1",
-                               "--reading-scale", "4.7 uF"])  # fmt: skip
+                               "--reading-scale", "4.7 uF", "--law", "harmonic"])  # fmt: skip
     assert res.exit_code == 0, res.output
     # tol: the readings scaled there and back (a rounding each way), through the inverse
     np.testing.assert_allclose(ph.read_table(tmp_path / "next_daq.csv").get("command"),
@@ -381,7 +385,7 @@ def test_the_file_loop_is_the_in_memory_loop(tmp_path: Path) -> None:
                                "--no-probe", "--desired", str(tmp_path / "scan.csv")])  # fmt: skip
     assert res.exit_code == 0, res.output
     plain = ph.LearningCompensator(model, v_min=lo, v_max=hi, sample_rate=RATE,
-                                   slew_rate=30e3, probe=False)  # fmt: skip
+                                   slew_rate=30e3, probe=False, law="harmonic")  # fmt: skip
     lead = ph.read_table(tmp_path / "plain.csv").get("command")
     np.testing.assert_array_equal(lead, plain.command(d))
     assert not np.array_equal(lead, mem[0])  # the default lead-in carries the probe
@@ -389,19 +393,19 @@ def test_the_file_loop_is_the_in_memory_loop(tmp_path: Path) -> None:
     # another learner's, refused
     res = runner.invoke(main, [*base[:2], "--state", str(tmp_path / "gate.json"), "-o",
                                str(tmp_path / "gate.csv"), "--slew-rate", "30000",
-                               "--noise-gate", "9",
+                               "--noise-gate", "9", "--law", "harmonic",
                                "--desired", str(tmp_path / "scan.csv")])  # fmt: skip
     assert res.exit_code == 0, res.output
     kept = json.loads((tmp_path / "gate.json").read_text())
     gated = ph.LearningCompensator(model, v_min=lo, v_max=hi, sample_rate=RATE,
-                                   slew_rate=30e3, noise_gate=9.0)  # fmt: skip
+                                   slew_rate=30e3, noise_gate=9.0, law="harmonic")  # fmt: skip
     gated.restore(kept, "gate.json")  # the same settings: the class resumes the CLI's state
     got = bench_b.run(ph.read_table(tmp_path / "gate.csv").get("command"))
     ph.write_table(tmp_path / "gated0.csv", {"time": got.t, "voltage": got.voltage,
                                              "charge": got.charge})  # fmt: skip
     res = runner.invoke(main, [*base[:2], str(tmp_path / "gated0.csv"), "--state",
                                str(tmp_path / "gate.json"), "-o", str(tmp_path / "gate.csv"),
-                               "--slew-rate", "30000"])  # fmt: skip
+                               "--slew-rate", "30000", "--law", "harmonic"])  # fmt: skip
     assert res.exit_code == 1 and "--noise-gate 0.0, where the first call gave 9.0" in res.output
     # the scan in uC against time in ms, as their headers say: read as compensate reads them
     ph.write_table(tmp_path / "scan_uc.csv", {"time": t * 1e3, "desired": d * 1e6},
@@ -545,7 +549,7 @@ def test_the_command_line_skips_lost_readings_written_nan(
     res = runner.invoke(main, [*base[:2], str(tmp_path / "t0.csv"), *base[2:]])
     assert res.exit_code == 0, res.output
     learned = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
-                                     slew_rate=20e3, lead_in=False)  # fmt: skip
+                                     slew_rate=20e3, lead_in=False, law="harmonic")  # fmt: skip
     learned.command(d)
     trial = learned.learn(np.where((np.arange(d.size) >= 50) & (np.arange(d.size) < 60),
                                    np.nan, q))  # fmt: skip
@@ -585,7 +589,7 @@ def test_a_trial_the_limits_hold_says_which_limit_and_its_option(pi_model: ph.Cl
              (40.0, 20e3, "at v_max 40 V and 0 at v_min 0 V (--v-max"))  # fmt: skip
     for v_max, slew, said in cases:
         ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=v_max, sample_rate=RATE,
-                                     slew_rate=slew, lead_in=False)  # fmt: skip
+                                     slew_rate=slew, lead_in=False, law="harmonic")  # fmt: skip
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")  # the compensator's own LimitWarning too
             ilc.learn(pi_model.hysteresis_.predict(ilc.command(d)))

@@ -119,13 +119,13 @@ def _auto_or_float(value: str) -> float | Literal["auto"]:
 )
 @click.option(
     "--law",
-    type=click.Choice(["harmonic", "jacobian"]),
-    default="harmonic",
+    type=click.Choice(["auto", "harmonic", "jacobian"]),
+    default="auto",
     show_default=True,
     help="How the error is learned: harmonic corrects the reference through the model's "
     "inverse; jacobian moves the commands through the model's Jacobian along them (an "
-    "actuator whose output runs on past its reversals; trials of up to 4000 samples); give "
-    "it on every call of a run.",
+    "actuator whose output runs on past its reversals too; trials of up to 4000 samples, "
+    "no --lag); auto: jacobian where it can, else harmonic; give it on every call of a run.",
 )
 @_limit_options
 @click.option(
@@ -227,5 +227,5 @@ def learn(
                 f"learned from {trial.learned} samples{back}"
             )
     if learner.design is not None and trial is not None:
-        ctx.info(learner.design.describe())
+        ctx.info(learner.describe())
     click.echo(f"trial {learner.trials}'s commands: {out}")

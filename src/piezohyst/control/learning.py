@@ -32,12 +32,10 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._kernels import signal as S
 from .._validation import check_float
 from ..errors import (
     LearningWarning,
     ModelFileError,
-    NonFiniteError,
     ParameterError,
     ShapeError,
 )
@@ -49,6 +47,15 @@ from .compensator import Compensator, Domain
 from .learning_design import LearningDesign, design_learning
 from .learning_jacobian import MAX_SAMPLES, damped_step, trial_jacobian, uniform_shift
 from .learning_probe import Response, probe_bins, probe_signal, response
+from .learning_trial import (
+    anti_windup,
+    centred_slew,
+    count_saturated,
+    limits_said,
+    periodic_fill,
+    ramp_in,
+    trajectory,
+)
 
 FloatArray = np.ndarray
 
@@ -106,110 +113,6 @@ class Trial:
     skipped: bool
     leakage_bound: float
     saturated: int = 0
-
-
-def _periodic_fill(values: FloatArray, ok: FloatArray) -> FloatArray:
-    """Values at the samples not ``ok`` interpolated linearly from the others, around the period."""
-    if ok.all():
-        return values
-    n = values.size
-    k = np.flatnonzero(ok)
-    xs = np.concatenate([k - n, k, k + n])
-    ys = np.tile(values[k], 3)
-    out = values.copy()
-    bad = np.flatnonzero(~ok)
-    out[bad] = np.interp(bad, xs, ys)
-    return out
-
-
-def _check_periodic(d: FloatArray) -> None:
-    steps = np.abs(np.diff(d))
-    jump = abs(float(d[0] - d[-1]))
-    largest = float(steps.max()) if steps.size else 0.0
-    if jump > 2.0 * largest + 1e-12 * float(np.ptp(d)):
-        msg = (
-            f"the desired trajectory is not periodic over the trial: it jumps {jump:.4g} from "
-            f"its last sample to its first, where its largest step is {largest:.4g}; a trial "
-            "must end where the next begins (send whole periods)"
-        )
-        raise ParameterError(msg)
-
-
-def _at_limits(u: FloatArray, comp: Compensator) -> tuple[FloatArray, FloatArray]:
-    """Commands at the top and at the bottom limit."""
-    top = u >= comp.v_max - 1e-9 * max(1.0, abs(comp.v_max))
-    bottom = u <= comp.v_min + 1e-9 * max(1.0, abs(comp.v_min))
-    return top, bottom
-
-
-def _held(u: FloatArray, comp: Compensator) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Commands at the top limit, at the bottom one, and moved by the whole slew limit."""
-    top, bottom = _at_limits(u, comp)
-    slewed = np.zeros(u.size, dtype=bool)
-    if math.isfinite(comp.max_step):
-        slewed[1:] = np.abs(np.diff(u)) >= comp.max_step * (1 - 1e-6)
-    return top, bottom, slewed
-
-
-def _saturated(u: FloatArray, comp: Compensator) -> int:
-    """Commands at a voltage limit or moved by the whole slew limit."""
-    top, bottom, slewed = _held(u, comp)
-    return int(np.count_nonzero(top | bottom | slewed))
-
-
-def _limits_said(index: int, u: FloatArray, comp: Compensator, law: str = "harmonic") -> str:
-    """The warning of a trial whose commands the limits held: how many each limit held, and
-    the option that sets it (and, where the harmonic law met the slew limit, the other law)."""
-    top, bottom, slewed = _held(u, comp)
-    parts = []
-    if slewed.any():
-        rate = f"{comp.max_step * comp.sample_rate:.4g} V/s" if comp.sample_rate else "its"
-        parts.append(f"{np.count_nonzero(slewed)} moved by the whole slew limit ({rate}; "
-                     "--slew-rate, slew_rate)")  # fmt: skip
-    if top.any() or bottom.any():
-        parts.append(f"{np.count_nonzero(top)} at v_max {comp.v_max:g} V and "
-                     f"{np.count_nonzero(bottom)} at v_min {comp.v_min:g} V "
-                     "(--v-max, --v-min)")  # fmt: skip
-    held = int(np.count_nonzero(top | bottom | slewed))
-    return (
-        f"trial {index}: the limits held {held} of {u.size} commands ({'; '.join(parts)}): "
-        "the trajectory asks for more than the actuator and amplifier give, and learning "
-        "cannot remove the error that leaves"
-        + (
-            " (if the output runs on past its reversals, report's run-on row: law='jacobian', "
-            "--law jacobian, learns without asking the amplifier for those steps)"
-            if slewed.any() and law == "harmonic"
-            else ""
-        )
-    )
-
-
-def _centred_slew(u: FloatArray, step: float) -> FloatArray:
-    """A trial's commands within the slew limit, a cut move spread evenly around its sample.
-
-    The midpoint of the smallest sequence within the limit at or above the commands and the
-    largest at or below (both over the periodic trial): within the limit (the mean of two
-    sequences that are), inside the range the commands span, equal to them wherever they
-    keep to the limit, and never further from them than any sequence within the limit can
-    be (half the hulls' largest gap). A causal limiter starts every cut move late; a trial
-    is known before it is sent, so half of the move can come before its sample.
-    """
-    n = u.size
-    tiled = np.tile(u, 3)  # the trial runs after itself: its hulls are periodic
-    upper, lower = np.empty_like(tiled), np.empty_like(tiled)
-    S.slew_hull(tiled, step, True, upper)
-    S.slew_hull(tiled, step, False, lower)
-    return np.asarray(0.5 * (upper + lower)[n : 2 * n])
-
-
-def _anti_windup(e: FloatArray, u: FloatArray, comp: Compensator, sign: float) -> FloatArray:
-    """No learning outward where a command sat at a limit (the error there is out of reach);
-    ``sign``: -1 when the desired falls as the voltage rises (a negative gain)."""
-    top, bottom = _at_limits(u, comp)
-    out = e.copy()
-    out[top & (sign * e > 0)] = 0.0
-    out[bottom & (sign * e < 0)] = 0.0
-    return out
 
 
 def _flag(value: object, name: str) -> bool:
@@ -270,28 +173,6 @@ def _update(
     return np.fft.irfft(design.q() * spectrum, n=base.size)
 
 
-def _ramp_in(u: FloatArray, last: float, step: float, d: FloatArray) -> FloatArray:
-    """Bring ``u`` into the trajectory from the ``last`` command at the slew limit (in place);
-    the samples whose history differs from the trajectory's (the ramp, and until its
-    extremes wipe the actuator's memory out) as a mask."""
-    clamped = np.zeros(u.size, dtype=bool)
-    prev = last
-    for k in range(u.size):
-        if abs(u[k] - prev) <= step * (1 + 1e-12):
-            break
-        u[k] = prev + math.copysign(step, u[k] - prev)
-        clamped[k] = True
-        prev = float(u[k])
-    if clamped.any():
-        after = np.arange(d.size) > int(np.flatnonzero(clamped)[-1])
-        near = 0.01 * float(np.ptp(d))  # within 1 % of an extreme: the memory is wiped
-        hi = np.flatnonzero(after & (d >= d.max() - near))
-        lo = np.flatnonzero(after & (d <= d.min() + near))
-        wiped = max(int(hi[0]) if hi.size else d.size, int(lo[0]) if lo.size else d.size)
-        clamped[: wiped + 1] = True
-    return clamped
-
-
 def _lead(data: Any, n: int) -> tuple[FloatArray, FloatArray] | None:
     """The lead-in's readings and usable mask from a saved state (None: none kept)."""
     if data is None:
@@ -348,7 +229,7 @@ def _measured(
             raise ParameterError(msg)
         return (y if as_displacement else y / g), 0.0, leaked
     ok = np.isfinite(y)
-    q = _periodic_fill(np.where(ok, y, 0.0), ok) if ok.any() else np.zeros_like(y)
+    q = periodic_fill(np.where(ok, y, 0.0), ok) if ok.any() else np.zeros_like(y)
     dt = 1.0 / learner.sample_rate
     leak = leaked + np.cumsum(learner.leakage.current(u, q) * dt)
     sigma = learner.leakage.current_stderr(u, q)
@@ -358,6 +239,37 @@ def _measured(
     if learner.output_map is not None:  # the capacitor charge as metres, curvature included
         return learner.output_map.predict(h), bound, float(leak[-1])
     return (h * g if as_displacement and g is not None else h), bound, float(leak[-1])
+
+
+def resolved_law(law: str, lag: float, samples: int) -> str:
+    """The law ``law="auto"`` learns with: ``"jacobian"`` for a trial of up to
+    :data:`~.learning_jacobian.MAX_SAMPLES` samples without a stated lag, else ``"harmonic"``
+    (any other law as it is).
+
+    Parameters
+    ----------
+    law : str
+    lag : float
+        s, a stated lag (0: none).
+    samples : int
+        Of one trial.
+
+    Returns
+    -------
+    str
+    """
+    if law != "auto":
+        return law
+    return "jacobian" if lag <= 0 and 0 < samples <= MAX_SAMPLES else "harmonic"
+
+
+def _jacobian_said(design: LearningDesign) -> str:
+    """The Jacobian law's :meth:`LearningCompensator.describe`."""
+    return (
+        f"the Jacobian law: learning gain {design.gain:.3g}, cutoff {design.cutoff:.4g} Hz (the "
+        "harmonic law's design; its condition does not bound this law: a trial whose error "
+        "grows is undone and the gain halved)"
+    )
 
 
 def _responder(learner: LearningCompensator) -> Any:
@@ -461,11 +373,12 @@ class LearningCompensator:
         the measurement noise's (9: three times its amplitude). 0 learns the noise too,
         and the commands carry it, which dithers the loop narrower; 9 lowered the NRMSE
         on 19 of 20 plant rows and widened the loop on 13 (``docs/realtime.md``).
-    law : {"harmonic", "jacobian"}
+    law : {"auto", "harmonic", "jacobian"}
         How the error is learned: ``"harmonic"`` corrects the reference, each harmonic
         through the model's inverse; ``"jacobian"`` moves the commands through the model's
-        Jacobian along them (:mod:`~piezohyst.control.learning_jacobian`: for an actuator
-        whose output runs on past its reversals; up to 4000 samples, 0.2-0.7 s per 1000; no lag=).
+        Jacobian along them (:mod:`~piezohyst.control.learning_jacobian`: an actuator whose
+        output runs on past its reversals too; up to 4000 samples, 0.2-0.7 s per 1000; no
+        ``lag``). ``"auto"``: the Jacobian law where it can (:func:`resolved_law`).
 
     Attributes
     ----------
@@ -514,7 +427,7 @@ class LearningCompensator:
         output_map: OutputMap | None = None,
         probe: bool = True,
         noise_gate: float = 0.0,
-        law: Literal["harmonic", "jacobian"] = "harmonic",
+        law: Literal["auto", "harmonic", "jacobian"] = "auto",
     ) -> None:
         self.model = model
         kept: dict[str, Any] = {"v_min": v_min, "v_max": v_max, "sample_rate": sample_rate,
@@ -522,7 +435,7 @@ class LearningCompensator:
                                 "allow_extrapolation": allow_extrapolation}  # fmt: skip
         self.compensator = Compensator(model, slew_rate=slew_rate, **kept)
         # the trial's commands before the slew limit, which the whole trial then meets at once
-        # (_centred_slew); the compensator above holds the limit
+        # (centred_slew); the compensator above holds the limit
         self._free = Compensator(model, slew_rate=None, **kept)
         #: The charge -> displacement map of the desired values (None: a gain or charge)
         self.output_map = output_map
@@ -552,13 +465,13 @@ class LearningCompensator:
         gate = check_float(noise_gate, "noise_gate", "LearningCompensator", 0.0, GATE_MAX)
         if gate > 0:  # only when set: the states saved before it existed resume
             self.settings["noise_gate"] = gate
-        if law not in ("harmonic", "jacobian"):
-            msg = f"'law' must be 'harmonic' or 'jacobian'. Got {law!r}."
+        if law not in ("auto", "harmonic", "jacobian"):
+            msg = f"'law' must be 'auto', 'harmonic' or 'jacobian'. Got {law!r}."
             raise ParameterError(msg)
         if law == "jacobian" and lag > 0:
-            msg = ("law='jacobian' with a stated lag learned a 40 Hz scan worse than the harmonic "
-                   "law on every plant (docs/benchmarks.md): identify the lag with the model "
-                   "(input_dynamics='auto') or use law='harmonic'")  # fmt: skip
+            msg = ("law='jacobian' learns through the model's own lag: a stated one learned 10 or "
+                   "40 Hz scans worse than the harmonic law (docs/benchmarks.md); identify it "
+                   "with the model (input_dynamics='auto') or use law='harmonic'")  # fmt: skip
             raise ParameterError(msg)
         if law != "harmonic":  # the same: the states saved before it existed resume
             self.settings["law"] = law
@@ -623,6 +536,25 @@ class LearningCompensator:
         self.design: LearningDesign | None = None
 
     @property
+    def law(self) -> str:
+        """The law learning: ``"harmonic"`` or ``"jacobian"``; ``law="auto"`` chooses once the
+        trajectory is known (:func:`resolved_law`; before it, ``"auto"``)."""
+        law = self.settings.get("law", "harmonic")
+        n = 0 if self._desired is None else self._desired.size
+        return law if n == 0 else resolved_law(law, self.settings["lag"], n)
+
+    def describe(self) -> str:
+        """One paragraph: the law learning, its gain and filter.
+
+        Returns
+        -------
+        str
+        """
+        if self.design is None:
+            return f"law {self.law!r}: chosen with the trajectory (the first command())"
+        return self.design.describe() if self.law != "jacobian" else _jacobian_said(self.design)
+
+    @property
     def trials(self) -> int:
         """Trials learned from (or skipped) so far."""
         return len(self.history)
@@ -659,27 +591,7 @@ class LearningCompensator:
 
     # --------------------------------------------------------------- commands
     def _set_trajectory(self, desired: ArrayLike) -> FloatArray:
-        try:
-            d = np.ascontiguousarray(desired, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            msg = f"'desired' must be a 1-D array of numbers ({exc})."
-            raise ShapeError(msg) from None
-        if d.ndim != 1 or d.size < 8:
-            msg = f"'desired' must be a 1-D array of at least 8 samples. Got shape {d.shape}."
-            raise ShapeError(msg)
-        bad = ~np.isfinite(d)
-        if bad.any():
-            i = int(np.argmax(bad))
-            msg = f"'desired' must be finite: a trial repeats it. Got {d[i]} at index {i}."
-            raise NonFiniteError(msg)
-        if not np.ptp(d) > 0:
-            msg = "'desired' must move: a constant trajectory has nothing to learn."
-            raise ParameterError(msg)
-        _check_periodic(d)
-        if self.settings.get("law") == "jacobian" and d.size > MAX_SAMPLES:
-            msg = (f"law='jacobian' learns trials of up to {MAX_SAMPLES} samples (its Jacobian "
-                   f"is n x n): this one has {d.size}; law='harmonic' learns any")  # fmt: skip
-            raise ParameterError(msg)
+        d = trajectory(desired, self.settings.get("law", "harmonic"))
         if self._desired is None:
             self._desired = d.copy()
             self._correction = np.zeros(d.size)
@@ -700,7 +612,7 @@ class LearningCompensator:
     ) -> FloatArray:
         """The compensator's commands for ``desired + correction`` after the history of
         ``desired + previous`` (at least 1 s of it, from the model's initial state), within
-        the slew limit over the whole trial (:func:`_centred_slew`)."""
+        the slew limit over the whole trial (:func:`centred_slew`)."""
         assert self._desired is not None
         d = self._desired
         comp = self._free
@@ -712,7 +624,7 @@ class LearningCompensator:
             u = np.clip(u + volts, self.compensator.v_min, self.compensator.v_max)
         step = self.compensator.max_step
         if math.isfinite(step):  # a hair inside, so that rounding never steps over it; the
-            u = _centred_slew(u, step * (1.0 - 1e-9))  # hulls stay inside the commands' range
+            u = centred_slew(u, step * (1.0 - 1e-9))  # hulls stay inside the commands' range
         return u
 
     def command(self, desired: ArrayLike | None = None) -> FloatArray:
@@ -750,11 +662,11 @@ class LearningCompensator:
         probing = self._probe.size and self.trials == 0  # the lead-in carries the probe
         probe = self._probe if probing else 0.0
         assert self._desired is not None
-        if self.settings.get("law") == "jacobian":  # a correction in volts, after a periodic d
+        if self.law == "jacobian":  # a correction in volts, after a periodic d
             u = self._commands(np.zeros(self._desired.size), probe, self._correction)
         else:
             u = self._commands(self._previous, self._correction + probe)
-        clamped = _ramp_in(u, self._last, self.compensator.max_step, self._desired)
+        clamped = ramp_in(u, self._last, self.compensator.max_step, self._desired)
         self._pending, self._clamped = u.copy(), clamped
         self._last = float(u[-1])
         return u
@@ -799,7 +711,7 @@ class LearningCompensator:
         index = self.trials
         span = float(np.ptp(d))
         learned = int(ok.sum())
-        saturated = _saturated(u, self.compensator)
+        saturated = count_saturated(u, self.compensator)
         self._previous = self._correction  # what this trial sent: the next trial's history
         lead_in = self.settings["lead_in"] and index == 0  # the arrival, not the scan's response
         if lead_in and self._probe.size:
@@ -820,12 +732,12 @@ class LearningCompensator:
             return trial
         error = float(np.sqrt(np.mean(e[ok] ** 2))) / span
         width = hysteresis_width(d[ok], measured[ok]) if learned > 2 else math.nan
-        e = _periodic_fill(e, ok)
+        e = periodic_fill(e, ok)
         g, as_displacement = _desired_gain(self.settings, self.output_map)
         flipped = as_displacement and g is not None and g < 0
-        e = _anti_windup(e, u, self.compensator, -1.0 if flipped else 1.0)
+        e = anti_windup(e, u, self.compensator, -1.0 if flipped else 1.0)
         if saturated > SATURATED * u.size:
-            said = _limits_said(index, u, self.compensator, self.settings.get("law", "harmonic"))
+            said = limits_said(index, u, self.compensator, self.law)
             warnings.warn(said, LearningWarning, stacklevel=2)
         rolled = False
         if self._first:  # the law, chosen from the first trial learned from
@@ -857,7 +769,7 @@ class LearningCompensator:
             self._good = (self._correction.copy(), error)
             self._resend = False
             assert self.design is not None
-            if self.settings.get("law") == "jacobian":
+            if self.law == "jacobian":
                 step = _jacobian_step(self, u, e, sensor)  # a new array: _previous keeps its own
                 self._correction = self._correction + self._gain * step
             else:

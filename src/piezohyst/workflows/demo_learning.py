@@ -56,7 +56,7 @@ def learning_study(
         loops.append(s)
     assert ilc.design is not None
     return {"desired": desired, "first": loops[0], "last": loops[-1], "rows": rows,
-            "design": ilc.design.describe(), "rollbacks": ilc.rollbacks}  # fmt: skip
+            "design": ilc.describe(), "rollbacks": ilc.rollbacks}  # fmt: skip
 
 
 def learning_figure(out: Path, study: dict[str, Any]) -> Path:

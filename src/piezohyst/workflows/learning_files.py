@@ -75,7 +75,7 @@ def learn_file(
     lead_in: bool = True,
     probe: bool = True,
     noise_gate: float = 0.0,
-    law: Literal["harmonic", "jacobian"] = "harmonic",
+    law: Literal["auto", "harmonic", "jacobian"] = "auto",
     voltage_tolerance: float | None = None,
     force: bool = False,
     command_scale: str | float | None = None,
