@@ -128,6 +128,14 @@ def test_what_a_trial_refuses(pi_model: ph.ClassicalPI) -> None:
     ramp = np.linspace(d.min(), d.max(), 64)
     with pytest.raises(ph.ParameterError, match="not periodic over the trial: it jumps"):
         ilc.command(ramp)
+    with pytest.raises(ph.NonFiniteError, match=r"'desired' must be finite\. Got nan at index 3"):
+        ilc.command(np.where(np.arange(d.size) == 3, np.nan, d))
+    with pytest.raises(ph.ShapeError, match=r"at least 8 samples .* Got 5"):
+        ilc.command(d[:5])
+    with pytest.raises(ph.ShapeError, match="'desired' must be a 1-D array"):
+        ilc.command(np.stack([d, d]))
+    with pytest.raises(ph.ParameterError, match="'desired' must move"):
+        ilc.command(np.full(d.size, d[0]))
     with pytest.raises(ph.ParameterError, match="needs a trial"):
         ilc.learn(d)
     ilc.command(d)
@@ -526,6 +534,35 @@ def test_the_command_line_learns_from_a_sensor_column(
     assert "not learned from" not in res.output
     res = runner.invoke(main, [*base, "--desired", str(tmp_path / "scan.csv")])
     assert res.exit_code == 1 and "--desired starts a run" in res.output
+
+
+def test_the_command_line_says_how_many_commands_the_limits_held(
+    pi_model: ph.ClassicalPI, tmp_path: Path
+) -> None:
+    """Every trial's line counts the commands a limit held, however few (the warning comes
+    only above 2 % of them)."""
+    pi_model.save(tmp_path / "m.json")
+    d = cosine(pi_model, n=200, cycles=4)
+    ph.write_table(tmp_path / "scan.csv", {"time": np.arange(d.size) / RATE, "desired": d})
+    runner = CliRunner()
+    for v_max in (140.0, 80.0):
+        state = tmp_path / f"s{v_max:g}.json"
+        base = ["learn", str(tmp_path / "m.json"), "--state", str(state), "-o",
+                str(tmp_path / "next.csv"), "--v-min", "0", "--v-max", f"{v_max:g}",
+                "--slew-rate", "20000", "--no-lead-in"]  # fmt: skip
+        res = runner.invoke(main, [*base, "--desired", str(tmp_path / "scan.csv")])
+        assert res.exit_code == 0, res.output
+        u = ph.read_table(tmp_path / "next.csv").get("command")
+        ph.write_table(
+            tmp_path / "t0.csv", {"voltage": u, "charge": pi_model.hysteresis_.predict(u)}
+        )
+        res = runner.invoke(main, [*base[:2], str(tmp_path / "t0.csv"), *base[2:]])
+        assert res.exit_code == 0, res.output
+        held = int(np.count_nonzero(u >= v_max - 1e-9))
+        if v_max < 140.0:
+            assert 0 < held and f"the limits held {held} commands" in res.output
+        else:
+            assert held == 0 and "the limits held" not in res.output
 
 
 def test_the_command_line_skips_lost_readings_written_nan(

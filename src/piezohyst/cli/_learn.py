@@ -222,9 +222,10 @@ def learn(
             click.echo(f"trial {trial.index}: {trial.learned} readings to learn from: skipped")
         else:
             back = " (rolled back, gain halved)" if trial.rolled_back else ""
+            held = f"; the limits held {trial.saturated} commands" if trial.saturated else ""
             click.echo(
                 f"trial {trial.index}: error {trial.error:.3%}, loop width {trial.width:.3%}, "
-                f"learned from {trial.learned} samples{back}"
+                f"learned from {trial.learned} samples{back}{held}"
             )
     if learner.design is not None and trial is not None:
         ctx.info(learner.describe())

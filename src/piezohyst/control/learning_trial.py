@@ -13,7 +13,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._kernels import signal as S
-from ..errors import NonFiniteError, ParameterError, ShapeError
+from .._validation import as_signal
+from ..errors import ParameterError, ShapeError
 from .compensator import Compensator
 from .learning_jacobian import MAX_SAMPLES
 
@@ -161,19 +162,10 @@ def ramp_in(u: FloatArray, last: float, step: float, d: FloatArray) -> FloatArra
 
 def trajectory(desired: ArrayLike, law: str) -> FloatArray:
     """``desired`` checked as one period of a trajectory the ``law`` learns."""
-    try:
-        d = np.ascontiguousarray(desired, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        msg = f"'desired' must be a 1-D array of numbers ({exc})."
-        raise ShapeError(msg) from None
-    if d.ndim != 1 or d.size < 8:
-        msg = f"'desired' must be a 1-D array of at least 8 samples. Got shape {d.shape}."
+    d = as_signal(desired, "desired")
+    if d.size < 8:
+        msg = f"'desired' must hold at least 8 samples (one trial). Got {d.size}."
         raise ShapeError(msg)
-    bad = ~np.isfinite(d)
-    if bad.any():
-        i = int(np.argmax(bad))
-        msg = f"'desired' must be finite: a trial repeats it. Got {d[i]} at index {i}."
-        raise NonFiniteError(msg)
     if not np.ptp(d) > 0:
         msg = "'desired' must move: a constant trajectory has nothing to learn."
         raise ParameterError(msg)
