@@ -289,18 +289,21 @@ def test_the_command_line_learns_with_the_jacobian_law_and_holds_a_run_to_it(
 def test_a_harmonic_trial_the_slew_limit_holds_names_the_other_law(
     pi_model: ph.ClassicalPI,
 ) -> None:
+    """Only where the Jacobian law could learn instead: not with it, and not where ``auto``
+    took the harmonic law for a stated lag (the Jacobian law refuses one)."""
     d = cosine(pi_model, n=200, cycles=4)
     said = {}
-    for law in ("harmonic", "jacobian"):
+    for law, lag in (("harmonic", 0.0), ("jacobian", 0.0), ("auto", 4e-3)):
         ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
-                                     slew_rate=1e3, lead_in=False, law=law)  # type: ignore[arg-type]  # fmt: skip
+                                     slew_rate=1e3, lead_in=False, law=law, lag=lag)  # type: ignore[arg-type]  # fmt: skip
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             ilc.learn(pi_model.hysteresis_.predict(ilc.command(d)))
         said[law] = [str(w.message) for w in caught if w.category is LearningWarning]
     assert any("moved by the whole slew limit" in m and "--law jacobian" in m
                for m in said["harmonic"])  # fmt: skip
-    assert said["jacobian"] and not any("--law jacobian" in m for m in said["jacobian"])
+    for law in ("jacobian", "auto"):
+        assert said[law] and not any("--law jacobian" in m for m in said[law])
 
 
 @pytest.fixture(scope="module")

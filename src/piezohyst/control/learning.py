@@ -263,6 +263,11 @@ def resolved_law(law: str, lag: float, samples: int) -> str:
     return "jacobian" if lag <= 0 and 0 < samples <= MAX_SAMPLES else "harmonic"
 
 
+def _other_law(law: str, settings: dict[str, Any], samples: int) -> bool:
+    """Whether the Jacobian law could learn where the harmonic law was asked for."""
+    return law == "harmonic" and resolved_law("auto", settings["lag"], samples) == "jacobian"
+
+
 def _jacobian_said(design: LearningDesign) -> str:
     """The Jacobian law's :meth:`LearningCompensator.describe`."""
     return (
@@ -539,9 +544,8 @@ class LearningCompensator:
     def law(self) -> str:
         """The law learning: ``"harmonic"`` or ``"jacobian"``; ``law="auto"`` chooses once the
         trajectory is known (:func:`resolved_law`; before it, ``"auto"``)."""
-        law = self.settings.get("law", "harmonic")
-        n = 0 if self._desired is None else self._desired.size
-        return law if n == 0 else resolved_law(law, self.settings["lag"], n)
+        law, d = self.settings.get("law", "harmonic"), self._desired
+        return law if d is None else resolved_law(law, self.settings["lag"], d.size)
 
     def describe(self) -> str:
         """One paragraph: the law learning, its gain and filter.
@@ -737,8 +741,9 @@ class LearningCompensator:
         flipped = as_displacement and g is not None and g < 0
         e = anti_windup(e, u, self.compensator, -1.0 if flipped else 1.0)
         if saturated > SATURATED * u.size:
-            said = limits_said(index, u, self.compensator, self.law)
-            warnings.warn(said, LearningWarning, stacklevel=2)
+            other = _other_law(self.law, self.settings, u.size)
+            warnings.warn(limits_said(index, u, self.compensator, other), LearningWarning,
+                          stacklevel=2)  # fmt: skip
         rolled = False
         if self._first:  # the law, chosen from the first trial learned from
             loop = _probed(self._lead, measured, ok, self._bins, d)

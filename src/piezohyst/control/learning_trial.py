@@ -83,9 +83,10 @@ def count_saturated(u: FloatArray, comp: Compensator) -> int:
     return int(np.count_nonzero(top | bottom | slewed))
 
 
-def limits_said(index: int, u: FloatArray, comp: Compensator, law: str = "harmonic") -> str:
+def limits_said(index: int, u: FloatArray, comp: Compensator, other_law: bool = False) -> str:
     """The warning of a trial whose commands the limits held: how many each limit held, and
-    the option that sets it (and, where the harmonic law met the slew limit, the other law)."""
+    the option that sets it (and, with ``other_law``, where the slew limit held commands,
+    the Jacobian law: the harmonic law was asked for where that one could learn)."""
     top, bottom, slewed = held_by_limits(u, comp)
     parts = []
     if slewed.any():
@@ -104,7 +105,7 @@ def limits_said(index: int, u: FloatArray, comp: Compensator, law: str = "harmon
         + (
             " (if the output runs on past its reversals, report's run-on row: law='jacobian', "
             "--law jacobian, learns without asking the amplifier for those steps)"
-            if slewed.any() and law == "harmonic"
+            if slewed.any() and other_law
             else ""
         )
     )
