@@ -7,7 +7,8 @@ the noise the correction carries, measured against the design's figure, on every
 ``--run-on``: how far each plant's charge runs on past a voltage reversal, and the models';
 ``--floor [--only PLANT]``: the best periodic command within the limits on each plant, and
 an idealised Jacobian law; ``--heldout``: the default law against the harmonic law at scan rates
-and on a plant no table ran).
+and on a plant no table ran; ``--probe-said``: where the lead-in's probe says the model's
+timing is off).
 
 1. Targets (issue 27), on the bench's amplifier-lag preset ``T226-H4-203X-amp4ms`` with
    0.1 % noise on the charge: the leakage calibrated from 10 s holds up and down; an
@@ -168,6 +169,9 @@ def main() -> None:
     ap.add_argument(
         "--heldout", action="store_true", help="the default law against the harmonic one, unseen"
     )
+    ap.add_argument(
+        "--probe-said", action="store_true", help="where the probe says the model's timing is off"
+    )
     args = ap.parse_args()
     SLEW, GATE, LAW = args.slew, args.noise_gate, args.law
     if args.floor:
@@ -175,6 +179,9 @@ def main() -> None:
         return
     if args.heldout:
         heldout_rows(args.trials)
+        return
+    if args.probe_said:
+        probe_said()
         return
     if args.run_on:
         run_on()
@@ -582,6 +589,35 @@ def lagged_plants(only: str | None = None) -> Iterator[tuple[str, object]]:
     for name, preset in PLANTS.items():
         if only is None or name == only:
             yield name, (replace(preset, amp_tau=4e-3) if preset.amp_tau == 0 else preset)
+
+
+def probe_said() -> None:
+    """``--probe-said``: where the lead-in's probe measures the loop beyond every timing the
+    law allows for (the learner's warning), for each plant behind its 4 ms amplifier, seeds
+    0-2, at 10 and 40 Hz, with ActivePI without input dynamics (no lag stated, and the 4 ms
+    stated), with identified dynamics, and BoucWen with them: the delay and lag beyond the
+    model that fit the probe, or "-" where it said nothing."""
+    global LAW
+    LAW = "auto"
+    print("| plant | model | 10 Hz, seeds 0-2 | 40 Hz, seeds 0-2 |")
+    print("|---|---|---|---|")
+    for name, preset in lagged_plants():
+        rigs = [rig(preset, seed) for seed in range(3)]
+        for key, lag, label in (("plain", 0.0, "ActivePI(10), no dynamics"),
+                                ("plain", 4e-3, "ActivePI(10), lag=4 ms stated"),
+                                ("dynamic", 0.0, "ActivePI(10), auto"),
+                                ("bw", 0.0, "BoucWen, auto")):  # fmt: skip
+            cells = []
+            for f in (10.0, 40.0):
+                said = []
+                for seed, r in enumerate(rigs):
+                    ilc, *_ = run(r, r[key], f, 1, lag, False, seed=3 + seed)  # type: ignore[arg-type]
+                    d = ilc.design
+                    sized = f"{d.probe_delay * 1e3:.2g} + {d.probe_lag * 1e3:.2g} ms"
+                    said.append(sized if d.probe_phase < 0 else "ahead" if d.probe_phase else "-")
+                cells.append(", ".join(said))
+            print(f"| {name} | {label} | {cells[0]} | {cells[1]} |", flush=True)
+    LAW = "harmonic"
 
 
 def heldout_rows(trials: int) -> None:

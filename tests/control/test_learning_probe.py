@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -21,6 +22,7 @@ from piezohyst.control.learning_probe import (
     response,
     scan_bin,
 )
+from piezohyst.errors import LearningWarning
 from piezohyst.model.dynamics import InputDynamics, filter_response
 
 RATE = 1000.0
@@ -121,7 +123,11 @@ def test_a_probe_that_agrees_narrows_the_timings_and_one_that_does_not_leaves_th
     assert probed.timing >= 0.5e-3  # the reading's half sample stays allowed for
     odd = Response(bins, np.full(bins.size, 1j), np.full(bins.size, 0.02))
     same = design_learning(model, sample_rate=RATE, samples=N, first_error=first, measured=odd)
-    assert same == plain
+    quiet = replace(same, probe_phase=0.0, probe_frequency=0.0, probe_delay=0.0, probe_lag=0.0)
+    assert quiet == plain  # and it says so:
+    assert same.probe_phase == math.pi / 2 and same.probe_frequency in bins * RATE / N
+    assert "90 degrees ahead of the timing the law assumes" in same.describe()
+    assert not plain.beyond() and not probed.beyond()
     tight = _model(())  # dynamics given by hand: the box of their tolerance narrows alike
     boxed = design_learning(tight, sample_rate=RATE, samples=N, first_error=first)
     narrowed = design_learning(tight, sample_rate=RATE, samples=N, first_error=first,
@@ -162,3 +168,32 @@ def test_the_lead_in_carries_the_probe_and_the_law_uses_what_it_measured() -> No
     assert on.design is not None and off.design is not None
     assert on.design.probed and not off.design.probed
     assert on.design.timing < off.design.timing
+
+
+def test_a_loop_lagging_a_model_without_dynamics_is_told_by_the_probe() -> None:
+    """A model that knows no lag, the loop 4 ms behind it (an amplifier): the lead-in's probe
+    measures the phase, the law allows for half a sample only, and the learner says so once,
+    naming what to do; the same loop with the lag in the model is quiet."""
+    h = ph.PIHysteresis([0.0, 15.0, 30.0], [1.0e-8, 4e-9, 2e-9])
+    plain = ph.ActivePI.from_operator(h)
+    plain.input_range_ = (0.0, 140.0)
+    d = _scan()
+    kw = {"v_min": 0.0, "v_max": 140.0, "sample_rate": RATE, "slew_rate": None}
+    said = {}
+    for name, model in (("plain", plain), ("lagged", _model(()))):
+        ilc = ph.LearningCompensator(model, **kw)  # type: ignore[arg-type]
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            for _ in range(3):
+                u = ilc.command(d)
+                ilc.learn(plain.hysteresis_.predict(_through(u, 0.5e-3, 4e-3)))
+        said[name] = [str(w.message) for w in caught if w.category is LearningWarning]
+        assert ilc.design is not None
+        assert (ilc.design.probe_phase < 0) == (name == "plain")  # the loop lags
+        if name == "plain":  # sized roughly (a hysteresis' response to small sines is not a
+            # linear system's): the delay to its grid's quarter sample, the lag to a factor 2
+            assert abs(ilc.design.probe_delay - 0.5e-3) <= 0.25e-3 + 1e-12
+            assert 2e-3 <= ilc.design.probe_lag <= 8e-3
+    told = [m for m in said["plain"] if "the lead-in's probe measured the loop" in m]
+    assert len(told) == 1 and "behind" in told[0] and "input_dynamics='auto'" in told[0]
+    assert not any("probe measured" in m for m in said["lagged"])

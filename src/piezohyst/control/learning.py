@@ -268,6 +268,20 @@ def _other_law(law: str, settings: dict[str, Any], samples: int) -> bool:
     return law == "harmonic" and resolved_law("auto", settings["lag"], samples) == "jacobian"
 
 
+def _first_design(
+    learner: LearningCompensator, measured: FloatArray, ok: FloatArray, e: FloatArray, index: int
+) -> LearningDesign:
+    """The law chosen from the first trial learned from, with the lead-in probe's response;
+    warns where that response is beyond every timing the law allows for."""
+    d = learner.desired
+    loop = _probed(learner._lead, measured, ok, learner._bins, d)
+    design = design_learning(learner.model, **learner._design_args(d.size), first_error=e,
+                             measured=loop)  # fmt: skip
+    if design.probe_phase:
+        warnings.warn(f"trial {index}: {design.beyond()}", LearningWarning, stacklevel=3)
+    return design
+
+
 def _jacobian_said(design: LearningDesign) -> str:
     """The Jacobian law's :meth:`LearningCompensator.describe`."""
     return (
@@ -746,12 +760,8 @@ class LearningCompensator:
                           stacklevel=2)  # fmt: skip
         rolled = False
         if self._first:  # the law, chosen from the first trial learned from
-            loop = _probed(self._lead, measured, ok, self._bins, d)
-            self.design = design_learning(self.model, **self._design_args(d.size), first_error=e,
-                                          measured=loop)  # fmt: skip
-            self._lead = None
-            self._gain = self.design.gain
-            self._first = False
+            self.design = _first_design(self, measured, ok, e, index)
+            self._lead, self._gain, self._first = None, self.design.gain, False
         assert self.design is not None
         floor = self.design.noise * math.sqrt(1.0 + self.design.noise_gain**2) / span
         grown = self._good is not None and error > max(self._good[1], floor) * (

@@ -38,6 +38,10 @@ PROBE_MARGIN = math.radians(5.0)
 #: complex plane: beyond 4, 3e-4 per sine), turns the phase by at most asin(4 stderr); a
 #: sine whose noise could reach the response itself (4 stderr >= 1) rules nothing out
 PROBE_SIGMAS = 4.0
+#: a probe's phase beyond every allowed timing is sized with delays of up to this many samples
+#: (in quarter samples) and these first-order lags (s)
+DELAYS = 20
+TAUS = np.concatenate([[0.0], np.geomspace(1e-5, 1.0, 201)])
 
 
 @dataclass(frozen=True)
@@ -98,6 +102,15 @@ class LearningDesign:
     probed : bool
         Whether the lead-in's probe narrowed the timings allowed for (to those whose
         phase agrees with the loop's measured one).
+    probe_phase, probe_frequency : float
+        Where the probe's response agrees with no timing allowed for: its phase over the
+        one the law assumes (rad; negative: the loop lags) at the sine where they differ
+        most, and that sine's frequency (Hz); 0 where one agrees. The condition above then
+        does not describe the loop (:meth:`beyond`).
+    probe_delay, probe_lag : float
+        s, the delay and first-order lag (of the model's own timing) whose phase fits the
+        probe's best there (among :data:`DELAYS` quarter samples and :data:`TAUS`): a rough
+        size of what the model does not hold.
     """
 
     gain: float
@@ -113,6 +126,10 @@ class LearningDesign:
     samples: int
     lag_error: float = 0.0
     probed: bool = False
+    probe_phase: float = 0.0
+    probe_frequency: float = 0.0
+    probe_delay: float = 0.0
+    probe_lag: float = 0.0
 
     def frequencies(self) -> FloatArray:
         """The harmonics of the trial (Hz), as :func:`numpy.fft.rfftfreq` gives them.
@@ -141,6 +158,26 @@ class LearningDesign:
         """
         return _l(self.frequencies(), self.lag, 1.0 / self.sample_rate)
 
+    def beyond(self) -> str:
+        """What the probe measured beyond every timing the law allows for ("" where nothing).
+
+        Returns
+        -------
+        str
+        """
+        if self.probe_phase == 0.0:
+            return ""
+        size = (f"; a delay of {self.probe_delay * 1e3:.2g} ms and a lag of "
+                f"{self.probe_lag * 1e3:.2g} ms more than the model holds fit it best"
+                if self.probe_phase < 0 else "")  # fmt: skip
+        return (
+            f"the lead-in's probe measured the loop {abs(math.degrees(self.probe_phase)):.0f} "
+            f"degrees {'behind' if self.probe_phase < 0 else 'ahead of'} the timing the law "
+            f"assumes at {self.probe_frequency:.0f} Hz, beyond every timing it allows for{size}: "
+            "the model does not hold the loop's dynamics (identify them: input_dynamics='auto',"
+            " --input-dynamics auto; or state lag=), and the condition does not hold"
+        )
+
     def describe(self) -> str:
         """One paragraph: gain, cutoff, what it allows for, the condition.
 
@@ -158,6 +195,7 @@ class LearningDesign:
             f"{self.timing * 1e3:.3g} ms{lags} and a slope error of {self.slope_error:.0%}: "
             f"worst-case contraction {self.contraction:.3f} per trial ({sure}); the learned "
             f"correction carries {self.noise_gain:.2f}x the measurement noise"
+            + (f"; but {self.beyond()}" if self.probe_phase else "")
         )
 
 
@@ -183,10 +221,13 @@ def _worst(ratios: Any, gain: float, slope_error: float) -> FloatArray:
 def _allowed(
     model: Any, lag: float, tolerance: float, dt: float, f: FloatArray,
     measured: Response | None = None,
-) -> tuple[float, float, Any, bool]:  # fmt: skip
+) -> tuple[float, float, Any, bool, tuple[float, float, float, float]]:  # fmt: skip
     """The delay error allowed for (s), the lag's relative error, the response of every
-    timing allowed for over the one the law assumes: shape (timings, harmonics), and
-    whether a probe's response narrowed them.
+    timing allowed for over the one the law assumes: shape (timings, harmonics), whether a
+    probe's response narrowed them, and where it agrees with none of them, the phase (rad)
+    of the loop's measured response over the assumed one at the sine where it is furthest,
+    that sine's frequency (Hz), and the delay and first-order lag that fit the phase best (s;
+    else zeros).
 
     The model's identified delay and lag anywhere in their joint 95 % region (the ellipse of
     their covariance: a delay and a lag the record could not tell apart are anti-correlated),
@@ -226,22 +267,33 @@ def _allowed(
                 rows.append((abs(d_off + shift), abs(t_off) / tau if tau > 0 else 0.0,
                              abs(stated - lag) / lag if lag > 0 else 0.0))  # fmt: skip
     table, kept = np.array(ratios), np.ones(len(ratios), dtype=bool)
-    narrowed = False
-    if measured is not None and offsets.shape[0] > 1:  # the identified timing's region only:
-        # the reading's half sample and a stated lag's tolerance stay allowed for
-        bound = PROBE_SIGMAS * measured.phase_stderr  # the noise's reach over the response
-        sure = bound < 1.0  # where the response stood out of it
+    narrowed, beyond = False, (0.0, 0.0, 0.0, 0.0)
+    centre = shifts.size // 2 * lags.size + lags.size // 2  # no shift, the lag stated
+    bound = PROBE_SIGMAS * measured.phase_stderr if measured is not None else np.zeros(0)
+    sure = bound < 1.0  # where the response stood out of the noise's reach over it
+    if measured is not None and sure.any():
         seen = (measured.ratio * _l(f[measured.bins], lag, dt))[sure]
         off = np.abs(np.angle(table[:, measured.bins[sure]] / seen[None, :]))
         agree = np.all(off <= np.arcsin(bound[sure])[None, :] + PROBE_MARGIN, axis=1)
         per = agree.reshape(offsets.shape[0], -1)  # rows: offsets x shifts x stated lags
-        near = per[:, shifts.size // 2 * lags.size + lags.size // 2]  # no shift, the lag stated
-        if sure.any() and near.any() and not near.all():
+        near = per[:, centre]
+        # the identified timing's region only: the reading's half sample and a stated lag's
+        # tolerance stay allowed for
+        if offsets.shape[0] > 1 and near.any() and not near.all():
             kept, narrowed = np.repeat(near, per.shape[1]), True
+        if not agree.any():  # the loop's timing is none the law allows for: by how much
+            phase = np.angle(seen / table[centre, measured.bins[sure]])
+            k = int(np.argmax(np.abs(phase)))
+            at = f[measured.bins[sure]]
+            delays = np.arange(0.0, DELAYS * dt, 0.25 * dt)
+            grid = filter_response(delays[:, None, None], TAUS[None, :, None], dt, at)
+            misfit = np.sum(np.abs(grid / np.abs(grid) - np.exp(1j * phase)) ** 2, axis=2)
+            i, j = np.unravel_index(int(np.argmin(misfit)), misfit.shape)
+            beyond = (float(phase[k]), float(at[k]), float(delays[i]), float(TAUS[j]))
     err = np.array(rows)[kept]
     delay_err = float(np.max(err[:, 0]))
     lag_error = float(max(np.max(err[:, 1]), np.max(err[:, 2])))
-    return delay_err, lag_error, table[kept], narrowed
+    return delay_err, lag_error, table[kept], narrowed, beyond
 
 
 def _noise_gain(q: FloatArray, gain: float) -> float:
@@ -314,7 +366,7 @@ def design_learning(
     s = check_float(slope_error, "slope_error", owner, 0.0, 0.99)
     dt = 1.0 / rate
     f = np.fft.rfftfreq(samples, dt)
-    timing, lag_error, ratios, narrowed = _allowed(model, tau, tol, dt, f, measured)
+    timing, lag_error, ratios, narrowed, beyond = _allowed(model, tau, tol, dt, f, measured)
     if cutoff == "auto":
         cuts = np.concatenate([np.geomspace(rate / samples, rate / 2, 60), [math.inf]])
     else:
@@ -354,6 +406,10 @@ def design_learning(
         samples=int(samples),
         lag_error=lag_error,
         probed=narrowed,
+        probe_phase=beyond[0],
+        probe_frequency=beyond[1],
+        probe_delay=beyond[2],
+        probe_lag=beyond[3],
     )
 
 
