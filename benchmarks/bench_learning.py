@@ -688,7 +688,8 @@ def plants(trials: int, only: str | None = None) -> None:
         rigs = [rig(preset, seed) for seed in range(3)]
         for key, label, lag in (("dynamic", "ActivePI(10), auto", 0.0),
                                 ("bw", "BoucWen, auto", 0.0),
-                                ("plain", "ActivePI(10) + lag=4 ms stated", 4e-3)):  # fmt: skip
+                                ("plain", "ActivePI(10) + lag=4 ms stated", 4e-3),
+                                ("plain", "ActivePI(10), no dynamics, no lag", 0.0)):  # fmt: skip
             if lag and LAW == "jacobian":  # refused: the lag is identified with the model
                 continue
             for f in (10.0, 40.0):
