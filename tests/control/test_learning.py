@@ -616,6 +616,22 @@ def test_a_call_with_other_settings_than_the_runs_first_is_told_which(
     assert said in res.output
     res = runner.invoke(main, [*base[:2], str(tmp_path / "t0.csv"), *base[2:], "--lag", "0.002"])
     assert res.exit_code == 0, res.output
+    # a run begun before --law existed (its state names no law) learned with the harmonic law,
+    # and a call with today's default is told so by name
+    base[3] = str(tmp_path / "old.json")
+    scan = str(tmp_path / "scan.csv")
+    first = runner.invoke(main, [*base, "--law", "harmonic", "--desired", scan])
+    assert first.exit_code == 0, first.output
+    state = json.loads((tmp_path / "old.json").read_text())
+    del state["run"]["law"], state["run"]["noise_gate"]
+    (tmp_path / "old.json").write_text(json.dumps(state))
+    u = ph.read_table(tmp_path / "next.csv").get("command")
+    ph.write_table(tmp_path / "t0.csv", {"voltage": u, "charge": pi_model.hysteresis_.predict(u)})
+    res = runner.invoke(main, [*base[:2], str(tmp_path / "t0.csv"), *base[2:]])
+    assert res.exit_code == 1
+    assert "--law 'auto', where the first call gave 'harmonic'; give every" in res.output
+    res = runner.invoke(main, [*base[:2], str(tmp_path / "t0.csv"), *base[2:], "--law", "harmonic"])
+    assert res.exit_code == 0, res.output
 
 
 def test_a_trial_the_limits_hold_says_which_limit_and_its_option(pi_model: ph.ClassicalPI) -> None:

@@ -257,6 +257,10 @@ RUN_OPTIONS = {
 }  # fmt: skip
 
 
+#: What a run's first call gave for the options added since runs were first saved
+RUN_DEFAULTS = {"noise_gate": 0.0, "law": "harmonic"}
+
+
 def _run_settings(learner: LearningCompensator) -> dict[str, Any]:
     """A run's settings as the command line gives them (files by a digest of their contents)."""
 
@@ -266,8 +270,8 @@ def _run_settings(learner: LearningCompensator) -> dict[str, Any]:
         ]
 
     out = {k: v for k, v in learner.settings.items() if k in RUN_OPTIONS}
-    out["noise_gate"] = learner.settings.get("noise_gate", 0.0)
-    out["law"] = learner.settings.get("law", "harmonic")
+    out["noise_gate"] = learner.settings.get("noise_gate", RUN_DEFAULTS["noise_gate"])
+    out["law"] = learner.settings.get("law", RUN_DEFAULTS["law"])
     out["model"] = digest(learner.model.to_dict())
     out["leakage"] = digest(learner.leakage.to_dict())
     out["output_map"] = None if learner.output_map is None else digest(learner.output_map.to_dict())
@@ -284,6 +288,7 @@ def _restore(learner: LearningCompensator, saved: Any, state_path: Path) -> None
         if not isinstance(was, dict):
             raise
         now = _run_settings(learner)
+        was = {**RUN_DEFAULTS, **was}  # a run begun before these options existed had them so
         diff = [
             _differs(k, was.get(k), now.get(k)) for k in RUN_OPTIONS if was.get(k) != now.get(k)
         ]
