@@ -849,8 +849,8 @@ class LearningCompensator:
             raise ModelFileError(msg)
         if data.get("fingerprint") != self._fingerprint:
             msg = (
-                f"{where}: made with another model, leakage or settings; a learning state "
-                "continues only the run that wrote it"
+                f"{where}: made with another model, leakage or settings (law= too: 'auto' is the "
+                "default, a run saved before it was 'harmonic'); a state continues only its run"
             )
             raise ModelFileError(msg)
         try:
