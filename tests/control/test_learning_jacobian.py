@@ -229,9 +229,13 @@ def test_auto_is_the_jacobian_law_where_it_can_be(pi_model: ph.ClassicalPI) -> N
                          (long, 0.0, "harmonic")):  # fmt: skip
         ilc = ph.LearningCompensator(pi_model, lag=lag, **kw)  # type: ignore[arg-type]
         assert ilc.law == "auto"  # before the trajectory is known
+        assert "chosen with the trajectory" in ilc.describe()
         u = ilc.command(d)
         assert ilc.law == want
         ilc.learn(pi_model.hysteresis_.predict(u * 0.98))
+        said = ilc.describe()  # the harmonic law's condition is not printed as the other's
+        assert ("worst-case contraction" in said) == (want == "harmonic")
+        assert ("the Jacobian law, learning gain" in said) == (want == "jacobian")
         by_name = ph.LearningCompensator(pi_model, lag=lag, law=want, **kw)  # type: ignore[arg-type]
         np.testing.assert_array_equal(by_name.command(d), u)
         by_name.learn(pi_model.hysteresis_.predict(u * 0.98))

@@ -285,7 +285,7 @@ def _first_design(
 def _jacobian_said(design: LearningDesign) -> str:
     """The Jacobian law's :meth:`LearningCompensator.describe`."""
     return (
-        f"the Jacobian law: learning gain {design.gain:.3g}, cutoff {design.cutoff:.4g} Hz (the "
+        f"the Jacobian law, learning gain {design.gain:.3g}, cutoff {design.cutoff:.4g} Hz (the "
         "harmonic law's design; its condition does not bound this law: a trial whose error "
         "grows is undone and the gain halved)"
     )
