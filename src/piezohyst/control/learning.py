@@ -235,10 +235,16 @@ def _measured(
     sigma = learner.leakage.current_stderr(u, q)
     scale = abs(g) if as_displacement and g is not None else 1.0
     bound = 2.0 * float(np.mean(sigma)) * u.size * dt * scale / span
-    h = np.where(ok, y, np.nan) - leak
-    if learner.output_map is not None:  # the capacitor charge as metres, curvature included
-        return learner.output_map.predict(h), bound, float(leak[-1])
-    return (h * g if as_displacement and g is not None else h), bound, float(leak[-1])
+    return _in_desired(learner, np.where(ok, y, np.nan) - leak), bound, float(leak[-1])
+
+
+def _in_desired(learner: LearningCompensator, q: FloatArray) -> FloatArray:
+    """The model's output (a capacitor charge) in the desired's units: through the output
+    map (curvature included), or the gain, or as it is."""
+    if learner.output_map is not None:
+        return np.asarray(learner.output_map.predict(q))
+    g, as_displacement = _desired_gain(learner.settings, None)
+    return q * g if as_displacement and g is not None else q
 
 
 def resolved_law(law: str, lag: float, samples: int) -> str:
@@ -294,18 +300,15 @@ def _jacobian_said(design: LearningDesign) -> str:
 def _responder(learner: LearningCompensator) -> Any:
     """Commands -> the model's output in the desired's units, the trial run after itself (its
     input dynamics, the gain or map included)."""
-    s, n = learner.settings, learner.desired.size
-    g, as_displacement = _desired_gain(s, learner.output_map)
-    t = np.arange(2 * n) / s["sample_rate"]
+    n = learner.desired.size
+    t = np.arange(2 * n) / learner.settings["sample_rate"]
     model = learner.model.hysteresis_
 
     def respond(v: FloatArray) -> FloatArray:
         with warnings.catch_warnings():  # the limits were checked where the commands were made
             warnings.simplefilter("ignore")
             q = np.asarray(model.predict(np.tile(v, 2), t))[n:]
-        y = (learner.output_map.predict(q) if learner.output_map is not None
-             else q * g if as_displacement and g is not None else q)  # fmt: skip
-        return np.asarray(y)
+        return _in_desired(learner, q)
 
     return respond
 
