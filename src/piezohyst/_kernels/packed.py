@@ -662,8 +662,7 @@ def core_step(desired, p, cfg, st, region, dyn, dstate, trial):  # type: ignore[
         a = max(lo, last - step)
         b = min(hi, last + step)
     u, clamped = core_inverse(p, cfg, st, y, a, b, trial, lin)
-    if clamped and (u <= lo or u >= hi):  # out of reach inside the limits (not the slew)
-        st[end + DS_SATURATED] += 1.0
+    held = clamped and (u <= lo or u >= hi)  # out of reach inside the limits (not the slew)
     x = u
     saved0 = dstate[0]
     saved1 = dstate[1]
@@ -674,8 +673,16 @@ def core_step(desired, p, cfg, st, region, dyn, dstate, trial):  # type: ignore[
         x = K.undo_fraction(w, dstate[0], last, dyn[0])
         if not math.isfinite(x):
             x = last
+        # the lags' inverse asks beyond a voltage limit: held there (real overshoots only,
+        # not a limit reached but for rounding), counted where the slew limit did not hold
+        # it first (as the play engine's _limit)
+        tol = 1e-12 * (hi - lo)
+        held = held or x < lo - tol or x > hi + tol
         x = min(max(x, lo), hi)
-        x = min(max(x, last - step), last + step)
+        sent = min(max(x, last - step), last + step)
+        held = held and sent == x
+        x = sent
+    if dynamic:
         u = _advance(x, last, dyn, dstate)
         if trial[0] != u:
             _move_all(p, cfg, st, trial, u, 0.0)
@@ -706,6 +713,8 @@ def core_step(desired, p, cfg, st, region, dyn, dstate, trial):  # type: ignore[
                 u = a
                 x = a
                 _move_all(p, cfg, st, trial, u, 0.0)
+    if held and (x <= lo or x >= hi):  # sent at the voltage limit that held it
+        st[end + DS_SATURATED] += 1.0
     _commit(st, trial)
     _lags_advance(dyn, dstate, st[0])
     st[end + DS_LAST] = x

@@ -120,7 +120,7 @@ class ChannelBank(Generic[C]):
         self._pending = 0
         self._sent = 0  # every step's commands since the reset, the approach too
         self._check_at = LIMIT_CHECK_FIRST
-        self._limits_warned = False
+        self._limits_warned: set[str] = set()  # the limits warned of, each once
 
     @property
     def slew_limited_count(self) -> NDArray[np.int64]:
@@ -168,7 +168,7 @@ class ChannelBank(Generic[C]):
                 LimitWarning,
                 stacklevel=3,
             )
-        if self._limits_warned or self._sent < self._check_at:
+        if len(self._limits_warned) == 2 or self._sent < self._check_at:
             return
         self._check_at = 2 * self._sent
         # the slew limit's share is of the commands on the trajectory; the voltage limits'
@@ -179,7 +179,8 @@ class ChannelBank(Generic[C]):
         parts = []
         for what, (counts, given) in held.items():
             over = np.flatnonzero((counts > LIMIT_SHARE * given) & (given >= LIMIT_CHECK_FIRST))
-            if over.size:
+            if over.size and what not in self._limits_warned:  # each limit said once
+                self._limits_warned.add(what)
                 worst = int(over[np.argmax(counts[over])])
                 parts.append(
                     f"the {what} held more than {100 * LIMIT_SHARE:g} % of the commands on "
@@ -187,7 +188,6 @@ class ChannelBank(Generic[C]):
                     f"{int(counts[worst])} of {int(given[worst])})"
                 )
         if parts:
-            self._limits_warned = True
             setting = "set slew_rate to what the amplifiers allow, or widen v_min/v_max"
             warnings.warn(f"{type(self).__name__}: {'; '.join(parts)}: {setting}",
                           LimitWarning, stacklevel=3)  # fmt: skip

@@ -634,7 +634,7 @@ class Compensator:
         self._tally[[K.TALLY_PREV, K.TALLY_TOL]] = self.last_command, tol
         self._tally[[K.TALLY_LOW, K.TALLY_HIGH]] = self.v_min, self.v_max
         self._until_check = LIMIT_CHECK_FIRST  # steps until the next look at the counts
-        self._limits_warned = False
+        self._limits_warned: set[str] = set()  # the limits said ("slew", "voltage", "region")
         self._approach_warned = False
 
     def _check_limits(self, owner: str) -> None:
@@ -646,17 +646,21 @@ class Compensator:
         if late and self.approach_count >= LIMIT_CHECK_FIRST:
             self._approach_warned = True
             warnings.warn(approach_message(owner, self), LimitWarning, stacklevel=4)
-        if self._limits_warned or given < LIMIT_CHECK_FIRST:
+        if len(self._limits_warned) == 3 or given < LIMIT_CHECK_FIRST:
             return
         sides = int(self._tally[K.TALLY_AT_LOW]), int(self._tally[K.TALLY_AT_HIGH])
-        message = limits_message(
-            owner, self.command_count, self.saturated_count, self.slew_limited_count,
-            (self.v_min, self.v_max), self._max_step, self.sample_rate, self.slew_rate,
+        parts = limit_parts(
+            self.command_count, self.saturated_count, self.slew_limited_count,
+            (self.v_min, self.v_max), self._max_step, self.sample_rate,
             given=given, sides=sides,
+            outside=0 if self.allow_extrapolation else self.outside_count,
         )  # fmt: skip
-        if message:
-            self._limits_warned = True
-            warnings.warn(message, LimitWarning, stacklevel=4)
+        # each limit is said once, when it first holds more than the share: a slew limit
+        # said early does not silence the voltage limits later (nor the other way round)
+        new = {k: v for k, v in parts.items() if k not in self._limits_warned}
+        if new:
+            self._limits_warned.update(new)
+            warnings.warn(f"{owner}: {'; '.join(new.values())}", LimitWarning, stacklevel=4)
 
     def _inner_process(self, d: FloatArray, out: FloatArray) -> None:
         """The engine over a block of hysteresis outputs (after the mode)."""
@@ -727,11 +731,44 @@ def limits_message(
     sides: tuple[int, int] | None = None,
 ) -> str:
     """The warning when the voltage or slew limits held over :data:`LIMIT_SHARE` of the
-    commands (empty when they did not): the counts and the setting to change.
+    commands (empty when they did not): each limit that did, its count and the setting to
+    change (:func:`limit_parts` joined).
 
     Parameters
     ----------
     owner : str
+    issued, saturated, slewed, limits, max_step, sample_rate, given, sides
+        As :func:`limit_parts`.
+    slew_rate : float or None
+        V/s (unused: the message gives ``max_step * sample_rate``).
+
+    Returns
+    -------
+    str
+    """
+    parts = limit_parts(issued, saturated, slewed, limits, max_step, sample_rate, given=given,
+                        sides=sides)  # fmt: skip
+    return f"{owner}: {'; '.join(parts.values())}" if parts else ""
+
+
+def limit_parts(
+    issued: int,
+    saturated: int,
+    slewed: int,
+    limits: tuple[float, float],
+    max_step: float,
+    sample_rate: float | None,
+    *,
+    given: int | None = None,
+    sides: tuple[int, int] | None = None,
+    outside: int = 0,
+) -> dict[str, str]:
+    """What each limit that held over :data:`LIMIT_SHARE` of the commands did: ``"slew"``,
+    ``"voltage"`` and ``"region"`` keys, each a sentence with its count and the setting to
+    change.
+
+    Parameters
+    ----------
     issued, saturated, slewed : int
         Commands given on the trajectory (the slew limit's count is of these); held by the
         voltage limits; held by the slew limit.
@@ -745,17 +782,20 @@ def limits_message(
         ``v_min, v_max`` (V).
     max_step : float
         The slew limit per sample (V).
-    sample_rate, slew_rate : float or None
-        Hz and V/s, for the message.
+    sample_rate : float or None
+        Hz, for the message.
+    outside : int, default 0
+        Commands held back because they would have left the (voltage, output) region the
+        model was identified on (a compensator that does not extrapolate).
 
     Returns
     -------
-    str
+    dict
     """
-    parts = []
+    parts = {}
     if slewed > LIMIT_SHARE * issued:
         per_s = f"{max_step * sample_rate:.4g} V/s" if sample_rate else f"{max_step:.4g} V/sample"
-        parts.append(
+        parts["slew"] = (
             f"the slew limit ({per_s}) held {slewed} of {issued} commands "
             f"({100 * slewed / issued:.1f} %): the trajectory is faster than the limit (by "
             "default the training record's fastest change); set slew_rate (--slew-rate) to "
@@ -770,12 +810,20 @@ def limits_message(
                      + ("below what v_min reaches" if low else "beyond what v_max reaches")
                      + " there")  # fmt: skip
             change = "v_min (--v-min)" if low else "v_max (--v-max)"
-        parts.append(
+        parts["voltage"] = (
             f"the voltage limits [{limits[0]:g}, {limits[1]:g}] V held {saturated} of {total} "
             f"commands ({100 * saturated / total:.1f} %; {reach}); widen {change} if the "
             "actuator allows, or bring the target within reach"
         )
-    return f"{owner}: {'; '.join(parts)}" if parts else ""
+    if outside > LIMIT_SHARE * total:
+        parts["region"] = (
+            f"the identified region held {outside} of {total} commands "
+            f"({100 * outside / total:.1f} %: they would have taken the actuator out of the "
+            "(voltage, output) region the model was identified on); allow extrapolation "
+            "(allow_extrapolation=True, --allow-extrapolation) to send them, identify on a "
+            "record that covers the target, or bring the target within it"
+        )
+    return parts
 
 
 def _trained_limit(model: Any, sample_rate: float | None) -> tuple[float | None, float]:

@@ -191,7 +191,7 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired)
 #endif
 {
     real_t y, a = V_MIN, b = V_MAX, u, x, f, trial[NS], lin = 0;
-    int clamped, i;
+    int clamped, held, i;
 #if DYNAMIC
     real_t saved_w = s->w, saved_u = s->u;
 #endif
@@ -214,28 +214,29 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired)
     b = min_real(V_MAX, s->last + MAX_STEP);
 #endif
     u = core_inverse(s->st, y, a, b, &clamped, trial, lin);
-    if (clamped && (u <= V_MIN || u >= V_MAX)) {
-        s->saturated++;
-    }
+    held = clamped && (u <= V_MIN || u >= V_MAX); /* out of reach inside the limits */
 #if HAS_SLEW && !DYNAMIC
-    else if (clamped) { /* held at the slew limit's bracket, inside the voltage limits */
+    if (clamped && !held) { /* held at the slew limit's bracket, inside the voltage limits */
         s->slewed++;
     }
 #endif
     x = u;
 #if DYNAMIC
     {
-        real_t w = GAIN_B > 0 ? s->u + (u - s->u) / GAIN_B : u;
+        real_t w = GAIN_B > 0 ? s->u + (u - s->u) / GAIN_B : u, tol = 1e-12 * (V_MAX - V_MIN);
         x = FRACTION > 0   ? (1 + FRACTION) * w - FRACTION * s->w
             : FRACTION < 0 ? (w - FRACTION * s->last) / (1 - FRACTION)
                            : w;
         if (non_finite(x)) {
             x = s->last;
         }
+        /* the lags' inverse asks beyond a voltage limit: held there (as play.c's limit) */
+        held = held || x < V_MIN - tol || x > V_MAX + tol;
         x = min_real(max_real(x, V_MIN), V_MAX);
 #if HAS_SLEW
         if (x > s->last + MAX_STEP || x < s->last - MAX_STEP) {
             s->slewed++;
+            held = 0; /* the slew limit held it first */
         }
         x = min_real(max_real(x, s->last - MAX_STEP), s->last + MAX_STEP);
 #endif
@@ -282,6 +283,9 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired)
     (void)saved_u;
 #endif
     (void)f;
+    if (held && (x <= V_MIN || x >= V_MAX)) { /* sent at the voltage limit that held it */
+        s->saturated++;
+    }
     for (i = 0; i < NS; ++i) {
         s->st[i] = trial[i];
     }
