@@ -485,7 +485,13 @@ def compare_c_with_python(
     cmd = [CC or "cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2",
            str(c_path), str(tmp_path / "main.c"), "-o", str(exe), "-lm"]  # fmt: skip
     subprocess.run(cmd, check=True, capture_output=True, text=True)
-    text = "\n".join(repr(float(x)) for x in desired) + "\n"
+    fed = desired
+    m = int(getattr(comp, "delay_samples", 0))
+    if m:  # the C step is given the value desired m samples on (its header says so), as
+        # process() previews its block: beyond the end extrapolated linearly
+        ahead = desired[-1] + np.arange(1, m + 1) * (desired[-1] - desired[-2])
+        fed = np.concatenate([desired, ahead])[m:]
+    text = "\n".join(repr(float(x)) for x in fed) + "\n"
     out = subprocess.run([str(exe)], input=text, check=True, capture_output=True, text=True)
     lines = out.stdout.split("\n")
     c_cmds = np.array([float(x) for x in lines[: desired.size]])

@@ -614,6 +614,84 @@ def numeric_process(desired, tables, static, lags, config, state, out):  # type:
         out[k] = numeric_step(desired[k], tables, static, lags, config, state)
 
 
+@njit(cache=True, fastmath=FASTMATH)
+def _numeric_piezo(q, tables, static, lags, config, state):  # type: ignore[no-untyped-def]
+    """The piezo voltage in [v_min, v_max] whose output from the current state is ``q`` (the
+    nearer limit when out of reach), and whether it was out of reach."""
+    lo = config[CFG_V_MIN]
+    hi = config[CFG_V_MAX]
+    y_lo, _ = hysteresis_output(lo, tables, static, lags, config, state)
+    y_hi, _ = hysteresis_output(hi, tables, static, lags, config, state)
+    tol = 1e-12 * (y_hi - y_lo)
+    if q <= y_lo:
+        return lo, q < y_lo - tol
+    if q >= y_hi:
+        return hi, q > y_hi + tol
+    v = 0.5 * (lo + hi)
+    for _ in range(200):  # safeguarded Newton, as numeric_step
+        y, slope = hysteresis_output(v, tables, static, lags, config, state)
+        err = y - q
+        if err == 0.0:
+            break
+        if err > 0:
+            hi = v
+        else:
+            lo = v
+        if hi - lo <= 1e-15 * (abs(lo) + abs(hi) + 1e-300):
+            break
+        trial = v - err / slope if slope > 0 else 0.5 * (lo + hi)
+        v = trial if lo < trial < hi else 0.5 * (lo + hi)
+    return v, False
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def numeric_dynamic_step(desired, tables, static, lags, config, state, dyn, dstate):  # type: ignore[no-untyped-def]
+    """``numeric_step`` behind input dynamics: the piezo voltage that gives ``desired`` is
+    solved as there, the lags are inverted one sample at a time (as ``dynamic_step``), the
+    command limited, and the operators and creep lags follow the piezo voltage it produces."""
+    n = tables.shape[1]
+    m = lags.shape[1]
+    end = state.shape[0]
+    last = state[end + ST_LAST]
+    if not math.isfinite(desired):  # hold the last command: the piezo keeps settling on it
+        state[end + ST_NONFINITE] += 1.0
+        u = _advance_dynamics(last, last, dyn, dstate)
+    else:
+        q = config[CFG_REFERENCE] + desired * config[CFG_INV_GAIN]
+        target, held = _numeric_piezo(q, tables, static, lags, config, state)
+        w_target = target
+        if dyn[DYN_GAIN_B] > 0.0:
+            w_target = dstate[1] + (target - dstate[1]) / dyn[DYN_GAIN_B]
+        x = undo_fraction(w_target, dstate[0], last, dyn[DYN_FRACTION])
+        if not math.isfinite(x):
+            x = last
+        lo = config[CFG_V_MIN]
+        hi = config[CFG_V_MAX]
+        tol = 1e-12 * (hi - lo)
+        held = held or x < lo - tol or x > hi + tol  # the lags' inverse asks beyond a limit
+        x = min(max(x, lo), hi)
+        step = config[CFG_MAX_STEP]
+        sent = min(max(x, last - step), last + step)
+        if held and sent == x and (x <= lo or x >= hi):  # held by the voltage limit, sent at it
+            state[end + ST_SATURATED] += 1.0
+        u = _advance_dynamics(sent, last, dyn, dstate)
+        last = sent
+    for i in range(n):
+        state[i] = min(max(state[i], u - tables[TAB_R, i]), u + tables[TAB_R, i])
+    for k in range(m):
+        state[n + k] += lags[2, k] * (u - state[n + k])
+    state[end + ST_LAST] = last
+    return last
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def numeric_dynamic_process(desired, delay, tables, static, lags, config, state, dyn, dstate, out):  # type: ignore[no-untyped-def]
+    """``numeric_dynamic_step`` over a block; the command at k targets ``desired[k + delay]``."""
+    for k in range(desired.shape[0]):
+        target = preview_target(desired, k, delay)
+        out[k] = numeric_dynamic_step(target, tables, static, lags, config, state, dyn, dstate)
+
+
 # Self-sensing controller (analytic inverse only): settings ``ctl``, state ``cs``.
 CTL_KP = 0  # proportional gain on the charge error (model units per model unit)
 CTL_KI = 1  # integral gain per sample

@@ -678,23 +678,9 @@ def select_model(
     if not math.isfinite(ranked[0].score):
         msg = f"no candidate could be fitted: {ranked[0].name}: {ranked[0].error}"
         raise InsufficientDataError(msg)
-    left: list[str] = []
-    why = ""
-    while True:  # a winner no compensator can invert with the input's lag gives way
-        open_rows = [r for r in rows if r.name not in left and math.isfinite(r.score)]
-        if not open_rows:
-            msg = f"no candidate can be compensated with input dynamics ({', '.join(left)})"
-            raise InsufficientDataError(msg)
-        winner = chosen(open_rows)
-        model = candidate_model(winner.name, operators, units, ts, **dyn)
-        model.fit(xs, ys, t=ts, initial_state=initial_state)
-        refused = model.inversion().dynamics_refused
-        if refused is None:
-            break
-        left.append(winner.name)
-        why = refused
+    winner = chosen([r for r in rows if math.isfinite(r.score)])
+    model = candidate_model(winner.name, operators, units, ts, **dyn)
+    model.fit(xs, ys, t=ts, initial_state=initial_state)
     notes = _record_notes(xs, turns)
-    if left:
-        notes = (f"Left out, though it scored better: {', '.join(left)}. {why}", *notes)
     ranked = sorted(with_margins(rows, winner), key=lambda r: r.score)
     return Selection(model, winner.name, tuple(ranked), notes)

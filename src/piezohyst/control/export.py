@@ -229,6 +229,7 @@ def _numeric_c(comp: Compensator, prefix: str, precision: Precision) -> CCode:
         f"#define N_STATIC {n_static}",
         f"#define N_LAGS {n_lags}",
         f"#define HAS_SLEW {has_slew}",
+        f"#define DYNAMIC {int(comp.dynamic)}",
         "#define MODE 0",
         f"static const real_t R[N] = {_array(e.tables[K.TAB_R], p)};",
         f"static const real_t W[N] = {_array(e.tables[K.TAB_W], p)};",
@@ -252,6 +253,11 @@ def _numeric_c(comp: Compensator, prefix: str, precision: Precision) -> CCode:
             f"static const real_t LAG_A[N_LAGS] = {_array(e.lags[2], p)};",
             f"static const real_t C0[N_LAGS] = {_array(state.lags, p)};",
         ]
+    init = []
+    if comp.dynamic:  # the input lags inverted before the Newton step (play_numeric.c)
+        lines += _constants(p, FRACTION=e.dyn[K.DYN_FRACTION], GAIN_B=e.dyn[K.DYN_GAIN_B])
+        init = [f"s->w = {_literal(e.dstate[0], p)};", f"s->u = {_literal(e.dstate[1], p)};"]
+    lines.append(_init_extra(init))
     spec = comp.spec
     desired_unit = "m" if comp.domain == "displacement" else spec.output_unit
     lag_state = f"\n    {prefix}_real c[{n_lags}];     /* creep lag states, V */" if n_lags else ""
@@ -260,8 +266,8 @@ def _numeric_c(comp: Compensator, prefix: str, precision: Precision) -> CCode:
         title="feedforward hysteresis compensator (play operators with asymmetry or creep)",
         model=type(comp.model).__name__, n=n, input_unit=spec.input_unit,
         output_unit=spec.output_unit, desired_unit=desired_unit, v_min=repr(comp.v_min),
-        v_max=repr(comp.v_max), notes=_notes(comp), controller=0, dynamic=0, mode=0,
-        kind="compensator", lag_state=lag_state,
+        v_max=repr(comp.v_max), notes=_notes(comp), controller=0, dynamic=int(comp.dynamic),
+        mode=0, kind="compensator", lag_state=lag_state,
     )  # fmt: skip
     source = _source(prefix, precision, lines, ["ieee.c", "play_numeric.c"], comp)
     return CCode(header, source, f"{prefix}.h")

@@ -279,9 +279,6 @@ class PlayInverse(Inverse):
                 "fit a PreisachModel(relaxation=...) instead"
             )
             raise ParameterError(msg)
-        refused = spec.dynamics_refused
-        if refused is not None:
-            raise ParameterError(refused)
         #: True when eq. 18's analytic inverse runs (no Newton solve); fixed by the model
         self.analytic = spec.analytic
         self.plain = spec.analytic and not dyn.active and not self.settings.mode_active
@@ -428,6 +425,10 @@ class PlayInverse(Inverse):
 
     def inner_step(self, target: float) -> float:
         """The kernel's command for the hysteresis output ``target`` (after mode and delay)."""
+        if self.dynamic and not self.analytic:
+            return float(K.numeric_dynamic_step(target, self.tables, self.static, self.lags,
+                                                self.config, self.kernel_state, self.dyn,
+                                                self.dstate))  # fmt: skip
         if self.dynamic:
             return float(
                 K.dynamic_step(
@@ -444,7 +445,11 @@ class PlayInverse(Inverse):
 
     def inner_process(self, d: FloatArray, out: FloatArray) -> None:
         """The kernel over a block of hysteresis outputs (after the mode)."""
-        if self.dynamic:
+        if self.dynamic and not self.analytic:
+            K.numeric_dynamic_process(d, self.delay_samples, self.tables, self.static, self.lags,
+                                      self.config, self.kernel_state, self.dyn, self.dstate,
+                                      out)  # fmt: skip
+        elif self.dynamic:
             K.dynamic_process(
                 d,
                 self.delay_samples,

@@ -46,7 +46,6 @@ from .._validation import FloatArray, as_signal, same_length
 from ..errors import (
     NotInvertibleError,
     ParameterError,
-    PiezohystError,
 )
 from ..io.blocks import Blocks, Summary
 from .cores.base import Core, Propagation
@@ -130,23 +129,6 @@ class InverseSpec:
     def analytic(self) -> bool:
         """True when eq. 18 inverts it exactly (no kept term beside the play operators)."""
         return self.static is None and self.lags is None and self.relaxation is None
-
-    @property
-    def dynamics_refused(self) -> str | None:
-        """Why no compensator inverts this model's input dynamics, or None: play operators
-        with a kept term beside them are solved sample by sample without the input's lag."""
-        if not self.dynamics.active or self.analytic:
-            return None
-        try:
-            engine = self.operator.inverse_plan().engine
-        except PiezohystError:  # not invertible at all: the compensator says why
-            return None
-        if engine != "play":
-            return None
-        return (
-            "A model with input dynamics is compensated with the analytic inverse only: fit "
-            "it without asymmetry or creep terms."
-        )
 
     @classmethod
     def of(cls, model: Any) -> InverseSpec:

@@ -86,7 +86,96 @@ void PREFIX_init(PREFIX_t *s)
     s->saturated = 0;
     s->slewed = 0;
     s->extrapolated = 0;
+    INIT_EXTRA(s);
 }
+
+#if DYNAMIC
+/* the piezo voltage after command x is held for one sample (as play_dynamic.c) */
+static real_t advance(PREFIX_t *s, real_t x)
+{
+    s->w = FRACTION != 0 ? (1 - FRACTION) * x + FRACTION * s->last : x;
+    s->u = GAIN_B > 0 ? s->u + GAIN_B * (s->w - s->u) : s->w;
+    return s->u;
+}
+
+/* the piezo voltage in [V_MIN, V_MAX] whose output is q (the nearer limit when out of reach,
+ * *held set): _kernels.play._numeric_piezo */
+static real_t numeric_piezo(const PREFIX_t *s, real_t q, int *held)
+{
+    real_t lo = V_MIN, hi = V_MAX, y_lo, y_hi, y, slope, err, trial, v, tol;
+    int k;
+    y_lo = numeric_output(s, lo, &slope);
+    y_hi = numeric_output(s, hi, &slope);
+    tol = (real_t)1e-12 * (y_hi - y_lo);
+    *held = 0;
+    if (q <= y_lo) {
+        *held = q < y_lo - tol;
+        return lo;
+    }
+    if (q >= y_hi) {
+        *held = q > y_hi + tol;
+        return hi;
+    }
+    v = (real_t)0.5 * (lo + hi);
+    for (k = 0; k < NEWTON_MAX; ++k) {
+        y = numeric_output(s, v, &slope);
+        err = y - q;
+        if (err == 0) {
+            break;
+        }
+        if (err > 0) {
+            hi = v;
+        } else {
+            lo = v;
+        }
+        if (hi - lo <= (real_t)1e-15 * (fabs_real(lo) + fabs_real(hi) + (real_t)1e-300)) {
+            break;
+        }
+        trial = slope > 0 ? v - err / slope : (real_t)0.5 * (lo + hi);
+        v = (lo < trial && trial < hi) ? trial : (real_t)0.5 * (lo + hi);
+    }
+    return v;
+}
+
+/* The step behind input dynamics: _kernels.play.numeric_dynamic_step */
+real_t PREFIX_step(PREFIX_t *s, real_t desired)
+{
+    real_t target, w, x, sent, u, tol = (real_t)1e-12 * (V_MAX - V_MIN);
+    int i, held;
+    if (non_finite(desired)) { /* hold: the piezo keeps settling on the last command */
+        s->nonfinite++;
+        u = advance(s, s->last);
+    } else {
+        target = numeric_piezo(s, TARGET(s, desired), &held);
+        w = GAIN_B > 0 ? s->u + (target - s->u) / GAIN_B : target;
+        x = FRACTION > 0   ? (1 + FRACTION) * w - FRACTION * s->w
+            : FRACTION < 0 ? (w - FRACTION * s->last) / (1 - FRACTION)
+                           : w;
+        if (non_finite(x)) {
+            x = s->last;
+        }
+        held = held || x < V_MIN - tol || x > V_MAX + tol; /* the lags' inverse asks beyond */
+        x = clamp(x, V_MIN, V_MAX);
+        sent = x;
+#if HAS_SLEW
+        sent = clamp(x, s->last - MAX_STEP, s->last + MAX_STEP);
+        if (sent != x) {
+            s->slewed++;
+        }
+#endif
+        if (held && sent == x && (x <= V_MIN || x >= V_MAX)) { /* held by a voltage limit */
+            s->saturated++;
+        }
+        u = advance(s, sent);
+        s->last = sent;
+    }
+    for (i = 0; i < N; ++i) {
+        s->z[i] = clamp(s->z[i], u - R[i], u + R[i]);
+    }
+    advance_lags(s, u);
+    return s->last;
+}
+#else
 
 real_t PREFIX_step(PREFIX_t *s, real_t desired)
 {
@@ -144,3 +233,4 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired)
     s->last = v;
     return v;
 }
+#endif
