@@ -554,8 +554,8 @@ def hysteresis_output(v, tables, static, lags, config, state):  # type: ignore[n
 def numeric_step(desired, tables, static, lags, config, state):  # type: ignore[no-untyped-def]
     """One command (V): solve output(v) = desired in [v_min, v_max] (output strictly increasing).
 
-    A safeguarded Newton iteration keeps the root bracketed; creep lags advance
-    with the command sent (also when a NaN holds the last one).
+    A safeguarded Newton iteration keeps the root bracketed (``_numeric_piezo``); creep lags
+    advance with the command sent (also when a NaN holds the last one).
     """
     n = tables.shape[1]
     m = lags.shape[1]
@@ -567,37 +567,13 @@ def numeric_step(desired, tables, static, lags, config, state):  # type: ignore[
             state[n + k] += lags[2, k] * (last - state[n + k])
         return last
     q = config[CFG_REFERENCE] + desired * config[CFG_INV_GAIN]
-    lo = config[CFG_V_MIN]
-    hi = config[CFG_V_MAX]
-    y_lo, _ = hysteresis_output(lo, tables, static, lags, config, state)
-    y_hi, _ = hysteresis_output(hi, tables, static, lags, config, state)
-    if q <= y_lo:
-        v = lo
-    elif q >= y_hi:
-        v = hi
-    else:  # safeguarded Newton: the bracket always holds the root
-        v = min(max(last, lo), hi)
-        for _ in range(200):
-            y, slope = hysteresis_output(v, tables, static, lags, config, state)
-            err = y - q
-            if err == 0.0:
-                break
-            if err > 0:
-                hi = v
-            else:
-                lo = v
-            if hi - lo <= 1e-15 * (abs(lo) + abs(hi) + 1e-300):
-                break
-            trial = v - err / slope if slope > 0 else 0.5 * (lo + hi)
-            v = trial if lo < trial < hi else 0.5 * (lo + hi)
-    # the limits are inside the bracket; _limit counts only unreachable targets
-    tol = 1e-12 * (y_hi - y_lo)
+    v, out_of_reach = _numeric_piezo(q, last, tables, static, lags, config, state)
     step = config[CFG_MAX_STEP]
     if v > last + step:
         v = last + step
     elif v < last - step:
         v = last - step
-    elif q < y_lo - tol or q > y_hi + tol:  # sent at the voltage limit (see _limit)
+    elif out_of_reach:  # sent at the voltage limit (see _limit)
         state[end + ST_SATURATED] += 1.0
     for i in range(n):
         state[i] = min(max(state[i], v - tables[TAB_R, i]), v + tables[TAB_R, i])
@@ -615,9 +591,13 @@ def numeric_process(desired, tables, static, lags, config, state, out):  # type:
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def _numeric_piezo(q, tables, static, lags, config, state):  # type: ignore[no-untyped-def]
+def _numeric_piezo(q, start, tables, static, lags, config, state):  # type: ignore[no-untyped-def]
     """The piezo voltage in [v_min, v_max] whose output from the current state is ``q`` (the
-    nearer limit when out of reach), and whether it was out of reach."""
+    nearer limit when out of reach), and whether it was out of reach (beyond rounding).
+
+    A safeguarded Newton iteration from ``start`` (clamped into the limits): the bracket
+    always holds the root.
+    """
     lo = config[CFG_V_MIN]
     hi = config[CFG_V_MAX]
     y_lo, _ = hysteresis_output(lo, tables, static, lags, config, state)
@@ -627,8 +607,8 @@ def _numeric_piezo(q, tables, static, lags, config, state):  # type: ignore[no-u
         return lo, q < y_lo - tol
     if q >= y_hi:
         return hi, q > y_hi + tol
-    v = 0.5 * (lo + hi)
-    for _ in range(200):  # safeguarded Newton, as numeric_step
+    v = min(max(start, lo), hi)
+    for _ in range(200):
         y, slope = hysteresis_output(v, tables, static, lags, config, state)
         err = y - q
         if err == 0.0:
@@ -658,7 +638,7 @@ def numeric_dynamic_step(desired, tables, static, lags, config, state, dyn, dsta
         u = _advance_dynamics(last, last, dyn, dstate)
     else:
         q = config[CFG_REFERENCE] + desired * config[CFG_INV_GAIN]
-        target, held = _numeric_piezo(q, tables, static, lags, config, state)
+        target, held = _numeric_piezo(q, dstate[1], tables, static, lags, config, state)
         w_target = target
         if dyn[DYN_GAIN_B] > 0.0:
             w_target = dstate[1] + (target - dstate[1]) / dyn[DYN_GAIN_B]

@@ -89,18 +89,9 @@ void PREFIX_init(PREFIX_t *s)
     INIT_EXTRA(s);
 }
 
-#if DYNAMIC
-/* the piezo voltage after command x is held for one sample (as play_dynamic.c) */
-static real_t advance(PREFIX_t *s, real_t x)
-{
-    s->w = FRACTION != 0 ? (1 - FRACTION) * x + FRACTION * s->last : x;
-    s->u = GAIN_B > 0 ? s->u + GAIN_B * (s->w - s->u) : s->w;
-    return s->u;
-}
-
 /* the piezo voltage in [V_MIN, V_MAX] whose output is q (the nearer limit when out of reach,
- * *held set): _kernels.play._numeric_piezo */
-static real_t numeric_piezo(const PREFIX_t *s, real_t q, int *held)
+ * *held set): _kernels.play._numeric_piezo, Newton from start inside a bracket */
+static real_t numeric_piezo(const PREFIX_t *s, real_t q, real_t start, int *held)
 {
     real_t lo = V_MIN, hi = V_MAX, y_lo, y_hi, y, slope, err, trial, v, tol;
     int k;
@@ -116,7 +107,7 @@ static real_t numeric_piezo(const PREFIX_t *s, real_t q, int *held)
         *held = q > y_hi + tol;
         return hi;
     }
-    v = (real_t)0.5 * (lo + hi);
+    v = clamp(start, lo, hi);
     for (k = 0; k < NEWTON_MAX; ++k) {
         y = numeric_output(s, v, &slope);
         err = y - q;
@@ -137,6 +128,15 @@ static real_t numeric_piezo(const PREFIX_t *s, real_t q, int *held)
     return v;
 }
 
+#if DYNAMIC
+/* the piezo voltage after command x is held for one sample (as play_dynamic.c) */
+static real_t advance(PREFIX_t *s, real_t x)
+{
+    s->w = FRACTION != 0 ? (1 - FRACTION) * x + FRACTION * s->last : x;
+    s->u = GAIN_B > 0 ? s->u + GAIN_B * (s->w - s->u) : s->w;
+    return s->u;
+}
+
 /* The step behind input dynamics: _kernels.play.numeric_dynamic_step */
 real_t PREFIX_step(PREFIX_t *s, real_t desired)
 {
@@ -146,7 +146,7 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired)
         s->nonfinite++;
         u = advance(s, s->last);
     } else {
-        target = numeric_piezo(s, TARGET(s, desired), &held);
+        target = numeric_piezo(s, TARGET(s, desired), s->u, &held);
         w = GAIN_B > 0 ? s->u + (target - s->u) / GAIN_B : target;
         x = FRACTION > 0   ? (1 + FRACTION) * w - FRACTION * s->w
             : FRACTION < 0 ? (w - FRACTION * s->last) / (1 - FRACTION)
@@ -179,41 +179,14 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired)
 
 real_t PREFIX_step(PREFIX_t *s, real_t desired)
 {
-    real_t q, lo = V_MIN, hi = V_MAX, y_lo, y_hi, y, slope, err, trial, v, tol;
-    int i, k;
+    real_t v;
+    int i, out_of_reach;
     if (non_finite(desired)) {
         s->nonfinite++;
         advance_lags(s, s->last);
         return s->last;
     }
-    q = TARGET(s, desired);
-    y_lo = numeric_output(s, lo, &slope);
-    y_hi = numeric_output(s, hi, &slope);
-    if (q <= y_lo) {
-        v = lo;
-    } else if (q >= y_hi) {
-        v = hi;
-    } else {
-        v = clamp(s->last, lo, hi);
-        for (k = 0; k < NEWTON_MAX; ++k) {
-            y = numeric_output(s, v, &slope);
-            err = y - q;
-            if (err == 0) {
-                break;
-            }
-            if (err > 0) {
-                hi = v;
-            } else {
-                lo = v;
-            }
-            if (hi - lo <= (real_t)1e-15 * (fabs_real(lo) + fabs_real(hi) + (real_t)1e-300)) {
-                break;
-            }
-            trial = slope > 0 ? v - err / slope : (real_t)0.5 * (lo + hi);
-            v = (lo < trial && trial < hi) ? trial : (real_t)0.5 * (lo + hi);
-        }
-    }
-    tol = (real_t)1e-12 * (y_hi - y_lo);
+    v = numeric_piezo(s, TARGET(s, desired), s->last, &out_of_reach);
 #if HAS_SLEW
     if (v > s->last + MAX_STEP) {
         v = s->last + MAX_STEP;
@@ -223,7 +196,7 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired)
         s->slewed++;
     } else
 #endif
-    if (q < y_lo - tol || q > y_hi + tol) { /* sent at the voltage limit (see play.c) */
+    if (out_of_reach) { /* sent at the voltage limit (see play.c) */
         s->saturated++;
     }
     for (i = 0; i < N; ++i) {
