@@ -41,14 +41,27 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=7)
     args = parser.parse_args()
-    cpu_seconds("import piezohyst")  # warm the file cache and write the bytecode once
-    bare = [cpu_seconds("pass") for _ in range(args.runs)]
-    pkg = [cpu_seconds("import piezohyst") for _ in range(args.runs)]
-    for name, xs in (("bare Python", bare), ("import piezohyst", pkg)):
+    first_model = "import piezohyst; piezohyst.ActivePI"
+    cpu_seconds(first_model)  # warm the file cache and write the bytecode once
+    runs = {
+        "bare Python": "pass",
+        "import numpy": "import numpy",
+        "import piezohyst": "import piezohyst",
+        # the public names load at first use (PEP 562): what a script that fits pays
+        "+ first model": first_model,
+        "+ the readers": "import piezohyst; piezohyst.io.read_recording",
+    }
+    times = {name: [cpu_seconds(code) for _ in range(args.runs)] for name, code in runs.items()}
+    for name, xs in times.items():
         print(
             f"{name:>18}: {statistics.median(xs):.3f} CPU-s (min {min(xs):.3f}, max {max(xs):.3f})"
         )
-    print(f"{'the package':>18}: {statistics.median(pkg) - statistics.median(bare):.3f} CPU-s")
+    med = {name: statistics.median(xs) for name, xs in times.items()}
+    print(f"{'the package':>18}: {med['import piezohyst'] - med['bare Python']:.3f} CPU-s")
+    print(
+        f"{'vs numpy alone':>18}: import {med['import piezohyst'] / med['import numpy']:.2f}x, "
+        f"with the first model {med['+ first model'] / med['import numpy']:.2f}x"
+    )
     probe = f"import sys, piezohyst; print(' '.join(m for m in {HEAVY!r} if m in sys.modules))"
     loaded = subprocess.run(
         [sys.executable, "-c", probe], check=True, capture_output=True, text=True

@@ -46,16 +46,10 @@ Modules not imported here: ``piezohyst.io.screening`` (a record's check),
 
 from __future__ import annotations
 
-from . import io, metrics
+from typing import TYPE_CHECKING
+
+from ._lazy import attach
 from ._version import __version__
-from .analysis import selection as selection  # ph.selection, as before the packages
-from .analysis.comparison import Comparison, ComparisonRow, compare_models
-from .analysis.selection import Selection, select_model
-from .control.calibration import OutputMap, calibrate_gain
-from .control.channels import BankCompensator, BankController
-from .control.compensator import Compensator, CompensatorState
-from .control.learning import LearningCompensator
-from .control.selfsensing import ControllerState, SelfSensingController
 from .errors import (
     DataFileError,
     ExtrapolationWarning,
@@ -73,28 +67,94 @@ from .errors import (
     ShapeError,
     TimeAxisError,
 )
-from .io import read_recording, read_table, write_table
-from .model import terms
-from .model.bank import ModelBank, load_bank
-from .model.cores.base import Core, Propagation, Region
-from .model.cores.boucwen import BoucWenHysteresis
-from .model.cores.duhem import DuhemHysteresis
-from .model.cores.play import PIHysteresis, default_thresholds
-from .model.cores.preisach import PreisachHysteresis
-from .model.leakage import Leakage, calibrate_leakage
-from .model.model import History, HysteresisModel, InverseSpec, ModelState
-from .model.models import (
-    ActivePI,
-    BoucWenModel,
-    ClassicalPI,
-    DuhemModel,
-    GeneralizedPI,
-    PIModel,
-    PreisachModel,
+
+# Every other public name is imported from its module at first use (PEP 562), so
+# ``import piezohyst`` loads neither the readers nor the models until a program asks for them.
+__getattr__, __dir__ = attach(
+    __name__,
+    {
+        "io": ".io:module",
+        "metrics": ".metrics:module",
+        "selection": ".analysis.selection:module",  # ph.selection, as before the packages
+        "terms": ".model.terms:module",
+        "Comparison": ".analysis.comparison",
+        "ComparisonRow": ".analysis.comparison",
+        "compare_models": ".analysis.comparison",
+        "Selection": ".analysis.selection",
+        "select_model": ".analysis.selection",
+        "OutputMap": ".control.calibration",
+        "calibrate_gain": ".control.calibration",
+        "BankCompensator": ".control.channels",
+        "BankController": ".control.channels",
+        "Compensator": ".control.compensator",
+        "CompensatorState": ".control.compensator",
+        "LearningCompensator": ".control.learning",
+        "ControllerState": ".control.selfsensing",
+        "SelfSensingController": ".control.selfsensing",
+        "read_recording": ".io",
+        "read_table": ".io",
+        "write_table": ".io",
+        "ModelBank": ".model.bank",
+        "load_bank": ".model.bank",
+        "Core": ".model.cores.base",
+        "Propagation": ".model.cores.base",
+        "Region": ".model.cores.base",
+        "BoucWenHysteresis": ".model.cores.boucwen",
+        "DuhemHysteresis": ".model.cores.duhem",
+        "PIHysteresis": ".model.cores.play",
+        "default_thresholds": ".model.cores.play",
+        "PreisachHysteresis": ".model.cores.preisach",
+        "Leakage": ".model.leakage",
+        "calibrate_leakage": ".model.leakage",
+        "History": ".model.model",
+        "HysteresisModel": ".model.model",
+        "InverseSpec": ".model.model",
+        "ModelState": ".model.model",
+        "ActivePI": ".model.models",
+        "BoucWenModel": ".model.models",
+        "ClassicalPI": ".model.models",
+        "DuhemModel": ".model.models",
+        "GeneralizedPI": ".model.models",
+        "PIModel": ".model.models",
+        "PreisachModel": ".model.models",
+        "load_model": ".model.persistence",
+        "Term": ".model.terms",
+        "simulate": ".simulation",
+    },
 )
-from .model.persistence import load_model
-from .model.terms import Term
-from .simulation import simulate
+
+if TYPE_CHECKING:  # the same names, for type checkers and editors
+    from . import io, metrics
+    from .analysis import selection as selection
+    from .analysis.comparison import Comparison, ComparisonRow, compare_models
+    from .analysis.selection import Selection, select_model
+    from .control.calibration import OutputMap, calibrate_gain
+    from .control.channels import BankCompensator, BankController
+    from .control.compensator import Compensator, CompensatorState
+    from .control.learning import LearningCompensator
+    from .control.selfsensing import ControllerState, SelfSensingController
+    from .io import read_recording, read_table, write_table
+    from .model import terms
+    from .model.bank import ModelBank, load_bank
+    from .model.cores.base import Core, Propagation, Region
+    from .model.cores.boucwen import BoucWenHysteresis
+    from .model.cores.duhem import DuhemHysteresis
+    from .model.cores.play import PIHysteresis, default_thresholds
+    from .model.cores.preisach import PreisachHysteresis
+    from .model.leakage import Leakage, calibrate_leakage
+    from .model.model import History, HysteresisModel, InverseSpec, ModelState
+    from .model.models import (
+        ActivePI,
+        BoucWenModel,
+        ClassicalPI,
+        DuhemModel,
+        GeneralizedPI,
+        PIModel,
+        PreisachModel,
+    )
+    from .model.persistence import load_model
+    from .model.terms import Term
+    from .simulation import simulate
 
 __all__ = [
     "ActivePI",

@@ -13,6 +13,8 @@ as fast as in the module's own.
 from __future__ import annotations
 
 import importlib
+import sys
+from collections.abc import Callable
 from types import ModuleType
 from typing import Any
 
@@ -44,3 +46,42 @@ class LazyModule(ModuleType):
 
     def __repr__(self) -> str:
         return f"<kernels {self._name!r}, loaded at first use>"
+
+
+def attach(
+    package: str, names: dict[str, str]
+) -> tuple[Callable[[str], Any], Callable[[], list[str]]]:
+    """A package's ``__getattr__`` and ``__dir__`` (PEP 562) that import each public name
+    from its module at first use, as scientific Python's ``lazy_loader.attach`` does.
+
+    Parameters
+    ----------
+    package : str
+        The package's ``__name__``.
+    names : dict
+        Each public name and the module (relative to ``package``, with a leading dot)
+        that defines it; a name that is itself a submodule maps to that submodule with
+        the suffix ``":module"``.
+
+    Returns
+    -------
+    (callable, callable)
+        ``__getattr__`` and ``__dir__`` for the package's namespace. A name, once imported,
+        is bound in the package, so later lookups do not come back here.
+    """
+
+    def __getattr__(name: str) -> Any:
+        where = names.get(name)
+        if where is None:
+            msg = f"module {package!r} has no attribute {name!r}"
+            raise AttributeError(msg)
+        module_name, _, kind = where.partition(":")
+        module = importlib.import_module(module_name, package)
+        value = module if kind == "module" else getattr(module, name)
+        setattr(sys.modules[package], name, value)
+        return value
+
+    def __dir__() -> list[str]:
+        return sorted(set(vars(sys.modules[package])) | set(names))
+
+    return __getattr__, __dir__
