@@ -671,6 +671,10 @@ class Compensator:
 LIMIT_SHARE = 0.01
 #: Commands given before the first check (then at every doubling, and after each block)
 LIMIT_CHECK_FIRST = 100
+#: A file workflow's limit this far beyond the training voltages (a fraction of their span)
+#: is narrowed to them, with a warning, rather than refused: the record's peak measured a
+#: little under the amplifier's setting (139.65 V of 140 V)
+LIMIT_SLACK = 0.01
 
 
 def _cycle_commands(knots: list[float], samples: int, step: float, settle: int) -> FloatArray:
@@ -896,21 +900,39 @@ class CompensatorSettings:
         if (self.v_min is None or self.v_max is None) and not known:
             msg = "the model does not record its training voltage range: give v_min and v_max"
             raise ParameterError(msg)
-        wide = (self.v_min is not None and self.v_min < lo) or (
-            self.v_max is not None and self.v_max > hi
-        )
+        v_min, v_max = self.v_min, self.v_max
+        if known and not self.allow_extrapolation:
+            # a limit a hair beyond the record (commanded 140 V, measured 139.65 V) is the
+            # record's limit: narrowed to it, and said; further beyond is refused
+            slack = LIMIT_SLACK * (hi - lo)
+            narrowed = (v_min is not None and lo - slack <= v_min < lo,
+                        v_max is not None and hi < v_max <= hi + slack)  # fmt: skip
+            if any(narrowed):
+                v_min = lo if narrowed[0] else v_min
+                v_max = hi if narrowed[1] else v_max
+                warnings.warn(
+                    f"the limits [{self.v_min if self.v_min is not None else lo:g}, "
+                    f"{self.v_max if self.v_max is not None else hi:g}] V were narrowed to "
+                    f"[{v_min if v_min is not None else lo:.6g}, "
+                    f"{v_max if v_max is not None else hi:.6g}] V, the voltages the model was "
+                    "identified on (--allow-extrapolation keeps them)",
+                    UserWarning,
+                    stacklevel=2,
+                )
+        wide = (v_min is not None and v_min < lo) or (v_max is not None and v_max > hi)
         if known and wide and not self.allow_extrapolation:
             msg = (
                 f"the limits [{self.v_min if self.v_min is not None else lo:g}, "
                 f"{self.v_max if self.v_max is not None else hi:g}] V go beyond the voltages "
-                f"the model was identified on, [{lo:g}, {hi:g}] V; allow extrapolation "
-                "explicitly to command them"
+                f"the model was identified on, [{lo:.6g}, {hi:.6g}] V: give limits inside "
+                "them (or leave --v-min/--v-max out: they default to them), or allow "
+                "extrapolation explicitly (--allow-extrapolation, allow_extrapolation=True)"
             )
             raise ParameterError(msg)
         return Compensator(
             model,
-            v_min=lo if self.v_min is None else float(self.v_min),
-            v_max=hi if self.v_max is None else float(self.v_max),
+            v_min=lo if v_min is None else float(v_min),
+            v_max=hi if v_max is None else float(v_max),
             domain=self.domain,
             gain=self.gain,
             slew_rate=self.slew_rate,

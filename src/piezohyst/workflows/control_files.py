@@ -126,7 +126,8 @@ def compensate_file(
       ``desired``); ``precondition=False`` keeps only the ramp;
     * NaN or infinite desired values hold the last command and are counted;
     * a trajectory that saturates most samples (out of reach: units, or the
-      sign of the gain) is an error, and nothing is written.
+      sign of the gain), or whose commands the slew limit holds mostly (faster than the
+      amplifier or the training record), is an error, and nothing is written.
 
     Parameters
     ----------
@@ -254,6 +255,16 @@ def compensate_file(
                 f"{unit}; check the units and the sign of the gain"
             )
             raise ParameterError(msg)
+        slewed = comp.slew_limited_count + comp.approach_count
+        if finite and slewed > 0.5 * finite:  # mostly cut by the slew limit: not the target
+            rate = comp.max_step * fs
+            msg = (
+                f"{target}: the slew limit ({rate:.4g} V/s) held {slewed} of {finite} commands "
+                f"({100 * slewed / finite:.0f} %): the trajectory is faster than the limit (by "
+                "default the training record's fastest change); set --slew-rate to what the "
+                "amplifier allows, or slow the target"
+            )
+            raise ParameterError(msg)
 
     write_blocks(out, rows(), units={"time": "s", "command": "V", "desired": expected},
                  blank=("desired",))  # fmt: skip
@@ -321,14 +332,24 @@ def _desired_column(table: Table, column: str | None, target: PathLike) -> str:
     return table.resolve(column)
 
 
+#: Samples each voltage is held for when estimating what the limits reach
+REACH_HOLD = 64
+
+
 def _reachable(
     model: HysteresisModel, comp: Compensator, settings: CompensatorSettings
 ) -> tuple[float, float]:
-    """Roughly the desired values the limits reach: the outputs at v_min and v_max from rest."""
+    """Roughly the desired values the limits reach: the outputs at v_min and v_max from rest.
+
+    Each voltage is held for :data:`REACH_HOLD` samples 1e4 s apart: creep terms settle, and
+    an input delay of a few samples (which shifts the output by samples, not seconds) has
+    passed; each level's last output counts (with one sample each, a delayed model's reach
+    was the previous level's)."""
     h = model.hysteresis_
     x0 = float(model.initial_state_[0])
-    slowly = np.array([0.0, 1e6, 2e6])  # s apart: what creep terms settle to
-    rest, low, high = h.predict(np.array([x0, comp.v_min, comp.v_max]), t=slowly)
+    x = np.repeat([x0, comp.v_min, comp.v_max], REACH_HOLD)
+    y = h.predict(x, t=np.arange(x.size) * 1e4)
+    rest, low, high = y[REACH_HOLD - 1 :: REACH_HOLD]
     values = np.array([low, high])
     if settings.output_map is not None:
         values = settings.output_map.predict(values)
