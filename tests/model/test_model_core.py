@@ -17,6 +17,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 from sklearn.base import clone
+from sklearn.exceptions import NotFittedError as SklearnNotFitted
+from sklearn.utils.validation import check_is_fitted
 
 import piezohyst as ph
 from piezohyst.simulation import make_signal
@@ -253,6 +255,11 @@ def test_scikit_learn_contract(record: Any) -> None:
         est.fit(v, q, t=t)
         unfitted = clone(est)  # cloning a fitted model gives an unfitted twin
         assert not unfitted.is_fitted and unfitted.get_params() == params
+        # scikit-learn's own check (it asks for __sklearn_tags__ since 1.6: failed before)
+        check_is_fitted(est)
+        with pytest.raises(SklearnNotFitted):
+            check_is_fitted(unfitted)
+        assert est.__sklearn_tags__().estimator_type == "regressor"
         with pytest.raises(ph.NotFittedError):
             unfitted.predict(v, t=t)
         assert unfitted.fit(v, q, t=t).score(v, q, t=t) == est.score(v, q, t=t)

@@ -186,6 +186,23 @@ class Estimator:
 
     _rules: ClassVar[dict[str, Rule]] = {}
 
+    def __sklearn_tags__(self) -> Any:
+        """scikit-learn's tags (1.6 and later ask for them, ``check_is_fitted`` too): a
+        regressor of one input signal, its sample times as ``t``. Imported only here:
+        scikit-learn calls this, so it is there when it runs."""
+        from sklearn.utils import InputTags, RegressorTags, Tags, TargetTags
+
+        return Tags(
+            estimator_type="regressor",
+            target_tags=TargetTags(required=True, one_d_labels=True),
+            regressor_tags=RegressorTags(),
+            input_tags=InputTags(one_d_array=True, two_d_array=False),
+        )
+
+    def __sklearn_is_fitted__(self) -> bool:
+        """Whether :meth:`fit` has run (scikit-learn's ``check_is_fitted`` asks this)."""
+        return hasattr(self, "operator_")
+
     @classmethod
     def _param_names(cls) -> list[str]:
         sig = inspect.signature(cls.__init__)
