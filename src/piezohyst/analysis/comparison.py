@@ -159,6 +159,12 @@ class Comparison:
             raise ParameterError(msg)
         return min(ok, key=lambda r: r.test_nrmse)
 
+    @property
+    def model(self) -> Any:
+        """The best model (:meth:`best`'s, fitted on the training part): the same name as
+        :attr:`Selection.model <piezohyst.analysis.selection.Selection.model>`."""
+        return self.best().model
+
     def table(self) -> str:
         """A Markdown table, best held-out first, failed models last.
 
