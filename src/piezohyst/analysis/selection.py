@@ -33,8 +33,15 @@ from numpy.typing import ArrayLike
 
 from .._kernels import signal as S
 from .._validation import FloatArray, as_signal, as_time, same_length
-from ..errors import ExtrapolationWarning, InsufficientDataError, ParameterError
+from ..errors import (
+    ExtrapolationWarning,
+    IdentifiabilityWarning,
+    InsufficientDataError,
+    ParameterError,
+    RecordWarning,
+)
 from ..io.screening import noise_level
+from ..model.fitting import screened
 from ..model.model import HysteresisModel, InitialState
 from ..model.persistence import model_class, model_names
 from ..model.terms import creep_time_constants
@@ -664,23 +671,32 @@ def select_model(
     if ts is None:  # creep operators need times: those candidates wait for a timed record
         names = [n for n in names if not n.endswith(CREEP)] or names
     units = (input_unit, output_unit)
+    # the record's outliers and holes said once, here, not by each candidate's fits (a gap
+    # was said 17 times); the candidates fit the cleaned record
+    xs, ys = screened(xs, ys, ts, False, input_unit, output_unit)
     turns = _turns(xs)
     dyn = {} if input_dynamics == "none" else {"input_dynamics": input_dynamics}
-    rows = _forward(
-        {n: candidate_model(n, operators, units, ts, **dyn) for n in names},
-        xs,
-        ys,
-        ts,
-        initial_state,
-        turns,
-    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RecordWarning)
+        # what a candidate's lag cannot be told from is said of the chosen one alone (below)
+        warnings.simplefilter("ignore", IdentifiabilityWarning)
+        rows = _forward(
+            {n: candidate_model(n, operators, units, ts, **dyn) for n in names},
+            xs,
+            ys,
+            ts,
+            initial_state,
+            turns,
+        )
     ranked = sorted(rows, key=lambda r: r.score)
     if not math.isfinite(ranked[0].score):
         msg = f"no candidate could be fitted: {ranked[0].name}: {ranked[0].error}"
         raise InsufficientDataError(msg)
     winner = chosen([r for r in rows if math.isfinite(r.score)])
     model = candidate_model(winner.name, operators, units, ts, **dyn)
-    model.fit(xs, ys, t=ts, initial_state=initial_state)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RecordWarning)  # said above
+        model.fit(xs, ys, t=ts, initial_state=initial_state)
     notes = _record_notes(xs, turns)
     ranked = sorted(with_margins(rows, winner), key=lambda r: r.score)
     return Selection(model, winner.name, tuple(ranked), notes)

@@ -52,7 +52,12 @@ from ._support import (
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="piezohyst")
-@click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
+@click.option(
+    "-q",
+    "--quiet",
+    is_flag=True,
+    help="Print nothing but errors and warnings (a limit that held commands is always said).",
+)
 @click.option("-v", "--verbose", is_flag=True, help="Print more detail.")
 @click.option("--debug", is_flag=True, help="Show tracebacks on errors.")
 @click.pass_context
@@ -138,7 +143,7 @@ def simulate(
         preset in PRESETS and rec.preset.c_ref != PRESETS[preset].c_ref
     ):  # the leaked charge would clip the ADC
         ctx.info(f"reference capacitor {rec.preset.c_ref * 1e6:.3g} uF, so the charge never clips")
-    click.echo(str(out))
+    ctx.result(str(out))
 
 
 @main.command()
@@ -213,7 +218,7 @@ def excite(
             command_scale=command_scale,
         ),
     )
-    click.echo(exc.summary())
+    ctx.result(exc.summary())
     if command_scale is not None:
         ctx.info(f"written in the DAQ's volts: the piezo's divided by {command_scale}")
     ctx.info(f"saved {out}")
@@ -298,7 +303,7 @@ def fit(
         model = _fit_auto(ctx, data, operators, initial_state, input_dynamics, data_spec, out,
                           force)  # fmt: skip
         if scan_frequency is not None and model.input_dynamics_.active:
-            click.echo(f"input dynamics {model.input_dynamics_.response_interval(scan_frequency)}")
+            ctx.result(f"input dynamics {model.input_dynamics_.response_interval(scan_frequency)}")
         return
     from ..io import estimated_rows
     from ..workflows import KEEP_ROWS
@@ -325,12 +330,12 @@ def fit(
                 progress=progress,
             ),
         )
-    click.echo(describe(model))
+    ctx.result(describe(model))
     if scan_frequency is not None and model.input_dynamics_.active:
-        click.echo(f"input dynamics {model.input_dynamics_.response_interval(scan_frequency)}")
+        ctx.result(f"input dynamics {model.input_dynamics_.response_interval(scan_frequency)}")
     if ctx.verbose:
         for label, text in model.operator_.describe(model.input_unit, model.output_unit)[1:]:
-            click.echo(f"{label} {text}")
+            ctx.result(f"{label} {text}")
     ctx.info(f"saved {out}")
 
 
@@ -422,10 +427,10 @@ def compare(
     a, b = result.train
     c, d = result.test
     held = f"{test_data.name if test_data else data.name} samples {c}-{d}"
-    click.echo(f"trained on {data.name} samples {a}-{b}, held out: {held}")
+    ctx.result(f"trained on {data.name} samples {a}-{b}, held out: {held}")
     if a > 0 and initial_state == "rest":
         ctx.info(f"the training part starts from the state the input before sample {a} left")
-    click.echo(result.table())
+    ctx.result(result.table())
     if out is not None:
         ctx.info(f"saved {out}")
 
@@ -473,7 +478,7 @@ def predict(
             ),
         )
     if math.isfinite(cols.rmse):
-        click.echo(
+        ctx.result(
             f"NRMSE {100 * cols.nrmse:.4g} % (RMSE {cols.rmse:.4g} {cols.unit}) "
             f"over {cols.samples} samples, t = {cols.scored[0]:.6g}-{cols.scored[1]:.6g} s"
         )
@@ -567,7 +572,7 @@ def compensate(
     slew = (
         f"{comp.max_step * result.sample_rate:.4g} V/s" if math.isfinite(comp.max_step) else "none"
     )
-    click.echo(
+    ctx.result(
         f"commands in [{comp.v_min:g}, {comp.v_max:g}] V; of the {comp.sent_count} sent, "
         f"{comp.saturated_count} held by the voltage limits; of the {comp.command_count} on "
         f"the trajectory, {comp.slew_limited_count} by the slew limit ({slew}); "
@@ -667,7 +672,7 @@ def report(
         )
     metres = res.metrics.get("displacement_nrmse_offset_free_pct")
     also = "" if metres is None else f"; displacement NRMSE {metres:.4g} % (offsets removed)"
-    click.echo(f"NRMSE {res.metrics['nrmse_pct']:.4g} %{also}; report in {out / 'report.html'}")
+    ctx.result(f"NRMSE {res.metrics['nrmse_pct']:.4g} %{also}; report in {out / 'report.html'}")
 
 
 def _expand_patterns(records: tuple[Path, ...]) -> tuple[Path, ...]:
@@ -792,14 +797,14 @@ def fit_many_cmd(
             ),
         )
     ok = len(result.rows) - len(result.failed)
-    click.echo(
+    ctx.result(
         f"fitted {ok} of {len(result.rows)} units; {len(result.failed)} failed, "
         f"{len(result.outliers)} flagged as outliers"
     )
     for row in result.failed:
-        click.echo(f"  failed  {row['unit']}: {row['error']}")
+        ctx.result(f"  failed  {row['unit']}: {row['error']}")
     for row in result.outliers:
-        click.echo(f"  outlier {row['unit']}: {row['outlier']} (NRMSE {row['nrmse'] * 100:.3f} %)")
+        ctx.result(f"  outlier {row['unit']}: {row['outlier']} (NRMSE {row['nrmse'] * 100:.3f} %)")
     ctx.info(
         f"saved {ok} model{'' if ok == 1 else 's'} in {out_dir} and the summary {result.summary}"
     )
@@ -876,7 +881,7 @@ def simulate_loop(
         line += (
             f" (the first {run.arrived} samples, the ramp from rest at the slew limit, left out)"
         )
-    click.echo(f"{line}; {run.saturated} samples saturated")
+    ctx.result(f"{line}; {run.saturated} samples saturated")
     ctx.info(f"saved {out}")
 
 
@@ -921,7 +926,7 @@ def demo(ctx: Context, out: Path, operators: int, seed: int) -> None:
         f"{m['compensation_fixed']['width_after_S_pct']:.2f} % of span "
         f"(from {m['compensation_fixed']['width_before_V_to_S_pct']:.1f} %)"
     )
-    click.echo(str(out / "report.md"))
+    ctx.result(str(out / "report.md"))
 
 
 from ._calibrate import calibrate_gain, calibrate_leakage  # noqa: E402 - after main

@@ -92,8 +92,8 @@ def calibrate_leakage(
     errors = leak.stderr()
     for name, (value, unit) in leak.coefficients().items():
         sure = f" ± {errors[name]:.2g}" if errors.get(name) else ""
-        click.echo(f"{name:12s} {value:.4g}{sure} {unit}")
-    click.echo(
+        ctx.result(f"{name:12s} {value:.4g}{sure} {unit}")
+    ctx.result(
         f"from {len(leak.holds)} holds at "
         f"{', '.join(f'{h.voltage:.4g}' for h in leak.holds)} {leak.input_unit}; "
         f"RMS misfit {leak.residual:.3g} {leak.output_unit}/s"
@@ -163,9 +163,9 @@ def calibrate_gain(
             force=force,
         ),
     )
-    click.echo(om.summary())
+    ctx.result(om.summary())
     s_lo, s_hi = om.displacement_range()
-    click.echo(
+    ctx.result(
         f"holds for displacements [{s_lo:.4g}, {s_hi:.4g}] {om.output_unit}; "
         f"{om.n_samples} samples (worth {om.n_effective} independent ones)"
     )

@@ -85,7 +85,7 @@ def export_c(
             mex=mex,
         ),
     )
-    click.echo("\n".join(str(p) for p in paths))
+    ctx.result("\n".join(str(p) for p in paths))
 
 
 @click.command("export-fmu")
@@ -146,4 +146,4 @@ def export_fmu(
             force=force,
         ),
     )
-    click.echo(str(path))
+    ctx.result(str(path))

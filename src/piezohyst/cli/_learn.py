@@ -214,19 +214,19 @@ def learn(
     trial, learner = result.trial, result.learner
     if trial is not None:
         if trial.skipped and trial.index == 0 and learner.settings["lead_in"]:
-            click.echo(
+            ctx.result(
                 f"trial 0: the lead-in (error {trial.error:.3%}: the actuator arriving), not "
                 "learned from"
             )
         elif trial.skipped:
-            click.echo(f"trial {trial.index}: {trial.learned} readings to learn from: skipped")
+            ctx.result(f"trial {trial.index}: {trial.learned} readings to learn from: skipped")
         else:
             back = " (rolled back, gain halved)" if trial.rolled_back else ""
             held = f"; the limits held {trial.saturated} commands" if trial.saturated else ""
-            click.echo(
+            ctx.result(
                 f"trial {trial.index}: error {trial.error:.3%}, loop width {trial.width:.3%}, "
                 f"learned from {trial.learned} samples{back}{held}"
             )
     if learner.design is not None and trial is not None:
         ctx.info(learner.describe())
-    click.echo(f"trial {learner.trials}'s commands: {out}")
+    ctx.result(f"trial {learner.trials}'s commands: {out}")

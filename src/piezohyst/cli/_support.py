@@ -33,8 +33,14 @@ class Context:
         self.debug = debug
 
     def info(self, message: str) -> None:
+        """A note on standard error (not with --quiet)."""
         if not self.quiet:
             click.echo(message, err=True)
+
+    def result(self, message: str) -> None:
+        """A command's result on standard output (not with --quiet: its files say it)."""
+        if not self.quiet:
+            click.echo(message)
 
 
 @contextmanager
@@ -165,8 +171,12 @@ def _run(ctx: Context, fn: Callable[[], Any]) -> Any:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             result = fn()
+        said: dict[str, int] = {}  # each distinct warning once, in order, with its count
         for w in caught:
-            click.echo(f"warning: {w.message}", err=True)
+            said[str(w.message)] = said.get(str(w.message), 0) + 1
+        for message, times in said.items():
+            again = f" (said {times} times)" if times > 1 else ""
+            click.echo(f"warning: {message}{again}", err=True)
         return result
     except (PiezohystError, OSError) as exc:
         if ctx.debug:
@@ -624,9 +634,9 @@ def _fit_auto(
                 progress=progress,
             ),
         )
-    click.echo(sel.table())
+    ctx.result(sel.table())
 
-    click.echo(describe(sel.model))
+    ctx.result(describe(sel.model))
     ctx.info(f"saved {out}")
     return cast(HysteresisModel, sel.model)
 

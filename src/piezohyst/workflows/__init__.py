@@ -36,7 +36,7 @@ from ..analysis.selection import (
     verdict,
     with_margins,
 )
-from ..errors import DataFileError, ParameterError, TimeAxisError
+from ..errors import DataFileError, ParameterError, RecordWarning, TimeAxisError
 from ..io import (
     MD_MARKER,
     DataSpec,
@@ -239,11 +239,14 @@ def select_file(
     warn_clipped([rec.y[w]], rec.names[1], rec.units[1], data)
     warn_assumed_volts(float(np.ptp(rec.x[w])), rec.units[0], rec.names[0], data)
     start = _continuing(rec, initial_state)
-    sel = select_model(
-        rec.x[w], rec.y[w], rec.t[w], candidates=candidates, operators=operators,
-        initial_state=start, input_unit=rec.units[0] or "V",
-        output_unit=rec.units[1] or _default_unit(rec.names[1]), input_dynamics=input_dynamics,
-    )  # fmt: skip
+    with warnings.catch_warnings():  # the file's holes and outliers: said by its rows above
+        warnings.simplefilter("ignore", RecordWarning)
+        sel = select_model(
+            rec.x[w], rec.y[w], rec.t[w], candidates=candidates, operators=operators,
+            initial_state=start, input_unit=rec.units[0] or "V",
+            output_unit=rec.units[1] or _default_unit(rec.names[1]),
+            input_dynamics=input_dynamics,
+        )  # fmt: skip
     if out is not None:
         sel.model.save(out)
     return sel
