@@ -7,6 +7,9 @@ Messages say what was expected and what came.
 
 from __future__ import annotations
 
+import sys
+import warnings
+
 __all__ = [
     "DataFileError",
     "ExtrapolationWarning",
@@ -104,3 +107,21 @@ class RecordWarning(UserWarning):
 
 class LearningWarning(UserWarning):
     """A learning trial was undone (its error grew) or not learned from (too few readings)."""
+
+
+def warn(message: str, category: type[Warning] = UserWarning) -> None:
+    """Issue a warning attributed to the first caller outside piezohyst: the line of the
+    user's script (or test) that called into the library, however deep the call that found
+    it (a fixed ``stacklevel`` pointed at the library's own modules from a longer chain).
+
+    Parameters
+    ----------
+    message : str
+    category : type of Warning, default UserWarning
+    """
+    frame = sys._getframe(1)
+    level = 2  # the caller of this function
+    while frame.f_back is not None and frame.f_globals.get("__name__", "").startswith("piezohyst"):
+        frame = frame.f_back
+        level += 1
+    warnings.warn(message, category, stacklevel=level)

@@ -651,3 +651,14 @@ def test_model_choice_shows_progress_on_a_terminal(
     assert "fitting 2 models on r.csv" in shown.stdout
     piped = subprocess.run(cmd.split(), capture_output=True, text=True)
     assert piped.returncode == 0 and "fitting 2 models" not in piped.stdout + piped.stderr
+
+
+def test_a_warning_points_at_the_callers_line(tmp_path: Path) -> None:
+    """Warnings from deep inside the readers pointed at ``io/__init__.py`` (a fixed
+    stacklevel); now at the line of the caller outside the library."""
+    t = np.delete(np.arange(1000) / 1000.0, np.s_[400:440])  # 40 ms the DAQ lost
+    ph.write_table(tmp_path / "gap.csv", {"time": t, "voltage": np.sin(t), "charge": t})
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        ph.read_recording(tmp_path / "gap.csv")
+    assert said and all(w.filename == __file__ for w in said), [w.filename for w in said]

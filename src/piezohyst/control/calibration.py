@@ -45,6 +45,7 @@ from ..errors import (
     ModelFileError,
     NotInvertibleError,
     ParameterError,
+    warn,
 )
 from ..model.persistence import checksum
 
@@ -322,12 +323,11 @@ class OutputMap:
 
     def _warn_outside(self, what: str) -> None:
         lo, hi = self.charge_range
-        warnings.warn(
+        warn(
             f"OutputMap: {what} lie outside the calibrated charges [{lo:.4g}, {hi:.4g}] "
             f"{self.input_unit}; the map is extended linearly from its edge there (calibrate "
             "over the full drive to hold it)",
             ExtrapolationWarning,
-            stacklevel=3,
         )
 
     # ------------------------------------------------------------------ files
@@ -763,13 +763,12 @@ def calibrate_gain(
         raise InsufficientDataError(msg)
     if not om.monotone:
         s_lo, s_hi = om.displacement_range()
-        warnings.warn(
+        warn(
             f"calibrate_gain: the displacement does not follow the charge one way over the "
             f"record (it turns: the butterfly of bipolar drive past the coercive field); "
             f"displacements in [{s_lo:.4g}, {s_hi:.4g}] {output_unit} are reached on two "
             "branches, and a compensator keeps to the branch the charge is on",
             UserWarning,
-            stacklevel=2,
         )
     return om
 

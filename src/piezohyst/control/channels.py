@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 from .._kernels import play as K
 from .._kernels import signal as S
 from .._validation import FloatArray
-from ..errors import ExtrapolationWarning, LimitWarning, ParameterError, ShapeError
+from ..errors import ExtrapolationWarning, LimitWarning, ParameterError, ShapeError, warn
 from ..model.bank import ModelBank
 from ..model.leakage import Leakage
 from ..model.model import HysteresisModel
@@ -158,7 +158,7 @@ class ChannelBank(Generic[C]):
         if away.size:
             self._approach_warned = True
             worst = int(away[np.argmax(self._approach[away])])
-            warnings.warn(
+            warn(
                 f"{type(self).__name__}: the slew limit has held every command of {away.size} "
                 f"of {len(self)} channels since the start ({int(self._approach[worst])} on "
                 f"channel {worst}) and they have not reached the trajectory: the target runs "
@@ -166,7 +166,6 @@ class ChannelBank(Generic[C]):
                 "amplifiers allow, start nearer the trajectory (precondition), or slow the "
                 "target",
                 LimitWarning,
-                stacklevel=3,
             )
         if len(self._limits_warned) == 2 or self._sent < self._check_at:
             return
@@ -189,8 +188,8 @@ class ChannelBank(Generic[C]):
                 )
         if parts:
             setting = "set slew_rate to what the amplifiers allow, or widen v_min/v_max"
-            warnings.warn(f"{type(self).__name__}: {'; '.join(parts)}: {setting}",
-                          LimitWarning, stacklevel=3)  # fmt: skip
+            warn(f"{type(self).__name__}: {'; '.join(parts)}: {setting}",
+                          LimitWarning)  # fmt: skip
 
     @classmethod
     def _models(cls, bank: ModelBank) -> list[HysteresisModel]:
@@ -348,12 +347,11 @@ class BankCompensator(ChannelBank[Compensator]):
             super().__init__(bank, build)
         narrowed = sum(ch.requested_limits is not None for ch in self._channels)
         if narrowed:
-            warnings.warn(
+            warn(
                 f"Compensator limits narrowed on {narrowed} of {c} channels to the voltages "
                 "each was identified on (pass allow_extrapolation=True to keep them; "
                 "v_min/v_max show the limits in force).",
                 UserWarning,
-                stacklevel=2,
             )
         channels = self._channels
         #: the output maps' inverse before the kernel (None without maps)
@@ -491,12 +489,11 @@ class _MapFront:
                 for charges, n in zip(self.counted, per, strict=True):  # each channel's count
                     assert charges is not None
                     charges.outside += int(n)
-                warnings.warn(
+                warn(
                     "BankCompensator: desired displacements lie outside their channels' "
                     "calibrated ranges; each map is extended linearly from its edge there "
                     "(calibrate over the full drive to hold it)",
                     ExtrapolationWarning,
-                    stacklevel=3,
                 )
         for i, charges in self.curved:  # counted by the channel's own front end
             assert charges is not None

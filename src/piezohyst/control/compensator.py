@@ -20,7 +20,6 @@ Safety, always:
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, replace
 from typing import Any, Literal
 
@@ -29,7 +28,7 @@ from numpy.typing import ArrayLike
 
 from .._kernels import play as K
 from .._validation import FloatArray
-from ..errors import LimitWarning, ParameterError, ShapeError
+from ..errors import LimitWarning, ParameterError, ShapeError, warn
 from ..model.model import HysteresisModel, InverseSpec
 from .calibration import Charges, OutputMap
 from .inverses import INVERSES, CompensatorState, EngineSettings, Inverse, finite_number
@@ -55,12 +54,11 @@ def _narrowed(
             "to use the model outside them."
         )
         raise ParameterError(msg)
-    warnings.warn(
+    warn(
         f"Compensator limits [{v_min:g}, {v_max:g}] V narrowed to "
         f"[{new_lo:g}, {new_hi:g}] V, the voltages the model was identified on: a model "
         "is not trusted outside them (pass allow_extrapolation=True to keep the limits).",
         UserWarning,
-        stacklevel=3,
     )
     return new_lo, new_hi
 
@@ -645,7 +643,7 @@ class Compensator:
         late = not (self._approach_warned or self._tally[K.TALLY_ARRIVED])
         if late and self.approach_count >= LIMIT_CHECK_FIRST:
             self._approach_warned = True
-            warnings.warn(approach_message(owner, self), LimitWarning, stacklevel=4)
+            warn(approach_message(owner, self), LimitWarning)
         if len(self._limits_warned) == 3 or given < LIMIT_CHECK_FIRST:
             return
         sides = int(self._tally[K.TALLY_AT_LOW]), int(self._tally[K.TALLY_AT_HIGH])
@@ -660,7 +658,7 @@ class Compensator:
         new = {k: v for k, v in parts.items() if k not in self._limits_warned}
         if new:
             self._limits_warned.update(new)
-            warnings.warn(f"{owner}: {'; '.join(new.values())}", LimitWarning, stacklevel=4)
+            warn(f"{owner}: {'; '.join(new.values())}", LimitWarning)
 
     def _inner_process(self, d: FloatArray, out: FloatArray) -> None:
         """The engine over a block of hysteresis outputs (after the mode)."""
@@ -910,14 +908,13 @@ class CompensatorSettings:
             if any(narrowed):
                 v_min = lo if narrowed[0] else v_min
                 v_max = hi if narrowed[1] else v_max
-                warnings.warn(
+                warn(
                     f"the limits [{self.v_min if self.v_min is not None else lo:g}, "
                     f"{self.v_max if self.v_max is not None else hi:g}] V were narrowed to "
                     f"[{v_min if v_min is not None else lo:.6g}, "
                     f"{v_max if v_max is not None else hi:.6g}] V, the voltages the model was "
                     "identified on (--allow-extrapolation keeps them)",
                     UserWarning,
-                    stacklevel=2,
                 )
         wide = (v_min is not None and v_min < lo) or (v_max is not None and v_max > hi)
         if known and wide and not self.allow_extrapolation:

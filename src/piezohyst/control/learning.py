@@ -38,6 +38,7 @@ from ..errors import (
     ModelFileError,
     ParameterError,
     ShapeError,
+    warn,
 )
 from ..io import atomic_write_text
 from ..metrics import hysteresis_width
@@ -284,7 +285,7 @@ def _first_design(
     design = design_learning(learner.model, **learner._design_args(d.size), first_error=e,
                              measured=loop)  # fmt: skip
     if design.probe_phase:
-        warnings.warn(f"trial {index}: {design.beyond()}", LearningWarning, stacklevel=3)
+        warn(f"trial {index}: {design.beyond()}", LearningWarning)
     return design
 
 
@@ -740,11 +741,10 @@ class LearningCompensator:
             self._lead = (measured.copy(), ok.copy())
         if lead_in or learned < d.size // 2:
             if not lead_in:
-                warnings.warn(
+                warn(
                     f"trial {index}: {learned} of {d.size} readings to learn from (NaN or "
                     "slew-limited into the trajectory): nothing learned",
                     LearningWarning,
-                    stacklevel=2,
                 )
             seen = float(np.sqrt(np.mean(e[ok] ** 2))) / span if lead_in and ok.any() else math.nan
             trial = Trial(index, seen, math.nan, 0 if lead_in else learned, self._gain, False,
@@ -759,8 +759,7 @@ class LearningCompensator:
         e = anti_windup(e, u, self.compensator, -1.0 if flipped else 1.0)
         if saturated > SATURATED * u.size:
             other = _other_law(self.law, self.settings, u.size)
-            warnings.warn(limits_said(index, u, self.compensator, other), LearningWarning,
-                          stacklevel=2)  # fmt: skip
+            warn(limits_said(index, u, self.compensator, other), LearningWarning)  # fmt: skip
         rolled = False
         if self._first:  # the law, chosen from the first trial learned from
             self.design = _first_design(self, measured, ok, e, index)
@@ -774,12 +773,11 @@ class LearningCompensator:
             assert self._good is not None
             rolled = True
             self._gain = max(self._gain / 2, self.design.gain / GAIN_FLOOR)
-            warnings.warn(
+            warn(
                 f"trial {index}: the error grew from {self._good[1]:.3%} to {error:.3%}: the "
                 "last update is undone (its correction is sent again) and the learning gain "
                 f"halved to {self._gain:.3g}",
                 LearningWarning,
-                stacklevel=2,
             )
             self._correction = self._good[0].copy()
             self._resend = True

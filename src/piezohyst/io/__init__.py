@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 import os
-import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import FloatArray
-from ..errors import DataFileError, RecordWarning
+from ..errors import DataFileError, RecordWarning, warn
 from ..units import scaled, split_unit, to_standard
 from ._formats import (
     BATCH_ROWS,
@@ -424,17 +423,16 @@ class RecordingStream:
             message = found.outlier_message(str(self.path), units)
             if self.keep_outliers:
                 message = message.split("; kept out of")[0] + "; kept, as asked (keep_outliers)"
-            warnings.warn(message, RecordWarning, stacklevel=3)
+            warn(message, RecordWarning)
         if found.holes:
-            warnings.warn(found.hole_message(str(self.path)), RecordWarning, stacklevel=3)
+            warn(found.hole_message(str(self.path)), RecordWarning)
         step = found.interval
         if t_name is not None and self._source_units[0] is None and step >= 1 and step % 1 == 0:
-            warnings.warn(
+            warn(
                 f"{self.path}: the time column {t_name!r} steps by {step:g} and states no "
                 f"unit: read as seconds, the record is sampled at {1 / step:g} Hz; if it "
                 "counts ms or us, say so (--time-unit ms, or a header 'time [ms]')",
                 RecordWarning,
-                stacklevel=3,
             )
         return found
 
@@ -510,11 +508,10 @@ class RecordingStream:
         dt = float(np.median(np.diff(t)))
         if not 1e-8 <= dt <= 60.0 and "interval" not in self._warned:
             self._warned.add("interval")
-            warnings.warn(
+            warn(
                 f"{self.path}: the median sample interval is {dt:.3g} s; if the time column is "
                 "not in seconds, give its unit (a header such as 'time [ms]', or the time unit)",
                 UserWarning,
-                stacklevel=3,
             )
 
 

@@ -30,6 +30,7 @@ from ..errors import (
     PiezohystError,
     RecordWarning,
     TimeAxisError,
+    warn,
 )
 from ..io.blocks import Blocks, Summary, array_blocks, block_dt
 from ..io.screening import screen
@@ -139,9 +140,9 @@ def screened(
         message = found.outlier_message("the record", {"x": x_unit, "y": y_unit}, arrays=True)
         if keep_outliers:
             message = message.split("; kept out of")[0] + "; kept, as asked (keep_outliers)"
-        warnings.warn(message, RecordWarning, stacklevel=4)
+        warn(message, RecordWarning)
     if found.holes:
-        warnings.warn(found.hole_message("the record", arrays=True), RecordWarning, stacklevel=4)
+        warn(found.hole_message("the record", arrays=True), RecordWarning)
     if keep_outliers:
         return x, y
     return found.cleaned("x", x), found.cleaned("y", y)
@@ -159,13 +160,12 @@ def _check_identifiable(dyn: InputDynamics) -> None:
     widest = float(np.linalg.eigvalsh(np.array(dyn.covariance).reshape(2, 2)).max())
     half = math.sqrt(max(widest, 0.0) * float(chi2.ppf(0.95, 2)))
     if half >= max(0.5 * total, dyn.sample_interval):  # a sample: no lag found is no warning
-        warnings.warn(
+        warn(
             f"the record (or the model's misfit) cannot separate a lag from hysteresis (delay "
             f"+ lag {1e3 * total:.3g} ± {1e3 * half:.2g} ms, 95 %): record loops at two "
             "frequencies or more, the fastest near the scan rate (piezohyst excite --kind "
             "multifreq)",
             IdentifiabilityWarning,
-            stacklevel=4,
         )
 
 
@@ -386,13 +386,12 @@ def _check_leakage(model: Any, sm: Summary) -> None:
     capacitance = (sm.y_max - sm.y_min) / (sm.x_max - sm.x_min)  # mean slope, output per input
     dt = (sm.t_last - sm.t_first) / (sm.n - 1)  # mean interval
     if conductance > 0 and capacitance / conductance < dt:
-        warnings.warn(
+        warn(
             f"the identified leakage {conductance:.3g} {model.output_unit}/"
             f"({model.input_unit}*s) would discharge the actuator in "
             f"{capacitance / conductance:.3g} s, less than one sample ({dt:.3g} s): check "
             "the time unit",
             UserWarning,
-            stacklevel=4,
         )
 
 

@@ -26,7 +26,6 @@ from __future__ import annotations
 import itertools
 import math
 import os
-import warnings
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -37,7 +36,7 @@ from numpy.typing import ArrayLike
 
 from .._kernels import signal as _signals
 from .._validation import FloatArray, as_signal, as_time, same_length
-from ..errors import InsufficientDataError, ModelFileError, ParameterError
+from ..errors import InsufficientDataError, ModelFileError, ParameterError, warn
 
 __all__ = ["LEAKAGE_TERMS", "Hold", "Leakage", "calibrate_leakage", "find_holds"]
 
@@ -858,12 +857,11 @@ def _undetermined(names: list[str], found: list[Hold], unit: str) -> None:
         "conductance": "holds at two or more voltages",
     }
     levels = ", ".join(f"{v:.4g}" for v in _distinct([h.voltage for h in found], 1e-9))
-    warnings.warn(
+    warn(
         f"the {len(found)} holds (at {levels} {unit}) cannot determine "
         + "; ".join(f"the {n} term (it needs {advice[n]})" for n in names)
         + ": left out",
         UserWarning,
-        stacklevel=3,
     )
 
 
@@ -924,7 +922,7 @@ def _check_sure(leak: Leakage, found: list[Hold], unit: str, settling: int) -> N
     )
     if rel > 0.1:
         raise InsufficientDataError(msg)
-    warnings.warn(msg, UserWarning, stacklevel=3)
+    warn(msg, UserWarning)
 
 
 def _distinct(values: Sequence[float], gap: float) -> list[float]:

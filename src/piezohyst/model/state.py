@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_signal, as_time, same_length
-from ..errors import ExtrapolationWarning, ParameterError, ShapeError, TimeAxisError
+from ..errors import ExtrapolationWarning, ParameterError, ShapeError, TimeAxisError, warn
 from ..io.blocks import BLOCK, block_dt
 from .cores.base import Propagation
 from .terms import term_columns
@@ -306,13 +306,12 @@ def region_warning(model: Any, x: FloatArray, core_output: FloatArray) -> None:
     outside = d > float(getattr(model, "region_tolerance", 0.05)) * region.span
     if outside.any():
         k = int(np.argmax(outside))
-        warnings.warn(
+        warn(
             f"{int(outside.sum())} of {x.size} samples (first: sample {k}, "
             f"{x[k]:.4g} {model.input_unit}) lie outside the (voltage, output) region the "
             f"{type(model).__name__} was identified on, by up to {float(d.max()):.3g} "
             f"{model.output_unit}: the model extrapolates there",
             ExtrapolationWarning,
-            stacklevel=5,
         )
 
 
@@ -326,13 +325,12 @@ def range_warning(model: Any, x: FloatArray) -> None:
     outside = (x < lo - reach) | (x > hi + reach)
     if outside.any():
         k = int(np.argmax(outside))
-        warnings.warn(
+        warn(
             f"{int(outside.sum())} of {x.size} samples (first: sample {k}, {x[k]:.4g} "
             f"{model.input_unit}) lie outside the input range [{lo:.4g}, {hi:.4g}] "
             f"{model.input_unit} the {type(model).__name__} was identified on: the model "
             "extrapolates there",
             ExtrapolationWarning,
-            stacklevel=5,
         )
 
 

@@ -36,7 +36,7 @@ from ..analysis.selection import (
     verdict,
     with_margins,
 )
-from ..errors import DataFileError, ParameterError, RecordWarning, TimeAxisError
+from ..errors import DataFileError, ParameterError, RecordWarning, TimeAxisError, warn
 from ..io import (
     MD_MARKER,
     DataSpec,
@@ -526,13 +526,12 @@ def _mid_loop_hint(x: FloatArray, t: FloatArray | None, model: HysteresisModel) 
     if t is not None and x.size > 1 and t[1] > t[0] and math.isfinite(model.max_slew_rate_):
         moving = x0 != 0.0 and abs(x[1] - x0) / (t[1] - t[0]) > 0.5 * model.max_slew_rate_
     if abs(x0) > 0.05 * span or moving:
-        warnings.warn(
+        warn(
             f"the record starts mid-loop ({x0:.4g} {model.input_unit}, inside "
             f"[{lo:.4g}, {hi:.4g}]{', moving' if moving else ''}) and was fitted from rest "
             "there; if the actuator was cycling before it, initial_state='periodic' "
             "(--initial-state periodic) starts it on its loop",
             UserWarning,
-            stacklevel=3,
         )
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 import os
-import warnings
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -13,7 +12,7 @@ import numpy as np
 
 from .._validation import FloatArray
 from ..control.compensator import CompensatorSettings
-from ..errors import DataFileError, OverwriteError, ParameterError
+from ..errors import DataFileError, OverwriteError, ParameterError, warn
 from ..io import (
     Table,
     is_piezohyst_output,
@@ -170,12 +169,11 @@ def warn_assumed_span(
     if assumed in IMPLAUSIBLE and span > IMPLAUSIBLE[assumed]:
         name = {"m": "metres", "C": "coulombs"}[assumed]
         usual = {"m": "um or nm", "C": "uC or nC"}[assumed]
-        warnings.warn(
+        warn(
             f"{data}: column {column!r} states no unit and spans {span:.4g}, read as {name}; "
             f"no piezo's does: if it is in {usual}, give the unit ({option} "
             f"{usual.split()[0]}, or a header '{column} [{usual.split()[0]}]')",
             UserWarning,
-            stacklevel=4,
         )
 
 
@@ -213,12 +211,11 @@ def warn_assumed_volts(span: float, unit: str | None, column: str | None, data: 
     """Warn when an input that states no unit (taken in V) spans more than any piezo
     amplifier drives (:data:`VOLTS_IMPLAUSIBLE`): millivolts, most likely."""
     if unit is None and span > VOLTS_IMPLAUSIBLE:
-        warnings.warn(
+        warn(
             f"{data}: column {column!r} states no unit and spans {span:.4g}, read as volts; "
             "no piezo amplifier drives that: if it is in mV, give the unit (--input-unit mV, "
             f"or a header '{column} [mV]')",
             UserWarning,
-            stacklevel=3,
         )
 
 
@@ -232,11 +229,10 @@ def _default_unit(column: str | None) -> str:
 def _check_measured_unit(unit: str | None, model: HysteresisModel, data: PathLike) -> None:
     """The recorded output must be in the model's unit; a unit the file omits is assumed."""
     if unit is None:
-        warnings.warn(
+        warn(
             f"{data}: the output column states no unit; taken to be in the model's unit "
             f"{model.output_unit!r} (give the output unit if it is not)",
             UserWarning,
-            stacklevel=3,
         )
     elif unit != model.output_unit:
         msg = f"{data}: the output column is in {unit!r}, the model predicts {model.output_unit!r}"
@@ -273,12 +269,11 @@ def warn_clipped(
     if unit is None:
         warn_assumed_span(extremes[1] - extremes[0], _default_unit(column), column, data)
     if n and count >= CLIP_SHARE * n:
-        warnings.warn(
+        warn(
             f"{data}: column {column!r} sits at its {which} ({level:.6g} {unit or ''}) on "
             f"{count} of {n} samples ({100 * count / n:.1f} %, the first at sample {first} of "
             "the window) in flat runs: the recording clipped there (a sensor or an ADC at "
             "its full scale) and those samples say nothing of the actuator; record with a "
             "wider range, or use a window that does not clip",
             UserWarning,
-            stacklevel=3,
         )

@@ -26,7 +26,7 @@ from .._validation import FloatArray, check_int
 from .._version import __version__
 from ..control.compensator import Compensator
 from ..control.selfsensing import SelfSensingController
-from ..errors import ExtrapolationWarning
+from ..errors import ExtrapolationWarning, warn
 from ..io import atomic_write_text
 from ..metrics import hysteresis_width, nrmse, rmse
 from ..model.leakage import Leakage, calibrate_leakage
@@ -324,7 +324,7 @@ def _said_by(who: str, work: Callable[..., Any], *args: Any, **kwargs: Any) -> A
         warnings.simplefilter("always")
         out = work(*args, **kwargs)
     for w in said:
-        warnings.warn(f"{who}: {w.message}", w.category, stacklevel=3)
+        warn(f"{who}: {w.message}", w.category)
     return out
 
 
