@@ -15,6 +15,7 @@ predict identically. Every error names the file and the field.
 from __future__ import annotations
 
 import hashlib
+import importlib
 import json
 import math
 import os
@@ -48,6 +49,13 @@ __all__ = [
 Model = Any
 
 _REGISTRY: dict[str, type] = {}
+
+
+def _registry() -> dict[str, type]:
+    """The registered model classes, the library's own loaded first (``import piezohyst``
+    loads them at first use, so a file may be read before any model was named)."""
+    importlib.import_module("piezohyst.model.models")
+    return _REGISTRY
 
 
 def register(cls: type) -> type:
@@ -85,7 +93,7 @@ def model_class(name: str) -> Any:
     ParameterError
         For an unknown name; the message lists the known ones.
     """
-    for cls in _REGISTRY.values():
+    for cls in _registry().values():
         if name in (cls.__name__, getattr(cls, "cli_name", "")):
             return cls
     msg = f"unknown model {name!r}; choose one of: {', '.join(model_names())}"
@@ -100,7 +108,7 @@ def model_names() -> tuple[str, ...]:
     tuple of str
     """
     return tuple(
-        str(getattr(c, "cli_name", "")) for c in _REGISTRY.values() if getattr(c, "cli_name", "")
+        str(getattr(c, "cli_name", "")) for c in _registry().values() if getattr(c, "cli_name", "")
     )
 
 
