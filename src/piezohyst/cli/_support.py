@@ -653,6 +653,9 @@ def describe(model: HysteresisModel) -> str:
         text += ", growth terms: " + ", ".join(f"{k} {v:.4g} {u}" for k, (v, u) in growth.items())
     elif "growth_terms" in model.get_params():
         text += ", growth terms: none"
+    if model.selection_:  # chosen by forecasting the record's later part: say by how much
+        scores = ", ".join(f"{k} {v:.3g}" for k, v in model.selection_.items())
+        text += f" (chosen by forecasting the record's later part, held-out RMSE: {scores})"
     shape = [term for term in model.terms_ if not term.removed]
     if shape:
         text += "; shape terms: " + ", ".join(f"{t.kind} ({t.width} coefficients)" for t in shape)
