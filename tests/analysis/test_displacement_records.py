@@ -53,7 +53,10 @@ def test_a_displacement_record_gets_no_growth_terms_and_no_default_ramps_away(cr
         model = cls(output_unit="m")
         errors[name] = _held_out(model, t, v, s)
         assert model.growth_coefficients() == {}, name  # a displacement sees no leaked charge
-        if "creep" in model.get_params():  # the drift goes to creep timed by the record
+        # the drift goes to creep timed by the record; ActivePI's integrator, fixed by the
+        # model, gives way to them too (it became ClassicalPI: 0.36 % held out on the
+        # measured SmartHysteresis record where creep gives 0.15 %)
+        if "creep" in model.get_params() or name == "ActivePI":
             kinds = [term.kind for term in model.terms_]
             assert "creep" in kinds, name
     # measured 0.016-1.17 %; before (an integral growth term by default) 16.6-20.2 % for

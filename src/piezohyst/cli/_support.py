@@ -22,6 +22,7 @@ from ..control.selfsensing import LoopSettings
 from ..errors import PiezohystError
 from ..io import DataSpec, estimated_rows
 from ..model.models import HysteresisModel, model_names
+from ..units import is_length
 
 
 class Context:
@@ -641,6 +642,14 @@ def _fit_auto(
     return cast(HysteresisModel, sel.model)
 
 
+def _shape(term: Any) -> str:
+    """A shape term in a line: its kind and size (creep: its time constants)."""
+    taus = getattr(term, "taus", None)
+    if term.kind == "creep" and taus is not None:
+        return "creep (time constants " + ", ".join(f"{tau:.3g}" for tau in taus) + " s)"
+    return f"{term.kind} ({term.width} coefficients)"
+
+
 def describe(model: HysteresisModel) -> str:
     """One line on a fitted model's quality and terms, from its public attributes."""
     core = model.operator_.summary
@@ -658,7 +667,9 @@ def describe(model: HysteresisModel) -> str:
         text += f" (chosen by forecasting the record's later part, held-out RMSE: {scores})"
     shape = [term for term in model.terms_ if not term.removed]
     if shape:
-        text += "; shape terms: " + ", ".join(f"{t.kind} ({t.width} coefficients)" for t in shape)
+        text += "; shape terms: " + ", ".join(_shape(t) for t in shape)
+    if is_length(model.output_unit) and not growth:  # what the domain rule did, said
+        text += "; no leak term (a displacement sees no leaked charge)"
     dyn = model.input_dynamics_
     mode = model.output_dynamics_
     if mode.active:
