@@ -239,7 +239,9 @@ def excite(
 )
 @input_dynamics_option(
     "Delay/lag between the logged command and the piezo, identified with the model "
-    "(record several drive frequencies)."
+    "(record several drive frequencies); record: identified when the record drives several "
+    "rates, else none.",
+    default="record",
 )
 @click.option(
     "--output-dynamics",
@@ -311,6 +313,7 @@ def fit(
     # a window of up to KEEP_ROWS rows is read once and kept; a longer one streams 3 passes
     passes = 1 if (estimated_rows(data) or 0) <= KEEP_ROWS else 3
     label = f"fitting {model_name} to {data.name}"
+    notes: list[str] = []
     with rows_progress(ctx, label, data, passes) as progress:
         model = _run(
             ctx,
@@ -328,9 +331,12 @@ def fit(
                 initial_state=initial_state,
                 force=force,
                 progress=progress,
+                say=notes.append,
             ),
         )
     ctx.result(describe(model))
+    for note in notes:  # what --input-dynamics record decided, after the result
+        ctx.info(note)
     if scan_frequency is not None and model.input_dynamics_.active:
         ctx.result(f"input dynamics {model.input_dynamics_.response_interval(scan_frequency)}")
     if ctx.verbose:

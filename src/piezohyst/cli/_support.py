@@ -539,10 +539,13 @@ def operators_option(
                         show_default=True, help=help)  # fmt: skip
 
 
-def input_dynamics_option(help: str) -> Decorator:
-    """--input-dynamics: the delay/lag between the logged command and the piezo."""
+def input_dynamics_option(help: str, default: str = "none") -> Decorator:
+    """--input-dynamics: the delay/lag between the logged command and the piezo (``record``,
+    where a command offers it: ``auto`` when the record drives several rates, else none)."""
     kinds = ["none", "delay", "first-order", "delay+first-order", "auto"]
-    return click.option("--input-dynamics", type=click.Choice(kinds), default="none",
+    if default == "record":
+        kinds.append("record")
+    return click.option("--input-dynamics", type=click.Choice(kinds), default=default,
                         show_default=True, help=help)  # fmt: skip
 
 
@@ -618,6 +621,7 @@ def _fit_auto(
     asked for), the best saved; returns it."""
     from ..workflows import select_file
 
+    notes: list[str] = []
     with (
         working(ctx, f"choosing a model for {data.name}: each candidate on the record's folds"),
         rows_progress(ctx, f"reading {data.name}", data) as progress,
@@ -633,9 +637,12 @@ def _fit_auto(
                 input_dynamics=input_dynamics,
                 force=force,
                 progress=progress,
+                say=notes.append,
             ),
         )
     ctx.result(sel.table())
+    for note in notes:  # what --input-dynamics record decided
+        ctx.info(note)
 
     ctx.result(describe(sel.model))
     ctx.info(f"saved {out}")

@@ -33,6 +33,7 @@ from ..analysis.selection import (
     is_candidate,
     record_notes,
     select_model,
+    several_rates,
     verdict,
     with_margins,
 )
@@ -43,6 +44,7 @@ from ..io import (
     Recording,
     RecordingStream,
     atomic_write_text,
+    estimated_rows,
     write_blocks,
     write_rows,
     write_table,
@@ -201,6 +203,7 @@ def select_file(
     input_dynamics: str = "none",
     force: bool = False,
     progress: Progress = None,
+    say: Callable[[str], None] | None = None,
 ) -> Selection:
     """Choose a model for a record (:func:`~piezohyst.analysis.selection.select_model`) and save
     the winner, fitted on the record (its window, started from the earlier input).
@@ -239,6 +242,10 @@ def select_file(
     warn_clipped([rec.y[w]], rec.names[1], rec.units[1], data)
     warn_assumed_volts(float(np.ptp(rec.x[w])), rec.units[0], rec.names[0], data)
     start = _continuing(rec, initial_state)
+    if input_dynamics == "record":
+        input_dynamics, note = dynamics_by_record(rec.x[w], rec.t[w])
+        if say is not None:
+            say(note)
     with warnings.catch_warnings():  # the file's holes and outliers: said by its rows above
         warnings.simplefilter("ignore", RecordWarning)
         sel = select_model(
@@ -250,6 +257,51 @@ def select_file(
     if out is not None:
         sel.model.save(out)
     return sel
+
+
+def dynamics_by_record(x: FloatArray, t: FloatArray) -> tuple[str, str]:
+    """``"auto"`` where a record drives several rates, so that a lag between the command and
+    the piezo can be told from loop width
+    (:func:`~piezohyst.analysis.selection.several_rates`), else ``"none"``; and a sentence
+    that says which and why.
+
+    Parameters
+    ----------
+    x, t : ndarray
+        The record's input and times.
+
+    Returns
+    -------
+    (str, str)
+    """
+    several, rates = several_rates(x, t)
+    if not rates.size:
+        return "none", "input dynamics: none (the input does not turn)"
+    low, high = np.percentile(rates, [5.0, 95.0])
+    if several:
+        return "auto", (
+            f"input dynamics: identified (the record drives {low:.3g}-{high:.3g} Hz: a lag "
+            "of the amplifier can be told from loop width; --input-dynamics none skips it)"
+        )
+    return "none", (
+        f"input dynamics: none (the record drives one rate, about {np.median(rates):.3g} Hz, "
+        "where a lag looks like loop width; record several, piezohyst excite, to identify it)"
+    )
+
+
+def _dynamics_of_file(data: PathLike, spec: DataSpec | None) -> tuple[str, str]:
+    """:func:`dynamics_by_record` of a file's window; none for one too long to hold."""
+    rows = estimated_rows(Path(data))
+    if rows is not None and rows > KEEP_ROWS:
+        return "none", (
+            "input dynamics: none (the record is streamed; --input-dynamics auto identifies "
+            "them in memory)"
+        )
+    with warnings.catch_warnings():  # the fit's own read says what the file holds
+        warnings.simplefilter("ignore")
+        rec = (spec or DataSpec()).read(data)
+    w = rec.window
+    return dynamics_by_record(rec.x[w], rec.t[w])
 
 
 def model_terms(
@@ -285,6 +337,7 @@ def fit_file(
     initial_state: str = "rest",
     force: bool = False,
     progress: Progress = None,
+    say: Callable[[str], None] | None = None,
 ) -> HysteresisModel:
     """Fit a model to a data file and save it (JSON) to ``out`` if given.
 
@@ -312,7 +365,9 @@ def fit_file(
         (see :class:`~piezohyst.PreisachModel`).
     input_dynamics, output_dynamics : str
         Delay and lag between command and piezo, mode between hysteresis and
-        output (see :class:`~piezohyst.model.models.HysteresisModel`).
+        output (see :class:`~piezohyst.model.models.HysteresisModel`);
+        ``input_dynamics="record"``: ``"auto"`` where the record drives several rates
+        (:func:`dynamics_by_record`), else none, said through ``say``.
     initial_state : {"rest", "periodic"}
         Where the operators start: at rest, or (a record that is one period of
         a periodic drive, starting mid-cycle) in the periodic steady state. A
@@ -321,6 +376,8 @@ def fit_file(
         Replace an existing ``out`` that piezohyst did not write.
     progress : callable, optional
         Called with the rows read so far.
+    say : callable, optional
+        Told, in a sentence, what ``input_dynamics="record"`` decided and why.
 
     Returns
     -------
@@ -350,7 +407,14 @@ def fit_file(
         "input_dynamics": input_dynamics,
         "output_dynamics": output_dynamics,
     }
+    note = ""
+    if input_dynamics == "record":  # by the record's rates; read once more to judge them
+        cls(**{**settings, "input_dynamics": "none"}).check_params()  # bad settings first
+        input_dynamics, note = _dynamics_of_file(data, data_spec)
+        settings["input_dynamics"] = input_dynamics
     estimator = cls(**settings)
+    if note and say is not None:
+        say(note)
     if input_dynamics != "none" or output_dynamics != "none":  # searched over the window in memory
         stream.require_time(f"{model}'s input and output dynamics")
         rec = (data_spec or DataSpec()).read(data, progress=progress)
