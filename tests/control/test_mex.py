@@ -86,6 +86,8 @@ def test_the_mex_gateway_in_octave(kind: str, tmp_path: Path) -> None:
     assert len(errors) == 4  # each wrong call an Octave error, none a crash
     assert "usage" in errors[0] and "unknown command 'bogus'" in errors[1]
     assert "usage" in errors[2] and "usage" in errors[3]
+    # the host names the function (Octave "ph_comp_mex: ..."): the message does not repeat it
+    assert all(e.count("ph_comp_mex:") <= 1 for e in errors), errors
     assert type(model).__name__ in (tmp_path / "version.txt").read_text()
     counts = [int(x) for x in (tmp_path / "counts.txt").read_text().split()]
     assert counts[:2] == [comp.nonfinite_count, comp.saturated_count]  # the limits say so

@@ -199,7 +199,7 @@ def _mex_gateway(name: str, prefix: str, controller: bool, what: str) -> str:
         f"""
     if (mxGetNumberOfElements(prhs[1]) != n || !mxIsDouble(prhs[1]) || mxIsComplex(prhs[1])
         || mxIsSparse(prhs[1])) {{
-        mexErrMsgIdAndTxt("{name}:charge", "{name}: the charge must be a real double vector "
+        mexErrMsgIdAndTxt("{name}:charge", "the charge must be a real double vector "
                           "as long as the target");
     }}
     charge = mxGetPr(prhs[1]);"""

@@ -3,7 +3,9 @@
  * Build: MATLAB  mex ${name}.c           Octave  mkoctfile --mex ${name}.c
  * Use:   v = ${name}(${args});   commands (V) for a vector of desired values, the state
  *        kept between calls; [v, counts] = ... also returns what the limits held since the
- *        last reset: [non-finite targets, targets out of reach, cut by the slew limit];   ${name}('reset') goes back to the exported state;
+ *        last reset: [non-finite targets, held by a voltage limit, cut by the slew limit,
+ *        beyond the output map's calibrated range];
+ *        ${name}('reset') goes back to the exported state;
  *        ${name}('version') returns what was exported.
  * The step is ${prefix}.c (included: one translation unit, nothing else to link).
  */
@@ -28,7 +30,7 @@ void mexFunction(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
     }
     if (nrhs == 1 && mxIsChar(prhs[0])) {
         if (mxGetString(prhs[0], command, sizeof command) != 0) {
-            mexErrMsgIdAndTxt("${name}:command", "${name}: the commands are 'reset' and 'version'");
+            mexErrMsgIdAndTxt("${name}:command", "the commands are 'reset' and 'version'");
         }
         if (strcmp(command, "reset") == 0) {
             ${prefix}_init(&state);
@@ -38,12 +40,12 @@ void mexFunction(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
             plhs[0] = mxCreateString("${version}");
             return;
         }
-        mexErrMsgIdAndTxt("${name}:command", "${name}: unknown command '%s' (reset, version)",
+        mexErrMsgIdAndTxt("${name}:command", "unknown command '%s' (reset, version)",
                           command);
     }
     if (nrhs != ${nargs} || nlhs > 2 || !mxIsDouble(prhs[0]) || mxIsComplex(prhs[0])
         || mxIsSparse(prhs[0])) {
-        mexErrMsgIdAndTxt("${name}:usage", "${name}: usage v = ${name}(${args}) with real double "
+        mexErrMsgIdAndTxt("${name}:usage", "usage v = ${name}(${args}) with real double "
                           "vectors, or ${name}('reset')");
     }
     n = mxGetNumberOfElements(prhs[0]);
