@@ -65,12 +65,11 @@ from ._base import (
     warn_assumed_volts,
     warn_clipped,
 )
+from .compensate import Compensation, compensate_file
 from .control_files import (
-    Compensation,
     LoopRun,
     calibrate_gain_file,
     calibrate_leakage_file,
-    compensate_file,
     export_c_file,
     export_fmu_file,
     model_report,

@@ -277,3 +277,17 @@ def warn_clipped(
             "wider range, or use a window that does not clip",
             UserWarning,
         )
+
+
+def _desired_column(table: Table, column: str | None, target: PathLike) -> str:
+    """The desired trajectory's column: as named, else ``desired``, else the only one but time."""
+    if column is None:
+        others = [c for c in table.columns if c != "time"]
+        column = "desired" if "desired" in table else (others[0] if len(others) == 1 else None)
+        if column is None:
+            msg = (
+                f"{target}: which column is the desired trajectory? Name it 'desired' or name "
+                f"the column (columns: {', '.join(map(repr, table.columns))})"
+            )
+            raise DataFileError(msg)
+    return table.resolve(column)
