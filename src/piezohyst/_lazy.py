@@ -61,7 +61,8 @@ def attach(
     names : dict
         Each public name and the module (relative to ``package``, with a leading dot)
         that defines it; a name that is itself a submodule maps to that submodule with
-        the suffix ``":module"``.
+        the suffix ``":module"``. Any other submodule is loaded at first use too
+        (``piezohyst.control.learning`` after ``import piezohyst``).
 
     Returns
     -------
@@ -72,9 +73,19 @@ def attach(
 
     def __getattr__(name: str) -> Any:
         where = names.get(name)
-        if where is None:
-            msg = f"module {package!r} has no attribute {name!r}"
-            raise AttributeError(msg)
+        if where is None:  # a submodule, loaded at first use as the import system would
+            if name.startswith("__"):
+                msg = f"module {package!r} has no attribute {name!r}"
+                raise AttributeError(msg)
+            try:
+                module = importlib.import_module(f"{package}.{name}")
+            except ModuleNotFoundError as exc:
+                if exc.name != f"{package}.{name}":
+                    raise
+                msg = f"module {package!r} has no attribute {name!r}"
+                raise AttributeError(msg) from None
+            setattr(sys.modules[package], name, module)
+            return module
         module_name, _, kind = where.partition(":")
         module = importlib.import_module(module_name, package)
         value = module if kind == "module" else getattr(module, name)

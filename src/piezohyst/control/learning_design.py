@@ -111,6 +111,9 @@ class LearningDesign:
         s, the delay and first-order lag (of the model's own timing) whose phase fits the
         probe's best there (among :data:`DELAYS` quarter samples and :data:`TAUS`): a rough
         size of what the model does not hold.
+    model_timed : bool
+        Whether the model holds input dynamics of its own: the probe's message then says
+        they do not describe the loop, not that they are missing.
     """
 
     gain: float
@@ -130,6 +133,7 @@ class LearningDesign:
     probe_frequency: float = 0.0
     probe_delay: float = 0.0
     probe_lag: float = 0.0
+    model_timed: bool = False
 
     def frequencies(self) -> FloatArray:
         """The harmonics of the trial (Hz), as :func:`numpy.fft.rfftfreq` gives them.
@@ -174,8 +178,14 @@ class LearningDesign:
             f"the lead-in's probe measured the loop {abs(math.degrees(self.probe_phase)):.0f} "
             f"degrees {'behind' if self.probe_phase < 0 else 'ahead of'} the timing the law "
             f"assumes at {self.probe_frequency:.0f} Hz, beyond every timing it allows for{size}: "
-            "the model does not hold the loop's dynamics (identify them: input_dynamics='auto',"
-            " --input-dynamics auto; or state lag=), and the condition does not hold"
+            + (
+                "the model's identified input dynamics do not describe this loop (identify "
+                "them again on a record of the loop's own rates and amplifier, or state lag=)"
+                if self.model_timed
+                else "the model does not hold the loop's dynamics (identify them: "
+                "input_dynamics='auto', --input-dynamics auto; or state lag=)"
+            )
+            + ", and the condition does not hold"
         )
 
     def describe(self) -> str:
@@ -410,6 +420,7 @@ def design_learning(
         probe_frequency=beyond[1],
         probe_delay=beyond[2],
         probe_lag=beyond[3],
+        model_timed=bool(model.input_dynamics_.active),
     )
 
 

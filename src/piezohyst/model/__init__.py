@@ -3,3 +3,8 @@ contract, state, the fit, the model class and its presets, files and banks, and 
 capacitor's leakage measured on holds (``leakage``).
 May import: the foundation, ``_kernels``, ``io``.
 """
+
+from .._lazy import attach
+
+# each module loaded at first use: piezohyst.model.NAME after import piezohyst
+__getattr__, __dir__ = attach(__name__, {})
