@@ -130,3 +130,25 @@ def test_fit_takes_the_loops_timing_when_the_record_drives_several_rates(tmp_pat
     assert res.exit_code == 0, res.output
     assert "input dynamics: none (the record drives one rate" in res.stderr
     assert not ph.load_model(tmp_path / "one.json").input_dynamics_.active
+
+
+def test_dynamics_the_record_cannot_determine_are_left_out_and_said(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """What `piezohyst excite` plays, on a relaxing plant behind a 4 ms amplifier: several
+    rates, but the fit finds 4.6 +- 13 ms (the relaxation looks like a lag too). Kept, they
+    left 57 % width learning a 40 Hz scan (benchmarks/default_path.py); now the fit is made
+    again without them, and `fit` says why."""
+    from dataclasses import replace
+
+    from piezohyst.simulation import PLANTS
+    from piezohyst.workflows.excitation import excitation
+
+    played = excitation(v_min=0.0, v_max=140.0, sample_rate=1000.0)
+    rec = ph.simulate(played.voltage, played.t, preset=replace(PLANTS["bouc-wen"], amp_tau=4e-3),
+                      seed=1)  # fmt: skip
+    ph.write_table(tmp_path / "excite.csv", {"time": rec.t, "voltage": rec.voltage,
+                                             "charge": rec.charge})  # fmt: skip
+    res = run("fit", tmp_path / "excite.csv", "-o", tmp_path / "m.json")
+    assert res.exit_code == 0, res.output
+    assert "but this fit cannot tell a lag from hysteresis" in res.stderr
+    assert not ph.load_model(tmp_path / "m.json").input_dynamics_.active
+    assert "cannot separate a lag" not in res.stderr  # judged and said once, not warned too

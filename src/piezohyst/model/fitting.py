@@ -50,6 +50,7 @@ __all__ = [
     "record_facts",
     "score_model",
     "screened",
+    "undetermined",
 ]
 
 SCORE_PIECE = 1 << 16  # samples per piece when scoring a fit (2 MB of temporaries)
@@ -148,18 +149,34 @@ def screened(
     return found.cleaned("x", x), found.cleaned("y", y)
 
 
-def _check_identifiable(dyn: InputDynamics) -> None:
-    """Warn when the record leaves the delay and lag undetermined: the 95 % region reaches
-    half the total lag, and a sample, in some direction (at one drive frequency a lag, a
-    delay and hysteresis look alike)."""
+def undetermined(dyn: InputDynamics) -> float:
+    """The 95 % half-width (s) of identified input dynamics where the record leaves them
+    undetermined (the region reaches half the total lag, and a sample, in some direction: at
+    one drive frequency a lag, a delay and hysteresis look alike); 0 where it determines them.
+
+    Parameters
+    ----------
+    dyn : InputDynamics
+
+    Returns
+    -------
+    float
+    """
     if not dyn.active or not dyn.covariance:
-        return
+        return 0.0
     total = dyn.delay + dyn.tau
     from scipy.stats import chi2
 
     widest = float(np.linalg.eigvalsh(np.array(dyn.covariance).reshape(2, 2)).max())
     half = math.sqrt(max(widest, 0.0) * float(chi2.ppf(0.95, 2)))
-    if half >= max(0.5 * total, dyn.sample_interval):  # a sample: no lag found is no warning
+    return half if half >= max(0.5 * total, dyn.sample_interval) else 0.0
+
+
+def _check_identifiable(dyn: InputDynamics) -> None:
+    """Warn when the record leaves the delay and lag undetermined (:func:`undetermined`)."""
+    half = undetermined(dyn)
+    total = dyn.delay + dyn.tau
+    if half:  # a sample: no lag found is no warning
         warn(
             f"the record (or the model's misfit) cannot separate a lag from hysteresis (delay "
             f"+ lag {1e3 * total:.3g} ± {1e3 * half:.2g} ms, 95 %): record loops at two "
