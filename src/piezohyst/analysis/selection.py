@@ -518,11 +518,16 @@ ONE_RATE = 2.0
 SEVERAL_RATES = 3.0
 
 
+#: The share of a sine's half-period its rise from 10 % to 90 % of the half-cycle takes:
+#: (acos(-0.8) - acos(0.8)) / pi
+SINE_RISE = 0.59033
+
+
 def drive_rates(x: ArrayLike, t: ArrayLike) -> FloatArray:
     """The rate (Hz) of each half-cycle of a record's drive, from its rise time: a half-cycle
     between two turns of the input, of at least 5 % of its range, takes the time ``d`` from
-    10 % to 90 % of its own amplitude, ``0.8 / (2 d)`` for a triangle of that period (holds
-    at its ends do not count, nor the noise in them).
+    10 % to 90 % of its own amplitude, ``0.59 / (2 d)`` for a sine of that period (a
+    triangle's reads 1.36x higher; holds at its ends do not count, nor the noise in them).
 
     Parameters
     ----------
@@ -549,7 +554,7 @@ def drive_rates(x: ArrayLike, t: ArrayLike) -> FloatArray:
         frac = (seg - seg[0]) / amp
         rise = float(ts[a + int(np.argmax(frac >= 0.9))] - ts[a + int(np.argmax(frac >= 0.1))])
         if rise > 0.0:
-            rates.append(0.8 / (2.0 * rise))
+            rates.append(SINE_RISE / (2.0 * rise))
     return np.array(rates)
 
 
