@@ -119,6 +119,8 @@ def _held_by_oracle(model: Any, target: np.ndarray, slew: float | None, mode: st
     return out, comp, held, said_limits
 
 
+@pytest.mark.heavy  # 18 cases x the examples, an oracle step each sample: compiled only (the
+# kernels' lines it reaches are run with the JIT off by the tests below)
 @pytest.mark.parametrize("dynamics", list(DYNAMICS))
 @pytest.mark.parametrize("kind", KINDS)
 @given(

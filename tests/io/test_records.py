@@ -310,9 +310,16 @@ def test_the_shell_counts_what_the_limits_held(tmp_path: Path, slow_model: ph.Ac
     ph.io.write_table(tmp_path / "scan.csv", {"time": np.arange(2000) * 1e-3,
                                               "desired": _scan(slow_model, 40.0)})  # fmt: skip
     files = [str(tmp_path / "m.json"), str(tmp_path / "scan.csv")]
+    # the slew limit holds most of this 40 Hz scan: an error now (issue 55: a file of
+    # commands 97 % held was written, exit 0), nothing written
     res = CliRunner().invoke(main, ["compensate", *files, "-o", str(tmp_path / "c.csv")])
+    assert res.exit_code == 1 and "the slew limit (439.8 V/s) held" in res.output, res.output
+    assert not (tmp_path / "c.csv").exists()
+    # a limit that holds a few: written, counted, said once (the dry run that sizes the
+    # precondition cycle said it too, with other counts)
+    res = CliRunner().invoke(main, ["compensate", *files, "--slew-rate", "9300", "-o",
+                                    str(tmp_path / "c.csv")])  # fmt: skip
     assert res.exit_code == 0, res.output
-    # once: the dry run that sizes the precondition cycle said it too, with other counts
     assert res.output.count("warning: Compensator: the slew limit") == 1, res.output
     assert "by the slew limit" in res.output
 

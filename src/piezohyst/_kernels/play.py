@@ -550,6 +550,16 @@ def hysteresis_output(v, tables, static, lags, config, state):  # type: ignore[n
     return y, slope
 
 
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def _follow(u, tables, lags, state):  # type: ignore[no-untyped-def]
+    """The operators and creep lags after the piezo voltage ``u`` is held one sample."""
+    n = tables.shape[1]
+    for i in range(n):
+        state[i] = min(max(state[i], u - tables[TAB_R, i]), u + tables[TAB_R, i])
+    for k in range(lags.shape[1]):
+        state[n + k] += lags[2, k] * (u - state[n + k])
+
+
 @njit(cache=True, fastmath=FASTMATH)
 def numeric_step(desired, tables, static, lags, config, state):  # type: ignore[no-untyped-def]
     """One command (V): solve output(v) = desired in [v_min, v_max] (output strictly increasing).
@@ -575,10 +585,7 @@ def numeric_step(desired, tables, static, lags, config, state):  # type: ignore[
         v = last - step
     elif out_of_reach:  # sent at the voltage limit (see _limit)
         state[end + ST_SATURATED] += 1.0
-    for i in range(n):
-        state[i] = min(max(state[i], v - tables[TAB_R, i]), v + tables[TAB_R, i])
-    for k in range(m):
-        state[n + k] += lags[2, k] * (v - state[n + k])
+    _follow(v, tables, lags, state)
     state[end + ST_LAST] = v
     return v
 
@@ -629,8 +636,6 @@ def numeric_dynamic_step(desired, tables, static, lags, config, state, dyn, dsta
     """``numeric_step`` behind input dynamics: the piezo voltage that gives ``desired`` is
     solved as there, the lags are inverted one sample at a time (as ``dynamic_step``), the
     command limited, and the operators and creep lags follow the piezo voltage it produces."""
-    n = tables.shape[1]
-    m = lags.shape[1]
     end = state.shape[0]
     last = state[end + ST_LAST]
     if not math.isfinite(desired):  # hold the last command: the piezo keeps settling on it
@@ -656,10 +661,7 @@ def numeric_dynamic_step(desired, tables, static, lags, config, state, dyn, dsta
             state[end + ST_SATURATED] += 1.0
         u = _advance_dynamics(sent, last, dyn, dstate)
         last = sent
-    for i in range(n):
-        state[i] = min(max(state[i], u - tables[TAB_R, i]), u + tables[TAB_R, i])
-    for k in range(m):
-        state[n + k] += lags[2, k] * (u - state[n + k])
+    _follow(u, tables, lags, state)
     state[end + ST_LAST] = last
     return last
 

@@ -719,40 +719,6 @@ def approach_message(owner: str, comp: Compensator) -> str:
     )
 
 
-def limits_message(
-    owner: str,
-    issued: int,
-    saturated: int,
-    slewed: int,
-    limits: tuple[float, float],
-    max_step: float,
-    sample_rate: float | None,
-    slew_rate: float | None,
-    *,
-    given: int | None = None,
-    sides: tuple[int, int] | None = None,
-) -> str:
-    """The warning when the voltage or slew limits held over :data:`LIMIT_SHARE` of the
-    commands (empty when they did not): each limit that did, its count and the setting to
-    change (:func:`limit_parts` joined).
-
-    Parameters
-    ----------
-    owner : str
-    issued, saturated, slewed, limits, max_step, sample_rate, given, sides
-        As :func:`limit_parts`.
-    slew_rate : float or None
-        V/s (unused: the message gives ``max_step * sample_rate``).
-
-    Returns
-    -------
-    str
-    """
-    parts = limit_parts(issued, saturated, slewed, limits, max_step, sample_rate, given=given,
-                        sides=sides)  # fmt: skip
-    return f"{owner}: {'; '.join(parts.values())}" if parts else ""
-
-
 def limit_parts(
     issued: int,
     saturated: int,

@@ -460,6 +460,8 @@ def fit_file(
         "output_dynamics": output_dynamics,
     }
     note = ""
+    if input_dynamics == "record" and stream.untimed:  # no times: no dynamics to identify
+        input_dynamics = settings["input_dynamics"] = "none"
     if input_dynamics == "record":  # by the record's rates; read once more to judge them
         cls(**{**settings, "input_dynamics": "none"}).check_params()  # bad settings first
         input_dynamics, note = _dynamics_of_file(data, data_spec)
