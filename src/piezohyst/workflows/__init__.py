@@ -58,6 +58,7 @@ from ..io import (
 )
 from ..io.blocks import Blocks, Summary
 from ..model.cores.base import Core
+from ..model.dynamics import InputDynamics
 from ..model.fitting import undetermined
 from ..model.model import History, HysteresisModel, InitialState, ModelState
 from ..model.persistence import model_class, model_names
@@ -270,12 +271,7 @@ def select_file(
 
     sel = choose(input_dynamics)
     if note and undetermined(sel.model.input_dynamics_):  # as _fit_timed: chosen again
-        dyn = sel.model.input_dynamics_
-        note = (
-            "input dynamics: none (the record drives several rates, but the chosen model "
-            f"cannot tell a lag from hysteresis: delay + lag {1e3 * (dyn.delay + dyn.tau):.3g} "
-            f"+- {1e3 * undetermined(dyn):.2g} ms, 95 %; --input-dynamics auto keeps them)"
-        )
+        note = _undetermined_note(sel.model.input_dynamics_, "the chosen model")
         sel = choose("none")
     if note and say is not None:
         say(note)
@@ -329,15 +325,19 @@ def _fit_timed(
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", IdentifiabilityWarning)  # judged here, said below
         model = estimator.fit(x, y, t=t, initial_state=start)
-    half = undetermined(model.input_dynamics_)
-    if not half:
+    if not undetermined(model.input_dynamics_):
         return model, note
-    dyn = model.input_dynamics_
+    said = _undetermined_note(model.input_dynamics_, "this fit")
     plain = estimator.set_params(input_dynamics="none").fit(x, y, t=t, initial_state=start)
-    return plain, (
-        "input dynamics: none (the record drives several rates, but this fit cannot tell a "
+    return plain, said
+
+
+def _undetermined_note(dyn: InputDynamics, who: str) -> str:
+    """What ``--input-dynamics record`` says when the fit left the dynamics undetermined."""
+    return (
+        f"input dynamics: none (the record drives several rates, but {who} cannot tell a "
         f"lag from hysteresis: delay + lag {1e3 * (dyn.delay + dyn.tau):.3g} +- "
-        f"{1e3 * half:.2g} ms, 95 %; --input-dynamics auto keeps them)"
+        f"{1e3 * undetermined(dyn):.2g} ms, 95 %; --input-dynamics auto keeps them)"
     )
 
 
