@@ -21,7 +21,7 @@ from ..control.selfsensing import LoopSettings
 from ..io import DataSpec
 from ..model.models import model_names
 from ..simulation.signals import SIGNALS
-from ..workflows.excitation import KINDS
+from ..workflows.excitation import KINDS, Excitation, excitation
 from ._support import (
     COMMAND_SCALE,
     EXISTING,
@@ -42,6 +42,7 @@ from ._support import (
     initial_state_option,
     input_dynamics_option,
     operators_option,
+    out_file,
     parse_terms,
     progress_steps,
     rows_progress,
@@ -165,14 +166,10 @@ def simulate(
     "--frequency", type=float, default=1.0, show_default=True, help="Base loop frequency, Hz."
 )
 @click.option("--hold", type=float, default=5.0, show_default=True, help="Each hold's length, s.")
-@click.option(
-    "-o",
-    "--out",
-    "out",
-    type=click.Path(dir_okay=False, path_type=Path),
-    required=True,
-    callback=_suffix(".csv", ".mat", ".tdms", ".npz", ".parquet", what="an excitation file"),
-    help="Output file (.csv, .mat, .tdms, .npz or .parquet).",
+@out_file(
+    "Output file (.csv, .mat, .tdms, .npz or .parquet).",
+    *(".csv", ".mat", ".tdms", ".npz", ".parquet"),
+    what="an excitation file",
 )
 @COMMAND_SCALE
 @FORCE
@@ -203,21 +200,11 @@ def excite(
     """
     from ..workflows import excite_file
 
-    exc = _run(
-        ctx,
-        lambda: excite_file(
-            out,
-            kind,
-            v_min=v_min,
-            v_max=v_max,
-            sample_rate=sample_rate,
-            slew_rate=slew_rate,
-            frequency=frequency,
-            hold=hold,
-            force=force,
-            command_scale=command_scale,
-        ),
-    )
+    def make() -> Excitation:
+        return excitation(kind, v_min=v_min, v_max=v_max, sample_rate=sample_rate,
+                          slew_rate=slew_rate, frequency=frequency, hold=hold)  # fmt: skip
+
+    exc = _run(ctx, lambda: excite_file(out, make(), force=force, command_scale=command_scale))
     ctx.result(exc.summary())
     if command_scale is not None:
         ctx.info(f"written in the DAQ's volts: the piezo's divided by {command_scale}")
@@ -377,13 +364,8 @@ def fit(
     "Where the training part starts (periodic: one period of a running drive).",
 )
 @_data_options
-@click.option(
-    "-o",
-    "--out",
-    "out",
-    type=click.Path(dir_okay=False, path_type=Path),
-    default=None,
-    help="Also write the table: .md (Markdown), .csv or .parquet (with fit times).",
+@out_file(
+    "Also write the table: .md (Markdown), .csv or .parquet (with fit times).", required=False
 )
 @FORCE
 @click.pass_obj

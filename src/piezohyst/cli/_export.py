@@ -3,7 +3,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Literal
 
 import click
 
@@ -12,25 +14,64 @@ from ..control.selfsensing import LoopSettings
 from ._support import EXISTING, FORCE, Context, _limit_options, _loop_options, _run, _suffix
 
 
+def _export_options(
+    suffix: str, what: str, float_help: str, out_help: str, controller_help: str
+) -> Callable[[Callable[..., None]], Callable[..., None]]:
+    """The options both exports share: the model, its limits, float, the file and the
+    controller (the file's suffix and the help as each export says them)."""
+
+    def wrap(f: Callable[..., None]) -> Callable[..., None]:
+        for option in reversed(
+            (
+                click.argument("model", type=EXISTING),
+                _limit_options,
+                click.option("--float", "use_float", is_flag=True, help=float_help),
+                click.option(
+                    "-o",
+                    "--out",
+                    type=click.Path(dir_okay=False, path_type=Path),
+                    default=Path(f"ph_comp{suffix}"),
+                    show_default=True,
+                    callback=_suffix(suffix, what=what),
+                    help=out_help,
+                ),
+                click.option("--controller", is_flag=True, help=controller_help),
+            )
+        ):
+            f = option(f)
+        return f
+
+    return wrap
+
+
+def _export(
+    ctx: Context,
+    model: Path,
+    out: Path,
+    settings: CompensatorSettings,
+    use_float: bool,
+    controller: LoopSettings | None,
+    **build: bool,
+) -> tuple[Path, ...]:
+    from ..workflows import export_file
+
+    precision: Literal["float", "double"] = "float" if use_float else "double"
+    paths: tuple[Path, ...] = _run(
+        ctx,
+        lambda: export_file(
+            model, out, settings=settings, precision=precision, controller=controller, **build
+        ),
+    )
+    return paths
+
+
 @click.command("export-c")
-@click.argument("model", type=EXISTING)
-@_limit_options
-@click.option(
-    "--float", "use_float", is_flag=True, help="float arithmetic (MCUs without a double FPU)."
-)
-@click.option(
-    "-o",
-    "--out",
-    type=click.Path(dir_okay=False, path_type=Path),
-    default=Path("ph_comp.c"),
-    show_default=True,
-    callback=_suffix(".c", what="the compensator is C source"),
-    help="C file (the .h goes beside it).",
-)
-@click.option(
-    "--controller",
-    is_flag=True,
-    help="Export the self-sensing controller (charge feedback; needs --sample-rate).",
+@_export_options(
+    ".c",
+    what="the compensator is C source",
+    float_help="float arithmetic (MCUs without a double FPU).",
+    out_help="C file (the .h goes beside it).",
+    controller_help="Export the self-sensing controller (charge feedback; needs --sample-rate).",
 )
 @click.option(
     "--shared",
@@ -70,43 +111,18 @@ def export_c(
       piezohyst export-c model.json --controller --leakage leak.json \\
           --sample-rate 1000 -o ph_loop.c
     """
-    from ..workflows import export_c_file
-
-    paths = _run(
-        ctx,
-        lambda: export_c_file(
-            model,
-            out,
-            settings=settings,
-            precision="float" if use_float else "double",
-            controller=loop if controller else None,
-            force=force,
-            shared=shared,
-            mex=mex,
-        ),
-    )
+    paths = _export(ctx, model, out, settings, use_float, loop if controller else None,
+                    force=force, shared=shared, mex=mex)  # fmt: skip
     ctx.result("\n".join(str(p) for p in paths))
 
 
 @click.command("export-fmu")
-@click.argument("model", type=EXISTING)
-@_limit_options
-@click.option(
-    "--float", "use_float", is_flag=True, help="float arithmetic in the step (doubles outside)."
-)
-@click.option(
-    "-o",
-    "--out",
-    type=click.Path(dir_okay=False, path_type=Path),
-    default=Path("ph_comp.fmu"),
-    show_default=True,
-    callback=_suffix(".fmu", what="the compensator is an FMU"),
-    help="FMU file; its name is the model's identifier (a C identifier).",
-)
-@click.option(
-    "--controller",
-    is_flag=True,
-    help="The self-sensing controller: a second input, the measured charge.",
+@_export_options(
+    ".fmu",
+    what="the compensator is an FMU",
+    float_help="float arithmetic in the step (doubles outside).",
+    out_help="FMU file; its name is the model's identifier (a C identifier).",
+    controller_help="The self-sensing controller: a second input, the measured charge.",
 )
 @_loop_options
 @FORCE
@@ -133,17 +149,6 @@ def export_fmu(
     Example:
       piezohyst export-fmu model.json --v-min 0 --v-max 140 --sample-rate 1000 -o ph_comp.fmu
     """
-    from ..workflows import export_fmu_file
-
-    path = _run(
-        ctx,
-        lambda: export_fmu_file(
-            model,
-            out,
-            settings=settings,
-            precision="float" if use_float else "double",
-            controller=loop if controller else None,
-            force=force,
-        ),
-    )
-    ctx.result(str(path))
+    paths = _export(ctx, model, out, settings, use_float, loop if controller else None,
+                    force=force)  # fmt: skip
+    ctx.result(str(paths[0]))

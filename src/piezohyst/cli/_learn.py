@@ -9,7 +9,7 @@ from typing import Literal
 import click
 
 from ..control.compensator import CompensatorSettings
-from ._support import COMMAND_SCALE, EXISTING, FORCE, Context, _limit_options, _run
+from ._support import COMMAND_SCALE, EXISTING, FORCE, Context, _limit_options, _run, out_file
 
 
 def _auto_or_float(value: str) -> float | Literal["auto"]:
@@ -128,14 +128,7 @@ def _auto_or_float(value: str) -> float | Literal["auto"]:
     "no --lag); auto: jacobian where it can, else harmonic; give it on every call of a run.",
 )
 @_limit_options
-@click.option(
-    "-o",
-    "--out",
-    "out",
-    type=click.Path(dir_okay=False, path_type=Path),
-    required=True,
-    help="The next trial's commands (CSV: time, command, desired).",
-)
+@out_file("The next trial's commands (CSV: time, command, desired).")
 @COMMAND_SCALE
 @FORCE
 @click.pass_obj

@@ -503,26 +503,30 @@ def _suffix(*allowed: str, what: str) -> Callable[[click.Context, click.Paramete
 
 TABLE_SUFFIXES = (".csv", ".npz", ".parquet")
 
-OUT_FILE = click.option(
-    "-o",
-    "--out",
-    "out",
-    type=click.Path(dir_okay=False, path_type=Path),
-    required=True,
-    callback=_suffix(*TABLE_SUFFIXES, what="a table is written as CSV, NPZ or Parquet"),
-    help="Output file (.csv, .npz or .parquet).",
-)
+
+def out_file(
+    help: str, *suffixes: str, what: str = "", required: bool = True
+) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """``-o/--out``: the file a command writes (``suffixes`` the kinds it may be, ``what``
+    said when another is given)."""
+    extra: dict[str, Any] = {"required": True} if required else {"default": None}
+    return click.option(
+        "-o",
+        "--out",
+        "out",
+        type=click.Path(dir_okay=False, path_type=Path),
+        callback=_suffix(*suffixes, what=what) if suffixes else None,
+        help=help,
+        **extra,
+    )
 
 
-OUT_FILE_JSON = click.option(
-    "-o",
-    "--out",
-    "out",
-    type=click.Path(dir_okay=False, path_type=Path),
-    required=True,
-    callback=_suffix(".json", what="this file is JSON"),
-    help="Output file (.json).",
+OUT_FILE = out_file(
+    "Output file (.csv, .npz or .parquet).",
+    *TABLE_SUFFIXES,
+    what="a table is written as CSV, NPZ or Parquet",
 )
+OUT_FILE_JSON = out_file("Output file (.json).", ".json", what="this file is JSON")
 
 
 EXISTING = click.Path(exists=False, dir_okay=False, path_type=Path)

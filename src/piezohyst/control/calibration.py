@@ -29,11 +29,9 @@ as JSON with a schema and a checksum, like a model file.
 from __future__ import annotations
 
 import math
-import os
 import warnings
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -47,6 +45,7 @@ from ..errors import (
     ParameterError,
     warn,
 )
+from ..io import JsonFile
 from ..model.persistence import checksum
 
 __all__ = ["OUTPUT_MAP_FORMAT", "Charges", "OutputMap", "calibrate_gain"]
@@ -66,7 +65,7 @@ SATURATED_SHARE = 0.01
 
 
 @dataclass(frozen=True)
-class OutputMap:
+class OutputMap(JsonFile):
     r"""The map from a capacitor's charge to its displacement, with its uncertainty.
 
     :math:`s = \sum_k c_k u^k` with :math:`u = (q - q_0) / q_s`: ``coefficients``
@@ -93,6 +92,8 @@ class OutputMap:
         ``|c_k / stderr|`` of each order's top coefficient as tried ("order 2": 1.3, ...).
     input_unit, output_unit : str
     """
+
+    file_kind: ClassVar[str] = "an output map"
 
     coefficients: tuple[float, ...]
     center: float
@@ -412,41 +413,6 @@ class OutputMap:
         except (TypeError, ValueError, IndexError, ParameterError) as exc:
             msg = f"{where}: {str(exc).splitlines()[0]}"
             raise ModelFileError(msg) from None
-
-    def save(self, path: str | os.PathLike[str]) -> Path:
-        """Write as JSON (atomically).
-
-        Parameters
-        ----------
-        path : str or os.PathLike
-
-        Returns
-        -------
-        Path
-        """
-        from ..io import write_json
-
-        return write_json(path, self.to_dict())
-
-    @classmethod
-    def load(cls, path: str | os.PathLike[str]) -> OutputMap:
-        """Read a file written by :meth:`save`.
-
-        Parameters
-        ----------
-        path : str or os.PathLike
-
-        Returns
-        -------
-        OutputMap
-
-        Raises
-        ------
-        ModelFileError
-        """
-        from ..io import read_json
-
-        return cls.from_dict(read_json(path, "an output map"), str(path))
 
     def summary(self) -> str:
         """One line: the gain with its standard error, the curvature, delay and range.

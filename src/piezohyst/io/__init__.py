@@ -46,6 +46,7 @@ from ._formats import (
 )
 from ._isolate import parse_isolated
 from ._writers import (
+    JsonFile,
     atomic_folder,
     atomic_write,
     atomic_write_text,
@@ -63,6 +64,7 @@ __all__ = [
     "MD_MARKER",
     "Block",
     "DataSpec",
+    "JsonFile",
     "Recording",
     "RecordingStream",
     "Table",

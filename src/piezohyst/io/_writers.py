@@ -15,6 +15,7 @@ import shutil
 import tempfile
 from collections.abc import Callable, Collection, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
+from typing import Any, ClassVar, Self
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -173,6 +174,73 @@ def read_json(path: str | os.PathLike[str], what: str) -> object:
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         msg = f"{p}: cannot read {what} ({str(exc).splitlines()[0]})"
         raise ModelFileError(msg) from None
+
+
+class JsonFile:
+    """``save`` and ``load`` for a record kept as one JSON document: a leakage file, an
+    output map. The class gives ``to_dict`` and ``from_dict(data, where)``, and names what
+    its files hold in ``file_kind`` (said when a file cannot be read).
+    """
+
+    file_kind: ClassVar[str] = "a JSON file"
+
+    def to_dict(self) -> dict[str, Any]:  # pragma: no cover - each record has its own
+        """JSON-ready contents (the record's own).
+
+        Returns
+        -------
+        dict
+        """
+        raise NotImplementedError
+
+    @classmethod
+    def from_dict(cls, data: Any, where: str = "") -> Self:  # pragma: no cover
+        """Rebuild from :meth:`to_dict` output (the record's own).
+
+        Parameters
+        ----------
+        data : dict
+        where : str
+            Named in errors.
+
+        Returns
+        -------
+        object
+        """
+        raise NotImplementedError
+
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write as JSON (atomically).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+
+        Returns
+        -------
+        Path
+        """
+        return write_json(path, self.to_dict())
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> Self:
+        """Read a file written by :meth:`save`.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+
+        Returns
+        -------
+        object
+            The record.
+
+        Raises
+        ------
+        ModelFileError
+            The file cannot be read, or a field is missing or bad (named in one line).
+        """
+        return cls.from_dict(read_json(path, cls.file_kind), str(path))
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:

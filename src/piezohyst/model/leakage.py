@@ -25,11 +25,9 @@ from __future__ import annotations
 
 import itertools
 import math
-import os
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -37,6 +35,7 @@ from numpy.typing import ArrayLike
 from .._kernels import signal as _signals
 from .._validation import FloatArray, as_signal, as_time, same_length
 from ..errors import InsufficientDataError, ModelFileError, ParameterError, warn
+from ..io import JsonFile
 
 __all__ = ["LEAKAGE_TERMS", "Hold", "Leakage", "calibrate_leakage", "find_holds"]
 
@@ -73,7 +72,7 @@ class Hold:
 
 
 @dataclass(frozen=True)
-class Leakage:
+class Leakage(JsonFile):
     r"""A leakage current :math:`G_0 v + G_1 v|v|/s + i_b - q/\tau` and its integral.
 
     Made by :func:`calibrate_leakage`, or from a fitted model's growth terms
@@ -109,6 +108,8 @@ class Leakage:
         too small for the holds' currents to tell, not known to be 0, and it adds up in
         the charge over a minute); empty when not calibrated.
     """
+
+    file_kind: ClassVar[str] = "a leakage file"
 
     conductance: float = 0.0
     quadratic: float = 0.0
@@ -391,42 +392,6 @@ class Leakage:
         except (TypeError, ParameterError) as exc:
             msg = f"{where}: {exc}"
             raise ModelFileError(msg) from None
-
-    def save(self, path: str | os.PathLike[str]) -> Path:
-        """Write as JSON (atomically).
-
-        Parameters
-        ----------
-        path : str or os.PathLike
-
-        Returns
-        -------
-        Path
-        """
-        from ..io import write_json
-
-        return write_json(path, self.to_dict())
-
-    @classmethod
-    def load(cls, path: str | os.PathLike[str]) -> Leakage:
-        """Read a file written by :meth:`save`.
-
-        Parameters
-        ----------
-        path : str or os.PathLike
-
-        Returns
-        -------
-        Leakage
-
-        Raises
-        ------
-        ModelFileError
-        """
-        from ..io import read_json
-
-        data = read_json(path, "a leakage file")
-        return cls.from_dict(data, str(path))  # type: ignore[arg-type]
 
 
 def find_holds(

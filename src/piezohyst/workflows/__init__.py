@@ -79,12 +79,11 @@ from .control_files import (
     LoopRun,
     calibrate_gain_file,
     calibrate_leakage_file,
-    export_c_file,
-    export_fmu_file,
+    export_file,
     model_report,
     simulate_loop_file,
 )
-from .excitation import Excitation, excitation
+from .excitation import Excitation
 
 __all__ = [
     "Compensation",
@@ -95,8 +94,7 @@ __all__ = [
     "compare_file",
     "compensate_file",
     "excite_file",
-    "export_c_file",
-    "export_fmu_file",
+    "export_file",
     "fit_file",
     "guard_outputs",
     "model_report",
@@ -158,35 +156,33 @@ def simulate_file(
 
 def excite_file(
     out: PathLike,
-    kind: str = "identification",
+    exc: Excitation,
     *,
-    v_min: float,
-    v_max: float,
-    sample_rate: float,
-    slew_rate: float | None = None,
-    frequency: float = 1.0,
-    hold: float = 5.0,
     force: bool = False,
     command_scale: str | float | None = None,
 ) -> Excitation:
     """Write an excitation to play on the rig: ``time,voltage`` (s, V) as CSV, MAT, TDMS,
-    NPZ or Parquet (see :func:`piezohyst.workflows.excitation.excitation` for the arguments).
+    NPZ or Parquet.
 
-    ``force`` replaces an existing file piezohyst did not write (see :func:`guard_outputs`);
-    ``command_scale``, the amplifier's gain, writes the voltage in the volts the DAQ plays
-    (the piezo's divided by it; :func:`~piezohyst.workflows._base.command_gain`).
+    Parameters
+    ----------
+    out : str or os.PathLike
+        The file; its suffix picks the format.
+    exc : Excitation
+        What :func:`piezohyst.workflows.excitation.excitation` made.
+    force : bool, default False
+        Replace an existing file piezohyst did not write (see :func:`guard_outputs`).
+    command_scale : str or float, optional
+        The amplifier's gain: the voltage is written in the volts the DAQ plays (the
+        piezo's divided by it; :func:`~piezohyst.workflows._base.command_gain`).
+
+    Returns
+    -------
+    Excitation
+        ``exc``, written.
     """
     gain = command_gain(command_scale)
     guard_outputs([out], [], force=force)
-    exc = excitation(
-        kind,
-        v_min=v_min,
-        v_max=v_max,
-        sample_rate=sample_rate,
-        slew_rate=slew_rate,
-        frequency=frequency,
-        hold=hold,
-    )
     write_table(out, {"time": exc.t, "voltage": exc.voltage / gain},
                 units={"time": "s", "voltage": "V"})  # fmt: skip
     return exc

@@ -59,14 +59,13 @@ __all__ = [
     "ReportResult",
     "calibrate_gain_file",
     "calibrate_leakage_file",
-    "export_c_file",
-    "export_fmu_file",
+    "export_file",
     "model_report",
     "simulate_loop_file",
 ]
 
 
-def export_c_file(
+def export_file(
     model_path: PathLike,
     out: PathLike,
     *,
@@ -77,18 +76,21 @@ def export_c_file(
     shared: bool = False,
     mex: bool = False,
 ) -> tuple[Path, ...]:
-    """Write ``NAME.c`` and ``NAME.h`` for the model's compensator (:mod:`~.control.export`).
+    """Export the model's compensator: C sources ``NAME.c`` and ``NAME.h``
+    (:mod:`~.control.export`), or where ``out`` ends in ``.fmu`` an FMI 2.0
+    Co-Simulation FMU (:mod:`~.control.fmu`).
 
     Parameters
     ----------
     model_path : str or os.PathLike
         A saved model.
     out : str or os.PathLike
-        The ``.c`` file.
+        The ``.c`` file, or the ``.fmu``.
     settings : CompensatorSettings
-        Limits, domain, gain, slew rate (and the sample rate a controller needs).
+        Limits, domain, gain, slew rate (and the sample rate a controller or an FMU needs:
+        one step of the FMU).
     precision : {"double", "float"}
-        The C type of every real.
+        The C type of every real (an FMU's step; doubles outside).
     controller : LoopSettings, optional
         Export the self-sensing controller instead of the feedforward compensator.
     force : bool, default False
@@ -102,18 +104,26 @@ def export_c_file(
     Returns
     -------
     tuple of Path
-        Source and header (and the library).
+        Source and header (and the library), or the FMU.
     """
-    c_path, h_path, _ = c_paths(out)
+    fmu = Path(out).suffix.lower() == ".fmu"
+    if shared + mex + fmu > 1:
+        msg = "--shared, --mex and an FMU build different things: choose one"
+        raise ParameterError(msg)
     inputs: list[PathLike] = [model_path]
     if controller is not None and controller.leakage is not None:
         inputs.append(controller.leakage)
-    guard_outputs([c_path, h_path], inputs, force=force)
+    if fmu:
+        if Path(out).exists() and not force and not _our_fmu(Path(out)):
+            msg = f"{out} exists and piezohyst did not write it: pass --force to replace it"
+            raise ParameterError(msg)
+    else:
+        c_path, h_path, _ = c_paths(out)
+        guard_outputs([c_path, h_path], inputs, force=force)
     model = _load(model_path)
     built = settings.build(model) if controller is None else controller.build(settings, model)
-    if shared and mex:
-        msg = "--shared and --mex build different things: choose one"
-        raise ParameterError(msg)
+    if fmu:
+        return (write_fmu(built, out, precision=precision),)
     if shared:
         return write_shared(built, out, precision=precision)
     if mex:
@@ -171,43 +181,6 @@ def calibrate_leakage_file(
     if out is not None:
         leak.save(out)
     return leak
-
-
-def export_fmu_file(
-    model_path: PathLike,
-    out: PathLike,
-    *,
-    settings: CompensatorSettings = _DEFAULT_SETTINGS,
-    precision: Precision = "double",
-    controller: LoopSettings | None = None,
-    force: bool = False,
-) -> Path:
-    """Write an FMI 2.0 Co-Simulation FMU of the model's compensator (:mod:`~.control.fmu`).
-
-    Parameters
-    ----------
-    model_path : str or os.PathLike
-        A saved model.
-    out : str or os.PathLike
-        The ``.fmu`` file.
-    settings : CompensatorSettings
-        Limits, domain, gain, slew rate and the sample rate (one step of the FMU).
-    precision : {"double", "float"}
-    controller : LoopSettings, optional
-        The self-sensing controller instead of the feedforward compensator.
-    force : bool, default False
-        Replace an existing file piezohyst did not write.
-
-    Returns
-    -------
-    Path
-    """
-    if Path(out).exists() and not force and not _our_fmu(Path(out)):
-        msg = f"{out} exists and piezohyst did not write it: pass --force to replace it"
-        raise ParameterError(msg)
-    model = _load(model_path)
-    built = settings.build(model) if controller is None else controller.build(settings, model)
-    return write_fmu(built, out, precision=precision)
 
 
 def _our_fmu(path: Path) -> bool:
