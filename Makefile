@@ -1,6 +1,8 @@
 # The two commands of the README: `make demo` and `make test`.
 # Both create .venv on first use with the system Python (>= 3.11) and install
-# piezohyst into it; later runs reuse it until pyproject.toml changes.
+# piezohyst into it; later runs reuse it until pyproject.toml changes. --no-compile: Python
+# writes the bytecode of the modules it imports as it first imports them, instead of pip
+# compiling every installed file first (the install's CPU, 2-core Xeon: 103 s -> 52 s).
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
@@ -11,7 +13,7 @@ OUT    ?= demo-report
 $(BIN)/.installed: pyproject.toml
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "piezohyst needs Python >= 3.11, found " + sys.version.split()[0]'
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[test]'
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check --no-compile -e '.[test]'
 	@touch $@
 
 demo: $(BIN)/.installed
@@ -27,9 +29,10 @@ lint: $(BIN)/.installed
 #  1. every test once, compiled, on two workers (a file's tests on one: its module fixtures
 #     are built once), under coverage: numba's compiled kernels are invisible to coverage, so
 #     their lines count in step 2 only;
-#  2. the tests marked `kernels` (the kernels on small inputs) again with the JIT off, under
-#     coverage: what sees the kernels' Python lines (no end-to-end test runs uninterpreted;
-#     Hypothesis tries a quarter of its examples there, tests/conftest.py);
+#  2. the tests listed in tests/kernel_paths.txt again with the JIT off, under coverage: what
+#     sees the kernels' Python lines. The list reaches every kernel line that all the tests
+#     of the `kernels` modules reach uncompiled, in a fifth of their time (tests/kernel_paths.py
+#     chooses it; Hypothesis tries a quarter of its examples there, tests/conftest.py);
 #  3. two gates on the combined data: all of src/ and the kernel modules, each >= 90 %.
 KERNEL_MODULES := */piezohyst/_kernels/*.py,*/piezohyst/simulation/_plant.py
 # Each worker's BLAS on one thread: the two workers fill the two cores, and BLAS threads on top
@@ -38,7 +41,7 @@ ONE_THREAD := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 test: lint
 	@rm -f .coverage .coverage.*
 	$(ONE_THREAD) $(BIN)/python -m pytest -n 2 --dist loadfile -p no:cacheprovider -rs --durations=10 --cov --cov-report=
-	$(ONE_THREAD) NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q -n 2 --dist loadfile -p no:cacheprovider -m "kernels and not heavy" \
+	$(ONE_THREAD) NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q -n 2 --dist loadfile -p no:cacheprovider -m kernel_paths \
 		--cov --cov-append --cov-report= tests
 	@printf 'line coverage of src/, both runs combined (gate 90): '
 	@$(BIN)/coverage report --fail-under=90 --format=total

@@ -14,6 +14,7 @@ command line picks the examples of either.
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, settings
@@ -53,11 +54,32 @@ def pytest_configure(config: pytest.Config) -> None:
     )
     config.addinivalue_line(
         "markers",
+        "kernel_paths: listed in tests/kernel_paths.txt: the tests of the kernels modules that "
+        "reach every kernel line; make test runs them with the JIT off",
+    )
+    config.addinivalue_line(
+        "markers",
         "heavy: a long fit or run that checks accuracy, not a kernel's paths: compiled only",
     )
 
 
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+#: The tests ``make test`` runs again with the JIT off (tests/kernel_paths.txt says how chosen).
+KERNEL_PATHS = [
+    line
+    for line in (Path(__file__).with_name("kernel_paths.txt")).read_text().splitlines()
+    if line and not line.startswith("#")
+]
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    listed = set(KERNEL_PATHS)
     for item in items:
         if HEAVY_FIXTURES & set(getattr(item, "fixturenames", ())):
             item.add_marker(pytest.mark.heavy)
+        if item.nodeid in listed:
+            item.add_marker(pytest.mark.kernel_paths)
+    if "kernel_paths" in (config.getoption("markexpr") or ""):
+        missing = listed - {item.nodeid for item in items}
+        if missing:
+            msg = f"tests/kernel_paths.txt lists tests not collected: {sorted(missing)}"
+            raise pytest.UsageError(msg)
