@@ -317,3 +317,28 @@ def test_learning_in_metres_goes_through_the_map(law: str) -> None:
     # 0.16-0.22 % from the laser (offset included); the bars are twice that, and half the gap
     assert scores["map"] <= 0.003 and scores["laser"] <= 0.005
     assert scores["gain"] >= 2 * scores["map"]
+
+
+def test_a_map_is_tied_to_the_model_it_was_calibrated_through(tmp_path: Path) -> None:
+    """Issue 55: a gain file used with another model (a Bouc-Wen map with a PI model) was
+    taken silently; the map names its model, and a compensator on another one says so."""
+    rec = ph.simulate(signal="decaying", duration=10.0, seed=2)
+    pi = _quiet_fit(ph.ActivePI(10), rec)
+    om = ph.calibrate_gain(pi, rec.voltage, rec.charge, rec.displacement, rec.t)
+    assert om.model == ph.control.calibration.model_fingerprint(pi)
+    assert om.model.startswith("ActivePI ") and len(om.model.split()[1]) == 12
+    assert ph.OutputMap.load(om.save(tmp_path / "gain.json")).model == om.model
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the model it was made with: nothing said
+        ph.Compensator(pi, v_min=0.0, v_max=float(rec.voltage.max()), output_map=om)
+    refit = _quiet_fit(ph.ActivePI(8), rec)  # the same kind, refitted
+    with pytest.warns(UserWarning, match=r"another fit of ActivePI \(ActivePI \w{12}\)"):
+        ph.Compensator(refit, v_min=0.0, v_max=float(rec.voltage.max()), output_map=om)
+    bw = _quiet_fit(ph.BoucWenModel(), rec)
+    with pytest.warns(UserWarning, match=r"through ActivePI \w{12}, not this BoucWenModel \w{12}"):
+        ph.Compensator(bw, v_min=0.0, v_max=float(rec.voltage.max()), output_map=om)
+    # a map made before the field (or by hand) names no model, and nothing is said
+    legacy = replace(om, model="")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ph.Compensator(bw, v_min=0.0, v_max=float(rec.voltage.max()), output_map=legacy)

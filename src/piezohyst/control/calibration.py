@@ -43,12 +43,13 @@ from ..errors import (
     ModelFileError,
     NotInvertibleError,
     ParameterError,
+    PiezohystError,
     warn,
 )
 from ..io import JsonFile
-from ..model.persistence import checksum
+from ..model.persistence import checksum, model_to_dict
 
-__all__ = ["OUTPUT_MAP_FORMAT", "Charges", "OutputMap", "calibrate_gain"]
+__all__ = ["OUTPUT_MAP_FORMAT", "Charges", "OutputMap", "calibrate_gain", "model_fingerprint"]
 
 OUTPUT_MAP_FORMAT = "piezohyst-output-map"
 OUTPUT_MAP_VERSION = 1
@@ -91,6 +92,11 @@ class OutputMap(JsonFile):
     evidence : dict
         ``|c_k / stderr|`` of each order's top coefficient as tried ("order 2": 1.3, ...).
     input_unit, output_unit : str
+    model : str
+        The model the charge went through (its growth terms removed, eq. 19): its class
+        and the start of its file's checksum (:func:`model_fingerprint`); "" for a map
+        made by hand or written before this field. A compensator built on another model
+        says so: that model's hysteresis charge can differ in offset and scale.
     """
 
     file_kind: ClassVar[str] = "an output map"
@@ -107,6 +113,7 @@ class OutputMap(JsonFile):
     evidence: dict[str, float] = field(default_factory=dict)
     input_unit: str = "C"
     output_unit: str = "m"
+    model: str = ""
 
     def __post_init__(self) -> None:
         c = self.coefficients
@@ -354,6 +361,7 @@ class OutputMap(JsonFile):
             "evidence": dict(self.evidence),
             "input_unit": self.input_unit,
             "output_unit": self.output_unit,
+            "model": self.model,
             "gain": self.gain,  # for a reader: derived, not read back
             "gain_stderr": self.gain_stderr,
         }
@@ -406,6 +414,7 @@ class OutputMap(JsonFile):
                 evidence={str(k): float(v) for k, v in (data.get("evidence") or {}).items()},
                 input_unit=str(data.get("input_unit", "C")),
                 output_unit=str(data.get("output_unit", "m")),
+                model=str(data.get("model", "")),
             )
         except KeyError as exc:
             msg = f"{where}: field {exc.args[0]!r} is missing"
@@ -413,6 +422,27 @@ class OutputMap(JsonFile):
         except (TypeError, ValueError, IndexError, ParameterError) as exc:
             msg = f"{where}: {str(exc).splitlines()[0]}"
             raise ModelFileError(msg) from None
+
+    def check_model(self, model: Any) -> None:
+        """Warn where ``model`` is not the model this map was calibrated through.
+
+        Parameters
+        ----------
+        model : HysteresisModel
+            The model a compensator or controller inverts with this map.
+        """
+        if not self.model:
+            return
+        used = model_fingerprint(model)
+        if used != self.model:
+            kind = self.model.split()[0]
+            made = (f"another fit of {kind} ({self.model}), not this one ({used})"
+                    if kind == used.split()[0] else f"{self.model}, not this {used}")  # fmt: skip
+            warn(
+                f"the output map was calibrated through {made}: the charge it maps can differ "
+                "in offset and scale; run calibrate-gain with this model",
+                UserWarning,
+            )
 
     def summary(self) -> str:
         """One line: the gain with its standard error, the curvature, delay and range.
@@ -718,6 +748,7 @@ def calibrate_gain(
         evidence=found,
         input_unit=getattr(model, "output_unit", "C"),
         output_unit=output_unit,
+        model=model_fingerprint(model),
     )
     sure = max(abs(c) / math.sqrt(max(float(cov[k, k]), 1e-300)) for k, c in enumerate(coef) if k)
     if sure < evidence:  # no term of the map stands out from its error
@@ -737,6 +768,26 @@ def calibrate_gain(
             UserWarning,
         )
     return om
+
+
+def model_fingerprint(model: Any) -> str:
+    """A fitted model's class and the first 12 hex digits of its file's checksum.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        Fitted.
+
+    Returns
+    -------
+    str
+        ``"BoucWenModel 3f2a9c01d4e7"``; the class alone for a model that cannot be written.
+    """
+    try:
+        digest = str(model_to_dict(model)["checksum"]).removeprefix("sha256:")[:12]
+    except (PiezohystError, AttributeError, TypeError):  # a stand-in without a file form
+        return type(model).__name__
+    return f"{type(model).__name__} {digest}"
 
 
 def _leak_columns(v: FloatArray, q: FloatArray, t: FloatArray) -> FloatArray:
