@@ -524,7 +524,10 @@ def test_the_command_line_learns_from_a_sensor_column(
     runner = CliRunner()
     res = runner.invoke(main, [*base, "--desired", str(tmp_path / "scan.csv"), "--no-lead-in"])
     assert res.exit_code == 0, res.output
-    u = ph.read_table(tmp_path / "next.csv").get("command")
+    written = ph.read_table(tmp_path / "next.csv")
+    u = written.get("command")
+    # the next trial's file says its units (it had none): seconds, volts, the desired's metres
+    assert [written.units.get(c) for c in ("time", "command", "desired")] == ["s", "V", "m"]
     s = gain * pi_model.hysteresis_.predict(u) - 1e-7  # the sensor reads 0.1 um short
     ph.write_table(tmp_path / "t0.csv", {"voltage": u, "laser": s})
     res = runner.invoke(main, [*base[:2], str(tmp_path / "t0.csv"), *base[2:], "--sensor",

@@ -235,7 +235,10 @@ def learn_file(
     commands = learner.command(d)
     desired_now = learner.desired
     t = np.arange(commands.size) / rate
-    write_table(out, {"time": t, "command": commands / written, "desired": desired_now})
+    in_metres = settings.domain == "displacement" or settings.output_map is not None
+    write_table(out, {"time": t, "command": commands / written, "desired": desired_now},
+                units={"time": "s", "command": "V",
+                       "desired": "m" if in_metres else model.output_unit})  # fmt: skip
     payload: dict[str, Any] = learner.to_dict()
     payload["sample_rate"] = rate
     if written != 1.0:  # only when set: the states saved before it existed resume
