@@ -152,3 +152,24 @@ def test_dynamics_the_record_cannot_determine_are_left_out_and_said(tmp_path) ->
     assert "but this fit cannot tell a lag from hysteresis" in res.stderr
     assert not ph.load_model(tmp_path / "m.json").input_dynamics_.active
     assert "cannot separate a lag" not in res.stderr  # judged and said once, not warned too
+
+
+def test_model_auto_takes_growth_auto_for_every_candidate_with_growth_terms(lab: tuple) -> None:
+    """``--model auto --growth auto`` was refused, and nothing pointed at the growth terms: each
+    candidate that has them now chooses them by evidence; other --growth values are still one
+    model's, refused with auto, naming the combination that works."""
+    d, _ = lab
+    res = run("fit", d / "run.csv", "--model", "auto", "--growth", "auto", "-o", d / "auto.json")
+    assert res.exit_code == 0, res.output
+    chosen = ph.load_model(d / "auto.json")
+    if "growth_terms" in chosen.get_params():
+        assert chosen.get_params()["growth_terms"] == "auto"
+    assert "growth terms" in res.output  # the result line names what the model holds
+    res = run("fit", d / "run.csv", "--model", "auto", "--growth", "time", "-o", d / "x.json")
+    assert_clean_error(res, code=2)
+    assert "--growth auto lets each choose" in res.output
+    for name in ("preisach", "classical-pi"):  # with and without growth terms of its own
+        model = ph.analysis.selection.candidate_model(name, 10, ("V", "C"), growth_terms="auto")
+        assert model.get_params().get("growth_terms", "auto") == "auto"
+    with pytest.raises(ph.ParameterError, match="'default' or 'auto'"):
+        ph.select_model([0.0, 1.0] * 50, [0.0, 1.0] * 50, growth_terms="time")

@@ -300,7 +300,8 @@ def candidate_model(
     t : ndarray, optional
         The record's times (for the creep time constants).
     **settings
-        Further settings every candidate takes (``input_dynamics``).
+        Further settings every candidate takes (``input_dynamics``; ``growth_terms``, for
+        the candidates that have them).
 
     Returns
     -------
@@ -310,6 +311,8 @@ def candidate_model(
     cls = model_class(base)
     accepted = cls().get_params()
     extra: dict[str, Any] = {"n_operators": operators} if "n_operators" in accepted else {}
+    if "growth_terms" in settings and "growth_terms" not in accepted:  # a model without them
+        settings = {k: v for k, v in settings.items() if k != "growth_terms"}
     if base != name and t is not None:
         extra["creep"] = creep_constants(t)
     model: HysteresisModel = cls(**extra, **settings, input_unit=units[0], output_unit=units[1])
@@ -690,6 +693,7 @@ def select_model(
     input_unit: str = "V",
     output_unit: str = "C",
     input_dynamics: str = "none",
+    growth_terms: str = "default",
 ) -> Selection:
     """Choose a model for a record: each candidate with its defaults, scored by forward
     chaining inside the record (:data:`FOLDS`), the best refitted on all of it.
@@ -713,6 +717,11 @@ def select_model(
         (``"auto"``, ``"first-order"``...; see :class:`~piezohyst.HysteresisModel`): on a
         record of several drive frequencies, the candidates are then scored on their
         hysteresis, not on how much of the lag each absorbs.
+    growth_terms : {"default", "auto"}, default "default"
+        ``"default"``: each candidate its own growth terms; ``"auto"``: every candidate
+        that has growth terms chooses them by forward-chaining cross-validation of its
+        Prandtl-Ishlinskii proxy (``growth_terms="auto"``: an op-amp's bias current, a
+        conductance that rises with the voltage), the others as they are.
 
     Returns
     -------
@@ -743,7 +752,12 @@ def select_model(
     # was said 17 times); the candidates fit the cleaned record
     xs, ys = screened(xs, ys, ts, False, input_unit, output_unit)
     turns = _turns(xs)
-    dyn = {} if input_dynamics == "none" else {"input_dynamics": input_dynamics}
+    if growth_terms not in ("default", "auto"):
+        msg = f"'growth_terms' must be 'default' or 'auto'. Got {growth_terms!r}."
+        raise ParameterError(msg)
+    dyn: dict[str, Any] = {} if input_dynamics == "none" else {"input_dynamics": input_dynamics}
+    if growth_terms == "auto":
+        dyn["growth_terms"] = "auto"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RecordWarning)
         # what a candidate's lag cannot be told from is said of the chosen one alone (below)

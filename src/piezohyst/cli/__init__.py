@@ -279,18 +279,19 @@ def fit(
 
     terms, taus = parse_terms(growth, creep)
     if model_name == "auto":
-        given = {"--growth": growth != "default", "--creep": bool(taus),
+        given = {"--growth": growth not in ("default", "auto"), "--creep": bool(taus),
                  "--relaxation": relaxation is not None,
                  "--output-dynamics": output_dynamics != "none"}  # fmt: skip
         named = [option for option, set_ in given.items() if set_]
         if named:  # each candidate takes its defaults: a setting of one model is not theirs
             raise click.UsageError(
                 f"{', '.join(named)} set one model's terms: with --model auto each candidate "
-                "takes its defaults (creep variants among them); name the model to set them, "
-                "or compare the candidates with them (piezohyst compare)"
+                "takes its defaults (creep variants among them; --growth auto lets each choose "
+                "its growth terms by evidence); name the model to set them, or compare the "
+                "candidates with them (piezohyst compare)"
             )
         model = _fit_auto(ctx, data, operators, initial_state, input_dynamics, data_spec, out,
-                          force)  # fmt: skip
+                          force, growth)  # fmt: skip
         if scan_frequency is not None and model.input_dynamics_.active:
             ctx.result(f"input dynamics {model.input_dynamics_.response_interval(scan_frequency)}")
         return

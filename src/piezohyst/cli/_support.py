@@ -566,7 +566,8 @@ def terms_options(fn: Callable[..., Any]) -> Callable[..., Any]:
         show_default=True,
         help="generalized-pi, preisach, duhem, bouc-wen: growth terms, 'default' (the model's: "
         "on a charge the leak's integral, with its rise where the record's holds show one; "
-        "generalized-pi chooses by forward chaining), 'auto', 'none' or a comma list of "
+        "generalized-pi chooses by forward chaining), 'auto' (chosen by forward chaining; with "
+        "--model auto, for every candidate that has growth terms), 'none' or a comma list of "
         "integral,time,abs_integral.",
     )(fn)
 
@@ -620,9 +621,11 @@ def _fit_auto(
     data_spec: DataSpec,
     out: Path,
     force: bool,
+    growth: str = "default",
 ) -> HysteresisModel:
     """fit --model auto: every model scored inside the record (each with the input dynamics
-    asked for), the best saved; returns it."""
+    asked for, and with --growth auto its growth terms chosen by evidence), the best saved;
+    returns it."""
     from ..workflows import select_file
 
     notes: list[str] = []
@@ -639,6 +642,7 @@ def _fit_auto(
                 operators=operators,
                 initial_state=initial_state,
                 input_dynamics=input_dynamics,
+                growth_terms=growth,
                 force=force,
                 progress=progress,
                 say=notes.append,

@@ -205,6 +205,7 @@ def select_file(
     initial_state: str = "rest",
     candidates: Sequence[str] = CANDIDATES,
     input_dynamics: str = "none",
+    growth_terms: str = "default",
     force: bool = False,
     progress: Progress = None,
     say: Callable[[str], None] | None = None,
@@ -228,6 +229,9 @@ def select_file(
         Model names to choose among.
     input_dynamics : str, default "none"
         The lag every candidate identifies with its hysteresis (see
+        :func:`~piezohyst.analysis.selection.select_model`).
+    growth_terms : {"default", "auto"}, default "default"
+        ``"auto"``: every candidate with growth terms chooses them by evidence (see
         :func:`~piezohyst.analysis.selection.select_model`).
     force : bool
         Replace an existing ``out`` piezohyst did not write.
@@ -262,7 +266,7 @@ def select_file(
                 x, y, t, candidates=candidates, operators=operators,
                 initial_state=start, input_unit=rec.units[0] or "V",
                 output_unit=rec.units[1] or _default_unit(rec.names[1]),
-                input_dynamics=dynamics,
+                input_dynamics=dynamics, growth_terms=growth_terms,
             )  # fmt: skip
 
     sel = choose(input_dynamics)
