@@ -819,6 +819,14 @@ def fit_many_cmd(
 @click.option(
     "--seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True, help="Noise seed."
 )
+@click.option(
+    "--plant",
+    type=EXISTING,
+    default=None,
+    help="A model file standing in for your actuator (your own fitted model): the loop runs "
+    "on it instead of the built-in bench, another actuator (--preset, --extra-bias, --seed "
+    "are the bench's).",
+)
 @OUT_FILE
 @FORCE
 @click.pass_obj
@@ -833,17 +841,21 @@ def simulate_loop(
     preset: str,
     extra_bias: float,
     seed: int,
+    plant: Path | None,
     out: Path,
     force: bool,
 ) -> None:
     """Drive the simulated bench with the self-sensing controller (or feedforward alone).
 
     Each sample the controller gets the charge the bench read after the
-    previous command; the laser reading is written for checking only.
+    previous command; the laser reading is written for checking only. The
+    bench is another actuator than yours: --plant runs your own model as the
+    plant instead.
 
     \b
     Example:
       piezohyst simulate-loop model.json target.csv --leakage leak.json -o loop.csv
+      piezohyst simulate-loop model.json target.csv --feedforward --plant model.json -o ff.csv
     """
     from ..workflows import simulate_loop_file
 
@@ -860,8 +872,10 @@ def simulate_loop(
             extra_bias=extra_bias,
             seed=seed,
             force=force,
+            plant=plant,
         ),
     )
+    ctx.info(f"simulated actuator: {run.plant}")
     what = "feedforward" if feedforward else "closed loop"
     line = f"{what}: width desired->displacement {100 * run.width:.3g} %"
     if math.isfinite(run.nrmse):

@@ -482,7 +482,7 @@ class Charges:
         self._reach = (min(lo_s, hi_s), max(lo_s, hi_s))
 
     @classmethod
-    def of(cls, output_map: Any, gain: float | None) -> Charges | None:
+    def of(cls, output_map: Any, gain: float | None, model: Any = None) -> Charges | None:
         """The front end for a compensator's ``output_map`` argument (None without one).
 
         Parameters
@@ -490,6 +490,9 @@ class Charges:
         output_map : OutputMap or None
         gain : float or None
             The compensator's ``gain`` argument: the map replaces it.
+        model : HysteresisModel, optional
+            The model the compensator inverts: said where the map was calibrated through
+            another (:meth:`OutputMap.check_model`).
 
         Returns
         -------
@@ -511,6 +514,8 @@ class Charges:
         if gain is not None:
             msg = "give the output_map or a gain, not both (the map holds the gain)"
             raise ParameterError(msg)
+        if model is not None:
+            output_map.check_model(model)
         return cls(output_map)
 
     def reset(self) -> None:

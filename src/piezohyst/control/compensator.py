@@ -145,10 +145,8 @@ class Compensator:
     ) -> None:
         #: Desired displacements as charges through the output map (None: no map); a loop
         #: built on this compensator's kernel (the self-sensing controller) uses it too
-        self.charges = Charges.of(output_map, gain)
+        self.charges = Charges.of(output_map, gain, model)
         self.output_map = output_map
-        if output_map is not None:
-            output_map.check_model(model)
         spec, settings = self._settings(
             model, v_min, v_max, slew_rate, sample_rate,
             "charge" if output_map is not None else domain, gain, allow_extrapolation,

@@ -14,6 +14,7 @@ from .bench import (
     simulate,
 )
 from .loop import run_loop
+from .model_plant import ModelPlant, PlantRun, run_on_model
 from .signals import SIGNALS, make_signal
 
 __all__ = [
@@ -24,9 +25,12 @@ __all__ = [
     "Bench",
     "BenchPreset",
     "BenchRecord",
+    "ModelPlant",
+    "PlantRun",
     "Reading",
     "batch_unit",
     "make_signal",
     "run_loop",
+    "run_on_model",
     "simulate",
 ]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import TypeGuard
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -10,7 +12,22 @@ from ..control.compensator import Compensator
 from ..control.selfsensing import SelfSensingController
 from .bench import Bench, BenchRecord
 
-__all__ = ["run_loop"]
+__all__ = ["feedforward", "run_loop"]
+
+
+def feedforward(controller: SelfSensingController | Compensator) -> TypeGuard[Compensator]:
+    """True for a feedforward compensator (a whole trajectory at once, no reading), False
+    for a controller that takes the reading after each command.
+
+    Parameters
+    ----------
+    controller : SelfSensingController or Compensator
+
+    Returns
+    -------
+    bool
+    """
+    return isinstance(controller, Compensator)
 
 
 def run_loop(
@@ -41,7 +58,7 @@ def run_loop(
     """
     d = np.ascontiguousarray(desired, dtype=np.float64)
     as_signal(np.nan_to_num(d), "desired")  # 1-D and not empty
-    if isinstance(controller, Compensator):
+    if feedforward(controller):
         return bench.run(controller.process(d))
     rows = np.empty((d.size, 7))
     for k in range(d.size):

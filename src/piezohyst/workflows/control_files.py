@@ -34,7 +34,16 @@ from ..metrics import hysteresis_width, nrmse, rmse, run_on
 from ..model.leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
 from ..model.model import HysteresisModel
 from ..model.state import predict_record
-from ..simulation import DEFAULT_PRESET, PRESETS, Bench, BenchRecord, run_loop
+from ..simulation import (
+    DEFAULT_PRESET,
+    PRESETS,
+    Bench,
+    BenchRecord,
+    ModelPlant,
+    PlantRun,
+    run_loop,
+    run_on_model,
+)
 from ..units import to_standard
 from ._base import (
     _DEFAULT_SETTINGS,
@@ -283,14 +292,18 @@ class LoopRun:
         Samples before the commands reached the trajectory (the ramp from rest at the slew
         limit), left out of ``width`` and ``nrmse``: the ramp's error is the limit's, not the
         controller's (on the bench's 5-35 um target, 9 % NRMSE with it, 0.8 % without).
+    plant : str
+        Which actuator ran: the built-in bench (another actuator than a lab's), or the
+        model file standing in for the lab's.
     """
 
-    record: BenchRecord
+    record: BenchRecord | PlantRun
     desired: FloatArray
     width: float
     nrmse: float
     saturated: int
     arrived: int = 0
+    plant: str = ""
 
 
 def simulate_loop_file(
@@ -305,8 +318,10 @@ def simulate_loop_file(
     extra_bias: float = 0.0,
     seed: int = 0,
     force: bool = False,
+    plant: PathLike | None = None,
 ) -> LoopRun:
-    """Run a desired trajectory through a controller against the simulated bench.
+    """Run a desired trajectory through a controller against the simulated bench, or
+    against a model standing in for the lab's actuator (``plant``).
 
     Writes ``time, desired, command, charge, displacement`` (s, desired
     units, V, C, m): what the bench read after each command. ``loop=None``
@@ -332,12 +347,20 @@ def simulate_loop_file(
         Noise seed.
     force : bool
         Replace an existing ``out`` that piezohyst did not write.
+    plant : path, optional
+        A saved model standing in for the actuator (:class:`~piezohyst.simulation.ModelPlant`:
+        the lab's own, not the built-in bench's physics; no noise). ``preset``,
+        ``extra_bias`` and ``seed`` are the bench's and not used with it; the sample rate
+        is the settings' (default the model's training record's).
 
     Returns
     -------
     LoopRun
+        ``plant_name`` says which actuator ran.
     """
     inputs: list[PathLike] = [model_path, target]
+    if plant is not None:
+        inputs.append(plant)
     if loop is not None and loop.leakage is not None:
         inputs.append(loop.leakage)
     guard_outputs([out], inputs, force=force)
@@ -353,9 +376,20 @@ def simulate_loop_file(
     name = _desired_column(table, column, target)
     desired = standard_column(table, name, "desired trajectory", "output",
                               desired_unit(settings, model))  # fmt: skip
+    if plant is not None:  # the lab's plant runs at the loop's rate: the settings' or the target's
+        rate = settings.sample_rate
+        if rate is None and "time" in table:
+            times = table.get("time")
+            rate = time_rate(to_standard(times, table.unit("time"), "time", f"{target}: 'time'")[0])
+        if rate is None:
+            msg = f"{target} has no time column: give the loop's rate (--sample-rate)"
+            raise ParameterError(msg)
+        p = dataclasses.replace(p, rate=float(rate))
     fs = settings.sample_rate or p.rate
     if abs(fs - p.rate) > 1e-9 * p.rate:
         msg = f"the bench {preset} samples at {p.rate:g} Hz; the loop rate must be the same"
+        if plant is not None:
+            msg = f"{target} is timed at {p.rate:g} Hz; the loop rate must be the same"
         raise ParameterError(msg)
     if "time" in table:  # a target timed at another rate would be played at the bench's
         t = to_standard(table.get("time"), table.unit("time"), "time", f"{target}: column 'time'")
@@ -365,10 +399,18 @@ def simulate_loop_file(
         )
     settings = dataclasses.replace(settings, sample_rate=fs)
     ctl = settings.build(model) if loop is None else loop.build(settings, model)
-    bench = Bench(
-        p, voltage=ctl.last_command, seed=check_int(seed, "seed", "simulate-loop", 0, 2**32 - 1)
-    )
-    rec = run_loop(ctl, desired, bench)
+    rec: BenchRecord | PlantRun
+    if plant is None:
+        bench = Bench(p, voltage=ctl.last_command,
+                      seed=check_int(seed, "seed", "simulate-loop", 0, 2**32 - 1))  # fmt: skip
+        rec = run_loop(ctl, desired, bench)
+        name = (f"the built-in bench {preset!r} (another actuator than yours: "
+                "--plant MODEL runs your own model as the plant)")  # fmt: skip
+    else:
+        stand_in = ModelPlant(_load(plant), fs, voltage=ctl.last_command,
+                              gain=settings.output_map or settings.gain)  # fmt: skip
+        rec = run_on_model(ctl, desired, stand_in)
+        name = f"{Path(plant).name}, {stand_in.describe()}"
     write_table(
         out,
         {
@@ -389,11 +431,12 @@ def simulate_loop_file(
     arrived = ctl.sent_count - ctl.command_count  # the ramp from rest at the slew limit
     ok = np.isfinite(desired)
     ok[:arrived] = False
-    width = hysteresis_width(desired[ok], rec.displacement[ok])
+    shown = rec.hysteresis if isinstance(rec, PlantRun) else rec.displacement
+    width = hysteresis_width(desired[ok], shown[ok])
     err = (
         nrmse(desired[ok], rec.displacement[ok]) if settings.domain == "displacement" else math.nan
     )
-    return LoopRun(rec, desired, width, err, ctl.saturated_count, arrived)
+    return LoopRun(rec, desired, width, err, ctl.saturated_count, arrived, name)
 
 
 @dataclass(frozen=True)
