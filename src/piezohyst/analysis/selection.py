@@ -503,11 +503,12 @@ def record_notes(x: FloatArray) -> tuple[str, ...]:
     Parameters
     ----------
     x : ndarray, shape (N,)
-        The input.
+        The record's input (V).
 
     Returns
     -------
     tuple of str
+        One sentence per thing the input cannot test (empty: nothing to say).
     """
     return _record_notes(x, _turns(x))
 

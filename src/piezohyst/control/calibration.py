@@ -375,6 +375,8 @@ class OutputMap(JsonFile):
         Parameters
         ----------
         data : dict
+            The map's coefficients, center, scale, covariance and charge range, with its
+            schema version and checksum.
         where : str
             Named in errors (a file name).
 
@@ -781,12 +783,12 @@ def model_fingerprint(model: Any) -> str:
     Parameters
     ----------
     model : HysteresisModel
-        Fitted.
+        Fitted; a stand-in that cannot be written as a model file gives its class alone.
 
     Returns
     -------
     str
-        ``"BoucWenModel 3f2a9c01d4e7"``; the class alone for a model that cannot be written.
+        ``"BoucWenModel 3f2a9c01d4e7"``.
     """
     try:
         digest = str(model_to_dict(model)["checksum"]).removeprefix("sha256:")[:12]

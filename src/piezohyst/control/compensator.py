@@ -848,11 +848,12 @@ class CompensatorSettings:
         Parameters
         ----------
         model : HysteresisModel
-            A fitted model.
+            The fitted model to invert.
 
         Returns
         -------
         Compensator
+            With these settings' limits, domain, gain, slew and sample rate.
 
         Raises
         ------

@@ -178,6 +178,7 @@ def write_fmu(
     Returns
     -------
     Path
+        The FMU written.
 
     Raises
     ------

@@ -829,6 +829,7 @@ def read_recording(
     Returns
     -------
     Recording
+        The columns in standard units (s, V, and the output's), with its window and names.
 
     Raises
     ------
@@ -852,6 +853,7 @@ def collect(stream: RecordingStream, progress: Callable[[int], None] | None = No
     Returns
     -------
     Recording
+        The stream's blocks joined in memory.
 
     Raises
     ------
@@ -976,9 +978,9 @@ class DataSpec:
         Parameters
         ----------
         path : str or os.PathLike
-            The data file.
+            The data file, read whole.
         output_required : bool, default True
-            Raise if the output column is missing (else read no output).
+            Raise if the output column is missing (else the recording has no output).
         progress : callable, optional
             Called with the rows read so far.
 

@@ -406,10 +406,12 @@ class ModelBank:
         Parameters
         ----------
         path : str or os.PathLike
+            Its suffix picks the format (above).
 
         Returns
         -------
         Path
+            The file written.
         """
         data = self.to_dict()
         p = Path(path)

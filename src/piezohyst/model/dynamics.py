@@ -177,10 +177,12 @@ class InputDynamics:
         Parameters
         ----------
         x0 : float
+            The command it rests at (V).
 
         Returns
         -------
         ndarray
+            ``[unused, lag, head, ring of the last inputs]``, all at ``x0``.
         """
         whole, _ = self._split()
         state = np.full(3 + whole + 2, float(x0))
@@ -328,6 +330,8 @@ class InputDynamics:
         Parameters
         ----------
         data : dict
+            The kind, time constant, delay and sample interval (s), and the covariance
+            where the fit gave one.
 
         Returns
         -------
@@ -517,6 +521,7 @@ class OutputDynamics:
         Parameters
         ----------
         data : dict
+            ``f0`` (Hz; 0: no mode), ``zeta`` and ``sample_interval`` (s).
 
         Returns
         -------

@@ -347,6 +347,8 @@ class Leakage(JsonFile):
         Parameters
         ----------
         data : dict
+            The terms' coefficients and units, with the calibration's holds and covariances
+            where it had them.
         where : str
             Named in errors (a file name).
 

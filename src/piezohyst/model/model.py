@@ -137,10 +137,12 @@ class InverseSpec:
         Parameters
         ----------
         model : HysteresisModel
+            Fitted.
 
         Returns
         -------
         InverseSpec
+            The operator (core) to invert and the kept terms beside it.
 
         Raises
         ------
@@ -296,7 +298,7 @@ class HysteresisModel(Fitted, Estimator):
         Returns
         -------
         HysteresisModel
-            ``self``, fitted.
+            ``self``, fitted on the record in memory.
 
         Raises
         ------

@@ -595,11 +595,12 @@ class Bench:
         Parameters
         ----------
         voltages : array_like
-            V, one per sample.
+            V, one per sample, sent in turn.
 
         Returns
         -------
         Reading
+            The DAQ's reading after the last voltage.
         """
         rec = self.run(voltages, _at_rest=_at_rest)
         k = -1

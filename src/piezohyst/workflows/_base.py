@@ -93,10 +93,12 @@ def check_folder(out: PathLike, what: str) -> Path:
     Returns
     -------
     Path
+        The folder.
 
     Raises
     ------
     ParameterError
+        ``out`` names a file (a table's suffix), not a folder.
     """
     p = Path(out)
     if not p.is_dir() and p.suffix.lower() in FILE_SUFFIXES:

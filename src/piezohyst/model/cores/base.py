@@ -268,6 +268,8 @@ class Region:
         Parameters
         ----------
         data : dict
+            ``v_lo``, ``v_hi`` (the voltage grid's edges) and ``q_lo``, ``q_hi`` (the output
+            band over it), as :meth:`to_dict` wrote them.
 
         Returns
         -------
@@ -422,10 +424,12 @@ class Core:
         Parameters
         ----------
         x0 : float
+            The input it rests at (V).
 
         Returns
         -------
         ndarray
+            The core's state vector (its layout is the core's).
         """
         raise NotImplementedError
 

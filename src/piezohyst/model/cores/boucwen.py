@@ -30,14 +30,7 @@ from ._inmemory import (
     _start_inner,
     fit_in_memory,
 )
-from .base import (
-    CoreFit,
-    FitJob,
-    PackedCore,
-    Region,
-    _finite,
-    _frozen,
-)
+from .base import CoreFit, FitJob, PackedCore, Region, _finite, _frozen
 from .solve import bounded_lstsq as _bounded_lstsq
 
 __all__ = ["BoucWenHysteresis"]

@@ -30,16 +30,7 @@ from ._inmemory import (
     _picked_rows,
     fit_in_memory,
 )
-from .base import (
-    CoreFit,
-    FitJob,
-    PackedCore,
-    Region,
-    _finite,
-    _frozen,
-    _nodes,
-    _slopes,
-)
+from .base import CoreFit, FitJob, PackedCore, Region, _finite, _frozen, _nodes, _slopes
 from .solve import bounded_lstsq as _bounded_lstsq
 
 #: full-range cycles (and samples per leg) over which a fitted core must settle, and the

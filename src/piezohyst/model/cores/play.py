@@ -544,7 +544,8 @@ def periodic_state(blocks: Blocks, thresholds: ArrayLike, x_first: float) -> Flo
     Returns
     -------
     ndarray
-        One state per threshold (V).
+        One state per threshold (V): where the periodic drive leaves each operator at the
+        record's start.
 
     Examples
     --------
