@@ -12,25 +12,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner, Result
 
 import piezohyst as ph
 from piezohyst.cli import main
 from piezohyst.simulation import make_signal
 
-
-def run(*args: str | Path) -> Result:
-    return CliRunner().invoke(main, [str(a) for a in args])
-
-
-def assert_clean_error(res: Result, *fragments: str, code: int = 1) -> None:
-    assert res.exit_code == code, res.output
-    err = res.stderr.strip()
-    assert "Traceback" not in res.output and "Traceback" not in err
-    if code == 1:
-        assert len(err.splitlines()) == 1, err
-        for fragment in fragments:
-            assert fragment in err, err
+from ..helpers import assert_clean_error, run
 
 
 @pytest.fixture(scope="module")

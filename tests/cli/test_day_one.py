@@ -12,7 +12,8 @@ import pytest
 
 import piezohyst as ph
 from piezohyst.model.dynamics import InputDynamics
-from tests.cli.test_cli import assert_clean_error, run
+
+from ..helpers import assert_clean_error, run
 
 
 @pytest.fixture(scope="module")

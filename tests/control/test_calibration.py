@@ -168,7 +168,7 @@ def test_the_map_round_trips_its_file_and_states_its_uncertainty(tmp_path: Path)
 def _beyond_the_map_in_c(comp: ph.Compensator, om: ph.OutputMap, tmp_path: Path, hi: float) -> None:
     """Targets over the map's range and 10 % beyond, NaN among them, through C and Python:
     the same commands and counts, the targets beyond the calibration counted (never silent)."""
-    from ..control.test_differential import compare_c_with_python
+    from ..helpers import compare_c_with_python
 
     s_lo, s_hi = om.displacement_range()
     desired = s_lo + (s_hi - s_lo) * (0.5 + 0.55 * np.sin(np.linspace(0, 12, 1500)))  # beyond
@@ -183,7 +183,7 @@ def _beyond_the_map_in_c(comp: ph.Compensator, om: ph.OutputMap, tmp_path: Path,
 
 @pytest.mark.parametrize("kind", ["active-pi", "preisach"])
 def test_a_linear_map_exports_to_c_like_python(kind: str, tmp_path: Path) -> None:
-    from ..control.test_differential import CC
+    from ..helpers import CC
 
     if CC is None:
         pytest.skip("no C compiler on this machine")
@@ -200,7 +200,7 @@ def test_a_curved_map_exports_to_c_like_python(kind: str, tmp_path: Path) -> Non
     """The map's inverse in C (Newton from the chord, the linear extension beyond the
     calibrated range) before each kind of step: the same commands as Python to 1e-9 V,
     targets beyond the calibration and NaN included."""
-    from ..control.test_differential import CC
+    from ..helpers import CC
 
     if CC is None:
         pytest.skip("no C compiler on this machine")

@@ -3,8 +3,6 @@ the closed loop."""
 
 from __future__ import annotations
 
-import shutil
-import subprocess
 import warnings
 from pathlib import Path
 from typing import Any
@@ -18,12 +16,12 @@ from sklearn.base import clone
 
 import piezohyst as ph
 from piezohyst._kernels import packed as D
-from piezohyst.control.export import write_c
 from piezohyst.model.cores import preisach
 from piezohyst.model.cores.duhem import _curvature
 from piezohyst.model.cores.preisach import _curvature_upper
 from piezohyst.simulation import make_signal
 
+from ..helpers import CC, compare_c_with_python
 from ..strategies import examples
 
 # these tests drive targets past the voltage and slew limits on purpose (safety, exactness
@@ -34,8 +32,6 @@ pytestmark = [
     pytest.mark.kernels,
     pytest.mark.filterwarnings("ignore::piezohyst.errors.LimitWarning"),
 ]
-
-CC = shutil.which("cc") or shutil.which("gcc")
 
 
 #: numba's JIT is off: the run that measures the kernels' Python lines (``make test``'s
@@ -470,39 +466,6 @@ def test_exported_c_matches_python(
     desired[7::301] = -1.0  # unreachable: saturates
     c_cmds = compare_c_with_python(comp, desired, tmp_path, precision, hi)
     assert np.all((c_cmds >= 0.0) & (c_cmds <= hi))
-
-
-def compare_c_with_python(
-    comp: Any, desired: np.ndarray, tmp_path: Path, precision: str, hi: float, name: str = "ph_comp"
-) -> np.ndarray:
-    """Export ``comp`` to C as ``name``, compile it strictly, run ``desired`` through both: the
-    commands agree to 1e-9 V in double (to float precision in float), and so do the counters."""
-    from tests.control.test_export import HARNESS
-
-    c_path, _ = write_c(comp, tmp_path / f"{name}.c", precision=precision)  # type: ignore[arg-type]
-    (tmp_path / "main.c").write_text(HARNESS.replace("NAME", name))
-    exe = tmp_path / name
-    cmd = [CC or "cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2",
-           str(c_path), str(tmp_path / "main.c"), "-o", str(exe), "-lm"]  # fmt: skip
-    subprocess.run(cmd, check=True, capture_output=True, text=True)
-    fed = desired
-    m = int(getattr(comp, "delay_samples", 0))
-    if m:  # the C step is given the value desired m samples on (its header says so), as
-        # process() previews its block: beyond the end extrapolated linearly
-        ahead = desired[-1] + np.arange(1, m + 1) * (desired[-1] - desired[-2])
-        fed = np.concatenate([desired, ahead])[m:]
-    text = "\n".join(repr(float(x)) for x in fed) + "\n"
-    out = subprocess.run([str(exe)], input=text, check=True, capture_output=True, text=True)
-    lines = out.stdout.split("\n")
-    c_cmds = np.array([float(x) for x in lines[: desired.size]])
-    py = comp.process(desired)
-    atol = 1e-9 if precision == "double" else 1e-4 * hi
-    # tol: C and numba round apart (FMA, order, libm); double: 1e-9 V covers a replay of ulp
-    # differences; float: its 1e-7 precision over the range
-    np.testing.assert_allclose(c_cmds, py, rtol=0, atol=atol)
-    counts = tuple(int(x) for x in lines[desired.size].split())
-    assert counts == (comp.nonfinite_count, comp.saturated_count, comp.extrapolated_count)
-    return c_cmds
 
 
 # -------------------------------------------------------------- closed loop

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -12,7 +11,8 @@ import pytest
 import piezohyst as ph
 from piezohyst.control.export import export_c, write_c
 
-CC = shutil.which("cc") or shutil.which("gcc")
+from ..helpers import CC, HARNESS
+
 # these tests drive targets past the voltage and slew limits on purpose (safety, exactness
 # where no limit acts); that the limits then say so is tested in test_records.py
 pytestmark = [
@@ -20,24 +20,6 @@ pytestmark = [
     pytest.mark.skipif(CC is None, reason="no C compiler on this machine"),
     pytest.mark.kernels,
 ]
-
-HARNESS = r"""
-#include <stdio.h>
-#include <stdlib.h>
-#include "NAME.h"
-int main(void)
-{
-    char line[128];
-    NAME_t s;
-    NAME_init(&s);
-    while (fgets(line, sizeof line, stdin)) {
-        NAME_real d = (NAME_real)strtod(line, NULL);
-        printf("%.17g\n", (double)NAME_step(&s, d));
-    }
-    printf("%lu %lu %lu\n", s.nonfinite, s.saturated, s.extrapolated);
-    return 0;
-}
-"""
 
 
 def fitted_model() -> ph.ActivePI:

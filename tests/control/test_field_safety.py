@@ -8,19 +8,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner, Result
 
 import piezohyst as ph
 import piezohyst.workflows as wf
-from piezohyst.cli import main
+
+from ..helpers import aixacct_like, one_line_error, run
 
 # these tests drive targets past the voltage and slew limits on purpose (safety, exactness
 # where no limit acts); that the limits then say so is tested in test_records.py
 pytestmark = pytest.mark.filterwarnings("ignore::piezohyst.errors.LimitWarning")
-
-
-def run(*args: str | Path) -> Result:
-    return CliRunner().invoke(main, [str(a) for a in args])
 
 
 @pytest.fixture(scope="module")
@@ -33,15 +29,6 @@ def lab(tmp_path_factory: pytest.TempPathFactory) -> Path:
     v = 20 + 50 * (1 - np.cos(2 * np.pi * 0.5 * t))
     ph.write_table(d / "target.csv", {"time": t, "desired": model.hysteresis_.predict(v)})
     return d
-
-
-def one_line_error(res: Result, *fragments: str) -> str:
-    assert res.exit_code == 1, res.output
-    err = res.stderr.strip()
-    assert len(err.splitlines()) == 1 and "Traceback" not in res.output, err
-    for fragment in fragments:
-        assert fragment in err, err
-    return err
 
 
 # ------------------------------------------------------------------ no data loss
@@ -350,25 +337,6 @@ def test_tdms_picks_the_group_holding_the_channels(tmp_path: Path) -> None:
     err = one_line_error(run("fit", tmp_path / "scan.tdms", "--input", "Ch9", "--output", "Ch1",
                              "-o", tmp_path / "x.json"), "no column 'Ch9'")  # fmt: skip
     assert "groups: 'Meta', 'Scan'" in err
-
-
-def aixacct_like(path: Path, rec: object) -> None:
-    """A file laid out as aixACCT TF Analyzer exports are (Latin-1, 'Table N' blocks)."""
-    t, v, q = rec.t[:400], rec.voltage[:400], rec.charge[:400] * 1e6  # type: ignore[attr-defined]
-    lines = ["PiezoResult", "", "Table 1",
-             "Table No [#]\tVc+ [V]\tPr+ [uC/cm2]\t", "1.000000e+000\t1.1e+003\t1.3e+001\t",
-             "", "ProgramMode: 0", "", "Table 1", "Timestamp: 08/23/2019 14:17:12",
-             "SampleName: TEST", "Area [mm2]: 60",
-             "Time [s]\tV+ [V]\tV- [V]\tP1 [µC]\t"]  # fmt: skip
-    lines += [
-        f"{a:.6e}\t{b:.6e}\t0.000000e+000\t{c:.6e}\t" for a, b, c in zip(t, v, q, strict=True)
-    ]
-    lines += ["", "Table 2", "SampleName: TEST2", "Time [s]\tV+ [V]\tV- [V]\tP1 [µC]\t"]
-    lines += [
-        f"{a:.6e}\t{b:.6e}\t0.000000e+000\t{c:.6e}\t"
-        for a, b, c in zip(t, v / 2, q / 2, strict=True)
-    ]
-    path.write_bytes("\r\n".join(lines).encode("latin-1"))
 
 
 def test_aixacct_exports_are_read_by_table(tmp_path: Path) -> None:

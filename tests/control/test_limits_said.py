@@ -235,7 +235,7 @@ def test_the_c_step_behind_a_lag_counts_as_python(
     """The exported C sends the same commands and counts the same held ones (GeneralizedPI's
     step behind a lag is new; the packed cores' count of what the lag's inverse asked beyond
     a limit too), on a scan from the bottom of the range that the lag takes below v_min."""
-    from tests.control.test_differential import compare_c_with_python
+    from tests.helpers import compare_c_with_python
 
     model = _with(fitted[kind], DYNAMICS[dynamics])
     lo, hi = model.input_range_

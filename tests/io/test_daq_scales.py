@@ -14,7 +14,7 @@ import pytest
 import piezohyst as ph
 from piezohyst.units import scaled
 
-from ..control.test_field_safety import one_line_error, run
+from ..helpers import one_line_error, run
 
 C_REF = 4.7e-6  # F: the Sawyer-Tower's reference capacitor
 SENSOR = 10e-6  # m/V

@@ -12,7 +12,7 @@ import pytest
 
 import piezohyst as ph
 
-from ..control.test_field_safety import one_line_error, run
+from ..helpers import one_line_error, run
 
 
 @pytest.fixture(scope="module")
@@ -76,7 +76,7 @@ def test_an_aixacct_export_defaults_to_its_first_measurement(
     tmp_path: Path, rec: ph.simulation.Recording
 ) -> None:
     """Columns named by number: the table read is the first with a time column, not 'Summary'."""
-    from ..control.test_field_safety import aixacct_like
+    from ..helpers import aixacct_like
 
     aixacct_like(tmp_path / "loops.dat", rec)
     got = ph.io.read_recording(tmp_path / "loops.dat", input_column="1", output_column="3")

@@ -15,7 +15,7 @@ from piezohyst.metrics import nrmse
 from piezohyst.model.cores.preisach import PreisachHysteresis, branch_sums
 from piezohyst.simulation import make_signal
 
-from ..control.test_differential import compare_c_with_python
+from ..helpers import compare_c_with_python
 
 #: A PI model whose later weights are negative: each branch is steep after a reversal and
 #: flattens (a density >= 0 can only steepen)

@@ -12,7 +12,8 @@ import pytest
 
 import piezohyst as ph
 from piezohyst.simulation import ModelPlant, run_on_model
-from tests.cli.test_cli import run
+
+from ..helpers import run
 
 RATE = 1000.0
 
