@@ -178,3 +178,16 @@ def test_kernels_are_imported_as_modules_and_load_at_first_use() -> None:
     assert stand_in.DYN_GAIN_B == play.DYN_GAIN_B  # the first lookup loads it
     assert type(stand_in) is types.ModuleType and where["K"] is sys.modules[play.__name__]
     assert kernels.__all__ == ["packed", "play", "signal"]
+
+
+def test_no_test_module_imports_another() -> None:
+    """Shared test code lives in tests/helpers.py (and strategies, reference, the rigs): a test
+    module imported from another one picks up its fixtures and marks, and moves with it."""
+    tests = Path(__file__).resolve().parent
+    found = []
+    for path in sorted(tests.rglob("test_*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                if node.module.split(".")[-1].startswith("test_"):
+                    found.append(f"{path.relative_to(tests)}:{node.lineno} {node.module}")
+    assert not found, found
