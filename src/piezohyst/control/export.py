@@ -1,7 +1,7 @@
 """C99 export of a :class:`~piezohyst.Compensator` for microcontrollers.
 
 The C is C: the algorithms are files shipped with the package
-(``piezohyst/cores/c``: ``play.c`` and its controller and dynamics steps,
+(``piezohyst/model/cores/c``: ``play.c`` and its controller and dynamics steps,
 ``packed.c`` with the Preisach, Duhem and Bouc-Wen cores, ``ieee.c``,
 ``mode.c``), compiled on their own in the tests. An export writes a header
 from ``play.h`` or ``packed.h`` and a source that is a preamble of the
@@ -330,7 +330,7 @@ def _template(name: str) -> Template:
 
 
 def _c_file(name: str) -> str:
-    """A C file shipped with the package (``piezohyst/cores/c``)."""
+    """A C file shipped with the package (``piezohyst/model/cores/c``)."""
     return (resources.files("piezohyst.model.cores") / "c" / name).read_text(encoding="utf-8")
 
 
@@ -383,7 +383,7 @@ def _source(
 
 
 def _packed_c(comp: Compensator, prefix: str, precision: Precision) -> CCode:
-    """C99 for a compensator on a packed core: ``_packedkernels.core_step`` in C.
+    """C99 for a compensator on a packed core: ``_kernels.packed.core_step`` in C.
 
     The same arithmetic as the kernel: the step's output is monotone in the
     voltage, so the inverse is Newton's method inside a bracket (bisecting

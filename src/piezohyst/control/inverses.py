@@ -499,7 +499,7 @@ class PackedInverse(Inverse):
     inverted per sample, an integer delay by preview) and output mode as the
     play engine. Each sample inverts the core's step from the actuator's
     state: explicitly for Duhem within a step, by a safeguarded Newton solve
-    (at most ``_packedkernels.NEWTON_MAX`` iterations) otherwise; the state then
+    (at most ``_kernels.packed.NEWTON_MAX`` iterations) otherwise; the state then
     advances with the command actually sent.
 
     Beyond the (voltage, output) region the model was identified on (its
@@ -575,7 +575,7 @@ class PackedInverse(Inverse):
         )
 
     def _slot(self, name: str) -> int:
-        """The status values follow the core's state (``_packedkernels.DS_*``)."""
+        """The status values follow the core's state (``_kernels.packed.DS_*``)."""
         at = {"last": D.DS_LAST, "nonfinite": D.DS_NONFINITE, "saturated": D.DS_SATURATED,
               "outside": D.DS_OUTSIDE}[name]  # fmt: skip
         return int(self._ns + D.DS_STATUS + at)

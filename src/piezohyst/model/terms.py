@@ -135,7 +135,7 @@ class RelaxationShape:
     tau : float
         The lag's time constant (s).
     packed : ndarray
-        The slow core in ``_packedkernels``' Preisach layout (head, Everett nodes).
+        The slow core in ``_kernels.packed``'s Preisach layout (head, Everett nodes).
     """
 
     tau: float

@@ -648,7 +648,7 @@ class Core:
 
 class PackedCore(Core):
     """A core whose parameters are one packed array run by the compiled kernels
-    (``_packedkernels``): Preisach, Duhem and Bouc-Wen; the first slot names its kernel.
+    (``_kernels.packed``): Preisach, Duhem and Bouc-Wen; the first slot names its kernel.
 
     Subclasses build ``packed`` (the kernels' layout) and set ``kind``.
     """

@@ -49,7 +49,7 @@ __all__ = ["PreisachHysteresis"]
 
 
 #: Reversal points of a Preisach core's rest state (a demagnetising staircase), of
-#: the stack's ``_packedkernels.STACK``; the rest holds the reversals of the drive
+#: the stack's ``_kernels.packed.STACK``; the rest holds the reversals of the drive
 DEMAG_POINTS = 20
 
 
@@ -107,7 +107,7 @@ class PreisachHysteresis(PackedCore):
         :math:`\mu_{kl}` (output units) for cells ``k <= l``, its
         :func:`branch_sums` ``> 0``; the lower half is ignored.
     initial_state : array_like
-        ``[v, q, direction, k, R[0..STACK-1]]`` (see ``_packedkernels``).
+        ``[v, q, direction, k, R[0..STACK-1]]`` (see ``_kernels.packed``).
     region : Region, optional
     virgin : bool, default False
         What "at rest" means (:meth:`rest_state`): True, a demagnetised state,

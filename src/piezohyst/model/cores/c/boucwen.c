@@ -1,4 +1,4 @@
-/* The Bouc-Wen core's step in C: RK4 in steps of DV_MAX, as _packedkernels.bw_next. */
+/* The Bouc-Wen core's step in C: RK4 in steps of DV_MAX, as _kernels.packed.bw_next. */
 static real_t g(real_t h, real_t s)
 {
     real_t ah = abs_real(h), hn, sh, r;

@@ -1,4 +1,4 @@
-/* The Duhem core's step in C: the same arithmetic as _packedkernels.duhem_next. */
+/* The Duhem core's step in C: the same arithmetic as _kernels.packed.duhem_next. */
 /* bilinear slope f+ (up) or f- at (v, q), clamped at the grid's edges */
 static void cell(real_t u, real_t lo, real_t step, int nodes, int *i, real_t *frac)
 {

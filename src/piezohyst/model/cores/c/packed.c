@@ -1,5 +1,5 @@
 /* The packed cores' compensator step: bracketed Newton, region, lags, dynamics, as
- * _packedkernels.core_step. */
+ * _kernels.packed.core_step. */
 /* trial = the state after moving from st to v; returns the output there, *f the slope */
 static real_t try_move(const real_t *st, real_t *trial, real_t v, real_t *f)
 {

@@ -23,7 +23,7 @@ typedef struct {
     unsigned long slewed;    /* commands cut by the slew limit */
     unsigned long extrapolated; /* desired values beyond the output map's calibrated range */${lag_state}
 #if ${upper}_CONTROLLER
-    /* feedback on the measured charge (see piezohyst.selfsensing) */
+    /* feedback on the measured charge (see piezohyst.control.selfsensing) */
     ${real} integral;         /* integral action, model output units */
     ${real} leak;             /* leaked charge since the frame was set */
     ${real} frame;            /* measured charge -> model output */

@@ -1,4 +1,4 @@
-/* The Preisach core's step in C: reversal memory and wiping-out, as _packedkernels.rev_move. */
+/* The Preisach core's step in C: reversal memory and wiping-out, as _kernels.packed.rev_move. */
 static real_t core_output(const real_t *st) { return st[1]; }
 
 /* the slope of the step's first instant from st in direction up */
