@@ -17,6 +17,7 @@ import piezohyst.workflows as wf
 from piezohyst.errors import DataFileError
 from piezohyst.io.blocks import Summary, array_blocks
 from piezohyst.model.cores.play import default_thresholds, history_state
+from piezohyst.workflows import model_files
 
 from ..strategies import examples
 
@@ -41,7 +42,7 @@ def small_batches(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(formats, "CSV_BLOCK_BYTES", 1 << 14)
     monkeypatch.setattr(formats, "BATCH_ROWS", 700)
     monkeypatch.setattr(pio, "BATCH_ROWS", 700)
-    monkeypatch.setattr(wf, "KEEP_ROWS", 1000)  # fits stream every pass, as for a huge file
+    monkeypatch.setattr(model_files, "KEEP_ROWS", 1000)  # fits stream every pass (a huge file)
 
 
 def split_blocks(

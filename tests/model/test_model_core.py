@@ -398,7 +398,7 @@ def test_every_setting_has_one_declared_rule() -> None:
 
 
 CONSUMERS = [
-    "control/compensator", "control/export", "workflows/__init__", "workflows/demo",
+    "control/compensator", "control/export", "workflows/model_files", "workflows/demo",
     "cli/__init__", "model/persistence", "plotting", "analysis/report",
 ]  # fmt: skip
 MODEL_CLASSES = {"HysteresisModel", "ClassicalPI", "ActivePI", "GeneralizedPI", "PIModel"}

@@ -296,7 +296,7 @@ def fit(
             ctx.result(f"input dynamics {model.input_dynamics_.response_interval(scan_frequency)}")
         return
     from ..io import estimated_rows
-    from ..workflows import KEEP_ROWS
+    from ..workflows.model_files import KEEP_ROWS
 
     # a window of up to KEEP_ROWS rows is read once and kept; a longer one streams 3 passes
     passes = 1 if (estimated_rows(data) or 0) <= KEEP_ROWS else 3

@@ -27,8 +27,8 @@ import numpy as np
 from ..errors import ParameterError, PiezohystError
 from ..io import DataSpec, write_rows
 from ..model.bank import model_width
-from . import fit_file, guard_outputs, model_terms
-from ._base import check_folder
+from ._base import check_folder, guard_outputs
+from .model_files import fit_file, model_terms
 
 __all__ = ["FleetResult", "Unit", "fit_many", "units_of"]
 
