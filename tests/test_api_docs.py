@@ -7,15 +7,16 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 import piezohyst as ph
-from piezohyst import io, testing
+from piezohyst import analysis, control, io, model, simulation, testing, workflows
 from piezohyst.control import compensator, export
 from piezohyst.io import blocks, screening
 from piezohyst.model import bank, models, persistence, terms
 from piezohyst.model.cores import play, solve
 from piezohyst.workflows import fleet
 
-MODULES = [ph, models, terms, solve, blocks, play, compensator, export, persistence, io, bank,
-           fleet, screening, testing]  # fmt: skip
+#: the top package, every subpackage's face, and the modules whose own names are public too
+MODULES = [ph, analysis, control, model, simulation, workflows, models, terms, solve, blocks, play,
+           compensator, export, persistence, io, bank, fleet, screening, testing]  # fmt: skip
 
 
 def _documented_objects() -> Iterator[tuple[str, Any]]:

@@ -1,9 +1,87 @@
 """Control: the inverse engines, the compensator, the self-sensing controller,
 learning from repetition, channel banks and the C export.
 May import: the foundation, ``_kernels``, ``io``, ``model`` (never ``analysis``).
+
+Feedforward (``compensator``; its engines in ``inverses``)
+    Compensator, CompensatorSettings, CompensatorState
+Feedback on the measured charge (``selfsensing``)
+    SelfSensingController, ControllerState, LoopSettings
+Learning a repeated scan (``learning``; the harmonic law's design in ``learning_design``, the
+Jacobian law in ``learning_jacobian``, the lead-in's probe in ``learning_probe``, a trial's
+trajectory and limits in ``learning_trial``)
+    LearningCompensator, Trial, LearningDesign, design_learning
+Charge to displacement (``calibration``)
+    OutputMap, calibrate_gain
+Many channels in one kernel (``channels``)
+    BankCompensator, BankController
+The compensator outside Python (``export``: C; ``shared``: a shared library and a MEX
+gateway; ``fmu``: an FMI 2.0 co-simulation FMU; their C templates in ``c/``)
+    export_c, write_c, CCode, write_shared, write_mex, write_fmu
 """
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 from .._lazy import attach
 
-# each module loaded at first use: piezohyst.control.NAME after import piezohyst
-__getattr__, __dir__ = attach(__name__, {})
+# each name loaded from its module at first use (PEP 562): importing the package stays light
+__getattr__, __dir__ = attach(
+    __name__,
+    {
+        "OutputMap": ".calibration",
+        "calibrate_gain": ".calibration",
+        "BankCompensator": ".channels",
+        "BankController": ".channels",
+        "Compensator": ".compensator",
+        "CompensatorSettings": ".compensator",
+        "CompensatorState": ".compensator",
+        "CCode": ".export",
+        "export_c": ".export",
+        "write_c": ".export",
+        "write_fmu": ".fmu",
+        "LearningCompensator": ".learning",
+        "Trial": ".learning",
+        "LearningDesign": ".learning_design",
+        "design_learning": ".learning_design",
+        "ControllerState": ".selfsensing",
+        "LoopSettings": ".selfsensing",
+        "SelfSensingController": ".selfsensing",
+        "write_mex": ".shared",
+        "write_shared": ".shared",
+    },
+)
+
+if TYPE_CHECKING:  # the same names, for type checkers and editors
+    from .calibration import OutputMap, calibrate_gain
+    from .channels import BankCompensator, BankController
+    from .compensator import Compensator, CompensatorSettings, CompensatorState
+    from .export import CCode, export_c, write_c
+    from .fmu import write_fmu
+    from .learning import LearningCompensator, Trial
+    from .learning_design import LearningDesign, design_learning
+    from .selfsensing import ControllerState, LoopSettings, SelfSensingController
+    from .shared import write_mex, write_shared
+
+__all__ = [
+    "BankCompensator",
+    "BankController",
+    "CCode",
+    "Compensator",
+    "CompensatorSettings",
+    "CompensatorState",
+    "ControllerState",
+    "LearningCompensator",
+    "LearningDesign",
+    "LoopSettings",
+    "OutputMap",
+    "SelfSensingController",
+    "Trial",
+    "calibrate_gain",
+    "design_learning",
+    "export_c",
+    "write_c",
+    "write_fmu",
+    "write_mex",
+    "write_shared",
+]

@@ -2,9 +2,100 @@
 contract, state, the fit, the model class and its presets, files and banks, and the
 capacitor's leakage measured on holds (``leakage``).
 May import: the foundation, ``_kernels``, ``io``.
+
+The model (``model``: the one class; ``models``: its presets; ``state``: runs from a state)
+    HysteresisModel, ModelState, History, InverseSpec
+    ClassicalPI, ActivePI, GeneralizedPI, PIModel, PreisachModel, DuhemModel, BoucWenModel
+What a model holds besides its core
+    Term, growth_kinds (``terms``); InputDynamics, OutputDynamics (``dynamics``, their
+    search in ``dynamics_fit``); Leakage, calibrate_leakage (``leakage``)
+Files and banks (``persistence``, ``bank``)
+    load_model, save_model, model_names, model_class, register; ModelBank, load_bank
+The estimator contract (``estimator``) and the fit (``fitting``: the identification;
+``fitted``: what it hands the model)
+    Estimator
 """
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 from .._lazy import attach
 
-# each module loaded at first use: piezohyst.model.NAME after import piezohyst
-__getattr__, __dir__ = attach(__name__, {})
+# each name loaded from its module at first use (PEP 562): importing the package stays light
+__getattr__, __dir__ = attach(
+    __name__,
+    {
+        "ModelBank": ".bank",
+        "load_bank": ".bank",
+        "InputDynamics": ".dynamics",
+        "OutputDynamics": ".dynamics",
+        "Estimator": ".estimator",
+        "Leakage": ".leakage",
+        "calibrate_leakage": ".leakage",
+        "History": ".model",
+        "HysteresisModel": ".model",
+        "InverseSpec": ".model",
+        "ModelState": ".model",
+        "ActivePI": ".models",
+        "BoucWenModel": ".models",
+        "ClassicalPI": ".models",
+        "DuhemModel": ".models",
+        "GeneralizedPI": ".models",
+        "PIModel": ".models",
+        "PreisachModel": ".models",
+        "load_model": ".persistence",
+        "model_class": ".persistence",
+        "model_names": ".persistence",
+        "register": ".persistence",
+        "save_model": ".persistence",
+        "Term": ".terms",
+        "growth_kinds": ".terms",
+    },
+)
+
+if TYPE_CHECKING:  # the same names, for type checkers and editors
+    from .bank import ModelBank, load_bank
+    from .dynamics import InputDynamics, OutputDynamics
+    from .estimator import Estimator
+    from .leakage import Leakage, calibrate_leakage
+    from .model import History, HysteresisModel, InverseSpec, ModelState
+    from .models import (
+        ActivePI,
+        BoucWenModel,
+        ClassicalPI,
+        DuhemModel,
+        GeneralizedPI,
+        PIModel,
+        PreisachModel,
+    )
+    from .persistence import load_model, model_class, model_names, register, save_model
+    from .terms import Term, growth_kinds
+
+__all__ = [
+    "ActivePI",
+    "BoucWenModel",
+    "ClassicalPI",
+    "DuhemModel",
+    "Estimator",
+    "GeneralizedPI",
+    "History",
+    "HysteresisModel",
+    "InputDynamics",
+    "InverseSpec",
+    "Leakage",
+    "ModelBank",
+    "ModelState",
+    "OutputDynamics",
+    "PIModel",
+    "PreisachModel",
+    "Term",
+    "calibrate_leakage",
+    "growth_kinds",
+    "load_bank",
+    "load_model",
+    "model_class",
+    "model_names",
+    "register",
+    "save_model",
+]

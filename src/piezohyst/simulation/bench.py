@@ -50,6 +50,40 @@ class BenchPreset:
 
     ``sources`` says, for each value, whether it comes from the paper, a
     datasheet, or is an assumption of typical magnitude.
+
+    Attributes
+    ----------
+    name : str
+    v_max, v_min : float
+        V: the drive's range and the actuator's safe limits.
+    rate : float
+        Hz, the DAQ's sample rate.
+    c0, q_irr : float
+        F, the linear capacitance; C, the irreversible (switching) charge at saturation.
+    field_center, field_spread, coercive_scale : float
+        V, the Preisach density's interaction field (centre, spread) and coercive scale.
+    g_leak, leak_voltage_coeff, i_bias : float
+        The leakage: S at 0 V, its relative rise at ``v_max``; A, the op-amp's bias current.
+    c_ref, r_ref : float
+        The Sawyer-Tower reference capacitor (F) and its insulation (Ohm).
+    adc_bits, adc_range, amp_noise : int, float, float
+        The ADC's resolution, full scale (V) and the noise at its input (V rms).
+    gain : float
+        m/C, displacement per capacitor charge (eq. 6-7).
+    laser_resolution, laser_noise : float
+        m, the checking laser's resolution and noise.
+    sources : dict of str to str
+        Where each value comes from.
+    amp_tau, dac : float, str
+        The amplifier's lag (s) and the DAC's hold (``"staircase"`` or ``"interpolating"``).
+    mech_f0, mech_zeta : float
+        The bender's first mode (Hz; 0: none) and its damping ratio.
+    law, law_params : str, tuple of float
+        The capacitor's law and its parameters (see :data:`PLANTS`).
+    relax_taus, relax_gains : tuple of float
+        Debye relaxation branches: time constants (s) and capacitances (F).
+    strain_curvature, strain_q_ref : float
+        An electrostrictive part of the strain (``S = g (dQ + k dQ^2 / q_ref)``).
     """
 
     name: str
@@ -92,12 +126,29 @@ class BenchPreset:
     strain_q_ref: float = 1e-6  # C
 
     def strain(self, dq: FloatArray) -> FloatArray:
-        """The quasi-static displacement (m) for capacitor charges ``dq`` from rest (C)."""
+        """The quasi-static displacement (m) for capacitor charges ``dq`` from rest (C).
+
+        Parameters
+        ----------
+        dq : ndarray
+            C, the capacitor's charge from its value at rest.
+
+        Returns
+        -------
+        ndarray
+            m.
+        """
         if self.strain_curvature == 0.0:
             return self.gain * dq
         return self.gain * (dq + self.strain_curvature * dq * dq / self.strain_q_ref)
 
     def to_dict(self) -> dict[str, Any]:
+        """Every parameter by name (JSON-ready but for the tuples).
+
+        Returns
+        -------
+        dict
+        """
         return asdict(self)
 
 

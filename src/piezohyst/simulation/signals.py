@@ -193,6 +193,28 @@ def make_signal(
 ) -> tuple[FloatArray, FloatArray]:
     """Time stamps (s) and voltage (V) of the named excitation.
 
+    Parameters
+    ----------
+    name : str
+        One of :data:`SIGNALS`.
+    amplitude : float, default 140
+        V, the peak.
+    frequency : float, default 0.5
+        Hz, the base frequency.
+    duration : float, default 20
+        s.
+    rate : float, default 1000
+        Hz, the sample rate.
+
+    Returns
+    -------
+    t, voltage : ndarray
+
+    Raises
+    ------
+    ParameterError
+        An unknown name, a value out of range, fewer than 2 samples.
+
     Examples
     --------
     >>> t, v = make_signal("triangle", amplitude=100, frequency=1, duration=1, rate=4)

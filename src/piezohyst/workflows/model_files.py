@@ -689,6 +689,21 @@ def predict_file(
     passes over the file). ``force`` replaces an existing file piezohyst did
     not write (see :func:`guard_outputs`); ``progress`` is called with the
     rows read so far.
+
+    Parameters
+    ----------
+    model_path, data, out : str or path
+        The model file, the record to run it on, the file to write.
+    data_spec : DataSpec, optional
+        Which columns and samples of ``data`` (default: the usual names, every sample).
+    initial_state : {"model", "rest", "periodic"}
+    force : bool, default False
+    progress : callable, optional
+
+    Returns
+    -------
+    Prediction
+        The scores where the record has the output, and what was written.
     """
     if initial_state not in ("model", "rest", "periodic"):
         msg = f"initial_state must be 'model', 'rest' or 'periodic'. Got {initial_state!r}."

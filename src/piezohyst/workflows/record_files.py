@@ -39,6 +39,23 @@ def simulate_file(
     ``seed`` seeds the noise; ``unit`` picks an actuator of a production batch (0: the
     preset; see :func:`piezohyst.simulation.batch_unit`). ``force`` replaces an existing
     file piezohyst did not write (see :func:`guard_outputs`).
+
+    Parameters
+    ----------
+    out : str or path
+        The file to write (CSV, or by its suffix).
+    preset : str
+        A name of :data:`piezohyst.simulation.PRESETS`.
+    signal, amplitude, frequency, duration, rate
+        As :func:`piezohyst.simulation.make_signal` (amplitude and rate default to the
+        preset's).
+    seed, unit : int
+    force : bool, default False
+
+    Returns
+    -------
+    BenchRecord
+        What was simulated and written.
     """
     guard_outputs([out], [], force=force)
     if preset not in PRESETS:
