@@ -272,7 +272,7 @@ def main() -> None:
     for _ in range(3):
         jac.learn(bench.run(jac.command()).charge)
     per_jac = (time.perf_counter() - t0) / 3 - sim
-    from piezohyst.control.learning_jacobian import damped_step
+    from piezohyst.control.learning.jacobian import damped_step
 
     big = rng.standard_normal((n, n))
     t0 = time.perf_counter()
@@ -515,7 +515,7 @@ def floor_rows(trials: int, only: str | None = None) -> None:
     may be larger)."""
     from scipy.optimize import minimize
 
-    from piezohyst.control.learning_jacobian import damped_step, trial_jacobian
+    from piezohyst.control.learning.jacobian import damped_step, trial_jacobian
 
     step = SLEW / RATE
     print("noise off, periodic: width, NRMSE of the true displacement (range over seeds 0-2)")

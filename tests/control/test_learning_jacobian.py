@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 import piezohyst as ph
 from piezohyst.cli import main
 from piezohyst.control.learning import resolved_law
-from piezohyst.control.learning_jacobian import (
+from piezohyst.control.learning.jacobian import (
     MAX_SAMPLES,
     TOP_TOL,
     damped_step,

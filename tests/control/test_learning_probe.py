@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 import piezohyst as ph
-from piezohyst.control.learning_design import PROBE_SIGMAS, design_learning
-from piezohyst.control.learning_probe import (
+from piezohyst.control.learning.design import PROBE_SIGMAS, design_learning
+from piezohyst.control.learning.probe import (
     AMPLITUDE,
     SETTLE,
     Response,

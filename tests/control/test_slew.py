@@ -25,7 +25,7 @@ def test_a_trial_meets_the_slew_limit_with_moves_centred(values: list[float], st
     their O(N^2) definition), within the limit around the period, inside the commands' range,
     and the commands themselves where they keep to the limit."""
     u = np.array(values)
-    got = ph.control.learning_trial.centred_slew(u, step)
+    got = ph.control.learning.trial.centred_slew(u, step)
     upper, lower = reference.slew_hulls(values, step)
     # tol: sums of up to 3N steps of at most 140 V, a few ulps each
     np.testing.assert_allclose(got, 0.5 * (np.array(upper) + np.array(lower)), rtol=0, atol=1e-11)
@@ -41,7 +41,7 @@ def test_a_cut_move_is_spread_evenly_around_its_sample() -> None:
     """A jump ten steps high is spread over the ten samples before it and the ten after,
     symmetric about it: a causal limiter would start it at the jump and end ten samples late."""
     u = np.where(np.arange(60) < 30, 0.0, 10.0)  # the fall back at the wrap is 30 samples away
-    got = ph.control.learning_trial.centred_slew(u, 1.0)
+    got = ph.control.learning.trial.centred_slew(u, 1.0)
     assert got[20] == 0.0 and got[39] == 10.0 and 0.0 < got[21] < got[38] < 10.0
     np.testing.assert_allclose(got[30:40] + got[29:19:-1], 10.0, atol=1e-12)  # symmetric
     assert np.abs(np.diff(got)).max() <= 1.0

@@ -6,9 +6,10 @@ Feedforward (``compensator``; its engines in ``inverses``)
     Compensator, CompensatorSettings, CompensatorState
 Feedback on the measured charge (``selfsensing``)
     SelfSensingController, ControllerState, LoopSettings
-Learning a repeated scan (``learning``; the harmonic law's design in ``learning_design``, the
-Jacobian law in ``learning_jacobian``, the lead-in's probe in ``learning_probe``, a trial's
-trajectory and limits in ``learning_trial``)
+Learning a repeated scan (the subpackage ``learning``: the compensator in
+``learning.compensator``, the harmonic law's design in ``learning.design``, the Jacobian law in
+``learning.jacobian``, the lead-in's probe in ``learning.probe``, a trial's trajectory and limits
+in ``learning.trial``)
     LearningCompensator, Trial, LearningDesign, design_learning
 Charge to displacement (``calibration``)
     OutputMap, calibrate_gain
@@ -42,8 +43,8 @@ __getattr__, __dir__ = attach(
         "write_fmu": ".fmu",
         "LearningCompensator": ".learning",
         "Trial": ".learning",
-        "LearningDesign": ".learning_design",
-        "design_learning": ".learning_design",
+        "LearningDesign": ".learning",
+        "design_learning": ".learning",
         "ControllerState": ".selfsensing",
         "LoopSettings": ".selfsensing",
         "SelfSensingController": ".selfsensing",
@@ -58,8 +59,7 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .compensator import Compensator, CompensatorSettings, CompensatorState
     from .export import CCode, export_c, write_c
     from .fmu import write_fmu
-    from .learning import LearningCompensator, Trial
-    from .learning_design import LearningDesign, design_learning
+    from .learning import LearningCompensator, LearningDesign, Trial, design_learning
     from .selfsensing import ControllerState, LoopSettings, SelfSensingController
     from .shared import write_mex, write_shared
 

@@ -1,7 +1,7 @@
 r"""The lead-in's probe: small sines whose response measures the loop's timing.
 
 The learning law allows for every timing the model's identification could not rule out
-(:func:`~piezohyst.control.learning_design.design_learning`). A model identified on slow
+(:func:`~piezohyst.control.learning.design.design_learning`). A model identified on slow
 records knows its lag poorly at the harmonics a fast scan needs: on the two-state capacitor
 behind a 4 ms amplifier, ``ActivePI`` with identified dynamics states its delay to
 :math:`\pm 1.2` ms (95 %), 123 degrees at 200 Hz, where the loop's measured phase error was

@@ -9,9 +9,9 @@ from typing import Any, Literal
 
 import numpy as np
 
-from .._validation import check_float
-from ..model.dynamics import filter_response
-from .learning_probe import Response
+from ..._validation import check_float
+from ...model.dynamics import filter_response
+from .probe import Response
 
 FloatArray = np.ndarray
 
@@ -243,7 +243,7 @@ def _allowed(
     their covariance: a delay and a lag the record could not tell apart are anti-correlated),
     or within ``tolerance`` of each when stated by hand; a stated ``lag`` within
     ``tolerance``; and half a sample for the instant a reading stands for (a pure shift).
-    With ``measured`` (the lead-in's probe, :mod:`~piezohyst.control.learning_probe`), only
+    With ``measured`` (the lead-in's probe, :mod:`~piezohyst.control.learning.probe`), only
     the delays and lags (identified, or stated by hand) whose phase agrees with the measured
     one at every probed harmonic, within what :data:`PROBE_SIGMAS` standard errors of noise
     can turn it and :data:`PROBE_MARGIN` (the reading's half sample and a stated lag's

@@ -32,23 +32,23 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._validation import check_float
-from ..errors import (
+from ..._validation import check_float
+from ...errors import (
     LearningWarning,
     ModelFileError,
     ParameterError,
     ShapeError,
     warn,
 )
-from ..io import atomic_write_text
-from ..metrics import hysteresis_width
-from ..model.leakage import Leakage
-from .calibration import OutputMap
-from .compensator import Compensator, Domain
-from .learning_design import LearningDesign, design_learning
-from .learning_jacobian import MAX_SAMPLES, damped_step, trial_jacobian, uniform_shift
-from .learning_probe import Response, probe_bins, probe_signal, response
-from .learning_trial import (
+from ...io import atomic_write_text
+from ...metrics import hysteresis_width
+from ...model.leakage import Leakage
+from ..calibration import OutputMap
+from ..compensator import Compensator, Domain
+from .design import LearningDesign, design_learning
+from .jacobian import MAX_SAMPLES, damped_step, trial_jacobian, uniform_shift
+from .probe import Response, probe_bins, probe_signal, response
+from .trial import (
     anti_windup,
     centred_slew,
     count_saturated,
@@ -60,7 +60,7 @@ from .learning_trial import (
 
 FloatArray = np.ndarray
 
-#: the law itself lives in :mod:`piezohyst.control.learning_design`
+#: the law itself lives in :mod:`piezohyst.control.learning.design`
 __all__ = ["LearningCompensator", "LearningDesign", "Trial", "design_learning"]
 
 #: the share of a trial's commands at a limit beyond which it is out of the actuator's reach
@@ -185,7 +185,7 @@ def _lead(data: Any, n: int) -> tuple[FloatArray, FloatArray] | None:
 
 
 def _lead_probe(d: FloatArray) -> tuple[np.ndarray, FloatArray]:
-    """The harmonics of the lead-in's probe and its sines (:mod:`.learning_probe`)."""
+    """The harmonics of the lead-in's probe and its sines (:mod:`.probe`)."""
     bins = probe_bins(d)
     return bins, probe_signal(bins, d.size, float(np.ptp(d)))
 
@@ -250,7 +250,7 @@ def _in_desired(learner: LearningCompensator, q: FloatArray) -> FloatArray:
 
 def resolved_law(law: str, lag: float, samples: int) -> str:
     """The law ``law="auto"`` learns with: ``"jacobian"`` for a trial of up to
-    :data:`~.learning_jacobian.MAX_SAMPLES` samples without a stated lag, else ``"harmonic"``
+    :data:`~.jacobian.MAX_SAMPLES` samples without a stated lag, else ``"harmonic"``
     (any other law as it is).
 
     Parameters
@@ -317,7 +317,7 @@ def _responder(learner: LearningCompensator) -> Any:
 def _jacobian_step(
     learner: LearningCompensator, u: FloatArray, e: FloatArray, sensor: bool
 ) -> FloatArray:
-    """The Jacobian law's move of the commands (see :mod:`.learning_jacobian`)."""
+    """The Jacobian law's move of the commands (see :mod:`.jacobian`)."""
     design, s = learner.design, learner.settings
     assert design is not None
     err = _gated(design, e, s.get("noise_gate", 0.0))
@@ -385,7 +385,7 @@ class LearningCompensator:
         the scan).
     probe : bool, default True
         The lead-in carries eight small sines (0.2 % of the span each, between
-        the scan's harmonics; :mod:`~piezohyst.control.learning_probe`): the next
+        the scan's harmonics; :mod:`~piezohyst.control.learning.probe`): the next
         trial's readings without them give the loop's phase there, and the law then
         allows only for the timings that agree with it (``design.probed``).
     output_map : OutputMap, optional
@@ -399,7 +399,7 @@ class LearningCompensator:
     law : {"auto", "harmonic", "jacobian"}
         How the error is learned: ``"harmonic"`` corrects the reference, each harmonic
         through the model's inverse; ``"jacobian"`` moves the commands through the model's
-        Jacobian along them (:mod:`~piezohyst.control.learning_jacobian`: an actuator whose
+        Jacobian along them (:mod:`~piezohyst.control.learning.jacobian`: an actuator whose
         output runs on past its reversals too; up to 4000 samples, 0.2-0.7 s per 1000; no
         ``lag``). ``"auto"``: the Jacobian law where it can (:func:`resolved_law`).
 

@@ -1,9 +1,9 @@
 r"""The Jacobian learning law (``LearningCompensator(law="jacobian")``).
 
-The harmonic law (:mod:`piezohyst.control.learning_design`) learns a correction of the
+The harmonic law (:mod:`piezohyst.control.learning.design`) learns a correction of the
 reference: each harmonic of the error, turned into volts by the model's inverse, that is
 by its local slope. It converges while the actuator's slope over the model's stays near 1
-(:attr:`~piezohyst.control.learning_design.LearningDesign.slope_error`). An actuator whose
+(:attr:`~piezohyst.control.learning.design.LearningDesign.slope_error`). An actuator whose
 output runs on past a reversal (``metrics.run_on``: the charge still rises while the
 voltage already falls) has a negative slope there over every model that can be inverted,
 and the inverse of a model whose branch is flat just past a reversal turns a small

@@ -12,11 +12,11 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._kernels import signal as S
-from .._validation import as_signal
-from ..errors import ParameterError, ShapeError
-from .compensator import Compensator
-from .learning_jacobian import MAX_SAMPLES
+from ..._kernels import signal as S
+from ..._validation import as_signal
+from ...errors import ParameterError, ShapeError
+from ..compensator import Compensator
+from .jacobian import MAX_SAMPLES
 
 FloatArray = np.ndarray
 
