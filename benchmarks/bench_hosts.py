@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 
 import piezohyst as ph
-from piezohyst.control.fmu import write_fmu
-from piezohyst.control.shared import write_shared
+from piezohyst.control.export.fmu import write_fmu
+from piezohyst.control.export.shared import write_shared
 
 
 def best(f, repeats: int = 5) -> float:  # type: ignore[no-untyped-def]

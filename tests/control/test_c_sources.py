@@ -44,9 +44,9 @@ def test_the_c_files_ship_with_the_package() -> None:
     text = (SRC.parent.parent / "pyproject.toml").read_text()
     assert '"model/cores/c/*.c", "model/cores/c/*.h"' in text
     # the hosts' wrappers: the shared library's API, the MEX gateway, the FMI 2.0 functions
-    hosts = {p.name for p in (SRC / "control" / "c").iterdir()}
+    hosts = {p.name for p in (SRC / "control" / "export" / "c").iterdir()}
     assert {"shared_api.c", "mex_gateway.c", "fmi2_cs.c"} <= hosts
-    assert '"control/c/*.c"' in text
+    assert '"control/export/c/*.c"' in text
 
 
 def _record() -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import piezohyst as ph
-from piezohyst.control.fmu import write_fmu
+from piezohyst.control.export.fmu import write_fmu
 
 from . import hosts
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import piezohyst as ph
-from piezohyst.control.shared import write_mex
+from piezohyst.control.export.shared import write_mex
 from piezohyst.simulation import make_signal
 
 OCTAVE = shutil.which("octave-cli") or shutil.which("octave")

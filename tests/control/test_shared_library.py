@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import piezohyst as ph
-from piezohyst.control.shared import STATUS, write_shared
+from piezohyst.control.export.shared import STATUS, write_shared
 
 from . import hosts
 

@@ -398,7 +398,7 @@ def test_every_setting_has_one_declared_rule() -> None:
 
 
 CONSUMERS = [
-    "control/compensator", "control/export", "workflows/model_files", "workflows/demo",
+    "control/compensator", "control/export/c_code", "workflows/model_files", "workflows/demo",
     "cli/_models", "cli/_compensate", "cli/_report", "cli/_loop", "cli/_records",
     "model/persistence", "plotting", "analysis/report",
 ]  # fmt: skip

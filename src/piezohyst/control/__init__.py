@@ -15,8 +15,9 @@ Charge to displacement (``calibration``)
     OutputMap, calibrate_gain
 Many channels in one kernel (``channels``)
     BankCompensator, BankController
-The compensator outside Python (``export``: C; ``shared``: a shared library and a MEX
-gateway; ``fmu``: an FMI 2.0 co-simulation FMU; their C templates in ``c/``)
+The compensator outside Python (the subpackage ``export``: C in ``export.c_code``; a shared
+library and a MEX gateway in ``export.shared``; an FMI 2.0 co-simulation FMU in ``export.fmu``;
+their C templates in ``export/c/``)
     export_c, write_c, CCode, write_shared, write_mex, write_fmu
 """
 
@@ -40,7 +41,7 @@ __getattr__, __dir__ = attach(
         "CCode": ".export",
         "export_c": ".export",
         "write_c": ".export",
-        "write_fmu": ".fmu",
+        "write_fmu": ".export",
         "LearningCompensator": ".learning",
         "Trial": ".learning",
         "LearningDesign": ".learning",
@@ -48,8 +49,8 @@ __getattr__, __dir__ = attach(
         "ControllerState": ".selfsensing",
         "LoopSettings": ".selfsensing",
         "SelfSensingController": ".selfsensing",
-        "write_mex": ".shared",
-        "write_shared": ".shared",
+        "write_mex": ".export",
+        "write_shared": ".export",
     },
 )
 
@@ -57,11 +58,9 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .calibration import OutputMap, calibrate_gain
     from .channels import BankCompensator, BankController
     from .compensator import Compensator, CompensatorSettings, CompensatorState
-    from .export import CCode, export_c, write_c
-    from .fmu import write_fmu
+    from .export import CCode, export_c, write_c, write_fmu, write_mex, write_shared
     from .learning import LearningCompensator, LearningDesign, Trial, design_learning
     from .selfsensing import ControllerState, LoopSettings, SelfSensingController
-    from .shared import write_mex, write_shared
 
 __all__ = [
     "BankCompensator",

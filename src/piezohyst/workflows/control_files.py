@@ -19,10 +19,10 @@ import numpy as np
 from .._validation import FloatArray, check_float, check_int
 from ..control.calibration import OutputMap, calibrate_gain
 from ..control.compensator import CompensatorSettings
-from ..control.export import Precision, c_paths, write_c
-from ..control.fmu import write_fmu
+from ..control.export.c_code import Precision, c_paths, write_c
+from ..control.export.fmu import write_fmu
+from ..control.export.shared import write_mex, write_shared
 from ..control.selfsensing import LoopSettings
-from ..control.shared import write_mex, write_shared
 from ..errors import DataFileError, ExtrapolationWarning, ParameterError
 from ..io import (
     DataSpec,
@@ -87,7 +87,7 @@ def export_file(
 ) -> tuple[Path, ...]:
     """Export the model's compensator: C sources ``NAME.c`` and ``NAME.h``
     (:mod:`~.control.export`), or where ``out`` ends in ``.fmu`` an FMI 2.0
-    Co-Simulation FMU (:mod:`~.control.fmu`).
+    Co-Simulation FMU (:mod:`~.control.export.fmu`).
 
     Parameters
     ----------
@@ -106,7 +106,7 @@ def export_file(
         Replace existing files piezohyst did not write.
     shared : bool, default False
         Add the shared-library API and build ``libNAME.so`` beside the sources
-        (:mod:`~piezohyst.control.shared`).
+        (:mod:`~piezohyst.control.export.shared`).
     mex : bool, default False
         ``out`` is a MEX gateway (``NAME_mex.c``), written with the step it includes.
 

@@ -29,13 +29,13 @@ from typing import Literal, cast
 
 import numpy as np
 
-from .._kernels import packed as D
-from .._kernels import play as K
-from .._validation import FloatArray
-from ..errors import ParameterError
-from ..io import atomic_write_text
-from .compensator import Compensator
-from .selfsensing import SelfSensingController
+from ..._kernels import packed as D
+from ..._kernels import play as K
+from ..._validation import FloatArray
+from ...errors import ParameterError
+from ...io import atomic_write_text
+from ..compensator import Compensator
+from ..selfsensing import SelfSensingController
 
 __all__ = ["CCode", "c_paths", "export_c", "write_c"]
 

@@ -38,14 +38,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING, cast
 from xml.sax.saxutils import escape
 
-from .._version import __version__
-from ..errors import ParameterError
-from .compensator import Compensator
-from .export import Precision, export_c
+from ..._version import __version__
+from ...errors import ParameterError
+from ..compensator import Compensator
+from .c_code import Precision, export_c
 from .shared import _c_template, compiler
 
 if TYPE_CHECKING:
-    from .selfsensing import SelfSensingController
+    from ..selfsensing import SelfSensingController
 
 __all__ = ["fmu_platform", "write_fmu"]
 
@@ -185,7 +185,7 @@ def write_fmu(
     ParameterError
         No sample rate, an output mode, a model the C export does not cover, no C compiler.
     """
-    from ..io import atomic_write
+    from ...io import atomic_write
 
     comp = cast(Compensator, getattr(compensator, "compensator", compensator))
     controller = comp is not compensator

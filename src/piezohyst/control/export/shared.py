@@ -36,13 +36,13 @@ from pathlib import Path
 from string import Template
 from typing import TYPE_CHECKING, cast
 
-from .._version import __version__
-from ..errors import ParameterError
-from .compensator import Compensator
-from .export import Precision, c_paths, export_c
+from ..._version import __version__
+from ...errors import ParameterError
+from ..compensator import Compensator
+from .c_code import Precision, c_paths, export_c
 
 if TYPE_CHECKING:
-    from .selfsensing import SelfSensingController
+    from ..selfsensing import SelfSensingController
 
 __all__ = ["STATUS", "compiler", "library_path", "write_mex", "write_shared"]
 
@@ -70,7 +70,7 @@ def library_path(c_path: Path, prefix: str) -> Path:
 
 def _c_template(name: str) -> Template:
     """A C template shipped with the package (``piezohyst/control/c``)."""
-    return Template((resources.files("piezohyst.control") / "c" / name).read_text("utf-8"))
+    return Template((resources.files("piezohyst.control.export") / "c" / name).read_text("utf-8"))
 
 
 def _version_text(what: str) -> str:
@@ -159,7 +159,7 @@ def write_shared(
         A model the C export does not cover, an output mode (its step needs the next
         desired value), no C compiler, or a build that fails (its first error named).
     """
-    from ..io import atomic_write_text
+    from ...io import atomic_write_text
 
     comp = cast(Compensator, getattr(compensator, "compensator", compensator))
     controller = comp is not compensator
@@ -245,8 +245,8 @@ def write_mex(
     ParameterError
         A model the C export does not cover, or an output mode.
     """
-    from ..io import atomic_write_text
-    from .export import write_c
+    from ...io import atomic_write_text
+    from .c_code import write_c
 
     comp = cast(Compensator, getattr(compensator, "compensator", compensator))
     controller = comp is not compensator

@@ -1,0 +1,34 @@
+"""The compensator (or the self-sensing controller) outside Python: its step as C, and the
+hosts a lab runs that C in.
+
+==========  ==============================================================================
+module      what it holds
+==========  ==============================================================================
+``c_code``  :func:`export_c`, :func:`write_c`, :class:`CCode`, :func:`c_paths`: the step as
+            one C file and its header (double or float), from each core's C in
+            ``piezohyst/model/cores/c/``
+``shared``  :func:`write_shared` (a shared library with an opaque-handle API, for ctypes,
+            LabVIEW or Simulink), :func:`write_mex` (a MEX gateway for MATLAB and Octave),
+            :data:`STATUS`, :func:`compiler`, :func:`library_path`
+``fmu``     :func:`write_fmu`: an FMI 2.0 co-simulation FMU, :func:`fmu_platform`
+``c/``      the hosts' C templates (the shared API, the MEX gateway, the FMI functions)
+==========  ==============================================================================
+"""
+
+from .c_code import CCode, c_paths, export_c, write_c
+from .fmu import fmu_platform, write_fmu
+from .shared import STATUS, compiler, library_path, write_mex, write_shared
+
+__all__ = [
+    "STATUS",
+    "CCode",
+    "c_paths",
+    "compiler",
+    "export_c",
+    "fmu_platform",
+    "library_path",
+    "write_c",
+    "write_fmu",
+    "write_mex",
+    "write_shared",
+]
