@@ -14,8 +14,8 @@ import tracemalloc
 import numpy as np
 
 import piezohyst as ph
-from piezohyst._kernels import play as _kernels
-from piezohyst._kernels import signal as _signalkernels
+from piezohyst._kernels import play as K
+from piezohyst._kernels import signal as S
 
 
 def excitation(n: int, fs: float = 1000.0) -> tuple[np.ndarray, np.ndarray]:
@@ -38,7 +38,7 @@ def naive_fit(x: np.ndarray, y: np.ndarray, t: np.ndarray, r: np.ndarray) -> np.
     """Dense regressor matrix (N x p) and an unconstrained lstsq: the obvious approach."""
     cols = np.empty((x.size, r.size + 2))
     z = np.full(r.size, x[0])
-    _kernels.play_states(x, r, z, cols)
+    K.play_states(x, r, z, cols)
     cols[:, r.size] = 1.0
     cols[:, r.size + 1] = np.concatenate([[0.0], np.cumsum(x[1:] * np.diff(t))])
     return np.linalg.lstsq(cols, y, rcond=None)[0]
@@ -66,8 +66,8 @@ def main() -> None:
     slopes = np.linspace(1.0, 0.4, m)
     h = ph.PIHysteresis(r, np.diff(slopes, prepend=0.0), 0.0, np.full(m, v[0]))
     q = 1e-8 * h.predict(v) + 2e-9 * np.concatenate([[0.0], np.cumsum(v[1:] * np.diff(t))])
-    _kernels.warm_up()
-    _signalkernels.warm_up()
+    K.warm_up()
+    S.warm_up()
     h.predict(v[:100])
 
     print(f"piezohyst {ph.__version__} core benchmark: {n:,} samples x {m} operators")

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from sklearn.base import clone
 
 import piezohyst as ph
-from piezohyst._kernels import packed as D
+from piezohyst._kernels import packed as P
 from piezohyst.model.cores import preisach
 from piezohyst.model.cores.duhem import _curvature
 from piezohyst.model.cores.preisach import _curvature_upper
@@ -72,7 +72,7 @@ def known_core(v: np.ndarray, n: int) -> Any:
     k, c = np.meshgrid(np.arange(n - 1.0), np.arange(n - 1.0), indexing="ij")
     density = np.triu(2e-8 * np.exp(-((c - k - 1.0) ** 2) / 4.0) * (1.0 + 0.1 * k))
     return ph.PreisachHysteresis(nodes, density, ph.PreisachHysteresis(
-        nodes, density, np.zeros(D.RV_SIZE)).rest_state(float(v[0])))  # fmt: skip
+        nodes, density, np.zeros(P.RV_SIZE)).rest_state(float(v[0])))  # fmt: skip
 
 
 def test_the_preisach_fit_is_exact_output_error() -> None:
@@ -99,11 +99,11 @@ def test_the_preisach_fit_is_exact_output_error() -> None:
 def test_everett_nodes_sum_the_density() -> None:
     rng = np.random.default_rng(0)
     mu = np.triu(rng.random((4, 4)))
-    e = D.everett_nodes(mu)
+    e = P.everett_nodes(mu)
     brute = np.array([[sum(mu[k, c] for k in range(4) for c in range(4) if i <= k <= c < j)
                        for j in range(5)] for i in range(5)])  # fmt: skip
     np.testing.assert_allclose(e, brute)
-    np.testing.assert_allclose(D.everett_map(5) @ mu.ravel(), e.ravel())
+    np.testing.assert_allclose(P.everett_map(5) @ mu.ravel(), e.ravel())
 
 
 def test_bouc_wen_recovers_its_parameters() -> None:
@@ -199,20 +199,20 @@ def test_chunks_equal_one_call(
 
 def test_a_preisach_rest_state_is_a_demagnetising_staircase() -> None:
     nodes = np.linspace(0.0, 100.0, 11)
-    plain = ph.PreisachHysteresis(nodes, np.eye(10) * 1e-9, np.zeros(D.RV_SIZE))
-    assert plain.rest_state(40.0)[D.RV_K] == 1  # no reversal yet: a branch from 40 V
-    core = ph.PreisachHysteresis(nodes, np.eye(10) * 1e-9, np.zeros(D.RV_SIZE), virgin=True)
+    plain = ph.PreisachHysteresis(nodes, np.eye(10) * 1e-9, np.zeros(P.RV_SIZE))
+    assert plain.rest_state(40.0)[P.RV_K] == 1  # no reversal yet: a branch from 40 V
+    core = ph.PreisachHysteresis(nodes, np.eye(10) * 1e-9, np.zeros(P.RV_SIZE), virgin=True)
     z = core.rest_state(40.0)
-    k = int(z[D.RV_K])
-    points = z[D.RV_R : D.RV_R + k]
+    k = int(z[P.RV_K])
+    points = z[P.RV_R : P.RV_R + k]
     assert k == preisach.DEMAG_POINTS
     assert points[0] == 0.0  # as wide as the grid allows on the nearer side
     gaps = points - 40.0
     assert np.all(np.sign(gaps[1:]) == -np.sign(gaps[:-1]))  # alternating about 40 V
     assert np.all(np.abs(gaps[1:]) < np.abs(gaps[:-1]))  # and closing in on it
-    assert z[D.RV_DIR] == -np.sign(gaps[-1])  # the last move was towards 40 V
+    assert z[P.RV_DIR] == -np.sign(gaps[-1])  # the last move was towards 40 V
     edge = core.rest_state(0.0)  # no room below: the first rise is a branch from 0 V
-    assert edge[D.RV_K] == 1 and edge[D.RV_R] == 0.0
+    assert edge[P.RV_K] == 1 and edge[P.RV_R] == 0.0
 
 
 def test_a_preisach_fit_from_rest_learns_the_initial_loading_curve(tmp_path: Path) -> None:
@@ -251,17 +251,17 @@ def test_a_preisach_fit_from_rest_learns_the_initial_loading_curve(tmp_path: Pat
 
 def test_preisach_memory_wipes_out_closed_inner_loops(models: dict[str, Any]) -> None:
     core = models["preisach"].operator_
-    z = np.zeros(D.RV_SIZE)  # a branch from 10 V (no demagnetised staircase below it)
-    z[0] = z[D.RV_R] = 10.0
-    z[D.RV_K] = 1
+    z = np.zeros(P.RV_SIZE)  # a branch from 10 V (no demagnetised staircase below it)
+    z[0] = z[P.RV_R] = 10.0
+    z[P.RV_K] = 1
     path = [50.0, 30.0, 45.0, 35.0, 40.0]  # nested loops: 10 up 50, down 30, up 45, ...
     for v in path:
         z = core.propagate(np.linspace(z[0], v, 20)[1:], z).state
-    assert z[D.RV_K] == 5  # rest, 50, 30, 45, 35 on the stack
+    assert z[P.RV_K] == 5  # rest, 50, 30, 45, 35 on the stack
     z = core.propagate(np.linspace(z[0], 47.0, 30)[1:], z).state  # past 45: two loops close
-    assert z[D.RV_K] == 3 and z[D.RV_R + 2] == 30.0
+    assert z[P.RV_K] == 3 and z[P.RV_R + 2] == 30.0
     z = core.propagate(np.linspace(z[0], 60.0, 30)[1:], z).state  # past 50: the first rise
-    assert z[D.RV_K] == 1
+    assert z[P.RV_K] == 1
     # return-point memory: a closed minor loop leaves the output where it started
     start = core.propagate(np.linspace(60.0, 40.0, 50), z).state
     loop = np.concatenate([np.linspace(40.0, 55.0, 80), np.linspace(55.0, 40.0, 80)])
@@ -285,8 +285,8 @@ def test_a_drive_that_returns_exactly_to_its_extremes_keeps_the_older_memory() -
     depths = []
     for _ in range(40):
         z = core.propagate(period, z).state
-        depths.append(int(z[D.RV_K]))
-    assert len(set(depths)) == 1 and depths[0] < D.STACK
+        depths.append(int(z[P.RV_K]))
+    assert len(set(depths)) == 1 and depths[0] < P.STACK
     z = core.propagate(np.linspace(5.0, 135.0, 200)[1:], z).state
     # tol: return-point memory of the outer loop: the same Everett terms summed back
     assert z[1] == pytest.approx(q_top, rel=1e-12)
@@ -300,15 +300,15 @@ def test_a_full_stack_forgets_its_smallest_loop_not_its_largest() -> None:
     v = np.linspace(0.0, 140.0, 50)
     core = known_core(v, 12)
     z = core.propagate(np.linspace(0.0, 135.0, 200)[1:], core.rest_state(0.0)).state
-    first = z[D.RV_R : D.RV_R + int(z[D.RV_K])].copy()
+    first = z[P.RV_R : P.RV_R + int(z[P.RV_K])].copy()
     x = [135.0]
     for j in range(24):
         for target in (60.0 - 55.0 * 0.85**j, 60.0 + 70.0 * 0.85**j):
             x += list(np.linspace(x[-1], target, 30)[1:])
     z = core.propagate(np.array(x[1:]), z).state
-    assert int(z[D.RV_K]) == D.STACK - 1  # it overflowed
-    np.testing.assert_array_equal(z[D.RV_R : D.RV_R + first.size], first)
-    assert z[D.RV_R + first.size] == 135.0  # the first rise's top is still remembered
+    assert int(z[P.RV_K]) == P.STACK - 1  # it overflowed
+    np.testing.assert_array_equal(z[P.RV_R : P.RV_R + first.size], first)
+    assert z[P.RV_R + first.size] == 135.0  # the first rise's top is still remembered
 
 
 # (on the kernel run's short record the Preisach fit has no periodic steady state: heavy)
@@ -425,11 +425,11 @@ def test_leaving_the_region_warns_and_the_compensator_stops_at_its_edge(
     strict = ph.Compensator(model, slew_rate=None, v_min=0.0, v_max=hi)
     free = ph.Compensator(model, slew_rate=None, v_min=0.0, v_max=hi, allow_extrapolation=True)
     region, config = strict.inverse.region, strict.inverse.config
-    tol = float(config[D.CC_TOL])
+    tol = float(config[P.CC_TOL])
 
     def distance(comp: Any) -> float:
         z = comp.state.operators
-        return float(D.region_distance(region, config, z[0], comp.spec.operator.output(z)))
+        return float(P.region_distance(region, config, z[0], comp.spec.operator.output(z)))
 
     far_free = far_strict = 0.0
     for d in desired:
@@ -544,7 +544,7 @@ def test_cores_check_what_they_are_built_from(models: dict[str, Any]) -> None:
     """Bad parameters are refused with a message naming them; cores describe themselves."""
     nodes = np.linspace(0.0, 100.0, 4)
     good = np.triu(np.full((3, 3), 1e-8))
-    rest = np.zeros(D.RV_SIZE)
+    rest = np.zeros(P.RV_SIZE)
     with pytest.raises(ph.ParameterError, match="equally spaced"):
         ph.PreisachHysteresis([0.0, 1.0, 5.0, 6.0], good, rest)
     with pytest.raises(ph.ParameterError, match="density must be finite, and its sums from"):
@@ -759,14 +759,14 @@ def test_relaxation_columns_are_a_preisach_core_on_the_lagged_voltage() -> None:
     mu = np.zeros((m, m))
     mu[np.triu_indices(m)] = cells
     nodes = np.linspace(v.min(), v.max(), 8)
-    ref_core = ph.PreisachHysteresis(nodes, mu + 1e-300 * np.eye(m), np.zeros(D.RV_SIZE))
+    ref_core = ph.PreisachHysteresis(nodes, mu + 1e-300 * np.eye(m), np.zeros(P.RV_SIZE))
     ref = ref_core.predict(lagged, ref_core.rest_state(float(v[0])))
     ref -= ref_core.rest_state(float(v[0]))[1]
     # tol: the same Everett sums on the lagged voltage, two code paths: rounding
     np.testing.assert_allclose(out, ref, rtol=0, atol=1e-12 * np.ptp(ref))
     assert np.ptp(ref) > 0
     # tol: the same density, packed two ways
-    np.testing.assert_allclose(shape.packed[D.DU_UP :], ref_core.packed[D.DU_UP :], rtol=1e-9)
+    np.testing.assert_allclose(shape.packed[P.DU_UP :], ref_core.packed[P.DU_UP :], rtol=1e-9)
     # in blocks, the state carried
     st2 = term.rest_state(float(v[0]))
     parts = [term.columns(v[a:b], t[a:b], dt[a:b], st2) @ cells
@@ -832,7 +832,7 @@ def test_a_preisach_branch_beyond_the_grid_keeps_its_slope_and_its_loops_close(
     nodes = np.linspace(0.0, 100.0, 11)
     k, c = np.meshgrid(np.arange(10.0), np.arange(10.0), indexing="ij")
     density = np.triu(2e-8 * np.exp(-((c - k) ** 2) / 4.0))
-    core = ph.PreisachHysteresis(nodes, density, np.zeros(D.RV_SIZE))
+    core = ph.PreisachHysteresis(nodes, density, np.zeros(P.RV_SIZE))
     core = ph.PreisachHysteresis(nodes, density, core.rest_state(0.0))
     model = ph.PreisachModel.from_operator(core)
     v = np.concatenate([np.linspace(0.0, 120.0, 121), np.linspace(119.0, 90.0, 30)])

@@ -8,7 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import piezohyst as ph
-from piezohyst._kernels import play as _kernels
+from piezohyst._kernels import play as K
 
 from .. import reference
 from ..strategies import invertible_pi, signals, thresholds
@@ -20,7 +20,7 @@ pytestmark = pytest.mark.kernels
 def test_play_kernel_matches_reference(x: np.ndarray, r: np.ndarray, y0: float) -> None:
     z = np.full(r.size, y0)
     out = np.empty((x.size, r.size))
-    _kernels.play_states(x, r, z, out)
+    K.play_states(x, r, z, out)
     for i, ri in enumerate(r):
         np.testing.assert_array_equal(out[:, i], reference.play(x.tolist(), ri, y0))
     np.testing.assert_array_equal(z, out[-1])

@@ -27,7 +27,7 @@ from typing import Any, cast
 
 import numpy as np
 
-from .._kernels import packed as D
+from .._kernels import packed as P
 from .._kernels import play as K
 from .._validation import FloatArray, as_signal
 from ..errors import ParameterError, ShapeError
@@ -519,45 +519,45 @@ class PackedInverse(Inverse):
         self.analytic = False
         self.plain = False
         self.params = np.array(core.packed)
-        self.config = np.zeros(D.CC_SIZE)
-        self.config[D.CC_V_MIN] = self.v_min
-        self.config[D.CC_V_MAX] = self.v_max
-        self.config[D.CC_MAX_STEP] = max_step
-        self.config[D.CC_INV_GAIN] = inv_gain
-        self.config[D.CC_REFUSE] = 0.0 if self.allow_extrapolation else 1.0
+        self.config = np.zeros(P.CC_SIZE)
+        self.config[P.CC_V_MIN] = self.v_min
+        self.config[P.CC_V_MAX] = self.v_max
+        self.config[P.CC_MAX_STEP] = max_step
+        self.config[P.CC_INV_GAIN] = inv_gain
+        self.config[P.CC_REFUSE] = 0.0 if self.allow_extrapolation else 1.0
         region = core.region
         if region is None:
-            self.config[D.CC_TOL] = math.inf
+            self.config[P.CC_TOL] = math.inf
             self.region = np.zeros((2, 0))
         else:
-            self.config[D.CC_TOL] = spec.region_tolerance * region.span
-            self.config[D.CC_RV_LO] = region.v_lo
-            self.config[D.CC_RV_HI] = region.v_hi
+            self.config[P.CC_TOL] = spec.region_tolerance * region.span
+            self.config[P.CC_RV_LO] = region.v_lo
+            self.config[P.CC_RV_HI] = region.v_hi
             self.region = region.array
         if domain == "displacement":  # displacement 0 = the output in the initial state
-            self.config[D.CC_REF] = core.output(core.initial_state)
+            self.config[P.CC_REF] = core.output(core.initial_state)
         fs = float(sample_rate or 0.0)  # given whenever lags or a slow core need it (_settings)
         lg = spec.lags
         if lg is not None:  # kept creep lags: affine in each sample's voltage, solved with it
             alphas = 1.0 - np.exp(-1.0 / (fs * np.asarray(lg.taus)))
             self.lags = np.vstack([lg.taus, lg.gains, alphas])
             pairs = np.column_stack([lg.gains, alphas]).ravel()
-            self.dyn = np.concatenate([self.dyn[: D.DYN_LAGS], pairs])
-            self.dstate = np.zeros(D.DYN_LAGS + alphas.size)
+            self.dyn = np.concatenate([self.dyn[: P.DYN_LAGS], pairs])
+            self.dstate = np.zeros(P.DYN_LAGS + alphas.size)
         else:
             self.lags = np.zeros((3, 0))
         ns = core.n_states
-        self.config[D.CC_NS] = ns
+        self.config[P.CC_NS] = ns
         slow = spec.relaxation
         if slow is not None:  # a slow Preisach core after the main one: params and state
-            self.config[D.CC_SLOW_AT] = self.params.size
-            self.config[D.CC_SLOW_A] = 1.0 - math.exp(-1.0 / (fs * slow.tau))
+            self.config[P.CC_SLOW_AT] = self.params.size
+            self.config[P.CC_SLOW_A] = 1.0 - math.exp(-1.0 / (fs * slow.tau))
             self.params = np.concatenate([self.params, slow.packed])
-            ns += D.RV_SIZE
+            ns += P.RV_SIZE
         #: the slow core's packed parameters (empty without a relaxation term)
         self.slow = np.zeros(0) if slow is None else np.array(slow.packed)
         self._ns = ns
-        self.kernel_state = np.zeros(self._ns + D.DS_STATUS)
+        self.kernel_state = np.zeros(self._ns + P.DS_STATUS)
         #: scratch for the kernel's trial steps (the core's state after a candidate command)
         self.trial = np.zeros(self._ns)
 
@@ -569,16 +569,16 @@ class PackedInverse(Inverse):
         """The core's state ``[v, x, ...]`` as ``operators``, and the last command (copies)."""
         return CompensatorState(
             self.kernel_state[: self._ns].copy(),
-            self.dstate[D.DYN_LAGS :].copy(),
-            float(self.kernel_state[self._ns + D.DS_STATUS + D.DS_LAST]),
-            self.dstate[: D.DYN_LAGS].copy() if self.dynamic else np.zeros(0),
+            self.dstate[P.DYN_LAGS :].copy(),
+            float(self.kernel_state[self._ns + P.DS_STATUS + P.DS_LAST]),
+            self.dstate[: P.DYN_LAGS].copy() if self.dynamic else np.zeros(0),
         )
 
     def _slot(self, name: str) -> int:
         """The status values follow the core's state (``_kernels.packed.DS_*``)."""
-        at = {"last": D.DS_LAST, "nonfinite": D.DS_NONFINITE, "saturated": D.DS_SATURATED,
-              "outside": D.DS_OUTSIDE}[name]  # fmt: skip
-        return int(self._ns + D.DS_STATUS + at)
+        at = {"last": P.DS_LAST, "nonfinite": P.DS_NONFINITE, "saturated": P.DS_SATURATED,
+              "outside": P.DS_OUTSIDE}[name]  # fmt: skip
+        return int(self._ns + P.DS_STATUS + at)
 
     def outside_count(self) -> int:
         """Commands that would have left the identified region (held unless extrapolating)."""
@@ -588,9 +588,9 @@ class PackedInverse(Inverse):
         """The core's state, then the slow core's at rest at the same voltage (if any)."""
         if not self.slow.size:
             return z
-        rest = np.zeros(D.RV_SIZE)
-        rest[0] = rest[D.RV_R] = float(z[0])
-        rest[D.RV_K] = 1.0
+        rest = np.zeros(P.RV_SIZE)
+        rest[0] = rest[P.RV_R] = float(z[0])
+        rest[P.RV_K] = 1.0
         return np.concatenate([z, rest])
 
     def _moved(self, start: FloatArray, v: float) -> FloatArray:
@@ -631,14 +631,14 @@ class PackedInverse(Inverse):
         self._inside(last)
         self.kernel_state[:] = 0.0
         self.kernel_state[: self._ns] = z
-        self.kernel_state[self._ns + D.DS_STATUS + D.DS_LAST] = last
+        self.kernel_state[self._ns + P.DS_STATUS + P.DS_LAST] = last
         self.dstate[:] = last  # the piezo and every creep lag settled at the last command
         if isinstance(state, CompensatorState):
-            if state.dynamics.size == D.DYN_LAGS and self.dynamic:
-                self.dstate[: D.DYN_LAGS] = state.dynamics
+            if state.dynamics.size == P.DYN_LAGS and self.dynamic:
+                self.dstate[: P.DYN_LAGS] = state.dynamics
             lags = as_signal(state.lags, "state.lags", allow_empty=True)
             if lags.size == self.lags.shape[1]:
-                self.dstate[D.DYN_LAGS :] = lags
+                self.dstate[P.DYN_LAGS :] = lags
             elif lags.size:
                 msg = (
                     f"'state.lags' must hold the model's {self.lags.shape[1]} creep lag "
@@ -650,24 +650,24 @@ class PackedInverse(Inverse):
         """See :meth:`~piezohyst.control.inverses.Inverse.precondition`."""
         u = np.empty_like(cycle)
         alphas = self.lags[2]
-        ns = int(self.config[D.CC_NS])
+        ns = int(self.config[P.CC_NS])
         slow = self.kernel_state[ns : self._ns]  # a view: the slow core moves in place
-        a = float(self.config[D.CC_SLOW_A])
+        a = float(self.config[P.CC_SLOW_A])
         last = self.last_command()
         for k, v in enumerate(cycle):
             u[k] = K._advance_dynamics(v, last, self.dyn, self.dstate) if self.dynamic else v
             last = v
-            self.dstate[D.DYN_LAGS :] += alphas * (u[k] - self.dstate[D.DYN_LAGS :])
+            self.dstate[P.DYN_LAGS :] += alphas * (u[k] - self.dstate[P.DYN_LAGS :])
             if slow.size:
                 c = float(slow[0])
-                D.rev_move(self.slow, slow, c + a * (u[k] - c), True, np.zeros(0), False)
+                P.rev_move(self.slow, slow, c + a * (u[k] - c), True, np.zeros(0), False)
         self.kernel_state[:ns] = self.core.propagate(u, self.kernel_state[:ns]).state
-        self.kernel_state[self._ns + D.DS_STATUS + D.DS_LAST] = cycle[-1]
+        self.kernel_state[self._ns + P.DS_STATUS + P.DS_LAST] = cycle[-1]
         return cycle
 
     def inner_step(self, target: float) -> float:
         return float(
-            D.core_step(
+            P.core_step(
                 target,
                 self.params,
                 self.config,
@@ -680,17 +680,17 @@ class PackedInverse(Inverse):
         )
 
     def inner_process(self, d: FloatArray, out: FloatArray) -> None:
-        D.core_process(d, self.delay_samples, self.params, self.config, self.kernel_state,
+        P.core_process(d, self.delay_samples, self.params, self.config, self.kernel_state,
                        self.region, self.dyn, self.dstate, self.trial, out)  # fmt: skip
 
     def closed_loop(self) -> bool:
         return True
 
     def slots(self) -> tuple[int, int]:
-        return int(D.CC_REF), int(D.CC_INV_GAIN)
+        return int(P.CC_REF), int(P.CC_INV_GAIN)
 
     def controller_step(self, d: float, m: float, loop: Loop) -> float:
-        return float(D.core_controller_step(d, m, self.params, loop[0], self.kernel_state,
+        return float(P.core_controller_step(d, m, self.params, loop[0], self.kernel_state,
                                             self.region, self.dyn, self.dstate, self.trial,
                                             loop[1], loop[2]))  # fmt: skip
 
@@ -704,7 +704,7 @@ class PackedInverse(Inverse):
             self.dstate,
             self.trial,
         )
-        D.core_controller_process(d, m, *a, loop[1], loop[2], out)
+        P.core_controller_process(d, m, *a, loop[1], loop[2], out)
 
 
 class PythonInverse(Inverse):

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from .._kernels import signal as _signals
+from .._kernels import signal as S
 from .._validation import FloatArray
 from ..errors import ParameterError
 
@@ -221,9 +221,7 @@ class InputDynamics:
         if st.size != 3 + whole + 2:
             msg = f"the input dynamics state must hold {3 + whole + 2} values. Got {st.size}."
             raise ParameterError(msg)
-        _signals.input_filter(
-            xs, ds, whole, frac, float(self.tau), float(self.sample_interval), st, out
-        )
+        S.input_filter(xs, ds, whole, frac, float(self.tau), float(self.sample_interval), st, out)
         return out, st
 
     def response(self, frequency: Any) -> Any:
@@ -437,7 +435,7 @@ class OutputDynamics:
         """
         ad, bd = self._cached()
         out = np.empty_like(u)
-        _signals.mode_filter(np.ascontiguousarray(u), ad, bd, state, out)
+        S.mode_filter(np.ascontiguousarray(u), ad, bd, state, out)
         return out
 
     def apply(self, y: Any, state: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:

@@ -32,7 +32,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._kernels import signal as _signals
+from .._kernels import signal as S
 from .._validation import FloatArray, as_signal, as_time, same_length
 from ..errors import InsufficientDataError, ModelFileError, ParameterError, warn
 from ..io import JsonFile
@@ -432,7 +432,7 @@ def find_holds(
         msg = f"'settle' must be a fraction in [0, 1). Got {settle!r}."
         raise ParameterError(msg)
     edges = np.empty(x.size + 1, dtype=np.int64)
-    count = _signals.constant_runs(x, tol, edges)
+    count = S.constant_runs(x, tol, edges)
     holds = []
     for k, j in itertools.pairwise(edges[: count + 1]):
         if j - k >= 3:

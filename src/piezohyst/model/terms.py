@@ -55,8 +55,8 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._kernels import packed as D
-from .._kernels import signal as _signals
+from .._kernels import packed as P
+from .._kernels import signal as S
 from .._validation import FloatArray
 from ..errors import ParameterError, ShapeError
 
@@ -343,9 +343,7 @@ class RunningIntegral(Term):
     ) -> FloatArray:
         """See :meth:`Term.columns`: the running integral."""
         out = np.empty((x.size, 1))
-        state[0] = _signals.running_integral(
-            self.integrand(x), _needs_time(self, dt), state[0], out[:, 0]
-        )
+        state[0] = S.running_integral(self.integrand(x), _needs_time(self, dt), state[0], out[:, 0])
         return out
 
     def coefficient_units(self, input_unit: str, output_unit: str) -> tuple[str, ...]:
@@ -608,7 +606,7 @@ class Creep(Term):
     ) -> FloatArray:
         """See :meth:`Term.columns`: the lag outputs (input units)."""
         out = np.empty((x.size, self.width))
-        _signals.lag_filter(x, _needs_time(self, dt), np.asarray(self.taus), state, out)
+        S.lag_filter(x, _needs_time(self, dt), np.asarray(self.taus), state, out)
         return out
 
     def lag_shape(self, coefficients: FloatArray) -> LagShape:
@@ -668,7 +666,7 @@ class Relaxation(Term):
             self.v_range = (lo, hi)
         m = nodes - 1
         self._upper = np.flatnonzero(np.triu(np.ones((m, m))).ravel())  # cells k <= l
-        self._map = D.everett_map(nodes)[:, self._upper]  # Everett nodes from the cells
+        self._map = P.everett_map(nodes)[:, self._upper]  # Everett nodes from the cells
 
     def get_params(self) -> dict[str, Any]:
         """See :meth:`Term.get_params`."""
@@ -692,7 +690,7 @@ class Relaxation(Term):
         lo, hi = self.v_range
         n = self.nodes
         # a Preisach core's packed head (beyond the grid each branch keeps its edge slope)
-        return np.array([D.KIND_PREISACH, n, n, lo, (hi - lo) / (n - 1), 0.0, 0.0, 0.0, 0.0])
+        return np.array([P.KIND_PREISACH, n, n, lo, (hi - lo) / (n - 1), 0.0, 0.0, 0.0, 0.0])
 
     @property
     def width(self) -> int:
@@ -704,7 +702,7 @@ class Relaxation(Term):
         """The slow core's state (its first value is the lagged voltage), then the output's
         derivatives by the Everett values at the nodes since the rest state."""
         core = ("lagged voltage", "output", "direction", "reversals")
-        stack = tuple(f"reversal[{j}]" for j in range(D.STACK))
+        stack = tuple(f"reversal[{j}]" for j in range(P.STACK))
         acc = tuple(f"d output/d E[{j}]" for j in range(self.nodes * self.nodes))
         return core + stack + acc
 
@@ -724,7 +722,7 @@ class Relaxation(Term):
     def rest_state(self, x0: float) -> FloatArray:
         """See :meth:`Term.rest_state`: the lag settled at ``x0``, no reversal yet."""
         z = np.zeros(len(self.state_names))
-        z[0], z[D.RV_K], z[D.RV_R] = float(x0), 1.0, float(x0)
+        z[0], z[P.RV_K], z[P.RV_R] = float(x0), 1.0, float(x0)
         return z
 
     def columns(
@@ -735,12 +733,12 @@ class Relaxation(Term):
         n = self.nodes
         lagged = np.empty((x.size, 1))
         lag = state[0:1].copy()  # the slow core's voltage is the lag's state
-        _signals.lag_filter(x, _needs_time(self, dt), np.array([self.tau]), lag, lagged)
+        S.lag_filter(x, _needs_time(self, dt), np.array([self.tau]), lag, lagged)
         packed = np.concatenate([head, np.zeros(n * n)])
-        core = state[: D.RV_SIZE]  # views: updated in place
-        acc = state[D.RV_SIZE :]
+        core = state[: P.RV_SIZE]  # views: updated in place
+        acc = state[P.RV_SIZE :]
         nodes_cols = np.empty((x.size, n * n))
-        D.rev_columns(packed, np.ascontiguousarray(lagged[:, 0]), core, acc, nodes_cols)
+        P.rev_columns(packed, np.ascontiguousarray(lagged[:, 0]), core, acc, nodes_cols)
         return np.asarray(nodes_cols @ self._map, dtype=np.float64)
 
     def relaxation_shape(self, coefficients: FloatArray) -> RelaxationShape:
@@ -748,7 +746,7 @@ class Relaxation(Term):
         m = self.nodes - 1
         mu = np.zeros(m * m)
         mu[self._upper] = np.maximum(coefficients, 0.0)
-        packed = np.concatenate([self._head(), D.everett_nodes(mu.reshape(m, m)).ravel()])
+        packed = np.concatenate([self._head(), P.everett_nodes(mu.reshape(m, m)).ravel()])
         return RelaxationShape(self.tau, packed)
 
 

@@ -29,7 +29,7 @@ from typing import Literal, cast
 
 import numpy as np
 
-from ..._kernels import packed as D
+from ..._kernels import packed as P
 from ..._kernels import play as K
 from ..._validation import FloatArray
 from ...errors import ParameterError
@@ -392,14 +392,14 @@ def _packed_c(comp: Compensator, prefix: str, precision: Precision) -> CCode:
     """
     p = precision
     params, state = comp.inverse.params, comp.state
-    cfg = _mapped(comp, comp.inverse.config, D.CC_REF, D.CC_INV_GAIN)
+    cfg = _mapped(comp, comp.inverse.config, P.CC_REF, P.CC_INV_GAIN)
     kind = int(params[0])
     n_lags = int(comp.inverse.lags.shape[1])
     has_slow = int(comp.inverse.slow.size > 0)
-    step = float(cfg[D.CC_MAX_STEP])
+    step = float(cfg[P.CC_MAX_STEP])
     has_slew = int(np.isfinite(step))
     region = comp.inverse.region
-    has_region = int(region.shape[1] > 0 and np.isfinite(cfg[D.CC_TOL]))
+    has_region = int(region.shape[1] > 0 and np.isfinite(cfg[P.CC_TOL]))
     lines = [
         f"#define NS {prefix.upper()}_NS",
         f"#define KIND {kind} /* 0 Duhem, 1 Bouc-Wen, 2 Preisach */",
@@ -409,37 +409,37 @@ def _packed_c(comp: Compensator, prefix: str, precision: Precision) -> CCode:
         f"#define HAS_REGION {has_region}",
         f"#define N_LAGS {n_lags} /* kept creep lags beside the core */",
         f"#define SLOW {has_slow} /* a slow (relaxing) Preisach core behind a lag */",
-        f"#define NS_MAIN {int(cfg[D.CC_NS])} /* the core values in st; the slow core next */",
-        f"#define NEWTON_MAX {D.NEWTON_MAX}",
-        f"#define HOLD_RES {D.HOLD_RES!r}",
-        f"#define REGION_BISECTIONS {D.REGION_BISECTIONS}",
-        f"#define STACK {D.STACK}",
+        f"#define NS_MAIN {int(cfg[P.CC_NS])} /* the core values in st; the slow core next */",
+        f"#define NEWTON_MAX {P.NEWTON_MAX}",
+        f"#define HOLD_RES {P.HOLD_RES!r}",
+        f"#define REGION_BISECTIONS {P.REGION_BISECTIONS}",
+        f"#define STACK {P.STACK}",
     ]
     files = ["ieee.c", "packed_util.c"]
-    if kind == int(D.KIND_BOUC_WEN):
-        lines += _constants(p, **{n: params[getattr(D, f"BW_{n if n != 'NEXP' else 'N'}")]
+    if kind == int(P.KIND_BOUC_WEN):
+        lines += _constants(p, **{n: params[getattr(P, f"BW_{n if n != 'NEXP' else 'N'}")]
                                   for n in ("C0", "ALPHA", "BETA", "GAMMA", "NEXP", "OFFSET",
                                             "DV_MAX", "G_MAX", "S_MIN")})  # fmt: skip
         files.append("boucwen.c")
-    elif kind == int(D.KIND_PREISACH):
+    elif kind == int(P.KIND_PREISACH):
         lines.append(_preisach_constants(params, p))
         files += ["preisach_grid.c", "preisach.c"]
     else:
-        nv, nq = int(params[D.DU_NV]), int(params[D.DU_NQ])
+        nv, nq = int(params[P.DU_NV]), int(params[P.DU_NQ])
         cells = nv * nq
         lines += [f"#define NV {nv}", f"#define NQ {nq}"]
-        lines += _constants(p, V_LO=params[D.DU_V_LO], V_STEP=params[D.DU_V_STEP],
-                            Q_LO=params[D.DU_Q_LO], Q_STEP=params[D.DU_Q_STEP],
-                            DV_MAX=params[D.DU_DV_MAX], S_MIN=params[D.DU_F_MIN])  # fmt: skip
+        lines += _constants(p, V_LO=params[P.DU_V_LO], V_STEP=params[P.DU_V_STEP],
+                            Q_LO=params[P.DU_Q_LO], Q_STEP=params[P.DU_Q_STEP],
+                            DV_MAX=params[P.DU_DV_MAX], S_MIN=params[P.DU_F_MIN])  # fmt: skip
         lines += [
-            f"static const real_t UP[NV * NQ] = {_array(params[D.DU_UP : D.DU_UP + cells], p)};",
+            f"static const real_t UP[NV * NQ] = {_array(params[P.DU_UP : P.DU_UP + cells], p)};",
             "static const real_t DOWN[NV * NQ] = "
-            f"{_array(params[D.DU_UP + cells : D.DU_UP + 2 * cells], p)};",
+            f"{_array(params[P.DU_UP + cells : P.DU_UP + 2 * cells], p)};",
         ]
         files.append("duhem.c")
     if has_slow:  # the slow core: the Preisach grid functions again, on its own grid
         lines.append(_preisach_constants(comp.inverse.slow, p, "SLOW_"))
-        lines += _constants(p, SLOW_A=cfg[D.CC_SLOW_A])
+        lines += _constants(p, SLOW_A=cfg[P.CC_SLOW_A])
         files += ["relaxation_begin.h", "preisach_grid.c", "relaxation_end.h"]
     if has_region:
         bins = region.shape[1]
@@ -447,12 +447,12 @@ def _packed_c(comp: Compensator, prefix: str, precision: Precision) -> CCode:
             f"static const real_t REGION_LO[{bins}] = {_array(region[0], p)};",
             f"static const real_t REGION_HI[{bins}] = {_array(region[1], p)};",
         ]
-        lines += _constants(p, RV_LO=cfg[D.CC_RV_LO], RV_HI=cfg[D.CC_RV_HI], TOL=cfg[D.CC_TOL])
-        lines += [f"#define REGION_BINS {bins}", f"#define REFUSE {int(cfg[D.CC_REFUSE] > 0)}"]
-    lines += _constants(p, V_MIN=cfg[D.CC_V_MIN], V_MAX=cfg[D.CC_V_MAX])
+        lines += _constants(p, RV_LO=cfg[P.CC_RV_LO], RV_HI=cfg[P.CC_RV_HI], TOL=cfg[P.CC_TOL])
+        lines += [f"#define REGION_BINS {bins}", f"#define REFUSE {int(cfg[P.CC_REFUSE] > 0)}"]
+    lines += _constants(p, V_MIN=cfg[P.CC_V_MIN], V_MAX=cfg[P.CC_V_MAX])
     if has_slew:
         lines += _constants(p, MAX_STEP=step)
-    lines += _constants(p, SCALE=cfg[D.CC_INV_GAIN], REFERENCE=cfg[D.CC_REF])
+    lines += _constants(p, SCALE=cfg[P.CC_INV_GAIN], REFERENCE=cfg[P.CC_REF])
     lines.append(f"static const real_t ST0[NS] = {_array(state.operators, p)};")
     lines += _constants(p, LAST0=state.command)
     init: list[str] = []
@@ -467,20 +467,20 @@ def _packed_c(comp: Compensator, prefix: str, precision: Precision) -> CCode:
             f"static const real_t LAG_G[N_LAGS] = {_array(comp.inverse.lags[1], p)};",
             f"static const real_t LAG_A[N_LAGS] = {_array(comp.inverse.lags[2], p)};",
         ]
-        init += [f"s->c[{k}] = {_literal(float(comp.inverse.dstate[D.DYN_LAGS + k]), p)};"
+        init += [f"s->c[{k}] = {_literal(float(comp.inverse.dstate[P.DYN_LAGS + k]), p)};"
                  for k in range(n_lags)]  # fmt: skip
     files.append("packed.c")
     lines += _mode(comp, p, init, files)
     lines.append(_init_extra(init))
     spec = comp.spec
-    names = {int(D.KIND_DUHEM): "Duhem", int(D.KIND_PREISACH): "Preisach",
-             int(D.KIND_BOUC_WEN): "Bouc-Wen"}  # fmt: skip
+    names = {int(P.KIND_DUHEM): "Duhem", int(P.KIND_PREISACH): "Preisach",
+             int(P.KIND_BOUC_WEN): "Bouc-Wen"}  # fmt: skip
     header = _template("packed.h").substitute(
         _names(prefix, precision), model=type(comp.model).__name__, core=names[kind],
         input_unit=spec.input_unit, output_unit=spec.output_unit,
         desired_unit="m" if comp.domain == "displacement" else spec.output_unit,
-        v_min=repr(comp.v_min), v_max=repr(comp.v_max), newton_max=D.NEWTON_MAX,
-        libm=" Needs pow() from <math.h> (link with -lm)." if kind == int(D.KIND_BOUC_WEN)
+        v_min=repr(comp.v_min), v_max=repr(comp.v_max), newton_max=P.NEWTON_MAX,
+        libm=" Needs pow() from <math.h> (link with -lm)." if kind == int(P.KIND_BOUC_WEN)
         else "", notes=_notes(comp), ns=comp.n_operators, n_lags=n_lags,
         dynamic=int(comp.dynamic), mode=int(comp.mode.active),
     )  # fmt: skip
@@ -571,8 +571,8 @@ def write_c(
 
 def _preisach_constants(packed: np.ndarray, precision: Precision, prefix: str = "") -> str:
     """A Preisach core's grid and Everett table as C constants (names after ``prefix``)."""
-    n = int(packed[D.DU_NV])
-    lit = [_literal(float(packed[k]), precision) for k in (D.DU_V_LO, D.DU_V_STEP, D.DU_F_MIN)]
+    n = int(packed[P.DU_NV])
+    lit = [_literal(float(packed[k]), precision) for k in (P.DU_V_LO, P.DU_V_STEP, P.DU_F_MIN)]
     # the smallest slope bounds the main core's bracket; a slow core's is not needed
     bracket = [] if prefix else [f"static const real_t S_MIN = {lit[2]};"]
     return "\n".join(
@@ -582,7 +582,7 @@ def _preisach_constants(packed: np.ndarray, precision: Precision, prefix: str = 
             f"static const real_t {prefix}H = {lit[1]};",
             *bracket,
             f"static const real_t {prefix}EV[{prefix}NN * {prefix}NN] = "
-            f"{_array(packed[D.DU_UP : D.DU_UP + n * n], precision)};",
+            f"{_array(packed[P.DU_UP : P.DU_UP + n * n], precision)};",
         ]
     )
 

@@ -34,7 +34,7 @@ from typing import Any, ClassVar, Generic, NamedTuple, TypeVar
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..._kernels import packed as D
+from ..._kernels import packed as P
 from ..._validation import FloatArray, as_signal
 from ...errors import NotInvertibleError, NumericRangeError, ParameterError, ShapeError
 from ...io.blocks import Blocks, Summary
@@ -661,7 +661,7 @@ class PackedCore(Core):
     def n_states(self) -> int:
         """Values in the state: the last input, the internal variable (and, for a Preisach
         core, the direction and the stack of reversal points)."""
-        return int(D.state_size(self.packed))
+        return int(P.state_size(self.packed))
 
     @property
     def is_invertible(self) -> bool:
@@ -671,7 +671,7 @@ class PackedCore(Core):
     @property
     def min_slope(self) -> float:
         """The smallest slope of every step (output per V), which brackets the inverse."""
-        return float(self.packed[D.DU_F_MIN])  # Bouc-Wen keeps its own slot
+        return float(self.packed[P.DU_F_MIN])  # Bouc-Wen keeps its own slot
 
     def _state(self, state: ArrayLike | None) -> FloatArray:
         if state is None:
@@ -690,13 +690,13 @@ class PackedCore(Core):
         xs = as_signal(x, "x", allow_empty=True)
         z = self._state(state)
         y = np.empty_like(xs)
-        D.core_propagate(self.packed, xs, z, y)
+        P.core_propagate(self.packed, xs, z, y)
         return Propagation(y, z)
 
     def output(self, state: ArrayLike) -> float:
         """See :meth:`~piezohyst.model.cores.base.Core.output`."""
         z = self._state(state)
-        return float(D.core_output(self.packed, z))
+        return float(P.core_output(self.packed, z))
 
     def _repeats(self, z: FloatArray, before: FloatArray) -> bool:
         # the voltage and the memory repeat; the output is compared in output units

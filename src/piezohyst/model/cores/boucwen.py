@@ -17,7 +17,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ..._kernels import packed as D
+from ..._kernels import packed as P
 from ..._validation import FloatArray
 from ...errors import InsufficientDataError, ParameterError, ShapeError
 from ._inmemory import (
@@ -119,7 +119,7 @@ class BoucWenHysteresis(PackedCore):
             msg = f"'dv_max' must be > 0. Got {dv!r}."
             raise ParameterError(msg)
         object.__setattr__(self, "dv_max", dv)
-        packed = np.array([D.KIND_BOUC_WEN, vals["c0"], vals["alpha"], vals["beta"],
+        packed = np.array([P.KIND_BOUC_WEN, vals["c0"], vals["alpha"], vals["beta"],
                            vals["gamma"], vals["n"], vals["offset"], dv, g_max, s_min])  # fmt: skip
         packed.flags.writeable = False
         object.__setattr__(self, "packed", packed)
@@ -138,7 +138,7 @@ class BoucWenHysteresis(PackedCore):
         cores keep it in holds Bouc-Wen's ``g_max``, which this property returned before
         (a dimensionless 2.06 for a slope of 6e-9 C/V; the kernels read the right slot).
         """
-        return float(self.packed[D.BW_S_MIN])
+        return float(self.packed[P.BW_S_MIN])
 
     @property
     def summary(self) -> str:
@@ -226,7 +226,7 @@ def _solve(job: Solving) -> tuple[BoucWenHysteresis, list[FloatArray]]:
         beta, gamma, expo = shape(theta)
         h_sat = span * math.exp(float(theta[0]))
         g_max = 2.0 * beta / (beta + gamma)
-        return np.array([D.KIND_BOUC_WEN, 1.0, 0.0, beta, gamma, expo, 0.0, 0.1 * h_sat,
+        return np.array([P.KIND_BOUC_WEN, 1.0, 0.0, beta, gamma, expo, 0.0, 0.1 * h_sat,
                          g_max, 1.0])  # fmt: skip
 
     def solver(xv: FloatArray, yv: FloatArray, gv: FloatArray, rows: np.ndarray) -> Any:
@@ -245,9 +245,9 @@ def _solve(job: Solving) -> tuple[BoucWenHysteresis, list[FloatArray]]:
                                       np.array([xv[0], 0.0]), p[7])  # fmt: skip
             start = _start_inner(probe, xv, initial_state)
             h0 = 0.0 if start is None else float(start[1])
-            D.bw_trace(p, xv, h0, hv)
+            P.bw_trace(p, xv, h0, hv)
             hr, xr = hv[rows], xv[rows]
-            g_max = float(p[D.BW_G_MAX])
+            g_max = float(p[P.BW_G_MAX])
             best_fit: tuple[float, float, FloatArray, FloatArray, float] | None = None
             for second in (hr, g_max * xr - hr):
                 a = np.vstack([xr, second, np.ones(rows.size), g_rows]).T
@@ -298,9 +298,9 @@ def _solve(job: Solving) -> tuple[BoucWenHysteresis, list[FloatArray]]:
     h = np.empty(n)
     beta, gamma, expo = shape(theta)
     p = packed(theta)
-    g_max = float(p[D.BW_G_MAX])
+    g_max = float(p[P.BW_G_MAX])
     c0 = max(c0, s_min * (1 + 1e-12) - min(alpha, 0.0) * g_max, s_min)
-    D.bw_trace(p, x, h0, h)
+    P.bw_trace(p, x, h0, h)
     offset = float(rest[0])
     pure = c0 * x + alpha * h + offset
     core = BoucWenHysteresis(c0, alpha, beta, gamma, expo, offset, np.array([x[0], h0]), p[7],

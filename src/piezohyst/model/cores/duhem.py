@@ -18,7 +18,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..._kernels import packed as D
+from ..._kernels import packed as P
 from ..._validation import FloatArray
 from ...errors import InsufficientDataError, ParameterError, ShapeError
 from ._inmemory import (
@@ -100,7 +100,7 @@ class DuhemHysteresis(PackedCore):
                             ("initial_state", z0), ("dv_max", dv)):  # fmt: skip
             object.__setattr__(self, name, value)
         f_min = min(float(up.min()), float(down.min()))
-        head = [D.KIND_DUHEM, vn.size, qn.size, vn[0], v_step, qn[0],
+        head = [P.KIND_DUHEM, vn.size, qn.size, vn[0], v_step, qn[0],
                 (qn[-1] - qn[0]) / (qn.size - 1), dv, f_min]  # fmt: skip
         packed = np.concatenate([head, up.ravel(), down.ravel()])
         packed.flags.writeable = False
@@ -122,14 +122,14 @@ class DuhemHysteresis(PackedCore):
         -------
         DuhemHysteresis
         """
-        nv, nq = int(packed[D.DU_NV]), int(packed[D.DU_NQ])
-        vn = packed[D.DU_V_LO] + packed[D.DU_V_STEP] * np.arange(nv)
-        qn = packed[D.DU_Q_LO] + packed[D.DU_Q_STEP] * np.arange(nq)
+        nv, nq = int(packed[P.DU_NV]), int(packed[P.DU_NQ])
+        vn = packed[P.DU_V_LO] + packed[P.DU_V_STEP] * np.arange(nv)
+        qn = packed[P.DU_Q_LO] + packed[P.DU_Q_STEP] * np.arange(nq)
         cells = nv * nq
-        up = packed[D.DU_UP : D.DU_UP + cells].reshape(nv, nq)
-        down = packed[D.DU_UP + cells : D.DU_UP + 2 * cells].reshape(nv, nq)
+        up = packed[P.DU_UP : P.DU_UP + cells].reshape(nv, nq)
+        down = packed[P.DU_UP + cells : P.DU_UP + 2 * cells].reshape(nv, nq)
         z0 = np.asarray(initial_state, dtype=np.float64)
-        return cls(vn, qn, up, down, z0, region, float(packed[D.DU_DV_MAX]))
+        return cls(vn, qn, up, down, z0, region, float(packed[P.DU_DV_MAX]))
 
     @property
     def summary(self) -> str:
@@ -155,8 +155,8 @@ class DuhemHysteresis(PackedCore):
         va = np.asarray(v, dtype=np.float64).reshape(-1)
         qa = np.asarray(q, dtype=np.float64).reshape(-1)
         pairs = list(zip(va, qa, strict=True))
-        up = np.array([D.duhem_slope(self.packed, a, b, True)[0] for a, b in pairs])
-        down = np.array([D.duhem_slope(self.packed, a, b, False)[0] for a, b in pairs])
+        up = np.array([P.duhem_slope(self.packed, a, b, True)[0] for a, b in pairs])
+        down = np.array([P.duhem_slope(self.packed, a, b, False)[0] for a, b in pairs])
         return up, down
 
     def describe(self, input_unit: str, output_unit: str) -> list[tuple[str, str]]:
@@ -219,7 +219,7 @@ def _solve(job: Solving) -> tuple[DuhemHysteresis, list[FloatArray]]:
     lo, hi = float(qh.min()), float(qh.max())
     pad = 0.02 * (hi - lo)
     v_step = float(np.ptp(x)) / (nv - 1)
-    head = [D.KIND_DUHEM, nv, nq, float(x.min()), v_step, lo - pad,
+    head = [P.KIND_DUHEM, nv, nq, float(x.min()), v_step, lo - pad,
             (hi - lo + 2 * pad) / (nq - 1), 0.25 * v_step, s_min]  # fmt: skip
     packed = np.concatenate([head, np.zeros(2 * cells)])
     penalty = _curvature(nv, nq)
@@ -227,7 +227,7 @@ def _solve(job: Solving) -> tuple[DuhemHysteresis, list[FloatArray]]:
     # integrated regression: the output is q0 plus the slopes summed along the measured
     # path; linear in the slopes, noise enters through the path only
     cum = np.empty((rows.size, 2 * cells))
-    D.duhem_cumulative(packed, x, qh, rows, cum)
+    P.duhem_cumulative(packed, x, qh, rows, cum)
     a = np.hstack([cum, np.ones((rows.size, 1))])
     gram = a.T @ a
     weight = smoothing * max(float(np.mean(np.diag(gram)[:-1])), 1e-300)
@@ -235,7 +235,7 @@ def _solve(job: Solving) -> tuple[DuhemHysteresis, list[FloatArray]]:
         sl = slice(half, half + cells)
         gram[sl, sl] += weight * penalty
     sol = _bounded_lstsq(gram, a.T @ qh[rows], np.append(np.full(2 * cells, s_min), -np.inf))
-    packed[D.DU_UP :] = np.maximum(sol[:-1], s_min)
+    packed[P.DU_UP :] = np.maximum(sol[:-1], s_min)
     q0 = float(sol[-1])
     # the state is (v, q): the record's own first output says where q starts, better
     # than any history run through a model still being fitted, so q0 is always fitted
@@ -281,7 +281,7 @@ def _curvature(nv: int, nq: int) -> FloatArray:
 def _sse(packed: FloatArray, q0: float, x: FloatArray, q: FloatArray) -> float:
     """Squared output error of a Duhem core simulated from q0 (inf if it blows up)."""
     sim = np.empty(x.size)
-    D.duhem_jacobian(packed, x, q0, np.zeros(0, dtype=np.int64), sim, np.zeros((0, 1)))
+    P.duhem_jacobian(packed, x, q0, np.zeros(0, dtype=np.int64), sim, np.zeros((0, 1)))
     r = sim - q
     total = float(r @ r)
     return total if np.isfinite(total) else math.inf
@@ -298,7 +298,7 @@ def _ratchet(packed: FloatArray, q0: float, x: FloatArray) -> float:
         legs += [hi + (lo - hi) * leg, lo + (hi - lo) * leg]
     path = np.concatenate(legs)
     sim = np.empty(path.size)
-    D.duhem_jacobian(packed, path, q0, np.zeros(0, dtype=np.int64), sim, np.zeros((0, 1)))
+    P.duhem_jacobian(packed, path, q0, np.zeros(0, dtype=np.int64), sim, np.zeros((0, 1)))
     tops = sim[CYCLE_LEG - 1 :: 2 * CYCLE_LEG]
     span = float(np.ptp(sim[-2 * CYCLE_LEG :]))
     move = abs(float(tops[-1] - tops[-2])) / max(span, 1e-300)
@@ -320,7 +320,7 @@ def _refine_duhem(
     simulated output, with the exact sensitivities of the simulation as its Jacobian."""
     from scipy.optimize import least_squares
 
-    cells2 = packed.size - D.DU_UP
+    cells2 = packed.size - P.DU_UP
     cells = cells2 // 2
     rows = _picked_rows(x.size, REFINE_ROWS)
     scale = max(float(np.ptp(q)), 1e-300)
@@ -331,28 +331,28 @@ def _refine_duhem(
     jac_core = np.empty((rows.size, cells2 + 1))
     no_rows = np.zeros(0, dtype=np.int64)
     no_jac = np.zeros((0, cells2 + 1))
-    theta0 = np.concatenate([packed[D.DU_UP :], [q0] if fit_q0 else []])
+    theta0 = np.concatenate([packed[P.DU_UP :], [q0] if fit_q0 else []])
 
     def split(theta: FloatArray) -> tuple[FloatArray, float]:
         p = packed.copy()
-        p[D.DU_UP :] = theta[:cells2]
+        p[P.DU_UP :] = theta[:cells2]
         return p, float(theta[-1]) if fit_q0 else q0
 
     p0, start = split(theta0)
-    D.duhem_jacobian(p0, x, start, rows, qsim, jac_core)
+    P.duhem_jacobian(p0, x, start, rows, qsim, jac_core)
     # the curvature penalty has the weight it had in the linear fit, relative to the data
     col = float(np.mean(np.sum(jac_core[:, :cells2] ** 2, axis=0))) / scale**2
     w_pen = math.sqrt(smoothing * max(col, 1e-300))
 
     def residual(theta: FloatArray) -> FloatArray:
         p, qq = split(theta)
-        D.duhem_jacobian(p, x, qq, no_rows, qsim, no_jac)
+        P.duhem_jacobian(p, x, qq, no_rows, qsim, no_jac)
         pen = [w_pen * (root @ theta[h : h + cells]) for h in (0, cells)]
         return np.concatenate([(qsim[rows] - q_rows) / scale, *pen])
 
     def jacobian(theta: FloatArray) -> FloatArray:
         p, qq = split(theta)
-        D.duhem_jacobian(p, x, qq, rows, qsim, jac_core)
+        P.duhem_jacobian(p, x, qq, rows, qsim, jac_core)
         top = jac_core if fit_q0 else jac_core[:, :cells2]
         pen = np.zeros((2 * root.shape[0], theta.size))
         pen[: root.shape[0], :cells] = w_pen * root
@@ -366,5 +366,5 @@ def _refine_duhem(
         x_scale="jac", max_nfev=REFINE_EVALS, tr_solver="exact",
     )  # fmt: skip
     p, qq = split(res.x)
-    p[D.DU_UP :] = np.maximum(p[D.DU_UP :], s_min)
+    p[P.DU_UP :] = np.maximum(p[P.DU_UP :], s_min)
     return p, qq

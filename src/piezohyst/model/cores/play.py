@@ -19,7 +19,7 @@ import numpy as np
 import numpy.typing as npt
 from numpy.typing import ArrayLike
 
-from ..._kernels import play as _kernels
+from ..._kernels import play as K
 from ..._validation import FloatArray, as_signal, check_int
 from ...errors import NotInvertibleError, NumericRangeError, ParameterError, ShapeError
 from ...io.blocks import Blocks, Summary, array_blocks, without_time
@@ -157,7 +157,7 @@ class PIHysteresis(Core):
         xs = as_signal(x, "x", allow_empty=True)
         z = self._state(state)
         y = np.empty_like(xs)
-        _kernels.pi_forward(xs, self.thresholds, self.weights, z, y)
+        K.pi_forward(xs, self.thresholds, self.weights, z, y)
         if self.offset != 0.0:
             y += self.offset
         return Propagation(y, z)
@@ -316,9 +316,9 @@ class PIHysteresis(Core):
     ) -> Callable[[FloatArray, Any], FloatArray | None] | None:
         """See :meth:`~piezohyst.model.cores.base.Core.fast_plan`."""
         if not terms:
-            kind, coef = _kernels.FAST_NONE, 0.0
+            kind, coef = K.FAST_NONE, 0.0
         elif len(terms) == 1 and type(terms[0]) in (Integral, TimeTerm):
-            kind = _kernels.FAST_INTEGRAL if terms[0].kind == "integral" else _kernels.FAST_TIME
+            kind = K.FAST_INTEGRAL if terms[0].kind == "integral" else K.FAST_TIME
             coef = float(coefs[0][0])
         else:
             return None
@@ -326,11 +326,11 @@ class PIHysteresis(Core):
 
         def plan(x: FloatArray, t: Any) -> FloatArray | None:
             timed = t is not None
-            if (not timed and kind == _kernels.FAST_NONE) or (
+            if (not timed and kind == K.FAST_NONE) or (
                 type(t) is np.ndarray and t.dtype == np.float64 and t.shape == x.shape
             ):
                 out = np.empty(x.size)
-                if _kernels.fast_predict(x, t if timed else x, timed, r, w, z0, offset, kind,
+                if K.fast_predict(x, t if timed else x, timed, r, w, z0, offset, kind,
                                          coef, out) < 0:  # fmt: skip
                     return out
             return None
@@ -438,7 +438,7 @@ class PlayCore:
         block : ndarray, shape (M, p), M >= N
             Destination; its offset column (``n``) must already hold 1.
         """
-        _kernels.play_states(x, self.thresholds, state, block)
+        K.play_states(x, self.thresholds, state, block)
 
     def fill_rows(
         self, x: FloatArray, state: FloatArray, rows: npt.NDArray[np.intp], block: FloatArray
@@ -453,7 +453,7 @@ class PlayCore:
         rows : ndarray of int, sorted
         block : ndarray, shape (len(rows), p)
         """
-        _kernels.play_states_rows(x, self.thresholds, state, rows, block)
+        K.play_states_rows(x, self.thresholds, state, rows, block)
 
     def slope_map(self, p: int) -> FloatArray:
         """Matrix M with ``parameters = M @ (slopes, other parameters)``.
@@ -520,7 +520,7 @@ def history_state(
     h = as_signal(history, "history")
     thr = as_signal(thresholds, "thresholds")
     z = np.full(thr.size, h[0]) if state is None else np.array(state, dtype=np.float64)
-    _kernels.pi_forward(h, thr, np.zeros(thr.size), z, np.empty_like(h))
+    K.pi_forward(h, thr, np.zeros(thr.size), z, np.empty_like(h))
     return z
 
 

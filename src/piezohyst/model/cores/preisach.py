@@ -20,7 +20,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..._kernels import packed as D
+from ..._kernels import packed as P
 from ..._kernels import signal as S
 from ..._validation import FloatArray, as_signal
 from ...errors import InsufficientDataError, ParameterError, ShapeError
@@ -140,8 +140,8 @@ class PreisachHysteresis(PackedCore):
             raise ParameterError(msg)
         mu.flags.writeable = False
         z0 = _frozen(self.initial_state, "initial_state")
-        if z0.size != D.RV_SIZE:
-            msg = f"'initial_state' of a Preisach core holds {D.RV_SIZE} values. Got {z0.size}."
+        if z0.size != P.RV_SIZE:
+            msg = f"'initial_state' of a Preisach core holds {P.RV_SIZE} values. Got {z0.size}."
             raise ShapeError(msg)
         object.__setattr__(self, "nodes", nodes)
         object.__setattr__(self, "density", mu)
@@ -149,8 +149,8 @@ class PreisachHysteresis(PackedCore):
         h = (nodes[-1] - nodes[0]) / (n - 1)
         s_min = float(branch_sums(mu).min()) / h  # a true lower bound: the solve's bracket
         s_out = float(np.diag(mu).min()) / h  # the smallest reversible slope (kept in the layout)
-        head = [D.KIND_PREISACH, n, n, nodes[0], h, s_out, 0.0, 0.0, s_min]
-        packed = np.concatenate([head, D.everett_nodes(mu).ravel()])
+        head = [P.KIND_PREISACH, n, n, nodes[0], h, s_out, 0.0, 0.0, s_min]
+        packed = np.concatenate([head, P.everett_nodes(mu).ravel()])
         packed.flags.writeable = False
         object.__setattr__(self, "packed", packed)
 
@@ -171,15 +171,15 @@ class PreisachHysteresis(PackedCore):
     def rest_state(self, x0: float) -> FloatArray:
         """See :meth:`~piezohyst.model.cores.base.Core.rest_state`."""
         q = self.region.middle(x0) if self.region is not None else float(self.initial_state[1])
-        z = np.zeros(D.RV_SIZE)
+        z = np.zeros(P.RV_SIZE)
         x0 = float(x0)
-        z[0], z[1], z[D.RV_K], z[D.RV_R] = x0, q, 1.0, x0
+        z[0], z[1], z[P.RV_K], z[P.RV_R] = x0, q, 1.0, x0
         amp = min(x0 - float(self.nodes[0]), float(self.nodes[-1]) - x0)
         if self.virgin and amp > 0:
             points = x0 - amp * (-DEMAG_RATIO) ** np.arange(DEMAG_POINTS)
-            z[D.RV_R : D.RV_R + DEMAG_POINTS] = points
-            z[D.RV_K] = DEMAG_POINTS
-            z[D.RV_DIR] = -1.0 if points[-1] > x0 else 1.0
+            z[P.RV_R : P.RV_R + DEMAG_POINTS] = points
+            z[P.RV_K] = DEMAG_POINTS
+            z[P.RV_DIR] = -1.0 if points[-1] > x0 else 1.0
         return z
 
     def everett(self, a: ArrayLike, b: ArrayLike) -> FloatArray:
@@ -198,7 +198,7 @@ class PreisachHysteresis(PackedCore):
             np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
         )
         out = np.array(
-            [D.everett(self.packed, x, y)[0] for x, y in zip(aa.ravel(), bb.ravel(), strict=True)]
+            [P.everett(self.packed, x, y)[0] for x, y in zip(aa.ravel(), bb.ravel(), strict=True)]
         )
         return out.reshape(aa.shape)
 
@@ -211,7 +211,7 @@ class PreisachHysteresis(PackedCore):
                      f"{self.nodes[-1]:.6g}] {input_unit}"),
             ("density", f"{mu.sum():.4g} {output_unit} in all, "
                         f"{np.trace(mu) / mu.sum():.1%} on the diagonal (reversible)"),
-            ("smallest slope", f"{self.packed[D.DU_F_MIN]:.4g} {output_unit}/{input_unit}"),
+            ("smallest slope", f"{self.packed[P.DU_F_MIN]:.4g} {output_unit}/{input_unit}"),
         ]  # fmt: skip
 
     def to_dict(self) -> dict[str, Any]:
@@ -304,9 +304,9 @@ def _density_solver(
         raise InsufficientDataError(msg)
     ng = g_mat.shape[1]
     lower_g = np.concatenate([term.lower_bounds() for term in terms]) if terms else np.zeros(0)
-    packed = np.concatenate([[D.KIND_PREISACH, n, n, nodes[0], h, 0.0, 0.0, 0.0, s_min],
+    packed = np.concatenate([[P.KIND_PREISACH, n, n, nodes[0], h, 0.0, 0.0, 0.0, s_min],
                              np.zeros(n * n)])  # fmt: skip
-    probe = PreisachHysteresis(nodes, np.eye(m), np.zeros(D.RV_SIZE), virgin=virgin)
+    probe = PreisachHysteresis(nodes, np.eye(m), np.zeros(P.RV_SIZE), virgin=virgin)
     start = _start_inner(probe, x, initial_state)  # the reversal stack before the record
     z0 = probe.rest_state(float(x[0])) if start is None else start
     # Everett nodes from the parameters: a density >= 0 on the cells (tied where the data only
@@ -316,7 +316,7 @@ def _density_solver(
     m_pi = m if with_pi else 0  # the PI part's columns, when asked for
     to_cells = np.hstack([cells, (_width_matrix(m, upper) @ _from_partial_sums(m))[:, :m_pi]])
     n_all = n_par + m_pi
-    to_nodes = np.ascontiguousarray(D.everett_map(n)[:, upper] @ to_cells)
+    to_nodes = np.ascontiguousarray(P.everett_map(n)[:, upper] @ to_cells)
     extra = np.hstack([g_mat, np.ones((rows.size, 1))])
     width = n_all + ng + 1
     gram = np.zeros((width, width))
@@ -328,7 +328,7 @@ def _density_solver(
         stop = int(picked[-1]) + 1
         begin = 0 if s0 == 0 else int(rows[s0 - 1]) + 1
         design = np.empty((picked.size, n_all))
-        D.rev_design(
+        P.rev_design(
             packed, x[begin:stop], st, picked - begin, acc, begin == 0, to_nodes, tmp, design
         )
         a = np.hstack([design, extra[s0 : s0 + picked.size]])
