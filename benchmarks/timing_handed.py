@@ -10,7 +10,9 @@ one-second trials; width of the true displacement after the last, seed 0):
 * ``--study record``: what ``piezohyst excite --kind multifreq`` plays (loops at 1, 10 and 40 Hz),
   fitted with ``--input-dynamics record`` (the lag kept where the fit determines it), with the
   lag kept whatever its interval (``auto``), and with the record's lag estimate stated to the
-  harmonic law with its 95 % interval as the tolerance.
+  harmonic law with its 95 % interval as the tolerance;
+* ``--study auto``: the same record, the model chosen by ``piezohyst fit --model auto
+  --input-dynamics auto`` (every candidate identified with its lag), learned with the default law.
 
 Run: ``python benchmarks/timing_handed.py --study injected [--plants bench,duhem]``.
 Uses the tests' learning rig (tests/control/learning_rigs.py). Not a test: nothing here
@@ -38,7 +40,7 @@ from tests.control.learning_rigs import Rig, make_rig, scan
 import piezohyst as ph
 from piezohyst.model.dynamics import InputDynamics
 from piezohyst.simulation import PLANTS, PRESETS
-from piezohyst.workflows import fit_file
+from piezohyst.workflows import fit_file, select_file
 from piezohyst.workflows.excitation import excitation
 
 warnings.simplefilter("ignore")
@@ -86,6 +88,20 @@ def record(rig: Rig) -> str:
     return "; ".join(rows)
 
 
+def auto(rig: Rig) -> str:
+    played = excitation("multifreq", v_min=0.0, v_max=140.0, sample_rate=1000.0)
+    ident = ph.simulate(played.voltage, played.t, preset=rig.preset, seed=1)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "excite.csv"
+        ph.write_table(path, {"time": ident.t, "voltage": ident.voltage, "charge": ident.charge})
+        model = select_file(path, input_dynamics="auto").model
+    dyn = model.input_dynamics_
+    return f"chose {type(model).__name__}, {dyn.kind} (lag {1e3 * dyn.tau:.2f} ms, delay " + (
+        f"{1e3 * dyn.delay:.2f} ms); "
+        + "; ".join(f"{f:.0f} Hz {width(rig, model, f, law='auto')} %" for f in (10.0, 40.0))
+    )
+
+
 def _stated(rig: Rig, model: ph.HysteresisModel, f: float, lag: float, tol: float) -> str:
     """The harmonic law with the record's lag stated and its interval as the tolerance."""
     import tests.control.learning_rigs as rigs
@@ -100,7 +116,7 @@ def _stated(rig: Rig, model: ph.HysteresisModel, f: float, lag: float, tol: floa
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--study", choices=("injected", "record"), default="injected")
+    parser.add_argument("--study", choices=("injected", "record", "auto"), default="injected")
     parser.add_argument(
         "--plants", default="bench," + ",".join(p for p in PLANTS if p != "preisach")
     )
@@ -109,7 +125,7 @@ def main() -> None:
         base = PRESETS["T226-H4-203X-amp4ms"] if name == "bench" else PLANTS[name]
         t0 = time.perf_counter()
         rig = make_rig(replace(base, amp_tau=TAU, name=f"{name}-0"), lambda: ph.ActivePI(10))
-        said = injected(rig) if args.study == "injected" else record(rig)
+        said = {"injected": injected, "record": record, "auto": auto}[args.study](rig)
         print(f"{name} ({time.perf_counter() - t0:.0f} s): {said}", flush=True)
 
 
