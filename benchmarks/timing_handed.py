@@ -28,8 +28,10 @@ import sys
 import tempfile
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
@@ -45,6 +47,7 @@ from piezohyst.workflows.excitation import excitation
 
 warnings.simplefilter("ignore")
 TAU = 4e-3
+T = TypeVar("T")
 TRIALS = 11  # the lead-in, then 10 learned
 
 
@@ -64,15 +67,21 @@ def injected(rig: Rig) -> str:
     )
 
 
-def record(rig: Rig) -> str:
+def fitted_on_excite(rig: Rig, fit: Callable[[Path], T]) -> T:
+    """``fit`` of the file a lab records when it plays ``piezohyst excite --kind multifreq``
+    (loops at 1, 10 and 40 Hz) on the rig's plant."""
     played = excitation("multifreq", v_min=0.0, v_max=140.0, sample_rate=1000.0)
     ident = ph.simulate(played.voltage, played.t, preset=rig.preset, seed=1)
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "excite.csv"
         ph.write_table(path, {"time": ident.t, "voltage": ident.voltage, "charge": ident.charge})
-        kept = fit_file(path, input_dynamics="record")
-        auto = fit_file(path, input_dynamics="auto")
-        none = fit_file(path, input_dynamics="none")
+        return fit(path)
+
+
+def record(rig: Rig) -> str:
+    kept, auto, none = fitted_on_excite(
+        rig, lambda p: [fit_file(p, input_dynamics=how) for how in ("record", "auto", "none")]
+    )
     dyn = auto.input_dynamics_
     cov = np.array(dyn.covariance).reshape(2, 2) if dyn.covariance else np.zeros((2, 2))
     lag = dyn.tau + dyn.delay
@@ -89,12 +98,7 @@ def record(rig: Rig) -> str:
 
 
 def auto(rig: Rig) -> str:
-    played = excitation("multifreq", v_min=0.0, v_max=140.0, sample_rate=1000.0)
-    ident = ph.simulate(played.voltage, played.t, preset=rig.preset, seed=1)
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "excite.csv"
-        ph.write_table(path, {"time": ident.t, "voltage": ident.voltage, "charge": ident.charge})
-        model = select_file(path, input_dynamics="auto").model
+    model = fitted_on_excite(rig, lambda p: select_file(p, input_dynamics="auto").model)
     dyn = model.input_dynamics_
     return f"chose {type(model).__name__}, {dyn.kind} (lag {1e3 * dyn.tau:.2f} ms, delay " + (
         f"{1e3 * dyn.delay:.2f} ms); "
