@@ -17,10 +17,12 @@ module                   commands (functions)
                          (:func:`fit_file`, :func:`select_file`, :func:`compare_file`,
                          :func:`predict_file`, :class:`Prediction`)
 ``compensate``           ``compensate`` (:func:`compensate_file`, :class:`Compensation`)
-``control_files``        ``calibrate-leakage``, ``calibrate-gain``, ``export-*``,
-                         ``simulate-loop``, ``report`` (:func:`calibrate_leakage_file`,
-                         :func:`calibrate_gain_file`, :func:`export_file`,
-                         :func:`simulate_loop_file`, :class:`LoopRun`, :func:`model_report`)
+``calibrate_files``      ``calibrate-leakage``, ``calibrate-gain`` (:func:`calibrate_leakage_file`,
+                         :func:`calibrate_gain_file`)
+``export_files``         ``export-c``, ``export-fmu`` (:func:`export_file`: C, a shared library, a
+                         MEX gateway or an FMU, by the output file)
+``loop_files``           ``simulate-loop`` (:func:`simulate_loop_file`, :class:`LoopRun`)
+``report_files``         ``report`` (:func:`model_report`)
 ``learning_files``       ``learn`` (``learn_file``)
 ``fleet``                ``fit-many``: a fleet of records on Dask (``fit_many``)
 ``excitation``           the voltages ``excite`` plays (``excitation``, ``Excitation``)
@@ -32,17 +34,13 @@ module                   commands (functions)
 from __future__ import annotations
 
 from ._base import guard_outputs
+from .calibrate_files import calibrate_gain_file, calibrate_leakage_file
 from .compensate import Compensation, compensate_file
-from .control_files import (
-    LoopRun,
-    calibrate_gain_file,
-    calibrate_leakage_file,
-    export_file,
-    model_report,
-    simulate_loop_file,
-)
+from .export_files import export_file
+from .loop_files import LoopRun, simulate_loop_file
 from .model_files import Prediction, compare_file, fit_file, predict_file, select_file
 from .record_files import excite_file, simulate_file
+from .report_files import model_report
 
 __all__ = [
     "Compensation",
