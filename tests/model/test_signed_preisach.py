@@ -70,11 +70,11 @@ def test_every_branch_of_a_signed_model_increases(fitted: dict[object, ph.Preisa
 def test_a_density_with_a_falling_branch_is_refused() -> None:
     nodes = np.linspace(0.0, 30.0, 4)
     good = np.triu(np.full((3, 3), -0.2)) + np.diag([1.0, 1.0, 1.0])
-    PreisachHysteresis(nodes, good, np.zeros(ph.model.cores.preisach.D.RV_SIZE))  # sums 0.6 > 0
+    PreisachHysteresis(nodes, good, np.zeros(ph.model.cores.preisach.P.RV_SIZE))  # sums 0.6 > 0
     bad = good.copy()
     bad[0, 2] = -2.0  # the row from cell (0, 0) sums to -1.2 at its end
     with pytest.raises(ph.ParameterError, match="sums from the diagonal"):
-        PreisachHysteresis(nodes, bad, np.zeros(ph.model.cores.preisach.D.RV_SIZE))
+        PreisachHysteresis(nodes, bad, np.zeros(ph.model.cores.preisach.P.RV_SIZE))
     with pytest.raises(ph.ParameterError, match="'signed'"):
         ph.PreisachModel(signed="maybe").fit(nodes, nodes)
 
