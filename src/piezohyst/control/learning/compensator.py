@@ -46,7 +46,8 @@ from ...model.leakage import Leakage
 from ..calibration import OutputMap
 from ..compensator import Compensator, Domain
 from .design import LearningDesign, design_learning
-from .jacobian import MAX_SAMPLES, damped_step, trial_jacobian, uniform_shift
+from .jacobian import MAX_SAMPLES
+from .laws import LAWS, Evidence, Law
 from .probe import Response, probe_bins, probe_signal, response
 from .trial import (
     anti_windup,
@@ -148,30 +149,6 @@ def _digest(values: Any) -> str:
 #: The most a noise gate can ask (``noise_gate``): a bin learned only above 100 times the
 #: noise's power (10 times its amplitude)
 GATE_MAX = 100.0
-
-
-def _gated(design: LearningDesign, e: FloatArray, gate: float) -> Any:
-    """The spectrum of ``e`` without the bins whose power is below ``gate`` times the
-    measurement noise's per bin (``design.noise``; see ``noise_gate``)."""
-    err = np.fft.rfft(e)
-    if gate > 0 and math.isfinite(design.noise) and design.noise > 0:
-        quiet = np.abs(err) ** 2 < gate * design.noise**2 * e.size
-        quiet[0] = False  # a sensor's offset is learned whole
-        err[quiet] = 0.0
-    return err
-
-
-def _update(
-    design: LearningDesign, gain: float, base: FloatArray, e: FloatArray, sensor: bool,
-    gate: float = 0.0,
-) -> FloatArray:  # fmt: skip
-    """``Q (base + gain L e)``, over the periodic trial; the mean is kept for a charge. With a
-    ``gate``, the bins of ``e`` whose power is below ``gate`` times the measurement noise's
-    per bin (``design.noise``) are not learned (see ``noise_gate``)."""
-    old, err = np.fft.rfft(base), _gated(design, e, gate)
-    spectrum = old + gain * design.l() * err
-    spectrum[0] = old[0] + (gain * err[0] if sensor else 0.0)
-    return np.fft.irfft(design.q() * spectrum, n=base.size)
 
 
 def _lead(data: Any, n: int) -> tuple[FloatArray, FloatArray] | None:
@@ -289,15 +266,6 @@ def _first_design(
     return design
 
 
-def _jacobian_said(design: LearningDesign) -> str:
-    """The Jacobian law's :meth:`LearningCompensator.describe`."""
-    return (
-        f"the Jacobian law, learning gain {design.gain:.3g}, cutoff {design.cutoff:.4g} Hz (the "
-        "harmonic law's design; its condition does not bound this law: a trial whose error "
-        "grows is undone and the gain halved)"
-    )
-
-
 def _responder(learner: LearningCompensator) -> Any:
     """Commands -> the model's output in the desired's units, the trial run after itself (its
     input dynamics, the gain or map included)."""
@@ -312,23 +280,6 @@ def _responder(learner: LearningCompensator) -> Any:
         return _in_desired(learner, q)
 
     return respond
-
-
-def _jacobian_step(
-    learner: LearningCompensator, u: FloatArray, e: FloatArray, sensor: bool
-) -> FloatArray:
-    """The Jacobian law's move of the commands (see :mod:`.jacobian`)."""
-    design, s = learner.design, learner.settings
-    assert design is not None
-    err = _gated(design, e, s.get("noise_gate", 0.0))
-    offset = float(err[0].real) / e.size if sensor else 0.0  # a sensor's: learned as a shift
-    err[0] = 0.0
-    ef = np.fft.irfft(design.q() * err, n=e.size)
-    respond = _responder(learner)
-    jac = trial_jacobian(respond, u, s["v_max"] - s["v_min"])
-    jac -= jac.mean(axis=0)  # the rest, offset-free
-    shift = uniform_shift(respond, u, offset) if offset else 0.0
-    return np.asarray(damped_step(jac, ef)) + shift
 
 
 class LearningCompensator:
@@ -488,14 +439,12 @@ class LearningCompensator:
         gate = check_float(noise_gate, "noise_gate", "LearningCompensator", 0.0, GATE_MAX)
         if gate > 0:  # only when set: the states saved before it existed resume
             self.settings["noise_gate"] = gate
-        if law not in ("auto", "harmonic", "jacobian"):
-            msg = f"'law' must be 'auto', 'harmonic' or 'jacobian'. Got {law!r}."
+        if law != "auto" and law not in LAWS:
+            *some, last = (repr(n) for n in ("auto", *LAWS))
+            msg = f"'law' must be {', '.join(some)} or {last}. Got {law!r}."
             raise ParameterError(msg)
-        if law == "jacobian" and lag > 0:
-            msg = ("law='jacobian' learns through the model's own lag: a stated one learned 10 or "
-                   "40 Hz scans worse than the harmonic law (docs/benchmarks.md); identify it "
-                   "with the model (input_dynamics='auto') or use law='harmonic'")  # fmt: skip
-            raise ParameterError(msg)
+        if law in LAWS:
+            LAWS[law].check_lag(float(lag))
         if law != "harmonic":  # the same: the states saved before it existed resume
             self.settings["law"] = law
         # checks every design setting now (a one-sample trial stands in for the trajectory)
@@ -565,6 +514,10 @@ class LearningCompensator:
         law, d = self.settings.get("law", "harmonic"), self._desired
         return law if d is None else resolved_law(law, self.settings["lag"], d.size)
 
+    def _law(self) -> Law:
+        """The law learning (:mod:`.laws`), once the trajectory is known."""
+        return LAWS[self.law]
+
     def describe(self) -> str:
         """One paragraph: the law learning, its gain and filter.
 
@@ -574,7 +527,7 @@ class LearningCompensator:
         """
         if self.design is None:
             return f"law {self.law!r}: chosen with the trajectory (the first command())"
-        return self.design.describe() if self.law != "jacobian" else _jacobian_said(self.design)
+        return self._law().said(self.design)
 
     @property
     def trials(self) -> int:
@@ -613,7 +566,10 @@ class LearningCompensator:
 
     # --------------------------------------------------------------- commands
     def _set_trajectory(self, desired: ArrayLike) -> FloatArray:
-        d = trajectory(desired, self.settings.get("law", "harmonic"))
+        d = trajectory(desired)
+        asked = self.settings.get("law", "harmonic")
+        if asked in LAWS:  # "auto" chooses a law that can learn it
+            LAWS[asked].check_samples(d.size)
         if self._desired is None:
             self._desired = d.copy()
             self._correction = np.zeros(d.size)
@@ -684,10 +640,7 @@ class LearningCompensator:
         probing = self._probe.size and self.trials == 0  # the lead-in carries the probe
         probe = self._probe if probing else 0.0
         assert self._desired is not None
-        if self.law == "jacobian":  # a correction in volts, after a periodic d
-            u = self._commands(np.zeros(self._desired.size), probe, self._correction)
-        else:
-            u = self._commands(self._previous, self._correction + probe)
+        u = self._commands(*self._law().reference(self._correction, self._previous, probe))
         clamped = ramp_in(u, self._last, self.compensator.max_step, self._desired)
         self._pending, self._clamped = u.copy(), clamped
         self._last = float(u[-1])
@@ -785,12 +738,11 @@ class LearningCompensator:
             self._good = (self._correction.copy(), error)
             self._resend = False
             assert self.design is not None
-            if self.law == "jacobian":
-                step = _jacobian_step(self, u, e, sensor)  # a new array: _previous keeps its own
-                self._correction = self._correction + self._gain * step
-            else:
-                self._correction = _update(self.design, self._gain, self._correction, e, sensor,
-                                           self.settings.get("noise_gate", 0.0))  # fmt: skip
+            s = self.settings
+            self._correction = self._law().update(
+                Evidence(self.design, self._gain, self._correction, e, sensor,
+                         s.get("noise_gate", 0.0), u, _responder(self), s["v_max"] - s["v_min"])
+            )  # fmt: skip
         trial = Trial(index, error, width, learned, self._gain, rolled, False, bound, saturated)
         self._close(trial)
         return trial

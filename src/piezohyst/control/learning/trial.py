@@ -16,7 +16,6 @@ from ..._kernels import signal as S
 from ..._validation import as_signal
 from ...errors import ParameterError, ShapeError
 from ..compensator import Compensator
-from .jacobian import MAX_SAMPLES
 
 FloatArray = np.ndarray
 
@@ -161,8 +160,9 @@ def ramp_in(u: FloatArray, last: float, step: float, d: FloatArray) -> FloatArra
     return clamped
 
 
-def trajectory(desired: ArrayLike, law: str) -> FloatArray:
-    """``desired`` checked as one period of a trajectory the ``law`` learns."""
+def trajectory(desired: ArrayLike) -> FloatArray:
+    """``desired`` checked as one period of a trajectory to learn (a law's own limit on its
+    length: :meth:`~.laws.Law.check_samples`)."""
     d = as_signal(desired, "desired")
     if d.size < 8:
         msg = f"'desired' must hold at least 8 samples (one trial). Got {d.size}."
@@ -171,8 +171,4 @@ def trajectory(desired: ArrayLike, law: str) -> FloatArray:
         msg = "'desired' must move: a constant trajectory has nothing to learn."
         raise ParameterError(msg)
     check_periodic(d)
-    if law == "jacobian" and d.size > MAX_SAMPLES:
-        msg = (f"law='jacobian' learns trials of up to {MAX_SAMPLES} samples (its Jacobian "
-               f"is n x n): this one has {d.size}; 'harmonic' or 'auto' learns any")  # fmt: skip
-        raise ParameterError(msg)
     return d
