@@ -16,8 +16,9 @@ from typing import Any, Literal, cast
 
 import click
 
+from ..control.arguments import Domain
 from ..control.calibration import OutputMap
-from ..control.compensator import CompensatorSettings, Domain
+from ..control.compensator import CompensatorSettings
 from ..control.selfsensing import LoopSettings
 from ..errors import PiezohystError
 from ..io import DataSpec, estimated_rows

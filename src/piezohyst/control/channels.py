@@ -26,8 +26,9 @@ from ..errors import ExtrapolationWarning, LimitWarning, ParameterError, ShapeEr
 from ..model.bank import ModelBank
 from ..model.leakage import Leakage
 from ..model.model import HysteresisModel
+from .arguments import Domain
 from .calibration import OutputMap, monotone_charges
-from .compensator import LIMIT_CHECK_FIRST, LIMIT_SHARE, Compensator, Domain
+from .compensator import LIMIT_CHECK_FIRST, LIMIT_SHARE, Compensator
 from .selfsensing import SelfSensingController
 
 __all__ = ["BankCompensator", "BankController", "ChannelBank", "per_channel"]

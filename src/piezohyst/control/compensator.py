@@ -20,8 +20,8 @@ Safety, always:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
-from typing import Any, Literal
+from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -29,38 +29,12 @@ from numpy.typing import ArrayLike
 from .._kernels import play as K
 from .._validation import FloatArray
 from ..errors import LimitWarning, ParameterError, ShapeError, warn
-from ..model.model import HysteresisModel, InverseSpec
+from ..model.model import HysteresisModel
+from .arguments import Domain, resolve
 from .calibration import Charges, OutputMap
-from .inverses import INVERSES, CompensatorState, EngineSettings, Inverse, finite_number
+from .inverses import INVERSES, CompensatorState, Inverse
 
 __all__ = ["Compensator", "CompensatorSettings", "CompensatorState"]
-
-Domain = Literal["charge", "displacement"]
-
-
-def _narrowed(
-    limits: tuple[float, float], trained: tuple[float, float], allow: bool
-) -> tuple[float, float]:
-    """The limits kept inside the voltages the model was identified on (unless ``allow``)."""
-    v_min, v_max = limits
-    lo, hi = trained
-    if allow or math.isnan(lo) or math.isnan(hi) or (v_min >= lo and v_max <= hi):
-        return limits
-    new_lo, new_hi = max(v_min, lo), min(v_max, hi)
-    if not new_lo < new_hi:
-        msg = (
-            f"The limits [{v_min:g}, {v_max:g}] V do not overlap the voltages the "
-            f"model was identified on, [{lo:g}, {hi:g}] V; pass allow_extrapolation=True "
-            "to use the model outside them."
-        )
-        raise ParameterError(msg)
-    warn(
-        f"Compensator limits [{v_min:g}, {v_max:g}] V narrowed to "
-        f"[{new_lo:g}, {new_hi:g}] V, the voltages the model was identified on: a model "
-        "is not trusted outside them (pass allow_extrapolation=True to keep the limits).",
-        UserWarning,
-    )
-    return new_lo, new_hi
 
 
 class Compensator:
@@ -147,12 +121,25 @@ class Compensator:
         #: built on this compensator's kernel (the self-sensing controller) uses it too
         self.charges = Charges.of(output_map, gain, model)
         self.output_map = output_map
-        spec, settings = self._settings(
+        a = resolve(
             model, v_min, v_max, slew_rate, sample_rate,
             "charge" if output_map is not None else domain, gain, allow_extrapolation,
         )  # fmt: skip
-        if output_map is not None:
-            self.domain = "displacement"
+        spec, settings = a.spec, a.settings
+        self.model, self.spec, self.gain, self.sample_rate = model, spec, gain, sample_rate
+        self.v_min, self.v_max, self.slew_rate = settings.v_min, settings.v_max, a.slew_rate
+        self.allow_extrapolation = allow_extrapolation
+        self.domain = "displacement" if output_map is not None else domain
+        #: The limits asked for, when they were narrowed to the training range (else None).
+        self.requested_limits = a.requested_limits
+        # input dynamics: an integer delay (handled by preview) and lags inverted per sample
+        self.dynamic, self.delay_samples = settings.dynamic, settings.delay_samples
+        #: A mechanical mode after the hysteresis, inverted from the desired trajectory (its
+        #: differences taken at the loop's rate when given, else the training record's)
+        self.mode = a.mode
+        self._max_step = settings.max_step
+        self._last_desired = math.nan
+        self._mode_history = np.full(2, np.nan)
         #: the engine the core's inverse plan names (play, packed, python): it owns the
         #: kernel arrays (:mod:`piezohyst.control.inverses`)
         self.inverse: Inverse = INVERSES[spec.operator.inverse_plan().engine](spec, settings)
@@ -160,118 +147,6 @@ class Compensator:
         self.analytic = self.inverse.analytic
         self._plain = self.inverse.plain and output_map is None
         self.reset()
-
-    def _settings(
-        self,
-        model: HysteresisModel,
-        v_min: float,
-        v_max: float,
-        slew_rate: float | Literal["trained"] | None,
-        sample_rate: float | None,
-        domain: Domain,
-        gain: float | None,
-        allow_extrapolation: bool,
-    ) -> tuple[InverseSpec, EngineSettings]:
-        """The checks and settings every compensator shares; (spec, the engine's settings)."""
-        inversion = getattr(model, "inversion", None)
-        if not callable(inversion):
-            msg = (
-                "The 'model' parameter of Compensator must be a fitted piezohyst model (a "
-                "ModelBank has ph.BankCompensator and ph.BankController). "
-                f"Got {type(model).__name__} instead."
-            )
-            raise ParameterError(msg)
-        spec: InverseSpec = inversion()
-        self.v_min = finite_number(v_min, "v_min")
-        self.v_max = finite_number(v_max, "v_max")
-        if not self.v_min < self.v_max:
-            msg = f"Compensator needs v_min < v_max. Got v_min={v_min!r}, v_max={v_max!r}."
-            raise ParameterError(msg)
-        if not isinstance(allow_extrapolation, bool):
-            msg = f"'allow_extrapolation' must be True or False. Got {allow_extrapolation!r}."
-            raise ParameterError(msg)
-        self.allow_extrapolation = allow_extrapolation
-        #: The limits asked for, when they were narrowed to the training range (else None).
-        self.requested_limits: tuple[float, float] | None = None
-        narrowed = _narrowed((self.v_min, self.v_max), spec.input_range, allow_extrapolation)
-        if narrowed != (self.v_min, self.v_max):
-            self.requested_limits = (self.v_min, self.v_max)
-            self.v_min, self.v_max = narrowed
-        max_step = math.inf
-        if isinstance(slew_rate, str):
-            if slew_rate != "trained":
-                msg = f"slew_rate must be a number in V/s, 'trained' or None. Got {slew_rate!r}."
-                raise ParameterError(msg)
-            slew_rate, max_step = _trained_limit(model, sample_rate)
-        if slew_rate is not None:
-            rate = finite_number(slew_rate, "slew_rate")
-            if sample_rate is None:
-                msg = "A slew_rate (V/s) needs the loop's sample_rate (Hz). Got sample_rate=None."
-                raise ParameterError(msg)
-            fs = finite_number(sample_rate, "sample_rate")
-            if rate <= 0 or fs <= 0:
-                msg = f"slew_rate and sample_rate must be > 0. Got {slew_rate!r}, {sample_rate!r}."
-                raise ParameterError(msg)
-            max_step = rate / fs
-        if domain not in ("charge", "displacement"):
-            msg = (
-                "The 'domain' parameter of Compensator must be 'charge' or 'displacement'. "
-                f"Got {domain!r} instead."
-            )
-            raise ParameterError(msg)
-        inv_gain = 1.0
-        if domain == "displacement":
-            if gain is None:
-                msg = "domain='displacement' needs the gain (m per model output unit). Got None."
-                raise ParameterError(msg)
-            g = finite_number(gain, "gain")
-            if g == 0.0:
-                msg = "The 'gain' parameter of Compensator must be non-zero. Got 0."
-                raise ParameterError(msg)
-            inv_gain = 1.0 / g
-        dyn = spec.dynamics
-        timed = [(dyn.active, "input dynamics"), (spec.lags is not None, "creep"),
-                 (spec.relaxation is not None, "a relaxation term")]  # fmt: skip
-        for needed, what in timed:
-            if needed and sample_rate is None:
-                msg = (f"A model with {what} needs the loop's sample_rate (Hz, --sample-rate). "
-                       "Got None.")  # fmt: skip
-                raise ParameterError(msg)
-        self.model = model
-        self.spec = spec
-        self.domain = domain
-        self.gain = gain
-        self.slew_rate = slew_rate
-        self.sample_rate = sample_rate
-        # input dynamics: an integer delay (handled by preview) and lags inverted per sample
-        self.dynamic = dyn.active
-        self.delay_samples = 0
-        frac = lag_gain = 0.0
-        self._last_desired = math.nan
-        #: A mechanical mode after the hysteresis, inverted from the desired trajectory (its
-        #: differences taken at the loop's rate when given, else the training record's)
-        self.mode = spec.output_dynamics
-        if self.mode.active and sample_rate is not None:
-            self.mode = replace(self.mode, sample_interval=1.0 / float(sample_rate))
-        self._mode_history = np.full(2, np.nan)
-        if dyn.active:
-            dt = 1.0 / float(sample_rate)  # type: ignore[arg-type]
-            d = dyn.delay / dt
-            # the whole samples go to the preview, the fraction in [-1/2, 1/2] is inverted
-            # per sample (above half a sample its inverse rings: see _kernels.DYN_FRACTION)
-            self.delay_samples = math.floor(d + 0.5)
-            frac = d - self.delay_samples
-            if abs(frac) <= 1e-9:
-                frac = 0.0
-            if dyn.tau > 0:
-                lag_gain = 1.0 - math.exp(-dt / dyn.tau)
-        self._max_step = max_step
-        settings = EngineSettings(
-            self.v_min, self.v_max, max_step, inv_gain, sample_rate, domain,
-            allow_extrapolation, self.mode.active, self.delay_samples, frac, lag_gain,
-            self.dynamic,
-        )  # fmt: skip
-        return spec, settings
 
     @property
     def max_step(self) -> float:
@@ -792,21 +667,6 @@ def limit_parts(
             "record that covers the target, or bring the target within it"
         )
     return parts
-
-
-def _trained_limit(model: Any, sample_rate: float | None) -> tuple[float | None, float]:
-    """The default slew limit: the training record's fastest change, as (V/s, V per sample).
-
-    Per second when the loop's rate is known; else per sample; none when the model
-    does not record it (built by hand, or an older file).
-    """
-    per_second = float(getattr(model, "max_slew_rate_", math.nan))
-    per_sample = float(getattr(model, "max_step_", math.nan))
-    if sample_rate is not None and math.isfinite(per_second) and per_second > 0:
-        return per_second, math.inf
-    if math.isfinite(per_sample) and per_sample > 0:
-        return None, per_sample
-    return None, math.inf
 
 
 @dataclass(frozen=True)

@@ -43,8 +43,9 @@ from ...errors import (
 from ...io import atomic_write_text
 from ...metrics import hysteresis_width
 from ...model.leakage import Leakage
+from ..arguments import Domain
 from ..calibration import OutputMap
-from ..compensator import Compensator, Domain
+from ..compensator import Compensator
 from .design import LearningDesign, design_learning
 from .jacobian import MAX_SAMPLES
 from .laws import LAWS, Evidence, Law
