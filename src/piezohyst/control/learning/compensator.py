@@ -20,13 +20,9 @@ condition under which the error shrinks from trial to trial; ``docs/realtime.md`
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
-import os
 import warnings
-from dataclasses import asdict, dataclass
-from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
@@ -35,12 +31,10 @@ from numpy.typing import ArrayLike
 from ..._validation import check_float
 from ...errors import (
     LearningWarning,
-    ModelFileError,
     ParameterError,
     ShapeError,
     warn,
 )
-from ...io import atomic_write_text
 from ...metrics import hysteresis_width
 from ...model.leakage import Leakage
 from ..arguments import Domain
@@ -50,7 +44,9 @@ from .design import LearningDesign, design_learning
 from .jacobian import MAX_SAMPLES
 from .laws import LAWS, Evidence, Law
 from .probe import Response, probe_bins, probe_signal, response
+from .saving import Saving, digest
 from .trial import (
+    Trial,
     anti_windup,
     centred_slew,
     count_saturated,
@@ -62,8 +58,8 @@ from .trial import (
 
 FloatArray = np.ndarray
 
-#: the law itself lives in :mod:`piezohyst.control.learning.design`
-__all__ = ["LearningCompensator", "LearningDesign", "Trial", "design_learning"]
+
+__all__ = ["LearningCompensator", "resolved_law"]
 
 #: the share of a trial's commands at a limit beyond which it is out of the actuator's reach
 SATURATED = 0.02
@@ -71,51 +67,6 @@ SATURATED = 0.02
 GROWTH_SIGMAS = 3.0
 #: learning stops halving its gain below the first gain over this
 GAIN_FLOOR = 64.0
-FORMAT = "piezohyst-learning"
-
-
-@dataclass(frozen=True)
-class Trial:
-    """What one trial measured and what the learner did with it.
-
-    Attributes
-    ----------
-    index : int
-        0 for the first trial.
-    error : float
-        RMS error over the desired span (fraction), of the quantity learned
-        from: offset-free for the charge (the leakage leaves its zero unknown),
-        absolute for a sensor.
-    width : float
-        Loop width of the measured against the desired (fraction of the span).
-    learned : int
-        Samples learned from (readings that were NaN, and samples whose command
-        was slew-limited into the trajectory, are not).
-    gain : float
-        The learning gain of the update made after this trial.
-    rolled_back : bool
-        The error grew over the trial before: that update was undone and the gain halved.
-    skipped : bool
-        Nothing learned: the lead-in (the first trial, see ``lead_in``), or too
-        few readings (under half the trial).
-    leakage_bound : float
-        The charge error one trial's leakage uncertainty can build (2 standard
-        errors of the calibrated current, over the trial), as a fraction of the
-        span; NaN when the leakage is not calibrated, 0 for a sensor.
-    saturated : int
-        Commands at a voltage limit or moved by the whole slew limit (beyond 2 %
-        of the trial, a ``LearningWarning``: the trajectory is out of reach).
-    """
-
-    index: int
-    error: float
-    width: float
-    learned: int
-    gain: float
-    rolled_back: bool
-    skipped: bool
-    leakage_bound: float
-    saturated: int = 0
 
 
 def _flag(value: object, name: str) -> bool:
@@ -143,23 +94,9 @@ def _readings(
     return y.reshape(-1), displacement is not None
 
 
-def _digest(values: Any) -> str:
-    return hashlib.sha256(values).hexdigest()[:16]
-
-
 #: The most a noise gate can ask (``noise_gate``): a bin learned only above 100 times the
 #: noise's power (10 times its amplitude)
 GATE_MAX = 100.0
-
-
-def _lead(data: Any, n: int) -> tuple[FloatArray, FloatArray] | None:
-    """The lead-in's readings and usable mask from a saved state (None: none kept)."""
-    if data is None:
-        return None
-    seen = np.array([math.nan if v is None else v for v in data[0]], dtype=np.float64)
-    usable = np.zeros(n, dtype=bool)
-    usable[np.array(data[1], dtype=int)] = True
-    return seen, usable
 
 
 def _lead_probe(d: FloatArray) -> tuple[np.ndarray, FloatArray]:
@@ -174,14 +111,6 @@ def _probed(
 ) -> Response | None:  # fmt: skip
     """The loop's response to the lead-in's probe (None without one)."""
     return None if lead is None else response(lead[0], measured, lead[1] & ok, bins, d)
-
-
-def _lead_data(lead: tuple[FloatArray, FloatArray] | None) -> list[Any] | None:
-    """The lead-in's readings (NaN as null) and usable indices, JSON-ready."""
-    if lead is None:
-        return None
-    seen = [float(v) if math.isfinite(v) else None for v in lead[0]]
-    return [seen, np.flatnonzero(lead[1]).tolist()]
 
 
 def _desired_gain(settings: dict[str, Any], om: OutputMap | None) -> tuple[float | None, bool]:
@@ -283,7 +212,7 @@ def _responder(learner: LearningCompensator) -> Any:
     return respond
 
 
-class LearningCompensator:
+class LearningCompensator(Saving):
     r"""A feedforward compensator that learns from repetition (iterative learning control).
 
     Each trial is one period of a repeated trajectory, sent right after the
@@ -471,7 +400,7 @@ class LearningCompensator:
         rest = json.dumps(
             [self.settings, self.leakage.to_dict()], sort_keys=True, default=str
         ).encode()
-        return _digest(model + rest)
+        return digest(model + rest)
 
     def reset(self, *, voltage: float | None = None) -> None:
         """Forget the trajectory and what was learned.
@@ -753,127 +682,3 @@ class LearningCompensator:
         self._pending = None
 
     # -------------------------------------------------------------------- files
-    def to_dict(self) -> dict[str, Any]:
-        """The learner's state, JSON-ready (see :meth:`from_dict`).
-
-        Returns
-        -------
-        dict
-        """
-        good = None
-        if self._good is not None:
-            good = {"correction": self._good[0].tolist(), "metric": self._good[1]}
-        return {
-            "format": FORMAT,
-            "version": 1,
-            "fingerprint": self._fingerprint,
-            "trajectory": None if self._desired is None else _digest(self._desired.tobytes()),
-            "desired": None if self._desired is None else self._desired.tolist(),
-            "correction": self._correction.tolist(),
-            "previous": self._previous.tolist(),
-            "good": good,
-            "pending": None if self._pending is None else self._pending.tolist(),
-            "clamped": np.flatnonzero(self._clamped).tolist(),
-            "last_command": self._last,
-            "leaked": self._leaked,
-            "gain": self._gain,
-            "first": self._first,
-            "resend": self._resend,
-            "lead": _lead_data(self._lead),
-            "design": None if self.design is None else asdict(self.design),
-            "history": [asdict(t) for t in self.history],
-        }
-
-    def restore(self, data: dict[str, Any], where: str = "learning state") -> None:
-        """Continue from :meth:`to_dict`'s contents, made with the same model and settings.
-
-        Parameters
-        ----------
-        data : dict
-        where : str
-            Named in errors (a file's path).
-
-        Raises
-        ------
-        ModelFileError
-            Another model, other settings, or not a learning state.
-        """
-        if not isinstance(data, dict) or data.get("format") != FORMAT:
-            msg = f"{where}: not a piezohyst learning state"
-            raise ModelFileError(msg)
-        if data.get("fingerprint") != self._fingerprint:
-            msg = (
-                f"{where}: made with another model, leakage or settings (law= too: 'auto' is the "
-                "default, a run saved before it was 'harmonic'); a state continues only its run"
-            )
-            raise ModelFileError(msg)
-        try:
-            self.reset()
-            if data["desired"] is not None:
-                self._set_trajectory(data["desired"])
-                if data["trajectory"] != _digest(self._desired.tobytes()):  # type: ignore[union-attr]
-                    raise ValueError("the trajectory's digest does not match its values")
-            self._correction = np.array(data["correction"], dtype=np.float64)
-            self._previous = np.array(data["previous"], dtype=np.float64)
-            good = data["good"]
-            if good is not None:
-                self._good = (np.array(good["correction"], dtype=np.float64), float(good["metric"]))
-            pending = data["pending"]
-            self._pending = None if pending is None else np.array(pending, dtype=np.float64)
-            n = 0 if self._desired is None else self._desired.size
-            self._clamped = np.zeros(n, dtype=bool)
-            self._clamped[np.array(data["clamped"], dtype=int)] = True
-            self._last = float(data["last_command"])
-            self._leaked = float(data["leaked"])
-            self._gain = float(data["gain"])
-            self._first = bool(data["first"])
-            self._resend = bool(data["resend"])
-            self._lead = _lead(data.get("lead"), n)
-            self.design = None if data["design"] is None else LearningDesign(**data["design"])
-            self.history = [Trial(**t) for t in data["history"]]
-        except (KeyError, TypeError, ValueError, IndexError) as exc:
-            self.reset()
-            msg = f"{where}: a damaged learning state ({exc})"
-            raise ModelFileError(msg) from None
-
-    def save(self, path: str | os.PathLike[str]) -> Path:
-        """Write :meth:`to_dict` as JSON, atomically (a reader sees the old file or the new).
-
-        Parameters
-        ----------
-        path : path
-
-        Returns
-        -------
-        Path
-        """
-        return self.save_dict(path, self.to_dict())
-
-    def save_dict(self, path: str | os.PathLike[str], data: dict[str, Any]) -> Path:
-        """Write ``data`` (:meth:`to_dict`'s, perhaps with keys added) as JSON, atomically.
-
-        Parameters
-        ----------
-        path : path
-        data : dict
-
-        Returns
-        -------
-        Path
-        """
-        return atomic_write_text(Path(path), json.dumps(data))
-
-    def load(self, path: str | os.PathLike[str]) -> None:
-        """Continue from a file :meth:`save` wrote (see :meth:`restore`).
-
-        Parameters
-        ----------
-        path : path
-        """
-        p = Path(path)
-        try:
-            data = json.loads(p.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            msg = f"{p}: cannot read the learning state ({exc})"
-            raise ModelFileError(msg) from None
-        self.restore(data, str(p))

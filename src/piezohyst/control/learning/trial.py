@@ -8,6 +8,7 @@ before; where a limit holds commands, the learner says how many and which option
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -20,6 +21,7 @@ from ..compensator import Compensator
 FloatArray = np.ndarray
 
 __all__ = [
+    "Trial",
     "anti_windup",
     "at_limits",
     "centred_slew",
@@ -31,6 +33,50 @@ __all__ = [
     "ramp_in",
     "trajectory",
 ]
+
+
+@dataclass(frozen=True)
+class Trial:
+    """What one trial measured and what the learner did with it.
+
+    Attributes
+    ----------
+    index : int
+        0 for the first trial.
+    error : float
+        RMS error over the desired span (fraction), of the quantity learned
+        from: offset-free for the charge (the leakage leaves its zero unknown),
+        absolute for a sensor.
+    width : float
+        Loop width of the measured against the desired (fraction of the span).
+    learned : int
+        Samples learned from (readings that were NaN, and samples whose command
+        was slew-limited into the trajectory, are not).
+    gain : float
+        The learning gain of the update made after this trial.
+    rolled_back : bool
+        The error grew over the trial before: that update was undone and the gain halved.
+    skipped : bool
+        Nothing learned: the lead-in (the first trial, see ``lead_in``), or too
+        few readings (under half the trial).
+    leakage_bound : float
+        The charge error one trial's leakage uncertainty can build (2 standard
+        errors of the calibrated current, over the trial), as a fraction of the
+        span; NaN when the leakage is not calibrated, 0 for a sensor.
+    saturated : int
+        Commands at a voltage limit or moved by the whole slew limit (beyond 2 %
+        of the trial, a ``LearningWarning``: the trajectory is out of reach).
+    """
+
+    index: int
+    error: float
+    width: float
+    learned: int
+    gain: float
+    rolled_back: bool
+    skipped: bool
+    leakage_bound: float
+    saturated: int = 0
 
 
 def periodic_fill(values: FloatArray, ok: FloatArray) -> FloatArray:
