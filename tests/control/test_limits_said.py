@@ -109,8 +109,8 @@ def _held_by_oracle(model: Any, target: np.ndarray, slew: float | None, mode: st
             if mode == "step":
                 last = comp.last_command
                 wide.reset(comp.state)
-                free = wide.step(float(target[k]), preview)
-                out[k] = comp.step(float(target[k]), preview)
+                free = wide.step(float(target[k]), preview=preview)
+                out[k] = comp.step(float(target[k]), preview=preview)
                 slewed = math.isfinite(step) and abs(out[k] - last) >= step * (1 - 1e-9)
                 at_lo, at_hi = out[k] <= lo + tol, out[k] >= hi - tol
                 if not slewed and ((at_lo and free < lo - tol) or (at_hi and free > hi + tol)):

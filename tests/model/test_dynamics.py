@@ -176,7 +176,7 @@ def test_compensation_inverts_the_lag_exactly(dyn: InputDynamics) -> None:
     # step with preview equals the block; without preview it extrapolates
     again = ph.Compensator(model, v_min=0.0, v_max=140.0, sample_rate=1000.0)
     m = again.delay_samples
-    stepped = [again.step(desired[k], desired[k + 1 : k + 1 + m]) for k in range(500)]
+    stepped = [again.step(desired[k], preview=desired[k + 1 : k + 1 + m]) for k in range(500)]
     # tol: step and block kernels compiled apart may round apart (FASTMATH); the lag's state carries
     # an ulp per sample: 1e-12 V bounds it
     np.testing.assert_allclose(stepped, commands[:500], rtol=0, atol=1e-12)
@@ -247,7 +247,8 @@ def test_exported_c_inverts_the_lag_like_python(tmp_path: Path) -> None:
         check=True, capture_output=True, text=True,
     ).stdout.split("\n")  # fmt: skip
     c_cmds = np.array([float(v) for v in out[: targets.size]])
-    py = np.array([comp.step(float(v), [float(v)]) for v in targets])  # the caller's preview
+    # the caller's preview
+    py = np.array([comp.step(float(v), preview=[float(v)]) for v in targets])
     # tol: C and numba round apart: 1e-9 V covers a replay of ulp differences
     np.testing.assert_allclose(c_cmds, py, rtol=0, atol=1e-9)
     assert tuple(int(v) for v in out[targets.size].split()) == (
@@ -366,7 +367,8 @@ def test_exported_c_inverts_the_mode_like_python(
         [str(exe)], input=lines, check=True, capture_output=True, text=True
     ).stdout.split("\n")
     c_cmds = np.array([float(v) for v in out[: desired.size]])
-    py = np.array([comp.step(float(d), [float(n)]) for d, n in zip(desired, nxt, strict=True)])
+    pairs = zip(desired, nxt, strict=True)
+    py = np.array([comp.step(float(d), preview=[float(n)]) for d, n in pairs])
     tol = 1e-9 if precision == "double" else 2e-3 * (hi - lo)
     # tol: C and numba round apart; double: a replay of ulp differences; float: its precision over
     # the range
@@ -417,7 +419,7 @@ def test_a_mode_behind_a_delay_steps_like_the_block(
     assert block.delay_samples == 2
     whole = block.process(desired)
     stepper = ph.Compensator(model, v_min=lo, v_max=hi, sample_rate=1000.0)
-    stepped = [stepper.step(desired[k], desired[k + 1 : k + 4]) for k in range(590)]
+    stepped = [stepper.step(desired[k], preview=desired[k + 1 : k + 4]) for k in range(590)]
     # tol: step with preview against the block: the same arithmetic, rounding through the lag's
     # state
     np.testing.assert_allclose(stepped, whole[:590], rtol=0, atol=1e-9)

@@ -2,6 +2,9 @@
 learning from repetition, channel banks and the C export.
 May import: the foundation, ``_kernels``, ``io``, ``model`` (never ``analysis``).
 
+The one contract every controller answers, ``step(desired, measured=None)``, ``process``,
+``reads`` (``contract``)
+    Controller
 Feedforward (``compensator``; its engines in ``inverses``)
     Compensator, CompensatorSettings, CompensatorState
 Feedback on the measured charge (``selfsensing``)
@@ -9,7 +12,7 @@ Feedback on the measured charge (``selfsensing``)
 Learning a repeated scan (the subpackage ``learning``: the compensator in
 ``learning.compensator``, the harmonic law's design in ``learning.design``, the Jacobian law in
 ``learning.jacobian``, the lead-in's probe in ``learning.probe``, a trial's trajectory and limits
-in ``learning.trial``)
+in ``learning.trial``, the laws behind one interface in ``learning.laws``)
     LearningCompensator, Trial, LearningDesign, design_learning
 Charge to displacement (``calibration``)
     OutputMap, calibrate_gain
@@ -35,6 +38,7 @@ __getattr__, __dir__ = attach(
         "calibrate_gain": ".calibration",
         "BankCompensator": ".channels",
         "BankController": ".channels",
+        "Controller": ".contract",
         "Compensator": ".compensator",
         "CompensatorSettings": ".compensator",
         "CompensatorState": ".compensator",
@@ -58,6 +62,7 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .calibration import OutputMap, calibrate_gain
     from .channels import BankCompensator, BankController
     from .compensator import Compensator, CompensatorSettings, CompensatorState
+    from .contract import Controller
     from .export import CCode, export_c, write_c, write_fmu, write_mex, write_shared
     from .learning import LearningCompensator, LearningDesign, Trial, design_learning
     from .selfsensing import ControllerState, LoopSettings, SelfSensingController
@@ -69,6 +74,7 @@ __all__ = [
     "Compensator",
     "CompensatorSettings",
     "CompensatorState",
+    "Controller",
     "ControllerState",
     "LearningCompensator",
     "LearningDesign",

@@ -314,6 +314,10 @@ class BankCompensator(ChannelBank[Compensator]):
     [50.0, 80.0]
     """
 
+    #: False: the commands do not depend on readings (the controllers' one contract,
+    #: :mod:`~piezohyst.control.contract`)
+    reads = False
+
     def __init__(
         self,
         bank: ModelBank,
@@ -408,7 +412,10 @@ class BankCompensator(ChannelBank[Compensator]):
         self._approach_warned = False
         return out
 
-    def step(self, desired: ArrayLike, out: FloatArray | None = None) -> FloatArray:
+    def step(
+        self, desired: ArrayLike, measured: ArrayLike | None = None, *,
+        out: FloatArray | None = None,
+    ) -> FloatArray:  # fmt: skip
         """One command per channel.
 
         Parameters
@@ -416,6 +423,9 @@ class BankCompensator(ChannelBank[Compensator]):
         desired : array_like, shape (C,)
             Desired output per channel; NaN or infinity holds that channel's
             last command (counted).
+        measured : array_like, shape (C,), optional
+            Readings: ignored, the bank is feedforward (the controllers' one contract,
+            :mod:`~piezohyst.control.contract`).
         out : ndarray, shape (C,), optional
             Written in place (a float64 array): nothing is allocated.
 
@@ -436,8 +446,8 @@ class BankCompensator(ChannelBank[Compensator]):
                 out[i] = ch.step(float(d[i]))
         return out
 
-    def process(self, desired: ArrayLike) -> FloatArray:
-        """Commands for a block: equal to :meth:`step` on each row.
+    def process(self, desired: ArrayLike, measured: ArrayLike | None = None) -> FloatArray:
+        """Commands for a block: equal to :meth:`step` on each row (``measured`` ignored).
 
         Parameters
         ----------
@@ -539,6 +549,10 @@ class BankController(ChannelBank[SelfSensingController]):
     (2,)
     """
 
+    #: True: each command depends on the reading before it (the controllers' one contract,
+    #: :mod:`~piezohyst.control.contract`)
+    reads = True
+
     def __init__(
         self,
         bank: ModelBank,
@@ -600,15 +614,17 @@ class BankController(ChannelBank[SelfSensingController]):
         self._tally_reset()
 
     def step(
-        self, desired: ArrayLike, measured: ArrayLike, out: FloatArray | None = None
-    ) -> FloatArray:
+        self, desired: ArrayLike, measured: ArrayLike | None = None, *,
+        out: FloatArray | None = None,
+    ) -> FloatArray:  # fmt: skip
         """One command per channel.
 
         Parameters
         ----------
         desired, measured : array_like, shape (C,)
             Desired output and the charge read at this sample, per channel
-            (NaN: hold / feedforward alone for that channel).
+            (NaN: hold / feedforward alone for that channel; ``measured`` None:
+            no readings, every channel on its feedforward alone).
         out : ndarray, shape (C,), optional
             Written in place.
 
@@ -617,6 +633,8 @@ class BankController(ChannelBank[SelfSensingController]):
         ndarray, shape (C,)
             Commands (V).
         """
+        if measured is None:
+            measured = np.full(np.shape(desired), np.nan)
         d, m = self._rows([desired, measured], "'desired' and 'measured'", 1)
         out = self._out(out, d.shape)
         if not self.fused:
@@ -629,7 +647,7 @@ class BankController(ChannelBank[SelfSensingController]):
         self._tally_step(out)
         return out
 
-    def process(self, desired: ArrayLike, measured: ArrayLike) -> FloatArray:
+    def process(self, desired: ArrayLike, measured: ArrayLike | None = None) -> FloatArray:
         """Commands for recorded blocks (samples, C); equal to :meth:`step` on each row.
 
         Parameters
@@ -640,6 +658,8 @@ class BankController(ChannelBank[SelfSensingController]):
         -------
         ndarray, shape (samples, C)
         """
+        if measured is None:
+            measured = np.full(np.shape(desired), np.nan)
         d, m = self._rows([desired, measured], "'desired' and 'measured'", 2)
         out = np.empty_like(d)
         if not self.fused:

@@ -104,6 +104,10 @@ class Compensator:
 
     domain: Domain  # what the desired values are: the model's output, or metres
 
+    #: False: the commands do not depend on readings (the controllers' one contract,
+    #: :mod:`~piezohyst.control.contract`)
+    reads = False
+
     def __init__(
         self,
         model: HysteresisModel,
@@ -320,7 +324,9 @@ class Compensator:
         self._mode_history = both[-2:].copy()
         return target
 
-    def step(self, desired: float, preview: ArrayLike | None = None) -> float:
+    def step(
+        self, desired: float, measured: float | None = None, preview: ArrayLike | None = None
+    ) -> float:  # no keyword-only argument: CPython fills those from a dict, 35 ns a call
         """The command for one desired value.
 
         Parameters
@@ -328,6 +334,11 @@ class Compensator:
         desired : float
             Desired output (model output units, or m for ``domain="displacement"``).
             NaN or infinity holds the last command and is counted.
+        measured : float, optional
+            The reading after the command before: ignored, a feedforward compensator
+            reads nothing (the controllers' one contract, :mod:`~piezohyst.control.contract`).
+            Where the model takes a preview, one that is not a number is refused (a
+            preview passed where it once was).
         preview : array_like, optional
             The desired values of the next samples, for a model with an input
             delay of ``delay_samples`` samples: the command sent now acts that
@@ -356,12 +367,27 @@ class Compensator:
             e = self.inverse
             c = float(K.compensator_step_tallied(d, e.tables, e.config, e.kernel_state,
                                                  self._tally))  # fmt: skip
-        else:
+        else:  # where a preview counts, one passed where it once was (2nd) is refused
+            if measured is not None and not isinstance(measured, float):
+                self._check_reading(measured)
             c = float(K.tally_command(self._step_general(d, preview), self._tally))
         self._until_check -= 1
         if not self._until_check:
             self._check_limits("Compensator")
         return c
+
+    @staticmethod
+    def _check_reading(measured: object) -> None:
+        """A reading that is not a number: most likely a preview passed where it once was."""
+        try:
+            float(measured)  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            msg = (
+                "Compensator.step's second argument is a reading (a number, ignored: the "
+                "compensator is feedforward); give the next desired values as preview=. Got "
+                f"{measured!r}."
+            )
+            raise ParameterError(msg) from None
 
     def _step_general(self, desired: float, preview: ArrayLike | None) -> float:
         """:meth:`step` for a model with input dynamics, a mode, an output map or another
@@ -406,7 +432,7 @@ class Compensator:
         self._last_desired = d
         return self._inner_step(target)
 
-    def process(self, desired: ArrayLike) -> FloatArray:
+    def process(self, desired: ArrayLike, measured: ArrayLike | None = None) -> FloatArray:
         """Commands for a block of desired values; equal to calling :meth:`step` on each.
 
         With an input delay, the block is its own preview: the command at
@@ -418,6 +444,8 @@ class Compensator:
         ----------
         desired : array_like, shape (N,)
             Desired outputs; NaN and infinite values hold the last command.
+        measured : array_like, shape (N,), optional
+            Readings: ignored (feedforward), their shape checked.
 
         Returns
         -------
@@ -427,6 +455,9 @@ class Compensator:
         d = np.ascontiguousarray(desired, dtype=np.float64)
         if d.ndim != 1:
             msg = f"'desired' must be a 1-D array. Got shape {d.shape}."
+            raise ShapeError(msg)
+        if measured is not None and np.shape(measured) != d.shape:
+            msg = f"'measured' must match 'desired' (shape {d.shape}). Got {np.shape(measured)}."
             raise ShapeError(msg)
         if self.charges is not None:
             d = self.charges.block(d)

@@ -37,6 +37,7 @@ from .compensator import (
     CompensatorSettings,
     CompensatorState,
 )
+from .contract import reading
 
 __all__ = [
     "ControllerState",
@@ -192,6 +193,10 @@ class SelfSensingController:
 
     A :class:`~piezohyst.ModelBank` has its own :class:`BankController`.
     """
+
+    #: True: each command depends on the reading before it (the controllers' one contract,
+    #: :mod:`~piezohyst.control.contract`)
+    reads = True
 
     def __init__(
         self,
@@ -411,7 +416,7 @@ class SelfSensingController:
         return float(self.feedback[K.CS_INTEGRAL])
 
     # -------------------------------------------------------------- commands
-    def step(self, desired: float, measured: float) -> float:
+    def step(self, desired: float, measured: float | None = None) -> float:
         """The command for one sample.
 
         Parameters
@@ -419,9 +424,10 @@ class SelfSensingController:
         desired : float
             Output wanted at this sample (model output units, or m). NaN or
             infinity holds the last command.
-        measured : float
+        measured : float, optional
             Charge read at this sample, before this command acts (model output
-            units). NaN or infinity: feedforward alone for this sample, counted.
+            units). None, NaN or infinity: feedforward alone for this sample, counted
+            in :attr:`measurement_faults`.
 
         Returns
         -------
@@ -432,16 +438,18 @@ class SelfSensingController:
         d = float(desired)
         if comp.charges is not None:  # metres through the output map, to the model's charge
             d, _ = comp.charges.one(d, None)
-        c = comp.inverse.controller_step(d, float(measured), (self.config, self.ctl, self.feedback))
+        m = reading(measured, "SelfSensingController")
+        c = comp.inverse.controller_step(d, m, (self.config, self.ctl, self.feedback))
         comp.tally_one(c, "SelfSensingController")
         return c
 
-    def process(self, desired: ArrayLike, measured: ArrayLike) -> FloatArray:
+    def process(self, desired: ArrayLike, measured: ArrayLike | None = None) -> FloatArray:
         """Commands for recorded blocks; equal to :meth:`step` on each sample.
 
         Parameters
         ----------
         desired, measured : array_like, shape (N,)
+            ``measured`` None: no readings (feedforward alone, every sample counted).
 
         Returns
         -------
@@ -449,7 +457,8 @@ class SelfSensingController:
             Commands (V).
         """
         d = np.ascontiguousarray(desired, dtype=np.float64)
-        m = np.ascontiguousarray(measured, dtype=np.float64)
+        m = np.full(d.shape, np.nan) if measured is None else measured
+        m = np.ascontiguousarray(m, dtype=np.float64)
         if d.ndim != 1 or d.shape != m.shape:
             msg = (
                 "'desired' and 'measured' must be 1-D arrays of one length. "

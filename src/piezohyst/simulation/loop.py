@@ -2,50 +2,31 @@
 
 from __future__ import annotations
 
-from typing import TypeGuard
-
 import numpy as np
 from numpy.typing import ArrayLike
 
 from .._validation import as_signal
-from ..control.compensator import Compensator
-from ..control.selfsensing import SelfSensingController
+from ..control.contract import Controller
 from .bench import Bench, BenchRecord
 
-__all__ = ["feedforward", "run_loop"]
+__all__ = ["run_loop"]
 
 
-def feedforward(controller: SelfSensingController | Compensator) -> TypeGuard[Compensator]:
-    """True for a feedforward compensator (a whole trajectory at once, no reading), False
-    for a controller that takes the reading after each command.
-
-    Parameters
-    ----------
-    controller : SelfSensingController or Compensator
-
-    Returns
-    -------
-    bool
-    """
-    return isinstance(controller, Compensator)
-
-
-def run_loop(
-    controller: SelfSensingController | Compensator, desired: ArrayLike, bench: Bench
-) -> BenchRecord:
+def run_loop(controller: Controller, desired: ArrayLike, bench: Bench) -> BenchRecord:
     """Drive ``bench`` with ``controller`` over a desired trajectory, one sample at a time.
 
-    A :class:`~piezohyst.control.selfsensing.SelfSensingController` gets, each sample,
-    the charge the bench read after the previous command (as on a rig: read
-    the ADC, compute, write the DAC); a
-    :class:`~piezohyst.control.compensator.Compensator` (feedforward) needs no
-    reading. Sample ``k`` of the result is what the bench read after command
-    ``k``, so ``displacement[k]`` is the response to ``desired[k]``.
+    Any controller of the one contract (:mod:`~piezohyst.control.contract`): one that
+    reads (``reads``: the self-sensing controller, the learning compensator) gets,
+    each sample, the charge the bench read after the previous command (as on a rig: read
+    the ADC, compute, write the DAC); a feedforward one (the compensator) is sent the
+    whole trajectory at once. Sample ``k`` of the result is what the bench read after
+    command ``k``, so ``displacement[k]`` is the response to ``desired[k]``.
 
     Parameters
     ----------
-    controller : SelfSensingController or Compensator
-        Reset to the bench's voltage before the run, or as the caller left it.
+    controller : Controller
+        A compensator, self-sensing controller or learning compensator (with its
+        trajectory: the first ``command``), as the caller left it.
     desired : array_like, shape (N,)
         Desired values (the controller's units); NaN holds the last command.
     bench : Bench
@@ -58,7 +39,7 @@ def run_loop(
     """
     d = np.ascontiguousarray(desired, dtype=np.float64)
     as_signal(np.nan_to_num(d), "desired")  # 1-D and not empty
-    if feedforward(controller):
+    if not controller.reads:
         return bench.run(controller.process(d))
     rows = np.empty((d.size, 7))
     for k in range(d.size):

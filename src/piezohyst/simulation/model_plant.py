@@ -19,12 +19,10 @@ from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_signal
 from ..control.calibration import OutputMap
-from ..control.compensator import Compensator
-from ..control.selfsensing import SelfSensingController
+from ..control.contract import Controller
 from ..errors import ParameterError
 from ..model.model import HysteresisModel
 from ..units import is_length
-from .loop import feedforward
 
 __all__ = ["ModelPlant", "PlantRun", "run_on_model"]
 
@@ -179,16 +177,15 @@ class ModelPlant:
         return run
 
 
-def run_on_model(
-    controller: SelfSensingController | Compensator, desired: ArrayLike, plant: ModelPlant
-) -> PlantRun:
+def run_on_model(controller: Controller, desired: ArrayLike, plant: ModelPlant) -> PlantRun:
     """Drive ``plant`` with ``controller`` over a desired trajectory, as
     :func:`~piezohyst.simulation.run_loop` drives the bench: the self-sensing controller
     gets, each sample, the charge the plant gave after the previous command.
 
     Parameters
     ----------
-    controller : SelfSensingController or Compensator
+    controller : Controller
+        Any controller of the one contract (:mod:`~piezohyst.control.contract`).
     desired : array_like, shape (N,)
         Desired values (the controller's units); NaN holds the last command.
     plant : ModelPlant
@@ -205,7 +202,7 @@ def run_on_model(
     """
     d = np.ascontiguousarray(desired, dtype=np.float64)
     as_signal(np.nan_to_num(d), "desired")
-    if feedforward(controller):
+    if not controller.reads:
         return plant.run(controller.process(d))
     if plant.of_displacement:
         msg = (

@@ -77,6 +77,9 @@ class Saving:
     _first: bool
     _resend: bool
     _lead: tuple[FloatArray, FloatArray] | None
+    _cursor: int
+    _seen: FloatArray
+    _awaiting: int | None
     design: LearningDesign | None
     history: list[Trial]
 
@@ -115,7 +118,16 @@ class Saving:
             "lead": _lead_data(self._lead),
             "design": None if self.design is None else asdict(self.design),
             "history": [asdict(t) for t in self.history],
+            "stepping": self._stepping(),
         }
+
+    def _stepping(self) -> dict[str, Any] | None:
+        """Where a loop stepping the trial stands (None: not stepping): the next sample, the
+        readings so far (NaN as null), the sample whose reading comes next."""
+        if self._pending is None or (self._cursor == 0 and self._awaiting is None):
+            return None
+        seen = [float(v) if math.isfinite(v) else None for v in self._seen]
+        return {"cursor": self._cursor, "seen": seen, "awaiting": self._awaiting}
 
     def restore(self, data: dict[str, Any], where: str = "learning state") -> None:
         """Continue from :meth:`to_dict`'s contents, made with the same model and settings.
@@ -164,6 +176,17 @@ class Saving:
             self._lead = _lead(data.get("lead"), n)
             self.design = None if data["design"] is None else LearningDesign(**data["design"])
             self.history = [Trial(**t) for t in data["history"]]
+            if self._pending is not None:  # a loop may step the pending trial from its start
+                self._seen = np.full(self._pending.size, np.nan)
+            stepping = data.get("stepping")  # a state saved mid-trial by a stepping loop
+            if stepping is not None and self._pending is not None:
+                self._cursor = int(stepping["cursor"])
+                seen = [math.nan if v is None else v for v in stepping["seen"]]
+                self._seen = np.array(seen, dtype=np.float64)
+                awaiting = stepping["awaiting"]
+                self._awaiting = None if awaiting is None else int(awaiting)
+                if not (0 <= self._cursor <= self._pending.size == self._seen.size):
+                    raise ValueError("the stepping loop's place is outside its trial")
         except (KeyError, TypeError, ValueError, IndexError) as exc:
             self.reset()
             msg = f"{where}: a damaged learning state ({exc})"
