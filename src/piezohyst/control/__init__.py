@@ -5,7 +5,8 @@ May import: the foundation, ``_kernels``, ``io``, ``model`` (never ``analysis``)
 The one contract every controller answers, ``step(desired, measured=None)``, ``process``,
 ``reads`` (``contract``)
     Controller
-Feedforward (``compensator``; its engines in ``inverses``)
+Feedforward (``compensator``, its arguments checked in ``arguments``; its engines in the
+subpackage ``engines``)
     Compensator, CompensatorSettings, CompensatorState
 Feedback on the measured charge (``selfsensing``)
     SelfSensingController, ControllerState, LoopSettings

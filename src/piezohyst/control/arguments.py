@@ -5,7 +5,7 @@ samples and a fraction; a lag's gain per sample; an output mode's sample interva
 
 :func:`resolve` is what every :class:`~piezohyst.Compensator` (and so the self-sensing
 controller, the learning compensator and the banks built on it) checks before an engine is
-built (:mod:`~piezohyst.control.inverses`).
+built (:mod:`~piezohyst.control.engines`).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from typing import Any, Literal
 from ..errors import ParameterError, warn
 from ..model.dynamics import OutputDynamics
 from ..model.model import HysteresisModel, InverseSpec
-from .inverses import EngineSettings, finite_number
+from .engines import EngineSettings, finite_number
 
 __all__ = ["Domain", "Resolved", "resolve", "trained_limit"]
 

@@ -32,7 +32,7 @@ from ..errors import LimitWarning, ParameterError, ShapeError, warn
 from ..model.model import HysteresisModel
 from .arguments import Domain, resolve
 from .calibration import Charges, OutputMap
-from .inverses import INVERSES, CompensatorState, Inverse
+from .engines import INVERSES, CompensatorState, Inverse
 
 __all__ = ["Compensator", "CompensatorSettings", "CompensatorState"]
 
@@ -98,7 +98,7 @@ class Compensator:
     The inverse follows the core's plan (:meth:`~piezohyst.model.cores.base.Core.inverse_plan`):
     eq. 18 for play operators, the compiled bracketed Newton step for the
     Preisach, Duhem and Bouc-Wen cores, a root search on the core for any
-    other (:mod:`piezohyst.control.inverses`). A :class:`~piezohyst.ModelBank` has its
+    other (:mod:`piezohyst.control.engines`). A :class:`~piezohyst.ModelBank` has its
     own :class:`BankCompensator`.
     """
 
@@ -145,7 +145,7 @@ class Compensator:
         self._last_desired = math.nan
         self._mode_history = np.full(2, np.nan)
         #: the engine the core's inverse plan names (play, packed, python): it owns the
-        #: kernel arrays (:mod:`piezohyst.control.inverses`)
+        #: kernel arrays (:mod:`piezohyst.control.engines`)
         self.inverse: Inverse = INVERSES[spec.operator.inverse_plan().engine](spec, settings)
         #: True when eq. 18's analytic inverse runs (no Newton solve); fixed by the model
         self.analytic = self.inverse.analytic
