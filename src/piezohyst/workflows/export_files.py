@@ -6,8 +6,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..control.c_text import Precision
 from ..control.compensator import CompensatorSettings
-from ..control.export.c_code import Precision, c_paths, write_c
+from ..control.export.c_code import c_paths, write_c
 from ..control.export.fmu import write_fmu
 from ..control.export.shared import write_mex, write_shared
 from ..control.selfsensing import LoopSettings

@@ -13,6 +13,7 @@ from ..._kernels import play as K
 from ..._validation import FloatArray
 from ...errors import ParameterError
 from ...model.model import InverseSpec
+from ..c_text import CParts, CText
 
 __all__ = ["CompensatorState", "EngineSettings", "Inverse", "Loop", "State", "finite_number"]
 
@@ -172,6 +173,54 @@ class Inverse:
     def closed_loop(self) -> bool:
         """Whether the self-sensing controller can run this inverse in its loop."""
         return False
+
+    def c_parts(self, c: CText, fold: tuple[float, float] | None, loop: Loop | None) -> CParts:
+        """This engine's part of the exported C: the constants of its own arrays, its
+        ``init`` statements, the shipped files its step needs and its header's fields
+        (:mod:`~piezohyst.control.c_text`).
+
+        Parameters
+        ----------
+        c : CText
+            The precision's literals.
+        fold : tuple of float, optional
+            A linear output map folded into the step: (scale, reference) of the desired
+            value, in place of the engine's own.
+        loop : tuple of ndarray, optional
+            The self-sensing loop's arrays (config, settings, feedback state) to export the
+            controller; None for the compensator.
+
+        Returns
+        -------
+        CParts
+
+        Raises
+        ------
+        ParameterError
+            The engine or core has no C (a core defined outside the library).
+        """
+        msg = (
+            "C export covers play operators and the Preisach, Duhem and Bouc-Wen cores; a "
+            f"{type(self.spec.operator).__name__} core runs in Python (ph.Compensator) only."
+        )
+        raise ParameterError(msg)
+
+    def _dynamics_c(self, c: CText) -> tuple[list[str], list[str]]:
+        """The input dynamics' constants and ``init`` statements (its filter state now)."""
+        lines = c.constants(FRACTION=self.dyn[K.DYN_FRACTION], GAIN_B=self.dyn[K.DYN_GAIN_B])
+        init = [f"s->w = {c.literal(self.dstate[0])};", f"s->u = {c.literal(self.dstate[1])};"]
+        return lines, init
+
+    @staticmethod
+    def _folded(
+        config: FloatArray, fold: tuple[float, float] | None, ref: int, scale: int
+    ) -> FloatArray:
+        """``config`` with a linear output map's (scale, reference) in place of its own."""
+        if fold is None:
+            return config
+        out = config.copy()
+        out[scale], out[ref] = fold
+        return out
 
     def n_operators(self) -> int:
         """Values in the core's state."""

@@ -4,6 +4,8 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import cast
 
 import numpy as np
@@ -14,6 +16,7 @@ from ..._validation import FloatArray, as_signal
 from ...errors import ShapeError
 from ...model.cores.base import PackedCore
 from ...model.model import InverseSpec
+from ..c_text import CParts, CText
 from .base import CompensatorState, Inverse, Loop, State, finite_number
 
 __all__ = ["PackedInverse"]
@@ -232,3 +235,135 @@ class PackedInverse(Inverse):
             self.trial,
         )
         P.core_controller_process(d, m, *a, loop[1], loop[2], out)
+
+    # ------------------------------------------------------------------ the C
+    def c_parts(self, c: CText, fold: tuple[float, float] | None, loop: Loop | None) -> CParts:
+        """See :meth:`~piezohyst.control.engines.base.Inverse.c_parts`: ``_kernels.packed.
+        core_step`` in C, the same arithmetic as the kernel (Newton inside a bracket, at most
+        ``NEWTON_MAX`` iterations: a bounded time per sample)."""
+        if self.spec.operator.c_source != "packed.c":
+            return super().c_parts(c, fold, loop)
+        params, state = self.params, self.state()
+        cfg = self._folded(self.config, fold, P.CC_REF, P.CC_INV_GAIN)
+        kind = int(params[0])
+        n_lags = int(self.lags.shape[1])
+        has_slow = int(self.slow.size > 0)
+        step = float(cfg[P.CC_MAX_STEP])
+        has_slew = int(np.isfinite(step))
+        region = self.region
+        has_region = int(region.shape[1] > 0 and np.isfinite(cfg[P.CC_TOL]))
+        lines = [
+            f"#define NS {c.upper}_NS",
+            f"#define KIND {kind} /* 0 Duhem, 1 Bouc-Wen, 2 Preisach */",
+            f"#define HAS_SLEW {has_slew}",
+            f"#define DYNAMIC {int(self.dynamic)}",
+            f"#define MODE {int(self.settings.mode_active)}",
+            f"#define HAS_REGION {has_region}",
+            f"#define N_LAGS {n_lags} /* kept creep lags beside the core */",
+            f"#define SLOW {has_slow} /* a slow (relaxing) Preisach core behind a lag */",
+            f"#define NS_MAIN {int(cfg[P.CC_NS])} /* the core values in st; the slow core next */",
+            f"#define NEWTON_MAX {P.NEWTON_MAX}",
+            f"#define HOLD_RES {P.HOLD_RES!r}",
+            f"#define REGION_BISECTIONS {P.REGION_BISECTIONS}",
+            f"#define STACK {P.STACK}",
+        ]
+        core = CORES[kind]
+        files = ["ieee.c", "packed_util.c"]
+        lines += core.constants(params, c)
+        files += core.files
+        if has_slow:  # the slow core: the Preisach grid functions again, on its own grid
+            lines.append(_preisach_constants(self.slow, c, "SLOW_"))
+            lines += c.constants(SLOW_A=cfg[P.CC_SLOW_A])
+            files += ["relaxation_begin.h", "preisach_grid.c", "relaxation_end.h"]
+        if has_region:
+            bins = region.shape[1]
+            lines += [c.table("REGION_LO", str(bins), region[0]),
+                      c.table("REGION_HI", str(bins), region[1])]  # fmt: skip
+            lines += c.constants(RV_LO=cfg[P.CC_RV_LO], RV_HI=cfg[P.CC_RV_HI], TOL=cfg[P.CC_TOL])
+            lines += [f"#define REGION_BINS {bins}", f"#define REFUSE {int(cfg[P.CC_REFUSE] > 0)}"]
+        lines += c.constants(V_MIN=cfg[P.CC_V_MIN], V_MAX=cfg[P.CC_V_MAX])
+        if has_slew:
+            lines += c.constants(MAX_STEP=step)
+        lines += c.constants(SCALE=cfg[P.CC_INV_GAIN], REFERENCE=cfg[P.CC_REF])
+        lines.append(c.table("ST0", "NS", state.operators))
+        lines += c.constants(LAST0=state.command)
+        init: list[str] = []
+        if self.dynamic:
+            more, init = self._dynamics_c(c)
+            lines += more
+        if n_lags:  # gains and 1 - exp(-dt / tau) at the loop's sample rate
+            lines += [c.table("LAG_G", "N_LAGS", self.lags[1]),
+                      c.table("LAG_A", "N_LAGS", self.lags[2])]  # fmt: skip
+            init += [f"s->c[{k}] = {c.literal(float(self.dstate[P.DYN_LAGS + k]))};"
+                     for k in range(n_lags)]  # fmt: skip
+        files.append("packed.c")
+        fields: dict[str, object] = {
+            "core": core.name, "newton_max": P.NEWTON_MAX, "ns": self.n_operators(),
+            "n_lags": n_lags, "libm": core.libm,
+        }  # fmt: skip
+        return CParts(lines, init, files, "packed.h", fields)
+
+
+@dataclass(frozen=True)
+class _CoreC:
+    """What a packed core's kind adds to the C: its constants, files and the header's words."""
+
+    name: str
+    files: tuple[str, ...]
+    constants: Callable[[FloatArray, CText], list[str]]
+    libm: str = ""
+
+
+def _bouc_wen_constants(params: FloatArray, c: CText) -> list[str]:
+    return c.constants(**{n: params[getattr(P, f"BW_{n if n != 'NEXP' else 'N'}")]
+                          for n in ("C0", "ALPHA", "BETA", "GAMMA", "NEXP", "OFFSET",
+                                    "DV_MAX", "G_MAX", "S_MIN")})  # fmt: skip
+
+
+def _duhem_constants(params: FloatArray, c: CText) -> list[str]:
+    nv, nq = int(params[P.DU_NV]), int(params[P.DU_NQ])
+    cells = nv * nq
+    return [
+        f"#define NV {nv}",
+        f"#define NQ {nq}",
+        *c.constants(V_LO=params[P.DU_V_LO], V_STEP=params[P.DU_V_STEP],
+                     Q_LO=params[P.DU_Q_LO], Q_STEP=params[P.DU_Q_STEP],
+                     DV_MAX=params[P.DU_DV_MAX], S_MIN=params[P.DU_F_MIN]),
+        c.table("UP", "NV * NQ", params[P.DU_UP : P.DU_UP + cells]),
+        c.table("DOWN", "NV * NQ", params[P.DU_UP + cells : P.DU_UP + 2 * cells]),
+    ]  # fmt: skip
+
+
+def _preisach_constants(packed: FloatArray, c: CText, prefix: str = "") -> str:
+    """A Preisach core's grid and Everett table as C constants (names after ``prefix``)."""
+    n = int(packed[P.DU_NV])
+    lit = [c.literal(float(packed[k])) for k in (P.DU_V_LO, P.DU_V_STEP, P.DU_F_MIN)]
+    # the smallest slope bounds the main core's bracket; a slow core's is not needed
+    bracket = [] if prefix else [f"static const real_t S_MIN = {lit[2]};"]
+    return "\n".join(
+        [
+            f"enum {{ {prefix}NN = {n} }};",
+            f"static const real_t {prefix}V_LO = {lit[0]};",
+            f"static const real_t {prefix}H = {lit[1]};",
+            *bracket,
+            f"static const real_t {prefix}EV[{prefix}NN * {prefix}NN] = "
+            f"{c.array(packed[P.DU_UP : P.DU_UP + n * n])};",
+        ]
+    )
+
+
+#: Each packed kind's C (``_kernels.packed.KIND_*``)
+CORES: dict[int, _CoreC] = {
+    int(P.KIND_DUHEM): _CoreC("Duhem", ("duhem.c",), _duhem_constants),
+    int(P.KIND_BOUC_WEN): _CoreC(
+        "Bouc-Wen",
+        ("boucwen.c",),
+        _bouc_wen_constants,
+        " Needs pow() from <math.h> (link with -lm).",
+    ),
+    int(P.KIND_PREISACH): _CoreC(
+        "Preisach",
+        ("preisach_grid.c", "preisach.c"),
+        lambda params, c: [_preisach_constants(params, c)],
+    ),
+}

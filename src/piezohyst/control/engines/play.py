@@ -12,6 +12,7 @@ from ..._validation import FloatArray, as_signal
 from ...errors import ParameterError, ShapeError
 from ...model.cores.play import PIHysteresis
 from ...model.model import InverseSpec
+from ..c_text import CParts, CText
 from .base import CompensatorState, Inverse, Loop, State, finite_number
 
 __all__ = ["PlayInverse"]
@@ -250,3 +251,125 @@ class PlayInverse(Inverse):
 
     def controller_process(self, d: FloatArray, m: FloatArray, loop: Loop, out: FloatArray) -> None:
         K.controller_process(d, m, self.tables, loop[0], self.kernel_state, loop[1], loop[2], out)
+
+    # ------------------------------------------------------------------ the C
+    def c_parts(self, c: CText, fold: tuple[float, float] | None, loop: Loop | None) -> CParts:
+        """See :meth:`~piezohyst.control.engines.base.Inverse.c_parts`."""
+        if self.spec.operator.c_source != "play.c":
+            return super().c_parts(c, fold, loop)
+        if not self.analytic:
+            return self._numeric_c(c, fold)
+        config = self._folded(self.config, fold, K.CFG_REFERENCE, K.CFG_INV_GAIN)
+        state, tables = self.state(), self.tables
+        step = float(config[K.CFG_MAX_STEP])
+        has_slew = int(np.isfinite(step))
+        lines = [
+            f"#define N {c.upper}_N",
+            f"#define HAS_SLEW {has_slew}",
+            f"#define DYNAMIC {int(self.dynamic)}",
+            f"#define MODE {int(self.settings.mode_active)}",
+            f"#define CONTROLLER {int(loop is not None)}",
+            *(c.table(name, "N", values) for name, values in (
+                ("R", tables[K.TAB_R]), ("W", tables[K.TAB_W]), ("S", tables[K.TAB_S]),
+                ("RI", tables[K.TAB_RI]), ("WI", tables[K.TAB_WI]), ("Z0", state.operators))),
+            *c.constants(OFFSET=config[K.CFG_OFFSET], INV_OFFSET=config[K.CFG_INV_OFFSET],
+                         V_MIN=config[K.CFG_V_MIN], V_MAX=config[K.CFG_V_MAX]),
+        ]  # fmt: skip
+        if has_slew:
+            lines += c.constants(MAX_STEP=step)
+        lines += c.constants(SCALE=config[K.CFG_INV_GAIN], REFERENCE=config[K.CFG_REFERENCE],
+                             BOUND=config[K.CFG_BOUND], SAT_TOL=1e-12 * (self.v_max - self.v_min),
+                             LAST0=state.command)  # fmt: skip
+        init = [] if loop is None else _feedback_init(loop[2], c)
+        files = ["ieee.c", "play.c"]
+        if self.dynamic:
+            more, init = self._dynamics_c(c)
+            lines += more
+            files.append("play_dynamic.c")
+        if loop is not None:
+            ctl = loop[1]
+            lines += c.constants(**{name: ctl[getattr(K, f"CTL_{name}")] for name in (
+                "KP", "KI", "G0", "G1", "INV_SCALE", "DT", "TOL", "HOLD_TOL", "HOLD_SAMPLES",
+                "REFRESH", "DISCHARGE")})  # fmt: skip
+            files.append("play_controller.c")
+        fields: dict[str, object] = {
+            "title": "feedforward hysteresis compensator" if loop is None
+            else "self-sensing controller (feedforward + charge feedback)",
+            "n": self.n_operators(), "controller": int(loop is not None),
+            "kind": "compensator" if loop is None else "controller", "lag_state": "",
+        }  # fmt: skip
+        return CParts(lines, init, files, "play.h", fields)
+
+    def _numeric_c(self, c: CText, fold: tuple[float, float] | None) -> CParts:
+        """Play operators beside kept asymmetry or creep terms (GeneralizedPI): the bracketed
+        Newton step of ``_kernels.play.numeric_step`` (``play_numeric.c``)."""
+        if self.settings.mode_active:
+            msg = (
+                "C export of a model with asymmetry or creep takes no output mode yet: pass the "
+                "pre-inverted target (OutputDynamics.invert) or fit without the mode"
+            )
+            raise ParameterError(msg)
+        config = self._folded(self.config, fold, K.CFG_REFERENCE, K.CFG_INV_GAIN)
+        state = self.state()
+        n_static, n_lags = int(self.static.shape[1]), int(self.lags.shape[1])
+        step = float(config[K.CFG_MAX_STEP])
+        has_slew = int(np.isfinite(step))
+        lines = [
+            f"#define N {c.upper}_N",
+            f"#define N_STATIC {n_static}",
+            f"#define N_LAGS {n_lags}",
+            f"#define HAS_SLEW {has_slew}",
+            f"#define DYNAMIC {int(self.dynamic)}",
+            "#define MODE 0",
+            c.table("R", "N", self.tables[K.TAB_R]),
+            c.table("W", "N", self.tables[K.TAB_W]),
+            c.table("Z0", "N", state.operators),
+            *c.constants(OFFSET=config[K.CFG_OFFSET], V_MIN=config[K.CFG_V_MIN],
+                         V_MAX=config[K.CFG_V_MAX], SCALE=config[K.CFG_INV_GAIN],
+                         REFERENCE=config[K.CFG_REFERENCE], LAST0=state.command),
+        ]  # fmt: skip
+        if has_slew:
+            lines += c.constants(MAX_STEP=step)
+        if n_static:
+            lines += [
+                c.table("STATIC_KNOT", "N_STATIC", self.static[0]),
+                c.table("STATIC_UP", "N_STATIC", self.static[1]),
+                c.table("STATIC_DOWN", "N_STATIC", self.static[2]),
+                *c.constants(STATIC_SCALE=config[K.CFG_STATIC_SCALE]),
+            ]
+        if n_lags:
+            lines += [
+                c.table("LAG_G", "N_LAGS", self.lags[1]),
+                c.table("LAG_A", "N_LAGS", self.lags[2]),
+                c.table("C0", "N_LAGS", state.lags),
+            ]
+        init: list[str] = []
+        if self.dynamic:  # the input lags inverted before the Newton step (play_numeric.c)
+            more, init = self._dynamics_c(c)
+            lines += more
+        lag_state = (
+            f"\n    {c.prefix}_real c[{n_lags}];     /* creep lag states, V */" if n_lags else ""
+        )
+        fields: dict[str, object] = {
+            "title": "feedforward hysteresis compensator (play operators with asymmetry or creep)",
+            "n": self.n_operators(), "controller": 0, "kind": "compensator", "lag_state": lag_state,
+        }  # fmt: skip
+        return CParts(lines, init, ["ieee.c", "play_numeric.c"], "play.h", fields)
+
+
+def _feedback_init(fb: FloatArray, c: CText) -> list[str]:
+    """The self-sensing loop's feedback state as it is now, one assignment per field."""
+    lines = [f"s->{name} = {c.literal(fb[idx])};" for name, idx in (
+        ("integral", K.CS_INTEGRAL), ("leak", K.CS_LEAK), ("frame", K.CS_FRAME),
+        ("q_last", K.CS_Q_LAST), ("error", K.CS_ERROR), ("bias", K.CS_BIAS),
+        ("hold_n", K.CS_HOLD_N), ("sx", K.CS_SX), ("sy", K.CS_SY), ("sxx", K.CS_SXX),
+        ("sxy", K.CS_SXY), ("sm", K.CS_SM), ("y0", K.CS_Y0))]  # fmt: skip
+    for name, idx in (("d_prev", K.CS_D_PREV), ("hold_ref", K.CS_HOLD_REF)):
+        value = float(fb[idx])
+        lines.append(f"s->{name} = {c.literal(value if np.isfinite(value) else 0.0)};")
+    lines.append(f"s->has_prev = {int(np.isfinite(fb[K.CS_D_PREV]))};")
+    lines.append(f"s->has_hold = {int(np.isfinite(fb[K.CS_HOLD_REF]))};")
+    lines.append(f"s->started = {int(fb[K.CS_STARTED] > 0)};")
+    lines.append(f"s->faults = {int(fb[K.CS_FAULTS])}UL;")
+    lines.append(f"s->refreshes = {int(fb[K.CS_REFRESHES])}UL;")
+    return lines

@@ -40,8 +40,9 @@ from xml.sax.saxutils import escape
 
 from ..._version import __version__
 from ...errors import ParameterError
+from ..c_text import Precision
 from ..compensator import Compensator
-from .c_code import Precision, export_c
+from .c_code import export_c
 from .shared import _c_template, compiler
 
 if TYPE_CHECKING:

@@ -38,8 +38,9 @@ from typing import TYPE_CHECKING, cast
 
 from ..._version import __version__
 from ...errors import ParameterError
+from ..c_text import Precision
 from ..compensator import Compensator
-from .c_code import Precision, c_paths, export_c
+from .c_code import c_paths, export_c
 
 if TYPE_CHECKING:
     from ..selfsensing import SelfSensingController
