@@ -142,6 +142,25 @@ def test_bad_export_arguments() -> None:
         export_c(comp, prefix="3-bad")
 
 
+@pytest.mark.parametrize("name", ["duhem", "bouc_wen", "preisach"])
+def test_a_packed_cores_loop_is_refused_in_c_not_dropped(name: str, tmp_path: Path) -> None:
+    """The C of the self-sensing controller is play operators' alone: on a Preisach, Duhem
+    or Bouc-Wen core its export said nothing and wrote the feedforward step (no reading, the
+    feedback gone). It is refused by name, on every host (C, shared library, FMU)."""
+    from piezohyst.control.export import write_fmu, write_shared
+
+    model = ph.load_model(Path(__file__).parents[1] / "fixtures" / "schema2" / f"{name}.json")
+    lo, hi = model.input_range_
+    ctl = ph.SelfSensingController(model, v_min=lo, v_max=hi, sample_rate=250.0)
+    for write in (write_c, write_shared, write_fmu):
+        with pytest.raises(ph.ParameterError, match=r"covers play-operator models.*Python"):
+            write(ctl, tmp_path / "ph_loop.c")  # type: ignore[operator]
+    assert not list(tmp_path.iterdir())  # nothing written
+    # the feedforward compensator of the same model still exports
+    assert write_c(ph.Compensator(model, v_min=lo, v_max=hi, sample_rate=250.0),
+                   tmp_path / "ph_comp.c")[0].exists()  # fmt: skip
+
+
 CONTROLLER_HARNESS = r"""
 #include <stdio.h>
 #include <stdlib.h>

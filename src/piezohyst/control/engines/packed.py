@@ -13,7 +13,7 @@ import numpy as np
 from ..._kernels import packed as P
 from ..._kernels import play as K
 from ..._validation import FloatArray, as_signal
-from ...errors import ShapeError
+from ...errors import ParameterError, ShapeError
 from ...model.cores.base import PackedCore
 from ...model.model import InverseSpec
 from ..c_text import CParts, CText
@@ -243,6 +243,13 @@ class PackedInverse(Inverse):
         ``NEWTON_MAX`` iterations: a bounded time per sample)."""
         if self.spec.operator.c_source != "packed.c":
             return super().c_parts(c, fold, loop)
+        if loop is not None:
+            msg = (
+                "C export of the self-sensing controller covers play-operator models; on a "
+                f"{CORES[int(self.params[0])].name} core the loop runs in Python "
+                "(ph.SelfSensingController), and the feedforward compensator exports alone"
+            )
+            raise ParameterError(msg)
         params, state = self.params, self.state()
         cfg = self._folded(self.config, fold, P.CC_REF, P.CC_INV_GAIN)
         kind = int(params[0])
