@@ -213,3 +213,30 @@ def test_no_test_module_imports_another() -> None:
                 if node.module.split(".")[-1].startswith("test_"):
                     found.append(f"{path.relative_to(tests)}:{node.lineno} {node.module}")
     assert not found, found
+
+
+def test_no_private_kernel_is_called_from_outside_the_kernels() -> None:
+    """The compiled step's owner is ``_kernels``: outside it, its modules are used through
+    their public names only (an engine called ``_advance_dynamics``; issue 56)."""
+    found, aliases_seen = [], 0
+    for path in MODULES:
+        if "_kernels" in path.parts:
+            continue
+        tree = ast.parse(path.read_text())
+        aliases = {
+            a.asname or a.name
+            for node in ast.walk(tree)
+            if isinstance(node, ast.ImportFrom) and (node.module or "").endswith("_kernels")
+            for a in node.names
+        }
+        aliases_seen += len(aliases)
+        for node in ast.walk(tree):
+            if (
+                isinstance(node, ast.Attribute)
+                and isinstance(node.value, ast.Name)
+                and node.value.id in aliases
+                and node.attr.startswith("_")
+            ):
+                found.append(f"{path.relative_to(SRC)}:{node.lineno} {node.value.id}.{node.attr}")
+    assert aliases_seen >= 10  # the rule sees the kernel modules where they are used
+    assert not found, found

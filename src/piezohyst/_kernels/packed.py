@@ -591,7 +591,7 @@ def region_distance(region, cfg, v, y):  # type: ignore[no-untyped-def]
 @njit(cache=True, fastmath=FASTMATH, inline="always")
 def _advance(x, last, dyn, dstate):  # type: ignore[no-untyped-def]
     """The piezo voltage after command x (after ``last``) is held one sample (as
-    ``_kernels._advance_dynamics``)."""
+    ``_kernels.advance_dynamics``)."""
     w = K.delay_fraction(x, last, dyn[0])
     u = dstate[1] + dyn[1] * (w - dstate[1]) if dyn[1] > 0.0 else w
     dstate[0] = w

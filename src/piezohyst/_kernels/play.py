@@ -358,7 +358,7 @@ def undo_fraction(w_target, w_prev, last, f):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def _advance_dynamics(x, last, dyn, dstate):  # type: ignore[no-untyped-def]
+def advance_dynamics(x, last, dyn, dstate):  # type: ignore[no-untyped-def]
     """The piezo voltage after command ``x`` (after ``last``) is held for one sample."""
     w = delay_fraction(x, last, dyn[DYN_FRACTION])
     u = dstate[1] + dyn[DYN_GAIN_B] * (w - dstate[1]) if dyn[DYN_GAIN_B] > 0.0 else w
@@ -384,7 +384,7 @@ def dynamic_step(desired, tables, config, state, dyn, dstate):  # type: ignore[n
     hi = config[CFG_V_MAX]
     if not math.isfinite(desired):  # hold the last command: the piezo keeps settling on it
         state[end + ST_NONFINITE] += 1.0
-        u = _advance_dynamics(last, last, dyn, dstate)
+        u = advance_dynamics(last, last, dyn, dstate)
         for i in range(n):
             state[i] = min(max(state[i], u - tables[TAB_R, i]), u + tables[TAB_R, i])
         inverse_states(tables, config, state)
@@ -406,7 +406,7 @@ def dynamic_step(desired, tables, config, state, dyn, dstate):  # type: ignore[n
         inverse_states(tables, config, state)
         return last
     x, _ = _limit(x, last, config, state)
-    u = _advance_dynamics(x, last, dyn, dstate)
+    u = advance_dynamics(x, last, dyn, dstate)
     for i in range(n):
         state[i] = min(max(state[i], u - tables[TAB_R, i]), u + tables[TAB_R, i])
     if abs(u - target) > 1e-12 * (hi - lo):
@@ -640,7 +640,7 @@ def numeric_dynamic_step(desired, tables, static, lags, config, state, dyn, dsta
     last = state[end + ST_LAST]
     if not math.isfinite(desired):  # hold the last command: the piezo keeps settling on it
         state[end + ST_NONFINITE] += 1.0
-        u = _advance_dynamics(last, last, dyn, dstate)
+        u = advance_dynamics(last, last, dyn, dstate)
     else:
         q = config[CFG_REFERENCE] + desired * config[CFG_INV_GAIN]
         target, held = _numeric_piezo(q, dstate[1], tables, static, lags, config, state)
@@ -659,7 +659,7 @@ def numeric_dynamic_step(desired, tables, static, lags, config, state, dyn, dsta
         sent = min(max(x, last - step), last + step)
         if held and sent == x and (x <= lo or x >= hi):  # held by the voltage limit, sent at it
             state[end + ST_SATURATED] += 1.0
-        u = _advance_dynamics(sent, last, dyn, dstate)
+        u = advance_dynamics(sent, last, dyn, dstate)
         last = sent
     _follow(u, tables, lags, state)
     state[end + ST_LAST] = last

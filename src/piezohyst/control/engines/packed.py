@@ -185,7 +185,7 @@ class PackedInverse(Inverse):
         a = float(self.config[P.CC_SLOW_A])
         last = self.last_command()
         for k, v in enumerate(cycle):
-            u[k] = K._advance_dynamics(v, last, self.dyn, self.dstate) if self.dynamic else v
+            u[k] = K.advance_dynamics(v, last, self.dyn, self.dstate) if self.dynamic else v
             last = v
             self.dstate[P.DYN_LAGS :] += alphas * (u[k] - self.dstate[P.DYN_LAGS :])
             if slow.size:

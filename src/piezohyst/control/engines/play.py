@@ -175,7 +175,7 @@ class PlayInverse(Inverse):
         step = self.max_step
         for k, v_target in enumerate(cycle):
             v = min(max(v_target, last - step), last + step)
-            u = K._advance_dynamics(v, last, self.dyn, self.dstate) if self.dynamic else v
+            u = K.advance_dynamics(v, last, self.dyn, self.dstate) if self.dynamic else v
             z[:] = np.clip(z, u - r, u + r)
             lag += alpha * (u - lag)
             out[k] = last = v
