@@ -82,8 +82,8 @@ __getattr__, __dir__ = attach(
         "compare_models": ".analysis.comparison",
         "Selection": ".analysis.selection",
         "select_model": ".analysis.selection",
-        "OutputMap": ".control.calibration",
-        "calibrate_gain": ".control.calibration",
+        "OutputMap": ".model.calibrations",
+        "calibrate_gain": ".model.calibrations",
         "BankCompensator": ".control.channels",
         "BankController": ".control.channels",
         "Compensator": ".control.compensator",
@@ -104,8 +104,8 @@ __getattr__, __dir__ = attach(
         "PIHysteresis": ".model.cores.play",
         "default_thresholds": ".model.cores.play",
         "PreisachHysteresis": ".model.cores.preisach",
-        "Leakage": ".model.leakage",
-        "calibrate_leakage": ".model.leakage",
+        "Leakage": ".model.calibrations",
+        "calibrate_leakage": ".model.calibrations",
         "History": ".model.model",
         "HysteresisModel": ".model.model",
         "InverseSpec": ".model.model",
@@ -128,7 +128,6 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .analysis import selection as selection
     from .analysis.comparison import Comparison, ComparisonRow, compare_models
     from .analysis.selection import Selection, select_model
-    from .control.calibration import OutputMap, calibrate_gain
     from .control.channels import BankCompensator, BankController
     from .control.compensator import Compensator, CompensatorState
     from .control.learning import LearningCompensator
@@ -136,12 +135,12 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .io import read_recording, read_table, write_table
     from .model import terms
     from .model.bank import ModelBank, load_bank
+    from .model.calibrations import Leakage, OutputMap, calibrate_gain, calibrate_leakage
     from .model.cores.base import Core, Propagation, Region
     from .model.cores.boucwen import BoucWenHysteresis
     from .model.cores.duhem import DuhemHysteresis
     from .model.cores.play import PIHysteresis, default_thresholds
     from .model.cores.preisach import PreisachHysteresis
-    from .model.leakage import Leakage, calibrate_leakage
     from .model.model import History, HysteresisModel, InverseSpec, ModelState
     from .model.models import (
         ActivePI,

@@ -325,7 +325,7 @@ def test_a_map_is_tied_to_the_model_it_was_calibrated_through(tmp_path: Path) ->
     rec = ph.simulate(signal="decaying", duration=10.0, seed=2)
     pi = _quiet_fit(ph.ActivePI(10), rec)
     om = ph.calibrate_gain(pi, rec.voltage, rec.charge, rec.displacement, rec.t)
-    assert om.model == ph.control.calibration.model_fingerprint(pi)
+    assert om.model == ph.model.calibrations.output_map.model_fingerprint(pi)
     assert om.model.startswith("ActivePI ") and len(om.model.split()[1]) == 12
     assert ph.OutputMap.load(om.save(tmp_path / "gain.json")).model == om.model
     with warnings.catch_warnings():

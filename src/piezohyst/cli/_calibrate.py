@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from ..io import DataSpec
-from ..model.leakage import LEAKAGE_TERMS
+from ..model.calibrations.leakage import LEAKAGE_TERMS
 from ._support import EXISTING, FORCE, OUT_FILE_JSON, Context, _data_options, _run
 
 

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import click
 
-from ..control.calibration import OutputMap
 from ..io import DataSpec
+from ..model.calibrations.output_map import OutputMap
 from ._support import (
     EXISTING,
     FORCE,

@@ -17,11 +17,11 @@ from typing import Any, Literal, cast
 import click
 
 from ..control.arguments import Domain
-from ..control.calibration import OutputMap
 from ..control.compensator import CompensatorSettings
 from ..control.selfsensing import LoopSettings
 from ..errors import PiezohystError
 from ..io import DataSpec, estimated_rows
+from ..model.calibrations.output_map import OutputMap
 from ..model.models import HysteresisModel, model_names
 from ..units import is_length
 

@@ -15,8 +15,9 @@ Learning a repeated scan (the subpackage ``learning``: the compensator in
 ``learning.jacobian``, the lead-in's probe in ``learning.probe``, a trial's trajectory and limits
 in ``learning.trial``, the laws behind one interface in ``learning.laws``)
     LearningCompensator, Trial, LearningDesign, design_learning
-Charge to displacement (``calibration``)
-    OutputMap, calibrate_gain
+Desired displacements as charges through the calibrated map (``charges``; the map itself,
+``OutputMap`` and ``calibrate_gain``, is a calibration: ``piezohyst.model.calibrations``)
+    Charges
 Many channels in one kernel (``channels``)
     BankCompensator, BankController
 The compensator outside Python (the subpackage ``export``: C in ``export.c_code``; a shared
@@ -35,8 +36,7 @@ from .._lazy import attach
 __getattr__, __dir__ = attach(
     __name__,
     {
-        "OutputMap": ".calibration",
-        "calibrate_gain": ".calibration",
+        "Charges": ".charges",
         "BankCompensator": ".channels",
         "BankController": ".channels",
         "Controller": ".contract",
@@ -60,8 +60,8 @@ __getattr__, __dir__ = attach(
 )
 
 if TYPE_CHECKING:  # the same names, for type checkers and editors
-    from .calibration import OutputMap, calibrate_gain
     from .channels import BankCompensator, BankController
+    from .charges import Charges
     from .compensator import Compensator, CompensatorSettings, CompensatorState
     from .contract import Controller
     from .export import CCode, export_c, write_c, write_fmu, write_mex, write_shared
@@ -72,6 +72,7 @@ __all__ = [
     "BankCompensator",
     "BankController",
     "CCode",
+    "Charges",
     "Compensator",
     "CompensatorSettings",
     "CompensatorState",
@@ -80,10 +81,8 @@ __all__ = [
     "LearningCompensator",
     "LearningDesign",
     "LoopSettings",
-    "OutputMap",
     "SelfSensingController",
     "Trial",
-    "calibrate_gain",
     "design_learning",
     "export_c",
     "write_c",

@@ -24,10 +24,10 @@ from .._kernels import signal as S
 from .._validation import FloatArray
 from ..errors import ExtrapolationWarning, LimitWarning, ParameterError, ShapeError, warn
 from ..model.bank import ModelBank
-from ..model.leakage import Leakage
+from ..model.calibrations.leakage import Leakage
+from ..model.calibrations.output_map import OutputMap, monotone_charges
 from ..model.model import HysteresisModel
 from .arguments import Domain
-from .calibration import OutputMap, monotone_charges
 from .compensator import LIMIT_CHECK_FIRST, LIMIT_SHARE, Compensator
 from .selfsensing import SelfSensingController
 

@@ -29,9 +29,10 @@ from numpy.typing import ArrayLike
 from .._kernels import play as K
 from .._validation import FloatArray
 from ..errors import LimitWarning, ParameterError, ShapeError, warn
+from ..model.calibrations.output_map import OutputMap
 from ..model.model import HysteresisModel
 from .arguments import Domain, resolve
-from .calibration import Charges, OutputMap
+from .charges import Charges
 from .engines import INVERSES, CompensatorState, Inverse
 
 __all__ = ["Compensator", "CompensatorSettings", "CompensatorState"]
@@ -76,7 +77,7 @@ class Compensator:
         the limits as given.
     output_map : OutputMap, optional
         The map from the capacitor's charge to the displacement
-        (:func:`~piezohyst.control.calibration.calibrate_gain`): desired values
+        (:func:`~piezohyst.model.calibrations.from_sensor.calibrate_gain`): desired values
         are then displacements in its unit, turned into the capacitor charge
         that gives them (curvature included; on a map that turns, on the
         branch the charge is on), instead of ``gain``. Displacement 0 is the

@@ -29,9 +29,9 @@ from numpy.typing import ArrayLike
 from .._kernels import play as K
 from .._validation import FloatArray
 from ..errors import ParameterError, ShapeError
-from ..model.leakage import Leakage
+from ..model.calibrations.leakage import Leakage
+from ..model.calibrations.output_map import OutputMap
 from ..model.model import HysteresisModel
-from .calibration import OutputMap
 from .compensator import (
     Compensator,
     CompensatorSettings,
@@ -124,7 +124,7 @@ class SelfSensingController:
     leakage : Leakage, optional
         The leakage to subtract from the measured charge; default the model's
         growth terms (:meth:`Leakage.from_model`). Calibrate it from holds
-        (:func:`~piezohyst.model.leakage.calibrate_leakage`) for the best result.
+        (:func:`~piezohyst.calibrate_leakage`) for the best result.
     ki : float, default 0.5
         Integral gain per sample, in [0, 1.9]: 1 removes a constant error in
         one sample but passes the measurement noise; the loop's bandwidth is
@@ -173,7 +173,7 @@ class SelfSensingController:
         Fraction of the estimated bias error corrected per window, in (0, 1].
     output_map : OutputMap, optional
         Desired values are displacements, turned into the capacitor charge through
-        this map (:func:`~piezohyst.control.calibration.calibrate_gain`); the loop
+        this map (:func:`~piezohyst.model.calibrations.from_sensor.calibrate_gain`); the loop
         still closes on the measured charge: the sensor is not needed.
 
     Examples

@@ -1,6 +1,7 @@
 """Models: terms, dynamics, the cores (``cores/``, one module per core), the estimator
 contract, state, the fit, the model class and its presets, files and banks, and the
-capacitor's leakage measured on holds (``leakage``).
+calibrations beside them (the subpackage ``calibrations``: the leakage from holds, the
+charge -> displacement map from a sensor).
 May import: the foundation, ``_kernels``, ``io``.
 
 The model (``model``: the one class; ``models``: its presets; ``state``: runs from a state)
@@ -8,7 +9,10 @@ The model (``model``: the one class; ``models``: its presets; ``state``: runs fr
     ClassicalPI, ActivePI, GeneralizedPI, PIModel, PreisachModel, DuhemModel, BoucWenModel
 What a model holds besides its core
     Term, growth_kinds (``terms``); InputDynamics, OutputDynamics (``dynamics``, their
-    search in ``dynamics_fit``); Leakage, calibrate_leakage (``leakage``)
+    search in ``dynamics_fit``)
+The calibrations, side by side (``calibrations``: ``leakage`` and ``from_holds``,
+``output_map`` and ``from_sensor``)
+    Leakage, calibrate_leakage, OutputMap, calibrate_gain
 Files and banks (``persistence``, ``bank``)
     load_model, save_model, model_names, model_class, register; ModelBank, load_bank
 The estimator contract (``estimator``) and the fit (``fitting``: the identification;
@@ -31,8 +35,10 @@ __getattr__, __dir__ = attach(
         "InputDynamics": ".dynamics",
         "OutputDynamics": ".dynamics",
         "Estimator": ".estimator",
-        "Leakage": ".leakage",
-        "calibrate_leakage": ".leakage",
+        "Leakage": ".calibrations",
+        "calibrate_leakage": ".calibrations",
+        "OutputMap": ".calibrations",
+        "calibrate_gain": ".calibrations",
         "History": ".model",
         "HysteresisModel": ".model",
         "InverseSpec": ".model",
@@ -56,9 +62,9 @@ __getattr__, __dir__ = attach(
 
 if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .bank import ModelBank, load_bank
+    from .calibrations import Leakage, OutputMap, calibrate_gain, calibrate_leakage
     from .dynamics import InputDynamics, OutputDynamics
     from .estimator import Estimator
-    from .leakage import Leakage, calibrate_leakage
     from .model import History, HysteresisModel, InverseSpec, ModelState
     from .models import (
         ActivePI,
@@ -87,9 +93,11 @@ __all__ = [
     "ModelBank",
     "ModelState",
     "OutputDynamics",
+    "OutputMap",
     "PIModel",
     "PreisachModel",
     "Term",
+    "calibrate_gain",
     "calibrate_leakage",
     "growth_kinds",
     "load_bank",

@@ -35,11 +35,11 @@ from ..errors import (
 from ..io.blocks import Blocks, Summary, array_blocks, block_dt
 from ..io.screening import screen
 from ..units import is_length
+from .calibrations.from_holds import calibrate_leakage
 from .cores.base import FitJob
 from .dynamics import InputDynamics, OutputDynamics
 from .dynamics_fit import profile_dynamics, search_dynamics
 from .estimator import _dynamics_kind, _output_kind
-from .leakage import calibrate_leakage
 from .state import InitialState, ModelState
 from .terms import Creep, creep_time_constants
 
@@ -412,7 +412,7 @@ HOLDS_SAMPLES = 1 << 20
 
 def holds_show_rise(blocks: Blocks, sm: Summary) -> bool:
     """Whether the record's constant-voltage holds show the leak's conductance rising with the
-    voltage: :func:`~piezohyst.model.leakage.calibrate_leakage` on the record chooses its
+    voltage: :func:`~piezohyst.calibrate_leakage` on the record chooses its
     ``quadratic`` term, beyond :data:`HOLDS_RISE_SIGMAS` of its standard errors.
 
     On a hold the hysteresis is still, so the charge's slope is the leak alone; a fit over

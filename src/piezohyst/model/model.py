@@ -583,7 +583,7 @@ class HysteresisModel(Fitted, Estimator):
             Times (s).
         leakage : Leakage, optional
             Remove this leakage (e.g. calibrated from holds,
-            :func:`~piezohyst.model.leakage.calibrate_leakage`) instead of the
+            :func:`~piezohyst.calibrate_leakage`) instead of the
             model's growth terms; needs ``t``.
 
         Returns

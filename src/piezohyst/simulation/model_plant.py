@@ -18,9 +18,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._validation import FloatArray, as_signal
-from ..control.calibration import OutputMap
 from ..control.contract import Controller
 from ..errors import ParameterError
+from ..model.calibrations.output_map import OutputMap
 from ..model.model import HysteresisModel
 from ..units import is_length
 

@@ -9,12 +9,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..control.calibration import OutputMap, calibrate_gain
 from ..errors import DataFileError
 from ..io import (
     DataSpec,
 )
-from ..model.leakage import LEAKAGE_TERMS, Leakage, calibrate_leakage
+from ..model.calibrations import Leakage, OutputMap, calibrate_gain, calibrate_leakage
+from ..model.calibrations.leakage import LEAKAGE_TERMS
 from ._base import (
     PathLike,
     _default_unit,
@@ -47,9 +47,9 @@ def calibrate_leakage_file(
     data_spec : DataSpec, optional
         Columns, units and window.
     terms : sequence of str
-        Leakage terms to fit (see :func:`~piezohyst.model.leakage.calibrate_leakage`).
+        Leakage terms to fit (see :func:`~piezohyst.calibrate_leakage`).
     min_duration, settle
-        Hold detection and trim (see :func:`~piezohyst.model.leakage.calibrate_leakage`).
+        Hold detection and trim (see :func:`~piezohyst.calibrate_leakage`).
     force : bool
         Replace an existing ``out`` that piezohyst did not write.
 

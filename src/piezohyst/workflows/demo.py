@@ -29,7 +29,7 @@ from ..control.selfsensing import SelfSensingController
 from ..errors import ExtrapolationWarning, warn
 from ..io import atomic_write_text
 from ..metrics import hysteresis_width, nrmse, rmse
-from ..model.leakage import Leakage, calibrate_leakage
+from ..model.calibrations import Leakage, calibrate_leakage
 from ..model.models import (
     ActivePI,
     BoucWenModel,

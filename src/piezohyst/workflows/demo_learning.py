@@ -14,7 +14,7 @@ import numpy as np
 
 from ..control.learning import LearningCompensator
 from ..metrics import hysteresis_width, rmse
-from ..model.leakage import Leakage
+from ..model.calibrations.leakage import Leakage
 from ..model.models import HysteresisModel
 from ..plotting import save_panels
 from ..simulation import Bench, BenchPreset

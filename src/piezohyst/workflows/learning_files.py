@@ -21,7 +21,7 @@ from ..control.learning import LearningCompensator, Trial
 from ..errors import DataFileError, ModelFileError, ParameterError
 from ..io import read_table, write_table
 from ..io.screening import NOISE_REACH, noise_level
-from ..model.leakage import Leakage
+from ..model.calibrations.leakage import Leakage
 from ..model.persistence import load_model
 from ._base import (
     ONE_RATE,
@@ -105,7 +105,7 @@ def learn_file(
         Limits (default: the model's training range), slew limit, sample rate,
         domain and gain.
     leakage : path, optional
-        A leakage file (:func:`~piezohyst.model.leakage.calibrate_leakage`); default the model's.
+        A leakage file (:func:`~piezohyst.calibrate_leakage`); default the model's.
     lag, learning_gain, cutoff, lead_in, probe, noise_gate, law
         See :class:`~piezohyst.LearningCompensator`.
     voltage_scale, reading_scale : str or float, optional

@@ -12,13 +12,13 @@ from typing import Any
 import numpy as np
 
 from .._validation import FloatArray
-from ..control.calibration import OutputMap
 from ..errors import ExtrapolationWarning, ParameterError
 from ..io import (
     DataSpec,
     atomic_folder,
 )
 from ..metrics import hysteresis_width, nrmse, rmse, run_on
+from ..model.calibrations.output_map import OutputMap
 from ..model.model import HysteresisModel
 from ..model.state import predict_record
 from ._base import (

@@ -36,9 +36,9 @@ from ...errors import (
     warn,
 )
 from ...metrics import hysteresis_width
-from ...model.leakage import Leakage
+from ...model.calibrations.leakage import Leakage
+from ...model.calibrations.output_map import OutputMap
 from ..arguments import Domain
-from ..calibration import OutputMap
 from ..compensator import Compensator
 from ..contract import reading
 from .design import LearningDesign, design_learning

@@ -1,0 +1,261 @@
+r"""From charge to position: the sensor once, then metres from the charge alone.
+
+At zero stress the strain follows the electric displacement, S = g·D (eq. 6-7),
+so once the map from the capacitor's charge to the displacement is known, a
+compensator that linearises voltage → charge linearises voltage → position,
+and the position sensor can go. :func:`calibrate_gain` identifies that map
+from one record with a displacement sensor (voltage, charge and displacement
+sampled together):
+
+* the charge the map starts from is the capacitor's: the measured charge with
+  the model's growth removed (eq. 19), so leaked charge moves nothing;
+* the map is a polynomial in the charge, of the lowest order the record's
+  evidence supports: linear ``g`` unless a curvature term's coefficient is
+  many standard errors from zero (an electrostrictive part, S ∝ D², on
+  semi-bipolar drive or near the coercive field); never curved by default;
+* a sensor delay (whole samples; a sensor's lag is absorbed by the delay that
+  fits best) if the record shows one, and an offset (the sensor's zero);
+* standard errors from a covariance that allows for correlated residuals
+  (Newey-West), so the uncertainty stated is not that of white noise.
+
+The :class:`OutputMap` states its uncertainty at any charge
+(:meth:`OutputMap.stderr`), the charge range it was calibrated on (beyond it,
+it extends linearly from the range's edge and says so with an
+:class:`~piezohyst.errors.ExtrapolationWarning`), whether it is monotone there
+(on bipolar drive past the coercive field it is not: the butterfly), and saves
+as JSON with a schema and a checksum, like a model file.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ..._validation import FloatArray, as_signal, as_time, same_length
+from ...errors import (
+    InsufficientDataError,
+    ParameterError,
+    warn,
+)
+from .output_map import (
+    EVIDENCE,
+    MAX_DELAY,
+    MAX_ORDER,
+    MIN_SAMPLES,
+    SATURATED_SHARE,
+    OutputMap,
+    model_fingerprint,
+)
+
+__all__ = ["calibrate_gain"]
+
+
+def _newey_west(x: FloatArray, e: FloatArray) -> tuple[FloatArray, int]:
+    """The least-squares coefficients' covariance robust to correlated residuals, and the
+    lag it spans (until the residuals' autocorrelation is lost in the noise)."""
+    n = e.size
+    rule = math.ceil(4.0 * (n / 100.0) ** (2.0 / 9.0))
+    ec = e - e.mean()
+    denom = float(ec @ ec) or 1e-300
+    cap = max(rule, min(n // 20, 2000))
+    lag = rule
+    limit = 2.0 / math.sqrt(n)
+    for k in range(1, cap + 1):
+        if abs(float(ec[k:] @ ec[:-k]) / denom) < limit:
+            lag = max(rule, k)
+            break
+    else:
+        lag = cap
+    xe = x * e[:, None]
+    s = xe.T @ xe
+    for k in range(1, lag + 1):
+        g = xe[k:].T @ xe[:-k]
+        s += (1.0 - k / (lag + 1.0)) * (g + g.T)
+    bread = np.linalg.inv(x.T @ x)
+    return bread @ s @ bread, lag
+
+
+def calibrate_gain(
+    model: Any,
+    voltage: ArrayLike,
+    charge: ArrayLike,
+    displacement: ArrayLike,
+    t: ArrayLike,
+    *,
+    max_order: int = MAX_ORDER,
+    evidence: float = EVIDENCE,
+    max_delay: float = MAX_DELAY,
+    output_unit: str = "m",
+) -> OutputMap:
+    """Identify the map from the capacitor's charge to the displacement (eq. 6-7) from a
+    record with a displacement sensor: the one step that needs the sensor.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        Fitted on voltage → charge (its growth terms are removed from ``charge``).
+    voltage, charge, displacement, t : array_like, shape (N,)
+        Sampled together: V, C, the sensor's reading (``output_unit``) and s.
+    max_order : int, default 3
+        Highest polynomial order tried; a term is kept only on evidence.
+    evidence : float, default 5
+        ``|coefficient / standard error|`` a curvature term needs.
+    max_delay : float, default 0.05
+        Longest sensor delay searched (s).
+    output_unit : str, default "m"
+
+    Returns
+    -------
+    OutputMap
+
+    Raises
+    ------
+    InsufficientDataError
+        Too short a record, a sensor that does not move or sits at its limit.
+    """
+    v = as_signal(voltage, "voltage")
+    q = as_signal(charge, "charge")
+    s = as_signal(displacement, "displacement")
+    same_length(v, q, "voltage", "charge")
+    same_length(v, s, "voltage", "displacement")
+    ts = as_time(t, v.size, required=True, owner="calibrate_gain")
+    assert ts is not None  # required
+    if not callable(getattr(model, "remove_growth", None)):
+        msg = f"calibrate_gain needs a fitted piezohyst model. Got {type(model).__name__}."
+        raise ParameterError(msg)
+    if isinstance(max_order, bool) or not isinstance(max_order, int) or not 1 <= max_order <= 5:
+        msg = f"'max_order' must be an int in [1, 5]. Got {max_order!r}."
+        raise ParameterError(msg)
+    if v.size < MIN_SAMPLES:
+        msg = (
+            f"calibrate_gain needs at least {MIN_SAMPLES} samples to tell the map from the "
+            f"sensor's noise. Got {v.size}."
+        )
+        raise InsufficientDataError(msg)
+    qc = np.asarray(model.remove_growth(v, q, t=ts), dtype=np.float64)  # eq. 19
+    _check_sensor(s, qc, output_unit)
+    dt = float(np.median(np.diff(ts)))
+    d_max = int(min(round(max_delay / dt), v.size // 20))
+    lo, hi = float(qc.min()), float(qc.max())
+    if not hi - lo > 1e-12 * max(abs(lo), abs(hi), 1e-300):
+        msg = "the capacitor charge never moves: nothing maps it to a displacement"
+        raise InsufficientDataError(msg)
+    center, scale = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    leak = _leak_columns(v, q, ts)  # what the displacement tells the model's growth from
+
+    def design(delay: int, order: int) -> tuple[FloatArray, FloatArray]:
+        u = (qc[: qc.size - delay] - center) / scale
+        x = np.column_stack([u**k for k in range(order + 1)] + [leak[: u.size]])
+        return x, s[delay:]
+
+    # the delay that fits best with the richest map (a delay is a shift, not a shape)
+    sse = []
+    for d in range(d_max + 1):
+        x, y = design(d, max_order)
+        coef, *_ = np.linalg.lstsq(x, y, rcond=None)
+        r = y - x @ coef
+        sse.append(float(r @ r) / r.size)
+    delay = int(np.argmin(sse))
+    order, found = 1, {}
+    fits: dict[int, tuple[Any, Any, FloatArray, int]] = {}
+    for k in range(1, max_order + 1):
+        x, y = design(delay, k)
+        coef, *_ = np.linalg.lstsq(x, y, rcond=None)
+        r = y - x @ coef
+        cov, lag = _newey_west(x, r)
+        fits[k] = (coef, cov, r, lag)
+        if k > 1:
+            t_top = abs(float(coef[k])) / math.sqrt(max(float(cov[k, k]), 1e-300))
+            found[f"order {k}"] = t_top
+            if t_top < evidence:
+                break
+            order = k
+    full, full_cov, r, lag = fits[order]
+    coef, cov = full[: order + 1], full_cov[: order + 1, : order + 1]
+    n = r.size
+    rho = _lag1(r)
+    n_eff = int(max(2, round(n * (1 - rho) / (1 + rho)))) if rho > 0 else n
+    om = OutputMap(
+        coefficients=tuple(float(c) for c in coef),
+        center=center,
+        scale=scale,
+        covariance=tuple(tuple(float(c) for c in row) for row in cov),
+        charge_range=(lo, hi),
+        delay=delay * dt,
+        residual=float(math.sqrt(float(r @ r) / n)),
+        n_samples=n,
+        n_effective=n_eff,
+        evidence=found,
+        input_unit=getattr(model, "output_unit", "C"),
+        output_unit=output_unit,
+        model=model_fingerprint(model),
+    )
+    sure = max(abs(c) / math.sqrt(max(float(cov[k, k]), 1e-300)) for k, c in enumerate(coef) if k)
+    if sure < evidence:  # no term of the map stands out from its error
+        msg = (
+            f"the displacement does not follow the charge (gain {om.gain:.3g} ± "
+            f"{om.gain_stderr:.2g} {output_unit}/{om.input_unit}, no term beyond "
+            f"{evidence:g} standard errors): is the sensor on the actuator, and the right column?"
+        )
+        raise InsufficientDataError(msg)
+    if not om.monotone:
+        s_lo, s_hi = om.displacement_range()
+        warn(
+            f"calibrate_gain: the displacement does not follow the charge one way over the "
+            f"record (it turns: the butterfly of bipolar drive past the coercive field); "
+            f"displacements in [{s_lo:.4g}, {s_hi:.4g}] {output_unit} are reached on two "
+            "branches, and a compensator keeps to the branch the charge is on",
+            UserWarning,
+        )
+    return om
+
+
+def _leak_columns(v: FloatArray, q: FloatArray, t: FloatArray) -> FloatArray:
+    """The leakage shapes the model's growth terms may have missed (the terms of
+    :data:`~piezohyst.model.calibrations.leakage.LEAKAGE_TERMS`: ohmic, voltage-dependent, a bias
+    current, the reference capacitor's discharge), each integrated by the backward
+    rectangle rule the growth terms use (eq. 13) and scaled to its span. The displacement
+    does not see leaked charge, so their coefficients take up whatever leakage the charge
+    model got wrong, instead of the gain."""
+    dt = np.diff(t)
+    vs = max(float(np.abs(v).max()), 1e-300)
+    cols = []
+    for rate in (v, v * np.abs(v) / vs, np.ones_like(v), q - q[0]):
+        c = np.concatenate([[0.0], np.cumsum(rate[1:] * dt)])
+        span = float(np.ptp(c))
+        cols.append(c / span if span > 0 else c)
+    return np.column_stack(cols)
+
+
+def _lag1(r: FloatArray) -> float:
+    rc = r - r.mean()
+    den = float(rc @ rc)
+    return float(rc[1:] @ rc[:-1]) / den if den > 0 else 0.0
+
+
+def _check_sensor(s: FloatArray, qc: FloatArray, unit: str) -> None:
+    """Refuse a sensor reading that cannot calibrate: still, or sitting at its limit while
+    the charge moves on (a hold at the top is not saturation: the charge holds too)."""
+    span = float(np.ptp(s))
+    noise = float(np.median(np.abs(np.diff(s)))) / 0.954 / math.sqrt(2.0)  # robust, per sample
+    if not span > 20.0 * noise or span == 0.0:
+        msg = (
+            f"the displacement barely moves ({span:.3g} {unit} peak to peak against a noise "
+            f"of {noise:.2g} {unit}): is the sensor on, and the right column?"
+        )
+        raise InsufficientDataError(msg)
+    tol = 1e-9 * span
+    for name, edge in (("top", float(s.max())), ("bottom", float(s.min()))):
+        at = np.abs(s - edge) <= tol
+        moving = at.any() and float(np.ptp(qc[at])) > 0.05 * float(np.ptp(qc))
+        if at.sum() > max(SATURATED_SHARE * s.size, 10) and moving:
+            runs = np.flatnonzero(at)
+            msg = (
+                f"the displacement sensor sits at its {name} reading {edge:.6g} {unit} for "
+                f"{int(at.sum())} samples (first at sample {int(runs[0])}): saturated; "
+                "calibrate within the sensor's range"
+            )
+            raise InsufficientDataError(msg)
