@@ -32,7 +32,7 @@ import numpy as np
 import piezohyst as ph
 from piezohyst.io.blocks import array_blocks
 from piezohyst.model.cores.play import subset_label
-from piezohyst.model.fitting import growth_by_evidence
+from piezohyst.model.fit_record import growth_by_evidence
 from piezohyst.simulation import PLANTS, batch_unit, make_signal
 from piezohyst.workflows.excitation import excitation
 

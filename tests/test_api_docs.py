@@ -10,12 +10,12 @@ import piezohyst as ph
 from piezohyst import analysis, control, io, model, simulation, testing, workflows
 from piezohyst.control import compensator, export
 from piezohyst.io import blocks, screening
-from piezohyst.model import bank, models, persistence, terms
+from piezohyst.model import bank, persistence, presets, terms
 from piezohyst.model.cores import play, solve
 from piezohyst.workflows import fleet
 
 #: the top package, every subpackage's face, and the modules whose own names are public too
-MODULES = [ph, analysis, control, model, simulation, workflows, models, terms, solve, blocks, play,
+MODULES = [ph, analysis, control, model, simulation, workflows, presets, terms, solve, blocks, play,
            compensator, export, persistence, io, bank, fleet, screening, testing]  # fmt: skip
 
 

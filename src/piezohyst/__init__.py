@@ -110,13 +110,13 @@ __getattr__, __dir__ = attach(
         "HysteresisModel": ".model.model",
         "InverseSpec": ".model.model",
         "ModelState": ".model.model",
-        "ActivePI": ".model.models",
-        "BoucWenModel": ".model.models",
-        "ClassicalPI": ".model.models",
-        "DuhemModel": ".model.models",
-        "GeneralizedPI": ".model.models",
-        "PIModel": ".model.models",
-        "PreisachModel": ".model.models",
+        "ActivePI": ".model.presets",
+        "BoucWenModel": ".model.presets",
+        "ClassicalPI": ".model.presets",
+        "DuhemModel": ".model.presets",
+        "GeneralizedPI": ".model.presets",
+        "PIModel": ".model.presets",
+        "PreisachModel": ".model.presets",
         "load_model": ".model.persistence",
         "Term": ".model.terms",
         "simulate": ".simulation",
@@ -142,7 +142,8 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .model.cores.play import PIHysteresis, default_thresholds
     from .model.cores.preisach import PreisachHysteresis
     from .model.model import History, HysteresisModel, InverseSpec, ModelState
-    from .model.models import (
+    from .model.persistence import load_model
+    from .model.presets import (
         ActivePI,
         BoucWenModel,
         ClassicalPI,
@@ -151,7 +152,6 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
         PIModel,
         PreisachModel,
     )
-    from .model.persistence import load_model
     from .model.terms import Term
     from .simulation import simulate
 

@@ -44,7 +44,7 @@ def known_model(
         "time": (ph.terms.TimeTerm(), 3e-9),
         "abs_integral": (ph.terms.AbsIntegral(hi - lo), 2.5e-10),
     }
-    parts += [(growth[k][0], [growth[k][1]]) for k in ph.model.models.GROWTH_TERMS if k in terms]
+    parts += [(growth[k][0], [growth[k][1]]) for k in ph.model.presets.GROWTH_TERMS if k in terms]
     m = ph.GeneralizedPI.from_operator(
         ph.PIHysteresis(r, w, 2e-8, np.full(6, v[0])),
         terms=[p[0] for p in parts],
@@ -203,7 +203,7 @@ def test_persistence_and_cli_name(tmp_path: Path, levels: tuple) -> None:
     (tmp_path / "bad.json").write_text(json.dumps(data))
     with pytest.raises(ph.ModelFileError, match=r"fitted.terms\[0\].coefficients.*signs"):
         ph.load_model(tmp_path / "bad.json")
-    assert ph.model.models.model_class("generalized-pi") is ph.GeneralizedPI
+    assert ph.model.presets.model_class("generalized-pi") is ph.GeneralizedPI
 
 
 def test_defaults_and_errors() -> None:

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import piezohyst as ph
-from piezohyst.model.fitting import RAMP_MARGIN
+from piezohyst.model.fit_record import RAMP_MARGIN
 from piezohyst.simulation import make_signal
 
 

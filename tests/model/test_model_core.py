@@ -207,7 +207,7 @@ def test_named_state_round_trips_and_continues(record: Any) -> None:
 @pytest.mark.parametrize("name", ["classical-pi", "active-pi", "generalized-pi"])
 def test_a_model_at_rest_stays_at_rest(name: str, record: Any) -> None:
     """Constant input from the rest state: the hysteresis part never moves."""
-    model = ph.model.models.model_class(name)(6).fit(record.voltage, record.charge, t=record.t)
+    model = ph.model.presets.model_class(name)(6).fit(record.voltage, record.charge, t=record.t)
     for x0 in (0.0, 55.5, 140.0):
         n = 500
         t = np.arange(n) / FS

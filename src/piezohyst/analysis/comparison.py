@@ -308,7 +308,7 @@ def compare_models(
         A separate test record; the whole of ``x, y`` then trains.
     initial_state : {"rest", "periodic"}, History or array_like
         Where the training part starts (see
-        :meth:`~piezohyst.model.models.HysteresisModel.fit`).
+        :meth:`~piezohyst.model.presets.HysteresisModel.fit`).
     test_state : {"rest", "periodic"}, History or array_like
         Where a separate test record starts.
 

@@ -42,7 +42,7 @@ from ..errors import (
     RecordWarning,
 )
 from ..io.screening import noise_level
-from ..model.fitting import screened
+from ..model.fit_record import screened
 from ..model.model import HysteresisModel, InitialState
 from ..model.persistence import model_class, model_names
 from ..model.terms import creep_time_constants

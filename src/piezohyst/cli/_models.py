@@ -11,7 +11,7 @@ from pathlib import Path
 import click
 
 from ..io import DataSpec
-from ..model.models import model_names
+from ..model.presets import model_names
 from ._support import (
     EXISTING,
     FORCE,

@@ -22,7 +22,7 @@ from ..control.selfsensing import LoopSettings
 from ..errors import PiezohystError
 from ..io import DataSpec, estimated_rows
 from ..model.calibrations.output_map import OutputMap
-from ..model.models import HysteresisModel, model_names
+from ..model.presets import HysteresisModel, model_names
 from ..units import is_length
 
 

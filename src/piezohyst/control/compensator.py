@@ -45,13 +45,13 @@ class Compensator:
     hysteresis part is inverted: analytically (eq. 18) when it is play
     operators alone, otherwise exactly by a safeguarded Newton solve per
     sample. The method follows from the terms the model holds
-    (:meth:`~piezohyst.model.models.HysteresisModel.inversion`), not from its class.
+    (:meth:`~piezohyst.model.presets.HysteresisModel.inversion`), not from its class.
 
     Parameters
     ----------
     model : HysteresisModel
         A fitted model (or any object with an ``inversion()`` method returning
-        an :class:`~piezohyst.model.models.InverseSpec`).
+        an :class:`~piezohyst.model.presets.InverseSpec`).
     v_min, v_max : float
         The actuator's voltage limits (V). Every command lies inside them.
     slew_rate : float, "trained" or None, default "trained"

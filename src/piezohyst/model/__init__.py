@@ -4,19 +4,20 @@ calibrations beside them (the subpackage ``calibrations``: the leakage from hold
 charge -> displacement map from a sensor).
 May import: the foundation, ``_kernels``, ``io``.
 
-The model (``model``: the one class; ``models``: its presets; ``state``: runs from a state)
+The model (``model``: the one class; ``presets``: its presets; ``state``: runs from a state)
     HysteresisModel, ModelState, History, InverseSpec
     ClassicalPI, ActivePI, GeneralizedPI, PIModel, PreisachModel, DuhemModel, BoucWenModel
 What a model holds besides its core
     Term, growth_kinds (``terms``); InputDynamics, OutputDynamics (``dynamics``, their
-    search in ``dynamics_fit``)
+    search in ``fit_dynamics``)
 The calibrations, side by side (``calibrations``: ``leakage`` and ``from_holds``,
 ``output_map`` and ``from_sensor``)
     Leakage, calibrate_leakage, OutputMap, calibrate_gain
 Files and banks (``persistence``, ``bank``)
     load_model, save_model, model_names, model_class, register; ModelBank, load_bank
-The estimator contract (``estimator``) and the fit (``fitting``: the identification;
-``fitted``: what it hands the model)
+The estimator contract (``estimator``) and the fit (``fit_record``: a record in, the core
+identified and scored; ``fit_state``: what a fit found, stored by its one writer;
+``fit_dynamics``: the input and output dynamics searched)
     Estimator
 """
 
@@ -43,13 +44,13 @@ __getattr__, __dir__ = attach(
         "HysteresisModel": ".model",
         "InverseSpec": ".model",
         "ModelState": ".model",
-        "ActivePI": ".models",
-        "BoucWenModel": ".models",
-        "ClassicalPI": ".models",
-        "DuhemModel": ".models",
-        "GeneralizedPI": ".models",
-        "PIModel": ".models",
-        "PreisachModel": ".models",
+        "ActivePI": ".presets",
+        "BoucWenModel": ".presets",
+        "ClassicalPI": ".presets",
+        "DuhemModel": ".presets",
+        "GeneralizedPI": ".presets",
+        "PIModel": ".presets",
+        "PreisachModel": ".presets",
         "load_model": ".persistence",
         "model_class": ".persistence",
         "model_names": ".persistence",
@@ -66,7 +67,8 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .dynamics import InputDynamics, OutputDynamics
     from .estimator import Estimator
     from .model import History, HysteresisModel, InverseSpec, ModelState
-    from .models import (
+    from .persistence import load_model, model_class, model_names, register, save_model
+    from .presets import (
         ActivePI,
         BoucWenModel,
         ClassicalPI,
@@ -75,7 +77,6 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
         PIModel,
         PreisachModel,
     )
-    from .persistence import load_model, model_class, model_names, register, save_model
     from .terms import Term, growth_kinds
 
 __all__ = [

@@ -112,7 +112,7 @@ class InputDynamics:
     covariance : tuple of float
         The 2x2 covariance (s², row-major over ``(delay, tau)``) of the
         identified values, from the profile of the model's own fit (see
-        :func:`~piezohyst.model.dynamics_fit.profile_dynamics`); ``()`` when unknown
+        :func:`~piezohyst.model.fit_dynamics.profile_dynamics`); ``()`` when unknown
         (stated by hand, or a file from before 0.9). A parameter the kind
         lacks has zero variance.
 

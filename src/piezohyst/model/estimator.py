@@ -88,7 +88,7 @@ def _growth_terms(value: object, name: str, owner: str) -> tuple[str, ...] | Non
     terms, in the registry's order (:func:`~piezohyst.model.terms.growth_kinds`); 'domain' is
     the record's: the charge's leakage (``integral``, and ``abs_integral`` where the record's
     holds show its rise), none on a displacement record (see
-    :func:`~piezohyst.model.fitting.identify_model`)."""
+    :func:`~piezohyst.model.fit_record.identify_model`)."""
     kinds = growth_kinds()
     if isinstance(value, str):
         if value == "domain":

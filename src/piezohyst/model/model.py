@@ -9,7 +9,7 @@ output dynamics. It knows nothing of any core's maths: it asks the core (the
 :class:`~piezohyst.model.cores.base.Core` contract) to identify itself, run, give
 its states, its inverse plan and its file form.
 
-The public presets (:mod:`piezohyst.model.models`: ``ClassicalPI``, ``ActivePI``,
+The public presets (:mod:`piezohyst.model.presets`: ``ClassicalPI``, ``ActivePI``,
 ``GeneralizedPI``, ``PIModel``, ``PreisachModel``, ``DuhemModel``,
 ``BoucWenModel``) are thin constructors: their own settings, their core and
 the terms they fit.
@@ -62,8 +62,8 @@ from .estimator import (
     _terms,
     _unit,
 )
-from .fitted import Fitted
-from .fitting import fit_arrays, fit_stream
+from .fit_record import fit_arrays, fit_stream
+from .fit_state import Fitted
 from .persistence import model_from_dict, model_to_dict, register, save_model
 from .state import (
     History,

@@ -1,9 +1,9 @@
 """Model files and the model registry: JSON (never pickle), schema version, checksum.
 
 The registry maps class names (in files) and CLI names (``--model``) to model
-classes; every :class:`~piezohyst.model.models.HysteresisModel` subclass registers
+classes; every :class:`~piezohyst.model.presets.HysteresisModel` subclass registers
 itself. This module works on models through their public methods only and
-sits below :mod:`piezohyst.model.models`, which calls it for ``save``/``to_dict``.
+sits below :mod:`piezohyst.model.presets`, which calls it for ``save``/``to_dict``.
 
 Schema 2 (written since 0.2) stores the core and a list of terms, each with
 its kind, settings and coefficients, so a model holding a custom term loads
@@ -54,7 +54,7 @@ _REGISTRY: dict[str, type] = {}
 def _registry() -> dict[str, type]:
     """The registered model classes, the library's own loaded first (``import piezohyst``
     loads them at first use, so a file may be read before any model was named)."""
-    importlib.import_module("piezohyst.model.models")
+    importlib.import_module("piezohyst.model.presets")
     return _REGISTRY
 
 
@@ -64,7 +64,7 @@ def register(cls: type) -> type:
     Parameters
     ----------
     cls : type
-        A :class:`~piezohyst.model.models.HysteresisModel` subclass.
+        A :class:`~piezohyst.model.presets.HysteresisModel` subclass.
 
     Returns
     -------
@@ -86,7 +86,7 @@ def model_class(name: str) -> Any:
     Returns
     -------
     type
-        A :class:`~piezohyst.model.models.HysteresisModel` subclass.
+        A :class:`~piezohyst.model.presets.HysteresisModel` subclass.
 
     Raises
     ------

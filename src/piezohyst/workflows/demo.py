@@ -30,7 +30,7 @@ from ..errors import ExtrapolationWarning, warn
 from ..io import atomic_write_text
 from ..metrics import hysteresis_width, nrmse, rmse
 from ..model.calibrations import Leakage, calibrate_leakage
-from ..model.models import (
+from ..model.presets import (
     ActivePI,
     BoucWenModel,
     ClassicalPI,

@@ -15,7 +15,7 @@ import numpy as np
 from ..control.learning import LearningCompensator
 from ..metrics import hysteresis_width, rmse
 from ..model.calibrations.leakage import Leakage
-from ..model.models import HysteresisModel
+from ..model.presets import HysteresisModel
 from ..plotting import save_panels
 from ..simulation import Bench, BenchPreset
 

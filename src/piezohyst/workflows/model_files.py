@@ -51,7 +51,7 @@ from ..io import (
 from ..io.blocks import Blocks, Summary
 from ..model.cores.base import Core
 from ..model.dynamics import InputDynamics
-from ..model.fitting import undetermined
+from ..model.fit_record import undetermined
 from ..model.model import History, HysteresisModel, InitialState, ModelState
 from ..model.persistence import model_class, model_names
 from ._base import (
@@ -197,7 +197,7 @@ def _fit_timed(
     note: str,
 ) -> tuple[HysteresisModel, str]:
     """Fit with the input dynamics the record's rates called for; where the fit cannot tell
-    them from hysteresis after all (:func:`~piezohyst.model.fitting.undetermined`: on a
+    them from hysteresis after all (:func:`~piezohyst.model.fit_record.undetermined`: on a
     relaxing plant's ``excite`` record, 4.6 +- 11 ms, and learning at 40 Hz through them left
     57 % width), fit again without them, and say so."""
     with warnings.catch_warnings():
@@ -281,7 +281,7 @@ def fit_file(
     out : str or os.PathLike, optional
         Where to save the model.
     model : str
-        A name from :func:`~piezohyst.model.models.model_names`.
+        A name from :func:`~piezohyst.model.presets.model_names`.
     operators : int
         Play operators.
     data_spec : DataSpec, optional
@@ -295,7 +295,7 @@ def fit_file(
         (see :class:`~piezohyst.PreisachModel`).
     input_dynamics, output_dynamics : str
         Delay and lag between command and piezo, mode between hysteresis and
-        output (see :class:`~piezohyst.model.models.HysteresisModel`);
+        output (see :class:`~piezohyst.model.presets.HysteresisModel`);
         ``input_dynamics="record"``: ``"auto"`` where the record drives several rates
         (:func:`dynamics_by_record`), else none, said through ``say``.
     initial_state : {"rest", "periodic"}
@@ -428,7 +428,7 @@ def compare_file(
         CLI names (``piezohyst fit --model``); each with its default settings, and with
         ``+creep`` creep operators timed by the record
         (:func:`~piezohyst.analysis.selection.candidate_model`). Default: every registered
-        model (:func:`~piezohyst.model.models.model_names`) and the creep candidates of
+        model (:func:`~piezohyst.model.presets.model_names`) and the creep candidates of
         :data:`~piezohyst.analysis.selection.CANDIDATES`.
     train : float
         Training fraction of ``data`` when there is no ``test_data``.

@@ -107,7 +107,7 @@ class Inverse:
     Parameters
     ----------
     spec : InverseSpec
-        What to invert (the model's :meth:`~piezohyst.model.models.HysteresisModel.inversion`).
+        What to invert (the model's :meth:`~piezohyst.model.presets.HysteresisModel.inversion`).
     settings : EngineSettings
         The compensator's limits, gain and timing.
 

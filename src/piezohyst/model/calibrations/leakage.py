@@ -74,7 +74,7 @@ class Leakage(JsonFile):
 
     Made by :func:`calibrate_leakage`, or from a fitted model's growth terms
     by :meth:`from_model`, or by hand. Accepted by
-    :meth:`~piezohyst.model.models.HysteresisModel.remove_growth` and
+    :meth:`~piezohyst.model.presets.HysteresisModel.remove_growth` and
     :class:`~piezohyst.control.selfsensing.SelfSensingController`.
 
     Attributes

@@ -89,7 +89,7 @@ class Propagation(NamedTuple, Generic[S]):
         One output sample per input sample.
     state : ndarray or ModelState
         The state after the last sample (operator states for
-        :class:`PIHysteresis`, a :class:`~piezohyst.model.models.ModelState` for a
+        :class:`PIHysteresis`, a :class:`~piezohyst.model.presets.ModelState` for a
         model); pass it back to continue.
     """
 
@@ -373,7 +373,7 @@ class Core:
     #: the growth terms come from a play-operator proxy first (cores whose loops need not close)
     growth_from_proxy: ClassVar[bool] = False
     #: Settings that make the repeated fits of the input-dynamics profile cheaper (see
-    #: :func:`~piezohyst.model.dynamics_fit.profile_dynamics`); the final fit uses the model's own
+    #: :func:`~piezohyst.model.fit_dynamics.profile_dynamics`); the final fit uses the model's own
     profile_settings: ClassVar[dict[str, Any]] = {}
     #: fields of its file form a reader checks by name first: "number" or "numbers" (a list)
     file_fields: ClassVar[dict[str, str]] = {}

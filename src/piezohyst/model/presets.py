@@ -567,11 +567,11 @@ class PreisachModel(HysteresisModel):
         Among ``"integral"``, ``"time"``, ``"abs_integral"``. ``"domain"``: the
         record's: ``("integral",)`` (the charge's leakage) on a charge record, with
         ``"abs_integral"`` (its conductance rising with the voltage) where the record's
-        holds show that rise (:func:`~piezohyst.model.fitting.holds_show_rise`), and
+        holds show that rise (:func:`~piezohyst.model.fit_record.holds_show_rise`), and
         none on a displacement record (``output_unit`` a length: the displacement
         does not see leaked charge; ``"auto"`` chooses none there either), where
         creep operators timed by the record take the drift instead when ``creep``
-        is left empty (:func:`~piezohyst.model.fitting.displacement_terms`).
+        is left empty (:func:`~piezohyst.model.fit_record.displacement_terms`).
         Fitted jointly (its loops close: a drift can only be growth);
         ``"auto"``: the Prandtl-Ishlinskii proxy's cross-validation chooses them.
     creep : sequence of float, default ()
@@ -721,11 +721,11 @@ class DuhemModel(HysteresisModel):
         Among ``"integral"``, ``"time"``, ``"abs_integral"``. ``"domain"``: the
         record's: ``("integral",)`` (the charge's leakage) on a charge record, with
         ``"abs_integral"`` (its conductance rising with the voltage) where the record's
-        holds show that rise (:func:`~piezohyst.model.fitting.holds_show_rise`), and
+        holds show that rise (:func:`~piezohyst.model.fit_record.holds_show_rise`), and
         none on a displacement record (``output_unit`` a length: the displacement
         does not see leaked charge; ``"auto"`` chooses none there either), where
         creep operators timed by the record take the drift instead when ``creep``
-        is left empty (:func:`~piezohyst.model.fitting.displacement_terms`).
+        is left empty (:func:`~piezohyst.model.fit_record.displacement_terms`).
         Growth terms (removed before compensating); ``"auto"`` chooses by the
         proxy's forward-chaining cross-validation (``selection_``).
     creep : sequence of float, default ()
@@ -745,7 +745,7 @@ class DuhemModel(HysteresisModel):
         counts as extrapolating.
     input_unit, output_unit : str
     input_dynamics, output_dynamics : str
-        As for :class:`~piezohyst.model.models.HysteresisModel`.
+        As for :class:`~piezohyst.model.presets.HysteresisModel`.
 
     Attributes
     ----------
@@ -819,11 +819,11 @@ class BoucWenModel(HysteresisModel):
         Among ``"integral"``, ``"time"``, ``"abs_integral"``. ``"domain"``: the
         record's: ``("integral",)`` (the charge's leakage) on a charge record, with
         ``"abs_integral"`` (its conductance rising with the voltage) where the record's
-        holds show that rise (:func:`~piezohyst.model.fitting.holds_show_rise`), and
+        holds show that rise (:func:`~piezohyst.model.fit_record.holds_show_rise`), and
         none on a displacement record (``output_unit`` a length: the displacement
         does not see leaked charge; ``"auto"`` chooses none there either), where
         creep operators timed by the record take the drift instead when ``creep``
-        is left empty (:func:`~piezohyst.model.fitting.displacement_terms`).
+        is left empty (:func:`~piezohyst.model.fit_record.displacement_terms`).
     creep : sequence of float, default ()
         Time constants (s) of kept creep lags, fitted with c0, alpha and the
         growth in the linear solve; inverted with the core by the compensator.

@@ -1,7 +1,7 @@
 """How a model is fitted: the record in, the dynamics searched, the core identified, scored.
 
 :func:`fit_arrays` (``HysteresisModel.fit``) searches the input and output
-dynamics when asked (:mod:`piezohyst.model.dynamics_fit`), then
+dynamics when asked (:mod:`piezohyst.model.fit_dynamics`), then
 :func:`identify_model` hands the record and the terms to the core's
 identification step (:meth:`~piezohyst.model.cores.base.Core.identify`), and
 :func:`score_model` runs the fitted model over the record for its error.
@@ -38,8 +38,8 @@ from ..units import is_length
 from .calibrations.from_holds import calibrate_leakage
 from .cores.base import FitJob
 from .dynamics import InputDynamics, OutputDynamics
-from .dynamics_fit import profile_dynamics, search_dynamics
 from .estimator import _dynamics_kind, _output_kind
+from .fit_dynamics import profile_dynamics, search_dynamics
 from .state import InitialState, ModelState
 from .terms import Creep, creep_time_constants
 

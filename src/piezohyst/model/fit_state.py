@@ -3,7 +3,7 @@
 :class:`Fitted` is the base of :class:`~piezohyst.model.model.HysteresisModel` that
 holds what a fit found: the core and terms (:meth:`Fitted.set_fitted`), and the facts
 beside them (fit quality, the training record's range, slew and window, the growth
-selection's scores, the dynamics). The fit's steps (:mod:`piezohyst.model.fitting`)
+selection's scores, the dynamics). The fit's steps (:mod:`piezohyst.model.fit_record`)
 compute these and hand them to ``_take``; nothing else sets them.
 """
 
@@ -93,7 +93,7 @@ class Fitted:
 
     def _take(self, fit: CoreFit | None = None, **facts: Any) -> None:
         """Apply what a fit found: its core, terms and selection scores, then the facts
-        named in :data:`~piezohyst.model.fitting.FIT_FACTS` (each stored as ``name_``)."""
+        named in :data:`~piezohyst.model.fit_record.FIT_FACTS` (each stored as ``name_``)."""
         if fit is not None:
             self.set_fitted(fit.core, fit.terms, fit.coefs)
             if fit.selection is not None:
