@@ -44,7 +44,7 @@ def _decision(x: np.ndarray, y: np.ndarray, t: np.ndarray) -> tuple[bool, float,
     """(kept, proxy score without, with) of the rule on one record."""
     model = ph.PreisachModel()
     sm_range = np.array([x.min(), x.max()])
-    terms, _ = model._terms_to_fit(sm_range, model.check_params())
+    terms, _ = model.terms_to_fit(sm_range, model.check_params())
     kept, selection = growth_by_evidence(array_blocks(x, y, t), terms, "rest")
     assert selection is not None
     scores = selection[0]

@@ -140,7 +140,7 @@ def _is_module(dotted: str) -> bool:
 
 def test_only_the_model_sets_its_fitted_attributes() -> None:
     """A fit returns what it found and the model applies it (``Fitted.set_fitted`` and
-    ``_take``): no other code assigns a model's fitted attribute, calls ``setattr`` on
+    ``take_fit``): no other code assigns a model's fitted attribute, calls ``setattr`` on
     another object, or passes data through the model's ``__dict__``."""
     from piezohyst.model.fit_state import FIT_FACTS
 
@@ -240,3 +240,29 @@ def test_no_private_kernel_is_called_from_outside_the_kernels() -> None:
                 found.append(f"{path.relative_to(SRC)}:{node.lineno} {node.value.id}.{node.attr}")
     assert aliases_seen >= 10  # the rule sees the kernel modules where they are used
     assert not found, found
+
+
+def test_the_fit_uses_the_models_public_interface() -> None:
+    """The fit's steps read a model and hand it what they found through its public fit
+    interface (``terms_to_fit``, ``refine_fit``, ``take_fit``), typed as the model, never
+    through its private names (issue 56: they walked into ``_take``, ``_refine``,
+    ``_terms_to_fit``, typed ``Any``)."""
+    for name in ("fit_record.py", "fit_dynamics.py"):
+        tree = ast.parse((SRC / "model" / name).read_text())
+        private = [
+            f"{name}:{node.lineno} model.{node.attr}"
+            for node in ast.walk(tree)
+            if isinstance(node, ast.Attribute)
+            and isinstance(node.value, ast.Name)
+            and node.value.id == "model"
+            and node.attr.startswith("_")
+        ]
+        assert not private, private
+        untyped = [
+            f"{name}:{arg.lineno}"
+            for node in ast.walk(tree)
+            if isinstance(node, ast.FunctionDef)
+            for arg in node.args.args
+            if arg.arg == "model" and ast.unparse(arg.annotation or ast.Constant(None)) == "Any"
+        ]
+        assert not untyped, untyped

@@ -21,12 +21,13 @@ from ..io.blocks import Summary, array_blocks, block_dt
 from .cores.play import PIHysteresis, PlayCore, default_thresholds
 from .cores.solve import identify
 from .dynamics import InputDynamics, OutputDynamics
+from .fit_state import Fittable
 
 __all__ = ["search_dynamics"]
 
 
 def _scorer(
-    model: Any, x: FloatArray, y: FloatArray, t: FloatArray
+    model: Fittable, x: FloatArray, y: FloatArray, t: FloatArray
 ) -> Callable[[InputDynamics, OutputDynamics | None, bool], float]:
     """A cheap objective for the dynamics searches: fit RMSE (or held-out RMSE).
 
@@ -40,7 +41,7 @@ def _scorer(
     assert dt is not None
     x_range = np.array([float(x.min()), float(x.max())])
     x_lo, x_hi = float(x_range[0]), float(x_range[1])
-    terms, _ = model._terms_to_fit(x_range, params)
+    terms, _ = model.terms_to_fit(x_range, params)
     if model.core_class is not PIHysteresis:  # shape terms belong to a core the proxy lacks
         terms = [term for term in terms if term.removed]
     rate = any(term.rate_dependent for term in terms)
@@ -78,7 +79,7 @@ def _scorer(
 
 
 def search_dynamics(
-    model: Any,
+    model: Fittable,
     x: FloatArray,
     y: FloatArray,
     t: FloatArray,

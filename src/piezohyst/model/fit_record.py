@@ -9,14 +9,15 @@ identification step (:meth:`~piezohyst.model.cores.base.Core.identify`), and
 
 These functions compute; they set nothing on a model. What a step finds (a
 :class:`~piezohyst.model.cores.base.CoreFit`, the record's facts, the score)
-is handed to the model's ``_take``, the one writer of its fitted attributes.
+is handed to the model's ``take_fit``, the one writer of its fitted attributes.
 """
 
 from __future__ import annotations
 
 import math
 import warnings
-from typing import Any
+from collections.abc import Callable
+from typing import Any, TypedDict
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -40,10 +41,13 @@ from .cores.base import FitJob
 from .dynamics import InputDynamics, OutputDynamics
 from .estimator import _dynamics_kind, _output_kind
 from .fit_dynamics import profile_dynamics, search_dynamics
+from .fit_state import Fittable
 from .state import InitialState, ModelState
-from .terms import Creep, creep_time_constants
+from .terms import Creep, Term, creep_time_constants
 
 __all__ = [
+    "RecordFacts",
+    "Score",
     "fit_arrays",
     "fit_stream",
     "identify_model",
@@ -65,14 +69,31 @@ FALLING = 0.5
 
 
 def fit_arrays(
-    model: Any,
+    model: Fittable,
     x: ArrayLike,
     y: ArrayLike,
     t: ArrayLike | None = None,
     *,
     initial_state: InitialState = None,
     keep_outliers: bool = False,
-) -> Any:
+) -> None:
+    """Fit ``model`` on a record in memory: screened, its dynamics searched when the model
+    asks, its core and terms identified and scored (:meth:`HysteresisModel.fit
+    <piezohyst.model.model.HysteresisModel.fit>`).
+
+    Parameters
+    ----------
+    model : Fittable
+        Takes what the fit finds through its one writer (``take_fit``).
+    x, y : array_like, shape (N,)
+        Input and output.
+    t : array_like, shape (N,), optional
+        Sample times (s).
+    initial_state : {"rest", "periodic"}, History, array_like or None
+        Where the operators stand before the first sample.
+    keep_outliers : bool
+        Fit single-sample glitches too (they are named and dropped by default).
+    """
     xs = as_signal(x, "x")
     ys = as_signal(y, "y")
     same_length(xs, ys, "x", "y")
@@ -100,17 +121,16 @@ def fit_arrays(
         us, _ = dyn.apply(xs, dt)
     blocks = array_blocks(us, ys, ts)
     summary = identify_model(model, blocks, initial_state, ts is not None, output_mode=mode)
-    if model._refine(us, ys, ts, summary, initial_state):
+    if model.refine_fit(us, ys, ts, summary, initial_state):
         # each refit reset the record's facts; the refinement changed the model's score
-        model._take(**record_facts(summary), **score_model(model, blocks, summary))
+        model.take_fit(**record_facts(summary), **score_model(model, blocks, summary))
     facts: dict[str, Any] = {"input_dynamics": dyn}
     if dyn.active:  # commands, their range and slew are the logged input's
         assert ts is not None
         logged = Summary.of(array_blocks(xs, ys, ts))
         facts["input_range"] = (float(xs.min()), float(xs.max()))
         facts["max_slew_rate"], facts["max_step"] = logged.max_slew_rate, logged.max_step
-    model._take(**facts)
-    return model
+    model.take_fit(**facts)
 
 
 def screened(
@@ -187,14 +207,14 @@ def _check_identifiable(dyn: InputDynamics) -> None:
 
 
 def _own_fit(
-    model: Any,
+    model: Fittable,
     xs: FloatArray,
     ys: FloatArray,
     ts: FloatArray,
-    dt: Any,
+    dt: FloatArray | None,
     initial_state: InitialState,
     mode: OutputDynamics | None,
-) -> Any:
+) -> Callable[[InputDynamics, bool], tuple[float, FloatArray | None]]:
     """``fit_sse(dynamics)`` for :func:`profile_dynamics`: the model's own fit on the
     command filtered by ``dynamics`` (warnings kept for the final fit)."""
     cheap = model.core_class.profile_settings
@@ -215,8 +235,27 @@ def _own_fit(
 
 
 def fit_stream(
-    model: Any, blocks: Blocks, *, timed: bool = True, initial_state: InitialState = None
-) -> Any:
+    model: Fittable,
+    blocks: Blocks,
+    *,
+    timed: bool = True,
+    initial_state: InitialState = None,
+) -> None:
+    """Fit ``model`` from blocks read one at a time (a record larger than memory):
+    identified and scored in passes over the blocks (:meth:`HysteresisModel.fit_blocks
+    <piezohyst.model.model.HysteresisModel.fit_blocks>`).
+
+    Parameters
+    ----------
+    model : Fittable
+        Without input or output dynamics and threshold search (they need the record in
+        memory: refused by name).
+    blocks : Blocks
+        The record's block source (:mod:`piezohyst.io.blocks`).
+    timed : bool
+        The blocks carry sample times.
+    initial_state : {"rest", "periodic"}, History, array_like or None
+    """
     if model.get_params().get("optimize_thresholds"):
         msg = (
             f"{type(model).__name__}(optimize_thresholds=True) searches the thresholds over "
@@ -233,12 +272,11 @@ def fit_stream(
         )
         raise ParameterError(msg)
     identify_model(model, blocks, initial_state, timed)
-    model._take(input_dynamics=InputDynamics())
-    return model
+    model.take_fit(input_dynamics=InputDynamics())
 
 
 def identify_model(
-    model: Any,
+    model: Fittable,
     blocks: Blocks,
     initial_state: InitialState,
     timed: bool,
@@ -283,7 +321,7 @@ def identify_model(
         and holds_show_rise(blocks, sm)
     ):  # the charge's leak, and its rise with the voltage where the holds show one
         params = {**params, "growth_terms": ("integral", "abs_integral")}
-    terms, subsets = model._terms_to_fit(sm.x_range, params)
+    terms, subsets = model.terms_to_fit(sm.x_range, params)
     if displacement:  # a growth term fixed by the model (ActivePI's integrator) goes too
         fixed_growth = any(term.removed for term in terms) and "growth_terms" not in params
         terms, subsets = [term for term in terms if not term.removed], None
@@ -302,11 +340,11 @@ def identify_model(
                  model.input_unit, model.output_unit, output_mode)  # fmt: skip
     fit = model.core_class.identify(job)
     mode = {} if output_mode is None else {"output_dynamics": output_mode}
-    model._take(fit, **record_facts(sm), **mode)
+    model.take_fit(fit, **record_facts(sm), **mode)
     if selection is not None:  # how the record's own later part chose the growth terms
         sel, folds, splits = selection
-        model._take(selection=sel, selection_folds=folds, selection_splits=list(splits))
-    model._take(**score_model(model, blocks, sm))
+        model.take_fit(selection=sel, selection_folds=folds, selection_splits=list(splits))
+    model.take_fit(**score_model(model, blocks, sm))
     return sm
 
 
@@ -320,7 +358,7 @@ RAMP_MARGIN = 2.0
 
 
 def _by_evidence(
-    model: Any, overrides: dict[str, Any] | None, displacement: bool, timed: bool
+    model: Fittable, overrides: dict[str, Any] | None, displacement: bool, timed: bool
 ) -> bool:
     """Whether the record's default growth terms must earn their place by forecasting its
     later part: ``growth_terms="domain"`` left as it is, on a timed record not known to be a
@@ -334,8 +372,8 @@ def _by_evidence(
 
 
 def growth_by_evidence(
-    blocks: Blocks, terms: list[Any], initial_state: InitialState
-) -> tuple[list[Any], tuple[Any, Any, Any] | None]:
+    blocks: Blocks, terms: list[Term], initial_state: InitialState
+) -> tuple[list[Term], Selection | None]:
     """The domain's growth terms (a charge's leak) dropped where the record's own later part
     says they forecast far worse (:data:`RAMP_MARGIN`): the Prandtl-Ishlinskii proxy's
     forward-chaining time-series cross-validation
@@ -452,7 +490,7 @@ def _averaged(blocks: Blocks, group: int) -> tuple[FloatArray, FloatArray, Float
     return t, x, y
 
 
-def _default_growth(model: Any) -> bool:
+def _default_growth(model: Fittable) -> bool:
     """Whether the model's growth terms follow the record's domain: ``growth_terms`` left to
     "domain" (the packed presets' default) or "auto", or fixed by the model (ActivePI's
     integrator), not named by the user."""
@@ -462,7 +500,27 @@ def _default_growth(model: Any) -> bool:
     return "terms" not in params or not params["terms"]  # PIModel's terms are named
 
 
-def score_model(model: Any, blocks: Blocks, sm: Summary) -> dict[str, float]:
+#: A growth selection's scores: by subset label, per fold, and the folds' split points
+Selection = tuple[dict[str, float], dict[str, list[float]], list[int]]
+
+
+class Score(TypedDict):
+    """A fit's quality over its record (output units, and over the output's span)."""
+
+    rmse: float
+    nrmse: float
+
+
+class RecordFacts(TypedDict):
+    """What a fit learns of its record beside the parameters."""
+
+    input_range: tuple[float, float]
+    max_slew_rate: float
+    max_step: float
+    train_window: tuple[float, float]
+
+
+def score_model(model: Fittable, blocks: Blocks, sm: Summary) -> Score:
     """Fit quality over the record (one pass, state carried) and the leakage check:
     ``{"rmse": ..., "nrmse": ...}`` for the model to take."""
     sse = 0.0
@@ -483,7 +541,7 @@ def score_model(model: Any, blocks: Blocks, sm: Summary) -> dict[str, float]:
     return {"rmse": err, "nrmse": err / max(sm.y_max - sm.y_min, 1e-300)}
 
 
-def _check_leakage(model: Any, sm: Summary) -> None:
+def _check_leakage(model: Fittable, sm: Summary) -> None:
     """Warn when the identified leakage drains the capacitance faster than one sample."""
     growth = model.growth_coefficients()
     if math.isnan(sm.t_first) or sm.n < 2 or "integral" not in growth:
@@ -501,7 +559,7 @@ def _check_leakage(model: Any, sm: Summary) -> None:
         )
 
 
-def record_facts(sm: Summary) -> dict[str, Any]:
+def record_facts(sm: Summary) -> RecordFacts:
     """What the fit learns of its record beside the parameters: its voltages, fastest slew
     and the times of its first and last samples."""
     return {

@@ -4,21 +4,25 @@
 holds what a fit found: the core and terms (:meth:`Fitted.set_fitted`), and the facts
 beside them (fit quality, the training record's range, slew and window, the growth
 selection's scores, the dynamics). The fit's steps (:mod:`piezohyst.model.fit_record`)
-compute these and hand them to ``_take``; nothing else sets them.
+compute these and hand them to ``take_fit``; nothing else sets them.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, Protocol
+
+from numpy.typing import ArrayLike
 
 from .._validation import FloatArray
 from ..errors import NotFittedError
-from .cores.base import Core, CoreFit
+from ..io.blocks import Summary
+from .cores.base import Core, CoreFit, Propagation
 from .dynamics import InputDynamics, OutputDynamics
+from .state import InitialState, ModelState
 from .terms import Term
 
-__all__ = ["FIT_FACTS", "Fitted", "unknown_facts"]
+__all__ = ["FIT_FACTS", "Fittable", "Fitted", "unknown_facts"]
 
 
 def unknown_facts() -> dict[str, Any]:
@@ -44,10 +48,63 @@ def unknown_facts() -> dict[str, Any]:
 FIT_FACTS = frozenset(unknown_facts())
 
 
+class Fittable(Protocol):
+    """What the fit's steps (:mod:`~piezohyst.model.fit_record`,
+    :mod:`~piezohyst.model.fit_dynamics`) read from a model and hand back to it: its
+    settings, the terms it fits, an optional refinement, its one writer
+    (:meth:`Fitted.take_fit`), and its run over the record for the score.
+    :class:`~piezohyst.model.model.HysteresisModel` is one.
+
+    Attributes
+    ----------
+    input_unit, output_unit : str
+    input_dynamics, output_dynamics : str
+        The dynamics settings ("none", "auto", a kind).
+    core_class : type of Core
+    rate_dependent_ : bool
+    """
+
+    input_unit: str
+    output_unit: str
+    input_dynamics: str
+    output_dynamics: str
+
+    @property
+    def core_class(self) -> type[Core]: ...
+
+    @property
+    def rate_dependent_(self) -> bool: ...
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]: ...
+
+    def check_params(self) -> dict[str, Any]: ...
+
+    def terms_to_fit(
+        self, x_range: FloatArray, params: dict[str, Any]
+    ) -> tuple[list[Term], list[tuple[int, ...]] | None]: ...
+
+    def refine_fit(
+        self, x: FloatArray, y: FloatArray, t: FloatArray | None, summary: Summary,
+        initial_state: InitialState,
+    ) -> bool: ...  # fmt: skip
+
+    def take_fit(self, fit: CoreFit | None = None, **facts: Any) -> None: ...
+
+    def predict(
+        self, x: ArrayLike, t: ArrayLike | None = None, state: ModelState | InitialState = None
+    ) -> FloatArray: ...
+
+    def propagate(
+        self, x: ArrayLike, t: ArrayLike | None = None, state: ModelState | InitialState = None
+    ) -> Propagation[ModelState]: ...
+
+    def growth_coefficients(self) -> dict[str, tuple[float, str]]: ...
+
+
 class Fitted:
     """The fitted attributes of a model and the methods that set them (see the module)."""
 
-    # fitted attributes (``set_fitted`` and ``_take``, their one writer)
+    # fitted attributes (``set_fitted`` and ``take_fit``, their one writer)
     operator_: Core
     initial_state_: FloatArray
     terms_: tuple[Term, ...]
@@ -89,11 +146,20 @@ class Fitted:
         for name, value in core.fitted_attributes().items():
             setattr(self, name, value)
         self.terms_, self.coefs_ = terms, coefs
-        self._take(**{**unknown_facts(), **facts})  # unknown for a model built by hand
+        self.take_fit(**{**unknown_facts(), **facts})  # unknown for a model built by hand
 
-    def _take(self, fit: CoreFit | None = None, **facts: Any) -> None:
-        """Apply what a fit found: its core, terms and selection scores, then the facts
-        named in :data:`~piezohyst.model.fit_record.FIT_FACTS` (each stored as ``name_``)."""
+    def take_fit(self, fit: CoreFit | None = None, **facts: Any) -> None:
+        """Apply what a fit found, the one writer of the fitted attributes: its core, terms
+        and selection scores, then the facts named in :data:`FIT_FACTS` (each stored as
+        ``name_``).
+
+        Parameters
+        ----------
+        fit : CoreFit, optional
+            The core, terms and coefficients identified (None: facts alone).
+        **facts
+            By name (:data:`FIT_FACTS`); another name is refused.
+        """
         if fit is not None:
             self.set_fitted(fit.core, fit.terms, fit.coefs)
             if fit.selection is not None:

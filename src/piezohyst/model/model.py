@@ -261,10 +261,24 @@ class HysteresisModel(Fitted, Estimator):
         """The core class this model fits (a preset's class attribute, or the ``core`` setting)."""
         return _core_rule(self.core, "core", type(self).__name__)
 
-    def _terms_to_fit(
+    def terms_to_fit(
         self, x_range: FloatArray, params: dict[str, Any]
     ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
-        """Bound terms to fit (kept ones first) and, for a selection, the subsets to choose from."""
+        """The terms a fit identifies beside the core (a preset overrides this).
+
+        Parameters
+        ----------
+        x_range : ndarray, shape (2,)
+            The record's input range (the terms are bound to it).
+        params : dict
+            The checked settings (:meth:`check_params`), perhaps with a record's overrides.
+
+        Returns
+        -------
+        tuple
+            Bound terms (kept ones first), and for a selection the subsets to choose from
+            (None: fit them all).
+        """
         terms = [term.bind(x_range) for term in params.get("terms", ())]
         return [term for term in terms if term.width > 0], None
 
@@ -307,8 +321,8 @@ class HysteresisModel(Fitted, Estimator):
         InsufficientDataError
             Fewer samples than parameters.
         """
-        return fit_arrays(self, x, y, t, initial_state=initial_state,  # type: ignore[no-any-return]
-                          keep_outliers=keep_outliers)  # fmt: skip
+        fit_arrays(self, x, y, t, initial_state=initial_state, keep_outliers=keep_outliers)
+        return self
 
     def fit_blocks(
         self, blocks: Blocks, *, timed: bool = True, initial_state: InitialState = None
@@ -345,13 +359,30 @@ class HysteresisModel(Fitted, Estimator):
         InsufficientDataError
             A record without excitation, or with fewer samples than parameters.
         """
-        return fit_stream(self, blocks, timed=timed, initial_state=initial_state)  # type: ignore[no-any-return]
+        fit_stream(self, blocks, timed=timed, initial_state=initial_state)
+        return self
 
-    def _refine(
+    def refine_fit(
         self, x: FloatArray, y: FloatArray, t: FloatArray | None, summary: Summary,
         initial_state: InitialState,
     ) -> bool:  # fmt: skip
-        """Optional nonlinear refinement after the linear solve; True if it changed the model."""
+        """A nonlinear refinement after the linear solve (a preset overrides this; the
+        classical model's threshold search), applied through :meth:`take_fit`.
+
+        Parameters
+        ----------
+        x, y, t : ndarray
+            The record the model was just fitted on (input after its dynamics).
+        summary : Summary
+            The record's summary.
+        initial_state : {"rest", "periodic"}, History, array_like or None
+            As :meth:`fit` took it.
+
+        Returns
+        -------
+        bool
+            True if it changed the model (its score is then computed again).
+        """
         return False
 
     @property

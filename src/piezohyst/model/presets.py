@@ -188,10 +188,11 @@ class PIModel(_PlayModel):
     ) -> None:
         _store(self, locals())
 
-    def _terms_to_fit(
+    def terms_to_fit(
         self, x_range: FloatArray, params: dict[str, Any]
     ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
-        """Its terms, bound to the input range (empty ones dropped)."""
+        """See :meth:`~piezohyst.model.model.HysteresisModel.terms_to_fit`: its terms, bound
+        to the input range (empty ones dropped)."""
         terms = [term.bind(x_range) for term in params["terms"]]
         return [term for term in terms if term.width > 0], None
 
@@ -276,9 +277,10 @@ class ActivePI(_PlayModel):
 
     cli_name = "active-pi"
 
-    def _terms_to_fit(
+    def terms_to_fit(
         self, x_range: FloatArray, params: dict[str, Any]
     ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
+        """See :meth:`~piezohyst.model.model.HysteresisModel.terms_to_fit`."""
         return [make_term("integral")], None
 
     @property
@@ -384,9 +386,10 @@ class GeneralizedPI(_PlayModel):
     ) -> None:
         _store(self, locals())
 
-    def _terms_to_fit(
+    def terms_to_fit(
         self, x_range: FloatArray, params: dict[str, Any]
     ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
+        """See :meth:`~piezohyst.model.model.HysteresisModel.terms_to_fit`."""
         fixed: list[Term] = []
         if params["asymmetry"]:
             fixed.append(Asymmetry(params["asymmetry"]).bind(x_range))
@@ -394,7 +397,7 @@ class GeneralizedPI(_PlayModel):
             fixed.append(params["creep"])
         return _growth(fixed, params["growth_terms"], x_range)
 
-    def _refine(
+    def refine_fit(
         self,
         x: FloatArray,
         y: FloatArray,
@@ -402,7 +405,8 @@ class GeneralizedPI(_PlayModel):
         summary: Summary,
         initial_state: InitialState,
     ) -> bool:
-        """Nonlinear least squares over the thresholds, the linear solve inside."""
+        """See :meth:`~piezohyst.model.model.HysteresisModel.refine_fit`: nonlinear least
+        squares over the thresholds, the linear solve inside."""
         if not self.optimize_thresholds or self.thresholds_.size < 2:
             return False
         from scipy.optimize import minimize
@@ -423,13 +427,13 @@ class GeneralizedPI(_PlayModel):
                 return 1e300
             job = FitJob(blocks, summary, terms, None, initial_state, {**params, "thresholds": thr},
                          type(self).__name__, self.input_unit, self.output_unit, mode)  # fmt: skip
-            self._take(PIHysteresis.identify(job), output_dynamics=kept)
+            self.take_fit(PIHysteresis.identify(job), output_dynamics=kept)
             return rmse(self.predict(x, t=t_fit), y) / span
 
         before = objective(start)
         res = minimize(objective, start, method="L-BFGS-B", options={"maxiter": 30})
         objective(res.x if res.fun < before else start)
-        self._take(selection=selection, selection_folds=folds, selection_splits=splits)
+        self.take_fit(selection=selection, selection_folds=folds, selection_splits=splits)
         return True
 
     def set_fitted(
@@ -676,9 +680,10 @@ class PreisachModel(HysteresisModel):
     ) -> None:
         _store(self, locals())
 
-    def _terms_to_fit(
+    def terms_to_fit(
         self, x_range: FloatArray, params: dict[str, Any]
     ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
+        """See :meth:`~piezohyst.model.model.HysteresisModel.terms_to_fit`."""
         tau = params["relaxation"]
         if tau is None:
             return _packed_terms(params, x_range)
@@ -789,9 +794,10 @@ class DuhemModel(HysteresisModel):
     ) -> None:
         _store(self, locals())
 
-    def _terms_to_fit(
+    def terms_to_fit(
         self, x_range: FloatArray, params: dict[str, Any]
     ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
+        """See :meth:`~piezohyst.model.model.HysteresisModel.terms_to_fit`."""
         return _packed_terms(params, x_range)
 
 
@@ -865,7 +871,8 @@ class BoucWenModel(HysteresisModel):
     ) -> None:
         _store(self, locals())
 
-    def _terms_to_fit(
+    def terms_to_fit(
         self, x_range: FloatArray, params: dict[str, Any]
     ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
+        """See :meth:`~piezohyst.model.model.HysteresisModel.terms_to_fit`."""
         return _packed_terms(params, x_range)
