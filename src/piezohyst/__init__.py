@@ -108,7 +108,7 @@ __getattr__, __dir__ = attach(
         "calibrate_leakage": ".model.calibrations",
         "History": ".model.model",
         "HysteresisModel": ".model.model",
-        "InverseSpec": ".model.model",
+        "InverseSpec": ".model.inverse_spec",
         "ModelState": ".model.model",
         "ActivePI": ".model.presets",
         "BoucWenModel": ".model.presets",
@@ -141,7 +141,8 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .model.cores.duhem import DuhemHysteresis
     from .model.cores.play import PIHysteresis, default_thresholds
     from .model.cores.preisach import PreisachHysteresis
-    from .model.model import History, HysteresisModel, InverseSpec, ModelState
+    from .model.inverse_spec import InverseSpec
+    from .model.model import History, HysteresisModel, ModelState
     from .model.persistence import load_model
     from .model.presets import (
         ActivePI,

@@ -16,7 +16,8 @@ from typing import Any, Literal
 
 from ..errors import ParameterError, warn
 from ..model.dynamics import OutputDynamics
-from ..model.model import HysteresisModel, InverseSpec
+from ..model.inverse_spec import InverseSpec
+from ..model.model import HysteresisModel
 from .engines import EngineSettings, finite_number
 
 __all__ = ["Domain", "Resolved", "resolve", "trained_limit"]

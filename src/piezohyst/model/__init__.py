@@ -4,7 +4,8 @@ calibrations beside them (the subpackage ``calibrations``: the leakage from hold
 charge -> displacement map from a sensor).
 May import: the foundation, ``_kernels``, ``io``.
 
-The model (``model``: the one class; ``presets``: its presets; ``state``: runs from a state)
+The model (``model``: the one class; ``presets``: its presets; ``state``: runs from a state;
+``inverse_spec``: what a compensator inverts)
     HysteresisModel, ModelState, History, InverseSpec
     ClassicalPI, ActivePI, GeneralizedPI, PIModel, PreisachModel, DuhemModel, BoucWenModel
 What a model holds besides its core
@@ -42,7 +43,7 @@ __getattr__, __dir__ = attach(
         "calibrate_gain": ".calibrations",
         "History": ".model",
         "HysteresisModel": ".model",
-        "InverseSpec": ".model",
+        "InverseSpec": ".inverse_spec",
         "ModelState": ".model",
         "ActivePI": ".presets",
         "BoucWenModel": ".presets",
@@ -66,7 +67,8 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .calibrations import Leakage, OutputMap, calibrate_gain, calibrate_leakage
     from .dynamics import InputDynamics, OutputDynamics
     from .estimator import Estimator
-    from .model import History, HysteresisModel, InverseSpec, ModelState
+    from .inverse_spec import InverseSpec
+    from .model import History, HysteresisModel, ModelState
     from .persistence import load_model, model_class, model_names, register, save_model
     from .presets import (
         ActivePI,

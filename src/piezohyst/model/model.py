@@ -36,7 +36,6 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from typing import Any, ClassVar, Self
 
 import numpy as np
@@ -45,11 +44,9 @@ from numpy.typing import ArrayLike
 from .._validation import FloatArray, as_signal, same_length
 from ..errors import (
     NotInvertibleError,
-    ParameterError,
 )
 from ..io.blocks import Blocks, Summary
 from .cores.base import Core, Propagation
-from .dynamics import InputDynamics, OutputDynamics
 from .estimator import (
     GROWTH_TERMS,
     Estimator,
@@ -64,6 +61,7 @@ from .estimator import (
 )
 from .fit_record import fit_arrays, fit_stream
 from .fit_state import Fitted
+from .inverse_spec import InverseSpec
 from .persistence import model_from_dict, model_to_dict, register, save_model
 from .state import (
     History,
@@ -75,113 +73,15 @@ from .state import (
     rest_state,
     run_model,
 )
-from .terms import LagShape, RelaxationShape, StaticShape, Term, coefficient_arrays
+from .terms import Term, coefficient_arrays
 
 __all__ = [
     "GROWTH_TERMS",
     "History",
     "HysteresisModel",
     "InitialState",
-    "InverseSpec",
     "ModelState",
 ]
-
-
-@dataclass(frozen=True)
-class InverseSpec:
-    """What a compensator must invert: the public description of a model's hysteresis part.
-
-    Attributes
-    ----------
-    operator : Core
-        The fitted core (play operators, a Preisach density, ...).
-    static : StaticShape or None
-        A kept memoryless monotone term (asymmetry).
-    lags : LagShape or None
-        Kept first-order lags (creep).
-    input_range : tuple of float
-        The training input range (V); NaN when unknown.
-    input_unit, output_unit : str
-        The model's units.
-    dynamics : InputDynamics
-        Delay and lag between the command and the hysteresis (none by default).
-    output_dynamics : OutputDynamics
-        A mode between the hysteresis and the output (none by default).
-    region_tolerance : float
-        For a core that records its region (Duhem, Bouc-Wen): how far outside
-        it, as a fraction of its output span, counts as extrapolating.
-    relaxation : RelaxationShape or None
-        A kept slow Preisach core behind a lag (relaxing hysteresis).
-    """
-
-    operator: Core
-    static: StaticShape | None
-    lags: LagShape | None
-    input_range: tuple[float, float]
-    input_unit: str
-    output_unit: str
-    dynamics: InputDynamics = field(default_factory=InputDynamics)
-    output_dynamics: OutputDynamics = field(default_factory=OutputDynamics)
-    region_tolerance: float = 0.05
-    relaxation: RelaxationShape | None = None
-
-    @property
-    def analytic(self) -> bool:
-        """True when eq. 18 inverts it exactly (no kept term beside the play operators)."""
-        return self.static is None and self.lags is None and self.relaxation is None
-
-    @classmethod
-    def of(cls, model: Any) -> InverseSpec:
-        """The spec of a fitted model: its core and kept terms, growth terms dropped.
-
-        Parameters
-        ----------
-        model : HysteresisModel
-            Fitted.
-
-        Returns
-        -------
-        InverseSpec
-            The operator (core) to invert and the kept terms beside it.
-
-        Raises
-        ------
-        ParameterError
-            If a kept term is neither a static shape nor lags (nothing can invert it).
-        """
-        static: StaticShape | None = None
-        lags: LagShape | None = None
-        relaxation: RelaxationShape | None = None
-        for term, coef in zip(model.terms_, model.coefs_, strict=True):
-            if term.removed:
-                continue
-            s, lag = term.static_shape(coef), term.lag_shape(coef)
-            slow = term.relaxation_shape(coef)
-            if s is not None and static is None:
-                static = s
-            elif lag is not None and lags is None:
-                lags = lag
-            elif slow is not None and relaxation is None:
-                relaxation = slow
-            else:
-                msg = (
-                    f"the {term.kind!r} term shapes the hysteresis but cannot be inverted: the "
-                    "compensator inverts play operators plus at most one static shape and one "
-                    "set of lags"
-                )
-                raise ParameterError(msg)
-        return cls(
-            model.operator_,
-            static,
-            lags,
-            model.input_range_,
-            model.input_unit,
-            model.output_unit,
-            model.input_dynamics_,
-            model.output_dynamics_,
-            float(getattr(model, "region_tolerance", 0.05)),
-            relaxation,
-        )
 
 
 #: The settings of the one model class, one rule each (presets add theirs)

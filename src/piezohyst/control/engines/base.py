@@ -12,7 +12,7 @@ import numpy as np
 from ..._kernels import play as K
 from ..._validation import FloatArray
 from ...errors import ParameterError
-from ...model.model import InverseSpec
+from ...model.inverse_spec import InverseSpec
 from ..c_text import CParts, CText
 
 __all__ = ["CompensatorState", "EngineSettings", "Inverse", "Loop", "State", "finite_number"]

@@ -15,7 +15,7 @@ from ..._kernels import play as K
 from ..._validation import FloatArray, as_signal
 from ...errors import ParameterError, ShapeError
 from ...model.cores.base import PackedCore
-from ...model.model import InverseSpec
+from ...model.inverse_spec import InverseSpec
 from ..c_text import CParts, CText
 from .base import CompensatorState, Inverse, Loop, State, finite_number
 

@@ -11,7 +11,7 @@ from ..._kernels import play as K
 from ..._validation import FloatArray, as_signal
 from ...errors import ParameterError, ShapeError
 from ...model.cores.play import PIHysteresis
-from ...model.model import InverseSpec
+from ...model.inverse_spec import InverseSpec
 from ..c_text import CParts, CText
 from .base import CompensatorState, Inverse, Loop, State, finite_number
 

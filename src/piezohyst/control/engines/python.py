@@ -11,7 +11,7 @@ import numpy as np
 from ..._validation import FloatArray, as_signal
 from ...errors import ParameterError, ShapeError
 from ...model.cores.base import Core
-from ...model.model import InverseSpec
+from ...model.inverse_spec import InverseSpec
 from .base import CompensatorState, Inverse, State, finite_number
 
 __all__ = ["PythonInverse"]

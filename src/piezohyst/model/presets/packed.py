@@ -1,462 +1,33 @@
-r"""The public models: thin constructors over the one model class.
-
-Each preset names its core, declares its own settings (with one rule each)
-and the terms it fits; everything else — fit, propagate, states, growth,
-inversion, files — is :class:`~piezohyst.model.HysteresisModel`'s:
-
-======================  ======================================================
-:class:`ClassicalPI`     play operators alone (eq. 11-12)
-:class:`ActivePI`        play operators plus the paper's integral (eq. 13-16)
-:class:`GeneralizedPI`   play operators plus asymmetry, creep and chosen growth terms
-:class:`PIModel`         play operators plus any terms, custom ones included
-:class:`PreisachModel`   a Preisach density plus growth (and relaxation) terms
-:class:`DuhemModel`      Duhem slopes plus growth terms
-:class:`BoucWenModel`    the Bouc-Wen equation plus growth terms
-======================  ======================================================
-"""
+"""The packed-core presets: :class:`PreisachModel` (a Preisach density, with relaxation),
+:class:`DuhemModel` (Duhem slopes) and :class:`BoucWenModel` (the Bouc-Wen equation), each
+with growth (and creep) terms."""
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Sequence
 from typing import Any, ClassVar
 
 import numpy as np
-from numpy.typing import ArrayLike
 
-from .._validation import FloatArray, check_float
-from ..errors import ParameterError
-from ..io.blocks import Summary, array_blocks
-from ..metrics import rmse
-from .cores.base import FitJob
-from .cores.boucwen import BoucWenHysteresis
-from .cores.duhem import DuhemHysteresis
-from .cores.play import PIHysteresis
-from .cores.preisach import PreisachHysteresis
-from .estimator import (
-    GROWTH_TERMS,
+from ..._validation import FloatArray, check_float
+from ...errors import ParameterError
+from ..cores.boucwen import BoucWenHysteresis
+from ..cores.duhem import DuhemHysteresis
+from ..cores.preisach import PreisachHysteresis
+from ..estimator import (
     Rule,
     _bool,
     _creep,
     _growth_terms,
-    _int_in,
-    _min_slope,
-    _terms,
-    _thresholds,
 )
-from .model import HysteresisModel, InverseSpec
-from .persistence import model_class, model_names
-from .state import History, InitialState, ModelState
-from .terms import Asymmetry, LagShape, Relaxation, StaticShape, Term, make_term
+from ..model import HysteresisModel
+from ..terms import Relaxation, Term
+from ._shared import growth_terms_to_fit, store
 
-__all__ = [
-    "GROWTH_TERMS",
-    "ActivePI",
-    "BoucWenModel",
-    "ClassicalPI",
-    "DuhemModel",
-    "GeneralizedPI",
-    "History",
-    "HysteresisModel",
-    "InverseSpec",
-    "ModelState",
-    "PIModel",
-    "PreisachModel",
-    "model_class",
-    "model_names",
-]
+__all__ = ["BoucWenModel", "DuhemModel", "PreisachModel"]
 
 
-def _store(model: HysteresisModel, arguments: dict[str, Any]) -> None:
-    """``__init__`` stores its arguments, nothing else (the scikit-learn contract)."""
-    for name, value in arguments.items():
-        if name not in ("self", "__class__"):
-            setattr(model, name, value)
-
-
-def _growth(
-    fixed: list[Term], names: tuple[str, ...] | None, x_range: FloatArray
-) -> tuple[list[Term], list[tuple[int, ...]] | None]:
-    """Kept terms, then growth terms by name (the term registry); ``names`` None: all of
-    them, with every physical subset to choose from (the kept terms in each)."""
-    auto = names is None
-    chosen = GROWTH_TERMS if names is None else names
-    terms = fixed + [make_term(name).bind(x_range) for name in chosen]
-    if not auto:
-        return terms, None
-    base = tuple(range(len(fixed)))
-    growth = range(len(fixed), len(terms))
-    kind = {j: terms[j].kind for j in growth}
-
-    def physical(combo: tuple[int, ...]) -> bool:
-        """A conductance that rises with the voltage (``abs_integral``) presupposes the
-        conductance itself (``integral``): on a record of one polarity the two columns nearly
-        coincide, and the rise alone fits it as well by chance, not by physics."""
-        names = {kind[j] for j in combo}
-        return "abs_integral" not in names or "integral" in names or "integral" not in chosen
-
-    subsets = [base + combo for size in range(len(chosen) + 1)
-               for combo in itertools.combinations(growth, size) if physical(combo)]  # fmt: skip
-    return terms, subsets
-
-
-class _PlayModel(HysteresisModel):
-    """The presets on play operators: their common settings."""
-
-    core = PIHysteresis
-    n_operators: int
-    thresholds_: FloatArray
-    weights_: FloatArray
-    offset_: float
-    _rules: ClassVar[dict[str, Rule]] = {
-        "n_operators": _int_in(1, 1000),
-        "thresholds": _thresholds,
-        "min_slope": _min_slope,
-    }
-
-    def __init__(
-        self,
-        n_operators: int = 10,
-        *,
-        thresholds: ArrayLike | None = None,
-        min_slope: float = 1e-3,
-        input_unit: str = "V",
-        output_unit: str = "C",
-        input_dynamics: str = "none",
-        output_dynamics: str = "none",
-    ) -> None:
-        _store(self, locals())
-
-
-class PIModel(_PlayModel):
-    """Prandtl-Ishlinskii play operators plus any terms, custom ones included.
-
-    Parameters
-    ----------
-    n_operators : int, default 10
-        Play operators including the linear one.
-    terms : sequence of str or Term, default ()
-        Term kinds (``"integral"``, ``"time"``, ``"abs_integral"``,
-        ``"asymmetry"``, ``"creep"``) or :class:`~piezohyst.model.terms.Term`
-        instances, custom ones included.
-    thresholds, min_slope, input_unit, output_unit
-        As for :class:`ClassicalPI`.
-
-    Attributes
-    ----------
-    operator_ : PIHysteresis
-        The identified play operators (thresholds, weights, offset, initial state).
-    thresholds_, weights_, offset_, initial_state_
-        Its parameters.
-    terms_ : tuple of Term
-        The fitted terms (data-dependent settings fixed).
-    coefs_ : tuple of ndarray
-        Their coefficients (see :meth:`coefficients` for labels and units).
-    rmse_, nrmse_ : float
-        Training fit: RMSE (output units) and RMSE / output span.
-    input_range_ : tuple of float
-        Smallest and largest training input (V).
-    selection_ : dict
-        Held-out RMSE of every term subset tried (models that select terms),
-        pooled over the folds of a forward-chaining time-series
-        cross-validation; ``selection_folds_`` holds each fold's.
-
-    Examples
-    --------
-    >>> import numpy as np, piezohyst as ph
-    >>> rec = ph.simulate(duration=4.0)
-    >>> m = ph.PIModel(8, terms=("integral", "time")).fit(rec.voltage, rec.charge, t=rec.t)
-    >>> sorted(m.coefficients())
-    ['integral', 'time']
-    """
-
-    cli_name = ""
-    _rules: ClassVar[dict[str, Rule]] = {"terms": _terms}
-
-    def __init__(
-        self,
-        n_operators: int = 10,
-        *,
-        terms: Sequence[str | Term] = (),
-        thresholds: ArrayLike | None = None,
-        min_slope: float = 1e-3,
-        input_unit: str = "V",
-        output_unit: str = "C",
-        input_dynamics: str = "none",
-        output_dynamics: str = "none",
-    ) -> None:
-        _store(self, locals())
-
-    def terms_to_fit(
-        self, x_range: FloatArray, params: dict[str, Any]
-    ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
-        """See :meth:`~piezohyst.model.model.HysteresisModel.terms_to_fit`: its terms, bound
-        to the input range (empty ones dropped)."""
-        terms = [term.bind(x_range) for term in params["terms"]]
-        return [term for term in terms if term.width > 0], None
-
-
-class ClassicalPI(_PlayModel):
-    r"""Classical (passive, rate-independent) Prandtl-Ishlinskii model, eq. 11-12.
-
-    .. math:: y(t) = c + \sum_{i=0}^{n-1} w_i\, H_{r_i}[x](t), \qquad r_0 = 0
-
-    Parameters
-    ----------
-    n_operators, thresholds, min_slope, input_unit, output_unit
-        As for :class:`HysteresisModel`.
-
-    Attributes
-    ----------
-    operator_ : PIHysteresis
-        The immutable identified operator (thresholds, weights, offset, initial state).
-    thresholds_, weights_ : ndarray
-        Identified thresholds (input units) and weights (output/input units).
-    offset_ : float
-        Output offset (output units).
-    initial_state_ : ndarray
-        Operator states before the first training sample (input units).
-    rmse_, nrmse_ : float
-        Training fit quality: RMSE (output units) and RMSE / output span.
-    input_range_ : tuple of float
-        Smallest and largest training input (V): where the model was seen
-        working, and the default voltage limits of the compensator commands.
-    max_slew_rate_ : float
-        Fastest input change in the training record (V/s; NaN without times):
-        the default slew limit of a :class:`~piezohyst.Compensator` that knows
-        its sample rate, and of ``piezohyst compensate``.
-    max_step_ : float
-        Largest input change from one training sample to the next (V): the
-        default limit per sample of a compensator that does not.
-
-    Examples
-    --------
-    >>> import numpy as np, piezohyst as ph
-    >>> v = 70 - 70 * np.cos(np.linspace(0, 6 * np.pi, 600))
-    >>> true = ph.PIHysteresis([0, 20, 40], [1.0, 0.5, -0.3])
-    >>> model = ph.ClassicalPI(thresholds=[0, 20, 40]).fit(v, true.predict(v))
-    >>> bool(model.nrmse_ < 1e-9)
-    True
-    """
-
-    cli_name = "classical-pi"
-
-
-class ActivePI(_PlayModel):
-    r"""Active (time-dependent) Prandtl-Ishlinskii model, eq. 13-16.
-
-    A classical PI model plus one integrator with growth rate :math:`R`:
-
-    .. math::
-
-        y(t) = c + \sum_i w_i\, H_{r_i}[x](t) + R\, y_2(t), \qquad
-        y_2(t_k) = y_2(t_{k-1}) + x(t_k)\,(t_k - t_{k-1}), \quad y_2(t_0) = 0
-
-    For a charge output, :math:`R` is the leakage conductance (C/(V s) = S) of
-    the resistor in parallel with the piezo (Fig. 3). All parameters are
-    identified jointly (eq. 16-17) with the slope constraints that guarantee
-    the inverse of the hysteresis part. The time stamps may be non-uniform.
-
-    Parameters are those of :class:`ClassicalPI`; ``fit`` needs ``t``.
-
-    Attributes
-    ----------
-    growth_rate_ : float
-        :math:`R` in output units per (input unit x s); S for V to C.
-    hysteresis_ : ClassicalPI
-        The pure hysteresis part :math:`y_1` (eq. 19), leakage removed; its
-        ``inverse()`` is the feedforward compensator of eq. 18.
-
-    Notes
-    -----
-    The state (:class:`ModelState`) holds the operator states, the integral
-    :math:`y_2` (V s) and the last time stamp. ``inverse()`` inverts the
-    hysteresis part only: leaked charge moves nothing.
-    """
-
-    cli_name = "active-pi"
-
-    def terms_to_fit(
-        self, x_range: FloatArray, params: dict[str, Any]
-    ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
-        """See :meth:`~piezohyst.model.model.HysteresisModel.terms_to_fit`."""
-        return [make_term("integral")], None
-
-    @property
-    def growth_rate_(self) -> float:
-        """:math:`R` (output per input unit and s; S for V to C)."""
-        self._check_fitted()
-        growth = self.growth_coefficients()  # built without the integral: no leakage
-        return float(growth["integral"][0]) if "integral" in growth else 0.0
-
-
-class GeneralizedPI(_PlayModel):
-    r"""Generalized PI model: PI + asymmetry + creep + selectable growth terms.
-
-    .. math::
-
-        y = c + \sum_i w_i H_{r_i}[x]
-            + \underbrace{\sum_j \frac{u_j (x - k_j)_+^2 - d_j (k_j - x)_+^2}{s}}_{\text{asymmetry}}
-            + \underbrace{\sum_k g_k L_{\tau_k}[x]}_{\text{creep}}
-            + \underbrace{\sum_m R_m G_m[x]}_{\text{growth}}
-
-    Every term is linear in its coefficient, so all are identified jointly by
-    the one bounded least-squares solve; the hysteresis part stays strictly
-    increasing in the current input and is inverted exactly, sample by
-    sample, by :class:`~piezohyst.Compensator`.
-
-    Parameters
-    ----------
-    n_operators, thresholds, min_slope, input_unit, output_unit
-        As for :class:`ClassicalPI`.
-    growth_terms : "auto" or sequence of str, default "auto"
-        Growth terms among ``"integral"`` (ohmic leakage), ``"time"`` (a
-        constant bias current), ``"abs_integral"`` (leakage rising with the
-        voltage); ``()`` for none. On a displacement record (``output_unit`` a
-        length) ``"auto"`` means none, with creep operators timed by the record
-        when ``creep`` is left empty. ``"auto"`` fits every subset on the first
-        70 % of the record, scores it on the last 30 % (the model running
-        through the whole record; one accumulation, subsets solved on
-        sub-matrices) and keeps the best; ``"abs_integral"`` only beside
-        ``"integral"`` (a rising conductance presupposes the conductance: on a
-        record of one polarity the rise alone fits as well by chance, and on
-        a two-state capacitor it left 7.7 % held out where both left 3.6 %).
-    asymmetry : int, default 3
-        Knots of the static monotone term (0 turns it off).
-    creep : sequence of float, default ()
-        Time constants (s) of the creep operators, e.g. ``(0.1, 1, 10)``.
-    optimize_thresholds : bool, default False
-        Refine the thresholds by bounded nonlinear least squares around the
-        linear solve (L-BFGS-B over threshold increments; slower).
-
-    Attributes
-    ----------
-    growth_terms_ : tuple of str
-        Growth terms used; ``growth_coefs_`` their coefficients.
-    knots_, static_up_, static_down_, static_scale_
-        Asymmetry term (V, output/V, output/V, V); empty when off.
-    creep_taus_, creep_gains_ : ndarray
-        Creep time constants (s) and gains (output/V).
-    selection_ : dict
-        Held-out RMSE of every growth subset tried (``growth_terms="auto"``),
-        pooled over 4 forward-chaining folds (the first 40 % trains, each later
-        block is predicted from everything before it).
-    selection_folds_ : dict
-        The same per fold, in time order. Each fold holds two or more
-        reversals of the input (at most 4 folds); a record with fewer has one
-        test block, its last 30 %.
-    selection_splits_ : list of int
-        The first sample of each fold, then the record's length.
-
-    Examples
-    --------
-    >>> import numpy as np, piezohyst as ph
-    >>> rec = ph.simulate(duration=10.0)
-    >>> model = ph.GeneralizedPI(10).fit(rec.voltage, rec.charge, t=rec.t)
-    >>> bool(model.nrmse_ < 0.005), len(model.growth_terms_) > 0
-    (True, True)
-    >>> len(model.selection_folds_["none"])      # forward-chaining folds, each a few cycles
-    3
-    """
-
-    cli_name = "generalized-pi"
-    optimize_thresholds: bool
-    _rules: ClassVar[dict[str, Rule]] = {
-        "growth_terms": _growth_terms,
-        "asymmetry": _int_in(0, 50),
-        "creep": _creep,
-        "optimize_thresholds": _bool,
-    }
-
-    def __init__(
-        self,
-        n_operators: int = 10,
-        *,
-        growth_terms: str | Sequence[str] = "auto",
-        asymmetry: int = 3,
-        creep: Sequence[float] = (),
-        optimize_thresholds: bool = False,
-        thresholds: ArrayLike | None = None,
-        min_slope: float = 1e-3,
-        input_unit: str = "V",
-        output_unit: str = "C",
-        input_dynamics: str = "none",
-        output_dynamics: str = "none",
-    ) -> None:
-        _store(self, locals())
-
-    def terms_to_fit(
-        self, x_range: FloatArray, params: dict[str, Any]
-    ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
-        """See :meth:`~piezohyst.model.model.HysteresisModel.terms_to_fit`."""
-        fixed: list[Term] = []
-        if params["asymmetry"]:
-            fixed.append(Asymmetry(params["asymmetry"]).bind(x_range))
-        if params["creep"] is not None:
-            fixed.append(params["creep"])
-        return _growth(fixed, params["growth_terms"], x_range)
-
-    def refine_fit(
-        self,
-        x: FloatArray,
-        y: FloatArray,
-        t: FloatArray | None,
-        summary: Summary,
-        initial_state: InitialState,
-    ) -> bool:
-        """See :meth:`~piezohyst.model.model.HysteresisModel.refine_fit`: nonlinear least
-        squares over the thresholds, the linear solve inside."""
-        if not self.optimize_thresholds or self.thresholds_.size < 2:
-            return False
-        from scipy.optimize import minimize
-
-        terms = list(self.terms_)
-        kept = self.output_dynamics_  # the mode the fit found, if any: the solve filters through it
-        mode = kept if kept.active else None
-        selection, folds, splits = self.selection_, self.selection_folds_, self.selection_splits_
-        span = max(float(np.ptp(x)), 1e-300)
-        start = np.log(np.diff(self.thresholds_) / span)
-        t_fit = t if self.rate_dependent_ else None
-        blocks = array_blocks(x, y, t_fit)
-        params = self.check_params()
-
-        def objective(logs: FloatArray) -> float:
-            thr = np.concatenate([[0.0], np.cumsum(np.exp(logs) * span)])
-            if thr[-1] >= span:  # a play wider than the range never reverses
-                return 1e300
-            job = FitJob(blocks, summary, terms, None, initial_state, {**params, "thresholds": thr},
-                         type(self).__name__, self.input_unit, self.output_unit, mode)  # fmt: skip
-            self.take_fit(PIHysteresis.identify(job), output_dynamics=kept)
-            return rmse(self.predict(x, t=t_fit), y) / span
-
-        before = objective(start)
-        res = minimize(objective, start, method="L-BFGS-B", options={"maxiter": 30})
-        objective(res.x if res.fun < before else start)
-        self.take_fit(selection=selection, selection_folds=folds, selection_splits=splits)
-        return True
-
-    def set_fitted(
-        self, core: Any, terms: tuple[Term, ...], coefs: tuple[FloatArray, ...], **facts: Any
-    ) -> None:
-        """See :meth:`HysteresisModel.set_fitted`; also sets the 0.1 names of the terms."""
-        super().set_fitted(core, terms, coefs, **facts)
-        static = StaticShape(np.zeros(0), np.zeros(0), np.zeros(0), 1.0)
-        lags = LagShape(np.zeros(0), np.zeros(0))
-        growth: list[tuple[str, FloatArray]] = []
-        for term, coef in zip(terms, coefs, strict=True):
-            static = term.static_shape(coef) or static
-            lags = term.lag_shape(coef) or lags
-            if term.removed:
-                growth.append((term.kind, coef))
-        self.knots_, self.static_scale_ = static.knots, static.scale
-        self.static_up_, self.static_down_ = static.up, static.down
-        self.creep_taus_, self.creep_gains_ = lags.taus, lags.gains
-        self.growth_terms_ = tuple(kind for kind, _ in growth)
-        self.growth_coefs_ = np.concatenate([c for _, c in growth]) if growth else np.zeros(0)
-
-
-# ---------------------------------------------------- cores beyond play operators
 def _grid(value: object, name: str, owner: str) -> tuple[int, int]:
     ok = (
         isinstance(value, Sequence)
@@ -537,7 +108,7 @@ def _packed_terms(
 ) -> tuple[list[Term], list[tuple[int, ...]] | None]:
     """Creep lags and ``kept`` terms (they shape the hysteresis), then the growth terms."""
     fixed = ([] if params["creep"] is None else [params["creep"]]) + list(kept)
-    return _growth(fixed, params["growth_terms"], x_range)
+    return growth_terms_to_fit(fixed, params["growth_terms"], x_range)
 
 
 class PreisachModel(HysteresisModel):
@@ -678,7 +249,7 @@ class PreisachModel(HysteresisModel):
         input_dynamics: str = "none",
         output_dynamics: str = "none",
     ) -> None:
-        _store(self, locals())
+        store(self, locals())
 
     def terms_to_fit(
         self, x_range: FloatArray, params: dict[str, Any]
@@ -792,7 +363,7 @@ class DuhemModel(HysteresisModel):
         input_dynamics: str = "none",
         output_dynamics: str = "none",
     ) -> None:
-        _store(self, locals())
+        store(self, locals())
 
     def terms_to_fit(
         self, x_range: FloatArray, params: dict[str, Any]
@@ -869,7 +440,7 @@ class BoucWenModel(HysteresisModel):
         input_dynamics: str = "none",
         output_dynamics: str = "none",
     ) -> None:
-        _store(self, locals())
+        store(self, locals())
 
     def terms_to_fit(
         self, x_range: FloatArray, params: dict[str, Any]
