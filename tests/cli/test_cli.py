@@ -413,7 +413,7 @@ def test_fit_from_the_periodic_state(tmp_path: Path) -> None:
 def test_long_work_says_so_once_when_piped(tmp_path: Path) -> None:
     """Piped (no terminal), a long fit logs one line when it starts, with the rows it
     expects, and one when done; a short one and --quiet log nothing."""
-    from piezohyst.io._formats import estimated_rows
+    from piezohyst.io._text import estimated_rows
 
     exe = Path(sys.executable).with_name("piezohyst")
     n = 150_000

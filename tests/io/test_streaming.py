@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 import piezohyst as ph
 import piezohyst.io as pio
 import piezohyst.io._formats as formats
+import piezohyst.io._text as text
 import piezohyst.io.tables as tables
 import piezohyst.workflows as wf
 from piezohyst.errors import DataFileError
@@ -40,7 +41,7 @@ def record() -> ph.simulation.BenchRecord:
 @pytest.fixture
 def small_batches(monkeypatch: pytest.MonkeyPatch) -> None:
     """pyarrow parses 16 kB at a time: a few hundred rows per batch, many batches per file."""
-    monkeypatch.setattr(formats, "CSV_BLOCK_BYTES", 1 << 14)
+    monkeypatch.setattr(text, "CSV_BLOCK_BYTES", 1 << 14)
     monkeypatch.setattr(formats, "BATCH_ROWS", 700)
     monkeypatch.setattr(tables, "BATCH_ROWS", 700)
     monkeypatch.setattr(model_files, "KEEP_ROWS", 1000)  # fits stream every pass (a huge file)

@@ -18,8 +18,10 @@ module            public names
                   :class:`RecordingStream`, :class:`Block`, :func:`collect`,
                   :func:`check_finite`, :func:`check_increasing` (input, output and
                   time, in units, whole or block by block)
-``_formats``      :class:`Table`, :class:`Recording`, :func:`estimated_rows`, the
-                  readers of each format, ``BATCH_ROWS``, ``MD_MARKER``
+``_formats``      :class:`Table`, :class:`Recording`, ``BATCH_ROWS``, ``MD_MARKER``: what
+                  every reader builds
+``_text``         the text readers (CSV, TSV, text, aixACCT), :func:`estimated_rows`
+``_containers``   the container readers (``.npz``, Parquet, ``.mat``, HDF5, TDMS)
 ``_writers``      :func:`write_table`, :func:`write_rows`, :func:`write_blocks`,
                   :func:`write_json`, :func:`read_json`, :class:`JsonFile`,
                   :func:`atomic_write`, :func:`atomic_write_text`, :func:`atomic_folder`,
@@ -32,8 +34,9 @@ module            public names
 
 from __future__ import annotations
 
-from ._formats import BATCH_ROWS, MD_MARKER, Recording, Table, estimated_rows
+from ._formats import BATCH_ROWS, MD_MARKER, Recording, Table
 from ._isolate import parse_isolated
+from ._text import estimated_rows
 from ._writers import (
     JsonFile,
     atomic_folder,

@@ -12,24 +12,9 @@ import numpy as np
 from .._validation import FloatArray
 from ..errors import DataFileError
 from ..units import split_unit
-from ._formats import (
-    BATCH_ROWS,
-    CSV_SUFFIXES,
-    Table,
-    _csv_batches,
-    _csv_plan,
-    _CsvPlan,
-    _Fallback,
-    _read_hdf5,
-    _read_head,
-    _read_mat,
-    _read_npz,
-    _read_parquet,
-    _read_tdms,
-    _read_text,
-    _read_text_careful,
-    with_suffix_units,
-)
+from ._containers import read_hdf5, read_mat, read_npz, read_parquet, read_tdms
+from ._formats import BATCH_ROWS, CSV_SUFFIXES, Table, with_suffix_units
+from ._text import CsvPlan, Fallback, csv_batches, csv_plan, read_head, read_text, read_text_careful
 
 
 def read_table(
@@ -73,15 +58,15 @@ def read_table(
     _check_skip(p, skip_rows)
     _refuse_workbook(p)
     readers: dict[str, Callable[[], Table]] = {
-        ".npz": lambda: _read_npz(p),
-        ".mat": lambda: _read_mat(p, group, channels),
-        ".tdms": lambda: _read_tdms(p, group, channels),
-        ".parquet": lambda: _read_parquet(p, progress),
-        ".h5": lambda: _read_hdf5(p, group, channels),
-        ".hdf5": lambda: _read_hdf5(p, group, channels),
+        ".npz": lambda: read_npz(p),
+        ".mat": lambda: read_mat(p, group, channels),
+        ".tdms": lambda: read_tdms(p, group, channels),
+        ".parquet": lambda: read_parquet(p, progress),
+        ".h5": lambda: read_hdf5(p, group, channels),
+        ".hdf5": lambda: read_hdf5(p, group, channels),
     }
     return _reading(
-        p, readers.get(suffix, lambda: _read_text(p, group, channels, progress, skip_rows))
+        p, readers.get(suffix, lambda: read_text(p, group, channels, progress, skip_rows))
     )
 
 
@@ -173,25 +158,25 @@ def open_table(
     if suffix == ".parquet":
         return _reading(p, lambda: _lazy_parquet(p))
     if suffix in CSV_SUFFIXES:
-        head = _read_head(p)
-        plan = None if b"\x00" in head else _csv_plan(p, head, skip_rows)
+        head = read_head(p)
+        plan = None if b"\x00" in head else csv_plan(p, head, skip_rows)
         if plan is not None:
             return with_suffix_units(_lazy_csv(p, plan, group, channels, skip_rows))
     return read_table(p, group=group, channels=channels, skip_rows=skip_rows)
 
 
 def _lazy_csv(
-    path: Path, plan: _CsvPlan, group: str | None, channels: Sequence[str], skip_rows: int
+    path: Path, plan: CsvPlan, group: str | None, channels: Sequence[str], skip_rows: int
 ) -> Table:
     def stream(names: Sequence[str]) -> Iterator[dict[str, FloatArray]]:
         done = 0
         try:
-            for batch in _csv_batches(path, plan, names):
+            for batch in csv_batches(path, plan, names):
                 done += len(batch[names[0]])
                 yield batch
-        except _Fallback:
+        except Fallback:
             # the careful reader raises naming the row, or reads what pyarrow could not
-            careful = _read_text_careful(path, group, channels, skip_rows)
+            careful = read_text_careful(path, group, channels, skip_rows)
             arrays = [careful.get(n, finite=False) for n in names]
             for lo in range(done, arrays[0].size, BATCH_ROWS):
                 yield {n: a[lo : lo + BATCH_ROWS] for n, a in zip(names, arrays, strict=True)}
