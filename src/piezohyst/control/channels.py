@@ -28,8 +28,9 @@ from ..model.calibrations.leakage import Leakage
 from ..model.calibrations.output_map import OutputMap, monotone_charges
 from ..model.model import HysteresisModel
 from .arguments import Domain
-from .compensator import LIMIT_CHECK_FIRST, LIMIT_SHARE, Compensator
+from .compensator import Compensator
 from .selfsensing import SelfSensingController
+from .tally import LIMIT_CHECK_FIRST, LIMIT_SHARE
 
 __all__ = ["BankCompensator", "BankController", "ChannelBank", "per_channel"]
 
