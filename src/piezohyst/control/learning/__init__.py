@@ -12,6 +12,7 @@ module           what it holds
                  ``"jacobian"``, by name in :data:`~.laws.LAWS`
 ``probe``        the lead-in's probe: small sines whose response measures the loop's timing
 ``saving``       a learner's state as a file, resumed exactly
+``stepping``     ``step`` and ``process``: the learner in a loop that reads each sample
 ``trial``        :class:`Trial` (what one trial did); a trial's trajectory, its limits, the
                  slew and anti-windup
 ===============  =========================================================================

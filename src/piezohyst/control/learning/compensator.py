@@ -40,12 +40,12 @@ from ...model.calibrations.leakage import Leakage
 from ...model.calibrations.output_map import OutputMap
 from ..arguments import Domain
 from ..compensator import Compensator
-from ..contract import reading
 from .design import LearningDesign, design_learning
 from .jacobian import MAX_SAMPLES
 from .laws import LAWS, Evidence, Law
 from .probe import Response, probe_bins, probe_signal, response
 from .saving import Saving, digest
+from .stepping import Stepping
 from .trial import (
     Trial,
     anti_windup,
@@ -213,7 +213,7 @@ def _responder(learner: LearningCompensator) -> Any:
     return respond
 
 
-class LearningCompensator(Saving):
+class LearningCompensator(Saving, Stepping):
     r"""A feedforward compensator that learns from repetition (iterative learning control).
 
     Each trial is one period of a repeated trajectory, sent right after the
@@ -309,10 +309,6 @@ class LearningCompensator(Saving):
     >>> ilc.history[-1].error < 0.6 * ilc.history[0].error   # 0.51 % -> 0.25 %: the noise
     True
     """
-
-    #: True: the trial's readings are learned from (the controllers' one contract,
-    #: :mod:`~piezohyst.control.contract`)
-    reads = True
 
     def __init__(
         self,
@@ -584,78 +580,6 @@ class LearningCompensator(Saving):
         self._last = float(u[-1])
         self._cursor, self._seen, self._awaiting = 0, np.full(u.size, np.nan), None
         return u
-
-    def step(self, desired: float, measured: float | None = None) -> float:
-        """One sample of the repeated trajectory, for a loop that reads after each command.
-
-        The trial's commands are made when it begins (:meth:`command`); each call sends the
-        next of them and keeps ``measured``, the reading taken after the command before, as
-        that sample's. The reading of a trial's last sample arrives with the next trial's
-        first call, which learns from the trial (:meth:`learn`, the charge) and begins the
-        next one. Equal to :meth:`command` and :meth:`learn` on whole trials.
-
-        Parameters
-        ----------
-        desired : float
-            The trajectory's value at this sample (checked: the learner repeats the
-            trajectory given to the first :meth:`command`).
-        measured : float, optional
-            The reading after the command before (model output units); None or NaN: none
-            (not learned from).
-
-        Returns
-        -------
-        float
-            The command (V).
-
-        Raises
-        ------
-        ParameterError
-            No trajectory yet (give it once with :meth:`command`), or ``desired`` is not
-            the trajectory's value at this point of the trial.
-        """
-        if self._desired is None:
-            msg = (
-                "step() repeats a known trajectory: give it once with command(desired), whose "
-                "commands are the first trial's, which step() then sends"
-            )
-            raise ParameterError(msg)
-        if self._awaiting is not None:
-            self._seen[self._awaiting] = reading(measured, "LearningCompensator")
-            self._awaiting = None
-        if self._pending is not None and self._cursor == self._pending.size:
-            self.learn(self._seen.copy())
-        if self._pending is None:
-            self.command()
-        assert self._pending is not None
-        k, d = self._cursor, self._desired
-        if not abs(float(desired) - d[k]) <= 1e-9 * float(np.ptp(d)):
-            msg = (
-                f"step(): desired {float(desired)!r} at sample {k} of the trial, where the "
-                f"trajectory is {d[k]!r}: the learner repeats one trajectory (reset() for another)"
-            )
-            raise ParameterError(msg)
-        self._cursor, self._awaiting = k + 1, k
-        return float(self._pending[k])
-
-    def process(self, desired: ArrayLike, measured: ArrayLike | None = None) -> FloatArray:
-        """:meth:`step` on each sample of a block (readings known beforehand: a playback).
-
-        Parameters
-        ----------
-        desired, measured : array_like, shape (N,)
-
-        Returns
-        -------
-        ndarray, shape (N,)
-            Commands (V).
-        """
-        d = np.asarray(desired, dtype=np.float64).reshape(-1)
-        m = np.full(d.size, np.nan) if measured is None else np.asarray(measured, np.float64)
-        if m.shape != d.shape:
-            msg = f"'measured' must match 'desired' (shape {d.shape}). Got {m.shape}."
-            raise ShapeError(msg)
-        return np.array([self.step(float(a), float(b)) for a, b in zip(d, m, strict=True)])
 
     # ----------------------------------------------------------------- learning
     def learn(
