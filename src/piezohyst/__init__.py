@@ -9,6 +9,7 @@ Models (the scikit-learn estimator contract: ``fit``, ``predict``, ``score``)
     HysteresisModel -- the one model class: a core, terms, input/output dynamics
     ModelState, History, InverseSpec -- explicit state; what a compensator inverts
     load_model, ModelBank, load_bank -- model files; one model per channel
+    CoupledModel -- several actuators moving one structure: a model each, the coupling
     default_thresholds -- play thresholds spread over an input range
 
 Cores and terms (for people who write their own; ``piezohyst.testing.check_core``)
@@ -23,6 +24,7 @@ Compensation and control
     OutputMap, calibrate_gain -- charge to displacement, from a sensor once (eq. 6-7)
     LearningCompensator -- learning a repeated scan from the charge
     BankCompensator, BankController -- many channels in one kernel
+    CoupledCompensator -- a coupled stage: the coupling's inverse, then each actuator's
 
 Choosing and checking a model
     compare_models, Comparison, ComparisonRow -- held-out scores of several models
@@ -86,6 +88,8 @@ __getattr__, __dir__ = attach(
         "calibrate_gain": ".model.calibrations",
         "BankCompensator": ".control.channels",
         "BankController": ".control.channels",
+        "CoupledCompensator": ".control.coupled",
+        "CoupledModel": ".model.coupled",
         "Compensator": ".control.compensator",
         "CompensatorState": ".control.compensator",
         "LearningCompensator": ".control.learning",
@@ -130,6 +134,7 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .analysis.selection import Selection, select_model
     from .control.channels import BankCompensator, BankController
     from .control.compensator import Compensator, CompensatorState
+    from .control.coupled import CoupledCompensator
     from .control.learning import LearningCompensator
     from .control.selfsensing import ControllerState, SelfSensingController
     from .io import read_recording, read_table, write_table
@@ -141,6 +146,7 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .model.cores.duhem import DuhemHysteresis
     from .model.cores.play import PIHysteresis, default_thresholds
     from .model.cores.preisach import PreisachHysteresis
+    from .model.coupled import CoupledModel
     from .model.inverse_spec import InverseSpec
     from .model.model import History, HysteresisModel, ModelState
     from .model.persistence import load_model
@@ -169,6 +175,8 @@ __all__ = [
     "CompensatorState",
     "ControllerState",
     "Core",
+    "CoupledCompensator",
+    "CoupledModel",
     "DataFileError",
     "DuhemHysteresis",
     "DuhemModel",

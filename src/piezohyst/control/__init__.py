@@ -8,6 +8,8 @@ The one contract every controller answers, ``step(desired, measured=None)``, ``p
 Feedforward (``compensator``, its arguments checked in ``arguments``; its engines in the
 subpackage ``engines``)
     Compensator, CompensatorSettings, CompensatorState
+A coupled stage: the coupling's inverse, then each actuator's compensator (``coupled``)
+    CoupledCompensator
 Feedback on the measured charge (``selfsensing``)
     SelfSensingController, ControllerState, LoopSettings
 Learning a repeated scan (the subpackage ``learning``: the compensator in
@@ -41,6 +43,7 @@ __getattr__, __dir__ = attach(
         "BankController": ".channels",
         "Controller": ".contract",
         "Compensator": ".compensator",
+        "CoupledCompensator": ".coupled",
         "CompensatorSettings": ".compensator",
         "CompensatorState": ".compensator",
         "CCode": ".export",
@@ -64,6 +67,7 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .charges import Charges
     from .compensator import Compensator, CompensatorSettings, CompensatorState
     from .contract import Controller
+    from .coupled import CoupledCompensator
     from .export import CCode, export_c, write_c, write_fmu, write_mex, write_shared
     from .learning import LearningCompensator, LearningDesign, Trial, design_learning
     from .selfsensing import ControllerState, LoopSettings, SelfSensingController
@@ -78,6 +82,7 @@ __all__ = [
     "CompensatorState",
     "Controller",
     "ControllerState",
+    "CoupledCompensator",
     "LearningCompensator",
     "LearningDesign",
     "LoopSettings",

@@ -14,6 +14,8 @@ What a model holds besides its core
 The calibrations, side by side (``calibrations``: ``leakage`` and ``from_holds``,
 ``output_map`` and ``from_sensor``)
     Leakage, calibrate_leakage, OutputMap, calibrate_gain
+Several actuators moving one structure (``coupled``)
+    CoupledModel
 Files and banks (``persistence``, ``bank``)
     load_model, save_model, model_names, model_class, register; ModelBank, load_bank
 The estimator contract (``estimator``) and the fit (``fit_record``: a record in, the core
@@ -33,6 +35,7 @@ __getattr__, __dir__ = attach(
     __name__,
     {
         "ModelBank": ".bank",
+        "CoupledModel": ".coupled",
         "load_bank": ".bank",
         "InputDynamics": ".dynamics",
         "OutputDynamics": ".dynamics",
@@ -65,6 +68,7 @@ __getattr__, __dir__ = attach(
 if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .bank import ModelBank, load_bank
     from .calibrations import Leakage, OutputMap, calibrate_gain, calibrate_leakage
+    from .coupled import CoupledModel
     from .dynamics import InputDynamics, OutputDynamics
     from .estimator import Estimator
     from .inverse_spec import InverseSpec
@@ -85,6 +89,7 @@ __all__ = [
     "ActivePI",
     "BoucWenModel",
     "ClassicalPI",
+    "CoupledModel",
     "DuhemModel",
     "Estimator",
     "GeneralizedPI",

@@ -1,4 +1,5 @@
-"""The simulated bench: actuator, charge circuit, sensors and excitation signals."""
+"""The simulated bench: actuator, charge circuit, sensors and excitation signals; a coupled
+stage of several benches (``stage``)."""
 
 from __future__ import annotations
 
@@ -16,21 +17,25 @@ from .bench import (
 from .loop import run_loop
 from .model_plant import ModelPlant, PlantRun, run_on_model
 from .signals import SIGNALS, make_signal
+from .stage import XY_COUPLING, StageRecord, simulate_stage
 
 __all__ = [
     "DEFAULT_PRESET",
     "PLANTS",
     "PRESETS",
     "SIGNALS",
+    "XY_COUPLING",
     "Bench",
     "BenchPreset",
     "BenchRecord",
     "ModelPlant",
     "PlantRun",
     "Reading",
+    "StageRecord",
     "batch_unit",
     "make_signal",
     "run_loop",
     "run_on_model",
     "simulate",
+    "simulate_stage",
 ]

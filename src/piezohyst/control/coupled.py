@@ -1,0 +1,234 @@
+"""The coupled compensator: desired stage positions in, one command per actuator out.
+
+A :class:`~piezohyst.model.coupled.CoupledModel` says ``y = C h(u) + c``: each actuator's
+hysteresis, then the static coupling. Its inverse runs the other way, sample by sample:
+the coupling's inverse turns the desired positions into what each actuator alone must move
+(``C^-1 (y - c)``), and each actuator's own :class:`~piezohyst.Compensator` inverts its
+hysteresis, within its limits (voltage and slew, per actuator), counting what they held.
+A target the stage cannot reach is named: the reachable set is the image of the actuators'
+ranges through the coupling (a parallelogram for two, not a box), so a position inside each
+axis's own range may still be out of reach.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .._validation import FloatArray
+from ..errors import LimitWarning, ParameterError, ShapeError, warn
+from ..model.coupled import CoupledModel
+from .compensator import Compensator
+
+__all__ = ["CoupledCompensator"]
+
+#: A desired position counts as out of reach when an actuator would have to move beyond its
+#: range by more than this share of the range (rounding at the range's edge is not)
+REACH_SLACK = 1e-3
+
+
+def _per_actuator(value: float | ArrayLike, n: int, name: str) -> FloatArray:
+    given = np.asarray(value, dtype=np.float64)
+    if given.ndim > 1 or given.size not in (1, n):
+        msg = f"'{name}' must be a finite number or one per actuator ({n}). Got {value!r}."
+        raise ParameterError(msg)
+    arr = np.broadcast_to(given.reshape(-1), (n,)).copy()
+    if not np.all(np.isfinite(arr)):
+        msg = f"'{name}' must be a finite number or one per actuator ({n}). Got {value!r}."
+        raise ParameterError(msg)
+    return arr
+
+
+class CoupledCompensator:
+    """Feedforward compensation of a coupled stage (the controllers' one contract).
+
+    Parameters
+    ----------
+    model : CoupledModel
+        Fitted.
+    v_min, v_max : float or array_like
+        Each actuator's voltage limits (V): one number for all, or one per actuator.
+    sample_rate : float, optional
+        Hz, of the loop (needed by models with creep or input dynamics, and by a slew rate).
+    slew_rate : float, "trained" or None, default "trained"
+        As for :class:`~piezohyst.Compensator`, per actuator.
+    allow_extrapolation : bool, default False
+        As for :class:`~piezohyst.Compensator`.
+
+    Attributes
+    ----------
+    compensators : list of Compensator
+        One per actuator, in its own axis's units.
+    reach : ndarray, shape (actuators, 2)
+        What each actuator alone moves over its limits (its axis's units).
+
+    Examples
+    --------
+    >>> import numpy as np, piezohyst as ph
+    >>> from piezohyst.simulation import make_signal, simulate_stage
+    >>> t, a = make_signal("decaying", duration=8.0)
+    >>> _, b = make_signal("triangle", duration=8.0, frequency=1.3)
+    >>> rec = simulate_stage(np.column_stack([np.clip(2 * a, 0, 140), b]), t)
+    >>> model = ph.CoupledModel().fit(rec.voltage, rec.position, t=rec.t)
+    >>> comp = ph.CoupledCompensator(model, v_min=0.0, v_max=140.0, sample_rate=1000.0,
+    ...                              slew_rate=None)
+    >>> comp.step(model.predict([[70.0, 70.0]], t=[0.0])[0]).shape   # one command per actuator
+    (2,)
+    """
+
+    #: False: the commands do not depend on readings (the controllers' one contract)
+    reads = False
+
+    def __init__(
+        self,
+        model: CoupledModel,
+        *,
+        v_min: float | ArrayLike,
+        v_max: float | ArrayLike,
+        sample_rate: float | None = None,
+        slew_rate: float | Literal["trained"] | None = "trained",
+        allow_extrapolation: bool = False,
+    ) -> None:
+        if not isinstance(model, CoupledModel) or not hasattr(model, "coupling_"):
+            msg = (
+                "CoupledCompensator takes a fitted ph.CoupledModel "
+                f"(got {type(model).__name__}); a single actuator has ph.Compensator."
+            )
+            raise ParameterError(msg)
+        n = len(model.channels_)
+        lo, hi = _per_actuator(v_min, n, "v_min"), _per_actuator(v_max, n, "v_max")
+        self.model = model
+        self.compensators = [
+            Compensator(ch, v_min=float(lo[i]), v_max=float(hi[i]), sample_rate=sample_rate,
+                        slew_rate=slew_rate, allow_extrapolation=allow_extrapolation)
+            for i, ch in enumerate(model.channels_)
+        ]  # fmt: skip
+        cond = float(np.linalg.cond(model.coupling_))
+        if not math.isfinite(cond) or cond > 1e6:
+            msg = f"the coupling cannot be inverted (condition number {cond:.3g})"
+            raise ParameterError(msg)
+        self._inverse = np.linalg.inv(model.coupling_)
+        self.reach = np.array([self._reach(c) for c in self.compensators])
+        self.outside_count = 0  # desired positions out of the stage's reach since the reset
+        self._outside_said = False
+
+    @staticmethod
+    def _reach(comp: Compensator) -> tuple[float, float]:
+        """What an actuator's hysteresis gives over its limits (both branches' extremes)."""
+        h = comp.model.hysteresis_.operator_
+        path = np.array([comp.v_min, comp.v_max, comp.v_min, comp.v_max])
+        q = np.asarray(h.propagate(path, h.rest_state(comp.v_min)).output)
+        return float(q.min()), float(q.max())
+
+    # ------------------------------------------------------------------ counts
+    @property
+    def last_command(self) -> FloatArray:
+        """The last commands sent, one per actuator (V)."""
+        return np.array([c.last_command for c in self.compensators])
+
+    @property
+    def saturated_count(self) -> NDArray[np.int64]:
+        """Per actuator, commands sent at a voltage limit because the target was beyond it."""
+        return np.array([c.saturated_count for c in self.compensators], dtype=np.int64)
+
+    @property
+    def slew_limited_count(self) -> NDArray[np.int64]:
+        """Per actuator, commands the slew limit held back."""
+        return np.array([c.slew_limited_count for c in self.compensators], dtype=np.int64)
+
+    @property
+    def nonfinite_count(self) -> NDArray[np.int64]:
+        """Per actuator, samples held because a desired value was NaN or infinite."""
+        return np.array([c.nonfinite_count for c in self.compensators], dtype=np.int64)
+
+    def reset(self, *, voltage: float | ArrayLike | None = None) -> None:
+        """Every actuator back to its initial state (or ``voltage``), the counts to zero.
+
+        Parameters
+        ----------
+        voltage : float or array_like, optional
+            Where the actuators sit now (V).
+        """
+        n = len(self.compensators)
+        v = None if voltage is None else _per_actuator(voltage, n, "voltage")
+        for i, comp in enumerate(self.compensators):
+            comp.reset(voltage=None if v is None else float(v[i]))
+        self.outside_count, self._outside_said = 0, False
+
+    # ---------------------------------------------------------------- commands
+    def _own(self, desired: FloatArray) -> FloatArray:
+        """What each actuator alone must move, and the count of targets out of reach."""
+        own = (desired - self.model.offset_) @ self._inverse.T
+        span = self.reach[:, 1] - self.reach[:, 0]
+        beyond = (own < self.reach[:, 0] - REACH_SLACK * span) | (
+            own > self.reach[:, 1] + REACH_SLACK * span
+        )
+        rows = np.flatnonzero(beyond.any(axis=1))
+        if rows.size:
+            self.outside_count += int(rows.size)
+            if not self._outside_said:
+                self._outside_said = True
+                k = int(rows[0])
+                axes = ", ".join(
+                    f"actuator {i} {own[k, i]:.4g} outside [{self.reach[i, 0]:.4g}, "
+                    f"{self.reach[i, 1]:.4g}]"
+                    for i in np.flatnonzero(beyond[k])
+                )
+                warn(
+                    f"CoupledCompensator: {rows.size} desired positions lie outside what the "
+                    f"stage reaches (first at sample {k}: {axes}); the reachable set is the "
+                    "actuators' ranges through the coupling, not a box; those commands sit at "
+                    "the limits (counted in saturated_count)",
+                    LimitWarning,
+                )
+        return np.asarray(own)
+
+    def step(self, desired: ArrayLike, measured: Any = None) -> FloatArray:
+        """One command per actuator for one desired position.
+
+        Parameters
+        ----------
+        desired : array_like, shape (outputs,)
+            The stage's desired position (the model's output units); NaN holds.
+        measured : optional
+            A reading: ignored (feedforward; the controllers' one contract).
+
+        Returns
+        -------
+        ndarray, shape (actuators,)
+            Commands (V), each inside its actuator's limits.
+        """
+        d = np.asarray(desired, dtype=np.float64).reshape(1, -1)
+        if d.shape[1] != self.model.coupling_.shape[0]:
+            msg = f"'desired' must hold {self.model.coupling_.shape[0]} positions. Got {d.size}."
+            raise ShapeError(msg)
+        own = self._own(d)[0]
+        return np.array([c.step(float(own[i])) for i, c in enumerate(self.compensators)])
+
+    def process(self, desired: ArrayLike, measured: ArrayLike | None = None) -> FloatArray:
+        """Commands for a block of desired positions; equal to :meth:`step` on each row.
+
+        Parameters
+        ----------
+        desired : array_like, shape (N, outputs)
+        measured : optional
+            Ignored (feedforward).
+
+        Returns
+        -------
+        ndarray, shape (N, actuators)
+        """
+        d = np.asarray(desired, dtype=np.float64)
+        if d.ndim != 2 or d.shape[1] != self.model.coupling_.shape[0]:
+            msg = (
+                f"'desired' must be (samples, {self.model.coupling_.shape[0]}). "
+                f"Got shape {d.shape}."
+            )
+            raise ShapeError(msg)
+        own = self._own(d)
+        return np.column_stack(
+            [c.process(np.ascontiguousarray(own[:, i])) for i, c in enumerate(self.compensators)]
+        )

@@ -1,0 +1,254 @@
+r"""Several actuators moving one structure: a hysteresis model per input, then the coupling.
+
+.. math::
+
+    y(t) = C\,\bigl[h_1(u_1)(t), \dots, h_n(u_n)(t)\bigr]^\top + c
+
+with :math:`h_i` any single-channel model of this library (its core, growth or creep terms,
+input dynamics) fitted to what actuator :math:`i` alone would move, :math:`C` the static
+coupling (a flexure that moves y by a few per cent when x moves; the diagonal 1: each
+actuator's model is in its own axis's units) and :math:`c` the offsets. Identified by
+alternation: the coupling from a linear fit of the outputs on the inputs, each actuator's
+model on the virtual output :math:`C^{-1}(y - c)` that is its own, the coupling again on
+the models' outputs, a few rounds.
+
+This is the static part of a coupled stage (the coupling at the rates a raster runs at);
+coupled dynamics (modes that a raster's corners excite) are a later step: on the measured
+fine-steering mirror the modes move with the drive level, which needs the hysteresis inside
+the dynamics' loop (``docs/validation.md``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Self
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from .._validation import FloatArray
+from ..errors import NotFittedError, ParameterError, ShapeError
+from .model import HysteresisModel, is_model
+from .presets import ClassicalPI
+
+__all__ = ["CoupledModel"]
+
+
+def _columns(a: ArrayLike, name: str, rows: int = 1) -> FloatArray:
+    x = np.asarray(a, dtype=np.float64)
+    if x.ndim == 1:
+        x = x[:, None]
+    if x.ndim != 2 or x.shape[0] < rows:
+        msg = f"'{name}' must be (samples, channels). Got shape {x.shape}."
+        raise ShapeError(msg)
+    if not np.all(np.isfinite(x)):
+        row, col = np.argwhere(~np.isfinite(x))[0]
+        msg = f"'{name}' holds a non-finite value at row {row}, column {col}."
+        raise ShapeError(msg)
+    return x
+
+
+class CoupledModel:
+    """A hysteresis model per input and the static coupling between the outputs.
+
+    Parameters
+    ----------
+    channel : HysteresisModel, optional
+        The template each input's model is fitted from (a fresh copy per input); default
+        ``ClassicalPI(10, output_unit="m")``, for stage positions.
+    rounds : int, default 3
+        Alternation rounds (each: every input's model, then the coupling).
+
+    Attributes
+    ----------
+    channels_ : list of HysteresisModel
+        One fitted model per input, in its own axis's units.
+    coupling_ : ndarray, shape (outputs, inputs)
+        The static coupling, about 1 on the diagonal (each model in its own axis's units;
+        the last round's least squares, not forced).
+    offset_ : ndarray, shape (outputs,)
+    output_nrmse_ : ndarray, shape (outputs,)
+        The fit's error per output, over its span.
+
+    Examples
+    --------
+    >>> import numpy as np, piezohyst as ph
+    >>> from piezohyst.simulation import make_signal, simulate_stage
+    >>> t, a = make_signal("decaying", duration=8.0)           # each axis its own signal
+    >>> _, b = make_signal("triangle", duration=8.0, frequency=1.3)
+    >>> rec = simulate_stage(np.column_stack([np.clip(2 * a, 0, 140), b]), t)
+    >>> model = ph.CoupledModel().fit(rec.voltage, rec.position, t=rec.t)
+    >>> np.round(model.coupling_, 2).tolist()                 # x moves y by 4 %, y x by -3 %
+    [[1.0, -0.03], [0.04, 1.0]]
+    """
+
+    def __init__(self, channel: HysteresisModel | None = None, rounds: int = 3) -> None:
+        self.channel = channel
+        self.rounds = rounds
+
+    # ------------------------------------------------------------ the contract
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """The constructor arguments (scikit-learn's contract).
+
+        Parameters
+        ----------
+        deep : bool, default True
+            Accepted for scikit-learn.
+
+        Returns
+        -------
+        dict
+        """
+        return {"channel": self.channel, "rounds": self.rounds}
+
+    def set_params(self, **params: Any) -> Self:
+        """Set constructor arguments (scikit-learn's contract).
+
+        Parameters
+        ----------
+        **params
+            ``channel``, ``rounds``.
+
+        Returns
+        -------
+        CoupledModel
+        """
+        for name, value in params.items():
+            if name not in ("channel", "rounds"):
+                msg = f"CoupledModel has no parameter {name!r} (channel, rounds)."
+                raise ParameterError(msg)
+            setattr(self, name, value)
+        return self
+
+    def _template(self) -> HysteresisModel:
+        template = self.channel if self.channel is not None else ClassicalPI(10, output_unit="m")
+        if not is_model(template):
+            msg = (
+                "CoupledModel's 'channel' must be a piezohyst model such as "
+                f"ph.ClassicalPI(10, output_unit='m'). Got {type(template).__name__}."
+            )
+            raise ParameterError(msg)
+        if not isinstance(self.rounds, int) or not 1 <= self.rounds <= 20:
+            msg = f"CoupledModel's 'rounds' must be an integer in [1, 20]. Got {self.rounds!r}."
+            raise ParameterError(msg)
+        return template
+
+    # -------------------------------------------------------------------- fit
+    def fit(self, u: ArrayLike, y: ArrayLike, t: ArrayLike | None = None) -> Self:
+        """Identify every input's model and the coupling from one record.
+
+        Parameters
+        ----------
+        u : array_like, shape (N, inputs)
+            The actuators' voltages (V).
+        y : array_like, shape (N, outputs)
+            The positions read (as many outputs as inputs: one per actuator's axis).
+        t : array_like, shape (N,), optional
+            Sample times (s), for models with rate-dependent terms.
+
+        Returns
+        -------
+        CoupledModel
+            ``self``, fitted.
+
+        Raises
+        ------
+        ShapeError
+            Not (samples, channels), a non-finite value (named by row and column), or a
+            different number of outputs than inputs.
+        """
+        template = self._template()
+        us, ys = _columns(u, "u", 2), _columns(y, "y", 2)
+        if us.shape[0] != ys.shape[0]:
+            msg = f"'u' and 'y' must have as many rows. Got {us.shape[0]} and {ys.shape[0]}."
+            raise ShapeError(msg)
+        n, m = us.shape[1], ys.shape[1]
+        if m != n:
+            msg = (
+                f"CoupledModel pairs each actuator with one output: {n} inputs, {m} outputs "
+                "(more outputs than actuators: fit on the actuators' own axes first)"
+            )
+            raise ShapeError(msg)
+        ts = None if t is None else np.asarray(t, dtype=np.float64)
+        # the start: the linear voltage map, each column scaled to its own axis
+        a = np.column_stack([us, np.ones(us.shape[0])])
+        lin = np.linalg.lstsq(a, ys, rcond=None)[0]  # (n + 1, m)
+        coupling = (lin[:n] / np.diag(lin[:n])[:, None]).T  # C[:, i] = column i of the map
+        offset = np.zeros(m)
+        channels: list[HysteresisModel] = []
+        for k in range(self.rounds):
+            virtual = np.linalg.solve(coupling, (ys - offset).T).T  # each actuator's own part
+            channels = [
+                type(template)(**template.get_params()).fit(us[:, i], virtual[:, i], t=ts)
+                for i in range(n)
+            ]
+            h = np.column_stack([ch.predict(us[:, i], t=ts) for i, ch in enumerate(channels)])
+            sol = np.linalg.lstsq(np.column_stack([h, np.ones(h.shape[0])]), ys, rcond=None)[0]
+            coupling, offset = (
+                np.asarray(sol[:n].T, dtype=np.float64),
+                np.asarray(sol[n], dtype=np.float64),
+            )
+            if k < self.rounds - 1:  # the next round's models take the diagonal's scale
+                coupling = coupling / np.diag(coupling)[None, :]
+        self.channels_, self.coupling_, self.offset_ = channels, coupling, offset
+        resid = self.predict(us, t=ts) - ys
+        span = np.maximum(np.ptp(ys, axis=0), 1e-300)
+        self.output_nrmse_ = np.sqrt(np.mean(resid**2, axis=0)) / span
+        return self
+
+    # ---------------------------------------------------------------- predict
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "coupling_"):
+            msg = "This CoupledModel is not fitted yet: call fit(u, y) first."
+            raise NotFittedError(msg)
+
+    def hysteresis(self, u: ArrayLike, t: ArrayLike | None = None) -> FloatArray:
+        """Each actuator's own output (its model's, in its axis's units), before the coupling.
+
+        Parameters
+        ----------
+        u : array_like, shape (N, inputs)
+        t : array_like, shape (N,), optional
+
+        Returns
+        -------
+        ndarray, shape (N, inputs)
+        """
+        self._check_fitted()
+        us = _columns(u, "u")
+        if us.shape[1] != len(self.channels_):
+            msg = f"'u' must have {len(self.channels_)} columns. Got {us.shape[1]}."
+            raise ShapeError(msg)
+        return np.column_stack([ch.predict(us[:, i], t=t) for i, ch in enumerate(self.channels_)])
+
+    def predict(self, u: ArrayLike, t: ArrayLike | None = None) -> FloatArray:
+        """The outputs for the actuators' voltages.
+
+        Parameters
+        ----------
+        u : array_like, shape (N, inputs)
+        t : array_like, shape (N,), optional
+
+        Returns
+        -------
+        ndarray, shape (N, outputs)
+        """
+        return np.asarray(self.hysteresis(u, t) @ self.coupling_.T + self.offset_)
+
+    def describe(self) -> str:
+        """The coupling and each actuator's model, one paragraph.
+
+        Returns
+        -------
+        str
+        """
+        self._check_fitted()
+        rows = "; ".join("[" + ", ".join(f"{x:.4g}" for x in row) + "]" for row in self.coupling_)
+        fit = ", ".join(f"{100 * e:.3g} %" for e in self.output_nrmse_)
+        kinds = ", ".join(type(ch).__name__ for ch in self.channels_)
+        worst = max(abs(x) for i, row in enumerate(self.coupling_) for j, x in
+                    enumerate(row) if i != j) if len(self.channels_) > 1 else math.nan  # fmt: skip
+        return (
+            f"CoupledModel: {len(self.channels_)} actuators ({kinds}), static coupling "
+            f"[{rows}] (largest cross term {100 * worst:.3g} %), NRMSE per output {fit}"
+        )
