@@ -101,6 +101,20 @@ def test_a_lissajous_is_compensated(stage: tuple[ph.CoupledModel, np.ndarray]) -
         assert nrmse < 0.015 and nrmse_lin > 4 * nrmse, (i, nrmse, nrmse_lin)
 
 
+def test_each_actuator_its_own_model() -> None:
+    """Actuators of different physics, each with the model chosen for it: a Bouc-Wen and a
+    Prandtl-Ishlinskii channel in one stage (the coupling is identified as well)."""
+    t, a = make_signal("decaying", duration=8.0)
+    _, b = make_signal("triangle", duration=8.0, frequency=1.3)
+    rec = simulate_stage(np.column_stack([np.clip(2 * a, 0, 140), b]), t,
+                         presets=("bouc-wen", "T226-H4-203X"), seed=0)  # fmt: skip
+    model = ph.CoupledModel([ph.BoucWenModel(output_unit="m"), ph.ClassicalPI(10, output_unit="m")])
+    model.fit(rec.voltage, rec.position, t=rec.t)
+    assert [type(c).__name__ for c in model.channels_] == ["BoucWenModel", "ClassicalPI"]
+    np.testing.assert_allclose(model.coupling_, XY_COUPLING, atol=5e-3)  # as on the bench
+    assert model.output_nrmse_[0] < 0.002  # the Bouc-Wen actuator's own model: 0.01 %
+
+
 def test_what_the_stage_cannot_reach_is_named(stage: tuple[ph.CoupledModel, np.ndarray]) -> None:
     """A corner inside each axis's own range can be outside the parallelogram the coupling
     makes of the actuators' ranges: named, counted, the commands at the limits."""
@@ -132,6 +146,10 @@ def test_what_the_coupled_model_refuses() -> None:
         ph.CoupledModel().fit(u, np.column_stack([u, u[:, :1]]))
     with pytest.raises(ph.ParameterError, match="'rounds'"):
         ph.CoupledModel(rounds=0).fit(u, u)
+    with pytest.raises(ph.ParameterError, match="holds 1 models for 2 inputs"):
+        ph.CoupledModel([ph.ClassicalPI(4)]).fit(u, u)
+    with pytest.raises(ph.ParameterError, match="one per input"):
+        ph.CoupledModel([ph.ClassicalPI(4), "bouc-wen"]).fit(u, u)  # type: ignore[list-item]
     with pytest.raises(ph.NotFittedError):
         ph.CoupledModel().predict(u)
     with pytest.raises(ph.ParameterError, match=r"fitted ph\.CoupledModel"):

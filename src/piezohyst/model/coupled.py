@@ -21,6 +21,7 @@ the dynamics' loop (``docs/validation.md``).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any, Self
 
 import numpy as np
@@ -53,8 +54,10 @@ class CoupledModel:
 
     Parameters
     ----------
-    channel : HysteresisModel, optional
-        The template each input's model is fitted from (a fresh copy per input); default
+    channel : HysteresisModel or sequence of HysteresisModel, optional
+        The template each input's model is fitted from (a fresh copy per input), or one
+        template per input (actuators of different physics: choose each with
+        :func:`~piezohyst.select_model` on a record of that actuator alone); default
         ``ClassicalPI(10, output_unit="m")``, for stage positions.
     rounds : int, default 3
         Alternation rounds (each: every input's model, then the coupling).
@@ -82,7 +85,9 @@ class CoupledModel:
     [[1.0, -0.03], [0.04, 1.0]]
     """
 
-    def __init__(self, channel: HysteresisModel | None = None, rounds: int = 3) -> None:
+    def __init__(
+        self, channel: HysteresisModel | Sequence[HysteresisModel] | None = None, rounds: int = 3
+    ) -> None:
         self.channel = channel
         self.rounds = rounds
 
@@ -120,18 +125,25 @@ class CoupledModel:
             setattr(self, name, value)
         return self
 
-    def _template(self) -> HysteresisModel:
-        template = self.channel if self.channel is not None else ClassicalPI(10, output_unit="m")
-        if not is_model(template):
-            msg = (
-                "CoupledModel's 'channel' must be a piezohyst model such as "
-                f"ph.ClassicalPI(10, output_unit='m'). Got {type(template).__name__}."
-            )
+    def _templates(self, n: int) -> list[HysteresisModel]:
+        """One template per input, checked."""
+        given = self.channel if self.channel is not None else ClassicalPI(10, output_unit="m")
+        templates = list(given) if isinstance(given, Sequence) else [given] * n
+        if len(templates) != n:
+            msg = f"CoupledModel's 'channel' holds {len(templates)} models for {n} inputs."
             raise ParameterError(msg)
+        for template in templates:
+            if not is_model(template):
+                msg = (
+                    "CoupledModel's 'channel' must be a piezohyst model such as "
+                    f"ph.ClassicalPI(10, output_unit='m'), or one per input. Got "
+                    f"{type(template).__name__}."
+                )
+                raise ParameterError(msg)
         if not isinstance(self.rounds, int) or not 1 <= self.rounds <= 20:
             msg = f"CoupledModel's 'rounds' must be an integer in [1, 20]. Got {self.rounds!r}."
             raise ParameterError(msg)
-        return template
+        return templates
 
     # -------------------------------------------------------------------- fit
     def fit(self, u: ArrayLike, y: ArrayLike, t: ArrayLike | None = None) -> Self:
@@ -157,7 +169,6 @@ class CoupledModel:
             Not (samples, channels), a non-finite value (named by row and column), or a
             different number of outputs than inputs.
         """
-        template = self._template()
         us, ys = _columns(u, "u", 2), _columns(y, "y", 2)
         if us.shape[0] != ys.shape[0]:
             msg = f"'u' and 'y' must have as many rows. Got {us.shape[0]} and {ys.shape[0]}."
@@ -169,6 +180,7 @@ class CoupledModel:
                 "(more outputs than actuators: fit on the actuators' own axes first)"
             )
             raise ShapeError(msg)
+        templates = self._templates(n)
         ts = None if t is None else np.asarray(t, dtype=np.float64)
         # the start: the linear voltage map, each column scaled to its own axis
         a = np.column_stack([us, np.ones(us.shape[0])])
@@ -179,8 +191,8 @@ class CoupledModel:
         for k in range(self.rounds):
             virtual = np.linalg.solve(coupling, (ys - offset).T).T  # each actuator's own part
             channels = [
-                type(template)(**template.get_params()).fit(us[:, i], virtual[:, i], t=ts)
-                for i in range(n)
+                type(tp)(**tp.get_params()).fit(us[:, i], virtual[:, i], t=ts)
+                for i, tp in enumerate(templates)
             ]
             h = np.column_stack([ch.predict(us[:, i], t=ts) for i, ch in enumerate(channels)])
             sol = np.linalg.lstsq(np.column_stack([h, np.ones(h.shape[0])]), ys, rcond=None)[0]

@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike
 
 from .._validation import FloatArray
 from ..errors import ParameterError, ShapeError
-from .bench import DEFAULT_PRESET, simulate
+from .bench import DEFAULT_PRESET, PLANTS, PRESETS, BenchPreset, simulate
 
 __all__ = ["XY_COUPLING", "StageRecord", "simulate_stage"]
 
@@ -57,7 +57,7 @@ def simulate_stage(
     t: ArrayLike | None = None,
     *,
     coupling: ArrayLike = XY_COUPLING,
-    presets: tuple[str, ...] | None = None,
+    presets: tuple[str | BenchPreset, ...] | None = None,
     seed: int = 0,
 ) -> StageRecord:
     """Run the coupled stage on one command column per actuator.
@@ -70,9 +70,10 @@ def simulate_stage(
         Time stamps (s); default 1 kHz from 0.
     coupling : array_like, shape (m, n), default :data:`XY_COUPLING`
         Actuator displacement to stage position.
-    presets : tuple of str, optional
-        One bench preset per actuator; default the paper's bimorph for every one (each with
-        its own noise).
+    presets : tuple of (str or BenchPreset), optional
+        One actuator per column: a bench preset (:data:`PRESETS`) or an actuator of other
+        physics (:data:`PLANTS`: ``"bouc-wen"``, ``"duhem"``, ...); default the paper's
+        bimorph for every one (each with its own noise).
     seed : int
         Seeds the noise (actuator ``i`` gets ``seed + i``).
 
@@ -98,8 +99,14 @@ def simulate_stage(
         msg = f"one preset per actuator: {v.shape[1]} actuators, {len(names)} presets"
         raise ParameterError(msg)
     ts = np.arange(v.shape[0]) / 1000.0 if t is None else np.asarray(t, dtype=np.float64)
+    chosen = []
+    for name in names:
+        if isinstance(name, str) and name not in PRESETS and name not in PLANTS:
+            msg = f"unknown actuator {name!r}; available: {', '.join([*PRESETS, *PLANTS])}"
+            raise ParameterError(msg)
+        chosen.append(PLANTS[name] if isinstance(name, str) and name not in PRESETS else name)
     runs = [
-        simulate(np.ascontiguousarray(v[:, i]), ts, preset=names[i], seed=seed + i)
+        simulate(np.ascontiguousarray(v[:, i]), ts, preset=chosen[i], seed=seed + i)
         for i in range(v.shape[1])
     ]
     read = np.column_stack([r.displacement for r in runs])
