@@ -4,7 +4,9 @@ them, identified as one system (:class:`ph.CoupledModel`) and compensated togeth
 
 from __future__ import annotations
 
+import json
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -163,3 +165,25 @@ def test_what_the_coupled_model_refuses() -> None:
         simulate_stage(np.zeros(10))
     with pytest.raises(ph.ShapeError, match="'coupling'"):
         simulate_stage(np.zeros((10, 2)), coupling=np.eye(3))
+
+
+def test_a_coupled_model_file_loads_and_predicts_as_written(
+    stage: tuple[ph.CoupledModel, np.ndarray], tmp_path: Path
+) -> None:
+    model, _ = stage
+    path = model.save(tmp_path / "stage.json")
+    again = ph.CoupledModel.load(path)
+    u = np.column_stack([np.linspace(0, 60, 500), np.linspace(140, 10, 500)])
+    t = np.arange(500) / FS
+    np.testing.assert_array_equal(again.predict(u, t=t), model.predict(u, t=t))
+    assert again.describe() == model.describe()
+    # the template it can be fitted again from, the estimator contract's clone
+    twin = type(again)(**again.get_params())
+    assert twin.get_params()["rounds"] == model.rounds and not hasattr(twin, "coupling_")
+    data = json.loads(path.read_text())
+    data["coupling"][0][1] = 0.5  # an edited coupling
+    path.write_text(json.dumps(data))
+    with pytest.raises(ph.ModelFileError, match="checksum"):
+        ph.CoupledModel.load(path)
+    with pytest.raises(ph.ModelFileError, match="not a piezohyst coupled model"):
+        ph.CoupledModel.from_dict({"format": "piezohyst-model"})

@@ -28,11 +28,16 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._validation import FloatArray
-from ..errors import NotFittedError, ParameterError, ShapeError
+from ..errors import ModelFileError, NotFittedError, ParameterError, PiezohystError, ShapeError
+from ..io import JsonFile
 from .model import HysteresisModel, is_model
+from .persistence import checksum, model_from_dict, model_to_dict
 from .presets import ClassicalPI
 
-__all__ = ["CoupledModel"]
+__all__ = ["COUPLED_FORMAT", "CoupledModel"]
+
+COUPLED_FORMAT = "piezohyst-coupled-model"
+COUPLED_VERSION = 1
 
 
 def _columns(a: ArrayLike, name: str, rows: int = 1) -> FloatArray:
@@ -49,7 +54,7 @@ def _columns(a: ArrayLike, name: str, rows: int = 1) -> FloatArray:
     return x
 
 
-class CoupledModel:
+class CoupledModel(JsonFile):
     """A hysteresis model per input and the static coupling between the outputs.
 
     Parameters
@@ -84,6 +89,8 @@ class CoupledModel:
     >>> np.round(model.coupling_, 2).tolist()                 # x moves y by 4 %, y x by -3 %
     [[1.0, -0.03], [0.04, 1.0]]
     """
+
+    file_kind = "a coupled model file"
 
     def __init__(
         self, channel: HysteresisModel | Sequence[HysteresisModel] | None = None, rounds: int = 3
@@ -264,3 +271,66 @@ class CoupledModel:
             f"CoupledModel: {len(self.channels_)} actuators ({kinds}), static coupling "
             f"[{rows}] (largest cross term {100 * worst:.3g} %), NRMSE per output {fit}"
         )
+
+    # ------------------------------------------------------------------ files
+    def to_dict(self) -> dict[str, Any]:
+        """The fitted model as JSON data: the coupling, the offsets, each actuator's model
+        file, the fit's error; with a format, a version and a checksum.
+
+        Returns
+        -------
+        dict
+        """
+        self._check_fitted()
+        body: dict[str, Any] = {
+            "format": COUPLED_FORMAT,
+            "version": COUPLED_VERSION,
+            "rounds": self.rounds,
+            "coupling": self.coupling_.tolist(),
+            "offset": self.offset_.tolist(),
+            "output_nrmse": self.output_nrmse_.tolist(),
+            "channels": [model_to_dict(ch) for ch in self.channels_],
+        }
+        body["checksum"] = checksum(body)
+        return body
+
+    @classmethod
+    def from_dict(cls, data: Any, where: str = "coupled model") -> CoupledModel:
+        """Rebuild a fitted model from :meth:`to_dict` data; a bad field is named.
+
+        Parameters
+        ----------
+        data : dict
+        where : str
+            Named in errors (a file's path).
+
+        Returns
+        -------
+        CoupledModel
+
+        Raises
+        ------
+        ModelFileError
+            Not a coupled model file, a checksum that does not match, or a damaged field.
+        """
+        if not isinstance(data, dict) or data.get("format") != COUPLED_FORMAT:
+            msg = f"{where}: not a piezohyst coupled model file"
+            raise ModelFileError(msg)
+        if data.get("checksum") != checksum(data):
+            msg = f"{where}: the checksum does not match its contents (edited or damaged)"
+            raise ModelFileError(msg)
+        try:
+            channels = [model_from_dict(d) for d in data["channels"]]
+            coupling = np.array(data["coupling"], dtype=np.float64)
+            offset = np.array(data["offset"], dtype=np.float64)
+            nrmse = np.array(data["output_nrmse"], dtype=np.float64)
+            n = len(channels)
+            if coupling.shape != (n, n) or offset.shape != (n,) or nrmse.shape != (n,):
+                raise ValueError(f"a coupling for {n} channels must be {n} x {n}")
+        except (KeyError, TypeError, ValueError, PiezohystError) as exc:
+            msg = f"{where}: a damaged coupled model ({exc})"
+            raise ModelFileError(msg) from None
+        model = cls([type(ch)(**ch.get_params()) for ch in channels], int(data["rounds"]))
+        model.channels_, model.coupling_, model.offset_ = channels, coupling, offset
+        model.output_nrmse_ = nrmse
+        return model
