@@ -341,7 +341,7 @@ class Compensator(Tallied):
             c = float(K.tally_command(self._step_general(d, preview), self._tally))
         self._until_check -= 1
         if not self._until_check:
-            self._check_limits("Compensator")
+            self._check_limits(self.owner)
         return c
 
     @staticmethod

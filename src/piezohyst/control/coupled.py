@@ -106,6 +106,8 @@ class CoupledCompensator:
                         slew_rate=slew_rate, allow_extrapolation=allow_extrapolation)
             for i, ch in enumerate(model.channels_)
         ]  # fmt: skip
+        for i, comp in enumerate(self.compensators):  # its warnings name the actuator
+            comp.owner = f"CoupledCompensator, actuator {i}"
         cond = float(np.linalg.cond(model.coupling_))
         if not math.isfinite(cond) or cond > 1e6:
             msg = f"the coupling cannot be inverted (condition number {cond:.3g})"

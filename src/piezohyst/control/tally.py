@@ -30,6 +30,9 @@ class Tallied:
     """The counts of what the limits held, and the one warning per limit (mixed into the
     compensator, whose limits, engine and output map it reads)."""
 
+    #: Who the limits' warnings name (a coupled stage names the actuator)
+    owner: str = "Compensator"
+
     inverse: Any
     charges: Any
     v_min: float
@@ -76,21 +79,22 @@ class Tallied:
         fourth count is the same."""
         return 0 if self.charges is None else self.charges.outside
 
-    def tally_one(self, command: float, owner: str = "Compensator") -> None:
+    def tally_one(self, command: float, owner: str | None = None) -> None:
         """:meth:`tally` for one command (a loop's step).
 
         Parameters
         ----------
         command : float
             The command sent (V).
-        owner : str, default "Compensator"
+        owner : str, optional
+            Who sent them, for the message (default :attr:`owner`).
         """
         K.tally_command(float(command), self._tally)
         self._until_check -= 1
         if not self._until_check:
-            self._check_limits(owner)
+            self._check_limits(owner or self.owner)
 
-    def tally(self, commands: FloatArray, owner: str = "Compensator") -> None:
+    def tally(self, commands: FloatArray, owner: str | None = None) -> None:
         """Count the commands the voltage and slew limits held, and warn once (a
         :class:`~piezohyst.errors.LimitWarning`) when they hold more than
         :data:`LIMIT_SHARE` of them. :meth:`step` and :meth:`process` call it; a loop
@@ -101,13 +105,13 @@ class Tallied:
         ----------
         commands : ndarray
             The commands sent since the last call, in order (V).
-        owner : str, default "Compensator"
-            Who sent them, for the message.
+        owner : str, optional
+            Who sent them, for the message (default :attr:`owner`).
         """
         if not commands.size:
             return
         K.tally_block(np.ascontiguousarray(commands, dtype=np.float64), self._tally)
-        self._check_limits(owner)
+        self._check_limits(owner or self.owner)
 
     @property
     def slew_limited_count(self) -> int:
