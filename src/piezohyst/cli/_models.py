@@ -102,6 +102,22 @@ def fit(
     """
     from ..workflows import fit_file
 
+    if "," in (data_spec.input_column or "") + (data_spec.output_column or ""):
+        given = {"--growth": growth != "default", "--creep": bool(creep),
+                 "--relaxation": relaxation is not None,
+                 "--input-dynamics": input_dynamics not in ("none", "record"),
+                 "--output-dynamics": output_dynamics != "none",
+                 "--model auto": model_name == "auto"}  # fmt: skip
+        named = [option for option, set_ in given.items() if set_]
+        if named:
+            raise click.UsageError(
+                f"{', '.join(named)}: a stage (several --input and --output columns) fits "
+                "each actuator's model with its defaults and the static coupling; name one "
+                "model (--model classical-pi), or choose each actuator's with piezohyst "
+                "select on its own columns"
+            )
+        _fit_stage(ctx, data, model_name, operators, data_spec, out, force)
+        return
     terms, taus = parse_terms(growth, creep)
     if model_name == "auto":
         given = {"--growth": growth not in ("default", "auto"), "--creep": bool(taus),
@@ -155,6 +171,26 @@ def fit(
     if ctx.verbose:
         for label, text in model.operator_.describe(model.input_unit, model.output_unit)[1:]:
             ctx.result(f"{label} {text}")
+    ctx.info(f"saved {out}")
+
+
+def _fit_stage(
+    ctx: Context, data: Path, model_name: str, operators: int, data_spec: DataSpec, out: Path,
+    force: bool,
+) -> None:  # fmt: skip
+    """``fit --input vx,vy --output x,y``: a coupled stage (:func:`fit_stage_file`)."""
+    from ..workflows.stage_files import fit_stage_file, stage_columns
+
+    stage = _run(
+        ctx,
+        lambda: fit_stage_file(
+            data, out,
+            inputs=stage_columns(data_spec.input_column, "--input"),
+            outputs=stage_columns(data_spec.output_column, "--output"),
+            model=model_name, operators=operators, data_spec=data_spec, force=force,
+        ),
+    )  # fmt: skip
+    ctx.result(stage.describe())
     ctx.info(f"saved {out}")
 
 

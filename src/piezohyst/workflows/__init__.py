@@ -16,6 +16,7 @@ module                   commands (functions)
 ``model_files``          ``fit``, ``select``/``fit --model auto``, ``compare``, ``predict``
                          (:func:`fit_file`, :func:`select_file`, :func:`compare_file`,
                          :func:`predict_file`, :class:`Prediction`)
+``stage_files``          ``fit --input vx,vy --output x,y``: a coupled stage (``fit_stage_file``)
 ``compensate``           ``compensate`` (:func:`compensate_file`, :class:`Compensation`)
 ``calibrate_files``      ``calibrate-leakage``, ``calibrate-gain`` (:func:`calibrate_leakage_file`,
                          :func:`calibrate_gain_file`)
