@@ -438,7 +438,10 @@ class SelfSensingController:
         d = float(desired)
         if comp.charges is not None:  # metres through the output map, to the model's charge
             d, _ = comp.charges.one(d, None)
-        m = reading(measured, "SelfSensingController")
+        try:  # the common case inline (a step runs per sample); reading() names the rest
+            m = math.nan if measured is None else float(measured)
+        except (TypeError, ValueError):
+            m = reading(measured, "SelfSensingController")
         c = comp.inverse.controller_step(d, m, (self.config, self.ctl, self.feedback))
         comp.tally_one(c, "SelfSensingController")
         return c
