@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import piezohyst as ph
+from piezohyst.errors import IdentifiabilityWarning
 from piezohyst.metrics import hysteresis_width
 from piezohyst.simulation import XY_COUPLING, make_signal, simulate_stage
 
@@ -138,6 +139,14 @@ def test_what_the_stage_cannot_reach_is_named(stage: tuple[ph.CoupledModel, np.n
     nan = comp.step([np.nan, 0.5 * (y0 + y1)])  # NaN holds both actuators, counted
     np.testing.assert_array_equal(nan, volts[-1])
     assert comp.nonfinite_count.tolist() == [1, 1]
+
+
+def test_inputs_that_move_together_are_said() -> None:
+    """Both actuators driven by one signal: which moved which output is not in the record."""
+    t, a = make_signal("triangle", duration=4.0, frequency=1.0)
+    rec = simulate_stage(np.column_stack([a, a]), t, seed=0)
+    with pytest.warns(IdentifiabilityWarning, match=r"inputs 0 and 1 move together \(.*1\.00"):
+        ph.CoupledModel().fit(rec.voltage, rec.position, t=rec.t)
 
 
 def test_what_the_coupled_model_refuses() -> None:

@@ -28,13 +28,25 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._validation import FloatArray
-from ..errors import ModelFileError, NotFittedError, ParameterError, PiezohystError, ShapeError
+from ..errors import (
+    IdentifiabilityWarning,
+    ModelFileError,
+    NotFittedError,
+    ParameterError,
+    PiezohystError,
+    ShapeError,
+    warn,
+)
 from ..io import JsonFile
 from .model import HysteresisModel, is_model
 from .persistence import checksum, model_from_dict, model_to_dict
 from .presets import ClassicalPI
 
-__all__ = ["COUPLED_FORMAT", "CoupledModel"]
+__all__ = ["COUPLED_FORMAT", "TOGETHER", "CoupledModel"]
+
+#: Inputs whose changes correlate beyond this move together: the record cannot tell which
+#: of them moved an output (the coupling between their axes is not determined)
+TOGETHER = 0.9
 
 COUPLED_FORMAT = "piezohyst-coupled-model"
 COUPLED_VERSION = 1
@@ -52,6 +64,24 @@ def _columns(a: ArrayLike, name: str, rows: int = 1) -> FloatArray:
         msg = f"'{name}' holds a non-finite value at row {row}, column {col}."
         raise ShapeError(msg)
     return x
+
+
+def _warn_together(u: FloatArray) -> None:
+    """Warn where two inputs' changes correlate beyond :data:`TOGETHER` (named)."""
+    du = np.diff(u, axis=0)
+    if du.shape[0] < 2 or np.any(np.std(du, axis=0) == 0):
+        return
+    corr = np.atleast_2d(np.asarray(np.corrcoef(du.T), dtype=np.float64))
+    for i in range(u.shape[1]):
+        for j in range(i + 1, u.shape[1]):
+            if abs(corr[i, j]) > TOGETHER:
+                warn(
+                    f"inputs {i} and {j} move together (their changes correlate at "
+                    f"{corr[i, j]:.2f}): the record cannot tell which moved an output, so the "
+                    "coupling between their axes is not determined; excite each actuator with "
+                    "its own signal at its own rate",
+                    IdentifiabilityWarning,
+                )
 
 
 class CoupledModel(JsonFile):
@@ -188,6 +218,7 @@ class CoupledModel(JsonFile):
             )
             raise ShapeError(msg)
         templates = self._templates(n)
+        _warn_together(us)
         ts = None if t is None else np.asarray(t, dtype=np.float64)
         # the start: the linear voltage map, each column scaled to its own axis
         a = np.column_stack([us, np.ones(us.shape[0])])
