@@ -24,6 +24,8 @@ lint: $(BIN)/.installed
 	$(BIN)/lint-imports
 
 # The tests, as CI runs them (.ci/run calls this target):
+#  0. the numba kernels the tests call compiled into numba's cache, half on each core
+#     (tests/kernel_warmup.py): on a fresh clone each worker compiled nearly all of them;
 #  1. every test once, compiled, on two workers (a file's tests on one: its module fixtures
 #     are built once), under coverage: numba's compiled kernels are invisible to coverage, so
 #     their lines count in step 2 only;
@@ -43,6 +45,7 @@ ONE_THREAD := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 export PYTHONDONTWRITEBYTECODE :=
 test: lint
 	@rm -f .coverage .coverage.*
+	$(ONE_THREAD) $(BIN)/python tests/kernel_warmup.py warm
 	$(ONE_THREAD) $(BIN)/python -m pytest -n 2 --dist loadfile -p no:cacheprovider -rs --durations=10 --cov --cov-report=
 	$(ONE_THREAD) NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q -n 2 --dist loadfile -p no:cacheprovider -m kernel_paths \
 		--cov --cov-append --cov-report= tests

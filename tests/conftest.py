@@ -83,3 +83,13 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         if missing:
             msg = f"tests/kernel_paths.txt lists tests not collected: {sorted(missing)}"
             raise pytest.UsageError(msg)
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    """Under ``tests/kernel_warmup.py record``: write the kernel specializations held."""
+    folder = os.environ.get("PIEZOHYST_KERNEL_RECORD")
+    if folder:
+        from tests.kernel_warmup import held
+
+        worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
+        Path(folder, f"{worker}.txt").write_text("\n".join(held()) + "\n")

@@ -94,3 +94,22 @@ def test_a_core_that_breaks_the_contract_is_told_which_rule(cls: type, rule: str
         check_core(core)
     with pytest.raises(CoreContractError, match="needs a piezohyst Core"):
         check_core("not a core")  # type: ignore[arg-type]
+
+
+def test_the_kernel_warm_up_list_names_kernels_that_exist() -> None:
+    """tests/kernel_signatures.txt: each row a dispatcher of today's kernels, its types read back.
+
+    A row left behind by a renamed kernel would only slow ``make test`` (the tests compile it
+    themselves), silently; this names it.
+    """
+    from . import kernel_warmup
+
+    found = kernel_warmup.dispatchers()
+    rows = kernel_warmup.entries()
+    assert len(rows) > 40
+    stale = [key for key, _ in rows if key not in found]
+    assert not stale, f"re-run `python tests/kernel_warmup.py record`: gone: {stale}"
+    unread = [text for _, text in rows if kernel_warmup.parse(text) is None]
+    assert len(unread) < len(rows) / 4, unread
+    assert kernel_warmup.parse("(Array(float64, 1, 'C', False, aligned=True), bool)") is not None
+    assert kernel_warmup.parse("Literal[bool](True)") is None
