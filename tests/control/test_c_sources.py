@@ -124,6 +124,9 @@ def test_each_fragment_compiles_with_the_preamble_and_what_the_readme_says_it_ne
     lo, hi = float(v.min()), float(v.max())
     lagged = ph.ActivePI(6, input_dynamics="first-order").fit(v, q, t=t)
     configs["play-dynamic"] = ph.Compensator(lagged, v_min=lo, v_max=hi, sample_rate=1e3)
+    configs["play-dynamic-controller"] = ph.SelfSensingController(
+        lagged, v_min=lo, v_max=hi, sample_rate=1e3
+    )
     seen: set[str] = set()
     for name, comp in configs.items():
         code = export_c(comp, precision="double", prefix="ph_x")  # type: ignore[arg-type]

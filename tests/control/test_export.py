@@ -10,6 +10,7 @@ import pytest
 
 import piezohyst as ph
 from piezohyst.control.export import export_c, write_c
+from piezohyst.simulation import make_signal
 
 from ..helpers import CC, HARNESS
 
@@ -270,3 +271,47 @@ def test_a_c_name_that_clashes_with_the_steps_own_is_refused(tmp_path: Path) -> 
         with pytest.raises(ph.ParameterError, match="clashes with the exported step"):
             write_c(comp, tmp_path / f"{name}.c")
     write_c(comp, tmp_path / "ph_comp.c")  # the name the docs use
+
+
+@pytest.mark.filterwarnings("ignore::piezohyst.errors.LimitWarning")  # the replay asks beyond
+def test_the_controller_through_an_amplifiers_lag_matches_python(tmp_path: Path) -> None:
+    """Issue 55: the self-sensing loop inverts the model's input lag; its C does the same (the
+    leakage at the piezo's voltage, a held sample still moving the lag). A whole-sample delay
+    would need the preview the C step has no room for: refused by name."""
+    t, v = make_signal("multifreq", amplitude=140.0, frequency=0.5, duration=12.0)
+    rec = ph.simulate(v, t, preset="T226-H4-203X-amp4ms", seed=0)
+    model = ph.ActivePI(8, input_dynamics="first-order").fit(rec.voltage, rec.charge, t=rec.t)
+    lo, hi = model.input_range_
+    leak = ph.Leakage(6e-10, 2e-10, 3e-11, scale=140.0, discharge=2e-5)
+    ctl = ph.SelfSensingController(model, v_min=lo, v_max=hi, sample_rate=1000.0, leakage=leak,
+                                   slew_rate=2e4)  # fmt: skip
+    top, rest = (float(q) for q in model.operator_.predict(np.array([hi, lo])))
+    _, shape = make_signal("fixed", amplitude=1.0, frequency=40.0, duration=2.0)
+    desired = rest + (top - rest) * (-0.05 + 1.1 * shape)  # beyond the reach at both ends
+    desired[[100, 700]] = [np.nan, np.inf]
+    c_path, _ = write_c(ctl, tmp_path / "ph_ctl.c")
+    rng = np.random.default_rng(3)
+    measured = desired * 1.03 + 2e-9 * rng.standard_normal(desired.size)
+    measured[::97] = np.nan
+    py = np.array([ctl.step(d, m) for d, m in zip(desired, measured, strict=True)])
+    (tmp_path / "main.c").write_text(CONTROLLER_HARNESS.replace("NAME", "ph_ctl"))
+    exe = tmp_path / "ctl"
+    subprocess.run(
+        [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", str(c_path),
+         str(tmp_path / "main.c"), "-o", str(exe)],
+        check=True, capture_output=True, text=True,
+    )  # fmt: skip
+    text = "".join(f"{float(d)!r} {float(m)!r}\n" for d, m in zip(desired, measured, strict=True))
+    out = subprocess.run([str(exe)], input=text, check=True, capture_output=True, text=True)
+    lines = out.stdout.split("\n")
+    # tol: a replay of ulp differences (FASTMATH kernels against the C), as the test above
+    np.testing.assert_allclose([float(x) for x in lines[: desired.size]], py, rtol=0, atol=5e-8)
+    counters = tuple(int(x) for x in lines[desired.size].split())
+    assert counters[:3] == (ctl.nonfinite_count, ctl.saturated_count, ctl.measurement_faults)
+    assert ctl.nonfinite_count == 2 and ctl.saturated_count > 0 and ctl.measurement_faults > 0
+    delayed = ph.ActivePI(8, input_dynamics="delay+first-order").fit(
+        rec.voltage[3:], rec.charge[:-3], t=rec.t[3:]
+    )
+    with pytest.raises(ph.ParameterError, match="not a delay of 3 whole samples"):
+        write_c(ph.SelfSensingController(delayed, v_min=lo, v_max=hi, sample_rate=1000.0),
+                tmp_path / "ph_delayed.c")  # fmt: skip

@@ -458,3 +458,84 @@ def test_a_bank_guards_each_channel_by_its_own_model() -> None:
     from piezohyst._kernels import play as K
 
     np.testing.assert_array_equal(ctl.ctl[:, K.CTL_KI], used)
+
+
+# ------------------------------------------------------- behind an amplifier
+LAGGED = "T226-H4-203X-amp4ms"
+
+
+@pytest.fixture(scope="module")
+def lagged_models() -> tuple[ph.ActivePI, ph.ActivePI]:
+    """ActivePI fitted with the amplifier's lag (4 ms, found), and with a lag behind a
+    logged delay of 3 samples (the voltage column logged 3 ms early)."""
+    t, v = make_signal("multifreq", amplitude=140.0, frequency=0.5, duration=20.0)
+    rec = ph.simulate(v, t, preset=LAGGED, seed=0)
+    lag = ph.ActivePI(12, input_dynamics="first-order").fit(rec.voltage, rec.charge, t=rec.t)
+    delayed = ph.ActivePI(12, input_dynamics="delay+first-order").fit(
+        rec.voltage[3:], rec.charge[:-3], t=rec.t[3:]
+    )
+    return lag, delayed
+
+
+def test_the_loop_inverts_the_amplifiers_lag_at_40_hz(
+    lagged_models: tuple[ph.ActivePI, ph.ActivePI],
+) -> None:
+    """Issue 55: the self-sensing loop took no model with input dynamics; a 40 Hz scan behind
+    a 4 ms amplifier (45 degrees of lag) needs one. Measured on this bench: feedforward
+    0.58 %, the loop 0.43-0.46 %, with a bias current the model never saw."""
+    model, _ = lagged_models
+    assert model.input_dynamics_ is not None and 0.003 < model.input_dynamics_.tau < 0.005
+    lo, hi = model.input_range_  # the multifreq record peaks at 138.9 V
+    top, rest = (float(q) for q in model.operator_.predict(np.array([hi, lo])))
+    _, shape = make_signal("fixed", amplitude=1.0, frequency=40.0, duration=6.0)
+    desired = rest + (top - rest) * (0.3 + 0.4 * shape)
+    keep = slice(1000, None)  # after the first second
+    p = dataclasses.replace(PRESETS[LAGGED], i_bias=40e-12)  # a bias never identified
+    ff = ph.Compensator(model, slew_rate=None, v_min=lo, v_max=hi, sample_rate=FS)
+    bench = Bench(p, seed=5, voltage=lo)
+    for x in ff.precondition(2000):
+        bench.apply(x)
+    moved = np.array([bench.apply(c).true_displacement for c in ff.process(desired)])
+    w_ff = hysteresis_width(desired[keep], moved[keep])
+    # the loop feeds the charge amplifier's noise back: its width is a statistic of the noise
+    # realisation (0.43-0.46 % over four seeds), so the claim is on the median of three
+    widths = []
+    for seed in (5, 6, 7):
+        ctl = ph.SelfSensingController(model, slew_rate=None, v_min=lo, v_max=hi, sample_rate=FS)
+        bench = Bench(p, seed=seed, voltage=lo)
+        for x in ctl.precondition(2000):
+            bench.apply(x)
+        commands = np.empty_like(desired)
+        for k, d in enumerate(desired):
+            commands[k] = ctl.step(d, bench.reading.charge)
+            moved[k] = bench.apply(commands[k]).true_displacement
+        widths.append(hysteresis_width(desired[keep], moved[keep]))
+        assert np.all((commands >= lo) & (commands <= hi))
+        at_limit = int(np.count_nonzero((commands == lo) | (commands == hi)))
+        assert ctl.saturated_count == at_limit
+    assert max(widths) < min(0.01, 0.9 * w_ff) and float(np.median(widths)) < 0.8 * w_ff
+
+
+def test_through_a_delay_without_feedback_it_is_the_compensator(
+    lagged_models: tuple[ph.ActivePI, ph.ActivePI],
+) -> None:
+    _, model = lagged_models
+    assert model.input_dynamics_ is not None
+    m = int(model.input_dynamics_.delay_samples)
+    assert m == 3  # the 3 ms the voltage column was logged early
+    _, shape = make_signal("decaying", amplitude=1.0, duration=3.0)
+    desired = model.operator_.predict(20 + 100 * shape)
+    noise = np.random.default_rng(0).normal(0, 1e-6, desired.size)
+    lo, hi = model.input_range_
+    kw = {"slew_rate": None, "v_min": lo, "v_max": hi, "sample_rate": FS}
+    comp = ph.Compensator(model, **kw)  # type: ignore[arg-type]
+    ff = ph.SelfSensingController(model, ki=0.0, **kw)  # type: ignore[arg-type]
+    np.testing.assert_array_equal(ff.process(desired, noise), comp.process(desired))
+    # with feedback: the block its own preview, as steps given the next m desired values
+    a = ph.SelfSensingController(model, **kw)  # type: ignore[arg-type]
+    b = ph.SelfSensingController(model, **kw)  # type: ignore[arg-type]
+    whole = a.process(desired, desired + noise)
+    n = desired.size - m  # the last m of the block extrapolate beyond it
+    steps = [b.step(desired[k], desired[k] + noise[k], desired[k + 1 : k + 1 + m])
+             for k in range(n)]  # fmt: skip
+    np.testing.assert_array_equal(whole[:n], steps)

@@ -862,6 +862,46 @@ def controller_process(desired, measured, tables, config, state, ctl, cs, out): 
         out[k] = _controller_step_at(0, desired[k], measured[k], t3, c2, s2, ctl2, cs2)
 
 
+@njit(cache=True, fastmath=FASTMATH)
+def dynamic_controller_step(reach, target, measured, tables, config, state, ctl, cs, dyn, dstate):  # type: ignore[no-untyped-def]
+    """``controller_step`` with lags (and a delay) between the command and the piezo.
+
+    ``reach`` is the output wanted at this sample, what the next reading is compared
+    with; ``target`` the output the command now must bring (``reach`` itself, or the
+    preview an integer input delay asks for). The feedback's correction joins the
+    target, and ``dynamic_step`` inverts the hysteresis and the lags; the leakage
+    flows at the piezo's voltage (the lag's output), not the command's.
+    """
+    t3, c2, s2 = tables[np.newaxis], config[np.newaxis], state[np.newaxis]
+    ctl2, cs2 = ctl[np.newaxis], cs[np.newaxis]
+    piezo = dstate[1]
+    qc = feedback_measure_at(0, measured, piezo, ctl2, cs2)
+    if math.isfinite(qc) and cs[CS_STARTED] == 0.0:  # the first measurement sets the frame
+        cs[CS_FRAME] = _output_at(0, t3, c2, s2) - qc
+        cs[CS_STARTED] = 1.0
+    e = feedback_error_at(0, qc, cs2)
+    d, integral, u = feedback_command_at(0, reach, e, ctl2, cs2)
+    if not math.isfinite(d):  # hold the last safe command (the piezo keeps settling on it)
+        return dynamic_step(math.nan, tables, config, state, dyn, dstate)
+    u += (target - reach) * ctl[CTL_INV_GAIN]
+    v = dynamic_step(u, tables, config, state, dyn, dstate)
+    feedback_close_at(0, d, u, _output_at(0, t3, c2, s2), integral, ctl2, cs2)
+    return v
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def dynamic_controller_process(  # type: ignore[no-untyped-def]
+    desired, delay, measured, tables, config, state, ctl, cs, dyn, dstate, out
+):
+    """``dynamic_controller_step`` over a block; the command at k targets
+    ``desired[k + delay]`` (the block its own preview, as ``dynamic_process``)."""
+    for k in range(desired.shape[0]):
+        out[k] = dynamic_controller_step(
+            desired[k], preview_target(desired, k, delay), measured[k],
+            tables, config, state, ctl, cs, dyn, dstate,
+        )  # fmt: skip
+
+
 # ---------------------------------------------------------------------------
 # Banks: C channels of one structure, the single-channel kernels run per
 # channel in parallel. tables (C, 5, n), config (C, CONFIG_SIZE), state

@@ -367,18 +367,23 @@ class Compensator(Tallied):
         if self.mode.active:
             desired = float(self._through_mode(np.array([float(desired)]), preview)[0])
         if self.dynamic:
-            d = float(desired)
-            m = self.delay_samples
-            target = d
-            if m:
-                ahead = np.asarray(preview if preview is not None else [], dtype=np.float64)
-                if ahead.size >= m:
-                    target = float(ahead[m - 1])
-                elif math.isfinite(self._last_desired):
-                    target = d + m * (d - self._last_desired)
-            self._last_desired = d
-            return self._inner_step(target)
+            return self._inner_step(self.delay_target(float(desired), preview))
         return self._inner_step(float(desired))
+
+    def delay_target(self, desired: float, preview: ArrayLike | None) -> float:
+        """The output the command sent now must bring, ``delay_samples`` samples on:
+        ``preview[delay_samples - 1]``, or extrapolated linearly from the last two desired
+        values without enough preview (see :meth:`step`); ``desired`` without a delay."""
+        m = self.delay_samples
+        target = desired
+        if m:
+            ahead = np.asarray(preview if preview is not None else [], dtype=np.float64)
+            if ahead.size >= m:
+                target = float(ahead[m - 1])
+            elif math.isfinite(self._last_desired):
+                target = desired + m * (desired - self._last_desired)
+        self._last_desired = desired
+        return target
 
     def _inner_step(self, target: float) -> float:
         """The engine's command for the hysteresis output ``target`` (after mode and delay)."""

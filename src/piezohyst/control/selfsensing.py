@@ -115,7 +115,10 @@ class SelfSensingController:
     model : HysteresisModel
         A fitted model whose hysteresis part is play operators alone
         (``ClassicalPI``, ``ActivePI``, or presets with growth terms only):
-        the loop uses the analytic inverse (eq. 18).
+        the loop uses the analytic inverse (eq. 18). Its input dynamics (an
+        amplifier's lag and delay, ``input_dynamics=``) are inverted as the
+        :class:`~piezohyst.Compensator` inverts them, and the leakage flows at
+        the piezo's voltage (the lag's output).
     v_min, v_max : float
         Voltage limits (V); narrowed to the model's training range unless
         ``allow_extrapolation`` (as for :class:`~piezohyst.control.compensator.Compensator`).
@@ -238,10 +241,12 @@ class SelfSensingController:
                 "asymmetry or creep beside play operators, or its core has no compiled step"
             )
             raise ParameterError(msg)
-        if comp.dynamic or comp.mode.active:
+        if comp.mode.active or (comp.dynamic and comp.inverse.name != "play"):
+            held = "output dynamics (a mode)" if comp.mode.active else "input dynamics"
             msg = (
-                "SelfSensingController does not invert input or output dynamics yet: fit the "
-                "model without them, or use the Compensator (feedforward) with this model"
+                f"SelfSensingController inverts {held} on play operators alone (ClassicalPI, "
+                f"ActivePI) so far; this {type(model).__name__} holds them: fit it without, "
+                "or use the Compensator (feedforward) with this model"
             )
             raise ParameterError(msg)
         if leakage is None:
@@ -416,7 +421,9 @@ class SelfSensingController:
         return float(self.feedback[K.CS_INTEGRAL])
 
     # -------------------------------------------------------------- commands
-    def step(self, desired: float, measured: float | None = None) -> float:
+    def step(
+        self, desired: float, measured: float | None = None, preview: ArrayLike | None = None
+    ) -> float:
         """The command for one sample.
 
         Parameters
@@ -428,6 +435,11 @@ class SelfSensingController:
             Charge read at this sample, before this command acts (model output
             units). None, NaN or infinity: feedforward alone for this sample, counted
             in :attr:`measurement_faults`.
+        preview : array_like, optional
+            The desired values of the next samples, for a model with an input delay
+            (as :meth:`Compensator.step <piezohyst.Compensator.step>`): the command is
+            computed for ``preview[delay_samples - 1]``, the reading still compared with
+            ``desired``. Lags need none.
 
         Returns
         -------
@@ -437,12 +449,16 @@ class SelfSensingController:
         comp = self.compensator
         d = float(desired)
         if comp.charges is not None:  # metres through the output map, to the model's charge
-            d, _ = comp.charges.one(d, None)
+            d, preview = comp.charges.one(d, preview)
         try:  # the common case inline (a step runs per sample); reading() names the rest
             m = math.nan if measured is None else float(measured)
         except (TypeError, ValueError):
             m = reading(measured, "SelfSensingController")
-        c = comp.inverse.controller_step(d, m, (self.config, self.ctl, self.feedback))
+        loop = (self.config, self.ctl, self.feedback)
+        if comp.delay_samples:
+            c = comp.inverse.controller_step(d, m, loop, comp.delay_target(d, preview))
+        else:
+            c = comp.inverse.controller_step(d, m, loop)
         comp.tally_one(c, "SelfSensingController")
         return c
 
@@ -453,6 +469,8 @@ class SelfSensingController:
         ----------
         desired, measured : array_like, shape (N,)
             ``measured`` None: no readings (feedforward alone, every sample counted).
+            With an input delay the block is its own preview (as
+            :meth:`Compensator.process <piezohyst.Compensator.process>`).
 
         Returns
         -------

@@ -276,8 +276,9 @@ class Inverse:
         """Where ``config`` holds the displacement reference and the inverse gain."""
         raise NotImplementedError
 
-    def controller_step(self, d: float, m: float, loop: Loop) -> float:
-        """One sample of the self-sensing loop around this inverse."""
+    def controller_step(self, d: float, m: float, loop: Loop, target: float | None = None) -> float:
+        """One sample of the self-sensing loop around this inverse (``target``: with an input
+        delay, the output the command must bring, ``d`` the output wanted now)."""
         raise NotImplementedError
 
     def controller_process(self, d: FloatArray, m: FloatArray, loop: Loop, out: FloatArray) -> None:

@@ -219,7 +219,7 @@ class PackedInverse(Inverse):
     def slots(self) -> tuple[int, int]:
         return int(P.CC_REF), int(P.CC_INV_GAIN)
 
-    def controller_step(self, d: float, m: float, loop: Loop) -> float:
+    def controller_step(self, d: float, m: float, loop: Loop, target: float | None = None) -> float:
         return float(P.core_controller_step(d, m, self.params, loop[0], self.kernel_state,
                                             self.region, self.dyn, self.dstate, self.trial,
                                             loop[1], loop[2]))  # fmt: skip

@@ -245,11 +245,20 @@ class PlayInverse(Inverse):
     def slots(self) -> tuple[int, int]:
         return int(K.CFG_REFERENCE), int(K.CFG_INV_GAIN)
 
-    def controller_step(self, d: float, m: float, loop: Loop) -> float:
+    def controller_step(self, d: float, m: float, loop: Loop, target: float | None = None) -> float:
+        if self.dynamic:  # the lags inverted per sample; ``target`` the delay's preview
+            return float(K.dynamic_controller_step(
+                d, d if target is None else target, m, self.tables, loop[0], self.kernel_state,
+                loop[1], loop[2], self.dyn, self.dstate))  # fmt: skip
         return float(K.controller_step(d, m, self.tables, loop[0], self.kernel_state,
                                        loop[1], loop[2]))  # fmt: skip
 
     def controller_process(self, d: FloatArray, m: FloatArray, loop: Loop, out: FloatArray) -> None:
+        if self.dynamic:
+            K.dynamic_controller_process(d, self.delay_samples, m, self.tables, loop[0],
+                                         self.kernel_state, loop[1], loop[2], self.dyn,
+                                         self.dstate, out)  # fmt: skip
+            return
         K.controller_process(d, m, self.tables, loop[0], self.kernel_state, loop[1], loop[2], out)
 
     # ------------------------------------------------------------------ the C
@@ -283,8 +292,9 @@ class PlayInverse(Inverse):
         init = [] if loop is None else _feedback_init(loop[2], c)
         files = ["ieee.c", "play.c"]
         if self.dynamic:
-            more, init = self._dynamics_c(c)
+            more, lag_init = self._dynamics_c(c)
             lines += more
+            init = [*init, *lag_init]
             files.append("play_dynamic.c")
         if loop is not None:
             ctl = loop[1]

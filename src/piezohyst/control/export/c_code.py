@@ -86,8 +86,12 @@ def export_c(
     """
     comp = cast(Compensator, getattr(compensator, "compensator", compensator))  # a controller's
     controller = cast("SelfSensingController", compensator) if comp is not compensator else None
-    if controller is not None and comp.dynamic:  # pragma: no cover - the controller refuses it
-        msg = "the self-sensing controller does not invert input dynamics"
+    if controller is not None and comp.delay_samples:
+        msg = (
+            "C export of the self-sensing controller inverts a lag and a fraction of a "
+            f"sample's delay, not a delay of {comp.delay_samples} whole samples (the step "
+            "would need the preview): run it in Python, or fit the model without the delay"
+        )
         raise ParameterError(msg)
     if comp.mode.active and (controller is not None or comp.delay_samples):
         msg = (

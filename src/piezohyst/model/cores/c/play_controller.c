@@ -1,10 +1,16 @@
 /* The self-sensing controller step: the same arithmetic, in the same order, as
- * _kernels.controller_step. */
+ * _kernels.controller_step (with input dynamics, _kernels.dynamic_controller_step: the
+ * inverse is play_dynamic.c's, and the leakage flows at the piezo's voltage, the lag's). */
 
+#if DYNAMIC
+#define PIEZO_VOLTAGE(s) ((s)->u)
+#else
+#define PIEZO_VOLTAGE(s) ((s)->last)
 static real_t abs_real(real_t x)
 {
     return x < 0 ? -x : x;
 }
+#endif
 
 static void hold_reset(PREFIX_t *s)
 {
@@ -35,7 +41,8 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired, real_t measured)
         s->q_last = measured;
     }
     if (s->started) { /* leakage over the sample the last command was held */
-        current = G0 * s->last + G1 * s->last * abs_real(s->last) * INV_SCALE;
+        v = PIEZO_VOLTAGE(s);
+        current = G0 * v + G1 * v * abs_real(v) * INV_SCALE;
         current += s->bias - DISCHARGE * s->q_last;
         s->leak += current * DT;
     }
@@ -54,20 +61,28 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired, real_t measured)
     }
     s->error = e;
     if (non_finite(desired)) { /* hold the last safe command */
-        s->nonfinite++;
         s->has_prev = 0;
         hold_reset(s);
+#if DYNAMIC
+        return core_step(s, desired); /* held and counted, the piezo settling on it */
+#else
+        s->nonfinite++;
         return s->last;
+#endif
     }
     d = TARGET(s, desired);
     integral = s->integral + KI * e;
     u = d + KP * e + integral;
+#if DYNAMIC
+    v = core_step(s, u); /* a non-finite u held and counted there */
+#else
     if (non_finite(u)) {
         s->nonfinite++;
         v = s->last;
     } else {
         v = core_step(s, u);
     }
+#endif
     y = model_output(s);
     delivered = !non_finite(u) && abs_real(y - u) <= TOL;
     if (delivered) {

@@ -1,4 +1,6 @@
-/* The play compensator step with the input lags inverted: _kernels.dynamic_step in C. */
+/* The play compensator step with the input lags inverted: _kernels.dynamic_step in C.
+ * Under a controller it is the loop's inverse, core_step (play_controller.c follows): its
+ * target in model output units already. */
 
 /* x after a fraction of a sample's delay, interpolated from the last command */
 static real_t advance(PREFIX_t *s, real_t x)
@@ -13,7 +15,13 @@ static real_t abs_real(real_t x)
     return x < 0 ? -x : x;
 }
 
+#if CONTROLLER
+#define DYNAMIC_TARGET(s, d) (d)
+static real_t core_step(PREFIX_t *s, real_t desired)
+#else
+#define DYNAMIC_TARGET(s, d) TARGET(s, d)
 STEP_SIGNATURE(PREFIX_t *s, real_t desired)
+#endif
 {
     real_t q, target, w_target, x, u;
     int i, over = 0;
@@ -26,7 +34,7 @@ STEP_SIGNATURE(PREFIX_t *s, real_t desired)
         inverse_states(s);
         return s->last;
     }
-    q = clamp(TARGET(s, desired), OFFSET - BOUND, OFFSET + BOUND);
+    q = clamp(DYNAMIC_TARGET(s, desired), OFFSET - BOUND, OFFSET + BOUND);
     target = INV_OFFSET;
     for (i = 0; i < N; ++i) {
         s->zeta[i] = clamp(s->zeta[i], q - RI[i], q + RI[i]);
