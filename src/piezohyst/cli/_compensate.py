@@ -77,12 +77,23 @@ def compensate(
     hold the last command; a trajectory that saturates most samples is an
     error. TARGET needs a time column (s), or give --sample-rate.
 
+    A coupled stage's model file (``fit --input vx,vy --output x,y``) takes one desired
+    column per axis (--column x,y) and writes one command column per actuator, after a
+    ramp from rest; --v-min and --v-max are then needed.
+
     \b
     Example:
       piezohyst compensate model.json target.csv --domain displacement \\
           --gain 125 --v-min 0 --v-max 140 -o command.csv
+      piezohyst compensate stage.json raster.csv --column x,y --v-min 0 --v-max 140 \\
+          -o commands.csv
     """
     from ..workflows import compensate_file
+    from ..workflows.stage_files import is_stage_file
+
+    if is_stage_file(model):
+        _compensate_stage(ctx, model, target, column, settings, out, force)
+        return
 
     with rows_progress(ctx, f"reading {target.name}", target) as progress:
         result = _run(
@@ -125,4 +136,36 @@ def compensate(
         )
     if command_scale is not None:
         ctx.info(f"written in the DAQ's volts: the piezo's divided by {command_scale}")
+    ctx.info(f"saved {out}")
+
+
+def _compensate_stage(
+    ctx: Context, model: Path, target: Path, column: str | None,
+    settings: CompensatorSettings, out: Path, force: bool,
+) -> None:  # fmt: skip
+    """``compensate stage.json target.csv --column x,y``: :func:`compensate_stage_file`."""
+    from ..workflows.stage_files import compensate_stage_file, stage_columns
+
+    if settings.v_min is None or settings.v_max is None:
+        raise click.UsageError("a stage's commands need --v-min and --v-max (V, every actuator)")
+    run = _run(
+        ctx,
+        lambda: compensate_stage_file(
+            model, target, out, columns=stage_columns(column, "--column"),
+            v_min=settings.v_min, v_max=settings.v_max,  # type: ignore[arg-type]
+            sample_rate=settings.sample_rate, slew_rate=settings.slew_rate,
+            allow_extrapolation=settings.allow_extrapolation, force=force,
+        ),
+    )  # fmt: skip
+    comp = run.compensator
+    assert comp is not None
+    per = "; ".join(
+        f"actuator {k}: {int(comp.saturated_count[k])} at a voltage limit, "
+        f"{int(comp.slew_limited_count[k])} slew-limited"
+        for k in range(len(comp.compensators))
+    )
+    ctx.result(
+        f"{run.samples} rows ({run.preamble} of ramp-in first); {per}; "
+        f"{comp.outside_count} desired positions outside the stage's reach"
+    )
     ctx.info(f"saved {out}")

@@ -1,5 +1,6 @@
-"""``piezohyst fit`` with several input and output columns: a coupled stage identified from
-one file (:class:`~piezohyst.CoupledModel`), saved as a coupled model file."""
+"""``piezohyst fit``, ``predict`` and ``compensate`` with several input and output columns: a
+coupled stage identified from one file (:class:`~piezohyst.CoupledModel`), saved as a coupled
+model file, run on another record, and compensated (:class:`~piezohyst.CoupledCompensator`)."""
 
 from __future__ import annotations
 
@@ -8,13 +9,252 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .._validation import FloatArray
+from ..control.coupled import CoupledCompensator
 from ..errors import DataFileError, ParameterError
-from ..io import DataSpec
-from ..model.coupled import CoupledModel
+from ..io import DataSpec, read_table, write_table
+from ..model.coupled import COUPLED_FORMAT, CoupledModel
 from ..model.persistence import model_class
 from ._base import PathLike, guard_outputs
 
-__all__ = ["fit_stage_file", "stage_columns"]
+__all__ = [
+    "StageRun",
+    "compensate_stage_file",
+    "fit_stage_file",
+    "is_stage_file",
+    "predict_stage_file",
+    "stage_columns",
+]
+
+
+@dataclasses.dataclass(frozen=True)
+class StageRun:
+    """What a stage's ``predict`` or ``compensate`` from files did.
+
+    Attributes
+    ----------
+    samples : int
+        Rows written.
+    nrmse : tuple of float
+        ``predict``: per axis, RMS error over the axis's measured span (empty without
+        measured columns).
+    compensator : CoupledCompensator or None
+        ``compensate``: the compensator after the run (its counts per actuator).
+    preamble : int
+        ``compensate``: rows of the ramp from rest to the trajectory's start.
+    """
+
+    samples: int
+    nrmse: tuple[float, ...] = ()
+    compensator: CoupledCompensator | None = None
+    preamble: int = 0
+
+
+def is_stage_file(path: PathLike) -> bool:
+    """True for a coupled model file (``CoupledModel.save``), read only as far as its format.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    bool
+    """
+    try:
+        with open(path, encoding="utf-8") as fh:
+            head = fh.read(4096)
+    except (OSError, UnicodeDecodeError):
+        return False
+    return f'"{COUPLED_FORMAT}"' in head
+
+
+def _read_stage(
+    data: PathLike, inputs: Sequence[str], outputs: Sequence[str] | None, spec: DataSpec
+) -> tuple[FloatArray, FloatArray, FloatArray | None, str | None]:
+    """The pairs' columns on one time axis: t, U (samples x inputs), Y or None, Y's unit."""
+    outs: list[str | None] = list(outputs) if outputs is not None else [None] * len(inputs)
+    pairs = list(zip(inputs, outs, strict=True))
+    recs = [
+        dataclasses.replace(spec, input_column=i, output_column=o).read(
+            data, output_required=o is not None
+        )
+        for i, o in pairs
+    ]
+    w = recs[0].window
+    t = recs[0].t[w]
+    for rec in recs[1:]:
+        if rec.t[rec.window].shape != t.shape or not np.array_equal(rec.t[rec.window], t):
+            msg = f"{data}: the columns' time axes differ (rows dropped from one, not another?)"
+            raise DataFileError(msg)
+    u = np.column_stack([rec.x[rec.window] for rec in recs])
+    if outputs is None:
+        return t, u, None, None
+    y = np.column_stack([rec.y[rec.window] for rec in recs if rec.y is not None])
+    return t, u, y, recs[0].units[1]
+
+
+def _stage(model_path: PathLike) -> CoupledModel:
+    model = CoupledModel.load(model_path)
+    if not isinstance(model, CoupledModel):  # pragma: no cover - load returns its class
+        msg = f"{model_path}: not a coupled model file"
+        raise ParameterError(msg)
+    return model
+
+
+def predict_stage_file(
+    model_path: PathLike,
+    data: PathLike,
+    out: PathLike,
+    *,
+    inputs: Sequence[str],
+    outputs: Sequence[str] | None = None,
+    data_spec: DataSpec | None = None,
+    force: bool = False,
+) -> StageRun:
+    """Run a coupled model on a record's actuator voltages; write each axis's prediction.
+
+    Parameters
+    ----------
+    model_path : str or os.PathLike
+        A coupled model file (``piezohyst fit --input vx,vy --output x,y``).
+    data, out : str or os.PathLike
+        The record, and the file to write: ``time``, ``predicted_<axis>`` per axis and,
+        where the record has them, ``measured_<axis>``.
+    inputs : sequence of str
+        The actuators' voltage columns, in the model's order.
+    outputs : sequence of str, optional
+        The axes' measured columns: scored and written beside the prediction.
+    data_spec : DataSpec, optional
+        Time column, rate, window, units, as for one channel.
+    force : bool
+        Replace an existing ``out`` that piezohyst did not write.
+
+    Returns
+    -------
+    StageRun
+    """
+    guard_outputs([out], [model_path, data], force=force)
+    model = _stage(model_path)
+    n = len(model.channels_)
+    if len(inputs) != n or (outputs is not None and len(outputs) != model.coupling_.shape[0]):
+        msg = (
+            f"{model_path} is a stage of {n} actuators and {model.coupling_.shape[0]} axes: "
+            f"got {len(inputs)} input and {len(outputs or ())} output columns"
+        )
+        raise ParameterError(msg)
+    t, u, y, unit = _read_stage(data, inputs, outputs, data_spec or DataSpec())
+    pred = model.predict(u, t=t)
+    names = list(outputs) if outputs is not None else [f"axis{i}" for i in range(pred.shape[1])]
+    columns: dict[str, FloatArray] = {"time": t}
+    units: dict[str, str | None] = {"time": "s"}
+    for i, name in enumerate(names):
+        columns[f"predicted_{name}"] = pred[:, i]
+        units[f"predicted_{name}"] = unit
+    nrmse: tuple[float, ...] = ()
+    if y is not None:
+        for i, name in enumerate(names):
+            columns[f"measured_{name}"] = y[:, i]
+            units[f"measured_{name}"] = unit
+        err = np.sqrt(np.mean((pred - y) ** 2, axis=0)) / np.maximum(np.ptp(y, axis=0), 1e-300)
+        nrmse = tuple(float(e) for e in err)
+    write_table(out, columns, units)
+    return StageRun(samples=int(t.size), nrmse=nrmse)
+
+
+def compensate_stage_file(
+    model_path: PathLike,
+    target: PathLike,
+    out: PathLike,
+    *,
+    columns: Sequence[str],
+    v_min: float,
+    v_max: float,
+    sample_rate: float | None = None,
+    slew_rate: float | str | None = "trained",
+    allow_extrapolation: bool = False,
+    ramp: float = 0.5,
+    force: bool = False,
+) -> StageRun:
+    """The commands that move a coupled stage along a target; write them, one per actuator.
+
+    The file starts with a ramp (``ramp`` seconds, rows with empty desired values) from where
+    the stage rests with every actuator at ``v_min`` to the trajectory's first position, so
+    the first command never jumps; then one row per target row.
+
+    Parameters
+    ----------
+    model_path : str or os.PathLike
+        A coupled model file.
+    target : str or os.PathLike
+        The desired positions: a time column (``time``, s) and one column per axis.
+    out : str or os.PathLike
+        Written: ``time``, ``command_<k>`` per actuator (V), ``desired_<axis>`` per axis.
+    columns : sequence of str
+        The target's axis columns, in the model's order.
+    v_min, v_max : float
+        Every actuator's voltage limits (V).
+    sample_rate : float, optional
+        Hz; default the target's time column's.
+    slew_rate : float, "trained" or None
+        As for :class:`~piezohyst.CoupledCompensator`.
+    allow_extrapolation : bool
+        Keep limits wider than the training range.
+    ramp : float
+        Seconds of the ramp-in.
+    force : bool
+        Replace an existing ``out`` that piezohyst did not write.
+
+    Returns
+    -------
+    StageRun
+
+    Raises
+    ------
+    ParameterError
+        Columns that do not match the model, or a target mostly out of the stage's reach.
+    """
+    guard_outputs([out], [model_path, target], force=force)
+    model = _stage(model_path)
+    m = model.coupling_.shape[0]
+    if len(columns) != m:
+        msg = f"{model_path} moves {m} axes: got {len(columns)} target columns ({columns})"
+        raise ParameterError(msg)
+    table = read_table(target)
+    t = table.get("time")
+    desired = np.column_stack([table.get(c, finite=False) for c in columns])
+    if t.size < 2 or not np.all(np.diff(t) > 0):
+        msg = f"{target}: the time column must increase, one row per sample"
+        raise DataFileError(msg)
+    fs = float(sample_rate) if sample_rate is not None else float(1.0 / np.median(np.diff(t)))
+    comp = CoupledCompensator(model, v_min=v_min, v_max=v_max, sample_rate=fs,
+                              slew_rate=slew_rate, allow_extrapolation=allow_extrapolation)  # type: ignore[arg-type]  # fmt: skip
+    lo = np.array([c.v_min for c in comp.compensators])
+    comp.reset(voltage=lo)
+    rest = model.predict(lo[None, :], t=[0.0])[0]
+    first = desired[np.all(np.isfinite(desired), axis=1)][:1]
+    n_ramp = max(2, round(ramp * fs)) if first.size else 0
+    path = np.linspace(rest, first[0], n_ramp) if n_ramp else np.empty((0, m))
+    commands = comp.process(np.vstack([path, desired]))
+    held = comp.saturated_count / max(desired.shape[0], 1)
+    if np.any(held > 0.5):
+        k = int(np.argmax(held))
+        msg = (
+            f"{target}: actuator {k} would sit at a voltage limit on {100 * held[k]:.0f} % of "
+            "the target (what the stage reaches is the actuators' ranges through the "
+            "coupling, not a box); bring the target within reach or widen --v-min/--v-max"
+        )
+        raise ParameterError(msg)
+    time = np.concatenate([t[0] - np.arange(n_ramp, 0, -1) / fs, t])
+    written: dict[str, FloatArray] = {"time": time}
+    units: dict[str, str | None] = {"time": "s"}
+    for k in range(commands.shape[1]):
+        written[f"command_{k}"] = commands[:, k]
+        units[f"command_{k}"] = "V"
+    for i, c in enumerate(columns):
+        written[f"desired_{c}"] = np.concatenate([np.full(n_ramp, np.nan), desired[:, i]])
+    write_table(out, written, units)
+    return StageRun(samples=int(time.size), compensator=comp, preamble=n_ramp)
 
 
 def stage_columns(spec: str | None, what: str) -> list[str]:
