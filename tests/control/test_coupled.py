@@ -5,6 +5,7 @@ them, identified as one system (:class:`ph.CoupledModel`) and compensated togeth
 from __future__ import annotations
 
 import json
+import subprocess
 import warnings
 from pathlib import Path
 
@@ -12,9 +13,12 @@ import numpy as np
 import pytest
 
 import piezohyst as ph
+from piezohyst.control.export import write_stage_c
 from piezohyst.errors import IdentifiabilityWarning
 from piezohyst.metrics import hysteresis_width
 from piezohyst.simulation import XY_COUPLING, make_signal, simulate_stage
+
+from ..helpers import CC
 
 FS = 1000.0
 
@@ -199,3 +203,69 @@ def test_a_coupled_model_file_loads_and_predicts_as_written(
         ph.CoupledModel.load(path)
     with pytest.raises(ph.ModelFileError, match="not a piezohyst coupled model"):
         ph.CoupledModel.from_dict({"format": "piezohyst-model"})
+
+
+STAGE_HARNESS = r"""
+#include <stdio.h>
+#include <stdlib.h>
+#include "ph_xy.h"
+int main(void)
+{
+    char line[256];
+    ph_xy_t s;
+    ph_xy_real d[2], v[2];
+    ph_xy_init(&s);
+    while (fgets(line, sizeof line, stdin)) {
+        char *rest;
+        d[0] = (ph_xy_real)strtod(line, &rest);
+        d[1] = (ph_xy_real)strtod(rest, NULL);
+        ph_xy_step(&s, d, v);
+        printf("%.17g %.17g\n", (double)v[0], (double)v[1]);
+    }
+    printf("%lu %lu %lu %lu %lu\n", s.outside, s.a0.saturated, s.a1.saturated, s.a0.nonfinite,
+           s.a1.nonfinite);
+    return 0;
+}
+"""
+
+
+@pytest.mark.skipif(CC is None, reason="no C compiler on this machine")
+@pytest.mark.filterwarnings("ignore::piezohyst.errors.LimitWarning")  # out of reach on purpose
+def test_the_stage_in_c_equals_python(
+    stage: tuple[ph.CoupledModel, np.ndarray], tmp_path: Path
+) -> None:
+    """The coupled compensator's C (each actuator's step and the coupling's inverse) gives
+    Python's commands and counts: a Lissajous, a stretch beyond the reach, NaN holds."""
+    model, _ = stage
+    comp = ph.CoupledCompensator(model, v_min=0.0, v_max=140.0, sample_rate=FS, slew_rate=2e4)
+    paths = write_stage_c(comp, tmp_path / "ph_xy.c")
+    assert [p.name for p in paths] == ["ph_xy.c", "ph_xy.h", "ph_xy_a0.c", "ph_xy_a0.h",
+                                       "ph_xy_a1.c", "ph_xy_a1.h"]  # fmt: skip
+    (x0, x1), (y0, y1) = comp.reach
+    k = np.arange(3000)
+    wave = np.column_stack([np.sin(2 * np.pi * 3 * k / FS), np.sin(2 * np.pi * 2 * k / FS)])
+    desired = np.array([x0, y0]) + np.array([x1 - x0, y1 - y0]) * (0.5 + 0.4 * wave)
+    desired[1000:1100, 0] = x1 + 0.2 * (x1 - x0)  # beyond x's reach
+    desired[[1500, 2000], 1] = np.nan
+    py = comp.process(desired)
+    (tmp_path / "main.c").write_text(STAGE_HARNESS)
+    exe = tmp_path / "stage"
+    subprocess.run(
+        [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2",
+         *(str(p) for p in paths if p.suffix == ".c"), str(tmp_path / "main.c"), "-o", str(exe),
+         "-lm"],
+        check=True, capture_output=True, text=True,
+    )  # fmt: skip
+    text = "".join(f"{a!r} {b!r}\n" for a, b in desired.tolist())
+    out = subprocess.run([str(exe)], input=text, check=True, capture_output=True, text=True)
+    lines = out.stdout.split("\n")
+    c_cmds = np.array([[float(x) for x in line.split()] for line in lines[: desired.shape[0]]])
+    # tol: FASTMATH kernels against the C part by an ulp per step; a feedforward step does
+    # not integrate it (the single channel's C holds 1e-12 V), so 1e-9 V bounds it with room
+    np.testing.assert_allclose(c_cmds, py, rtol=0, atol=1e-9)
+    counts = [int(x) for x in lines[desired.shape[0]].split()]
+    # (the C's slew count includes the approach to the trajectory, Python's from it on)
+    assert counts == [comp.outside_count, *comp.saturated_count.tolist(),
+                      *comp.nonfinite_count.tolist()]  # fmt: skip
+    assert comp.outside_count == 100 and comp.saturated_count[0] > 0
+    assert comp.nonfinite_count.tolist() == [2, 2]

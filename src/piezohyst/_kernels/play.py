@@ -430,11 +430,8 @@ def preview_target(desired, k, delay):  # type: ignore[no-untyped-def]
 
 @njit(cache=True, fastmath=FASTMATH)
 def dynamic_process(desired, delay, tables, config, state, dyn, dstate, out):  # type: ignore[no-untyped-def]
-    """``dynamic_step`` over a block; the command at k targets ``desired[k + delay]``.
-
-    The block is the preview of an integer delay: its last ``delay`` targets
-    lie beyond it and are extrapolated linearly from its last two values.
-    """
+    """``dynamic_step`` over a block; the command at k targets ``desired[k + delay]``: the
+    block is its own preview, its last ``delay`` targets extrapolated (``preview_target``)."""
     for k in range(desired.shape[0]):
         out[k] = dynamic_step(preview_target(desired, k, delay), tables, config, state, dyn, dstate)
 
@@ -864,23 +861,15 @@ def controller_process(desired, measured, tables, config, state, ctl, cs, out): 
 
 @njit(cache=True, fastmath=FASTMATH)
 def dynamic_controller_step(reach, target, measured, tables, config, state, ctl, cs, dyn, dstate):  # type: ignore[no-untyped-def]
-    """``controller_step`` with lags (and a delay) between the command and the piezo.
-
-    ``reach`` is the output wanted at this sample, what the next reading is compared
-    with; ``target`` the output the command now must bring (``reach`` itself, or the
-    preview an integer input delay asks for). The feedback's correction joins the
-    target, and ``dynamic_step`` inverts the hysteresis and the lags; the leakage
-    flows at the piezo's voltage (the lag's output), not the command's.
-    """
-    t3, c2, s2 = tables[np.newaxis], config[np.newaxis], state[np.newaxis]
-    ctl2, cs2 = ctl[np.newaxis], cs[np.newaxis]
-    piezo = dstate[1]
-    qc = feedback_measure_at(0, measured, piezo, ctl2, cs2)
+    """``controller_step`` through ``dynamic_step``: the reading compared with ``reach`` (the
+    output wanted now), the command computed for ``target`` (``reach``, or an input delay's
+    preview); the leakage flows at the piezo's voltage (the lag's output), not the command's."""
+    t3, c2, s2, ctl2, cs2 = tables[None], config[None], state[None], ctl[None], cs[None]
+    qc = feedback_measure_at(0, measured, dstate[1], ctl2, cs2)
     if math.isfinite(qc) and cs[CS_STARTED] == 0.0:  # the first measurement sets the frame
         cs[CS_FRAME] = _output_at(0, t3, c2, s2) - qc
         cs[CS_STARTED] = 1.0
-    e = feedback_error_at(0, qc, cs2)
-    d, integral, u = feedback_command_at(0, reach, e, ctl2, cs2)
+    d, integral, u = feedback_command_at(0, reach, feedback_error_at(0, qc, cs2), ctl2, cs2)
     if not math.isfinite(d):  # hold the last safe command (the piezo keeps settling on it)
         return dynamic_step(math.nan, tables, config, state, dyn, dstate)
     u += (target - reach) * ctl[CTL_INV_GAIN]
@@ -890,16 +879,11 @@ def dynamic_controller_step(reach, target, measured, tables, config, state, ctl,
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def dynamic_controller_process(  # type: ignore[no-untyped-def]
-    desired, delay, measured, tables, config, state, ctl, cs, dyn, dstate, out
-):
-    """``dynamic_controller_step`` over a block; the command at k targets
-    ``desired[k + delay]`` (the block its own preview, as ``dynamic_process``)."""
-    for k in range(desired.shape[0]):
-        out[k] = dynamic_controller_step(
-            desired[k], preview_target(desired, k, delay), measured[k],
-            tables, config, state, ctl, cs, dyn, dstate,
-        )  # fmt: skip
+def dynamic_controller_process(d, delay, m, tables, config, state, ctl, cs, dyn, dstate, out):  # type: ignore[no-untyped-def]
+    """``dynamic_controller_step`` over a block, the command at k for ``d[k + delay]``."""
+    for k in range(d.shape[0]):
+        out[k] = dynamic_controller_step(d[k], preview_target(d, k, delay), m[k], tables, config,
+                                         state, ctl, cs, dyn, dstate)  # fmt: skip
 
 
 # ---------------------------------------------------------------------------

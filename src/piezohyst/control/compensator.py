@@ -371,9 +371,22 @@ class Compensator(Tallied):
         return self._inner_step(float(desired))
 
     def delay_target(self, desired: float, preview: ArrayLike | None) -> float:
-        """The output the command sent now must bring, ``delay_samples`` samples on:
-        ``preview[delay_samples - 1]``, or extrapolated linearly from the last two desired
-        values without enough preview (see :meth:`step`); ``desired`` without a delay."""
+        """The output the command sent now must bring, ``delay_samples`` samples on.
+
+        Parameters
+        ----------
+        desired : float
+            The output wanted at this sample (remembered for the next extrapolation).
+        preview : array_like or None
+            The next samples' desired values.
+
+        Returns
+        -------
+        float
+            ``preview[delay_samples - 1]``, or extrapolated linearly from the last two
+            desired values without enough preview (see :meth:`step`); ``desired`` without
+            a delay.
+        """
         m = self.delay_samples
         target = desired
         if m:

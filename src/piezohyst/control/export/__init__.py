@@ -11,6 +11,8 @@ module      what it holds
             LabVIEW or Simulink), :func:`write_mex` (a MEX gateway for MATLAB and Octave),
             :data:`STATUS`, :func:`compiler`, :func:`library_path`
 ``fmu``     :func:`write_fmu`: an FMI 2.0 co-simulation FMU, :func:`fmu_platform`
+``stage_c`` :func:`export_stage_c`, :func:`write_stage_c`, :class:`StageCode`: a coupled
+            stage's compensator, each actuator's step and the coupling's inverse around them
 ``c/``      the hosts' C templates (the shared API, the MEX gateway, the FMI functions)
 ==========  ==============================================================================
 """
@@ -18,17 +20,21 @@ module      what it holds
 from .c_code import CCode, c_paths, export_c, write_c
 from .fmu import fmu_platform, write_fmu
 from .shared import STATUS, compiler, library_path, write_mex, write_shared
+from .stage_c import StageCode, export_stage_c, write_stage_c
 
 __all__ = [
     "STATUS",
     "CCode",
+    "StageCode",
     "c_paths",
     "compiler",
     "export_c",
+    "export_stage_c",
     "fmu_platform",
     "library_path",
     "write_c",
     "write_fmu",
     "write_mex",
     "write_shared",
+    "write_stage_c",
 ]
