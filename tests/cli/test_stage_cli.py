@@ -113,3 +113,27 @@ def test_predict_and_compensate_a_stage_from_the_shell(tmp_path: Path) -> None:
                        "--v-max", "140", "-o", tmp_path / "c2.csv"), "moves 2 axes")  # fmt: skip
     assert_clean_error(run("compensate", model_file, target, "--column", "x,y",
                            "-o", tmp_path / "c3.csv"), code=2)  # fmt: skip
+
+
+def test_export_a_stage_as_c_from_the_shell(tmp_path: Path) -> None:
+    """``export-c`` on a stage's model file writes the stage's C and each actuator's, equal
+    to what ``write_stage_c`` writes in Python; the hosts that do not take a stage yet say so."""
+    data = _stage_file(tmp_path)
+    model_file = tmp_path / "stage.json"
+    assert run("fit", data, "--input", "vx,vy", "--output", "x,y", "-o", model_file).exit_code == 0
+    res = run("export-c", model_file, "--v-min", "0", "--v-max", "140", "--sample-rate", "1000",
+              "-o", tmp_path / "ph_xy.c")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    names = sorted(p.name for p in tmp_path.glob("ph_xy*"))
+    assert names == ["ph_xy.c", "ph_xy.h", "ph_xy_a0.c", "ph_xy_a0.h", "ph_xy_a1.c", "ph_xy_a1.h"]
+    from piezohyst.control.export import export_stage_c
+
+    comp = ph.CoupledCompensator(ph.CoupledModel.load(model_file), v_min=0.0, v_max=140.0,
+                                 sample_rate=1000.0)  # fmt: skip
+    for name, text in export_stage_c(comp, prefix="ph_xy").files.items():
+        assert (tmp_path / name).read_text() == text, name
+    for extra in (["--shared"], ["--mex"], ["--controller"]):
+        assert_clean_error(run("export-c", model_file, "--v-min", "0", "--v-max", "140",
+                               *extra, "-o", tmp_path / "other.c"), code=2)  # fmt: skip
+    assert_clean_error(run("export-c", model_file, "-o", tmp_path / "other.c"), code=2)
+    assert not (tmp_path / "other.c").exists()

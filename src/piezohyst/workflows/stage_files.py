@@ -5,12 +5,15 @@ model file, run on another record, and compensated (:class:`~piezohyst.CoupledCo
 from __future__ import annotations
 
 import dataclasses
+import os
 from collections.abc import Sequence
 
 import numpy as np
 
 from .._validation import FloatArray
 from ..control.coupled import CoupledCompensator
+from ..control.export.c_code import c_paths
+from ..control.export.stage_c import write_stage_c
 from ..errors import DataFileError, ParameterError
 from ..io import DataSpec, read_table, write_table
 from ..model.coupled import COUPLED_FORMAT, CoupledModel
@@ -20,6 +23,7 @@ from ._base import PathLike, guard_outputs
 __all__ = [
     "StageRun",
     "compensate_stage_file",
+    "export_stage_file",
     "fit_stage_file",
     "is_stage_file",
     "predict_stage_file",
@@ -358,3 +362,51 @@ def fit_stage_file(
     if out is not None:
         stage.save(out)
     return stage
+
+
+def export_stage_file(
+    model_path: PathLike,
+    out: PathLike,
+    *,
+    v_min: float,
+    v_max: float,
+    sample_rate: float | None = None,
+    slew_rate: float | str | None = "trained",
+    allow_extrapolation: bool = False,
+    precision: str = "double",
+    force: bool = False,
+) -> list[os.PathLike[str]]:
+    """A coupled stage's compensator as C files (:func:`~piezohyst.control.export.write_stage_c`).
+
+    Parameters
+    ----------
+    model_path : str or os.PathLike
+        A coupled model file.
+    out : str or os.PathLike
+        The stage's ``.c`` file; each actuator's pair goes beside it.
+    v_min, v_max : float
+        Every actuator's voltage limits (V).
+    sample_rate : float, optional
+        Hz (for a slew rate, creep or input dynamics).
+    slew_rate : float, "trained" or None
+    allow_extrapolation : bool
+    precision : {"double", "float"}
+    force : bool
+        Replace existing files piezohyst did not write.
+
+    Returns
+    -------
+    list of Path
+        The files written, the stage's ``.c`` first.
+    """
+    model = _stage(model_path)
+    c_path, h_path, prefix = c_paths(out)
+    names = [c_path, h_path] + [
+        c_path.with_name(f"{prefix}_a{k}{ext}")
+        for k in range(len(model.channels_)) for ext in (".c", ".h")
+    ]  # fmt: skip
+    guard_outputs(names, [model_path], force=force)
+    comp = CoupledCompensator(model, v_min=v_min, v_max=v_max, sample_rate=sample_rate,
+                              slew_rate=slew_rate,  # type: ignore[arg-type]
+                              allow_extrapolation=allow_extrapolation)  # fmt: skip
+    return list(write_stage_c(comp, c_path, precision=precision))  # type: ignore[arg-type]
