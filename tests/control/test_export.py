@@ -184,6 +184,26 @@ int main(void)
 """
 
 
+def _run_controller_c(
+    tmp_path: Path, c_path: Path, desired: np.ndarray, measured: np.ndarray,
+    flags: tuple[str, ...],
+) -> tuple[np.ndarray, tuple[int, ...]]:  # fmt: skip
+    """The exported controller compiled with CONTROLLER_HARNESS, run on (desired, measured):
+    its commands and its counters (nonfinite, saturated, faults, refreshes, extrapolated)."""
+    (tmp_path / "main.c").write_text(CONTROLLER_HARNESS.replace("NAME", "ph_ctl"))
+    exe = tmp_path / "ctl"
+    subprocess.run(
+        [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", *flags, str(c_path),
+         str(tmp_path / "main.c"), "-o", str(exe)],
+        check=True, capture_output=True, text=True,
+    )  # fmt: skip
+    text = "".join(f"{float(d)!r} {float(m)!r}\n" for d, m in zip(desired, measured, strict=True))
+    out = subprocess.run([str(exe)], input=text, check=True, capture_output=True, text=True)
+    lines = out.stdout.split("\n")
+    c_cmds = np.array([float(x) for x in lines[: desired.size]])
+    return c_cmds, tuple(int(x) for x in lines[desired.size].split())
+
+
 @pytest.mark.parametrize(
     ("flags", "refresh", "samples", "atol", "curved"),
     # The kernels may contract and reassociate (FASTMATH), so compiled Python and C part by
@@ -238,20 +258,9 @@ def test_controller_matches_python(
         run = plant.propagate(np.array([py[k]]), None, state)
         state = run.state
         reading = 1.05 * float(run.output[0]) + 4e-11 * k + 1e-9 * rng.standard_normal()
-    (tmp_path / "main.c").write_text(CONTROLLER_HARNESS.replace("NAME", "ph_ctl"))
-    exe = tmp_path / "ctl"
-    subprocess.run(
-        [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", *flags, str(c_path),
-         str(tmp_path / "main.c"), "-o", str(exe)],
-        check=True, capture_output=True, text=True,
-    )  # fmt: skip
-    text = "".join(f"{float(d)!r} {float(m)!r}\n" for d, m in zip(desired, measured, strict=True))
-    out = subprocess.run([str(exe)], input=text, check=True, capture_output=True, text=True)
-    lines = out.stdout.split("\n")
-    c_cmds = np.array([float(x) for x in lines[: desired.size]])
+    c_cmds, counters = _run_controller_c(tmp_path, c_path, desired, measured, flags)
     # tol: as chosen per case above (a replay of ulp differences)
     np.testing.assert_allclose(c_cmds, py, rtol=0, atol=atol)
-    counters = tuple(int(x) for x in lines[desired.size].split())
     assert counters == (
         ctl.nonfinite_count,
         ctl.saturated_count,
@@ -294,19 +303,9 @@ def test_the_controller_through_an_amplifiers_lag_matches_python(tmp_path: Path)
     measured = desired * 1.03 + 2e-9 * rng.standard_normal(desired.size)
     measured[::97] = np.nan
     py = np.array([ctl.step(d, m) for d, m in zip(desired, measured, strict=True)])
-    (tmp_path / "main.c").write_text(CONTROLLER_HARNESS.replace("NAME", "ph_ctl"))
-    exe = tmp_path / "ctl"
-    subprocess.run(
-        [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", str(c_path),
-         str(tmp_path / "main.c"), "-o", str(exe)],
-        check=True, capture_output=True, text=True,
-    )  # fmt: skip
-    text = "".join(f"{float(d)!r} {float(m)!r}\n" for d, m in zip(desired, measured, strict=True))
-    out = subprocess.run([str(exe)], input=text, check=True, capture_output=True, text=True)
-    lines = out.stdout.split("\n")
+    c_cmds, counters = _run_controller_c(tmp_path, c_path, desired, measured, ("-O2",))
     # tol: a replay of ulp differences (FASTMATH kernels against the C), as the test above
-    np.testing.assert_allclose([float(x) for x in lines[: desired.size]], py, rtol=0, atol=5e-8)
-    counters = tuple(int(x) for x in lines[desired.size].split())
+    np.testing.assert_allclose(c_cmds, py, rtol=0, atol=5e-8)
     assert counters[:3] == (ctl.nonfinite_count, ctl.saturated_count, ctl.measurement_faults)
     assert ctl.nonfinite_count == 2 and ctl.saturated_count > 0 and ctl.measurement_faults > 0
     delayed = ph.ActivePI(8, input_dynamics="delay+first-order").fit(

@@ -337,22 +337,11 @@ def fit_stage_file(
         raise ParameterError(msg)
     if out is not None:
         guard_outputs([out], [data], force=force)
-    spec = data_spec or DataSpec()
-    recs = [
-        dataclasses.replace(spec, input_column=i, output_column=o).read(data)
-        for i, o in zip(inputs, outputs, strict=True)
-    ]
-    w = recs[0].window
-    t = recs[0].t[w]
-    for rec in recs[1:]:
-        if rec.t[rec.window].shape != t.shape or not np.array_equal(rec.t[rec.window], t):
-            msg = f"{data}: the columns' time axes differ (rows dropped from one, not another?)"
-            raise DataFileError(msg)
-    u = np.column_stack([rec.x[rec.window] for rec in recs])
-    y = np.column_stack([rec.y[rec.window] for rec in recs if rec.y is not None])
+    t, u, y, unit = _read_stage(data, inputs, outputs, data_spec or DataSpec())
+    assert y is not None  # outputs given: read or refused
     cls = model_class(model)
     accepted = cls().get_params()
-    settings: dict[str, object] = {"output_unit": recs[0].units[1] or "m"}
+    settings: dict[str, object] = {"output_unit": unit or "m"}
     if "n_operators" in accepted:
         settings["n_operators"] = operators
     elif operators != 10:
