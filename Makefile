@@ -11,7 +11,7 @@ OUT    ?= demo-report
 $(BIN)/.installed: pyproject.toml
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "piezohyst needs Python >= 3.11, found " + sys.version.split()[0]'
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[test]'
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check --no-compile -e '.[test]'
 	@touch $@
 
 demo: $(BIN)/.installed
@@ -24,8 +24,9 @@ lint: $(BIN)/.installed
 	$(BIN)/lint-imports
 
 # The tests, as CI runs them (.ci/run calls this target):
-#  0. the numba kernels the tests call compiled into numba's cache, half on each core
-#     (tests/kernel_warmup.py): on a fresh clone each worker compiled nearly all of them;
+#  0. the linters, and beside them the numba kernels the tests call compiled into numba's
+#     cache, half on each core (tests/kernel_warmup.py): on a fresh clone each worker
+#     compiled nearly all of them, the same work once per core;
 #  1. every test once, compiled, on two workers (a file's tests on one: its module fixtures
 #     are built once), under coverage: numba's compiled kernels are invisible to coverage, so
 #     their lines count in step 2 only;
@@ -42,10 +43,14 @@ ONE_THREAD := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 # this workplace's machines): the tests start piezohyst and Python processes (the console
 # script, the docs' shell blocks), and each compiled the package's sources again (a CLI
 # process: 0.48 s with its bytecode, 0.70-0.74 s without). Written under src/, ignored by git.
+# So the install compiles none (--no-compile): pip compiled every module of every dependency
+# (89 s against 56 s on a 2-core Xeon), the first process to import one now compiles it.
 export PYTHONDONTWRITEBYTECODE :=
-test: lint
+test: $(BIN)/.installed
 	@rm -f .coverage .coverage.*
-	$(ONE_THREAD) $(BIN)/python tests/kernel_warmup.py warm
+	$(ONE_THREAD) $(BIN)/python tests/kernel_warmup.py warm & warm=$$!; \
+		$(MAKE) --no-print-directory lint || { kill $$warm; exit 1; }; \
+		wait $$warm
 	$(ONE_THREAD) $(BIN)/python -m pytest -n 2 --dist loadfile -p no:cacheprovider -rs --durations=10 --cov --cov-report=
 	$(ONE_THREAD) NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q -n 2 --dist loadfile -p no:cacheprovider -m kernel_paths \
 		--cov --cov-append --cov-report= tests
