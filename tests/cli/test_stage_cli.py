@@ -10,7 +10,7 @@ import numpy as np
 import piezohyst as ph
 from piezohyst.simulation import XY_COUPLING, make_signal, simulate_stage
 
-from ..helpers import assert_clean_error, one_line_error, run
+from ..helpers import CC, assert_clean_error, one_line_error, run
 
 
 def _stage_file(tmp_path: Path) -> Path:
@@ -117,7 +117,8 @@ def test_predict_and_compensate_a_stage_from_the_shell(tmp_path: Path) -> None:
 
 def test_export_a_stage_as_c_from_the_shell(tmp_path: Path) -> None:
     """``export-c`` on a stage's model file writes the stage's C and each actuator's, equal
-    to what ``write_stage_c`` writes in Python; the hosts that do not take a stage yet say so."""
+    to what ``write_stage_c`` writes in Python, and with --shared its library; the hosts that
+    do not take a stage yet say so."""
     data = _stage_file(tmp_path)
     model_file = tmp_path / "stage.json"
     assert run("fit", data, "--input", "vx,vy", "--output", "x,y", "-o", model_file).exit_code == 0
@@ -132,7 +133,12 @@ def test_export_a_stage_as_c_from_the_shell(tmp_path: Path) -> None:
                                  sample_rate=1000.0)  # fmt: skip
     for name, text in export_stage_c(comp, prefix="ph_xy").files.items():
         assert (tmp_path / name).read_text() == text, name
-    for extra in (["--shared"], ["--mex"], ["--controller"]):
+    if CC is not None:  # the library needs the system C compiler
+        res = run("export-c", model_file, "--v-min", "0", "--v-max", "140", "--sample-rate",
+                  "1000", "--shared", "--force", "-o", tmp_path / "ph_xy.c")  # fmt: skip
+        assert res.exit_code == 0, res.output
+        assert "libph_xy" in res.output and list(tmp_path.glob("libph_xy.*"))
+    for extra in (["--mex"], ["--controller"]):
         assert_clean_error(run("export-c", model_file, "--v-min", "0", "--v-max", "140",
                                *extra, "-o", tmp_path / "other.c"), code=2)  # fmt: skip
     assert_clean_error(run("export-c", model_file, "-o", tmp_path / "other.c"), code=2)

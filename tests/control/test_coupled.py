@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import piezohyst as ph
-from piezohyst.control.export import write_stage_c
+from piezohyst.control.export import write_stage_c, write_stage_shared
 from piezohyst.errors import IdentifiabilityWarning
 from piezohyst.metrics import hysteresis_width
 from piezohyst.simulation import XY_COUPLING, make_signal, simulate_stage
@@ -269,3 +269,44 @@ def test_the_stage_in_c_equals_python(
                       *comp.nonfinite_count.tolist()]  # fmt: skip
     assert comp.outside_count == 100 and comp.saturated_count[0] > 0
     assert comp.nonfinite_count.tolist() == [2, 2]
+
+
+@pytest.mark.skipif(CC is None, reason="no C compiler on this machine")
+@pytest.mark.filterwarnings("ignore::piezohyst.errors.LimitWarning")  # out of reach on purpose
+def test_the_stage_as_a_shared_library_equals_python(
+    stage: tuple[ph.CoupledModel, np.ndarray], tmp_path: Path
+) -> None:
+    """The stage's library through ctypes (as LabVIEW or MATLAB's loadlibrary call it): the
+    commands of a raster equal Python's to 1e-9 V, the counts equal, a reset starts again."""
+    import ctypes
+
+    model, _ = stage
+    comp = ph.CoupledCompensator(model, v_min=0.0, v_max=140.0, sample_rate=FS, slew_rate=2e4)
+    _, lib_path = write_stage_shared(comp, tmp_path / "ph_xy.c")
+    (x0, x1), (y0, y1) = comp.reach
+    k = np.arange(2000)
+    tri = np.abs(((k / FS * 2.0) % 1.0) * 2 - 1)
+    desired = np.column_stack([x0 + (x1 - x0) * (0.2 + 0.6 * tri), np.full(k.size, (y0 + y1) / 2)])
+    desired[700:760, 1] = y1 + 0.3 * (y1 - y0)  # beyond y's reach
+    desired[900, 0] = np.nan
+    py = comp.process(desired)
+    lib = ctypes.CDLL(str(lib_path))
+    lib.ph_xy_new.restype = ctypes.c_void_p
+    lib.ph_xy_process.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_long]
+    lib.ph_xy_counts.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
+    lib.ph_xy_reset.argtypes = lib.ph_xy_free.argtypes = [ctypes.c_void_p]
+    handle = lib.ph_xy_new()
+    target = np.ascontiguousarray(desired)
+    volts = np.empty((k.size, 2))
+    for _ in range(2):  # the second time after a reset: the same
+        assert lib.ph_xy_process(handle, target.ctypes.data, volts.ctypes.data, k.size) == 0
+        # tol: an ulp per step of a feedforward step (not integrated), as the C test above
+        np.testing.assert_allclose(volts, py, rtol=0, atol=1e-9)
+        counts = np.zeros(7, dtype=np.uint64)
+        assert lib.ph_xy_counts(handle, counts.ctypes.data) == 0
+        assert counts[0] == comp.outside_count == 60
+        assert counts[[1, 4]].tolist() == comp.nonfinite_count.tolist() == [1, 1]
+        assert counts[[2, 5]].tolist() == comp.saturated_count.tolist()
+        lib.ph_xy_reset(handle)
+    assert lib.ph_xy_process(handle, None, volts.ctypes.data, 1) == -1
+    lib.ph_xy_free(handle)

@@ -59,7 +59,7 @@ def _export(
     precision: Literal["float", "double"] = "float" if use_float else "double"
     if is_stage_file(model):  # a coupled stage: its C, the coupling's inverse around each step
         flags = [f for f, on in (("--controller", controller is not None),
-                                 ("--shared", build.get("shared")), ("--mex", build.get("mex")),
+                                 ("--mex", build.get("mex")),
                                  ("export-fmu", out.suffix == ".fmu")) if on]  # fmt: skip
         if flags or settings.v_min is None or settings.v_max is None:
             raise click.UsageError(
@@ -70,7 +70,7 @@ def _export(
             model, out, v_min=settings.v_min, v_max=settings.v_max,  # type: ignore[arg-type]
             sample_rate=settings.sample_rate, slew_rate=settings.slew_rate,
             allow_extrapolation=settings.allow_extrapolation, precision=precision,
-            force=bool(build.get("force")))))  # fmt: skip
+            shared=bool(build.get("shared")), force=bool(build.get("force")))))  # fmt: skip
     paths: tuple[Path, ...] = _run(
         ctx,
         lambda: export_file(

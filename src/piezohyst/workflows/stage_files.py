@@ -13,7 +13,7 @@ import numpy as np
 from .._validation import FloatArray
 from ..control.coupled import CoupledCompensator
 from ..control.export.c_code import c_paths
-from ..control.export.stage_c import write_stage_c
+from ..control.export.stage_c import write_stage_c, write_stage_shared
 from ..errors import DataFileError, ParameterError
 from ..io import DataSpec, read_table, write_table
 from ..model.coupled import COUPLED_FORMAT, CoupledModel
@@ -363,9 +363,11 @@ def export_stage_file(
     slew_rate: float | str | None = "trained",
     allow_extrapolation: bool = False,
     precision: str = "double",
+    shared: bool = False,
     force: bool = False,
 ) -> list[os.PathLike[str]]:
-    """A coupled stage's compensator as C files (:func:`~piezohyst.control.export.write_stage_c`).
+    """A coupled stage's compensator as C files (:func:`~piezohyst.control.export.write_stage_c`),
+    and with ``shared`` its library (:func:`~piezohyst.control.export.write_stage_shared`).
 
     Parameters
     ----------
@@ -380,13 +382,15 @@ def export_stage_file(
     slew_rate : float, "trained" or None
     allow_extrapolation : bool
     precision : {"double", "float"}
+    shared : bool
+        Also build the shared library (the system C compiler).
     force : bool
         Replace existing files piezohyst did not write.
 
     Returns
     -------
     list of Path
-        The files written, the stage's ``.c`` first.
+        The files written, the stage's ``.c`` first (the library last).
     """
     model = _stage(model_path)
     c_path, h_path, prefix = c_paths(out)
@@ -398,4 +402,7 @@ def export_stage_file(
     comp = CoupledCompensator(model, v_min=v_min, v_max=v_max, sample_rate=sample_rate,
                               slew_rate=slew_rate,  # type: ignore[arg-type]
                               allow_extrapolation=allow_extrapolation)  # fmt: skip
+    if shared:
+        files, lib = write_stage_shared(comp, c_path, precision=precision)  # type: ignore[arg-type]
+        return [*files, lib]
     return list(write_stage_c(comp, c_path, precision=precision))  # type: ignore[arg-type]

@@ -11,8 +11,9 @@ module      what it holds
             LabVIEW or Simulink), :func:`write_mex` (a MEX gateway for MATLAB and Octave),
             :data:`STATUS`, :func:`compiler`, :func:`library_path`
 ``fmu``     :func:`write_fmu`: an FMI 2.0 co-simulation FMU, :func:`fmu_platform`
-``stage_c`` :func:`export_stage_c`, :func:`write_stage_c`, :class:`StageCode`: a coupled
-            stage's compensator, each actuator's step and the coupling's inverse around them
+``stage_c`` :func:`export_stage_c`, :func:`write_stage_c`, :func:`write_stage_shared`,
+            :class:`StageCode`: a coupled stage's compensator, each actuator's step and the
+            coupling's inverse around them, and its shared library
 ``c/``      the hosts' C templates (the shared API, the MEX gateway, the FMI functions)
 ==========  ==============================================================================
 """
@@ -20,7 +21,7 @@ module      what it holds
 from .c_code import CCode, c_paths, export_c, write_c
 from .fmu import fmu_platform, write_fmu
 from .shared import STATUS, compiler, library_path, write_mex, write_shared
-from .stage_c import StageCode, export_stage_c, write_stage_c
+from .stage_c import StageCode, export_stage_c, write_stage_c, write_stage_shared
 
 __all__ = [
     "STATUS",
@@ -37,4 +38,5 @@ __all__ = [
     "write_mex",
     "write_shared",
     "write_stage_c",
+    "write_stage_shared",
 ]

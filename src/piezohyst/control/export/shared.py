@@ -180,14 +180,32 @@ def write_shared(
     atomic_write_text(h_path, header)
     atomic_write_text(c_path, code.source + definitions)
     lib = library_path(c_path, prefix)
+    build_library([c_path], lib)
+    return c_path, h_path, lib
+
+
+def build_library(sources: list[Path], lib: Path) -> None:
+    """Compile ``sources`` into the shared library ``lib`` with the system C compiler.
+
+    Parameters
+    ----------
+    sources : list of Path
+        C files, one translation unit each.
+    lib : Path
+        The library to write.
+
+    Raises
+    ------
+    ParameterError
+        No C compiler, or a build that fails (its first error named).
+    """
     cmd = [compiler(), "-std=c99", "-O2", "-shared", "-fPIC", "-fvisibility=hidden",
-           str(c_path), "-o", str(lib), "-lm"]  # fmt: skip
+           *(str(p) for p in sources), "-o", str(lib), "-lm"]  # fmt: skip
     done = subprocess.run(cmd, capture_output=True, text=True, check=False)
     if done.returncode != 0:
         first = next((ln for ln in done.stderr.splitlines() if "error" in ln), done.stderr)
         msg = f"building {lib.name} failed: {first.strip()}"
         raise ParameterError(msg)
-    return c_path, h_path, lib
 
 
 def _mex_gateway(name: str, prefix: str, controller: bool, what: str) -> str:

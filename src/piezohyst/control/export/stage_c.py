@@ -22,7 +22,7 @@ from ..c_text import CText, Precision
 from ..coupled import REACH_SLACK, CoupledCompensator
 from .c_code import c_paths, export_c
 
-__all__ = ["StageCode", "export_stage_c", "write_stage_c"]
+__all__ = ["StageCode", "export_stage_c", "write_stage_c", "write_stage_shared"]
 
 
 def _template(name: str) -> Template:
@@ -132,3 +132,55 @@ def write_stage_c(
         atomic_write_text(out, code.files[name])
         written.append(out)
     return written
+
+
+def write_stage_shared(
+    compensator: CoupledCompensator,
+    path: str | os.PathLike[str],
+    *,
+    precision: Precision = "double",
+) -> tuple[list[Path], Path]:
+    """The stage's C files (:func:`write_stage_c`) with a shared-library API, and the library.
+
+    The API (doubles, row by row): ``NAME_new``, ``NAME_free``, ``NAME_reset``,
+    ``int NAME_process(NAME_t *s, const double *target, double *volts, long n)`` (``target``
+    n rows of one position per axis, ``volts`` n rows of one command per actuator),
+    ``int NAME_counts(const NAME_t *s, unsigned long *counts)`` (the out-of-reach count,
+    then per actuator its non-finite targets, voltage-limit and slew counts),
+    ``NAME_version``.
+
+    Parameters
+    ----------
+    compensator : CoupledCompensator
+    path : str or os.PathLike
+        The stage's ``.c`` file; the other files and the library go beside it.
+    precision : {"double", "float"}
+        The C type of the steps' reals (the API takes and returns doubles).
+
+    Returns
+    -------
+    tuple
+        The files written (the stage's ``.c`` first), and the library.
+
+    Raises
+    ------
+    ParameterError
+        No C compiler, or a build that fails (its first error named).
+    """
+    from .shared import _version_text, build_library, library_path
+
+    c_path, _, prefix = c_paths(path)
+    files = write_stage_c(compensator, c_path, precision=precision)
+    n, m = len(compensator.compensators), compensator.model.coupling_.shape[0]
+    count_lines = "\n".join(
+        f"    counts[{1 + 3 * k + j}] = s->a{k}.{field};"
+        for k in range(n) for j, field in enumerate(("nonfinite", "saturated", "slewed"))
+    )  # fmt: skip
+    api = _template("stage_api.c").substitute(
+        prefix=prefix, n=n, m=m, counts=1 + 3 * n, count_lines=count_lines,
+        version=_version_text(f"{prefix}, the compensator of a stage of {n} actuators"),
+    )  # fmt: skip
+    atomic_write_text(c_path, c_path.read_text() + api)
+    lib = library_path(c_path, prefix)
+    build_library([p for p in files if p.suffix == ".c"], lib)
+    return files, lib

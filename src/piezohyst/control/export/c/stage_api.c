@@ -1,0 +1,77 @@
+/* A template (piezohyst.control.export.stage_c): the dollar-brace names are filled in at
+ * export. */
+
+/* ---- shared-library API of a coupled stage (piezohyst.control.export.write_stage_shared) */
+#include <stdlib.h>
+#if defined(_WIN32)
+#define PH_EXPORT __declspec(dllexport)
+#else
+#define PH_EXPORT __attribute__((visibility("default")))
+#endif
+
+/* A handle in the exported state; NULL if memory ran out. */
+PH_EXPORT ${prefix}_t *${prefix}_new(void)
+{
+    ${prefix}_t *s = (${prefix}_t *)malloc(sizeof(${prefix}_t));
+    if (s != NULL) {
+        ${prefix}_init(s);
+    }
+    return s;
+}
+
+PH_EXPORT void ${prefix}_free(${prefix}_t *s)
+{
+    free(s);
+}
+
+/* Back to the exported state (the counts too). */
+PH_EXPORT void ${prefix}_reset(${prefix}_t *s)
+{
+    if (s != NULL) {
+        ${prefix}_init(s);
+    }
+}
+
+/* n samples: target holds n rows of ${m} desired positions, volts gets n rows of ${n}
+ * commands (V), both row by row. 0; -1 for a NULL pointer, -2 for n < 0. */
+PH_EXPORT int ${prefix}_process(${prefix}_t *s, const double *target, double *volts, long n)
+{
+    ${prefix}_real d[${m}], v[${n}];
+    long k;
+    int i;
+    if (s == NULL || target == NULL || volts == NULL) {
+        return -1;
+    }
+    if (n < 0) {
+        return -2;
+    }
+    for (k = 0; k < n; ++k) {
+        for (i = 0; i < ${m}; ++i) {
+            d[i] = (${prefix}_real)target[k * ${m} + i];
+        }
+        ${prefix}_step(s, d, v);
+        for (i = 0; i < ${n}; ++i) {
+            volts[k * ${n} + i] = (double)v[i];
+        }
+    }
+    return 0;
+}
+
+/* What the limits held since the last reset: counts[0] desired positions beyond the
+ * stage's reach, then per actuator k: counts[1 + 3k] non-finite targets (held),
+ * counts[2 + 3k] commands at a voltage limit, counts[3 + 3k] commands cut by the slew
+ * limit. 0; -1 for a NULL pointer. */
+PH_EXPORT int ${prefix}_counts(const ${prefix}_t *s, unsigned long counts[${counts}])
+{
+    if (s == NULL || counts == NULL) {
+        return -1;
+    }
+    counts[0] = s->outside;
+${count_lines}
+    return 0;
+}
+
+PH_EXPORT const char *${prefix}_version(void)
+{
+    return "${version}";
+}
