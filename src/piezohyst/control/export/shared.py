@@ -100,7 +100,9 @@ const char *{prefix}_version(void);
 }}
 #endif
 """
-    definitions = _c_template("shared_api.c").substitute(
+    definitions = _c_template("handle.c").substitute(prefix=prefix) + _c_template(
+        "shared_api.c"
+    ).substitute(
         prefix=prefix,
         charge_arg=charge_arg,
         charge_null=charge_null,

@@ -176,7 +176,7 @@ def write_stage_shared(
         f"    counts[{1 + 3 * k + j}] = s->a{k}.{field};"
         for k in range(n) for j, field in enumerate(("nonfinite", "saturated", "slewed"))
     )  # fmt: skip
-    api = _template("stage_api.c").substitute(
+    api = _template("handle.c").substitute(prefix=prefix) + _template("stage_api.c").substitute(
         prefix=prefix, n=n, m=m, counts=1 + 3 * n, count_lines=count_lines,
         version=_version_text(f"{prefix}, the compensator of a stage of {n} actuators"),
     )  # fmt: skip

@@ -2,36 +2,6 @@
  * A template: the dollar-brace names are filled in at export. */
 
 /* ---- shared-library API (piezohyst export-c --shared) ---- */
-#include <stdlib.h>
-#if defined(_WIN32)
-#define PH_EXPORT __declspec(dllexport)
-#else
-#define PH_EXPORT __attribute__((visibility("default")))
-#endif
-
-/* A handle in the exported state; NULL if memory ran out. */
-PH_EXPORT ${prefix}_t *${prefix}_new(void)
-{
-    ${prefix}_t *s = (${prefix}_t *)malloc(sizeof(${prefix}_t));
-    if (s != NULL) {
-        ${prefix}_init(s);
-    }
-    return s;
-}
-
-PH_EXPORT void ${prefix}_free(${prefix}_t *s)
-{
-    free(s);
-}
-
-/* Back to the exported state (the counters too). */
-PH_EXPORT void ${prefix}_reset(${prefix}_t *s)
-{
-    if (s != NULL) {
-        ${prefix}_init(s);
-    }
-}
-
 /* n commands (V) into volts: 0; -1 for a NULL pointer, -2 for n < 0. */
 PH_EXPORT int ${prefix}_process(${prefix}_t *s, const double *target, ${charge_arg}double *volts,
                                long n)

@@ -2,36 +2,6 @@
  * export. */
 
 /* ---- shared-library API of a coupled stage (piezohyst.control.export.write_stage_shared) */
-#include <stdlib.h>
-#if defined(_WIN32)
-#define PH_EXPORT __declspec(dllexport)
-#else
-#define PH_EXPORT __attribute__((visibility("default")))
-#endif
-
-/* A handle in the exported state; NULL if memory ran out. */
-PH_EXPORT ${prefix}_t *${prefix}_new(void)
-{
-    ${prefix}_t *s = (${prefix}_t *)malloc(sizeof(${prefix}_t));
-    if (s != NULL) {
-        ${prefix}_init(s);
-    }
-    return s;
-}
-
-PH_EXPORT void ${prefix}_free(${prefix}_t *s)
-{
-    free(s);
-}
-
-/* Back to the exported state (the counts too). */
-PH_EXPORT void ${prefix}_reset(${prefix}_t *s)
-{
-    if (s != NULL) {
-        ${prefix}_init(s);
-    }
-}
-
 /* n samples: target holds n rows of ${m} desired positions, volts gets n rows of ${n}
  * commands (V), both row by row. 0; -1 for a NULL pointer, -2 for n < 0. */
 PH_EXPORT int ${prefix}_process(${prefix}_t *s, const double *target, double *volts, long n)
