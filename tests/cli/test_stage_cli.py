@@ -138,6 +138,14 @@ def test_export_a_stage_as_c_from_the_shell(tmp_path: Path) -> None:
                   "1000", "--shared", "--force", "-o", tmp_path / "ph_xy.c")  # fmt: skip
         assert res.exit_code == 0, res.output
         assert "libph_xy" in res.output and list(tmp_path.glob("libph_xy.*"))
+        res = run("export-fmu", model_file, "--v-min", "0", "--v-max", "140", "--sample-rate",
+                  "1000", "-o", tmp_path / "ph_xy.fmu")  # fmt: skip
+        assert res.exit_code == 0, res.output
+        from fmpy import read_model_description
+
+        md = read_model_description(str(tmp_path / "ph_xy.fmu"))
+        names = {v.name for v in md.modelVariables}
+        assert {"target_0", "target_1", "voltage_0", "voltage_1", "outside"} <= names
     for extra in (["--mex"], ["--controller"]):
         assert_clean_error(run("export-c", model_file, "--v-min", "0", "--v-max", "140",
                                *extra, "-o", tmp_path / "other.c"), code=2)  # fmt: skip

@@ -59,12 +59,11 @@ def _export(
     precision: Literal["float", "double"] = "float" if use_float else "double"
     if is_stage_file(model):  # a coupled stage: its C, the coupling's inverse around each step
         flags = [f for f, on in (("--controller", controller is not None),
-                                 ("--mex", build.get("mex")),
-                                 ("export-fmu", out.suffix == ".fmu")) if on]  # fmt: skip
+                                 ("--mex", build.get("mex"))) if on]  # fmt: skip
         if flags or settings.v_min is None or settings.v_max is None:
             raise click.UsageError(
-                "a stage's model file exports as C source with --v-min and --v-max (V, every "
-                f"actuator); {', '.join(flags) or 'the limits'}: not for a stage yet"
+                "a stage's model file exports (C, --shared, export-fmu) with --v-min and --v-max "
+                f"(V, every actuator); {', '.join(flags) or 'the limits'}: not for a stage yet"
             )
         return tuple(_run(ctx, lambda: export_stage_file(
             model, out, v_min=settings.v_min, v_max=settings.v_max,  # type: ignore[arg-type]

@@ -13,7 +13,7 @@ import numpy as np
 from .._validation import FloatArray
 from ..control.coupled import CoupledCompensator
 from ..control.export.c_code import c_paths
-from ..control.export.stage_c import write_stage_c, write_stage_shared
+from ..control.export.stage_c import write_stage_c, write_stage_fmu, write_stage_shared
 from ..errors import DataFileError, ParameterError
 from ..io import DataSpec, read_table, write_table
 from ..model.coupled import COUPLED_FORMAT, CoupledModel
@@ -367,7 +367,8 @@ def export_stage_file(
     force: bool = False,
 ) -> list[os.PathLike[str]]:
     """A coupled stage's compensator as C files (:func:`~piezohyst.control.export.write_stage_c`),
-    and with ``shared`` its library (:func:`~piezohyst.control.export.write_stage_shared`).
+    with ``shared`` its library (:func:`~piezohyst.control.export.write_stage_shared`), or
+    where ``out`` ends in ``.fmu`` an FMU (:func:`~piezohyst.control.export.write_stage_fmu`).
 
     Parameters
     ----------
@@ -393,6 +394,12 @@ def export_stage_file(
         The files written, the stage's ``.c`` first (the library last).
     """
     model = _stage(model_path)
+    if str(out).endswith(".fmu"):  # an FMU: two target inputs... one voltage per actuator
+        guard_outputs([out], [model_path], force=force)
+        comp = CoupledCompensator(model, v_min=v_min, v_max=v_max, sample_rate=sample_rate,
+                                  slew_rate=slew_rate,  # type: ignore[arg-type]
+                                  allow_extrapolation=allow_extrapolation)  # fmt: skip
+        return [write_stage_fmu(comp, out, precision=precision)]  # type: ignore[arg-type]
     c_path, h_path, prefix = c_paths(out)
     names = [c_path, h_path] + [
         c_path.with_name(f"{prefix}_a{k}{ext}")

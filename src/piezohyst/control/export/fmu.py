@@ -74,14 +74,64 @@ def _wrapper(prefix: str, controller: bool, period: float, what: str) -> str:
         if controller
         else f"{prefix}_step(&c->s, ({prefix}_real)c->r[0])"
     )
+    return fmi2_wrapper(
+        prefix, period, what, n_real=n_real,
+        layout="0 target, 1 voltage, 2 charge", not_input="vr[i] == 1",
+        inputs="target, charge" if controller else "target",
+        counts=("c->s.nonfinite", "c->s.saturated", "c->s.slewed", "c->s.extrapolated"),
+        counts_said="0 non-finite targets, 1 targets out of reach,\n * 2 commands cut by the "
+        "slew limit, 3 targets beyond the output map's calibrated range",
+        step_statement=f"c->r[1] = (fmi2Real){step_call}",
+        start_outputs="c->r[0] = 0.0;\n    c->r[1] = (fmi2Real)c->s.last;"
+        + ("\n    c->r[2] = 0.0;" if controller else ""),
+    )  # fmt: skip
+
+
+def fmi2_wrapper(
+    prefix: str, period: float, what: str, *, n_real: int, layout: str, not_input: str,
+    inputs: str, counts: tuple[str, ...], counts_said: str, step_statement: str,
+    start_outputs: str,
+) -> str:  # fmt: skip
+    """The FMI 2.0 Co-Simulation functions (``c/fmi2_cs.c``) around a step: its real
+    variables (``n_real``, the inputs where ``not_input`` is false), its integer counts (C
+    expressions on the state ``c->s``, value references 0, 1, ...), and the statement a step
+    runs (it reads the inputs from ``c->r`` and writes the outputs there).
+
+    Parameters
+    ----------
+    prefix : str
+    period : float
+        The step (s).
+    what : str
+        One line naming what the FMU holds.
+    n_real : int
+    layout : str
+        The real variables, said in a comment.
+    not_input : str
+        A C expression of ``vr[i]``: true for a real that is an output.
+    inputs : str
+        The inputs' names, for a refusal.
+    counts : tuple of str
+    counts_said : str
+        The counts, said in a comment.
+    step_statement : str
+    start_outputs : str
+        The statements that set every real variable at the start (the outputs: the commands
+        of the exported state).
+
+    Returns
+    -------
+    str
+    """
+    chain = counts[-1]
+    for k in range(len(counts) - 2, -1, -1):
+        chain = f"vr[i] == {k} ? {counts[k]} : {chain}"
     return _c_template("fmi2_cs.c").substitute(
-        what=what,
-        prefix=prefix,
-        period=repr(period),
-        n_real=n_real,
-        STEP_TOLERANCE=repr(STEP_TOLERANCE),
-        step_call=step_call,
-    )
+        what=what, prefix=prefix, period=repr(period), n_real=n_real,
+        STEP_TOLERANCE=repr(STEP_TOLERANCE), layout=layout, not_input=not_input,
+        inputs=inputs, last_count=len(counts) - 1, count_of=chain, counts_said=counts_said,
+        step_statement=step_statement, start_outputs=start_outputs,
+    )  # fmt: skip
 
 
 def _model_description(
@@ -186,8 +236,6 @@ def write_fmu(
     ParameterError
         No sample rate, an output mode, a model the C export does not cover, no C compiler.
     """
-    from ...io import atomic_write
-
     comp = cast(Compensator, getattr(compensator, "compensator", compensator))
     controller = comp is not compensator
     if comp.sample_rate is None:
@@ -215,13 +263,45 @@ def write_fmu(
     source = source.replace(f'"{{{name}-GUID}}"', f'"{guid}"')
     unit = "m" if comp.domain == "displacement" else comp.spec.output_unit
     xml = _model_description(name, guid, controller, period, unit, what)
+    return package_fmu(out, name, {f"{name}.c": source, code.header_name: code.header}, xml, what)
+
+
+def package_fmu(out: Path, name: str, files: dict[str, str], xml: str, what: str) -> Path:
+    """Build an FMU's binary from its C ``files`` (every ``.c`` a translation unit) and zip it
+    with ``modelDescription.xml``, the sources and a page saying how to build them elsewhere.
+
+    Parameters
+    ----------
+    out : Path
+        The ``.fmu`` file, written atomically.
+    name : str
+        The model identifier (the binary's name).
+    files : dict of str to str
+        The sources and headers, by file name.
+    xml : str
+        The model description.
+    what : str
+        One line naming what the FMU holds.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ParameterError
+        No C compiler, or a build that fails.
+    """
+    from ...io import atomic_write
+
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        (folder / f"{name}.c").write_text(source, encoding="utf-8")
-        (folder / code.header_name).write_text(code.header, encoding="utf-8")
+        for file, text in files.items():
+            (folder / file).write_text(text, encoding="utf-8")
+        sources = [file for file in files if file.endswith(".c")]
         binary = folder / f"{name}{'.dll' if sys.platform == 'win32' else '.so'}"
         cmd = [compiler(), "-std=c99", "-O2", "-shared", "-fPIC", "-fvisibility=hidden",
-               str(folder / f"{name}.c"), "-o", str(binary), "-lm"]  # fmt: skip
+               *(str(folder / f) for f in sources), "-o", str(binary), "-lm"]  # fmt: skip
         done = subprocess.run(cmd, capture_output=True, text=True, check=False)
         if done.returncode != 0:
             first = next((ln for ln in done.stderr.splitlines() if "error" in ln), done.stderr)
@@ -231,14 +311,14 @@ def write_fmu(
         with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as z:
             z.writestr("modelDescription.xml", xml)
             z.write(binary, f"binaries/{fmu_platform()}/{binary.name}")
-            z.write(folder / f"{name}.c", f"sources/{name}.c")
-            z.write(folder / code.header_name, f"sources/{code.header_name}")
+            for file in files:
+                z.write(folder / file, f"sources/{file}")
             z.writestr(
                 "documentation/index.html",
                 f"<html><body><h1>{escape(name)}</h1><p>{escape(what)}; built by piezohyst "
                 f"{__version__} on {platform.system()} {platform.machine()}. Build for another "
-                f"platform from sources/ (C99): cc -shared -fPIC -O2 {name}.c -o {name}.so -lm "
-                "(Linux), cl /LD /O2 (Windows).</p></body></html>",
+                f"platform from sources/ (C99): cc -shared -fPIC -O2 {' '.join(sources)} -o "
+                f"{name}.so -lm (Linux), cl /LD /O2 (Windows).</p></body></html>",
             )
         data = buffer.read_bytes()
 

@@ -9,6 +9,7 @@ each actuator's compensator step on its own share.
 
 from __future__ import annotations
 
+import hashlib
 import os
 from dataclasses import dataclass
 from importlib import resources
@@ -17,12 +18,13 @@ from string import Template
 
 import numpy as np
 
+from ...errors import ParameterError
 from ...io import atomic_write_text
 from ..c_text import CText, Precision
 from ..coupled import REACH_SLACK, CoupledCompensator
 from .c_code import c_paths, export_c
 
-__all__ = ["StageCode", "export_stage_c", "write_stage_c", "write_stage_shared"]
+__all__ = ["StageCode", "export_stage_c", "write_stage_c", "write_stage_fmu", "write_stage_shared"]
 
 
 def _template(name: str) -> Template:
@@ -184,3 +186,125 @@ def write_stage_shared(
     lib = library_path(c_path, prefix)
     build_library([p for p in files if p.suffix == ".c"], lib)
     return files, lib
+
+
+def write_stage_fmu(
+    compensator: CoupledCompensator,
+    path: str | os.PathLike[str],
+    *,
+    precision: Precision = "double",
+) -> Path:
+    """An FMI 2.0 Co-Simulation FMU of a coupled stage's compensator.
+
+    Real inputs ``target_0`` ... (one per axis, value references 0 ...), real outputs
+    ``voltage_0`` ... (one per actuator, after the targets), integer outputs ``outside`` (0)
+    then per actuator k ``nonfinite_k``, ``saturated_k``, ``slewed_k`` (1 + 3k ...). One
+    ``fmi2DoStep`` is one sample of the compensator's rate.
+
+    Parameters
+    ----------
+    compensator : CoupledCompensator
+        With its ``sample_rate``.
+    path : str or os.PathLike
+        The ``.fmu`` file; its stem names the model (a C identifier).
+    precision : {"double", "float"}
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ParameterError
+        No sample rate, a name that is not a C identifier, no C compiler.
+    """
+    from .fmu import fmi2_wrapper, package_fmu
+
+    rate = compensator.compensators[0].sample_rate
+    if rate is None:
+        msg = "an FMU steps at the loop's rate: give the sample rate (sample_rate=)"
+        raise ParameterError(msg)
+    out = Path(path).with_suffix(".fmu")
+    name = out.stem
+    if not name.isidentifier() or not name.isascii():
+        msg = f"the FMU's name {name!r} (its file name) must be a C identifier"
+        raise ParameterError(msg)
+    n, m = len(compensator.compensators), compensator.model.coupling_.shape[0]
+    period = 1.0 / float(rate)
+    what = f"{name}: the compensator of a stage of {n} actuators and {m} axes, {rate:g} Hz"
+    files = export_stage_c(compensator, precision=precision, prefix=name).files
+    counts = ["c->s.outside"] + [
+        f"c->s.a{k}.{field}" for k in range(n) for field in ("nonfinite", "saturated", "slewed")
+    ]
+    files[f"{name}.c"] += fmi2_wrapper(
+        name, period, what, n_real=m + n,
+        layout=f"0-{m - 1} the targets, {m}-{m + n - 1} the voltages", not_input=f"vr[i] >= {m}",
+        inputs="the targets", counts=tuple(counts),
+        counts_said="0 desired positions beyond the reach, then per actuator k: 1 + 3k\n * "
+        "non-finite targets, 2 + 3k commands at a voltage limit, 3 + 3k cut by the slew limit",
+        step_statement=f"{name}_step_doubles(&c->s, c->r, c->r + {m})",
+        start_outputs="\n    ".join([*(f"c->r[{i}] = 0.0;" for i in range(m)),
+                                      *(f"c->r[{m + k}] = (fmi2Real)c->s.a{k}.last;"
+                                        for k in range(n))]),
+    )  # fmt: skip
+    guid = "{" + hashlib.sha256("".join(files.values()).encode()).hexdigest()[:32] + "}"
+    files[f"{name}.c"] = files[f"{name}.c"].replace(f'"{{{name}-GUID}}"', f'"{guid}"')
+    unit = compensator.model.channels_[0].output_unit
+    xml = _stage_description(name, guid, n, m, period, what, unit)
+    return package_fmu(out, name, files, xml, what)
+
+
+def _stage_description(
+    name: str, guid: str, n: int, m: int, period: float, what: str, unit: str
+) -> str:
+    """The stage FMU's ``modelDescription.xml``."""
+    from xml.sax.saxutils import escape
+
+    from ... import __version__
+
+    def var(label: str, ref: int, causality: str, kind: str, said: str) -> str:
+        extra = ' variability="continuous"' if causality == "input" else (
+            ' variability="discrete" initial="calculated"')  # fmt: skip
+        start = ' start="0"' if causality == "input" else ""
+        return (f'    <ScalarVariable name="{label}" valueReference="{ref}" causality="{causality}"'
+                f'{extra} description="{escape(said)}">\n      <{kind}{start}/>\n'
+                "    </ScalarVariable>")  # fmt: skip
+
+    rows = [var(f"target_{i}", i, "input", "Real", f"axis {i}'s desired position ({unit})")
+            for i in range(m)]  # fmt: skip
+    rows += [var(f"voltage_{k}", m + k, "output", "Real", f"actuator {k}'s command (V)")
+             for k in range(n)]  # fmt: skip
+    rows.append(var("outside", 0, "output", "Integer", "desired positions beyond the reach"))
+    for k in range(n):
+        for j, field in enumerate(("nonfinite", "saturated", "slewed")):
+            rows.append(var(f"{field}_{k}", 1 + 3 * k + j, "output", "Integer",
+                            f"actuator {k}: {field} commands since the last reset"))  # fmt: skip
+    outputs = range(m + 1, m + n + 1 + 1 + 3 * n)  # 1-based: every variable after the targets
+    sources = "".join(f'      <File name="{name}{part}.c"/>\n'
+                      for part in ["", *(f"_a{k}" for k in range(n))])  # fmt: skip
+    return f"""<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{guid}"
+  description="{escape(what)}" generationTool="piezohyst {__version__}"
+  variableNamingConvention="flat" numberOfEventIndicators="0">
+  <CoSimulation modelIdentifier="{name}" needsExecutionTool="false"
+    canHandleVariableCommunicationStepSize="false" canInterpolateInputs="false"
+    canRunAsynchronuously="false" canBeInstantiatedOnlyOncePerProcess="false"
+    canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="false"
+    canSerializeFMUstate="false" providesDirectionalDerivative="false">
+    <SourceFiles>
+{sources}    </SourceFiles>
+  </CoSimulation>
+  <DefaultExperiment startTime="0" stepSize="{period!r}"/>
+  <ModelVariables>
+{chr(10).join(rows)}
+  </ModelVariables>
+  <ModelStructure>
+    <Outputs>
+{chr(10).join(f'      <Unknown index="{i}"/>' for i in outputs)}
+    </Outputs>
+    <InitialUnknowns>
+{chr(10).join(f'      <Unknown index="{i}" dependencies=""/>' for i in outputs)}
+    </InitialUnknowns>
+  </ModelStructure>
+</fmiModelDescription>
+"""

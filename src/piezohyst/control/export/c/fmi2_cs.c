@@ -50,7 +50,7 @@ enum { PH_INSTANTIATED, PH_INITIALIZING, PH_STEPPING, PH_TERMINATED, PH_FAILED }
 
 typedef struct {
     ${prefix}_t s;
-    fmi2Real r[PH_N_REAL]; /* 0 target, 1 voltage, 2 charge */
+    fmi2Real r[PH_N_REAL]; /* ${layout} */
     fmi2Real time;
     int phase;
     int logging;
@@ -76,11 +76,7 @@ static fmi2Status refuse(ph_fmu_t *c, const char *message)
 static void start(ph_fmu_t *c)
 {
     ${prefix}_init(&c->s);
-    c->r[0] = 0.0;
-    c->r[1] = (fmi2Real)c->s.last;
-#if PH_N_REAL > 2
-    c->r[2] = 0.0;
-#endif
+    ${start_outputs}
     c->time = 0.0;
     c->phase = PH_INSTANTIATED;
 }
@@ -227,8 +223,8 @@ FMI2_Export fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference 
         return refuse(c, "fmi2SetReal: the FMU was terminated");
     }
     for (i = 0; i < nvr; ++i) {
-        if (vr[i] >= PH_N_REAL || vr[i] == 1) {
-            return refuse(c, "fmi2SetReal: only the inputs (target, charge) can be set");
+        if (vr[i] >= PH_N_REAL || ${not_input}) {
+            return refuse(c, "fmi2SetReal: only the inputs (${inputs}) can be set");
         }
         c->r[vr[i]] = value[i];
     }
@@ -240,8 +236,7 @@ static fmi2Status none(fmi2Component comp, const char *what)
     return refuse((ph_fmu_t *)comp, what);
 }
 
-/* the limits' counts since the last reset: 0 non-finite targets, 1 targets out of reach,
- * 2 commands cut by the slew limit, 3 targets beyond the output map's calibrated range */
+/* the limits' counts since the last reset: ${counts_said} */
 FMI2_Export fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReference vr[],
                                       size_t nvr, fmi2Integer value[])
 {
@@ -251,13 +246,10 @@ FMI2_Export fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReferen
         return fmi2Error;
     }
     for (i = 0; i < nvr; ++i) {
-        if (vr[i] > 3) {
+        if (vr[i] > ${last_count}) {
             return refuse(c, "fmi2GetInteger: no variable with this value reference");
         }
-        value[i] = (fmi2Integer)(vr[i] == 0   ? c->s.nonfinite
-                                 : vr[i] == 1 ? c->s.saturated
-                                 : vr[i] == 2 ? c->s.slewed
-                                              : c->s.extrapolated);
+        value[i] = (fmi2Integer)(${count_of});
     }
     return fmi2OK;
 }
@@ -403,7 +395,7 @@ FMI2_Export fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicat
                  PH_PERIOD);
         return refuse(c, message);
     }
-    c->r[1] = (fmi2Real)${step_call};
+    ${step_statement};
     c->time = currentCommunicationPoint + communicationStepSize;
     return fmi2OK;
 }

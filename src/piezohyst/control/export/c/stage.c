@@ -29,3 +29,18 @@ void ${prefix}_step(${prefix}_t *s, const ${prefix}_real *desired, ${prefix}_rea
     }
 ${steps}
 }
+
+/* The step on doubles, as a host passes them (the shared library's rows, an FMU's
+ * variables). */
+void ${prefix}_step_doubles(${prefix}_t *s, const double *desired, double *command)
+{
+    ${prefix}_real d[${m}], v[${n}];
+    int i;
+    for (i = 0; i < ${m}; ++i) {
+        d[i] = (${prefix}_real)desired[i];
+    }
+    ${prefix}_step(s, d, v);
+    for (i = 0; i < ${n}; ++i) {
+        command[i] = (double)v[i];
+    }
+}

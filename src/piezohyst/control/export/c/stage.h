@@ -24,4 +24,7 @@ void ${prefix}_init(${prefix}_t *s);
  * a NaN holds every actuator's last command. */
 void ${prefix}_step(${prefix}_t *s, const ${prefix}_real *desired, ${prefix}_real *command);
 
+/* The same on doubles (desired[${m}] in, command[${n}] out) whatever the precision. */
+void ${prefix}_step_doubles(${prefix}_t *s, const double *desired, double *command);
+
 #endif

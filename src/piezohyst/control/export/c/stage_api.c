@@ -6,9 +6,7 @@
  * commands (V), both row by row. 0; -1 for a NULL pointer, -2 for n < 0. */
 PH_EXPORT int ${prefix}_process(${prefix}_t *s, const double *target, double *volts, long n)
 {
-    ${prefix}_real d[${m}], v[${n}];
     long k;
-    int i;
     if (s == NULL || target == NULL || volts == NULL) {
         return -1;
     }
@@ -16,13 +14,7 @@ PH_EXPORT int ${prefix}_process(${prefix}_t *s, const double *target, double *vo
         return -2;
     }
     for (k = 0; k < n; ++k) {
-        for (i = 0; i < ${m}; ++i) {
-            d[i] = (${prefix}_real)target[k * ${m} + i];
-        }
-        ${prefix}_step(s, d, v);
-        for (i = 0; i < ${n}; ++i) {
-            volts[k * ${n} + i] = (double)v[i];
-        }
+        ${prefix}_step_doubles(s, target + k * ${m}, volts + k * ${n});
     }
     return 0;
 }
