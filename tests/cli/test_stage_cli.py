@@ -117,8 +117,8 @@ def test_predict_and_compensate_a_stage_from_the_shell(tmp_path: Path) -> None:
 
 def test_export_a_stage_as_c_from_the_shell(tmp_path: Path) -> None:
     """``export-c`` on a stage's model file writes the stage's C and each actuator's, equal
-    to what ``write_stage_c`` writes in Python, and with --shared its library; the hosts that
-    do not take a stage yet say so."""
+    to what ``write_stage_c`` writes in Python, with --shared its library, with --mex its
+    gateway, and ``export-fmu`` its FMU; the controller, not for a stage yet, says so."""
     data = _stage_file(tmp_path)
     model_file = tmp_path / "stage.json"
     assert run("fit", data, "--input", "vx,vy", "--output", "x,y", "-o", model_file).exit_code == 0
@@ -146,8 +146,13 @@ def test_export_a_stage_as_c_from_the_shell(tmp_path: Path) -> None:
         md = read_model_description(str(tmp_path / "ph_xy.fmu"))
         names = {v.name for v in md.modelVariables}
         assert {"target_0", "target_1", "voltage_0", "voltage_1", "outside"} <= names
-    for extra in (["--mex"], ["--controller"]):
-        assert_clean_error(run("export-c", model_file, "--v-min", "0", "--v-max", "140",
-                               *extra, "-o", tmp_path / "other.c"), code=2)  # fmt: skip
+    res = run("export-c", model_file, "--v-min", "0", "--v-max", "140", "--mex",
+              "-o", tmp_path / "mex" / "ph_xy_mex.c")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert sorted(p.name for p in (tmp_path / "mex").iterdir()) == [
+        "ph_xy.c", "ph_xy.h", "ph_xy_a0.c", "ph_xy_a0.h", "ph_xy_a1.c", "ph_xy_a1.h",
+        "ph_xy_mex.c"]  # fmt: skip
+    assert_clean_error(run("export-c", model_file, "--v-min", "0", "--v-max", "140",
+                           "--controller", "-o", tmp_path / "other.c"), code=2)  # fmt: skip
     assert_clean_error(run("export-c", model_file, "-o", tmp_path / "other.c"), code=2)
     assert not (tmp_path / "other.c").exists()

@@ -58,18 +58,19 @@ def _export(
 
     precision: Literal["float", "double"] = "float" if use_float else "double"
     if is_stage_file(model):  # a coupled stage: its C, the coupling's inverse around each step
-        flags = [f for f, on in (("--controller", controller is not None),
-                                 ("--mex", build.get("mex"))) if on]  # fmt: skip
+        flags = ["--controller"] if controller is not None else []
         if flags or settings.v_min is None or settings.v_max is None:
             raise click.UsageError(
-                "a stage's model file exports (C, --shared, export-fmu) with --v-min and --v-max "
+                "a stage's model file exports (C, --shared, --mex, export-fmu) with --v-min and "
+                "--v-max "
                 f"(V, every actuator); {', '.join(flags) or 'the limits'}: not for a stage yet"
             )
         return tuple(_run(ctx, lambda: export_stage_file(
             model, out, v_min=settings.v_min, v_max=settings.v_max,  # type: ignore[arg-type]
             sample_rate=settings.sample_rate, slew_rate=settings.slew_rate,
             allow_extrapolation=settings.allow_extrapolation, precision=precision,
-            shared=bool(build.get("shared")), force=bool(build.get("force")))))  # fmt: skip
+            shared=bool(build.get("shared")), mex=bool(build.get("mex")),
+            force=bool(build.get("force")))))  # fmt: skip
     paths: tuple[Path, ...] = _run(
         ctx,
         lambda: export_file(

@@ -13,7 +13,12 @@ import numpy as np
 from .._validation import FloatArray
 from ..control.coupled import CoupledCompensator
 from ..control.export.c_code import c_paths
-from ..control.export.stage_c import write_stage_c, write_stage_fmu, write_stage_shared
+from ..control.export.stage_c import (
+    write_stage_c,
+    write_stage_fmu,
+    write_stage_mex,
+    write_stage_shared,
+)
 from ..errors import DataFileError, ParameterError
 from ..io import DataSpec, read_table, write_table
 from ..model.coupled import COUPLED_FORMAT, CoupledModel
@@ -364,6 +369,7 @@ def export_stage_file(
     allow_extrapolation: bool = False,
     precision: str = "double",
     shared: bool = False,
+    mex: bool = False,
     force: bool = False,
 ) -> list[os.PathLike[str]]:
     """A coupled stage's compensator as C files (:func:`~piezohyst.control.export.write_stage_c`),
@@ -385,6 +391,8 @@ def export_stage_file(
     precision : {"double", "float"}
     shared : bool
         Also build the shared library (the system C compiler).
+    mex : bool
+        ``out`` is a MEX gateway (``NAME_mex.c``), the stage's C beside it.
     force : bool
         Replace existing files piezohyst did not write.
 
@@ -405,10 +413,16 @@ def export_stage_file(
         c_path.with_name(f"{prefix}_a{k}{ext}")
         for k in range(len(model.channels_)) for ext in (".c", ".h")
     ]  # fmt: skip
+    if mex:  # the stage's files take the gateway's name without _mex
+        step = c_path.with_name(prefix[: -len("_mex")] if prefix.endswith("_mex") else
+                                f"{prefix}_step")  # fmt: skip
+        names = [c_path, *(step.with_name(p.name.replace(prefix, step.name, 1)) for p in names)]
     guard_outputs(names, [model_path], force=force)
     comp = CoupledCompensator(model, v_min=v_min, v_max=v_max, sample_rate=sample_rate,
                               slew_rate=slew_rate,  # type: ignore[arg-type]
                               allow_extrapolation=allow_extrapolation)  # fmt: skip
+    if mex:
+        return list(write_stage_mex(comp, c_path, precision=precision))  # type: ignore[arg-type]
     if shared:
         files, lib = write_stage_shared(comp, c_path, precision=precision)  # type: ignore[arg-type]
         return [*files, lib]

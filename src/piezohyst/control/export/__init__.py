@@ -12,8 +12,9 @@ module      what it holds
             :data:`STATUS`, :func:`compiler`, :func:`library_path`
 ``fmu``     :func:`write_fmu`: an FMI 2.0 co-simulation FMU, :func:`fmu_platform`
 ``stage_c`` :func:`export_stage_c`, :func:`write_stage_c`, :func:`write_stage_shared`,
-            :func:`write_stage_fmu`, :class:`StageCode`: a coupled stage's compensator, each
-            actuator's step and the coupling's inverse around them, its library and FMU
+            :func:`write_stage_fmu`, :func:`write_stage_mex`, :class:`StageCode`: a coupled
+            stage's compensator, each actuator's step and the coupling's inverse around
+            them, its library, FMU and MEX gateway
 ``c/``      the hosts' C templates (the shared API, the MEX gateway, the FMI functions)
 ==========  ==============================================================================
 """
@@ -21,7 +22,14 @@ module      what it holds
 from .c_code import CCode, c_paths, export_c, write_c
 from .fmu import fmu_platform, write_fmu
 from .shared import STATUS, compiler, library_path, write_mex, write_shared
-from .stage_c import StageCode, export_stage_c, write_stage_c, write_stage_fmu, write_stage_shared
+from .stage_c import (
+    StageCode,
+    export_stage_c,
+    write_stage_c,
+    write_stage_fmu,
+    write_stage_mex,
+    write_stage_shared,
+)
 
 __all__ = [
     "STATUS",
@@ -39,5 +47,6 @@ __all__ = [
     "write_shared",
     "write_stage_c",
     "write_stage_fmu",
+    "write_stage_mex",
     "write_stage_shared",
 ]

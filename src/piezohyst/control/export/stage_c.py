@@ -24,7 +24,14 @@ from ..c_text import CText, Precision
 from ..coupled import REACH_SLACK, CoupledCompensator
 from .c_code import c_paths, export_c
 
-__all__ = ["StageCode", "export_stage_c", "write_stage_c", "write_stage_fmu", "write_stage_shared"]
+__all__ = [
+    "StageCode",
+    "export_stage_c",
+    "write_stage_c",
+    "write_stage_fmu",
+    "write_stage_mex",
+    "write_stage_shared",
+]
 
 
 def _template(name: str) -> Template:
@@ -308,3 +315,46 @@ def _stage_description(
   </ModelStructure>
 </fmiModelDescription>
 """
+
+
+def write_stage_mex(
+    compensator: CoupledCompensator,
+    path: str | os.PathLike[str],
+    *,
+    precision: Precision = "double",
+) -> list[Path]:
+    """A MEX gateway ``NAME.c`` for MATLAB and Octave, and the stage's C beside it.
+
+    ``NAME`` comes from ``path`` (``ph_xy_mex.c``: the function ``ph_xy_mex``); the stage's
+    files are named after it without ``_mex`` (``ph_xy.c``, ``ph_xy_a0.c``, ...). Build with
+    ``mkoctfile --mex`` (or ``mex``) on the gateway and the stage's ``.c`` files.
+
+    Parameters
+    ----------
+    compensator : CoupledCompensator
+    path : str or os.PathLike
+        The gateway's ``.c`` file.
+    precision : {"double", "float"}
+
+    Returns
+    -------
+    list of Path
+        The gateway first, then the stage's files.
+    """
+    from .shared import _version_text
+
+    gate, _, name = c_paths(path)
+    prefix = name[: -len("_mex")] if name.endswith("_mex") else f"{name}_step"
+    files = write_stage_c(compensator, gate.with_name(f"{prefix}.c"), precision=precision)
+    n, m = len(compensator.compensators), compensator.model.coupling_.shape[0]
+    count_lines = "\n".join(
+        f"        counts[{1 + 3 * k + j}] = (double)state.a{k}.{field};"
+        for k in range(n) for j, field in enumerate(("nonfinite", "saturated", "slewed"))
+    )  # fmt: skip
+    text = _template("stage_mex.c").substitute(
+        name=name, prefix=prefix, n=n, m=m, n_counts=1 + 3 * n, count_lines=count_lines,
+        sources=" ".join(p.name for p in files if p.suffix == ".c"),
+        version=_version_text(f"{name}, the compensator of a stage of {n} actuators"),
+    )  # fmt: skip
+    atomic_write_text(gate, text)
+    return [gate, *files]
