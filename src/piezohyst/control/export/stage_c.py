@@ -267,7 +267,7 @@ def _stage_description(
     """The stage FMU's ``modelDescription.xml``."""
     from xml.sax.saxutils import escape
 
-    from ... import __version__
+    from ..._version import __version__
 
     def var(label: str, ref: int, causality: str, kind: str, said: str) -> str:
         extra = ' variability="continuous"' if causality == "input" else (
