@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -156,3 +157,26 @@ def test_export_a_stage_as_c_from_the_shell(tmp_path: Path) -> None:
                            "--controller", "-o", tmp_path / "other.c"), code=2)  # fmt: skip
     assert_clean_error(run("export-c", model_file, "-o", tmp_path / "other.c"), code=2)
     assert not (tmp_path / "other.c").exists()
+
+
+def test_report_a_stage_from_the_shell(tmp_path: Path) -> None:
+    """``report`` on a stage's model file: each axis's NRMSE (equal to the model's own on its
+    training record), its figures, the coupling in the report."""
+    data = _stage_file(tmp_path)
+    model_file = tmp_path / "stage.json"
+    assert run("fit", data, "--input", "vx,vy", "--output", "x,y", "-o", model_file).exit_code == 0
+    stage = ph.CoupledModel.load(model_file)
+    out = tmp_path / "report"
+    res = run("report", model_file, data, "--input", "vx,vy", "--output", "x,y", "--out", out)
+    assert res.exit_code == 0, res.output
+    metrics = json.loads((out / "metrics.json").read_text())
+    values = {k: v["value"] if isinstance(v, dict) else v for k, v in metrics["metrics"].items()}
+    # tol: the same prediction, written to JSON and read back (17 significant digits)
+    np.testing.assert_allclose([values["nrmse_x_pct"], values["nrmse_y_pct"]],
+                               100 * stage.output_nrmse_, rtol=1e-9)  # fmt: skip
+    assert {"fit_x.png", "fit_y.png", "loop_x.png", "loop_y.png", "report.html"} <= {
+        p.name for p in out.iterdir()}  # fmt: skip
+    assert "coupling" in (out / "report.md").read_text()
+    assert f"x {values['nrmse_x_pct']:.4g} %" in res.output
+    assert_clean_error(run("report", model_file, data, "--input", "vx,vy", "--output", "x,y",
+                           "--gain", "125", "--out", tmp_path / "r2"), code=2)  # fmt: skip

@@ -70,15 +70,33 @@ def report(
     """Figures (loop, fit, residual, growth removal) and metrics of MODEL on DATA; with
     --gain, the displacement in metres too.
 
+    A stage's model file (``fit --input vx,vy --output x,y``) takes the same columns and
+    scores each axis.
+
     \b
     Example:
       piezohyst report model.json run2.csv --out model-report
+      piezohyst report stage.json run2.csv --input vx,vy --output x,y --out stage-report
       piezohyst report model.json sensor.csv --gain gain.json \\
           --displacement-column displacement --out report-m
     """
     from ..workflows import model_report
+    from ..workflows.stage_files import is_stage_file, stage_columns, stage_report
 
     command = _command_line()
+    if is_stage_file(model):  # a coupled stage: each axis scored, the coupling said
+        given = [o for o, v in (("--gain", gain), ("--displacement-column", displacement_column))
+                 if v is not None]  # fmt: skip
+        if given:
+            raise click.UsageError(f"{', '.join(given)}: not for a stage's model file")
+        res = _run(ctx, lambda: stage_report(
+            model, data, out, inputs=stage_columns(data_spec.input_column, "--input"),
+            outputs=stage_columns(data_spec.output_column, "--output"), data_spec=data_spec,
+            command=command, force=force))  # fmt: skip
+        per_axis = ", ".join(f"{k[6:-4]} {v:.4g} %" for k, v in res.metrics.items()
+                             if k.startswith("nrmse_"))  # fmt: skip
+        ctx.result(f"NRMSE {per_axis}; report in {out / 'report.html'}")
+        return
     with rows_progress(ctx, f"reading {data.name}, then drawing the report", data) as progress:
         res = _run(
             ctx,
