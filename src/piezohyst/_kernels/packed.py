@@ -866,34 +866,38 @@ def _model_output(p, cfg, st, dyn, dstate):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def core_controller_step(desired, measured, p, cfg, st, region, dyn, dstate, trial, ctl, cs):  # type: ignore[no-untyped-def]
+def core_controller_step(  # type: ignore[no-untyped-def]
+    desired, target, measured, p, cfg, st, region, dyn, dstate, trial, ctl, cs
+):
     """``_kernels.controller_step`` on a packed core: the same feedback arithmetic
-    (shared helpers), the core's inverse in place of eq. 18. ``cfg`` takes model units."""
+    (shared helpers), the core's inverse in place of eq. 18. ``cfg`` takes model units.
+    ``target`` is what the command must bring (``desired``, or an input delay's preview);
+    with input dynamics the leakage flows at the piezo's voltage (the lag's output)."""
     c2 = ctl[np.newaxis]
     cs2 = cs[np.newaxis]
     end = st.shape[0]
     last = st[end + DS_LAST]
-    qc = K.feedback_measure_at(0, measured, last, c2, cs2)
+    piezo = dstate[1] if dyn[0] != 0.0 or dyn[1] > 0.0 else last
+    qc = K.feedback_measure_at(0, measured, piezo, c2, cs2)
     if math.isfinite(qc) and cs[K.CS_STARTED] == 0.0:  # the first measurement sets the frame
         cs[K.CS_FRAME] = _model_output(p, cfg, st, dyn, dstate) - qc
         cs[K.CS_STARTED] = 1.0
     e = K.feedback_error_at(0, qc, cs2)
     d, integral, u = K.feedback_command_at(0, desired, e, c2, cs2)
-    if not math.isfinite(d):  # hold the last safe command
-        st[end + DS_NONFINITE] += 1.0
-        return last
+    if not math.isfinite(d):  # hold the last safe command (the piezo and lags settle on it)
+        return core_step(math.nan, p, cfg, st, region, dyn, dstate, trial)
+    u += (target - desired) * ctl[K.CTL_INV_GAIN]
     v = core_step(u, p, cfg, st, region, dyn, dstate, trial)
     K.feedback_close_at(0, d, u, _model_output(p, cfg, st, dyn, dstate), integral, c2, cs2)
     return v
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def core_controller_process(des, meas, p, cfg, st, region, dyn, dstate, trial, ctl, cs, out):  # type: ignore[no-untyped-def]
-    """``core_controller_step`` over a block of recorded samples."""
+def core_controller_process(des, delay, meas, p, cfg, st, region, dyn, dstate, trial, ctl, cs, out):  # type: ignore[no-untyped-def]
+    """``core_controller_step`` over a block; the command at k for ``des[k + delay]``."""
     for k in range(des.shape[0]):
-        out[k] = core_controller_step(
-            des[k], meas[k], p, cfg, st, region, dyn, dstate, trial, ctl, cs
-        )
+        out[k] = core_controller_step(des[k], K.preview_target(des, k, delay), meas[k], p, cfg,
+                                      st, region, dyn, dstate, trial, ctl, cs)  # fmt: skip
 
 
 # ------------------------------------------- Everett maps (plain NumPy, cached)

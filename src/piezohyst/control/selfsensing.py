@@ -115,7 +115,8 @@ class SelfSensingController:
     model : HysteresisModel
         A fitted model whose hysteresis part is play operators alone
         (``ClassicalPI``, ``ActivePI``, or presets with growth terms only):
-        the loop uses the analytic inverse (eq. 18). Its input dynamics (an
+        the loop uses the analytic inverse (eq. 18); or a Preisach, Duhem or
+        Bouc-Wen core (its compiled inverse). Its input dynamics (an
         amplifier's lag and delay, ``input_dynamics=``) are inverted as the
         :class:`~piezohyst.Compensator` inverts them, and the leakage flows at
         the piezo's voltage (the lag's output).
@@ -241,12 +242,11 @@ class SelfSensingController:
                 "asymmetry or creep beside play operators, or its core has no compiled step"
             )
             raise ParameterError(msg)
-        if comp.mode.active or (comp.dynamic and comp.inverse.name != "play"):
-            held = "output dynamics (a mode)" if comp.mode.active else "input dynamics"
+        if comp.mode.active:
             msg = (
-                f"SelfSensingController inverts {held} on play operators alone (ClassicalPI, "
-                f"ActivePI) so far; this {type(model).__name__} holds them: fit it without, "
-                "or use the Compensator (feedforward) with this model"
+                f"SelfSensingController does not invert output dynamics (a mode) yet; this "
+                f"{type(model).__name__} holds one: fit it without, or use the Compensator "
+                "(feedforward) with this model"
             )
             raise ParameterError(msg)
         if leakage is None:

@@ -220,9 +220,9 @@ class PackedInverse(Inverse):
         return int(P.CC_REF), int(P.CC_INV_GAIN)
 
     def controller_step(self, d: float, m: float, loop: Loop, target: float | None = None) -> float:
-        return float(P.core_controller_step(d, m, self.params, loop[0], self.kernel_state,
-                                            self.region, self.dyn, self.dstate, self.trial,
-                                            loop[1], loop[2]))  # fmt: skip
+        return float(P.core_controller_step(d, d if target is None else target, m, self.params,
+                                            loop[0], self.kernel_state, self.region, self.dyn,
+                                            self.dstate, self.trial, loop[1], loop[2]))  # fmt: skip
 
     def controller_process(self, d: FloatArray, m: FloatArray, loop: Loop, out: FloatArray) -> None:
         a = (
@@ -234,7 +234,7 @@ class PackedInverse(Inverse):
             self.dstate,
             self.trial,
         )
-        P.core_controller_process(d, m, *a, loop[1], loop[2], out)
+        P.core_controller_process(d, self.delay_samples, m, *a, loop[1], loop[2], out)
 
     # ------------------------------------------------------------------ the C
     def c_parts(self, c: CText, fold: tuple[float, float] | None, loop: Loop | None) -> CParts:
