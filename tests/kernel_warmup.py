@@ -88,8 +88,10 @@ def compile_part(part: int, parts: int) -> None:
                 continue
             done += 1
     took = time.perf_counter() - start
-    print(f"part {part + 1} of {parts}: {done} specializations in {took:.1f} s"
-          + (f"; not compiled, their arguments changed: {', '.join(stale)}" if stale else ""))
+    print(
+        f"part {part + 1} of {parts}: {done} specializations in {took:.1f} s"
+        + (f"; not compiled, their arguments changed: {', '.join(stale)}" if stale else "")
+    )
 
 
 def warm(parts: int = 2) -> None:
