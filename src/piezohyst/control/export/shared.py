@@ -210,6 +210,24 @@ def build_library(sources: list[Path], lib: Path) -> None:
         raise ParameterError(msg)
 
 
+def mex_commands(name: str, prefix: str, version: str) -> str:
+    """The MEX gateways' ``run_command`` (``c/mex_commands.c``): NAME('reset'), NAME('version').
+
+    Parameters
+    ----------
+    name, prefix : str
+        The gateway's function name and the step's prefix.
+    version : str
+        What ``NAME('version')`` returns.
+
+    Returns
+    -------
+    str
+    """
+    text = _c_template("mex_commands.c").template.split("\n", 2)[2]
+    return Template(text).substitute(name=name, prefix=prefix, version=version)
+
+
 def _mex_gateway(name: str, prefix: str, controller: bool, what: str) -> str:
     """The MEX gateway's source: one translation unit with the exported step."""
     args = "target, charge" if controller else "target"
@@ -228,6 +246,7 @@ def _mex_gateway(name: str, prefix: str, controller: bool, what: str) -> str:
         else ""
     )
     return _c_template("mex_gateway.c").substitute(
+        run_command=mex_commands(name, prefix, version),
         name=name,
         version=version,
         args=args,

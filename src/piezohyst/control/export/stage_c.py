@@ -341,7 +341,7 @@ def write_stage_mex(
     list of Path
         The gateway first, then the stage's files.
     """
-    from .shared import _version_text
+    from .shared import _version_text, mex_commands
 
     gate, _, name = c_paths(path)
     prefix = name[: -len("_mex")] if name.endswith("_mex") else f"{name}_step"
@@ -351,10 +351,11 @@ def write_stage_mex(
         f"        counts[{1 + 3 * k + j}] = (double)state.a{k}.{field};"
         for k in range(n) for j, field in enumerate(("nonfinite", "saturated", "slewed"))
     )  # fmt: skip
+    version = _version_text(f"{name}, the compensator of a stage of {n} actuators")
     text = _template("stage_mex.c").substitute(
         name=name, prefix=prefix, n=n, m=m, n_counts=1 + 3 * n, count_lines=count_lines,
-        sources=" ".join(p.name for p in files if p.suffix == ".c"),
-        version=_version_text(f"{name}, the compensator of a stage of {n} actuators"),
+        sources=" ".join(p.name for p in files if p.suffix == ".c"), version=version,
+        run_command=mex_commands(name, prefix, version),
     )  # fmt: skip
     atomic_write_text(gate, text)
     return [gate, *files]

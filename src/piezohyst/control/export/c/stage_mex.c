@@ -18,31 +18,20 @@
 static ${prefix}_t state;
 static int ready = 0;
 
+${run_command}
+
 void mexFunction(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
 {
     mwSize rows, k;
     int i;
     const double *target;
     double *volts, *counts, d[${m}], v[${n}];
-    char command[16];
     if (!ready) {
         ${prefix}_init(&state);
         ready = 1;
     }
-    if (nrhs == 1 && mxIsChar(prhs[0])) {
-        if (mxGetString(prhs[0], command, sizeof command) != 0) {
-            mexErrMsgIdAndTxt("${name}:command", "the commands are 'reset' and 'version'");
-        }
-        if (strcmp(command, "reset") == 0) {
-            ${prefix}_init(&state);
-            return;
-        }
-        if (strcmp(command, "version") == 0) {
-            plhs[0] = mxCreateString("${version}");
-            return;
-        }
-        mexErrMsgIdAndTxt("${name}:command", "unknown command '%s' (reset, version)",
-                          command);
+    if (run_command(nrhs, plhs, prhs)) {
+        return;
     }
     if (nrhs != 1 || nlhs > 2 || !mxIsDouble(prhs[0]) || mxIsComplex(prhs[0])
         || mxIsSparse(prhs[0]) || mxGetN(prhs[0]) != ${m}) {
