@@ -66,6 +66,10 @@ def _columns(a: ArrayLike, name: str, rows: int = 1) -> FloatArray:
     return x
 
 
+#: A coupling whose condition number reaches this is not inverted (singular up to rounding)
+COND_LIMIT = 1e8
+
+
 def _warn_together(u: FloatArray) -> None:
     """Warn where two inputs' changes correlate beyond :data:`TOGETHER` (named)."""
     du = np.diff(u, axis=0)
@@ -227,6 +231,14 @@ class CoupledModel(JsonFile):
         offset = np.zeros(m)
         channels: list[HysteresisModel] = []
         for k in range(self.rounds):
+            cond = float(np.linalg.cond(coupling))
+            if not cond < COND_LIMIT:  # inputs that move together leave it singular
+                msg = (
+                    "the record cannot separate the actuators: the coupling it gives cannot "
+                    f"be inverted (condition number {cond:.3g}); drive each actuator with "
+                    "its own signal (inputs that move together are named in the warning)"
+                )
+                raise ParameterError(msg)
             virtual = np.linalg.solve(coupling, (ys - offset).T).T  # each actuator's own part
             channels = [
                 type(tp)(**tp.get_params()).fit(us[:, i], virtual[:, i], t=ts)
