@@ -109,7 +109,10 @@ def test_predict_and_compensate_a_stage_from_the_shell(tmp_path: Path) -> None:
     e = moved[s, 0] - x[s]
     assert np.sqrt(np.mean((e - e.mean()) ** 2)) / np.ptp(x[s]) < 0.01
     assert np.ptp(moved[s, 1]) / (y1 - y0) < 0.005
-    # what it cannot take
+    # what it cannot take: the raster under the training record's slew rate (the default)
+    res = run("compensate", model_file, target, "--column", "x,y", "--v-min", "0", "--v-max",
+              "140", "-o", tmp_path / "c1.csv")  # fmt: skip
+    one_line_error(res, "slew limit would hold")
     one_line_error(run("compensate", model_file, target, "--column", "x", "--v-min", "0",
                        "--v-max", "140", "-o", tmp_path / "c2.csv"), "moves 2 axes")  # fmt: skip
     assert_clean_error(run("compensate", model_file, target, "--column", "x,y",

@@ -224,7 +224,8 @@ def compensate_stage_file(
     Raises
     ------
     ParameterError
-        Columns that do not match the model, or a target mostly out of the stage's reach.
+        Columns that do not match the model, or a target mostly out of the stage's reach or
+        mostly held back by the slew limit.
     """
     guard_outputs([out], [model_path, target], force=force)
     model = _stage(model_path)
@@ -248,13 +249,22 @@ def compensate_stage_file(
     n_ramp = max(2, round(ramp * fs)) if first.size else 0
     path = np.linspace(rest, first[0], n_ramp) if n_ramp else np.empty((0, m))
     commands = comp.process(np.vstack([path, desired]))
-    held = comp.saturated_count / max(desired.shape[0], 1)
+    rows = max(desired.shape[0], 1)
+    held, slewed = comp.saturated_count / rows, comp.slew_limited_count / rows
     if np.any(held > 0.5):
         k = int(np.argmax(held))
         msg = (
             f"{target}: actuator {k} would sit at a voltage limit on {100 * held[k]:.0f} % of "
             "the target (what the stage reaches is the actuators' ranges through the "
             "coupling, not a box); bring the target within reach or widen --v-min/--v-max"
+        )
+        raise ParameterError(msg)
+    if np.any(slewed > 0.5):  # a trajectory mostly held back by the slew limit: not followed
+        k = int(np.argmax(slewed))
+        msg = (
+            f"{target}: the slew limit would hold back {100 * slewed[k]:.0f} % of actuator "
+            f"{k}'s commands (by default the training record's fastest change); set "
+            "--slew-rate to what the amplifier allows, or slow the target"
         )
         raise ParameterError(msg)
     time = np.concatenate([t[0] - np.arange(n_ramp, 0, -1) / fs, t])
