@@ -16,6 +16,7 @@ from .._validation import FloatArray
 from ..control.coupled import CoupledCompensator
 from ..control.export.c_code import c_paths
 from ..control.export.stage_c import (
+    stage_paths,
     write_stage_c,
     write_stage_fmu,
     write_stage_mex,
@@ -421,16 +422,8 @@ def export_stage_file(
                                   slew_rate=slew_rate,  # type: ignore[arg-type]
                                   allow_extrapolation=allow_extrapolation)  # fmt: skip
         return [write_stage_fmu(comp, out, precision=precision)]  # type: ignore[arg-type]
-    c_path, h_path, prefix = c_paths(out)
-    names = [c_path, h_path] + [
-        c_path.with_name(f"{prefix}_a{k}{ext}")
-        for k in range(len(model.channels_)) for ext in (".c", ".h")
-    ]  # fmt: skip
-    if mex:  # the stage's files take the gateway's name without _mex
-        step = c_path.with_name(prefix[: -len("_mex")] if prefix.endswith("_mex") else
-                                f"{prefix}_step")  # fmt: skip
-        names = [c_path, *(step.with_name(p.name.replace(prefix, step.name, 1)) for p in names)]
-    guard_outputs(names, [model_path], force=force)
+    c_path = c_paths(out)[0]
+    guard_outputs(stage_paths(c_path, len(model.channels_), mex=mex), [model_path], force=force)
     comp = CoupledCompensator(model, v_min=v_min, v_max=v_max, sample_rate=sample_rate,
                               slew_rate=slew_rate,  # type: ignore[arg-type]
                               allow_extrapolation=allow_extrapolation)  # fmt: skip

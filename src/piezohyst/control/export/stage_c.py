@@ -27,11 +27,44 @@ from .c_code import c_paths, export_c
 __all__ = [
     "StageCode",
     "export_stage_c",
+    "stage_paths",
     "write_stage_c",
     "write_stage_fmu",
     "write_stage_mex",
     "write_stage_shared",
 ]
+
+
+def _counts(n: int) -> list[str]:
+    """The stage state's counts, as every host numbers them: ``outside``, then per actuator
+    k its ``aK.nonfinite``, ``aK.saturated``, ``aK.slewed`` (1 + 3k ...)."""
+    fields = ("nonfinite", "saturated", "slewed")
+    return ["outside", *(f"a{k}.{field}" for k in range(n) for field in fields)]
+
+
+def stage_paths(path: str | os.PathLike[str], actuators: int, *, mex: bool = False) -> list[Path]:
+    """The files the stage's writers write for ``path``, the stage's ``.c`` first (with
+    ``mex``: the gateway first, the stage's files named after it without ``_mex``).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The ``.c`` file asked for (the stage's, or with ``mex`` the gateway's).
+    actuators : int
+    mex : bool
+
+    Returns
+    -------
+    list of Path
+    """
+    c_path, _, prefix = c_paths(path)
+    gate = [c_path] if mex else []
+    if mex:
+        prefix = prefix[: -len("_mex")] if prefix.endswith("_mex") else f"{prefix}_step"
+    names = [f"{prefix}.c", f"{prefix}.h"] + [
+        f"{prefix}_a{k}{ext}" for k in range(actuators) for ext in (".c", ".h")
+    ]
+    return gate + [c_path.with_name(name) for name in names]
 
 
 def _template(name: str) -> Template:
@@ -134,11 +167,15 @@ def write_stage_c(
         Every file written, the stage's ``.c`` first.
     """
     c_path, _, prefix = c_paths(path)
-    code = export_stage_c(compensator, precision=precision, prefix=prefix)
+    return _write(export_stage_c(compensator, precision=precision, prefix=prefix).files, c_path)
+
+
+def _write(files: dict[str, str], c_path: Path) -> list[Path]:
+    """Each file beside ``c_path``, atomically; ``c_path`` first."""
     written = []
-    for name in sorted(code.files, key=lambda f: (f != f"{prefix}.c", f)):
+    for name in sorted(files, key=lambda f: (f != c_path.name, f)):
         out = c_path.with_name(name)
-        atomic_write_text(out, code.files[name])
+        atomic_write_text(out, files[name])
         written.append(out)
     return written
 
@@ -179,17 +216,16 @@ def write_stage_shared(
     from .shared import _version_text, build_library, library_path
 
     c_path, _, prefix = c_paths(path)
-    files = write_stage_c(compensator, c_path, precision=precision)
+    code = export_stage_c(compensator, precision=precision, prefix=prefix).files
     n, m = len(compensator.compensators), compensator.model.coupling_.shape[0]
-    count_lines = "\n".join(
-        f"    counts[{1 + 3 * k + j}] = s->a{k}.{field};"
-        for k in range(n) for j, field in enumerate(("nonfinite", "saturated", "slewed"))
-    )  # fmt: skip
-    api = _template("handle.c").substitute(prefix=prefix) + _template("stage_api.c").substitute(
+    count_lines = "\n".join(f"    counts[{i}] = s->{c};" for i, c in enumerate(_counts(n)) if i)
+    code[c_path.name] += _template("handle.c").substitute(prefix=prefix) + _template(
+        "stage_api.c"
+    ).substitute(
         prefix=prefix, n=n, m=m, counts=1 + 3 * n, count_lines=count_lines,
         version=_version_text(f"{prefix}, the compensator of a stage of {n} actuators"),
     )  # fmt: skip
-    atomic_write_text(c_path, c_path.read_text() + api)
+    files = _write(code, c_path)
     lib = library_path(c_path, prefix)
     build_library([p for p in files if p.suffix == ".c"], lib)
     return files, lib
@@ -240,9 +276,7 @@ def write_stage_fmu(
     period = 1.0 / float(rate)
     what = f"{name}: the compensator of a stage of {n} actuators and {m} axes, {rate:g} Hz"
     files = export_stage_c(compensator, precision=precision, prefix=name).files
-    counts = ["c->s.outside"] + [
-        f"c->s.a{k}.{field}" for k in range(n) for field in ("nonfinite", "saturated", "slewed")
-    ]
+    counts = [f"c->s.{c}" for c in _counts(n)]
     files[f"{name}.c"] += fmi2_wrapper(
         name, period, what, n_real=m + n,
         layout=f"0-{m - 1} the targets, {m}-{m + n - 1} the voltages", not_input=f"vr[i] >= {m}",
@@ -344,13 +378,13 @@ def write_stage_mex(
     from .shared import _version_text, mex_commands
 
     gate, _, name = c_paths(path)
-    prefix = name[: -len("_mex")] if name.endswith("_mex") else f"{name}_step"
-    files = write_stage_c(compensator, gate.with_name(f"{prefix}.c"), precision=precision)
     n, m = len(compensator.compensators), compensator.model.coupling_.shape[0]
+    step = stage_paths(gate, n, mex=True)[1]
+    prefix = step.stem
+    files = write_stage_c(compensator, step, precision=precision)
     count_lines = "\n".join(
-        f"        counts[{1 + 3 * k + j}] = (double)state.a{k}.{field};"
-        for k in range(n) for j, field in enumerate(("nonfinite", "saturated", "slewed"))
-    )  # fmt: skip
+        f"        counts[{i}] = (double)state.{c};" for i, c in enumerate(_counts(n)) if i
+    )
     version = _version_text(f"{name}, the compensator of a stage of {n} actuators")
     text = _template("stage_mex.c").substitute(
         name=name, prefix=prefix, n=n, m=m, n_counts=1 + 3 * n, count_lines=count_lines,
