@@ -7,7 +7,18 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 import piezohyst as ph
-from piezohyst import analysis, control, io, model, simulation, testing, workflows
+from piezohyst import (
+    analysis,
+    control,
+    io,
+    metrics,
+    model,
+    plotting,
+    simulation,
+    testing,
+    workflows,
+)
+from piezohyst.analysis import selection
 from piezohyst.control import compensator, export
 from piezohyst.io import blocks, screening
 from piezohyst.model import bank, persistence, presets, terms
@@ -16,7 +27,8 @@ from piezohyst.workflows import fleet
 
 #: the top package, every subpackage's face, and the modules whose own names are public too
 MODULES = [ph, analysis, control, model, simulation, workflows, presets, terms, solve, blocks, play,
-           compensator, export, persistence, io, bank, fleet, screening, testing]  # fmt: skip
+           compensator, export, persistence, io, bank, fleet, screening, testing, selection,
+           metrics, plotting]  # fmt: skip
 
 
 def _documented_objects() -> Iterator[tuple[str, Any]]:
@@ -24,7 +36,7 @@ def _documented_objects() -> Iterator[tuple[str, Any]]:
     for module in MODULES:
         for name in getattr(module, "__all__", []):
             obj = getattr(module, name)
-            if id(obj) in seen or inspect.ismodule(obj) or not callable(obj):
+            if id(obj) in seen or not (inspect.isclass(obj) or inspect.isroutine(obj)):
                 continue
             seen.add(id(obj))
             yield f"{module.__name__}.{name}", obj

@@ -77,6 +77,20 @@ def hysteresis_width(x: ArrayLike, y: ArrayLike, *, levels: int = 200) -> float:
     the levels it crosses; the rising and falling branches are the means over
     the runs of each direction. A straight line gives 0.
 
+    Parameters
+    ----------
+    x : array_like
+        The input (what was wanted, or the voltage).
+    y : array_like
+        The output, one per input sample.
+    levels : int, default 200
+        How many input levels the branches are compared at.
+
+    Returns
+    -------
+    float
+        The largest gap between the branches over the levels, divided by ``y``'s span.
+
     Examples
     --------
     >>> import numpy as np

@@ -30,7 +30,19 @@ def loop_figure(
     title: str,
     identity: bool = False,
 ) -> None:
-    """Draw input-output curves on ``ax`` (one line each, with a legend)."""
+    """Draw input-output curves on ``ax`` (one line each, with a legend).
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        Where to draw.
+    curves : sequence of Curve
+        ``(x, y, label, style)`` per line, ``style`` the keywords of ``ax.plot``.
+    xlabel, ylabel, title : str
+        The axes' labels and title.
+    identity : bool, default False
+        Also draw the line y = x (an ideal compensation), over the curves' x range.
+    """
     for x, y, label, style in curves:
         ax.plot(x, y, label=label, **style)  # type: ignore[arg-type]
     if identity:
@@ -45,7 +57,22 @@ def loop_figure(
 
 
 def save_panels(path: Path, panels: Sequence[dict[str, object]], *, suptitle: str) -> Path:
-    """One figure with side-by-side panels, each given as ``loop_figure`` keywords."""
+    """One figure with side-by-side panels, each given as ``loop_figure`` keywords.
+
+    Parameters
+    ----------
+    path : Path
+        The image file to write (its suffix names the format).
+    panels : sequence of dict
+        One panel each: the keywords of :func:`loop_figure` but ``ax``.
+    suptitle : str
+        The figure's title.
+
+    Returns
+    -------
+    Path
+        ``path``, written.
+    """
     fig = Figure(figsize=(5.2 * len(panels), 4.2))
     axes = fig.subplots(1, len(panels), squeeze=False)
     for ax, panel in zip(axes[0], panels, strict=True):

@@ -22,7 +22,6 @@ smaller ones.
 
 from __future__ import annotations
 
-import itertools
 import math
 import warnings
 from collections.abc import Sequence
@@ -32,7 +31,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._kernels import signal as S
 from .._validation import FloatArray, as_signal, as_time, same_length
 from ..errors import (
     ExtrapolationWarning,
@@ -41,12 +39,25 @@ from ..errors import (
     ParameterError,
     RecordWarning,
 )
-from ..io.screening import noise_level
 from ..model.fit_record import screened
 from ..model.model import HysteresisModel, InitialState
 from ..model.persistence import model_class, model_names
 from ..model.terms import creep_time_constants
 from .comparison import compare_models
+from .turns import (
+    MAJOR,
+    MIN_TURNS,
+    NOISE_REACH,
+    SEVERAL_RATES,
+    TURN_BAND,
+    _record_notes,
+    _turns,
+    drive_rates,
+    input_noise,
+    record_notes,
+    several_rates,
+    turn_band,
+)
 
 __all__ = [
     "CANDIDATES",
@@ -103,14 +114,6 @@ LOOP_CANDIDATES = ("classical-pi", "active-pi", "bouc-wen", "duhem")
 #: (end of the fitted part, end of the scored part) as fractions of the record's input turns
 #: (of its samples where it has fewer than :data:`MIN_TURNS`)
 FOLDS = ((0.5, 0.75), (0.75, 1.0))
-#: A turn: the input back by this fraction of its span from its last extreme
-TURN_BAND = 0.01
-#: Fewest turns for folds placed by turns: two per scored part at the least
-MIN_TURNS = 8
-#: A turn must also move back this many times the input's noise (RMS): over a hold of
-#: 10^4-10^5 samples Gaussian noise spans 8.6-9.5 of its RMS from highest to lowest, so a
-#: smaller band counts the noise of a hold as turns
-NOISE_REACH = 10.0
 #: Each part's weight in the score: equal. Chosen on units 4-6 of the simulated plants'
 #: batches with the folds placed by turns: the plain mean, weights 0.4 and 0.6 (the share of
 #: the turns each fit saw), the last part alone and the worst part chose within 1.25x of the
@@ -121,8 +124,6 @@ WEIGHTS = (0.5, 0.5)
 TIE = 0.02
 #: A scored part with fewer than two turns inside is cut into this many equal blocks
 EVEN_BLOCKS = 8
-#: Reversals spanning at least this share of the input's range belong to the major loop
-MAJOR = 0.9
 #: A margin within this many of its standard errors is one the record does not decide
 SURE = 2.0
 
@@ -146,7 +147,12 @@ class Part:
     span: float
 
     def left_out(self) -> FloatArray:
-        """The part's NRMSE with each block left out in turn."""
+        """The part's NRMSE with each block left out in turn.
+
+        Returns
+        -------
+        ndarray, shape (blocks,)
+        """
         total, n = float(self.squares.sum()), float(self.counts.sum())
         rest = np.maximum(total - self.squares, 0.0) / (n - self.counts)
         return np.asarray(np.sqrt(rest) / self.span, dtype=np.float64)
@@ -377,38 +383,6 @@ def _bounds(size: int, turns: np.ndarray) -> list[tuple[int, int]]:
     return bounds
 
 
-#: the input's noise (RMS): one estimator with the record's check
-input_noise = noise_level
-
-
-def turn_band(x: FloatArray) -> float:
-    """How far the input must move back from its last extreme to turn: :data:`TURN_BAND` of
-    its span, or :data:`NOISE_REACH` times its noise (:func:`input_noise`) where larger.
-
-    Parameters
-    ----------
-    x : ndarray, shape (N,)
-
-    Returns
-    -------
-    float
-        In the input's units; 0 for a constant input.
-    """
-    span = float(np.ptp(x)) if x.size else 0.0
-    if span <= 0.0:
-        return 0.0
-    return max(TURN_BAND * span, NOISE_REACH * input_noise(x))
-
-
-def _turns(x: FloatArray) -> np.ndarray:
-    """The index of each turn's extreme (:func:`turn_band`); none for a constant input."""
-    band = turn_band(x)
-    turns = np.empty(x.size, np.int64)
-    if band <= 0.0:
-        return turns[:0]
-    return turns[: int(S.turn_points(x, band, np.zeros(3), turns))]
-
-
 def _block_starts(turns: np.ndarray, a: int, b: int) -> np.ndarray:
     """Where the blocks of part ``a:b`` start, relative to ``a``: after each turn inside it
     (a half-cycle a block), or :data:`EVEN_BLOCKS` equal blocks with fewer than two turns."""
@@ -463,7 +437,21 @@ def jackknife(parts: Sequence[Part], other: Sequence[Part] = ()) -> float:
 
 
 def with_margins(rows: Sequence[SelectionRow], winner: SelectionRow) -> list[SelectionRow]:
-    """The rows with each one's margin over ``winner`` and its paired standard error."""
+    """The rows with each one's margin over ``winner`` and its paired standard error.
+
+    Parameters
+    ----------
+    rows : sequence of SelectionRow
+        Every candidate's scores (its parts: the folds' half-cycle errors).
+    winner : SelectionRow
+        The chosen candidate's row.
+
+    Returns
+    -------
+    list of SelectionRow
+        The rows in their order, each with ``margin`` (score minus the winner's) and
+        ``margin_stderr`` (a paired jackknife over the record's half-cycles).
+    """
     out = []
     for r in rows:
         if r.name == winner.name:
@@ -477,16 +465,44 @@ def with_margins(rows: Sequence[SelectionRow], winner: SelectionRow) -> list[Sel
 
 
 def undecided(rows: Sequence[SelectionRow], name: str) -> tuple[str, ...]:
-    """The rows' candidates not told apart from ``name`` (see :attr:`Selection.undecided`),
-    in the rows' order; ``rows`` carry margins (:func:`with_margins`)."""
+    """The rows' candidates not told apart from ``name`` (see :attr:`Selection.undecided`).
+
+    Parameters
+    ----------
+    rows : sequence of SelectionRow
+        The rows with margins (:func:`with_margins`).
+    name : str
+        The chosen candidate.
+
+    Returns
+    -------
+    tuple of str
+        The other candidates whose margin is within :data:`SURE` standard errors, in the
+        rows' order.
+    """
     return tuple(
         r.name for r in rows if r.name != name and math.isfinite(r.score) and not r.decided
     )
 
 
 def verdict(rows: Sequence[SelectionRow], name: str, notes: Sequence[str]) -> tuple[str, ...]:
-    """How sure the choice of ``name`` is, in sentences: the candidates the record does not
-    tell apart from it (``rows`` with margins, :func:`with_margins`), then ``notes``."""
+    """How sure the choice of ``name`` is, in sentences.
+
+    Parameters
+    ----------
+    rows : sequence of SelectionRow
+        The rows with margins (:func:`with_margins`).
+    name : str
+        The chosen candidate.
+    notes : sequence of str
+        What the record cannot test (:func:`record_notes`).
+
+    Returns
+    -------
+    tuple of str
+        The candidates the record does not tell apart from ``name`` (one sentence, if any),
+        then ``notes``.
+    """
     close = undecided(sorted(rows, key=lambda r: r.score), name)
     if not close:
         return tuple(notes)
@@ -495,122 +511,6 @@ def verdict(rows: Sequence[SelectionRow], name: str, notes: Sequence[str]) -> tu
         f"{', '.join(close)}."
     )
     return (head, *notes)
-
-
-def record_notes(x: FloatArray) -> tuple[str, ...]:
-    """What a record's input cannot test, said plainly (for :attr:`Selection.notes`).
-
-    Parameters
-    ----------
-    x : ndarray, shape (N,)
-        The record's input (V).
-
-    Returns
-    -------
-    tuple of str
-        One sentence per thing the input cannot test (empty: nothing to say).
-    """
-    return _record_notes(x, _turns(x))
-
-
-#: half-cycles all within this factor of their median length: a record of one frequency
-ONE_RATE = 2.0
-#: The 5th and 95th percentiles of a record's half-cycle rates this far apart: it drives
-#: several rates, and a lag between the command and the piezo can be told from loop width
-#: (measured on the simulator's signals: one frequency 1.0-1.7, ``multifreq`` 4.2,
-#: ``two-rate`` 4.0, ``piezohyst excite`` 11.8; the measured 1 Hz sets 1.0-1.1)
-SEVERAL_RATES = 3.0
-
-
-#: The share of a sine's half-period its rise from 10 % to 90 % of the half-cycle takes:
-#: (acos(-0.8) - acos(0.8)) / pi
-SINE_RISE = 0.59033
-
-
-def drive_rates(x: ArrayLike, t: ArrayLike) -> FloatArray:
-    """The rate (Hz) of each half-cycle of a record's drive, from its rise time: a half-cycle
-    between two turns of the input, of at least 5 % of its range, takes the time ``d`` from
-    10 % to 90 % of its own amplitude, ``0.59 / (2 d)`` for a sine of that period (a
-    triangle's reads 1.36x higher; holds at its ends do not count, nor the noise in them).
-
-    Parameters
-    ----------
-    x : array_like
-        The input.
-    t : array_like
-        Its times (s).
-
-    Returns
-    -------
-    ndarray
-        One rate per half-cycle, in time order.
-    """
-    xs, ts = as_signal(x, "x"), as_signal(t, "t")
-    same_length(xs, ts, "x", "t")
-    turns = _turns(xs)
-    span = float(np.ptp(xs)) if xs.size else 0.0
-    rates = []
-    for a, b in itertools.pairwise(turns):
-        seg = xs[a : b + 1]
-        amp = float(seg[-1] - seg[0])
-        if abs(amp) < 0.05 * span:
-            continue
-        frac = (seg - seg[0]) / amp
-        rise = float(ts[a + int(np.argmax(frac >= 0.9))] - ts[a + int(np.argmax(frac >= 0.1))])
-        if rise > 0.0:
-            rates.append(SINE_RISE / (2.0 * rise))
-    return np.array(rates)
-
-
-def several_rates(x: ArrayLike, t: ArrayLike) -> tuple[bool, FloatArray]:
-    """Whether a record drives several rates (:data:`SEVERAL_RATES`), and its half-cycles'
-    rates (:func:`drive_rates`).
-
-    Parameters
-    ----------
-    x, t : array_like
-
-    Returns
-    -------
-    (bool, ndarray)
-    """
-    rates = drive_rates(x, t)
-    if rates.size < 4:
-        return False, rates
-    low, high = np.percentile(rates, [5.0, 95.0])
-    return bool(high >= SEVERAL_RATES * low), rates
-
-
-def _record_notes(x: FloatArray, turns: np.ndarray) -> tuple[str, ...]:
-    notes = []
-    if turns.size < MIN_TURNS:
-        notes.append(
-            f"The input turns {turns.size} times (fewer than {MIN_TURNS}): the folds split its "
-            "samples, and each scored part holds few loops."
-        )
-    span = float(np.ptp(x)) if x.size else 0.0
-    if turns.size >= 2 and span > 0.0:
-        widths = np.abs(np.diff(x[turns])) / span
-        if np.all(widths >= MAJOR):
-            notes.append(
-                f"Every reversal spans at least {100 * MAJOR:.0f} % of the input's range: the "
-                "record holds no minor loops, so the scores rank how each candidate follows the "
-                "major loop, not how it predicts smaller loops (a Preisach density or a Duhem "
-                "grid inside the loop is then a guess). Record loops of several amplitudes "
-                "(piezohyst excite) to choose for them."
-            )
-    halves = np.diff(turns)[1:-1]  # the first and last may be cut by the record's ends
-    middle = float(np.median(halves)) if halves.size else 0.0
-    if halves.size >= 3 and np.all((halves >= middle / ONE_RATE) & (halves <= middle * ONE_RATE)):
-        notes.append(
-            "Every half-cycle lasts about as long as the others (within "
-            f"{ONE_RATE:g}x of their median): the record drives one frequency, where a "
-            "lag of the amplifier or sensor and hysteresis look alike, so the scores cannot "
-            "rank how the candidates follow another rate, and each holds the lag this drive "
-            "showed as loop width. Record several frequencies (piezohyst excite, or the "
-            "multifreq signal) to choose for other rates."
-        )
-    return tuple(notes)
 
 
 def forward_scores(
@@ -678,7 +578,17 @@ def _forward(
 
 
 def chosen(rows: Sequence[SelectionRow]) -> SelectionRow:
-    """The first row (the simplest, in candidate order) within :data:`TIE` of the best."""
+    """The first row (the simplest, in candidate order) within ``TIE`` of the best.
+
+    Parameters
+    ----------
+    rows : sequence of SelectionRow
+        Every candidate's row, in candidate order (simplest first).
+
+    Returns
+    -------
+    SelectionRow
+    """
     best = min(r.score for r in rows)
     return next(r for r in rows if r.score <= best * (1 + TIE))
 

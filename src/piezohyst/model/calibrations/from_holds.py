@@ -128,7 +128,7 @@ def calibrate_leakage(
         amplifier still settle; "auto" chooses it per hold from
         :data:`TRIMS`: the shortest whose slope agrees with the hold's last 40 %.
     scale : float, optional
-        :math:`s`; default the largest |v| of the record.
+        :math:`s`; default the largest ``|v|`` of the record.
     input_unit, output_unit : str
         Units of ``v`` and ``q``.
 
