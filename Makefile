@@ -6,7 +6,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 OUT    ?= demo-report
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test lint bench clean docs
 
 $(BIN)/.installed: pyproject.toml
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "piezohyst needs Python >= 3.11, found " + sys.version.split()[0]'
@@ -18,8 +18,8 @@ demo: $(BIN)/.installed
 	$(BIN)/piezohyst demo --out $(OUT)
 
 lint: $(BIN)/.installed
-	$(BIN)/ruff check src tests benchmarks
-	$(BIN)/ruff format --check src tests benchmarks
+	$(BIN)/ruff check src tests benchmarks examples docs/conf.py docs/api_pages.py
+	$(BIN)/ruff format --check src tests benchmarks examples docs/conf.py docs/api_pages.py
 	$(BIN)/mypy
 	$(BIN)/lint-imports
 
@@ -64,3 +64,16 @@ bench: $(BIN)/.installed
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache .mypy_cache .ruff_cache .hypothesis .coverage
+
+# The documentation site (docs/_build/html): Sphinx with warnings as errors (a broken
+# reference, a docstring numpydoc cannot read, or a gallery example that raises fails it),
+# the API reference written from the packages (docs/api_pages.py), the gallery run from
+# examples/; then the built pages opened in headless Chromium (tests/site). Its tools are the
+# `docs` extra, installed beside the package on first use.
+$(BIN)/.docs-installed: $(BIN)/.installed
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[docs]'
+	@touch $@
+
+docs: $(BIN)/.docs-installed
+	@start=$$(date +%s); 	MPLBACKEND=Agg $(BIN)/sphinx-build -W --keep-going -q -b html docs docs/_build/html && 	echo "site built in $$(( $$(date +%s) - start )) s: $$(find docs/_build/html -name '*.html' | wc -l) pages in docs/_build/html (open index.html)"
+	PIEZOHYST_SITE=$(CURDIR)/docs/_build/html $(BIN)/python -m pytest -q -p no:cacheprovider -rs tests/site

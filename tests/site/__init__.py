@@ -1,0 +1,1 @@
+"""The documentation site, opened in a browser (``make docs``)."""
