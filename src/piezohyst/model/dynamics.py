@@ -471,7 +471,8 @@ class OutputDynamics:
         ----------
         desired : ndarray, shape (N,)
         before : ndarray, shape (2,)
-            The two desired values before the block (NaN: none, taken as the first).
+            The two desired values before the block (NaN: none yet, taken as the first
+            one known: ``[NaN, a]`` is ``[a, a]``).
         after : ndarray
             Desired values after the block.
 
@@ -481,19 +482,21 @@ class OutputDynamics:
         """
         if not self.active or desired.size == 0:
             return desired.copy()
-        b = np.where(np.isfinite(before), before, desired[0])
-        if after.size and math.isfinite(after[0]):
-            nxt = float(after[0])
-        else:
-            last2 = np.concatenate([b, desired])[-2:]
-            nxt = 2.0 * last2[1] - last2[0]
-        e = np.concatenate([b, desired, [nxt]])  # e[j + 2] is desired[j]
+        nxt = float(after[0]) if after.size else math.nan
+        e = np.concatenate([np.asarray(before, dtype=np.float64), desired, [nxt]])
         dt = self.sample_interval
         w = 2.0 * math.pi * self.f0
-        k = np.arange(desired.size) + 2
-        mid = 0.5 * (e[k] + e[k - 1])
-        d1 = (e[k] - e[k - 1]) / dt
-        d2 = ((e[k + 1] - e[k]) - (e[k - 1] - e[k - 2])) / (2.0 * dt * dt)
+        k = np.arange(desired.size) + 2  # e[k] is desired[k - 2]
+        # a value not known (NaN: before the first, a held sample, no preview) is taken as the
+        # nearest known one, per sample as the C step does: ``[NaN, a]`` before is ``[a, a]``,
+        # and an unknown next value extrapolates the last two linearly
+        cur = e[k]
+        b1 = np.where(np.isfinite(e[k - 1]), e[k - 1], cur)
+        b0 = np.where(np.isfinite(e[k - 2]), e[k - 2], b1)
+        ahead = np.where(np.isfinite(e[k + 1]), e[k + 1], 2.0 * cur - b1)
+        mid = 0.5 * (cur + b1)
+        d1 = (cur - b1) / dt
+        d2 = ((ahead - cur) - (b1 - b0)) / (2.0 * dt * dt)
         return np.asarray(mid + 2.0 * self.zeta / w * d1 + d2 / (w * w))
 
     def _cached(self) -> tuple[FloatArray, FloatArray]:

@@ -10,8 +10,8 @@ real_t PREFIX_step(PREFIX_t *s, real_t desired, real_t next)
     if (!non_finite(next)) {
         next = MAP_D(next);
     }
-    b0 = non_finite(s->e2) ? desired : s->e2;
-    b1 = non_finite(s->e1) ? desired : s->e1;
+    b1 = non_finite(s->e1) ? desired : s->e1; /* not known yet: the first one known */
+    b0 = non_finite(s->e2) ? b1 : s->e2;
     nxt = non_finite(next) ? 2.0 * desired - b1 : next;
     mid = 0.5 * (desired + b1);
     d1 = (desired - b1) / MODE_DT;
