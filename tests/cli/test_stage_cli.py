@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 import piezohyst as ph
-from piezohyst.simulation import XY_COUPLING, make_signal, simulate_stage
+from piezohyst.simulation import XY_COUPLING, XY_DYNAMIC, make_signal, simulate_stage
 
 from ..helpers import CC, assert_clean_error, one_line_error, run
 
@@ -183,3 +183,36 @@ def test_report_a_stage_from_the_shell(tmp_path: Path) -> None:
     assert f"x {values['nrmse_x_pct']:.4g} %" in res.output
     assert_clean_error(run("report", model_file, data, "--input", "vx,vy", "--output", "x,y",
                            "--gain", "125", "--out", tmp_path / "r2"), code=2)  # fmt: skip
+
+
+def test_a_stage_with_lags_and_modes_from_the_shell(tmp_path: Path) -> None:
+    """``fit`` takes each actuator's lag and mode for a stage, says what it found, and its C
+    export's step takes the next position; the hosts that step one position refuse it."""
+    t, a = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=12.0)
+    _, b = make_signal("multifreq", amplitude=140.0, frequency=1.9, duration=12.0)
+    rec = simulate_stage(np.column_stack([a, b]), t, presets=XY_DYNAMIC, seed=0)
+    data = tmp_path / "fast.csv"
+    ph.write_table(
+        data,
+        {"time": rec.t, "vx": rec.voltage[:, 0], "vy": rec.voltage[:, 1],
+         "x": rec.position[:, 0], "y": rec.position[:, 1]},
+        units={"time": "s", "vx": "V", "vy": "V", "x": "m", "y": "m"},
+    )  # fmt: skip
+    out = tmp_path / "stage.json"
+    res = run("fit", data, "--input", "vx,vy", "--output", "x,y", "--operators", "16",
+              "--input-dynamics", "first-order", "--output-dynamics", "second-order",
+              "-o", out)  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "actuator 0 a lag of 3.9" in res.output and "a mode at 149." in res.output
+    assert "actuator 1 a lag of 2.9" in res.output and "a mode at 119." in res.output
+    c_file = tmp_path / "ph_xy.c"
+    res = run("export-c", out, "--v-min", "1", "--v-max", "139", "--sample-rate", "1000",
+              "-o", c_file)  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "const ph_xy_real *next" in (tmp_path / "ph_xy.h").read_text()
+    one_line_error(
+        run("export-c", out, "--v-min", "1", "--v-max", "139", "--sample-rate", "1000",
+            "--shared", "-o", tmp_path / "lib" / "ph_xy.c"),
+        "actuator 0's model holds an output mode",
+    )  # fmt: skip
+    assert not (tmp_path / "lib").exists()

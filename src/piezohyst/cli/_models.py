@@ -105,16 +105,15 @@ def fit(
     if "," in (data_spec.input_column or "") + (data_spec.output_column or ""):
         given = {"--growth": growth != "default", "--creep": bool(creep),
                  "--relaxation": relaxation is not None,
-                 "--input-dynamics": input_dynamics not in ("none", "record"),
-                 "--output-dynamics": output_dynamics != "none",
                  "--model auto": model_name == "auto"}  # fmt: skip
         named = [option for option, set_ in given.items() if set_]
         if named:
             raise click.UsageError(
                 f"{', '.join(named)}: a stage (several --input and --output columns) fits "
-                "each actuator's model with its defaults and the static coupling; name one "
-                "model (--model classical-pi), or choose each actuator's with piezohyst "
-                "select on its own columns"
+                "each actuator's model with its defaults (and the lag and mode you name: "
+                "--input-dynamics, --output-dynamics) and the coupling; name one model "
+                "(--model classical-pi), or choose each actuator's with piezohyst select on "
+                "its own columns"
             )
         # a stage's actuators default to the CoupledModel's own (ClassicalPI): the default
         # ActivePI keeps creep operators on a displacement record, and its numeric inverse
@@ -122,7 +121,10 @@ def fit(
         chosen = click.get_current_context().get_parameter_source("model_name")
         if chosen is click.core.ParameterSource.DEFAULT:
             model_name = "classical-pi"
-        _fit_stage(ctx, data, model_name, operators, data_spec, out, force)
+        # a stage's lag is identified where named (--input-dynamics record is one
+        # actuator's evidence rule, not yet a stage's)
+        dynamics = ("none" if input_dynamics == "record" else input_dynamics, output_dynamics)
+        _fit_stage(ctx, data, model_name, operators, dynamics, data_spec, out, force)
         return
     terms, taus = parse_terms(growth, creep)
     if model_name == "auto":
@@ -181,8 +183,8 @@ def fit(
 
 
 def _fit_stage(
-    ctx: Context, data: Path, model_name: str, operators: int, data_spec: DataSpec, out: Path,
-    force: bool,
+    ctx: Context, data: Path, model_name: str, operators: int, dynamics: tuple[str, str],
+    data_spec: DataSpec, out: Path, force: bool,
 ) -> None:  # fmt: skip
     """``fit --input vx,vy --output x,y``: a coupled stage (:func:`fit_stage_file`)."""
     from ..workflows.stage_files import fit_stage_file, stage_columns
@@ -194,6 +196,7 @@ def _fit_stage(
             inputs=stage_columns(data_spec.input_column, "--input"),
             outputs=stage_columns(data_spec.output_column, "--output"),
             model=model_name, operators=operators, data_spec=data_spec, force=force,
+            input_dynamics=dynamics[0], output_dynamics=dynamics[1],
         ),
     )  # fmt: skip
     ctx.result(stage.describe())

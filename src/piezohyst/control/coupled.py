@@ -188,7 +188,9 @@ class CoupledCompensator:
                 )
         return np.asarray(own)
 
-    def step(self, desired: ArrayLike, measured: Any = None) -> FloatArray:
+    def step(
+        self, desired: ArrayLike, measured: Any = None, preview: ArrayLike | None = None
+    ) -> FloatArray:
         """One command per actuator for one desired position.
 
         Parameters
@@ -197,18 +199,33 @@ class CoupledCompensator:
             The stage's desired position (the model's output units); NaN holds.
         measured : optional
             A reading: ignored (feedforward; the controllers' one contract).
+        preview : array_like, shape (k, outputs) or (outputs,), optional
+            The desired positions of the next samples, for actuators whose models look ahead
+            (an output mode, an input delay): each actuator's compensator gets what it alone
+            must move there (:meth:`~piezohyst.Compensator.step`'s ``preview``). Without it
+            they extrapolate, so ``process`` of a block equals ``step`` on each row with the
+            rows after it as the preview.
 
         Returns
         -------
         ndarray, shape (actuators,)
             Commands (V), each inside its actuator's limits.
         """
+        m = self.model.coupling_.shape[0]
         d = np.asarray(desired, dtype=np.float64).reshape(1, -1)
-        if d.shape[1] != self.model.coupling_.shape[0]:
-            msg = f"'desired' must hold {self.model.coupling_.shape[0]} positions. Got {d.size}."
+        if d.shape[1] != m:
+            msg = f"'desired' must hold {m} positions. Got {d.size}."
             raise ShapeError(msg)
         own = self._own(d)[0]
-        return np.array([c.step(float(own[i])) for i, c in enumerate(self.compensators)])
+        if preview is None:
+            return np.array([c.step(float(own[i])) for i, c in enumerate(self.compensators)])
+        ahead = np.atleast_2d(np.asarray(preview, dtype=np.float64))
+        if ahead.ndim != 2 or ahead.shape[1] != m:
+            msg = f"'preview' must be (samples, {m}) desired positions. Got shape {ahead.shape}."
+            raise ShapeError(msg)
+        own_ahead = (ahead - self.model.offset_) @ self._inverse.T  # not counted: not yet due
+        return np.array([c.step(float(own[i]), preview=own_ahead[:, i])
+                         for i, c in enumerate(self.compensators)])  # fmt: skip
 
     def process(self, desired: ArrayLike, measured: ArrayLike | None = None) -> FloatArray:
         """Commands for a block of desired positions; equal to :meth:`step` on each row.

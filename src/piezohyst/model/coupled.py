@@ -12,10 +12,14 @@ alternation: the coupling from a linear fit of the outputs on the inputs, each a
 model on the virtual output :math:`C^{-1}(y - c)` that is its own, the coupling again on
 the models' outputs, a few rounds.
 
-This is the static part of a coupled stage (the coupling at the rates a raster runs at);
-coupled dynamics (modes that a raster's corners excite) are a later step: on the measured
-fine-steering mirror the modes move with the drive level, which needs the hysteresis inside
-the dynamics' loop (``docs/validation.md``).
+Each actuator's model may hold its amplifier's lag and the mode its axis moves through
+(``input_dynamics``, ``output_dynamics="second-order"``): identified with its hysteresis on
+a record of several rates per axis, they are the dynamics a fast raster's corners excite,
+and the compensator inverts them with one sample of preview (a flexure whose coupling is
+kinematic: y's sensor sees x's motion, mode and all; ``simulation.XY_DYNAMIC``). Modes
+*after* the coupling (a structure's own modes shared by the axes) and modes that move with
+the drive level (the measured fine-steering mirror: hysteresis inside the dynamics' loop,
+``docs/validation.md``) are not modelled yet.
 """
 
 from __future__ import annotations
@@ -310,9 +314,20 @@ class CoupledModel(JsonFile):
         kinds = ", ".join(type(ch).__name__ for ch in self.channels_)
         worst = max(abs(x) for i, row in enumerate(self.coupling_) for j, x in
                     enumerate(row) if i != j) if len(self.channels_) > 1 else math.nan  # fmt: skip
+        dynamics = []
+        for k, ch in enumerate(self.channels_):
+            held = []
+            lag, mode = ch.input_dynamics_, ch.output_dynamics_
+            if lag.active:
+                held.append(f"a lag of {1e3 * (lag.tau + lag.delay):.3g} ms")
+            if mode.active:
+                held.append(f"a mode at {mode.f0:.4g} Hz (damping {mode.zeta:.3g})")
+            if held:
+                dynamics.append(f"actuator {k} {' and '.join(held)}")
+        said = f"; {'; '.join(dynamics)}" if dynamics else ""
         return (
             f"CoupledModel: {len(self.channels_)} actuators ({kinds}), static coupling "
-            f"[{rows}] (largest cross term {100 * worst:.3g} %), NRMSE per output {fit}"
+            f"[{rows}] (largest cross term {100 * worst:.3g} %), NRMSE per output {fit}{said}"
         )
 
     # ------------------------------------------------------------------ files

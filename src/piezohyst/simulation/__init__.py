@@ -17,7 +17,7 @@ from .bench import (
 from .loop import run_loop
 from .model_plant import ModelPlant, PlantRun, run_on_model
 from .signals import SIGNALS, make_signal
-from .stage import XY_COUPLING, StageRecord, simulate_stage
+from .stage import XY_COUPLING, XY_DYNAMIC, StageRecord, simulate_stage
 
 __all__ = [
     "DEFAULT_PRESET",
@@ -25,6 +25,7 @@ __all__ = [
     "PRESETS",
     "SIGNALS",
     "XY_COUPLING",
+    "XY_DYNAMIC",
     "Bench",
     "BenchPreset",
     "BenchRecord",

@@ -233,6 +233,25 @@ PRESETS["T226-H4-203X-mode"] = replace(
     },
 )
 
+PRESETS["T226-H4-203X-mode-y"] = replace(
+    PRESETS["T226-H4-203X-mode"],
+    name="T226-H4-203X-mode-y",
+    amp_tau=3e-3,
+    mech_f0=120.0,
+    mech_zeta=0.04,
+    sources={
+        **PRESETS["T226-H4-203X-mode"].sources,
+        "amp_tau": (
+            "assumption: the second axis's amplifier, a 3 ms time constant (another channel "
+            "of a stage's driver, another cable)"
+        ),
+        "mech_f0, mech_zeta": (
+            "assumption: an XY stage's second axis carries the first (a stacked or nested "
+            "flexure), so its mode is lower, 120 Hz with 4 % damping"
+        ),
+    },
+)
+
 DEFAULT_PRESET = "T226-H4-203X"
 
 _ZOO_CHAIN = (

@@ -312,6 +312,8 @@ def fit_stage_file(
     operators: int = 10,
     data_spec: DataSpec | None = None,
     force: bool = False,
+    input_dynamics: str = "none",
+    output_dynamics: str = "none",
 ) -> CoupledModel:
     """Fit a coupled stage (one model per actuator and the coupling) to a file and save it.
 
@@ -336,6 +338,9 @@ def fit_stage_file(
         are replaced by each pair).
     force : bool
         Replace an existing ``out`` that piezohyst did not write.
+    input_dynamics, output_dynamics : str
+        Each actuator's amplifier lag and its axis's mode, as one model's
+        (``"first-order"``, ``"second-order"``, ...): identified with its hysteresis.
 
     Returns
     -------
@@ -360,7 +365,8 @@ def fit_stage_file(
     assert y is not None  # outputs given: read or refused
     cls = model_class(model)
     accepted = cls().get_params()
-    settings: dict[str, object] = {"output_unit": unit or "m"}
+    settings: dict[str, object] = {"output_unit": unit or "m", "input_dynamics": input_dynamics,
+                                   "output_dynamics": output_dynamics}  # fmt: skip
     if "n_operators" in accepted:
         settings["n_operators"] = operators
     elif operators != 10:

@@ -21,6 +21,7 @@ import numpy as np
 from ...errors import ParameterError
 from ...io import atomic_write_text
 from ..c_text import CText, Precision
+from ..compensator import Compensator
 from ..coupled import REACH_SLACK, CoupledCompensator
 from .c_code import c_paths, export_c
 
@@ -130,19 +131,57 @@ def export_stage_c(
                                ("REACH_HI", compensator.reach[:, 1]),
                                ("SLACK", REACH_SLACK * span))),
     ])  # fmt: skip
+    looks = _next_fields(comps, prefix, n, m)
     files[f"{prefix}.h"] = _template("stage.h").substitute(
-        prefix=prefix, upper=prefix.upper(), n=n, m=m, precision=precision,
+        **looks, prefix=prefix, upper=prefix.upper(), n=n, m=m, precision=precision,
         parts=", ".join(f"{prefix}_a{k}.c" for k in range(n)),
         includes="\n".join(f'#include "{prefix}_a{k}.h"' for k in range(n)),
         members="\n".join(f"    {prefix}_a{k}_t a{k};" for k in range(n)),
     )  # fmt: skip
     files[f"{prefix}.c"] = _template("stage.c").substitute(
-        prefix=prefix, n=n, m=m, tables=tables,
+        **looks, prefix=prefix, n=n, m=m, tables=tables,
         inits="\n".join(f"    {prefix}_a{k}_init(&s->a{k});" for k in range(n)),
-        steps="\n".join(f"    command[{k}] = {prefix}_a{k}_step(&s->a{k}, own[{k}]);"
-                        for k in range(n)),
+        steps="\n".join(f"    command[{k}] = {prefix}_a{k}_step(&s->a{k}, own[{k}]"
+                        + (f", own_next[{k}]" if comp.mode.active else "") + ");"
+                        for k, comp in enumerate(comps)),
     )  # fmt: skip
     return StageCode(files)
+
+
+NEXT_FIELDS = ("next_param", "next_decl", "next_own", "next_double", "next_copy_decl",
+               "next_copy", "next_arg", "next_said")  # fmt: skip
+
+
+def _next_fields(comps: list[Compensator], prefix: str, n: int, m: int) -> dict[str, str]:
+    """The template's fields for a step that also takes the next desired position: where an
+    actuator's model holds an output mode, whose inverse needs it (empty fields otherwise)."""
+    if not any(comp.mode.active for comp in comps):
+        return dict.fromkeys(NEXT_FIELDS, "")
+    return {
+        "next_param": f", const {prefix}_real *next",
+        "next_decl": f"\n    {prefix}_real own_next[{n}];",
+        "next_own": (f"    for (i = 0; i < {n}; ++i) {{ /* the same for the next position */\n"
+                     "        own_next[i] = 0;\n"
+                     f"        for (j = 0; j < {m}; ++j) {{\n"
+                     "            own_next[i] += INVERSE[i][j] * (next[j] - OFFSET[j]);\n"
+                     "        }\n    }\n"),
+        "next_double": ", const double *next",
+        "next_copy_decl": f" {prefix}_real e[{m}];",
+        "next_copy": "\n        e[i] = (" + prefix + "_real)next[i];",
+        "next_arg": ", e",
+        "next_said": (f"\n * An actuator's mechanical mode is inverted from the trajectory: also "
+                      f"pass the next\n * desired position (next[{m}]; NaN: extrapolated)."),
+    }  # fmt: skip
+
+
+def _refuse_mode(compensator: CoupledCompensator, what: str) -> None:
+    """A host that steps one desired position at a time cannot feed a mode's inverse."""
+    for k, comp in enumerate(compensator.compensators):
+        if comp.mode.active:
+            msg = (f"{what} takes one desired position per step: actuator {k}'s model holds an "
+                   "output mode, whose inverse needs the next one too; export the stage's "
+                   "sources (export-c) instead, whose step takes it")  # fmt: skip
+            raise ParameterError(msg)
 
 
 def write_stage_c(
@@ -215,6 +254,7 @@ def write_stage_shared(
     """
     from .shared import _version_text, build_library, library_path
 
+    _refuse_mode(compensator, "a shared library")
     c_path, _, prefix = c_paths(path)
     code = export_stage_c(compensator, precision=precision, prefix=prefix).files
     n, m = len(compensator.compensators), compensator.model.coupling_.shape[0]
@@ -263,6 +303,7 @@ def write_stage_fmu(
     """
     from .fmu import fmi2_wrapper, package_fmu
 
+    _refuse_mode(compensator, "an FMU")
     rate = compensator.compensators[0].sample_rate
     if rate is None:
         msg = "an FMU steps at the loop's rate: give the sample rate (sample_rate=)"
@@ -377,6 +418,7 @@ def write_stage_mex(
     """
     from .shared import _version_text, mex_commands
 
+    _refuse_mode(compensator, "a MEX gateway")
     gate, _, name = c_paths(path)
     n, m = len(compensator.compensators), compensator.model.coupling_.shape[0]
     step = stage_paths(gate, n, mex=True)[1]

@@ -11,9 +11,9 @@ ${inits}
     s->outside = 0;
 }
 
-void ${prefix}_step(${prefix}_t *s, const ${prefix}_real *desired, ${prefix}_real *command)
+void ${prefix}_step(${prefix}_t *s, const ${prefix}_real *desired${next_param}, ${prefix}_real *command)
 {
-    ${prefix}_real own[${n}];
+    ${prefix}_real own[${n}];${next_decl}
     int i, j, beyond = 0;
     for (i = 0; i < ${n}; ++i) { /* what each actuator alone must move */
         own[i] = 0;
@@ -27,19 +27,19 @@ void ${prefix}_step(${prefix}_t *s, const ${prefix}_real *desired, ${prefix}_rea
     if (beyond) {
         s->outside++;
     }
-${steps}
+${next_own}${steps}
 }
 
 /* The step on doubles, as a host passes them (the shared library's rows, an FMU's
  * variables). */
-void ${prefix}_step_doubles(${prefix}_t *s, const double *desired, double *command)
+void ${prefix}_step_doubles(${prefix}_t *s, const double *desired${next_double}, double *command)
 {
-    ${prefix}_real d[${m}], v[${n}];
+    ${prefix}_real d[${m}], v[${n}];${next_copy_decl}
     int i;
     for (i = 0; i < ${m}; ++i) {
-        d[i] = (${prefix}_real)desired[i];
+        d[i] = (${prefix}_real)desired[i];${next_copy}
     }
-    ${prefix}_step(s, d, v);
+    ${prefix}_step(s, d${next_arg}, v);
     for (i = 0; i < ${n}; ++i) {
         command[i] = (double)v[i];
     }

@@ -21,10 +21,10 @@ ${members}
 void ${prefix}_init(${prefix}_t *s);
 
 /* One command per actuator (command[${n}], V) for one desired position (desired[${m}]);
- * a NaN holds every actuator's last command. */
-void ${prefix}_step(${prefix}_t *s, const ${prefix}_real *desired, ${prefix}_real *command);
+ * a NaN holds every actuator's last command.${next_said} */
+void ${prefix}_step(${prefix}_t *s, const ${prefix}_real *desired${next_param}, ${prefix}_real *command);
 
 /* The same on doubles (desired[${m}] in, command[${n}] out) whatever the precision. */
-void ${prefix}_step_doubles(${prefix}_t *s, const double *desired, double *command);
+void ${prefix}_step_doubles(${prefix}_t *s, const double *desired${next_double}, double *command);
 
 #endif
