@@ -490,10 +490,8 @@ def verdict(rows: Sequence[SelectionRow], name: str, notes: Sequence[str]) -> tu
 
     Parameters
     ----------
-    rows : sequence of SelectionRow
-        The rows with margins (:func:`with_margins`).
-    name : str
-        The chosen candidate.
+    rows, name
+        As for :func:`undecided`.
     notes : sequence of str
         What the record cannot test (:func:`record_notes`).
 

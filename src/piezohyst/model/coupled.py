@@ -292,8 +292,8 @@ class CoupledModel(JsonFile):
 
         Parameters
         ----------
-        u : array_like, shape (N, inputs)
-        t : array_like, shape (N,), optional
+        u, t
+            As for :meth:`hysteresis`.
 
         Returns
         -------

@@ -69,6 +69,7 @@ def is_stage_file(path: PathLike) -> bool:
     Parameters
     ----------
     path : str or os.PathLike
+        Any file: one that cannot be read, or is not JSON, is not a stage's.
 
     Returns
     -------

@@ -288,9 +288,8 @@ def write_stage_fmu(
     ----------
     compensator : CoupledCompensator
         With its ``sample_rate``.
-    path : str or os.PathLike
-        The ``.fmu`` file; its stem names the model (a C identifier).
-    precision : {"double", "float"}
+    path, precision
+        As for :func:`~piezohyst.control.export.write_fmu`.
 
     Returns
     -------
