@@ -138,28 +138,34 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .control.learning import LearningCompensator
     from .control.selfsensing import ControllerState, SelfSensingController
     from .io import read_recording, read_table, write_table
-    from .model import terms
-    from .model.bank import ModelBank, load_bank
-    from .model.calibrations import Leakage, OutputMap, calibrate_gain, calibrate_leakage
+    from .model import (  # the model package's face: one name each, as it exports them
+        ActivePI,
+        BoucWenModel,
+        ClassicalPI,
+        CoupledModel,
+        DuhemModel,
+        GeneralizedPI,
+        History,
+        HysteresisModel,
+        InverseSpec,
+        Leakage,
+        ModelBank,
+        ModelState,
+        OutputMap,
+        PIModel,
+        PreisachModel,
+        Term,
+        calibrate_gain,
+        calibrate_leakage,
+        load_bank,
+        load_model,
+        terms,
+    )
     from .model.cores.base import Core, Propagation, Region
     from .model.cores.boucwen import BoucWenHysteresis
     from .model.cores.duhem import DuhemHysteresis
     from .model.cores.play import PIHysteresis, default_thresholds
     from .model.cores.preisach import PreisachHysteresis
-    from .model.coupled import CoupledModel
-    from .model.inverse_spec import InverseSpec
-    from .model.model import History, HysteresisModel, ModelState
-    from .model.persistence import load_model
-    from .model.presets import (
-        ActivePI,
-        BoucWenModel,
-        ClassicalPI,
-        DuhemModel,
-        GeneralizedPI,
-        PIModel,
-        PreisachModel,
-    )
-    from .model.terms import Term
     from .simulation import simulate
 
 __all__ = [

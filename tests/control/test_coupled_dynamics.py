@@ -44,14 +44,14 @@ def test_each_axis_lag_and_mode_are_identified_with_the_coupling(
     stage: tuple[ph.CoupledModel, ph.CoupledModel],
 ) -> None:
     model, _ = stage
-    # tol: identified from one noisy record (as the single channel's test of the mode): the
-    # frequency to 2 %, the lag to 5 %, the damping (least determined) to 10 %; the cross
-    # terms within 0.005 of the truth (what the models' misfit leaves in the least squares)
     for channel, name in zip(model.channels_, XY_DYNAMIC, strict=True):
         truth = PRESETS[name]
+        # tol: identified from one noisy record (as the single channel's test of the mode):
+        # the frequency to 2 %, the lag to 5 %, the damping (least determined) to 10 %
         assert channel.output_dynamics_.f0 == pytest.approx(truth.mech_f0, rel=0.02)
         assert channel.output_dynamics_.zeta == pytest.approx(truth.mech_zeta, rel=0.1)
         assert channel.input_dynamics_.tau == pytest.approx(truth.amp_tau, rel=0.05)
+    # tol: the cross terms within 0.005 of the truth (the models' misfit in the least squares)
     np.testing.assert_allclose(model.coupling_, XY_COUPLING, atol=5e-3)
 
 

@@ -286,6 +286,7 @@ def package_fmu(out: Path, name: str, files: dict[str, str], xml: str, what: str
     Returns
     -------
     Path
+        The ``.fmu`` archive, written atomically.
 
     Raises
     ------

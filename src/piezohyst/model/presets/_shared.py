@@ -1,26 +1,32 @@
-"""What every preset shares: storing its arguments (the scikit-learn contract) and the
-growth terms by name, with the subsets to choose from."""
+"""What every preset shares: the settings every one ends with (a dataclass: its fields are
+the presets' keyword arguments, stored as given, the scikit-learn contract) and the growth
+terms by name, with the subsets to choose from."""
 
 from __future__ import annotations
 
 import itertools
-from typing import Any
+from dataclasses import dataclass
 
 from ..._validation import FloatArray
 from ..estimator import (
     GROWTH_TERMS,
 )
-from ..model import HysteresisModel
 from ..terms import Term, make_term
 
-__all__ = ["growth_terms_to_fit", "store"]
+__all__ = ["Common", "growth_terms_to_fit"]
 
 
-def store(model: HysteresisModel, arguments: dict[str, Any]) -> None:
-    """``__init__`` stores its arguments, nothing else (the scikit-learn contract)."""
-    for name, value in arguments.items():
-        if name not in ("self", "__class__"):
-            setattr(model, name, value)
+# Each preset is a dataclass (``eq=False, repr=False``: the model class's own ``repr`` and
+# identity kept): its ``__init__`` is written from its fields, each argument stored as given
+# and nothing else, as the scikit-learn contract asks
+@dataclass(eq=False, repr=False, kw_only=True)
+class Common:
+    """The keyword arguments every preset ends with (see :class:`~piezohyst.HysteresisModel`)."""
+
+    input_unit: str = "V"
+    output_unit: str = "C"
+    input_dynamics: str = "none"
+    output_dynamics: str = "none"
 
 
 def growth_terms_to_fit(

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import KW_ONLY, dataclass
 from typing import Any, ClassVar
 
 import numpy as np
@@ -23,7 +24,7 @@ from ..estimator import (
 )
 from ..model import HysteresisModel
 from ..terms import Relaxation, Term
-from ._shared import growth_terms_to_fit, store
+from ._shared import Common, growth_terms_to_fit
 
 __all__ = ["BoucWenModel", "DuhemModel", "PreisachModel"]
 
@@ -111,7 +112,8 @@ def _packed_terms(
     return growth_terms_to_fit(fixed, params["growth_terms"], x_range)
 
 
-class PreisachModel(HysteresisModel):
+@dataclass(eq=False, repr=False)
+class PreisachModel(HysteresisModel, Common):
     r"""The Preisach model, identified from data as an Everett function, plus growth terms.
 
     .. math::
@@ -231,25 +233,17 @@ class PreisachModel(HysteresisModel):
         "signed": _signed_rule,
     }
 
-    def __init__(
-        self,
-        nodes: int = 16,
-        *,
-        growth_terms: str | Sequence[str] = "domain",
-        creep: Sequence[float] = (),
-        relaxation: float | None = None,
-        relaxation_nodes: int = 12,
-        rest: str = "auto",
-        smoothing: float = 1e-4,
-        signed: bool | str = "auto",
-        min_slope: float = 0.02,
-        region_tolerance: float = 0.05,
-        input_unit: str = "V",
-        output_unit: str = "C",
-        input_dynamics: str = "none",
-        output_dynamics: str = "none",
-    ) -> None:
-        store(self, locals())
+    nodes: int = 16
+    _: KW_ONLY
+    growth_terms: str | Sequence[str] = "domain"
+    creep: Sequence[float] = ()
+    relaxation: float | None = None
+    relaxation_nodes: int = 12
+    rest: str = "auto"
+    smoothing: float = 1e-4
+    signed: bool | str = "auto"
+    min_slope: float = 0.02
+    region_tolerance: float = 0.05
 
     def terms_to_fit(
         self, x_range: FloatArray, params: dict[str, Any]
@@ -262,7 +256,8 @@ class PreisachModel(HysteresisModel):
         return _packed_terms(params, x_range, slow)
 
 
-class DuhemModel(HysteresisModel):
+@dataclass(eq=False, repr=False)
+class DuhemModel(HysteresisModel, Common):
     r"""Rate-independent Duhem hysteresis, identified from data, plus growth terms.
 
     .. math::
@@ -335,6 +330,8 @@ class DuhemModel(HysteresisModel):
     >>> import piezohyst as ph
     >>> rec = ph.simulate(signal="decaying", duration=20.0)
     >>> model = ph.DuhemModel().fit(rec.voltage, rec.charge, t=rec.t)
+    >>> model.operator_.up.shape, model.operator_.is_invertible   # the rising slopes' grid
+    ((8, 6), True)
     >>> bool(model.nrmse_ < 0.005)
     True
     """
@@ -348,22 +345,14 @@ class DuhemModel(HysteresisModel):
         "refine": _bool,
     }
 
-    def __init__(
-        self,
-        grid: tuple[int, int] = (8, 6),
-        *,
-        growth_terms: str | Sequence[str] = "domain",
-        creep: Sequence[float] = (),
-        smoothing: float = 1e-3,
-        min_slope: float = 0.02,
-        refine: bool = True,
-        region_tolerance: float = 0.05,
-        input_unit: str = "V",
-        output_unit: str = "C",
-        input_dynamics: str = "none",
-        output_dynamics: str = "none",
-    ) -> None:
-        store(self, locals())
+    grid: tuple[int, int] = (8, 6)
+    _: KW_ONLY
+    growth_terms: str | Sequence[str] = "domain"
+    creep: Sequence[float] = ()
+    smoothing: float = 1e-3
+    min_slope: float = 0.02
+    refine: bool = True
+    region_tolerance: float = 0.05
 
     def terms_to_fit(
         self, x_range: FloatArray, params: dict[str, Any]
@@ -372,7 +361,8 @@ class DuhemModel(HysteresisModel):
         return _packed_terms(params, x_range)
 
 
-class BoucWenModel(HysteresisModel):
+@dataclass(eq=False, repr=False)
+class BoucWenModel(HysteresisModel, Common):
     r"""The Bouc-Wen model of hysteresis, plus growth terms.
 
     .. math::
@@ -428,19 +418,11 @@ class BoucWenModel(HysteresisModel):
     core = BoucWenHysteresis
     _rules: ClassVar[dict[str, Rule]] = PACKED_RULES
 
-    def __init__(
-        self,
-        growth_terms: str | Sequence[str] = "domain",
-        *,
-        creep: Sequence[float] = (),
-        min_slope: float = 1e-3,
-        region_tolerance: float = 0.05,
-        input_unit: str = "V",
-        output_unit: str = "C",
-        input_dynamics: str = "none",
-        output_dynamics: str = "none",
-    ) -> None:
-        store(self, locals())
+    growth_terms: str | Sequence[str] = "domain"
+    _: KW_ONLY
+    creep: Sequence[float] = ()
+    min_slope: float = 1e-3
+    region_tolerance: float = 0.05
 
     def terms_to_fit(
         self, x_range: FloatArray, params: dict[str, Any]

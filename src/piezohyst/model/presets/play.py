@@ -5,6 +5,7 @@ and :class:`PIModel` (any terms)."""
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import KW_ONLY, dataclass
 from typing import Any, ClassVar
 
 import numpy as np
@@ -28,39 +29,37 @@ from ..estimator import (
 from ..model import HysteresisModel
 from ..state import InitialState
 from ..terms import Asymmetry, LagShape, StaticShape, Term, make_term
-from ._shared import growth_terms_to_fit, store
+from ._shared import Common, growth_terms_to_fit
 
 __all__ = ["ActivePI", "ClassicalPI", "GeneralizedPI", "PIModel"]
 
 
-class _PlayModel(HysteresisModel):
-    """The presets on play operators: their common settings."""
+class _PlayFitted:
+    """What ``fit`` sets on a play-operator model (attributes, not arguments: declared outside
+    the dataclass so they are not its fields)."""
 
-    core = PIHysteresis
-    n_operators: int
     thresholds_: FloatArray
     weights_: FloatArray
     offset_: float
+
+
+@dataclass(eq=False, repr=False)
+class _PlayModel(HysteresisModel, Common, _PlayFitted):
+    """The presets on play operators: their common settings."""
+
+    core = PIHysteresis
     _rules: ClassVar[dict[str, Rule]] = {
         "n_operators": _int_in(1, 1000),
         "thresholds": _thresholds,
         "min_slope": _min_slope,
     }
-
-    def __init__(
-        self,
-        n_operators: int = 10,
-        *,
-        thresholds: ArrayLike | None = None,
-        min_slope: float = 1e-3,
-        input_unit: str = "V",
-        output_unit: str = "C",
-        input_dynamics: str = "none",
-        output_dynamics: str = "none",
-    ) -> None:
-        store(self, locals())
+    n_operators: int = 10
+    _: KW_ONLY
+    thresholds: ArrayLike | None = None
+    min_slope: float = 1e-3
 
 
+@dataclass(eq=False, repr=False)
 class PIModel(_PlayModel):
     """Prandtl-Ishlinskii play operators plus any terms, custom ones included.
 
@@ -105,20 +104,8 @@ class PIModel(_PlayModel):
 
     cli_name = ""
     _rules: ClassVar[dict[str, Rule]] = {"terms": _terms}
-
-    def __init__(
-        self,
-        n_operators: int = 10,
-        *,
-        terms: Sequence[str | Term] = (),
-        thresholds: ArrayLike | None = None,
-        min_slope: float = 1e-3,
-        input_unit: str = "V",
-        output_unit: str = "C",
-        input_dynamics: str = "none",
-        output_dynamics: str = "none",
-    ) -> None:
-        store(self, locals())
+    _: KW_ONLY
+    terms: Sequence[str | Term] = ()
 
     def terms_to_fit(
         self, x_range: FloatArray, params: dict[str, Any]
@@ -223,6 +210,7 @@ class ActivePI(_PlayModel):
         return float(growth["integral"][0]) if "integral" in growth else 0.0
 
 
+@dataclass(eq=False, repr=False)
 class GeneralizedPI(_PlayModel):
     r"""Generalized PI model: PI + asymmetry + creep + selectable growth terms.
 
@@ -293,30 +281,17 @@ class GeneralizedPI(_PlayModel):
     """
 
     cli_name = "generalized-pi"
-    optimize_thresholds: bool
     _rules: ClassVar[dict[str, Rule]] = {
         "growth_terms": _growth_terms,
         "asymmetry": _int_in(0, 50),
         "creep": _creep,
         "optimize_thresholds": _bool,
     }
-
-    def __init__(
-        self,
-        n_operators: int = 10,
-        *,
-        growth_terms: str | Sequence[str] = "auto",
-        asymmetry: int = 3,
-        creep: Sequence[float] = (),
-        optimize_thresholds: bool = False,
-        thresholds: ArrayLike | None = None,
-        min_slope: float = 1e-3,
-        input_unit: str = "V",
-        output_unit: str = "C",
-        input_dynamics: str = "none",
-        output_dynamics: str = "none",
-    ) -> None:
-        store(self, locals())
+    _: KW_ONLY
+    growth_terms: str | Sequence[str] = "auto"
+    asymmetry: int = 3
+    creep: Sequence[float] = ()
+    optimize_thresholds: bool = False
 
     def terms_to_fit(
         self, x_range: FloatArray, params: dict[str, Any]
