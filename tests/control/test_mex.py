@@ -149,3 +149,46 @@ def test_a_stage_mex_in_octave(tmp_path: Path) -> None:
     assert counts[1::3] == comp.nonfinite_count.tolist() == [1, 1]
     assert counts[2::3] == comp.saturated_count.tolist()
     assert "matrix of 2 columns" in (tmp_path / "errors.txt").read_text()
+
+
+def test_a_stage_with_modes_mex_in_octave(tmp_path: Path) -> None:
+    """Issue 57: a stage whose actuators hold a lag and a mode: the gateway takes a block,
+    its own preview (each row's next position the row after it), as Python's ``process``:
+    two calls equal Python's two calls, one call Python's one, to 1e-9 V."""
+    from piezohyst.control.export import write_stage_mex
+    from piezohyst.simulation import XY_DYNAMIC, simulate_stage
+
+    t, a = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=12.0)
+    _, b = make_signal("multifreq", amplitude=140.0, frequency=1.9, duration=12.0)
+    rec = simulate_stage(np.column_stack([a, b]), t, presets=XY_DYNAMIC, seed=0)
+    kw = {"output_unit": "m", "input_dynamics": "first-order", "output_dynamics": "second-order"}
+    model = ph.CoupledModel([ph.ClassicalPI(12, **kw), ph.ClassicalPI(12, **kw)])  # type: ignore[arg-type]
+    model.fit(rec.voltage, rec.position, t=rec.t)
+    lo = [c.input_range_[0] for c in model.channels_]
+    hi = [c.input_range_[1] for c in model.channels_]
+    comp = ph.CoupledCompensator(model, v_min=lo, v_max=hi, sample_rate=1000.0, slew_rate=3e4)
+    files = write_stage_mex(comp, tmp_path / "ph_xy_mex.c")
+    subprocess.run([MKOCTFILE, "--mex", *(p.name for p in files if p.suffix == ".c")],
+                   cwd=tmp_path, check=True, capture_output=True, text=True)  # fmt: skip
+    (x0, x1), (y0, y1) = comp.reach
+    k = np.arange(1200)
+    wave = np.column_stack([np.sin(2 * np.pi * 8 * k / 1000), np.sin(2 * np.pi * 5 * k / 1000)])
+    d = np.array([x0, y0]) + np.array([x1 - x0, y1 - y0]) * (0.5 + 0.3 * wave)
+    d[800, 1] = np.nan
+    np.savetxt(tmp_path / "target.txt", d, fmt="%.17g")
+    (tmp_path / "script.m").write_text(STAGE_SCRIPT)
+    octave = [OCTAVE, "--no-gui", "--quiet", "--no-window-system", "script.m"]
+    subprocess.run(octave, cwd=tmp_path, check=True, capture_output=True, text=True, timeout=300)
+    out = np.loadtxt(tmp_path / "out.txt")
+    half = k.size // 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ph.LimitWarning)  # compared, not said
+        split = np.vstack([comp.process(d[:half]), comp.process(d[half:])])
+        comp.reset()
+        whole = comp.process(d)
+    # tol: C and numba round apart by an ulp per step, not integrated: issue 41's 1e-9 V
+    np.testing.assert_allclose(out[: k.size], split, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(out[k.size :], whole, rtol=0, atol=1e-9)
+    assert np.abs(split - whole).max() > 1e-6  # the split's last row extrapolated: it shows
+    counts = np.loadtxt(tmp_path / "counts.txt").astype(int).tolist()
+    assert counts[1::3] == comp.nonfinite_count.tolist() == [1, 1]

@@ -174,13 +174,35 @@ def _next_fields(comps: list[Compensator], prefix: str, n: int, m: int) -> dict[
     }  # fmt: skip
 
 
+def _block_fields(comps: list[Compensator], prefix: str, n: int, m: int) -> dict[str, str]:
+    """The shared library's and the MEX's fields: a block is its own preview, as Python's
+    ``process`` (each row's next position is the row after it; the block's last row's is
+    unknown, NaN: extrapolated), where an actuator's model holds a mode."""
+    if not any(comp.mode.active for comp in comps):
+        step = f"{prefix}_step_doubles(s, target + k * {m}, volts + k * {n});"
+        return {"process_decl": "", "process_said": "", "mex_next_decl": "", "mex_next": "",
+                "mex_next_arg": "", "process_step": step}  # fmt: skip
+    return {
+        "process_decl": (f"\n    double unknown[{m}];\n    long j;\n"
+                         f"    for (j = 0; j < {m}; ++j) {{\n        unknown[j] = NAN;\n    }}"),
+        "process_said": ("\n * An actuator's mode is inverted from the trajectory: each row's next "
+                         "position is\n * the row after it (the block's last: extrapolated)."),
+        "process_step": (f"{prefix}_step_doubles(s, target + k * {m}, k + 1 < n ? target + "
+                         f"(k + 1) * {m} : unknown, volts + k * {n});"),
+        "mex_next_decl": f", e[{m}]",
+        "mex_next": "\n            e[i] = k + 1 < rows ? target[k + 1 + i * rows] : NAN;",
+        "mex_next_arg": ", e",
+    }  # fmt: skip
+
+
 def _refuse_mode(compensator: CoupledCompensator, what: str) -> None:
     """A host that steps one desired position at a time cannot feed a mode's inverse."""
     for k, comp in enumerate(compensator.compensators):
         if comp.mode.active:
             msg = (f"{what} takes one desired position per step: actuator {k}'s model holds an "
                    "output mode, whose inverse needs the next one too; export the stage's "
-                   "sources (export-c) instead, whose step takes it")  # fmt: skip
+                   "sources (export-c), whose step takes it, or its library or MEX gateway "
+                   "(--shared, --mex), which take blocks")  # fmt: skip
             raise ParameterError(msg)
 
 
@@ -254,7 +276,6 @@ def write_stage_shared(
     """
     from .shared import _version_text, build_library, library_path
 
-    _refuse_mode(compensator, "a shared library")
     c_path, _, prefix = c_paths(path)
     code = export_stage_c(compensator, precision=precision, prefix=prefix).files
     n, m = len(compensator.compensators), compensator.model.coupling_.shape[0]
@@ -264,6 +285,7 @@ def write_stage_shared(
     ).substitute(
         prefix=prefix, n=n, m=m, counts=1 + 3 * n, count_lines=count_lines,
         version=_version_text(f"{prefix}, the compensator of a stage of {n} actuators"),
+        **_block_fields(compensator.compensators, prefix, n, m),
     )  # fmt: skip
     files = _write(code, c_path)
     lib = library_path(c_path, prefix)
@@ -417,7 +439,6 @@ def write_stage_mex(
     """
     from .shared import _version_text, mex_commands
 
-    _refuse_mode(compensator, "a MEX gateway")
     gate, _, name = c_paths(path)
     n, m = len(compensator.compensators), compensator.model.coupling_.shape[0]
     step = stage_paths(gate, n, mex=True)[1]
@@ -428,6 +449,7 @@ def write_stage_mex(
     )
     version = _version_text(f"{name}, the compensator of a stage of {n} actuators")
     text = _template("stage_mex.c").substitute(
+        **_block_fields(compensator.compensators, prefix, n, m),
         name=name, prefix=prefix, n=n, m=m, n_counts=1 + 3 * n, count_lines=count_lines,
         sources=" ".join(p.name for p in files if p.suffix == ".c"), version=version,
         run_command=mex_commands(name, prefix, version),

@@ -2,11 +2,12 @@
  * export. */
 
 /* ---- shared-library API of a coupled stage (piezohyst.control.export.write_stage_shared) */
+#include <math.h>
 /* n samples: target holds n rows of ${m} desired positions, volts gets n rows of ${n}
- * commands (V), both row by row. 0; -1 for a NULL pointer, -2 for n < 0. */
+ * commands (V), both row by row. 0; -1 for a NULL pointer, -2 for n < 0.${process_said} */
 PH_EXPORT int ${prefix}_process(${prefix}_t *s, const double *target, double *volts, long n)
 {
-    long k;
+    long k;${process_decl}
     if (s == NULL || target == NULL || volts == NULL) {
         return -1;
     }
@@ -14,7 +15,7 @@ PH_EXPORT int ${prefix}_process(${prefix}_t *s, const double *target, double *vo
         return -2;
     }
     for (k = 0; k < n; ++k) {
-        ${prefix}_step_doubles(s, target + k * ${m}, volts + k * ${n});
+        ${process_step}
     }
     return 0;
 }

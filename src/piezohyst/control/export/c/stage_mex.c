@@ -11,6 +11,7 @@
  *        voltage limit, cut by the slew limit]; ${name}('reset') goes back to the exported
  *        state; ${name}('version') returns what was exported.
  */
+#include <math.h>
 #include <string.h>
 #include "mex.h"
 #include "${prefix}.h"
@@ -25,7 +26,7 @@ void mexFunction(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
     mwSize rows, k;
     int i;
     const double *target;
-    double *volts, *counts, d[${m}], v[${n}];
+    double *volts, *counts, d[${m}], v[${n}]${mex_next_decl};
     if (!ready) {
         ${prefix}_init(&state);
         ready = 1;
@@ -44,9 +45,9 @@ void mexFunction(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
     volts = mxGetPr(plhs[0]);
     for (k = 0; k < rows; ++k) { /* MATLAB's matrices go column by column */
         for (i = 0; i < ${m}; ++i) {
-            d[i] = target[k + i * rows];
+            d[i] = target[k + i * rows];${mex_next}
         }
-        ${prefix}_step_doubles(&state, d, v);
+        ${prefix}_step_doubles(&state, d${mex_next_arg}, v);
         for (i = 0; i < ${n}; ++i) {
             volts[k + i * rows] = v[i];
         }
