@@ -14,7 +14,6 @@ import pytest
 import piezohyst as ph
 from piezohyst.control.export import (
     write_stage_c,
-    write_stage_fmu,
     write_stage_shared,
 )
 from piezohyst.metrics import hysteresis_width
@@ -255,14 +254,3 @@ def test_the_dynamic_stage_as_a_shared_library_equals_python(
     assert counts[[1, 4]].tolist() == comp.nonfinite_count.tolist() == [1, 1]
     assert counts[[2, 5]].tolist() == comp.saturated_count.tolist()
     lib.ph_xy_free(handle)
-
-
-def test_an_fmu_which_steps_one_position_refuses_a_mode_by_name(
-    stage: tuple[ph.CoupledModel, ph.CoupledModel], tmp_path: Path
-) -> None:
-    model, _ = stage
-    comp = ph.CoupledCompensator(model, **_limits(model), sample_rate=FS)
-    said = "an FMU takes one desired position per step: actuator 0's model holds an output mode"
-    with pytest.raises(ph.ParameterError, match=said):
-        write_stage_fmu(comp, tmp_path / "ph_xy.fmu")
-    assert not list(tmp_path.iterdir())

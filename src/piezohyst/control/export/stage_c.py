@@ -195,17 +195,6 @@ def _block_fields(comps: list[Compensator], prefix: str, n: int, m: int) -> dict
     }  # fmt: skip
 
 
-def _refuse_mode(compensator: CoupledCompensator, what: str) -> None:
-    """A host that steps one desired position at a time cannot feed a mode's inverse."""
-    for k, comp in enumerate(compensator.compensators):
-        if comp.mode.active:
-            msg = (f"{what} takes one desired position per step: actuator {k}'s model holds an "
-                   "output mode, whose inverse needs the next one too; export the stage's "
-                   "sources (export-c), whose step takes it, or its library or MEX gateway "
-                   "(--shared, --mex), which take blocks")  # fmt: skip
-            raise ParameterError(msg)
-
-
 def write_stage_c(
     compensator: CoupledCompensator,
     path: str | os.PathLike[str],
@@ -324,7 +313,6 @@ def write_stage_fmu(
     """
     from .fmu import fmi2_wrapper, package_fmu
 
-    _refuse_mode(compensator, "an FMU")
     rate = compensator.compensators[0].sample_rate
     if rate is None:
         msg = "an FMU steps at the loop's rate: give the sample rate (sample_rate=)"
@@ -335,54 +323,66 @@ def write_stage_fmu(
         msg = f"the FMU's name {name!r} (its file name) must be a C identifier"
         raise ParameterError(msg)
     n, m = len(compensator.compensators), compensator.model.coupling_.shape[0]
+    # a mode's inverse needs the next position: inputs next_0 ... after the targets (NaN, the
+    # start, extrapolates, as Python without a preview)
+    p = m if any(comp.mode.active for comp in compensator.compensators) else 0
     period = 1.0 / float(rate)
     what = f"{name}: the compensator of a stage of {n} actuators and {m} axes, {rate:g} Hz"
     files = export_stage_c(compensator, precision=precision, prefix=name).files
     counts = [f"c->s.{c}" for c in _counts(n)]
+    ahead = f", c->r + {m}" if p else ""
     files[f"{name}.c"] += fmi2_wrapper(
-        name, period, what, n_real=m + n,
-        layout=f"0-{m - 1} the targets, {m}-{m + n - 1} the voltages", not_input=f"vr[i] >= {m}",
-        inputs="the targets", counts=tuple(counts),
+        name, period, what, n_real=m + p + n,
+        layout=(f"0-{m - 1} the targets, "
+                + (f"{m}-{2 * m - 1} the next targets, " if p else "")
+                + f"{m + p}-{m + p + n - 1} the voltages"),
+        not_input=f"vr[i] >= {m + p}",
+        inputs="the targets" + (" and the next targets" if p else ""), counts=tuple(counts),
         counts_said="0 desired positions beyond the reach, then per actuator k: 1 + 3k\n * "
         "non-finite targets, 2 + 3k commands at a voltage limit, 3 + 3k cut by the slew limit",
-        step_statement=f"{name}_step_doubles(&c->s, c->r, c->r + {m})",
+        step_statement=f"{name}_step_doubles(&c->s, c->r{ahead}, c->r + {m + p})",
         start_outputs="\n    ".join([*(f"c->r[{i}] = 0.0;" for i in range(m)),
-                                      *(f"c->r[{m + k}] = (fmi2Real)c->s.a{k}.last;"
+                                      *(f"c->r[{m + i}] = NAN;" for i in range(p)),
+                                      *(f"c->r[{m + p + k}] = (fmi2Real)c->s.a{k}.last;"
                                         for k in range(n))]),
     )  # fmt: skip
     guid = "{" + hashlib.sha256("".join(files.values()).encode()).hexdigest()[:32] + "}"
     files[f"{name}.c"] = files[f"{name}.c"].replace(f'"{{{name}-GUID}}"', f'"{guid}"')
     unit = compensator.model.channels_[0].output_unit
-    xml = _stage_description(name, guid, n, m, period, what, unit)
+    xml = _stage_description(name, guid, n, m, period, what, unit, ahead=bool(p))
     return package_fmu(out, name, files, xml, what)
 
 
 def _stage_description(
-    name: str, guid: str, n: int, m: int, period: float, what: str, unit: str
+    name: str, guid: str, n: int, m: int, period: float, what: str, unit: str, *, ahead: bool
 ) -> str:
-    """The stage FMU's ``modelDescription.xml``."""
+    """The stage FMU's ``modelDescription.xml`` (``ahead``: the next targets' inputs too)."""
     from xml.sax.saxutils import escape
 
     from ..._version import __version__
 
-    def var(label: str, ref: int, causality: str, kind: str, said: str) -> str:
+    def var(label: str, ref: int, causality: str, kind: str, said: str, start: str = "0") -> str:
         extra = ' variability="continuous"' if causality == "input" else (
             ' variability="discrete" initial="calculated"')  # fmt: skip
-        start = ' start="0"' if causality == "input" else ""
+        start = f' start="{start}"' if causality == "input" else ""
         return (f'    <ScalarVariable name="{label}" valueReference="{ref}" causality="{causality}"'
                 f'{extra} description="{escape(said)}">\n      <{kind}{start}/>\n'
                 "    </ScalarVariable>")  # fmt: skip
 
+    p = m if ahead else 0
     rows = [var(f"target_{i}", i, "input", "Real", f"axis {i}'s desired position ({unit})")
             for i in range(m)]  # fmt: skip
-    rows += [var(f"voltage_{k}", m + k, "output", "Real", f"actuator {k}'s command (V)")
+    rows += [var(f"next_{i}", m + i, "input", "Real", f"axis {i}'s desired position at the "
+                 f"next step ({unit}; NaN: extrapolated), for the actuators' modes", "NaN")
+             for i in range(p)]  # fmt: skip
+    rows += [var(f"voltage_{k}", m + p + k, "output", "Real", f"actuator {k}'s command (V)")
              for k in range(n)]  # fmt: skip
     rows.append(var("outside", 0, "output", "Integer", "desired positions beyond the reach"))
     for k in range(n):
         for j, field in enumerate(("nonfinite", "saturated", "slewed")):
             rows.append(var(f"{field}_{k}", 1 + 3 * k + j, "output", "Integer",
                             f"actuator {k}: {field} commands since the last reset"))  # fmt: skip
-    outputs = range(m + 1, m + n + 1 + 1 + 3 * n)  # 1-based: every variable after the targets
+    outputs = range(m + p + 1, m + p + n + 1 + 1 + 3 * n)  # 1-based: every one after the inputs
     sources = "".join(f'      <File name="{name}{part}.c"/>\n'
                       for part in ["", *(f"_a{k}" for k in range(n))])  # fmt: skip
     return f"""<?xml version="1.0" encoding="UTF-8"?>
