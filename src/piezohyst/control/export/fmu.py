@@ -66,24 +66,27 @@ def fmu_platform() -> str:
     return f"{name}{bits}"
 
 
-def _wrapper(prefix: str, controller: bool, period: float, what: str) -> str:
-    """The FMI 2.0 Co-Simulation functions around the step."""
-    n_real = 3 if controller else 2
+def _wrapper(prefix: str, third: str, period: float, what: str) -> str:
+    """The FMI 2.0 Co-Simulation functions around the step; ``third`` names the step's
+    second input, value reference 2 ("charge" for the controller, "next" for a model with a
+    mode: the next target, its inverse's preview; "" for none)."""
+    n_real = 3 if third else 2
     step_call = (
         f"{prefix}_step(&c->s, ({prefix}_real)c->r[0], ({prefix}_real)c->r[2])"
-        if controller
+        if third
         else f"{prefix}_step(&c->s, ({prefix}_real)c->r[0])"
     )
+    start = "NAN" if third == "next" else "0.0"
     return fmi2_wrapper(
         prefix, period, what, n_real=n_real,
-        layout="0 target, 1 voltage, 2 charge", not_input="vr[i] == 1",
-        inputs="target, charge" if controller else "target",
+        layout=f"0 target, 1 voltage, 2 {third or 'unused'}", not_input="vr[i] == 1",
+        inputs=f"target, {third}" if third else "target",
         counts=("c->s.nonfinite", "c->s.saturated", "c->s.slewed", "c->s.extrapolated"),
         counts_said="0 non-finite targets, 1 targets out of reach,\n * 2 commands cut by the "
         "slew limit, 3 targets beyond the output map's calibrated range",
         step_statement=f"c->r[1] = (fmi2Real){step_call}",
         start_outputs="c->r[0] = 0.0;\n    c->r[1] = (fmi2Real)c->s.last;"
-        + ("\n    c->r[2] = 0.0;" if controller else ""),
+        + (f"\n    c->r[2] = {start};" if third else ""),
     )  # fmt: skip
 
 
@@ -135,16 +138,21 @@ def fmi2_wrapper(
 
 
 def _model_description(
-    name: str, guid: str, controller: bool, period: float, desired_unit: str, what: str
+    name: str, guid: str, third: str, period: float, desired_unit: str, what: str
 ) -> str:
+    said = {
+        "charge": ("0", "the charge read at this step (model output units)"),
+        "next": ("NaN", f"the next step's desired value ({desired_unit}; NaN: extrapolated), "
+                        "for the model's mechanical mode"),
+    }  # fmt: skip
     charge = (
-        '    <ScalarVariable name="charge" valueReference="2" causality="input" '
-        'variability="continuous" description="the charge read at this step (model output '
-        'units)">\n      <Real start="0"/>\n    </ScalarVariable>\n'
-        if controller
+        f'    <ScalarVariable name="{third}" valueReference="2" causality="input" '
+        f'variability="continuous" description="{escape(said[third][1])}">\n      '
+        f'<Real start="{said[third][0]}"/>\n    </ScalarVariable>\n'
+        if third
         else ""
     )
-    first_count = 4 if controller else 3  # the counts follow target, voltage (and charge)
+    first_count = 4 if third else 3  # the counts follow target, voltage (and charge or next)
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription
   fmiVersion="2.0"
@@ -234,18 +242,14 @@ def write_fmu(
     Raises
     ------
     ParameterError
-        No sample rate, an output mode, a model the C export does not cover, no C compiler.
+        No sample rate, a model the C export does not cover, no C compiler. A model with an
+        output mode has a second input, ``next`` (the next step's target, the preview its
+        inverse needs; start NaN: extrapolated).
     """
     comp = cast(Compensator, getattr(compensator, "compensator", compensator))
     controller = comp is not compensator
     if comp.sample_rate is None:
         msg = "an FMU steps at the loop's rate: give the sample rate (--sample-rate)"
-        raise ParameterError(msg)
-    if comp.mode.active:
-        msg = (
-            "the FMU takes one desired value per step: a model with an output mode needs the "
-            "next one too; export its sources (export-c) instead"
-        )
         raise ParameterError(msg)
     out = Path(path)
     if out.suffix != ".fmu":
@@ -258,11 +262,12 @@ def write_fmu(
     code = export_c(compensator, precision=precision, prefix=name)
     kind = "self-sensing controller" if controller else "compensator"
     what = f"{name}: the {kind} of a {type(comp.model).__name__}, {comp.sample_rate:g} Hz"
-    source = code.source + _wrapper(name, controller, period, what)
+    third = "charge" if controller else "next" if comp.mode.active else ""
+    source = code.source + _wrapper(name, third, period, what)
     guid = "{" + hashlib.sha256((code.header + source).encode()).hexdigest()[:32] + "}"
     source = source.replace(f'"{{{name}-GUID}}"', f'"{guid}"')
     unit = "m" if comp.domain == "displacement" else comp.spec.output_unit
-    xml = _model_description(name, guid, controller, period, unit, what)
+    xml = _model_description(name, guid, third, period, unit, what)
     return package_fmu(out, name, {f"{name}.c": source, code.header_name: code.header}, xml, what)
 
 

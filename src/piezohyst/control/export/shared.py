@@ -79,11 +79,19 @@ def _version_text(what: str) -> str:
     return f"piezohyst {__version__}: {what}".replace("\\", "/").replace('"', "'")
 
 
-def _api(prefix: str, controller: bool, what: str) -> tuple[str, str]:
+def _block_next(prefix: str) -> str:
+    """A mode's step argument in a block: the next target, the block's own preview as
+    Python's ``process`` (the block's last: NaN, extrapolated)."""
+    return f", ({prefix}_real)(k + 1 < n ? target[k + 1] : NAN)"
+
+
+def _api(prefix: str, controller: bool, what: str, mode: bool = False) -> tuple[str, str]:
     """The API's declarations (for the header) and definitions (after the source)."""
     charge_arg = "const double *charge, " if controller else ""
     charge_null = " || charge == NULL" if controller else ""
     charge_use = ", (" + prefix + "_real)charge[k]" if controller else ""
+    if mode:  # a mode's step takes the next target (never with the controller: refused)
+        charge_use = _block_next(prefix)
     version = _version_text(what)
     declarations = f"""
 /* Shared-library API (piezohyst export-c --shared): one handle per channel. */
@@ -159,24 +167,19 @@ def write_shared(
     Raises
     ------
     ParameterError
-        A model the C export does not cover, an output mode (its step needs the next
-        desired value), no C compiler, or a build that fails (its first error named).
+        A model the C export does not cover, no C compiler, or a build that fails (its first
+        error named). A model with an output mode: ``process`` takes each target's next from
+        the block, as Python's ``process`` does (the block's last: extrapolated).
     """
     from ...io import atomic_write_text
 
     comp = cast(Compensator, getattr(compensator, "compensator", compensator))
     controller = comp is not compensator
-    if comp.mode.active:
-        msg = (
-            "the shared library's process() takes one desired value per command: a model with "
-            "an output mode needs the next one too; export its sources (export-c) instead"
-        )
-        raise ParameterError(msg)
     c_path, h_path, prefix = c_paths(path)
     code = export_c(compensator, precision=precision, prefix=prefix)
     kind = "self-sensing controller" if controller else "compensator"
     what = f"{prefix}, the {kind} of a {type(comp.model).__name__}"
-    declarations, definitions = _api(prefix, controller, what)
+    declarations, definitions = _api(prefix, controller, what, comp.mode.active)
     guard_end = code.header.rindex("#endif")
     header = code.header[:guard_end] + declarations + "\n" + code.header[guard_end:]
     atomic_write_text(h_path, header)
@@ -228,12 +231,14 @@ def mex_commands(name: str, prefix: str, version: str) -> str:
     return Template(text).substitute(name=name, prefix=prefix, version=version)
 
 
-def _mex_gateway(name: str, prefix: str, controller: bool, what: str) -> str:
+def _mex_gateway(name: str, prefix: str, controller: bool, what: str, mode: bool = False) -> str:
     """The MEX gateway's source: one translation unit with the exported step."""
     args = "target, charge" if controller else "target"
     nargs = 2 if controller else 1
     version = _version_text(what)
     measured = ", (" + prefix + "_real)charge[k]" if controller else ""
+    if mode:  # the block is its own preview (see _block_next)
+        measured = _block_next(prefix)
     charge_check = (
         f"""
     if (mxGetNumberOfElements(prhs[1]) != n || !mxIsDouble(prhs[1]) || mxIsComplex(prhs[1])
@@ -283,23 +288,18 @@ def write_mex(
     Raises
     ------
     ParameterError
-        A model the C export does not cover, or an output mode.
+        A model the C export does not cover. A model with an output mode: each call's vector
+        is its own preview, as Python's ``process``.
     """
     from ...io import atomic_write_text
     from .c_code import write_c
 
     comp = cast(Compensator, getattr(compensator, "compensator", compensator))
     controller = comp is not compensator
-    if comp.mode.active:
-        msg = (
-            "the MEX gateway takes one desired value per command: a model with an output mode "
-            "needs the next one too; export its sources (export-c) instead"
-        )
-        raise ParameterError(msg)
     gate, _, name = c_paths(path)
     step_name = name[: -len("_mex")] if name.endswith("_mex") and len(name) > 4 else f"{name}_step"
     c_path, h_path = write_c(compensator, gate.with_name(f"{step_name}.c"), precision=precision)
     kind = "self-sensing controller" if controller else "compensator"
     what = f"{name}, the {kind} of a {type(comp.model).__name__}"
-    atomic_write_text(gate, _mex_gateway(name, step_name, controller, what))
+    atomic_write_text(gate, _mex_gateway(name, step_name, controller, what, comp.mode.active))
     return gate, c_path, h_path

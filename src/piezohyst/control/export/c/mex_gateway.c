@@ -9,6 +9,7 @@
  *        ${name}('version') returns what was exported.
  * The step is ${prefix}.c (included: one translation unit, nothing else to link).
  */
+#include <math.h>
 #include <string.h>
 #include "mex.h"
 #include "${prefix}.c"

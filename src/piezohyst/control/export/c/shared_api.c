@@ -2,6 +2,7 @@
  * A template: the dollar-brace names are filled in at export. */
 
 /* ---- shared-library API (piezohyst export-c --shared) ---- */
+#include <math.h>
 /* n commands (V) into volts: 0; -1 for a NULL pointer, -2 for n < 0. */
 PH_EXPORT int ${prefix}_process(${prefix}_t *s, const double *target, ${charge_arg}double *volts,
                                long n)
