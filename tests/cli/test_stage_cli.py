@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 
 import piezohyst as ph
-from piezohyst.simulation import XY_COUPLING, XY_DYNAMIC, make_signal, simulate_stage
+from piezohyst.simulation import XY_COUPLING, make_signal, simulate_stage
 
+from ..control import hosts
 from ..helpers import CC, assert_clean_error, one_line_error, run
 
 
@@ -189,9 +190,7 @@ def test_report_a_stage_from_the_shell(tmp_path: Path) -> None:
 def test_a_stage_with_lags_and_modes_from_the_shell(tmp_path: Path) -> None:
     """``fit`` takes each actuator's lag and mode for a stage, says what it found, and its C
     export's step takes the next position, and the FMU has the next positions as inputs."""
-    t, a = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=12.0)
-    _, b = make_signal("multifreq", amplitude=140.0, frequency=1.9, duration=12.0)
-    rec = simulate_stage(np.column_stack([a, b]), t, presets=XY_DYNAMIC, seed=0)
+    rec = hosts.dynamic_record()
     data = tmp_path / "fast.csv"
     ph.write_table(
         data,

@@ -17,12 +17,12 @@ from piezohyst.control.export import (
     write_stage_shared,
 )
 from piezohyst.metrics import hysteresis_width
-from piezohyst.simulation import PRESETS, XY_COUPLING, XY_DYNAMIC, make_signal, simulate_stage
+from piezohyst.simulation import PRESETS, XY_COUPLING, XY_DYNAMIC, simulate_stage
 
 from ..helpers import CC
+from . import hosts
 
 FS = 1000.0
-DYNAMICS = {"output_unit": "m", "input_dynamics": "first-order", "output_dynamics": "second-order"}
 
 
 @pytest.fixture(scope="module")
@@ -30,10 +30,10 @@ def stage() -> tuple[ph.CoupledModel, ph.CoupledModel]:
     """Fitted on 12 s of each axis's own three-rate signal (2.5/25/100 Hz on x, 1.9/19/76 Hz
     on y: the rates tell a lag and a mode from hysteresis, the two inputs do not move
     together), with the lag and the mode, and the static model on the same record."""
-    t, a = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=12.0)
-    _, b = make_signal("multifreq", amplitude=140.0, frequency=1.9, duration=12.0)
-    rec = simulate_stage(np.column_stack([a, b]), t, presets=XY_DYNAMIC, seed=0)
-    dynamic = ph.CoupledModel([ph.ClassicalPI(16, **DYNAMICS), ph.ClassicalPI(16, **DYNAMICS)])
+    rec = hosts.dynamic_record()
+    dynamic = ph.CoupledModel(
+        [ph.ClassicalPI(16, **hosts.DYNAMICS), ph.ClassicalPI(16, **hosts.DYNAMICS)]
+    )
     dynamic.fit(rec.voltage, rec.position, t=rec.t)
     return dynamic, ph.CoupledModel().fit(rec.voltage, rec.position, t=rec.t)
 

@@ -224,17 +224,9 @@ def test_a_stage_with_modes_as_an_fmu_takes_the_next_positions(tmp_path: Path) -
     from fmpy.validation import validate_fmu
 
     from piezohyst.control.export import write_stage_fmu
-    from piezohyst.simulation import XY_DYNAMIC, make_signal, simulate_stage
 
-    t, a = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=12.0)
-    _, b = make_signal("multifreq", amplitude=140.0, frequency=1.9, duration=12.0)
-    rec = simulate_stage(np.column_stack([a, b]), t, presets=XY_DYNAMIC, seed=0)
-    kw = {"output_unit": "m", "input_dynamics": "first-order", "output_dynamics": "second-order"}
-    model = ph.CoupledModel([ph.ClassicalPI(12, **kw), ph.ClassicalPI(12, **kw)])  # type: ignore[arg-type]
-    model.fit(rec.voltage, rec.position, t=rec.t)
-    lo = [c.input_range_[0] for c in model.channels_]
-    hi = [c.input_range_[1] for c in model.channels_]
-    comp = ph.CoupledCompensator(model, v_min=lo, v_max=hi, sample_rate=FS, slew_rate=3e4)
+    model, limits = hosts.dynamic_stage()
+    comp = ph.CoupledCompensator(model, **limits, sample_rate=FS, slew_rate=3e4)  # type: ignore[arg-type]
     path = write_stage_fmu(comp, tmp_path / "ph_xy.fmu")
     assert validate_fmu(str(path)) == []
     (x0, x1), (y0, y1) = comp.reach
@@ -271,21 +263,12 @@ def test_a_model_with_a_mode_as_an_fmu_takes_the_next_target(tmp_path: Path) -> 
     (before, the FMU refused a mode)."""
     from fmpy.validation import validate_fmu
 
-    from piezohyst.simulation import make_signal, simulate
-
-    t, v = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=6.0)
-    rec = simulate(v, t, preset="T226-H4-203X-mode", seed=0)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # a lag it does not hold: it says so; not the point
-        model = ph.ClassicalPI(6, output_unit="m", output_dynamics="second-order").fit(
-            rec.voltage, rec.displacement, t=rec.t
-        )
+    model = hosts.mode_model()
     lo, hi = model.input_range_
     comp = ph.Compensator(model, v_min=lo, v_max=hi, sample_rate=FS)
     path = write_fmu(comp, tmp_path / "ph_comp.fmu")
     assert validate_fmu(str(path)) == []
-    k = np.arange(800)
-    d = model.operator_.predict(70.0 + 40.0 * np.sin(2 * np.pi * 5 * k / FS))
+    d = hosts.mode_target(model, 800)
     d[500] = np.nan
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ph.LimitWarning)  # compared, not said

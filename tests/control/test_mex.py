@@ -16,6 +16,8 @@ import piezohyst as ph
 from piezohyst.control.export.shared import write_mex
 from piezohyst.simulation import make_signal
 
+from . import hosts
+
 OCTAVE = shutil.which("octave-cli") or shutil.which("octave")
 MKOCTFILE = shutil.which("mkoctfile")
 pytestmark = pytest.mark.skipif(
@@ -156,17 +158,9 @@ def test_a_stage_with_modes_mex_in_octave(tmp_path: Path) -> None:
     its own preview (each row's next position the row after it), as Python's ``process``:
     two calls equal Python's two calls, one call Python's one, to 1e-9 V."""
     from piezohyst.control.export import write_stage_mex
-    from piezohyst.simulation import XY_DYNAMIC, simulate_stage
 
-    t, a = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=12.0)
-    _, b = make_signal("multifreq", amplitude=140.0, frequency=1.9, duration=12.0)
-    rec = simulate_stage(np.column_stack([a, b]), t, presets=XY_DYNAMIC, seed=0)
-    kw = {"output_unit": "m", "input_dynamics": "first-order", "output_dynamics": "second-order"}
-    model = ph.CoupledModel([ph.ClassicalPI(12, **kw), ph.ClassicalPI(12, **kw)])  # type: ignore[arg-type]
-    model.fit(rec.voltage, rec.position, t=rec.t)
-    lo = [c.input_range_[0] for c in model.channels_]
-    hi = [c.input_range_[1] for c in model.channels_]
-    comp = ph.CoupledCompensator(model, v_min=lo, v_max=hi, sample_rate=1000.0, slew_rate=3e4)
+    model, limits = hosts.dynamic_stage()
+    comp = ph.CoupledCompensator(model, **limits, sample_rate=1000.0, slew_rate=3e4)  # type: ignore[arg-type]
     files = write_stage_mex(comp, tmp_path / "ph_xy_mex.c")
     subprocess.run([MKOCTFILE, "--mex", *(p.name for p in files if p.suffix == ".c")],
                    cwd=tmp_path, check=True, capture_output=True, text=True)  # fmt: skip
@@ -198,22 +192,13 @@ def test_a_model_with_a_mode_mex_in_octave(tmp_path: Path) -> None:
     """A model with a mechanical mode: each call's vector is its own preview, as Python's
     ``process`` (a vector's last target extrapolated): two calls equal Python's two, one
     call Python's one, to 1e-9 V (before, the gateway refused a mode)."""
-    from piezohyst.simulation import simulate
-
-    t, v = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=6.0)
-    rec = simulate(v, t, preset="T226-H4-203X-mode", seed=0)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # a lag it does not hold: it says so; not the point
-        model = ph.ClassicalPI(6, output_unit="m", output_dynamics="second-order").fit(
-            rec.voltage, rec.displacement, t=rec.t
-        )
+    model = hosts.mode_model()
     lo, hi = model.input_range_
     comp = ph.Compensator(model, v_min=lo, v_max=hi, sample_rate=1000.0)
     gate, _, _ = write_mex(comp, tmp_path / "ph_comp_mex.c")
     subprocess.run([MKOCTFILE, "--mex", gate.name], cwd=tmp_path, check=True,
                    capture_output=True, text=True)  # fmt: skip
-    k = np.arange(1000)
-    d = model.operator_.predict(70.0 + 40.0 * np.sin(2 * np.pi * 5 * k / 1000.0))
+    d = hosts.mode_target(model, 1000)
     d[700] = np.nan
     np.savetxt(tmp_path / "target.txt", d, fmt="%.17g")
     (tmp_path / "script.m").write_text(SCRIPT)

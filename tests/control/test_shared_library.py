@@ -166,22 +166,13 @@ def test_an_output_mode_takes_its_preview_from_the_block(tmp_path: Path) -> None
     """A model with a mechanical mode: the library's process takes each target's next from
     the block, as Python's process (the block's last: extrapolated), blocks and NaN holds
     equal to Python's calls to 1e-9 V (before, the library refused a mode)."""
-    from piezohyst.simulation import make_signal, simulate
-
-    t, v = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=6.0)
-    rec = simulate(v, t, preset="T226-H4-203X-mode", seed=0)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # a lag it does not hold: it says so; not the point
-        model = ph.ClassicalPI(6, output_unit="m", output_dynamics="second-order").fit(
-            rec.voltage, rec.displacement, t=rec.t
-        )
+    model = hosts.mode_model()
     assert model.output_dynamics_.active
     lo, hi = model.input_range_
     comp = ph.Compensator(model, v_min=lo, v_max=hi, sample_rate=1000.0)
     _, _, lib = write_shared(comp, tmp_path / "ph_comp.c")
     so = _load(lib)
-    k = np.arange(1200)
-    d = model.operator_.predict(70.0 + 40.0 * np.sin(2 * np.pi * 5 * k / 1000.0))
+    d = hosts.mode_target(model, 1200)
     d[600] = np.nan
     py = np.concatenate([comp.process(d[:500]), comp.process(d[500:])])
     s = so.ph_comp_new()
