@@ -94,3 +94,38 @@ def dynamic_stage(operators: int = 12) -> tuple[ph.CoupledModel, dict[str, list[
     model.fit(rec.voltage, rec.position, t=rec.t)
     ranges = [channel.input_range_ for channel in model.channels_]
     return model, {"v_min": [lo for lo, _ in ranges], "v_max": [hi for _, hi in ranges]}
+
+
+def stage_harness(ahead: bool = False) -> str:
+    """A C main for the stage ``ph_xy``: each stdin line one desired position (and, with
+    ``ahead``, the next one: a mode's preview), each stdout line the commands, then the
+    counts (outside, saturated per actuator, non-finite per actuator)."""
+    read_next = (
+        "        e[0] = (ph_xy_real)strtod(rest, &rest);\n"
+        "        e[1] = (ph_xy_real)strtod(rest, NULL);\n"
+        if ahead
+        else ""
+    )
+    return f"""
+#include <stdio.h>
+#include <stdlib.h>
+#include "ph_xy.h"
+int main(void)
+{{
+    char line[512];
+    ph_xy_t s;
+    ph_xy_real d[2], e[2], v[2];
+    ph_xy_init(&s);
+    (void)e;
+    while (fgets(line, sizeof line, stdin)) {{
+        char *rest;
+        d[0] = (ph_xy_real)strtod(line, &rest);
+        d[1] = (ph_xy_real)strtod(rest, &rest);
+{read_next}        ph_xy_step(&s, d{", e" if ahead else ""}, v);
+        printf("%.17g %.17g\\n", (double)v[0], (double)v[1]);
+    }}
+    printf("%lu %lu %lu %lu %lu\\n", s.outside, s.a0.saturated, s.a1.saturated, s.a0.nonfinite,
+           s.a1.nonfinite);
+    return 0;
+}}
+"""

@@ -19,6 +19,7 @@ from piezohyst.metrics import hysteresis_width
 from piezohyst.simulation import XY_COUPLING, make_signal, simulate_stage
 
 from ..helpers import CC
+from . import hosts
 
 FS = 1000.0
 
@@ -210,30 +211,6 @@ def test_a_coupled_model_file_loads_and_predicts_as_written(
         ph.CoupledModel.from_dict({"format": "piezohyst-model"})
 
 
-STAGE_HARNESS = r"""
-#include <stdio.h>
-#include <stdlib.h>
-#include "ph_xy.h"
-int main(void)
-{
-    char line[256];
-    ph_xy_t s;
-    ph_xy_real d[2], v[2];
-    ph_xy_init(&s);
-    while (fgets(line, sizeof line, stdin)) {
-        char *rest;
-        d[0] = (ph_xy_real)strtod(line, &rest);
-        d[1] = (ph_xy_real)strtod(rest, NULL);
-        ph_xy_step(&s, d, v);
-        printf("%.17g %.17g\n", (double)v[0], (double)v[1]);
-    }
-    printf("%lu %lu %lu %lu %lu\n", s.outside, s.a0.saturated, s.a1.saturated, s.a0.nonfinite,
-           s.a1.nonfinite);
-    return 0;
-}
-"""
-
-
 @pytest.mark.skipif(CC is None, reason="no C compiler on this machine")
 @pytest.mark.filterwarnings("ignore::piezohyst.errors.LimitWarning")  # out of reach on purpose
 def test_the_stage_in_c_equals_python(
@@ -253,7 +230,7 @@ def test_the_stage_in_c_equals_python(
     desired[1000:1100, 0] = x1 + 0.2 * (x1 - x0)  # beyond x's reach
     desired[[1500, 2000], 1] = np.nan
     py = comp.process(desired)
-    (tmp_path / "main.c").write_text(STAGE_HARNESS)
+    (tmp_path / "main.c").write_text(hosts.stage_harness())
     exe = tmp_path / "stage"
     subprocess.run(
         [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2",

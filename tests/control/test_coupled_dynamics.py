@@ -144,32 +144,6 @@ def test_step_with_the_preview_equals_process(
         comp.step(wanted[0], preview=np.zeros((2, 3)))
 
 
-HARNESS = r"""
-#include <stdio.h>
-#include <stdlib.h>
-#include "ph_xy.h"
-int main(void)
-{
-    char line[512];
-    ph_xy_t s;
-    ph_xy_real d[2], e[2], v[2];
-    ph_xy_init(&s);
-    while (fgets(line, sizeof line, stdin)) {
-        char *rest;
-        d[0] = (ph_xy_real)strtod(line, &rest);
-        d[1] = (ph_xy_real)strtod(rest, &rest);
-        e[0] = (ph_xy_real)strtod(rest, &rest);
-        e[1] = (ph_xy_real)strtod(rest, NULL);
-        ph_xy_step(&s, d, e, v);
-        printf("%.17g %.17g\n", (double)v[0], (double)v[1]);
-    }
-    printf("%lu %lu %lu %lu %lu\n", s.outside, s.a0.saturated, s.a1.saturated, s.a0.nonfinite,
-           s.a1.nonfinite);
-    return 0;
-}
-"""
-
-
 @pytest.mark.skipif(CC is None, reason="no C compiler on this machine")
 @pytest.mark.filterwarnings("ignore::piezohyst.errors.LimitWarning")  # out of reach on purpose
 def test_the_dynamic_stage_in_c_equals_python(
@@ -192,7 +166,7 @@ def test_the_dynamic_stage_in_c_equals_python(
     desired[[2000, 2400], 1] = np.nan
     nxt = np.vstack([desired[1:], [[np.nan, np.nan]]])
     py = comp.process(desired)
-    (tmp_path / "main.c").write_text(HARNESS)
+    (tmp_path / "main.c").write_text(hosts.stage_harness(ahead=True))
     exe = tmp_path / "stage"
     subprocess.run(
         [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2",

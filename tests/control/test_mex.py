@@ -47,6 +47,18 @@ fid = fopen('version.txt', 'w'); fprintf(fid, '%s\\n', ph_comp_mex('version')); 
 """
 
 
+def _in_octave(tmp_path: Path, sources: list[str], target: np.ndarray, script: str) -> np.ndarray:
+    """Build the gateway from ``sources`` with mkoctfile, run ``script`` on ``target`` (saved
+    as target.txt) in Octave, and return what it wrote to out.txt."""
+    subprocess.run([MKOCTFILE, "--mex", *sources], cwd=tmp_path, check=True,
+                   capture_output=True, text=True)  # fmt: skip
+    np.savetxt(tmp_path / "target.txt", target, fmt="%.17g")
+    (tmp_path / "script.m").write_text(script)
+    octave = [OCTAVE, "--no-gui", "--quiet", "--no-window-system", "script.m"]
+    subprocess.run(octave, cwd=tmp_path, check=True, capture_output=True, text=True, timeout=300)
+    return np.loadtxt(tmp_path / "out.txt")
+
+
 KINDS = {
     "active-pi": lambda: ph.ActivePI(20),
     "generalized-pi+creep": lambda: ph.GeneralizedPI(12, creep=(0.05, 0.5, 5.0)),
@@ -66,17 +78,11 @@ def test_the_mex_gateway_in_octave(kind: str, tmp_path: Path) -> None:
     lo, hi = model.input_range_
     comp = ph.Compensator(model, v_min=lo, v_max=hi, sample_rate=1000.0)
     gate, _, _ = write_mex(comp, tmp_path / "ph_comp_mex.c")
-    subprocess.run([MKOCTFILE, "--mex", gate.name], cwd=tmp_path, check=True,
-                   capture_output=True, text=True)  # fmt: skip
     _, shape = make_signal("decaying", amplitude=1.0, duration=2.0)
     v = lo + (hi - lo) * (0.5 + 0.45 * shape / np.abs(shape).max())
     d = model.hysteresis_.predict(v, t=np.arange(v.size) / 1000.0)
     d[::97] = np.nan  # held: the last command
-    np.savetxt(tmp_path / "target.txt", d, fmt="%.17g")
-    (tmp_path / "script.m").write_text(SCRIPT)
-    octave = [OCTAVE, "--no-gui", "--quiet", "--no-window-system", "script.m"]
-    subprocess.run(octave, cwd=tmp_path, check=True, capture_output=True, text=True, timeout=300)
-    out = np.loadtxt(tmp_path / "out.txt")
+    out = _in_octave(tmp_path, [gate.name], d, SCRIPT)
     carried, again = out[: d.size], out[d.size :]
     assert np.array_equal(carried, again)  # the state carried across calls; reset: the same
     with warnings.catch_warnings():
@@ -126,19 +132,13 @@ def test_a_stage_mex_in_octave(tmp_path: Path) -> None:
     comp = ph.CoupledCompensator(model, v_min=0.0, v_max=140.0, sample_rate=1000.0,
                                  slew_rate=2e4)  # fmt: skip
     files = write_stage_mex(comp, tmp_path / "ph_xy_mex.c")
-    subprocess.run([MKOCTFILE, "--mex", *(p.name for p in files if p.suffix == ".c")],
-                   cwd=tmp_path, check=True, capture_output=True, text=True)  # fmt: skip
     (x0, x1), (y0, y1) = comp.reach
     k = np.arange(1200)
     wave = np.column_stack([np.sin(2 * np.pi * 3 * k / 1000), np.sin(2 * np.pi * 2 * k / 1000)])
     d = np.array([x0, y0]) + np.array([x1 - x0, y1 - y0]) * (0.5 + 0.4 * wave)
     d[500:540, 0] = x1 + 0.2 * (x1 - x0)  # beyond x's reach
     d[800, 1] = np.nan
-    np.savetxt(tmp_path / "target.txt", d, fmt="%.17g")
-    (tmp_path / "script.m").write_text(STAGE_SCRIPT)
-    octave = [OCTAVE, "--no-gui", "--quiet", "--no-window-system", "script.m"]
-    subprocess.run(octave, cwd=tmp_path, check=True, capture_output=True, text=True, timeout=300)
-    out = np.loadtxt(tmp_path / "out.txt")
+    out = _in_octave(tmp_path, [p.name for p in files if p.suffix == ".c"], d, STAGE_SCRIPT)
     carried, again = out[: k.size], out[k.size :]
     assert np.array_equal(carried, again)  # the state carried across calls; reset: the same
     with warnings.catch_warnings():
@@ -162,18 +162,12 @@ def test_a_stage_with_modes_mex_in_octave(tmp_path: Path) -> None:
     model, limits = hosts.dynamic_stage()
     comp = ph.CoupledCompensator(model, **limits, sample_rate=1000.0, slew_rate=3e4)  # type: ignore[arg-type]
     files = write_stage_mex(comp, tmp_path / "ph_xy_mex.c")
-    subprocess.run([MKOCTFILE, "--mex", *(p.name for p in files if p.suffix == ".c")],
-                   cwd=tmp_path, check=True, capture_output=True, text=True)  # fmt: skip
     (x0, x1), (y0, y1) = comp.reach
     k = np.arange(1200)
     wave = np.column_stack([np.sin(2 * np.pi * 8 * k / 1000), np.sin(2 * np.pi * 5 * k / 1000)])
     d = np.array([x0, y0]) + np.array([x1 - x0, y1 - y0]) * (0.5 + 0.3 * wave)
     d[800, 1] = np.nan
-    np.savetxt(tmp_path / "target.txt", d, fmt="%.17g")
-    (tmp_path / "script.m").write_text(STAGE_SCRIPT)
-    octave = [OCTAVE, "--no-gui", "--quiet", "--no-window-system", "script.m"]
-    subprocess.run(octave, cwd=tmp_path, check=True, capture_output=True, text=True, timeout=300)
-    out = np.loadtxt(tmp_path / "out.txt")
+    out = _in_octave(tmp_path, [p.name for p in files if p.suffix == ".c"], d, STAGE_SCRIPT)
     half = k.size // 2
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ph.LimitWarning)  # compared, not said
@@ -196,15 +190,9 @@ def test_a_model_with_a_mode_mex_in_octave(tmp_path: Path) -> None:
     lo, hi = model.input_range_
     comp = ph.Compensator(model, v_min=lo, v_max=hi, sample_rate=1000.0)
     gate, _, _ = write_mex(comp, tmp_path / "ph_comp_mex.c")
-    subprocess.run([MKOCTFILE, "--mex", gate.name], cwd=tmp_path, check=True,
-                   capture_output=True, text=True)  # fmt: skip
     d = hosts.mode_target(model, 1000)
     d[700] = np.nan
-    np.savetxt(tmp_path / "target.txt", d, fmt="%.17g")
-    (tmp_path / "script.m").write_text(SCRIPT)
-    octave = [OCTAVE, "--no-gui", "--quiet", "--no-window-system", "script.m"]
-    subprocess.run(octave, cwd=tmp_path, check=True, capture_output=True, text=True, timeout=300)
-    out = np.loadtxt(tmp_path / "out.txt")
+    out = _in_octave(tmp_path, [gate.name], d, SCRIPT)
     half = d.size // 2
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ph.LimitWarning)  # compared, not said
