@@ -96,6 +96,31 @@ def dynamic_stage(operators: int = 12) -> tuple[ph.CoupledModel, dict[str, list[
     return model, {"v_min": [lo for lo, _ in ranges], "v_max": [hi for _, hi in ranges]}
 
 
+def run_stage_c(
+    sources: list[Any], rows: np.ndarray, tmp_path: Any
+) -> tuple[np.ndarray, list[int]]:
+    """Build the stage's C with :func:`stage_harness` (``ahead`` where ``rows`` holds the
+    next positions beside the desired ones) under ``-Wall -Wextra -Werror -pedantic``, feed it
+    ``rows`` and return its commands and its counts."""
+    import subprocess
+
+    from ..helpers import CC
+
+    (tmp_path / "main.c").write_text(stage_harness(ahead=rows.shape[1] == 4))
+    exe = tmp_path / "stage"
+    subprocess.run(
+        [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2",
+         *(str(p) for p in sources if p.suffix == ".c"), str(tmp_path / "main.c"), "-o",
+         str(exe), "-lm"],
+        check=True, capture_output=True, text=True,
+    )  # fmt: skip
+    text = "".join(" ".join(repr(x) for x in row) + "\n" for row in rows.tolist())
+    out = subprocess.run([str(exe)], input=text, check=True, capture_output=True, text=True)
+    lines = out.stdout.split("\n")
+    cmds = np.array([[float(x) for x in line.split()] for line in lines[: rows.shape[0]]])
+    return cmds, [int(x) for x in lines[rows.shape[0]].split()]
+
+
 def stage_harness(ahead: bool = False) -> str:
     """A C main for the stage ``ph_xy``: each stdin line one desired position (and, with
     ``ahead``, the next one: a mode's preview), each stdout line the commands, then the

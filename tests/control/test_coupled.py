@@ -5,7 +5,6 @@ them, identified as one system (:class:`ph.CoupledModel`) and compensated togeth
 from __future__ import annotations
 
 import json
-import subprocess
 import warnings
 from pathlib import Path
 
@@ -230,22 +229,10 @@ def test_the_stage_in_c_equals_python(
     desired[1000:1100, 0] = x1 + 0.2 * (x1 - x0)  # beyond x's reach
     desired[[1500, 2000], 1] = np.nan
     py = comp.process(desired)
-    (tmp_path / "main.c").write_text(hosts.stage_harness())
-    exe = tmp_path / "stage"
-    subprocess.run(
-        [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2",
-         *(str(p) for p in paths if p.suffix == ".c"), str(tmp_path / "main.c"), "-o", str(exe),
-         "-lm"],
-        check=True, capture_output=True, text=True,
-    )  # fmt: skip
-    text = "".join(f"{a!r} {b!r}\n" for a, b in desired.tolist())
-    out = subprocess.run([str(exe)], input=text, check=True, capture_output=True, text=True)
-    lines = out.stdout.split("\n")
-    c_cmds = np.array([[float(x) for x in line.split()] for line in lines[: desired.shape[0]]])
+    c_cmds, counts = hosts.run_stage_c(paths, desired, tmp_path)
     # tol: FASTMATH kernels against the C part by an ulp per step; a feedforward step does
     # not integrate it (the single channel's C holds 1e-12 V), so 1e-9 V bounds it with room
     np.testing.assert_allclose(c_cmds, py, rtol=0, atol=1e-9)
-    counts = [int(x) for x in lines[desired.shape[0]].split()]
     # (the C's slew count includes the approach to the trajectory, Python's from it on)
     assert counts == [comp.outside_count, *comp.saturated_count.tolist(),
                       *comp.nonfinite_count.tolist()]  # fmt: skip

@@ -5,7 +5,6 @@ compensated together, in Python and in C."""
 
 from __future__ import annotations
 
-import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -166,24 +165,10 @@ def test_the_dynamic_stage_in_c_equals_python(
     desired[[2000, 2400], 1] = np.nan
     nxt = np.vstack([desired[1:], [[np.nan, np.nan]]])
     py = comp.process(desired)
-    (tmp_path / "main.c").write_text(hosts.stage_harness(ahead=True))
-    exe = tmp_path / "stage"
-    subprocess.run(
-        [CC, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2",
-         *(str(p) for p in paths if p.suffix == ".c"), str(tmp_path / "main.c"), "-o", str(exe),
-         "-lm"],
-        check=True, capture_output=True, text=True,
-    )  # fmt: skip
-    text = "".join(
-        " ".join(repr(x) for x in row) + "\n" for row in np.hstack([desired, nxt]).tolist()
-    )
-    out = subprocess.run([str(exe)], input=text, check=True, capture_output=True, text=True)
-    lines = out.stdout.split("\n")
-    c_cmds = np.array([[float(x) for x in line.split()] for line in lines[: desired.shape[0]]])
+    c_cmds, counts = hosts.run_stage_c(paths, np.hstack([desired, nxt]), tmp_path)
     # tol: as the static stage's C (numba's kernels and the C round apart by an ulp a step,
     # which a feedforward step does not integrate): 1e-9 V bounds it with room
     np.testing.assert_allclose(c_cmds, py, rtol=0, atol=1e-9)
-    counts = [int(x) for x in lines[desired.shape[0]].split()]
     assert counts == [comp.outside_count, *comp.saturated_count.tolist(),
                       *comp.nonfinite_count.tolist()]  # fmt: skip
     assert comp.outside_count == 60 and comp.saturated_count[0] > 0
