@@ -228,7 +228,8 @@ class CoupledCompensator:
                          for i, c in enumerate(self.compensators)])  # fmt: skip
 
     def process(self, desired: ArrayLike, measured: ArrayLike | None = None) -> FloatArray:
-        """Commands for a block of desired positions; equal to :meth:`step` on each row.
+        """Commands for a block of desired positions; equal to :meth:`step` on each row with
+        the rows after it as its preview (the block's last row: extrapolated).
 
         Parameters
         ----------
