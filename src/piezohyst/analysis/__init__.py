@@ -3,7 +3,8 @@ May import: the foundation, ``_kernels``, ``io``, ``model`` (never ``control``).
 
 Comparing models on held-out data (``comparison``)
     compare_models, Comparison, ComparisonRow
-Choosing one inside a record, with how sure the choice is (``selection``)
+Choosing one inside a record, with how sure the choice is (``selection``; what the record's
+input tells it, in ``turns``)
     select_model, Selection, SelectionRow
 A model's report: its numbers and figures (``report``)
     Report
