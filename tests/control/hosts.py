@@ -3,6 +3,7 @@ model kind issue 41 names fitted on it, and a desired trajectory inside each one
 
 from __future__ import annotations
 
+import functools
 import warnings
 from collections.abc import Callable
 from typing import Any
@@ -50,6 +51,7 @@ def desired(model: ph.HysteresisModel, n: int = 3000, fs: float = 1000.0) -> np.
     return np.ascontiguousarray(d[:n])
 
 
+@functools.cache  # fitted once per worker: the tests only read it
 def mode_model() -> ph.ClassicalPI:
     """A model with a mechanical mode (the bench's 150 Hz, from 6 s of three rates on the
     laser), and no lag: the hosts' preview for a mode, tested on its own."""
@@ -70,6 +72,7 @@ def mode_target(model: ph.HysteresisModel, n: int, fs: float = 1000.0) -> np.nda
     )
 
 
+@functools.cache  # fitted once per worker: the tests only read it
 def dynamic_record() -> Any:
     """The simulated stage with lags and modes (``XY_DYNAMIC``) on 12 s of each axis's own
     three-rate signal (2.5/25/100 Hz on x, 1.9/19/76 Hz on y: the rates tell a lag and a mode
@@ -86,6 +89,7 @@ DYNAMICS: dict[str, Any] = {"output_unit": "m", "input_dynamics": "first-order",
                             "output_dynamics": "second-order"}  # fmt: skip
 
 
+@functools.cache  # fitted once per worker: the tests only read it
 def dynamic_stage(operators: int = 12) -> tuple[ph.CoupledModel, dict[str, list[float]]]:
     """:func:`dynamic_record` fitted with each actuator's lag and mode, and the actuators'
     limits (the voltages each model was identified on)."""
