@@ -148,6 +148,12 @@ def export_stage_c(
     return StageCode(files)
 
 
+def _looks_ahead(comps: list[Compensator]) -> bool:
+    """Whether an actuator's model holds an output mode: the stage's step then takes the next
+    desired position too (its inverse's preview)."""
+    return any(comp.mode.active for comp in comps)
+
+
 NEXT_FIELDS = ("next_param", "next_decl", "next_own", "next_double", "next_copy_decl",
                "next_copy", "next_arg", "next_said")  # fmt: skip
 
@@ -155,7 +161,7 @@ NEXT_FIELDS = ("next_param", "next_decl", "next_own", "next_double", "next_copy_
 def _next_fields(comps: list[Compensator], prefix: str, n: int, m: int) -> dict[str, str]:
     """The template's fields for a step that also takes the next desired position: where an
     actuator's model holds an output mode, whose inverse needs it (empty fields otherwise)."""
-    if not any(comp.mode.active for comp in comps):
+    if not _looks_ahead(comps):
         return dict.fromkeys(NEXT_FIELDS, "")
     return {
         "next_param": f", const {prefix}_real *next",
@@ -178,7 +184,7 @@ def _block_fields(comps: list[Compensator], prefix: str, n: int, m: int) -> dict
     """The shared library's and the MEX's fields: a block is its own preview, as Python's
     ``process`` (each row's next position is the row after it; the block's last row's is
     unknown, NaN: extrapolated), where an actuator's model holds a mode."""
-    if not any(comp.mode.active for comp in comps):
+    if not _looks_ahead(comps):
         step = f"{prefix}_step_doubles(s, target + k * {m}, volts + k * {n});"
         return {"process_decl": "", "process_said": "", "mex_next_decl": "", "mex_next": "",
                 "mex_next_arg": "", "process_step": step}  # fmt: skip
@@ -325,7 +331,7 @@ def write_stage_fmu(
     n, m = len(compensator.compensators), compensator.model.coupling_.shape[0]
     # a mode's inverse needs the next position: inputs next_0 ... after the targets (NaN, the
     # start, extrapolates, as Python without a preview)
-    p = m if any(comp.mode.active for comp in compensator.compensators) else 0
+    p = m if _looks_ahead(compensator.compensators) else 0
     period = 1.0 / float(rate)
     what = f"{name}: the compensator of a stage of {n} actuators and {m} axes, {rate:g} Hz"
     files = export_stage_c(compensator, precision=precision, prefix=name).files
