@@ -4,6 +4,7 @@ half-cycles, and what a record cannot test said in the selection's notes."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 from hypothesis import assume, given, settings
@@ -15,11 +16,15 @@ from piezohyst.analysis.selection import (
     MAJOR,
     SURE,
     WEIGHTS,
+    TIE,
     Part,
+    SelectionRow,
     _block_starts,
     _part,
     _turns,
+    chosen,
     jackknife,
+    latest_of_close,
     record_notes,
     select_model,
 )
@@ -134,6 +139,63 @@ def test_the_choice_says_its_margins_and_what_the_record_cannot_test() -> None:
     assert any("no minor loops" in n for n in sel.notes)
     table = sel.table()
     assert "vs chosen (± s.e.)" in table and "no minor loops" in table
+
+
+def _row(name: str, folds: tuple[float, float], margin: float, se: float) -> SelectionRow:
+    return SelectionRow(name, folds, float(np.mean(folds)), margin=margin, margin_stderr=se)
+
+
+@given(
+    st.lists(
+        st.tuples(
+            st.floats(0.001, 0.1), st.floats(0.001, 0.1), st.floats(0.0, 0.02), st.booleans()
+        ),
+        min_size=2,
+        max_size=6,
+    )
+)
+def test_the_latest_part_decides_among_those_the_record_does_not_tell_apart(
+    drawn: list[tuple[float, float, float, bool]],
+) -> None:
+    """The rule written plainly: the first choice by the score, then among it and the
+    candidates within SURE standard errors of it, the simplest within TIE of the best latest
+    part. A candidate the record puts clearly behind is never taken, however its latest
+    part went."""
+    names = [f"c{k}" for k in range(len(drawn))]
+    plain = [SelectionRow(n, (a, b), 0.5 * (a + b)) for n, (a, b, _, _) in zip(names, drawn)]
+    first = chosen(plain)
+    rows = []
+    for row, (_, _, spread, sure) in zip(plain, drawn):
+        margin = row.score - first.score
+        # a decided row: its standard error well inside the margin; else well outside
+        se = 0.0 if row is first else (abs(margin) / (4 * SURE) if sure else abs(margin) + spread + 1e-6)
+        rows.append(replace(row, margin=margin, margin_stderr=se))
+    close = [r for r in rows if r.name == first.name or not r.decided]
+    best = min(r.folds[-1] for r in close)
+    expected = next(r for r in close if r.folds[-1] <= best * (1 + TIE))
+    got = latest_of_close(rows, first)
+    assert got.name == expected.name
+    assert got.name == first.name or not got.decided
+
+
+def test_a_choice_the_latest_part_moved_says_so(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """Where the rule takes another candidate than the score did, the selection is that
+    candidate refitted, its margins are over it, and the notes say why (the figures are the
+    rows' own latest parts)."""
+    from piezohyst.analysis import selection
+
+    def other(rows, first):  # type: ignore[no-untyped-def]
+        return next(r for r in rows if r.name != first.name and math.isfinite(r.score))
+
+    monkeypatch.setattr(selection, "latest_of_close", other)
+    rec = ph.simulate(duration=20.0, seed=2)
+    sel = select_model(rec.voltage, rec.charge, rec.t, candidates=("active-pi", "classical-pi"))
+    assert sel.name == "classical-pi" and sel.model.__class__.__name__ == "ClassicalPI"
+    win = next(r for r in sel.rows if r.name == "classical-pi")
+    first = next(r for r in sel.rows if r.name == "active-pi")
+    assert win.margin == 0.0 and first.margin == first.score - win.score < 0.0
+    said = f"{100 * win.folds[-1]:.3g} % against {100 * first.folds[-1]:.3g} %"
+    assert any(n.startswith("active-pi scored best") and said in n for n in sel.notes)
 
 
 def test_a_record_with_minor_loops_has_no_such_note() -> None:

@@ -1,0 +1,324 @@
+"""A rule for choosing a model, judged on plants drawn at random (issue 55, item 5).
+
+``python benchmarks/selection_random.py [--dev N] [--test N] [-o docs/selection-study.md]``
+(about 15 minutes for 20 + 20 plants on two cores; ``-o`` rewrites the tables between the
+page's second pair of markers).
+
+The matrix's plants (``benchmarks/selection_study.py``) are five fixed designs and their
+production spread. Here each plant is *drawn*: a family (the simulator's Preisach,
+Bouc-Wen, Duhem, two-state and Bouc-Wen-with-creep capacitors, and a Jiles-Atherton-type
+capacitor written below and nowhere in the package), then its parameters (the law's, the
+capacitance, the leakage and its rise with the voltage, an op-amp's bias current, an
+amplifier's lag on half of the plants, dielectric relaxation on some), then what the lab
+records to fit on (what ``piezohyst excite`` plays, or 40 s of decaying loops), then a test
+it never sees (12 s of the ``multi`` signal, another noise draw). Plants ``0 .. dev-1`` of
+the draw are the **development set** a rule may be chosen on; plants ``1000 ..`` are the
+**held-out set**, drawn the same way, scored once the rule is chosen.
+
+Each plant: ``select_model`` on the record (its folds, the margins' standard errors, the
+candidates it cannot tell apart), and every candidate fitted on the whole record and scored
+on the test. A rule's figure on a plant is the test NRMSE of what it chose over the best
+candidate's ("within 1.25x of the best default"). Every rule is scored from the same fits.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+import warnings
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import piezohyst as ph
+from piezohyst.analysis.selection import (
+    CANDIDATES,
+    TIE,
+    candidate_model,
+    chosen,
+    undecided,
+    with_margins,
+)
+
+FAMILIES = ("preisach", "bouc-wen", "duhem", "two-state", "bouc-wen-creep", "jiles-atherton")
+DEV_SEED, TEST_SEED = 0, 1000
+Run = dict[str, Any]
+
+
+# ------------------------------------------------------------------ the draw
+def _logn(rng: np.random.Generator, value: float, spread: float) -> float:
+    return float(value * math.exp(spread * rng.standard_normal()))
+
+
+def draw(seed: int) -> dict[str, Any]:
+    """A plant: its family, parameters and training design, all from ``seed``."""
+    rng = np.random.default_rng([0x5E1EC7, seed])
+    family = FAMILIES[int(rng.integers(len(FAMILIES)))]
+    plant: dict[str, Any] = {
+        "seed": seed,
+        "family": family,
+        "design": ("excite", "decaying")[int(rng.integers(2))],
+        "c0": _logn(rng, 12e-9, 0.2),
+        "g_leak": float(10 ** rng.uniform(-10.0, -8.8)),
+        "leak_voltage_coeff": float(rng.uniform(0.0, 1.5)),
+        "i_bias": float(rng.uniform(-25e-12, 25e-12)),
+        "amp_tau": float(rng.uniform(1e-3, 4e-3)) if rng.random() < 0.5 else 0.0,
+    }
+    if family == "preisach":
+        plant["preisach"] = {k: _logn(rng, 1.0, s) for k, s in
+                             (("q_irr", 0.2), ("field_center", 0.3), ("field_spread", 0.3),
+                              ("coercive_scale", 0.3))}  # fmt: skip
+    elif family == "jiles-atherton":
+        plant["ja"] = {
+            "a": float(rng.uniform(15.0, 45.0)),  # V, the anhysteretic curve's width
+            "k": float(rng.uniform(8.0, 30.0)),  # V, the pinning (coercive) scale
+            "alpha": float(rng.uniform(0.0, 0.3)),  # the mean-field coupling, of k
+            "c": float(rng.uniform(0.1, 0.5)),  # the reversible share
+            "centre": float(rng.uniform(50.0, 90.0)),  # V, where the domains are balanced
+            "qs": _logn(rng, 0.6e-6, 0.4),  # C, the switching charge at saturation
+        }
+    else:
+        plant["law"] = float(rng.standard_normal()), rng.standard_normal(5)
+        relax = family == "bouc-wen-creep" or rng.random() < 0.3
+        plant["relax"] = (
+            (float(rng.uniform(0.1, 0.5)), float(rng.uniform(2.0, 8.0))),
+            (_logn(rng, 1.2e-9, 0.4), _logn(rng, 1.0e-9, 0.4)),
+        ) if relax else None  # fmt: skip
+    return plant
+
+
+def _preset(plant: dict[str, Any]) -> Any:
+    from piezohyst.simulation import PLANTS
+
+    family = plant["family"]
+    base = PLANTS["bouc-wen" if family == "bouc-wen-creep" else family]
+    common = {k: plant[k] for k in ("c0", "g_leak", "leak_voltage_coeff", "i_bias", "amp_tau")}
+    p = replace(base, name=f"random {plant['seed']}", relax_taus=(), relax_gains=(), **common)
+    if family == "preisach":
+        return replace(p, **{k: getattr(base, k) * f for k, f in plant["preisach"].items()})
+    _, z = plant["law"]
+    law = np.array(base.law_params, dtype=float)
+    if family == "bouc-wen" or family == "bouc-wen-creep":  # A, beta, gamma jittered, n = 1
+        law[1:4] *= np.exp(0.3 * z[:3])
+    elif family == "duhem":  # alpha, c_an, c_rev
+        law *= np.exp(0.3 * z[:3])
+    else:  # two-state: the populations' scale, rate and activation width
+        law *= np.exp(0.3 * z[:3])
+    p = replace(p, law_params=tuple(float(x) for x in law))
+    if plant["relax"] is not None:
+        p = replace(p, relax_taus=plant["relax"][0], relax_gains=plant["relax"][1])
+    return p
+
+
+def _lagged(t: np.ndarray, v: np.ndarray, tau: float) -> np.ndarray:
+    if tau <= 0.0:
+        return v
+    out, y = np.empty_like(v), v[0]
+    for k in range(v.size):
+        y += (1.0 - math.exp(-(t[k] - t[k - 1]) / tau)) * (v[k] - y) if k else 0.0
+        out[k] = y
+    return out
+
+
+def jiles_atherton(t: np.ndarray, v: np.ndarray, plant: dict[str, Any], seed: int) -> np.ndarray:
+    """The measured charge of a Jiles-Atherton-type capacitor: ``q = c0 v + qs P`` with the
+    polarization ``P`` of the JA law in the voltage (the field), plus the leakage's and the
+    bias current's charge and 0.1 % noise. Written here, used nowhere in the package."""
+    ja = plant["ja"]
+    a, k, alpha, c, centre = ja["a"], ja["k"], ja["alpha"] * ja["k"], ja["c"], ja["centre"]
+    u = _lagged(t, v, plant["amp_tau"]) - centre
+
+    def langevin(x: float) -> float:
+        return x / 3.0 if abs(x) < 1e-4 else 1.0 / math.tanh(x) - 1.0 / x
+
+    p_pol, u_prev = 0.0, u[0]
+    pol = np.empty_like(u)
+    steps = 8
+    for i in range(u.size):
+        du = (u[i] - u_prev) / steps
+        for _ in range(steps):
+            if du != 0.0:
+                delta = 1.0 if du > 0 else -1.0
+                h = u_prev + alpha * p_pol
+                an = langevin(h / a)
+                gap = an - p_pol
+                irr = gap / (delta * k - alpha * gap) if gap * delta > 0 else 0.0
+                dan = (langevin((h + 1e-3) / a) - langevin((h - 1e-3) / a)) / 2e-3
+                p_pol = min(max(p_pol + ((1.0 - c) * irr + c * dan) * du, -1.0), 1.0)
+            u_prev += du
+        pol[i] = p_pol
+        u_prev = u[i]
+    vv = u + centre
+    q = plant["c0"] * vv + ja["qs"] * (pol - pol[0])
+    g = plant["g_leak"] * (1.0 + plant["leak_voltage_coeff"] * np.abs(vv) / 140.0)
+    current = g * vv + plant["i_bias"]
+    q = q + np.concatenate(([0.0], np.cumsum(0.5 * (current[1:] + current[:-1]) * np.diff(t))))
+    noise = np.random.default_rng(seed).standard_normal(q.size)
+    return np.asarray(q + 1e-3 * np.ptp(q) * noise)
+
+
+def records(plant: dict[str, Any]) -> tuple[tuple[Any, ...], tuple[Any, ...]]:
+    """(voltage, charge, t) of the training record and of the test."""
+    from piezohyst.simulation import make_signal
+    from piezohyst.workflows.excitation import excitation
+
+    seed = plant["seed"]
+    if plant["design"] == "excite":
+        played = excitation(v_min=0.0, v_max=140.0, sample_rate=1000.0)
+        t, v = played.t, played.voltage
+    else:
+        t, v = make_signal("decaying", duration=40.0)
+    tt, vt = make_signal("multi", duration=12.0)
+    if plant["family"] == "jiles-atherton":
+        return (v, jiles_atherton(t, v, plant, seed), t), (
+            vt,
+            jiles_atherton(tt, vt, plant, seed + 7),
+            tt,
+        )
+    p = _preset(plant)
+    tr, te = ph.simulate(v, t, preset=p, seed=seed), ph.simulate(vt, tt, preset=p, seed=seed + 7)
+    return (tr.voltage, tr.charge, tr.t), (te.voltage, te.charge, te.t)
+
+
+# ------------------------------------------------------------------ measuring
+def measure(seed: int) -> Run:
+    """``select_model``'s table on the record, and every candidate's test error."""
+    plant = draw(seed)
+    (x, y, t), (xt, yt, tt) = records(plant)
+    start = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sel = ph.select_model(x, y, t=t)
+    seconds = time.perf_counter() - start
+    test: dict[str, float] = {}
+    preds: dict[str, np.ndarray] = {}
+    for name in CANDIDATES:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            try:
+                m = candidate_model(name, 10, ("V", "C"), t).fit(x, y, t=t)
+                preds[name] = m.predict(xt, t=tt)
+                test[name] = float(ph.metrics.nrmse(yt, preds[name]))
+            except ph.PiezohystError:
+                test[name] = math.inf
+    rows = {r.name: (tuple(r.folds), r.score) for r in sel.rows}
+    # the choice by the score alone, and what the record does not tell from it, recomputed
+    # from the table: ``select_model`` itself now goes on to the latest part among those
+    ordered = sorted(sel.rows, key=lambda r: CANDIDATES.index(r.name))
+    first = chosen([r for r in ordered if math.isfinite(r.score)])
+    close = undecided(with_margins(ordered, first), first.name)
+    combined = {}
+    for label, names in (("undecided", (first.name, *close)),):
+        got = [preds[n] for n in names if n in preds and math.isfinite(test[n])]
+        combined[label] = float(ph.metrics.nrmse(yt, np.mean(got, axis=0)))
+    lag = f"lag {1e3 * plant['amp_tau']:.1f} ms"
+    best = min(test, key=lambda n: test[n])
+    print(f"  plant {seed}: {plant['family']} ({plant['design']}, {lag}) chose {sel.name}, "
+          f"best {best}", flush=True)  # fmt: skip
+    return {
+        "plant": plant,
+        "chosen": first.name,
+        "selected": sel.name,
+        "undecided": tuple(close),
+        "rows": rows,
+        "test": test,
+        "combined": combined,
+        "seconds": seconds,
+    }
+
+
+# ------------------------------------------------------------------ the rules
+def _simplest(scores: dict[str, float]) -> str:
+    best = min(scores.values())
+    return next(n for n in CANDIDATES if n in scores and scores[n] <= best * (1 + TIE))
+
+
+def _finite(run: Run) -> dict[str, tuple[float, ...]]:
+    return {n: f for n, (f, s) in run["rows"].items() if math.isfinite(s)}
+
+
+def _latest_of_undecided(run: Run) -> float:
+    names = [n for n in (run["chosen"], *run["undecided"]) if n in _finite(run)]
+    folds = _finite(run)
+    return run["test"][_simplest({n: folds[n][-1] for n in names})]
+
+
+RULES: dict[str, Callable[[Run], float]] = {
+    "the mean of the two parts (select_model until this study)": lambda r: r["test"][r["chosen"]],
+    "the latest part among those not told apart": _latest_of_undecided,
+    "the latest part alone": lambda r: r["test"][
+        _simplest({n: f[-1] for n, f in _finite(r).items()})
+    ],
+    "the worst part": lambda r: r["test"][_simplest({n: max(f) for n, f in _finite(r).items()})],
+    "the mean of those not told apart": lambda r: r["combined"]["undecided"],
+    "select_model as it is": lambda r: r["test"][r.get("selected", r["chosen"])],
+}
+
+
+def table(runs: list[Run]) -> list[str]:
+    heads = "rule | within 1.25x of the best default | median ratio | worst ratio | worst plant"
+    lines = [f"| {heads} |", "|---|---|---|---|---|"]
+    for label, rule in RULES.items():
+        ratios = np.array([rule(r) / min(r["test"].values()) for r in runs])
+        worst = runs[int(np.argmax(ratios))]["plant"]
+        lines.append(
+            f"| {label} | {int(np.sum(ratios <= 1.25))} of {ratios.size} | "
+            f"{np.median(ratios):.2f} | {ratios.max():.2f} | "
+            f"{worst['family']} ({worst['design']}, {worst['seed']}) |"
+        )
+    return lines
+
+
+def plants_table(runs: list[Run]) -> list[str]:
+    heads = "plant | family | record | lag | chosen by the mean | not told apart | best on the test"
+    lines = [f"| {heads} | ratio |", "|---|---|---|---|---|---|---|---|"]
+    for r in runs:
+        p, best = r["plant"], min(r["test"], key=lambda n: r["test"][n])
+        lines.append(
+            f"| {p['seed']} | {p['family']} | {p['design']} | {1e3 * p['amp_tau']:.1f} ms | "
+            f"{r['chosen']} | {', '.join(r['undecided']) or '-'} | {best} "
+            f"({100 * r['test'][best]:.2f} %) | {r['test'][r['chosen']] / r['test'][best]:.2f} |"
+        )
+    return lines
+
+
+BEGIN, END = (
+    "<!-- random plants: benchmarks/selection_random.py -->",
+    "<!-- end of random plants -->",
+)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--dev", type=int, default=20, help="development plants (seeds 0 ..)")
+    ap.add_argument("--test", type=int, default=0, help="held-out plants (seeds 1000 ..)")
+    ap.add_argument("-o", "--out", type=Path, default=None, help="write the tables here (.md)")
+    args = ap.parse_args()
+    seeds = [DEV_SEED + k for k in range(args.dev)] + [TEST_SEED + k for k in range(args.test)]
+    with ProcessPoolExecutor(max_workers=2) as pool:
+        runs = list(pool.map(measure, seeds))
+    dev = [r for r in runs if r["plant"]["seed"] < TEST_SEED]
+    held = [r for r in runs if r["plant"]["seed"] >= TEST_SEED]
+    out = []
+    for label, part in (("Development plants", dev), ("Held-out plants", held)):
+        if part:
+            secs = [r["seconds"] for r in part]
+            out += [f"### {label} ({len(part)}; `select_model` {min(secs):.0f}-{max(secs):.0f} s "
+                    "each)", "", *table(part), "", *plants_table(part), ""]  # fmt: skip
+    text = "\n".join(out).rstrip()
+    print(text)
+    if args.out is not None:
+        page = args.out.read_text()
+        if BEGIN not in page or END not in page:
+            raise SystemExit(f"{args.out} lacks the markers {BEGIN} and {END}")
+        head, rest = page.split(BEGIN, 1)
+        args.out.write_text(f"{head}{BEGIN}\n{text}\n{END}{rest.split(END, 1)[1]}")
+
+
+if __name__ == "__main__":
+    main()
