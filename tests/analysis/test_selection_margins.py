@@ -15,8 +15,8 @@ from piezohyst.analysis.selection import (
     FOLDS,
     MAJOR,
     SURE,
-    WEIGHTS,
     TIE,
+    WEIGHTS,
     Part,
     SelectionRow,
     _block_starts,
@@ -162,13 +162,16 @@ def test_the_latest_part_decides_among_those_the_record_does_not_tell_apart(
     part. A candidate the record puts clearly behind is never taken, however its latest
     part went."""
     names = [f"c{k}" for k in range(len(drawn))]
-    plain = [SelectionRow(n, (a, b), 0.5 * (a + b)) for n, (a, b, _, _) in zip(names, drawn)]
+    plain = [
+        SelectionRow(n, (a, b), 0.5 * (a + b)) for n, (a, b, _, _) in zip(names, drawn, strict=True)
+    ]
     first = chosen(plain)
     rows = []
-    for row, (_, _, spread, sure) in zip(plain, drawn):
+    for row, (_, _, spread, sure) in zip(plain, drawn, strict=True):
         margin = row.score - first.score
         # a decided row: its standard error well inside the margin; else well outside
-        se = 0.0 if row is first else (abs(margin) / (4 * SURE) if sure else abs(margin) + spread + 1e-6)
+        se = abs(margin) / (4 * SURE) if sure else abs(margin) + spread + 1e-6
+        se = 0.0 if row is first else se
         rows.append(replace(row, margin=margin, margin_stderr=se))
     close = [r for r in rows if r.name == first.name or not r.decided]
     best = min(r.folds[-1] for r in close)
