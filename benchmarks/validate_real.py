@@ -838,7 +838,11 @@ def matrix(data: Path) -> str:
         "PI has no growth term: on a "
         "leaking capacitor's charge it drifts by design (the paper's baseline). Other rules "
         "for the choice, tried on other units of the same batches and checked here: "
-        "`docs/selection-study.md`.\n",
+        "`docs/selection-study.md`. The choice among the candidates a record cannot tell "
+        "apart now goes to the one that forecast the record's latest part "
+        "(`selection.latest_of_close`), chosen on plants drawn at random, not on these "
+        "(`docs/selection-study.md`, \"Plants drawn at random\"); this table was not "
+        "rerun for it.\n",
         _minor_loops_close(),
     ]
     return "\n".join(lines)
