@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import shutil
 import subprocess
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,7 @@ from hypothesis import strategies as st
 import piezohyst as ph
 from piezohyst.control.export import write_c
 from piezohyst.metrics import hysteresis_width, nrmse
-from piezohyst.model.dynamics import InputDynamics
+from piezohyst.model.dynamics import InputDynamics, OutputDynamics
 from piezohyst.simulation import make_signal, simulate
 
 from ..strategies import examples
@@ -302,6 +303,56 @@ def test_a_mode_is_found_with_the_lag(
     np.testing.assert_allclose(
         np.concatenate([run.output, rest.output]), full.predict(v, t=t), rtol=0, atol=1e-18
     )
+
+
+@settings(max_examples=examples(40), deadline=None)
+@given(st.floats(1.0, 300.0), st.floats(0.005, 0.7), st.integers(0, 2**31))
+def test_the_mode_taken_out_is_the_input_that_makes_the_output(
+    f0: float, zeta: float, seed: int
+) -> None:
+    """``unapply`` is the mode's exact inverse: run back through the mode it gives the
+    output again, and on a held input it gives that input (a naive forward recursion of the
+    discrete state in Python is the reference)."""
+    mode = OutputDynamics(f0, zeta, DT)
+    rng = np.random.default_rng(seed)
+    u = rng.standard_normal(600).cumsum()
+    y, _ = mode.apply(u)
+    ad, bd = mode.matrices()
+    x, naive = np.array([u[0], 0.0]), np.empty_like(u)
+    for k in range(u.size):
+        x = ad @ x + bd * u[k]
+        naive[k] = x[0]
+    # tol: the two forward recursions round apart by a few ulps of the state per step
+    np.testing.assert_allclose(y, naive, rtol=0, atol=1e-12 * np.abs(u).max())
+    back = mode.unapply(y)
+    bound = 1e-13 * np.abs(y).max() / bd[0]
+    # tol: the inverse divides by bd[0] (>= 4e-6 at 1 Hz and 1 kHz) and runs on the sampling
+    # zero's pole, so rounding of y (1e-16 of its size) can grow by 1/bd[0] over the record
+    np.testing.assert_allclose(back, u, rtol=0, atol=bound)
+    np.testing.assert_array_equal(OutputDynamics().unapply(y), y)  # no mode: the output
+
+
+@pytest.mark.parametrize("model_cls", [ph.PreisachModel, ph.DuhemModel, ph.BoucWenModel])
+def test_every_core_is_fitted_through_the_mode(model_cls: type[ph.HysteresisModel]) -> None:
+    """A core that does not pass its regressors through the mode is fitted to the output with
+    the mode taken out. Before, each was fitted as if the output held no mode: on this record
+    (the bench's 150 Hz mode behind its 4 ms lag) Preisach 1.64 %, lag 4.36 ms; Duhem 1.72 %;
+    Bouc-Wen 1.66 %. Measured after: Preisach 0.20 %, 3.96 ms; Duhem 0.85 %; Bouc-Wen 1.09 %."""
+    t, v = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=9.0)
+    rec = simulate(v, t, preset=MODE, seed=0)
+    kw = {"output_unit": "m", "input_dynamics": "first-order", "output_dynamics": "second-order"}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ph.errors.IdentifiabilityWarning)
+        model = model_cls(**kw).fit(rec.voltage, rec.displacement, t=rec.t)
+    p = ph.simulation.PRESETS[MODE]
+    lag_tol = 0.02 if model_cls is ph.PreisachModel else 0.1
+    # tol: identified from one noisy record, as the PI model's test above: the mode to 2 %
+    assert model.output_dynamics_.f0 == pytest.approx(p.mech_f0, rel=0.02)
+    # tol: the lag to 2 % with the bench's own law (Preisach), to 10 % with a core that does
+    # not hold it and trades the lag against its misfit (Duhem 4.36 ms, Bouc-Wen 4.12 ms here)
+    assert model.input_dynamics_.tau == pytest.approx(p.amp_tau, rel=lag_tol)
+    bound = 0.004 if model_cls is ph.PreisachModel else 0.0125  # each core's misfit here
+    assert model.nrmse_ < bound
 
 
 def test_compensation_through_the_mode(mode_models: tuple[ph.ClassicalPI, ph.ClassicalPI]) -> None:

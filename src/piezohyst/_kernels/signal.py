@@ -115,6 +115,21 @@ def mode_filter(u, ad, bd, state, out):  # type: ignore[no-untyped-def]
         state[1, j] = x2
 
 
+@njit(cache=True, fastmath=FASTMATH)
+def mode_unfilter(y, ad, bd, u):  # type: ignore[no-untyped-def]
+    """The inputs that :func:`mode_filter` turns into ``y`` (1-D), from rest at ``y[0]``.
+
+    Row ``k``'s input moves the position from ``y[k-1]`` to ``y[k]`` (``bd[0] > 0``: a
+    held input always moves the position); the velocity follows from it.
+    """
+    u[0] = y[0]
+    x2 = 0.0
+    for k in range(1, y.shape[0]):
+        x1 = y[k - 1]
+        u[k] = (y[k] - ad[0, 0] * x1 - ad[0, 1] * x2) / bd[0]
+        x2 = ad[1, 0] * x1 + ad[1, 1] * x2 + bd[1] * u[k]
+
+
 @njit(cache=True)
 def turn_points(x, band, state, out):  # type: ignore[no-untyped-def]
     """The input's turns: reversals of at least ``band`` back from the last extreme. Writes

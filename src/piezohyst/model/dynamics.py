@@ -457,6 +457,41 @@ class OutputDynamics:
             return ys.copy(), st
         return self.apply_columns(ys[:, None], st)[:, 0], st
 
+    def unapply(self, y: Any) -> FloatArray:
+        """The input held over each sample that the mode turns into ``y`` exactly, from rest
+        at ``y[0]`` (as :meth:`apply` starts).
+
+        The discrete mode's inverse, run forward: each sample's input is what moves the
+        position from ``y[k]`` to ``y[k+1]``, and the velocity follows from it. Stable: its
+        pole is the held mode's sampling zero, inside the unit circle. What a fit of a core
+        that does not filter its columns through the mode is fitted to
+        (:attr:`~piezohyst.model.cores.base.Core.takes_mode`).
+
+        Parameters
+        ----------
+        y : array_like, shape (N,)
+            The mode's output (a displacement record).
+
+        Returns
+        -------
+        ndarray, shape (N,)
+
+        Examples
+        --------
+        >>> mode = OutputDynamics(150.0, 0.05, 1e-3)
+        >>> u = np.sin(np.linspace(0.0, 20.0, 400))
+        >>> y, _ = mode.apply(u)
+        >>> bool(np.allclose(mode.unapply(y), u, rtol=0.0, atol=1e-9))
+        True
+        """
+        ys = np.ascontiguousarray(y, dtype=np.float64)
+        if not self.active or ys.size < 2:
+            return ys.copy()
+        ad, bd = self._cached()
+        u = np.empty_like(ys)
+        S.mode_unfilter(ys, ad, bd, u)
+        return u
+
     def invert(self, desired: FloatArray, before: FloatArray, after: FloatArray) -> FloatArray:
         """The input that makes the mode follow ``desired``: y + 2ζ/ω y' + y''/ω².
 

@@ -335,7 +335,10 @@ def identify_model(
         terms, selection = growth_by_evidence(blocks, terms, initial_state)
     if not timed and any(term.rate_dependent for term in terms):
         as_time(None, sm.n, required=True, owner=type(model).__name__)  # raises
-    job = FitJob(blocks, sm, terms, subsets, initial_state,
+    fitted = blocks
+    if output_mode is not None and output_mode.active and not model.core_class.takes_mode:
+        fitted = _mode_taken_out(blocks, output_mode)  # scored on the record as measured
+    job = FitJob(fitted, sm, terms, subsets, initial_state,
                  {**params, **(params.get("settings") or {})}, type(model).__name__,
                  model.input_unit, model.output_unit, output_mode)  # fmt: skip
     fit = model.core_class.identify(job)
@@ -346,6 +349,19 @@ def identify_model(
         model.take_fit(selection=sel, selection_folds=folds, selection_splits=list(splits))
     model.take_fit(**score_model(model, blocks, sm))
     return sm
+
+
+def _mode_taken_out(blocks: Blocks, mode: OutputDynamics) -> Blocks:
+    """The record with its output through the mode's exact inverse: what a core that does
+    not pass its regressors through the mode is fitted to (a Preisach, Duhem or Bouc-Wen
+    core; the play operators' solve filters its columns instead). Until this, those cores
+    were fitted to the output as if it held no mode: on the bench with a 150 Hz mode and a
+    4 ms lag the Preisach model fitted 1.6 % (PI 0.23 %) and its lag came out 4.4 ms."""
+    parts = list(blocks())
+    x = np.concatenate([p[0] for p in parts])
+    y = mode.unapply(np.concatenate([p[1] for p in parts]))
+    t = None if parts[0][2] is None else np.concatenate([p[2] for p in parts])
+    return array_blocks(x, y, t)
 
 
 #: The domain's growth terms are dropped where the proxy's forward chaining forecasts the

@@ -372,6 +372,10 @@ class Core:
     c_source: ClassVar[str | None] = None
     #: the growth terms come from a play-operator proxy first (cores whose loops need not close)
     growth_from_proxy: ClassVar[bool] = False
+    #: its identification passes its regressors through the fit's mechanical mode
+    #: (``FitJob.output``); a core without it is fitted to the output with the mode taken out
+    #: (:func:`~piezohyst.model.dynamics.OutputDynamics.unapply`)
+    takes_mode: ClassVar[bool] = False
     #: Settings that make the repeated fits of the input-dynamics profile cheaper (see
     #: :func:`~piezohyst.model.fit_dynamics.profile_dynamics`); the final fit uses the model's own
     profile_settings: ClassVar[dict[str, Any]] = {}

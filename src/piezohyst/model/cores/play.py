@@ -80,6 +80,7 @@ class PIHysteresis(Core):
     initial_state: FloatArray = field(default=None)  # type: ignore[arg-type]
     kind: ClassVar[str] = "play"  # the core's name in model files
     c_source: ClassVar[str | None] = "play.c"
+    takes_mode: ClassVar[bool] = True  # its columns pass through the mode (solve.identify)
     file_fields: ClassVar[dict[str, str]] = {
         "thresholds": "numbers", "weights": "numbers", "offset": "number",
         "initial_state": "numbers",
