@@ -217,11 +217,15 @@ def test_a_record_with_minor_loops_has_no_such_note() -> None:
     assert any("fewer than" in n for n in record_notes(np.linspace(0.0, 1.0, 50)))
 
 
-def test_compare_s_recommendation_says_what_its_training_part_cannot_test(tmp_path) -> None:  # type: ignore[no-untyped-def]
-    """`compare` recommends from the training part alone, and says under its table what that
+def test_compare_s_recommendation_says_what_its_training_part_cannot_test(  # type: ignore[no-untyped-def]
+    tmp_path, monkeypatch
+) -> None:
+    """`compare` recommends from the training part alone, decided as select_model decides
+    (the latest part among those not told apart too), and says under its table what that
     part cannot tell: the same sentences select_model would give for it."""
     import piezohyst.workflows as wf
-    from piezohyst.analysis.selection import chosen, forward_scores, verdict, with_margins
+    from piezohyst.analysis import selection
+    from piezohyst.analysis.selection import decide, forward_scores, verdict, with_margins
 
     rec = ph.simulate(duration=20.0, seed=2)  # one amplitude: no minor loops
     ph.write_table(tmp_path / "run.csv", {"time": rec.t, "voltage": rec.voltage,
@@ -230,8 +234,16 @@ def test_compare_s_recommendation_says_what_its_training_part_cannot_test(tmp_pa
     a, b = got.train
     inner = forward_scores({"active-pi": ph.ActivePI(10), "bouc-wen": ph.BoucWenModel()},
                            rec.voltage[a:b], rec.charge[a:b], rec.t[a:b])  # fmt: skip
-    win = chosen(inner)
+    _, win = decide(inner)
     expected = verdict(with_margins(inner, win), win.name, record_notes(rec.voltage[a:b]))
-    assert got.recommendation_notes == expected
+    assert got.recommended == win.name and got.recommendation_notes == expected
     assert any("no minor loops" in n for n in got.recommendation_notes)
     assert got.table().endswith(got.recommendation_notes[-1])
+    # where the latest part moves the choice, the recommendation moves with it
+    monkeypatch.setattr(
+        selection,
+        "latest_of_close",
+        lambda rows, first: next(r for r in rows if r.name != first.name),
+    )
+    moved = wf.compare_file(tmp_path / "run.csv", models=["active-pi", "bouc-wen"])
+    assert moved.recommended != got.recommended

@@ -80,6 +80,7 @@ __all__ = [
     "candidate_model",
     "chosen",
     "creep_constants",
+    "decide",
     "drive_rates",
     "fold_bounds",
     "forward_scores",
@@ -626,6 +627,26 @@ def latest_of_close(rows: Sequence[SelectionRow], first: SelectionRow) -> Select
     return next(r for r in latest if r.folds[-1] <= best * (1 + TIE))
 
 
+def decide(rows: Sequence[SelectionRow]) -> tuple[SelectionRow, SelectionRow]:
+    """The choice among scored rows: the simplest near the best score (:func:`chosen`),
+    then, among it and what the record does not tell from it, the best on the latest part
+    (:func:`latest_of_close`). What ``select_model`` and ``compare``'s recommendation take.
+
+    Parameters
+    ----------
+    rows : sequence of SelectionRow
+        Every candidate's row, in candidate order (at least one with a finite score).
+
+    Returns
+    -------
+    (SelectionRow, SelectionRow)
+        The choice by the score alone, and the one taken (the same row where the latest
+        part did not move it).
+    """
+    first = chosen([r for r in rows if math.isfinite(r.score)])
+    return first, latest_of_close(with_margins(rows, first), first)
+
+
 def select_model(
     x: ArrayLike,
     y: ArrayLike,
@@ -718,8 +739,7 @@ def select_model(
     if not math.isfinite(ranked[0].score):
         msg = f"no candidate could be fitted: {ranked[0].name}: {ranked[0].error}"
         raise InsufficientDataError(msg)
-    first = chosen([r for r in rows if math.isfinite(r.score)])
-    winner = latest_of_close(with_margins(rows, first), first)
+    first, winner = decide(rows)
     model = candidate_model(winner.name, operators, units, ts, **dyn)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RecordWarning)  # said above

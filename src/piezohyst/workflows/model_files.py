@@ -21,7 +21,7 @@ from ..analysis.selection import (
     CREEP,
     Selection,
     candidate_model,
-    chosen,
+    decide,
     forward_scores,
     is_candidate,
     record_notes,
@@ -494,7 +494,7 @@ def compare_file(
     a, b = result.train
     inner = forward_scores(estimators, rec.x[w][a:b], rec.y[w][a:b], rec.t[w][a:b], start)
     if any(math.isfinite(r.score) for r in inner):  # chosen inside the training part alone
-        winner = chosen(inner)
+        _, winner = decide(inner)  # as select_model decides
         said = verdict(with_margins(inner, winner), winner.name, record_notes(rec.x[w][a:b]))
         result = dataclasses.replace(result, recommended=winner.name, recommendation_notes=said)
     if w.start:  # the samples scored, as rows of the record
