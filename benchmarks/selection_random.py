@@ -297,9 +297,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--dev", type=int, default=20, help="development plants (seeds 0 ..)")
     ap.add_argument("--test", type=int, default=0, help="held-out plants (seeds 1000 ..)")
+    ap.add_argument("--test-from", type=int, default=TEST_SEED, help="the first held-out seed")
     ap.add_argument("-o", "--out", type=Path, default=None, help="write the tables here (.md)")
     args = ap.parse_args()
-    seeds = [DEV_SEED + k for k in range(args.dev)] + [TEST_SEED + k for k in range(args.test)]
+    seeds = [DEV_SEED + k for k in range(args.dev)]
+    seeds += [args.test_from + k for k in range(args.test)]
     with ProcessPoolExecutor(max_workers=2) as pool:
         runs = list(pool.map(measure, seeds))
     dev = [r for r in runs if r["plant"]["seed"] < TEST_SEED]
@@ -313,11 +315,9 @@ def main() -> None:
     text = "\n".join(out).rstrip()
     print(text)
     if args.out is not None:
-        page = args.out.read_text()
-        if BEGIN not in page or END not in page:
-            raise SystemExit(f"{args.out} lacks the markers {BEGIN} and {END}")
-        head, rest = page.split(BEGIN, 1)
-        args.out.write_text(f"{head}{BEGIN}\n{text}\n{END}{rest.split(END, 1)[1]}")
+        from selection_study import write_between  # beside this script
+
+        write_between(args.out, BEGIN, END, text)
 
 
 if __name__ == "__main__":

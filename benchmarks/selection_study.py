@@ -176,12 +176,17 @@ def main() -> None:
         out += ["", "## Measured sets (the matrix's splits)", "", *table(runs, (0,))]
     text = "\n".join(out)
     print(text)
-    if args.out is not None:  # between the markers of an existing page, else a page of its own
-        page = args.out.read_text() if args.out.exists() else f"{BEGIN}\n{END}\n"
-        if BEGIN not in page or END not in page:
-            raise SystemExit(f"{args.out} lacks the markers {BEGIN} and {END}")
-        head, rest = page.split(BEGIN, 1)
-        args.out.write_text(f"{head}{BEGIN}\n{text}\n{END}{rest.split(END, 1)[1]}")
+    if args.out is not None:
+        write_between(args.out, BEGIN, END, text)
+
+
+def write_between(out: Path, begin: str, end: str, text: str) -> None:
+    """``text`` between the markers of an existing page, else a page of its own."""
+    page = out.read_text() if out.exists() else f"{begin}\n{end}\n"
+    if begin not in page or end not in page:
+        raise SystemExit(f"{out} lacks the markers {begin} and {end}")
+    head, rest = page.split(begin, 1)
+    out.write_text(f"{head}{begin}\n{text}\n{end}{rest.split(end, 1)[1]}")
 
 
 if __name__ == "__main__":
