@@ -8,6 +8,7 @@ import shutil
 import subprocess
 import warnings
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -118,6 +119,23 @@ fid = fopen('errors.txt', 'w'); fprintf(fid, '%s\\n', messages{:}); fclose(fid);
 """
 
 
+def _two_calls_and_one(comp: Any, d: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """The gateway's two calls (each half of ``d`` its own block) and its one call, as Octave
+    wrote them one after the other in ``out``, against Python's ``process`` called the same
+    ways; returns Python's two calls less its one."""
+    half = d.shape[0] // 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ph.LimitWarning)  # compared, not said
+        split = np.concatenate([comp.process(d[:half]), comp.process(d[half:])])
+        comp.reset()
+        whole = comp.process(d)
+    # tol: C and numba round apart (FMA, order, libm) by an ulp per step, not integrated:
+    # issue 41's 1e-9 V
+    np.testing.assert_allclose(out[: d.shape[0]], split, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(out[d.shape[0] :], whole, rtol=0, atol=1e-9)
+    return np.asarray(split - whole)
+
+
 def test_a_stage_mex_in_octave(tmp_path: Path) -> None:
     """Issue 57: a coupled stage's compensator in Octave (the gateway and the stage's C
     built together): a matrix of positions in, a matrix of commands out, equal to Python to
@@ -168,16 +186,8 @@ def test_a_stage_with_modes_mex_in_octave(tmp_path: Path) -> None:
     d = np.array([x0, y0]) + np.array([x1 - x0, y1 - y0]) * (0.5 + 0.3 * wave)
     d[800, 1] = np.nan
     out = _in_octave(tmp_path, [p.name for p in files if p.suffix == ".c"], d, STAGE_SCRIPT)
-    half = k.size // 2
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ph.LimitWarning)  # compared, not said
-        split = np.vstack([comp.process(d[:half]), comp.process(d[half:])])
-        comp.reset()
-        whole = comp.process(d)
-    # tol: C and numba round apart by an ulp per step, not integrated: issue 41's 1e-9 V
-    np.testing.assert_allclose(out[: k.size], split, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(out[k.size :], whole, rtol=0, atol=1e-9)
-    assert np.abs(split - whole).max() > 1e-6  # the split's last row extrapolated: it shows
+    apart = _two_calls_and_one(comp, d, out)
+    assert np.abs(apart).max() > 1e-6  # the split's last row extrapolated: it shows
     counts = np.loadtxt(tmp_path / "counts.txt").astype(int).tolist()
     assert counts[1::3] == comp.nonfinite_count.tolist() == [1, 1]
 
@@ -193,12 +203,4 @@ def test_a_model_with_a_mode_mex_in_octave(tmp_path: Path) -> None:
     d = hosts.mode_target(model, 1000)
     d[700] = np.nan
     out = _in_octave(tmp_path, [gate.name], d, SCRIPT)
-    half = d.size // 2
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ph.LimitWarning)  # compared, not said
-        split = np.concatenate([comp.process(d[:half]), comp.process(d[half:])])
-        comp.reset()
-        whole = comp.process(d)
-    # tol: C and numba round apart (FMA, order, libm): 1e-9 V, issue 41's bar
-    np.testing.assert_allclose(out[: d.size], split, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(out[d.size :], whole, rtol=0, atol=1e-9)
+    _two_calls_and_one(comp, d, out)
