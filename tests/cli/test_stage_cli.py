@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -20,7 +21,11 @@ def _stage_file(tmp_path: Path) -> Path:
     t, a = make_signal("decaying", duration=8.0)
     _, b = make_signal("triangle", duration=8.0, frequency=1.3)
     rec = simulate_stage(np.column_stack([np.clip(2 * a, 0, 140), b]), t, seed=0)
-    path = tmp_path / "stage.csv"
+    return _written(rec, tmp_path / "stage.csv")
+
+
+def _written(rec: Any, path: Path) -> Path:
+    """A stage record as a lab's CSV: time, the two voltages, the two positions, with units."""
     ph.write_table(
         path,
         {"time": rec.t, "vx": rec.voltage[:, 0], "vy": rec.voltage[:, 1],
@@ -71,10 +76,7 @@ def test_predict_and_compensate_a_stage_from_the_shell(tmp_path: Path) -> None:
     t = np.arange(4000) / 1000.0
     u = np.column_stack([70 - 60 * np.cos(2 * np.pi * 0.7 * t), 70 - 60 * np.cos(3.8 * np.pi * t)])
     rec = simulate_stage(u, t, seed=1)
-    other = tmp_path / "other.csv"
-    ph.write_table(other, {"time": rec.t, "vx": rec.voltage[:, 0], "vy": rec.voltage[:, 1],
-                           "x": rec.position[:, 0], "y": rec.position[:, 1]},
-                   units={"time": "s", "vx": "V", "vy": "V", "x": "m", "y": "m"})  # fmt: skip
+    other = _written(rec, tmp_path / "other.csv")
     pred = tmp_path / "pred.csv"
     res = run("predict", model_file, other, "--input", "vx,vy", "--output", "x,y", "-o", pred)
     assert res.exit_code == 0, res.output
@@ -191,13 +193,7 @@ def test_a_stage_with_lags_and_modes_from_the_shell(tmp_path: Path) -> None:
     """``fit`` takes each actuator's lag and mode for a stage, says what it found, and its C
     export's step takes the next position, and the FMU has the next positions as inputs."""
     rec = hosts.dynamic_record()
-    data = tmp_path / "fast.csv"
-    ph.write_table(
-        data,
-        {"time": rec.t, "vx": rec.voltage[:, 0], "vy": rec.voltage[:, 1],
-         "x": rec.position[:, 0], "y": rec.position[:, 1]},
-        units={"time": "s", "vx": "V", "vy": "V", "x": "m", "y": "m"},
-    )  # fmt: skip
+    data = _written(rec, tmp_path / "fast.csv")
     out = tmp_path / "stage.json"
     res = run("fit", data, "--input", "vx,vy", "--output", "x,y", "--operators", "16",
               "--input-dynamics", "first-order", "--output-dynamics", "second-order",
