@@ -461,11 +461,13 @@ class OutputDynamics:
         """The input held over each sample that the mode turns into ``y`` exactly, from rest
         at ``y[0]`` (as :meth:`apply` starts).
 
-        The discrete mode's inverse, run forward: each sample's input is what moves the
-        position from ``y[k]`` to ``y[k+1]``, and the velocity follows from it. Stable: its
-        pole is the held mode's sampling zero, inside the unit circle. What a fit of a core
-        that does not filter its columns through the mode is fitted to
-        (:attr:`~piezohyst.model.cores.base.Core.takes_mode`).
+        The discrete mode's inverse, run forward: sample ``k``'s input is what moves the
+        position from ``y[k-1]`` to ``y[k]``, and the velocity follows from it. Stable: its
+        pole is the held mode's sampling zero, inside the unit circle but near -1 for a mode
+        well below the sample rate (-0.968 for 150 Hz at 1 kHz), so noise near half the
+        sample rate is amplified and rings on; a fit low-passes the output first where the
+        sampling reaches far above the mode. What a core that does not filter its columns
+        through the mode is fitted to (:attr:`~piezohyst.model.cores.base.Core.takes_mode`).
 
         Parameters
         ----------
