@@ -201,6 +201,24 @@ def test_a_choice_the_latest_part_moved_says_so(monkeypatch) -> None:  # type: i
     assert any(n.startswith("active-pi scored best") and said in n for n in sel.notes)
 
 
+def test_a_rise_the_holds_show_and_the_choice_lacks_is_said() -> None:
+    """On what ``piezohyst excite`` plays to the Bouc-Wen plant (its leak rises 100 % to
+    140 V; the holds show it), a model without a term for the rise is chosen with a sentence
+    that says so; one that takes it (the Bouc-Wen default) without. A displacement record
+    has no leak: nothing said."""
+    exc = excitation(v_min=0.0, v_max=140.0, sample_rate=1000.0)
+    rec = ph.simulate(exc.voltage, exc.t, plant="bouc-wen", seed=1)
+    lacking = select_model(rec.voltage, rec.charge, rec.t, candidates=("active-pi",))
+    assert [term.kind for term in lacking.model.terms_] == ["integral"]
+    assert any("holds show the leak rising" in n and "active-pi" in n for n in lacking.notes)
+    holding = select_model(rec.voltage, rec.charge, rec.t, candidates=("bouc-wen",))
+    assert "abs_integral" in [term.kind for term in holding.model.terms_]
+    assert not any("holds show the leak rising" in n for n in holding.notes)
+    moved = select_model(rec.voltage, rec.displacement, rec.t, candidates=("active-pi",),
+                         output_unit="m")  # fmt: skip
+    assert not any("holds show the leak rising" in n for n in moved.notes)
+
+
 def test_a_record_with_minor_loops_has_no_such_note() -> None:
     exc = excitation(v_min=0.0, v_max=140.0, sample_rate=1000.0)
     assert record_notes(exc.voltage) == ()
