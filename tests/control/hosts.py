@@ -158,3 +158,15 @@ int main(void)
     return 0;
 }}
 """
+
+
+def sines_in_reach(
+    comp: Any, n: int, rates: tuple[float, float], depth: float, fs: float = 1000.0
+) -> np.ndarray:
+    """``n`` rows of a sine per axis (``rates``, Hz) about the middle of a stage
+    compensator's reach, ``depth`` of each axis's reach either side: a target inside it."""
+    (x0, x1), (y0, y1) = comp.reach
+    k = np.arange(n)
+    wave = np.column_stack([np.sin(2 * np.pi * rates[0] * k / fs),
+                            np.sin(2 * np.pi * rates[1] * k / fs)])  # fmt: skip
+    return np.asarray(np.array([x0, y0]) + np.array([x1 - x0, y1 - y0]) * (0.5 + depth * wave))

@@ -222,10 +222,8 @@ def test_the_stage_in_c_equals_python(
     paths = write_stage_c(comp, tmp_path / "ph_xy.c")
     assert [p.name for p in paths] == ["ph_xy.c", "ph_xy.h", "ph_xy_a0.c", "ph_xy_a0.h",
                                        "ph_xy_a1.c", "ph_xy_a1.h"]  # fmt: skip
-    (x0, x1), (y0, y1) = comp.reach
-    k = np.arange(3000)
-    wave = np.column_stack([np.sin(2 * np.pi * 3 * k / FS), np.sin(2 * np.pi * 2 * k / FS)])
-    desired = np.array([x0, y0]) + np.array([x1 - x0, y1 - y0]) * (0.5 + 0.4 * wave)
+    (x0, x1), _ = comp.reach
+    desired = hosts.sines_in_reach(comp, 3000, (3, 2), 0.4, FS)
     desired[1000:1100, 0] = x1 + 0.2 * (x1 - x0)  # beyond x's reach
     desired[[1500, 2000], 1] = np.nan
     py = comp.process(desired)

@@ -155,12 +155,8 @@ def test_the_dynamic_stage_in_c_equals_python(
     comp = ph.CoupledCompensator(model, **_limits(model), sample_rate=FS, slew_rate=3e4)
     paths = write_stage_c(comp, tmp_path / "ph_xy.c")
     assert "next[2]" in (tmp_path / "ph_xy.h").read_text()
-    (x0, x1), (y0, y1) = comp.reach
-    k = np.arange(2500)
-    wave = np.column_stack([np.sin(2 * np.pi * 6 * k / FS), np.sin(2 * np.pi * 4 * k / FS)])
-    desired = _from_rest(
-        model, np.array([x0, y0]) + np.array([x1 - x0, y1 - y0]) * (0.5 + 0.35 * wave)
-    )
+    (x0, x1), _ = comp.reach
+    desired = _from_rest(model, hosts.sines_in_reach(comp, 2500, (6, 4), 0.35, FS))
     desired[1500:1560, 0] = x1 + 0.2 * (x1 - x0)  # beyond x's reach
     desired[[2000, 2400], 1] = np.nan
     nxt = np.vstack([desired[1:], [[np.nan, np.nan]]])
@@ -186,12 +182,7 @@ def test_the_dynamic_stage_as_a_shared_library_equals_python(
     model, _ = stage
     comp = ph.CoupledCompensator(model, **_limits(model), sample_rate=FS, slew_rate=3e4)
     _, lib_path = write_stage_shared(comp, tmp_path / "ph_xy.c")
-    (x0, x1), (y0, y1) = comp.reach
-    k = np.arange(2000)
-    wave = np.column_stack([np.sin(2 * np.pi * 9 * k / FS), np.sin(2 * np.pi * 6 * k / FS)])
-    desired = _from_rest(
-        model, np.array([x0, y0]) + np.array([x1 - x0, y1 - y0]) * (0.5 + 0.35 * wave)
-    )
+    desired = _from_rest(model, hosts.sines_in_reach(comp, 2000, (9, 6), 0.35, FS))
     desired[1800, 1] = np.nan
     py = np.vstack([comp.process(desired[:1200]), comp.process(desired[1200:])])
     lib = ctypes.CDLL(str(lib_path))

@@ -192,10 +192,8 @@ def test_a_stage_fmu_in_fmpy_equals_python(tmp_path: Path) -> None:
     comp = ph.CoupledCompensator(model, v_min=0.0, v_max=140.0, sample_rate=FS, slew_rate=2e4)
     path = write_stage_fmu(comp, tmp_path / "ph_xy.fmu")
     assert validate_fmu(str(path)) == []
-    (x0, x1), (y0, y1) = comp.reach
-    k = np.arange(1500)
-    wave = np.column_stack([np.sin(2 * np.pi * 3 * k / FS), np.sin(2 * np.pi * 2 * k / FS)])
-    desired = np.array([x0, y0]) + np.array([x1 - x0, y1 - y0]) * (0.5 + 0.4 * wave)
+    (x0, x1), _ = comp.reach
+    desired = hosts.sines_in_reach(comp, 1500, (3, 2), 0.4, FS)
     desired[600:650, 0] = x1 + 0.2 * (x1 - x0)  # beyond x's reach
     desired[900, 1] = np.nan
     py = comp.process(desired)
@@ -229,10 +227,7 @@ def test_a_stage_with_modes_as_an_fmu_takes_the_next_positions(tmp_path: Path) -
     comp = ph.CoupledCompensator(model, **limits, sample_rate=FS, slew_rate=3e4)  # type: ignore[arg-type]
     path = write_stage_fmu(comp, tmp_path / "ph_xy.fmu")
     assert validate_fmu(str(path)) == []
-    (x0, x1), (y0, y1) = comp.reach
-    k = np.arange(1000)
-    wave = np.column_stack([np.sin(2 * np.pi * 8 * k / FS), np.sin(2 * np.pi * 5 * k / FS)])
-    desired = np.array([x0, y0]) + np.array([x1 - x0, y1 - y0]) * (0.5 + 0.3 * wave)
+    desired = hosts.sines_in_reach(comp, 1000, (8, 5), 0.3, FS)
     desired[700, 1] = np.nan
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ph.LimitWarning)  # compared, not said

@@ -150,14 +150,12 @@ def test_a_stage_mex_in_octave(tmp_path: Path) -> None:
     comp = ph.CoupledCompensator(model, v_min=0.0, v_max=140.0, sample_rate=1000.0,
                                  slew_rate=2e4)  # fmt: skip
     files = write_stage_mex(comp, tmp_path / "ph_xy_mex.c")
-    (x0, x1), (y0, y1) = comp.reach
-    k = np.arange(1200)
-    wave = np.column_stack([np.sin(2 * np.pi * 3 * k / 1000), np.sin(2 * np.pi * 2 * k / 1000)])
-    d = np.array([x0, y0]) + np.array([x1 - x0, y1 - y0]) * (0.5 + 0.4 * wave)
+    (x0, x1), _ = comp.reach
+    d = hosts.sines_in_reach(comp, 1200, (3, 2), 0.4)
     d[500:540, 0] = x1 + 0.2 * (x1 - x0)  # beyond x's reach
     d[800, 1] = np.nan
     out = _in_octave(tmp_path, [p.name for p in files if p.suffix == ".c"], d, STAGE_SCRIPT)
-    carried, again = out[: k.size], out[k.size :]
+    carried, again = out[: d.shape[0]], out[d.shape[0] :]
     assert np.array_equal(carried, again)  # the state carried across calls; reset: the same
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ph.LimitWarning)  # out of reach on purpose
@@ -180,10 +178,7 @@ def test_a_stage_with_modes_mex_in_octave(tmp_path: Path) -> None:
     model, limits = hosts.dynamic_stage()
     comp = ph.CoupledCompensator(model, **limits, sample_rate=1000.0, slew_rate=3e4)  # type: ignore[arg-type]
     files = write_stage_mex(comp, tmp_path / "ph_xy_mex.c")
-    (x0, x1), (y0, y1) = comp.reach
-    k = np.arange(1200)
-    wave = np.column_stack([np.sin(2 * np.pi * 8 * k / 1000), np.sin(2 * np.pi * 5 * k / 1000)])
-    d = np.array([x0, y0]) + np.array([x1 - x0, y1 - y0]) * (0.5 + 0.3 * wave)
+    d = hosts.sines_in_reach(comp, 1200, (8, 5), 0.3)
     d[800, 1] = np.nan
     out = _in_octave(tmp_path, [p.name for p in files if p.suffix == ".c"], d, STAGE_SCRIPT)
     apart = _two_calls_and_one(comp, d, out)
