@@ -25,19 +25,22 @@ class Rig:
     model: ph.HysteresisModel
     ident: BenchRecord
     range: tuple[float, float]
+    seed: int = 0
 
 
-def make_rig(plant: BenchPreset, model: Callable[[], ph.HysteresisModel]) -> Rig:
+def make_rig(plant: BenchPreset, model: Callable[[], ph.HysteresisModel], seed: int = 0) -> Rig:
     """``plant`` with 0.1 % noise on the charge, its leakage calibrated from 10 s holds up and
-    down, ``model()`` identified on 30 s of multifreq, and the scan's range."""
+    down, ``model()`` identified on 30 s of multifreq, and the scan's range; ``seed`` draws
+    other noise for every record and the scans (0: the tests' own)."""
+    s = 10 * seed
     played = excitation(v_min=0.0, v_max=140.0, sample_rate=RATE)
-    span = np.ptp(ph.simulate(played.voltage, played.t, preset=plant, seed=1).capacitor_charge)
+    span = np.ptp(ph.simulate(played.voltage, played.t, preset=plant, seed=1 + s).capacitor_charge)
     p = replace(plant, amp_noise=1e-3 * span / plant.c_ref)
-    ident = ph.simulate(played.voltage, played.t, preset=p, seed=1)
+    ident = ph.simulate(played.voltage, played.t, preset=p, seed=1 + s)
     holds = excitation("holds", v_min=0.0, v_max=140.0, sample_rate=RATE, hold=10.0)
-    cal = ph.simulate(holds.voltage, holds.t, preset=p, seed=2)
+    cal = ph.simulate(holds.voltage, holds.t, preset=p, seed=2 + s)
     t, v = make_signal("multifreq", amplitude=140.0, frequency=0.5, duration=30.0)
-    multi = ph.simulate(v, t, preset=p, seed=4)
+    multi = ph.simulate(v, t, preset=p, seed=4 + s)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the relaxing plant's calibration says how sure it is
         leak = ph.calibrate_leakage(cal.t, cal.voltage, cal.charge)
@@ -49,7 +52,7 @@ def make_rig(plant: BenchPreset, model: Callable[[], ph.HysteresisModel]) -> Rig
     top = float(q[vv >= vv.max() - 1e-9].min() - q[0])
     bottom = float(q[vv <= vv.min() + 1e-9].max() - q[0])
     middle = (bottom + 0.3 * (top - bottom), top - 0.3 * (top - bottom))
-    return Rig(p, leak, fitted, ident, middle)
+    return Rig(p, leak, fitted, ident, middle, seed)
 
 
 def scan(
@@ -67,7 +70,7 @@ def scan(
     ilc = ph.LearningCompensator(model, v_min=v_min, v_max=v_max, sample_rate=RATE,
                                  leakage=rig.leak, domain="displacement", gain=p.gain,
                                  lag=lag, slew_rate=30e3, law=law)  # type: ignore[arg-type]  # fmt: skip
-    bench = Bench(p, seed=3, voltage=ilc.last_command)
+    bench = Bench(p, seed=3 + 10 * rig.seed, voltage=ilc.last_command)
     scores = []
     for j in range(trials):
         u = ilc.command(desired)
