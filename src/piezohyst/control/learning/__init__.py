@@ -13,6 +13,8 @@ module           what it holds
 ``probe``        the lead-in's probe: small sines whose response measures the loop's timing
 ``saving``       a learner's state as a file, resumed exactly
 ``stepping``     ``step`` and ``process``: the learner in a loop that reads each sample
+``timing``       the loop's lag measured on the first trial learned from, where the model
+                 holds none
 ``trial``        :class:`Trial` (what one trial did); a trial's trajectory, its limits, the
                  slew and anti-windup
 ===============  =========================================================================

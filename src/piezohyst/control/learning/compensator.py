@@ -23,6 +23,7 @@ from __future__ import annotations
 import json
 import math
 import warnings
+from dataclasses import replace
 from typing import Any, Literal
 
 import numpy as np
@@ -46,6 +47,7 @@ from .laws import LAWS, Evidence, Law
 from .probe import Response, probe_bins, probe_signal, response
 from .saving import Saving, digest
 from .stepping import Stepping
+from .timing import TrialLag, trial_lag
 from .trial import (
     Trial,
     anti_windup,
@@ -190,11 +192,30 @@ def _first_design(
     warns where that response is beyond every timing the law allows for."""
     d = learner.desired
     loop = _probed(learner._lead, measured, ok, learner._bins, d)
-    design = design_learning(learner.model, **learner._design_args(d.size), first_error=e,
-                             measured=loop)  # fmt: skip
+    args = learner._design_args(d.size)
+    found = _lag_measured(learner, measured, ok)
+    if found is not None:
+        args["lag"] = found.lag
+    design = design_learning(learner.model, **args, first_error=e, measured=loop)
+    if found is not None:
+        design = replace(design, lag_explained=found.explained)
     if design.probe_phase:
         warn(f"trial {index}: {design.beyond()}", LearningWarning)
     return design
+
+
+def _lag_measured(
+    learner: LearningCompensator, measured: FloatArray, ok: FloatArray
+) -> TrialLag | None:
+    """The loop's lag measured on the first trial learned from (:mod:`.timing`), where the
+    model holds no input dynamics, no lag was stated and the law may invert one (not the
+    Jacobian law asked by name)."""
+    s = learner.settings
+    if s["lag"] > 0 or s.get("law", "harmonic") == "jacobian":
+        return None
+    if learner.model.input_dynamics_.active or learner._pending is None:
+        return None
+    return trial_lag(_responder(learner), learner._pending, measured, ok, s["sample_rate"])
 
 
 def _responder(learner: LearningCompensator) -> Any:
@@ -249,7 +270,11 @@ class LearningCompensator(Saving, Stepping):
         unit, also turns a sensor's displacement into the model's units).
     lag : float, default 0
         s: a lag the model does not hold, inverted by the learning filter
-        (see :func:`design_learning`, with ``lag_tolerance``, ``slope_error``).
+        (see :func:`design_learning`, with ``lag_tolerance``, ``slope_error``). 0 with
+        a model that holds no input dynamics: the first trial learned from measures
+        the loop's lag (:mod:`~piezohyst.control.learning.timing`); where it explains at
+        least half of that trial's misfit, the harmonic law inverts it as if stated, and
+        :meth:`describe` says so (not with ``law="jacobian"``).
     learning_gain, cutoff : float or "auto", default "auto"
         The fraction of the error learned per trial, and the robustness filter's
         cutoff (Hz); ``"auto"`` chooses them from the first trial's error
@@ -283,7 +308,8 @@ class LearningCompensator(Saving, Stepping):
         through the model's inverse; ``"jacobian"`` moves the commands through the model's
         Jacobian along them (:mod:`~piezohyst.control.learning.jacobian`: an actuator whose
         output runs on past its reversals too; up to 4000 samples, 0.2-0.7 s per 1000; no
-        ``lag``). ``"auto"``: the Jacobian law where it can (:func:`resolved_law`).
+        ``lag``). ``"auto"``: the Jacobian law where it can (:func:`resolved_law`), the
+        harmonic law where a lag was stated or measured.
 
     Attributes
     ----------
@@ -446,7 +472,14 @@ class LearningCompensator(Saving, Stepping):
         """The law learning: ``"harmonic"`` or ``"jacobian"``; ``law="auto"`` chooses once the
         trajectory is known (:func:`resolved_law`; before it, ``"auto"``)."""
         law, d = self.settings.get("law", "harmonic"), self._desired
-        return law if d is None else resolved_law(law, self.settings["lag"], d.size)
+        return law if d is None else resolved_law(law, self._lag(), d.size)
+
+    def _lag(self) -> float:
+        """s, the lag the law inverts: stated, or measured on the first trial learned from
+        (:mod:`.timing`)."""
+        if self.design is not None and self.design.lag_explained > 0:
+            return self.design.lag
+        return float(self.settings["lag"])
 
     def _law(self) -> Law:
         """The law learning (:mod:`.laws`), once the trajectory is known."""

@@ -1,0 +1,142 @@
+r"""The loop's lag measured on the first trial learned from, where the model holds none.
+
+A model identified without input dynamics (``piezohyst fit``'s default on a record that
+cannot tell a lag from hysteresis) has absorbed the amplifier's lag at the record's own
+rates, and not beyond them: behind a 4 ms amplifier a 40 Hz scan's commands arrive 45
+degrees late, its third harmonic 72 degrees, and a law that assumes no lag learns those
+harmonics slowly or not at all (1.5-5.6 % width after 10 trials on the plants of
+``benchmarks/default_path.py``). The lead-in's probe measures the loop's phase with sines
+of 0.2 % of the span, too weak to size the lag on a capacitor whose small-signal response
+is not the amplifier's (:mod:`.probe`; docs/benchmarks.md). The first trial learned from
+is a record at the scan's own rate and full amplitude: its readings against the model's
+prediction from its commands, each command through a first-order lag
+(:func:`periodic_lag`, the trial's periodic steady state), find the lag that explains the
+trial (:func:`trial_lag`). It is kept where it removes at least :data:`EXPLAINED` of the
+trial's misfit variance (a lag the trial shows, not a polish of the model's hysteresis
+error) and lies inside the search; the harmonic law then inverts it as a stated lag, with
+the stated lag's tolerance, and :meth:`~.design.LearningDesign.describe` says it was
+measured.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...model.dynamics import filter_response
+
+FloatArray = np.ndarray
+
+__all__ = ["EXPLAINED", "MAX_LAG", "TrialLag", "periodic_lag", "trial_lag"]
+
+#: the longest lag searched (s): amplifiers and sensor filters, as the fit's own search
+MAX_LAG = 0.05
+#: the share of the trial's misfit variance a lag must remove to be kept (chosen before any
+#: trial was scored with it: a lag that halves the misfit is what the trial shows)
+EXPLAINED = 0.5
+
+
+@dataclass(frozen=True)
+class TrialLag:
+    """A first-order lag measured on a trial.
+
+    Attributes
+    ----------
+    lag : float
+        s.
+    misfit, left : float
+        RMS of the trial's readings against the model's prediction (offset-free, desired
+        units), without the lag and with it.
+    """
+
+    lag: float
+    misfit: float
+    left: float
+
+    @property
+    def explained(self) -> float:
+        """The share of the misfit's variance the lag removes."""
+        return 1.0 - (self.left / self.misfit) ** 2 if self.misfit > 0 else 0.0
+
+
+def periodic_lag(v: FloatArray, tau: float, sample_rate: float) -> FloatArray:
+    """``v`` repeated forever through a first-order lag ``tau`` (s) of held samples, the lag
+    :class:`~piezohyst.model.dynamics.InputDynamics` applies and the harmonic law inverts:
+    one period of the steady state, exactly (its response at each harmonic of the period,
+    :func:`~piezohyst.model.dynamics.filter_response`).
+
+    Parameters
+    ----------
+    v : ndarray
+        One period.
+    tau : float
+        s; 0 returns a copy.
+    sample_rate : float
+        Hz.
+
+    Returns
+    -------
+    ndarray
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> k = np.arange(1000)
+    >>> v = np.sin(2 * np.pi * 10 * k / 1000)
+    >>> u = periodic_lag(v, 1 / (2 * np.pi * 10), 1000.0)   # the corner near 10 Hz
+    >>> round(float(np.ptp(u) / np.ptp(v)), 3)                 # about 1 / sqrt(2)
+    0.707
+    """
+    if tau <= 0:
+        return np.array(v, dtype=np.float64)
+    f = np.fft.rfftfreq(v.size, 1.0 / sample_rate)
+    h = filter_response(0.0, tau, 1.0 / sample_rate, f)
+    return np.fft.irfft(np.fft.rfft(v) * h, n=v.size)
+
+
+def trial_lag(
+    respond: Callable[[FloatArray], FloatArray],
+    commands: FloatArray,
+    measured: FloatArray,
+    usable: FloatArray,
+    sample_rate: float,
+) -> TrialLag | None:
+    """The first-order lag between a trial's commands and its readings that the model,
+    run after itself (``respond``), explains best; None where it explains less than
+    :data:`EXPLAINED` of the misfit or lies at the search's end.
+
+    Parameters
+    ----------
+    respond : callable
+        Commands (one trial) -> the model's output in the readings' units.
+    commands, measured : ndarray
+        The trial's commands (V) and readings (desired units; their offset is free).
+    usable : ndarray of bool
+        The readings to compare.
+    sample_rate : float
+        Hz.
+
+    Returns
+    -------
+    TrialLag or None
+    """
+    from scipy.optimize import minimize_scalar
+
+    if usable.sum() < 3:
+        return None
+
+    def misfit(tau: float) -> float:
+        r = (measured - respond(periodic_lag(commands, tau, sample_rate)))[usable]
+        return float(np.sqrt(np.mean((r - r.mean()) ** 2)))
+
+    top = min(MAX_LAG, 0.1 * commands.size / sample_rate)
+    dt = 1.0 / sample_rate
+    found = minimize_scalar(misfit, bounds=(0.0, top), method="bounded",
+                            options={"xatol": 0.01 * dt})  # fmt: skip
+    lag = TrialLag(float(found.x), misfit(0.0), float(found.fun))
+    if not math.isfinite(lag.left) or lag.lag > top - dt or lag.explained < EXPLAINED:
+        return None
+    return lag
