@@ -159,3 +159,33 @@ def test_a_stated_lag_or_the_models_own_dynamics_is_not_measured_again() -> None
     assert stated.design is not None and stated.design.lag == 3e-3
     assert stated.design.lag_explained == 0.0
     assert "measured" not in stated.describe()
+
+
+def test_learn_from_the_shell_says_the_lag_it_measured(tmp_path: Path) -> None:
+    """`piezohyst learn` prints what describe() says after the first trial learned from."""
+    from click.testing import CliRunner
+
+    from piezohyst.cli import main
+
+    plain = ph.ActivePI.from_operator(H)
+    plain.input_range_ = (0.0, 140.0)
+    plain.save(tmp_path / "model.json")
+    top, bottom = H.predict(np.array([140.0, 0.0]))
+    d = bottom + (top - bottom) * (0.5 + 0.25 * np.sin(2 * np.pi * 40 * np.arange(N) / RATE))
+    t = np.arange(N) / RATE
+    ph.write_table(tmp_path / "scan.csv", {"time": t, "desired": d})
+    runner = CliRunner()
+    base = ["learn", str(tmp_path / "model.json"), "--state", str(tmp_path / "s.json"),
+            "-o", str(tmp_path / "next.csv"), "--v-min", "0", "--v-max", "140"]  # fmt: skip
+    res = runner.invoke(main, [*base, "--desired", str(tmp_path / "scan.csv")])
+    assert res.exit_code == 0, res.output
+    said = []
+    for j in range(2):  # the lead-in, then the first trial learned from
+        sent = ph.read_table(tmp_path / "next.csv").get("command")
+        q = _periodic(H, periodic_lag(sent, 4e-3, RATE))
+        ph.write_table(tmp_path / f"trial{j}.csv", {"time": t, "voltage": sent, "charge": q})
+        res = runner.invoke(main, [*base[:2], str(tmp_path / f"trial{j}.csv"), *base[2:]])
+        assert res.exit_code == 0, res.output
+        said.append(res.output)
+    assert "measured on the first trial learned from" not in said[0]
+    assert "ms lag measured on the first trial learned from" in said[1], said[1]
