@@ -189,3 +189,26 @@ def test_learn_from_the_shell_says_the_lag_it_measured(tmp_path: Path) -> None:
         said.append(res.output)
     assert "measured on the first trial learned from" not in said[0]
     assert "ms lag measured on the first trial learned from" in said[1], said[1]
+
+
+def test_a_slew_held_trial_names_the_jacobian_law_only_where_no_lag_was_measured() -> None:
+    """The harmonic law asked by name, the slew limit holding commands: the warning names the
+    Jacobian law as the other way where the loop shows no lag, not where the first trial
+    measured one (the Jacobian law cannot learn through it)."""
+    top, bottom = H.predict(np.array([140.0, 0.0]))
+    d = bottom + (top - bottom) * (0.5 + 0.25 * np.sin(2 * np.pi * 40 * np.arange(N) / RATE))
+    said = {}
+    for tau in (0.0, 4e-3):
+        plain = ph.ActivePI.from_operator(H)
+        plain.input_range_ = (0.0, 140.0)
+        ilc = ph.LearningCompensator(plain, v_min=0.0, v_max=140.0, sample_rate=RATE,
+                                     slew_rate=6e3, law="harmonic")  # fmt: skip
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            for _ in range(3):
+                u = ilc.command(d)
+                ilc.learn(_periodic(H, periodic_lag(u, tau, RATE)))
+        assert ilc.design is not None and (ilc.design.lag_explained > 0) == (tau > 0)
+        said[tau] = [str(w.message) for w in caught if "trial 2" in str(w.message)]
+    assert any("--law jacobian" in m for m in said[0.0])
+    assert said[4e-3] and not any("--law jacobian" in m for m in said[4e-3])

@@ -180,9 +180,10 @@ def resolved_law(law: str, lag: float, samples: int) -> str:
     return "jacobian" if lag <= 0 and 0 < samples <= MAX_SAMPLES else "harmonic"
 
 
-def _other_law(law: str, settings: dict[str, Any], samples: int) -> bool:
-    """Whether the Jacobian law could learn where the harmonic law was asked for."""
-    return law == "harmonic" and resolved_law("auto", settings["lag"], samples) == "jacobian"
+def _other_law(law: str, lag: float, samples: int) -> bool:
+    """Whether the Jacobian law could learn where the harmonic law learns (not through a lag
+    stated or measured: ``lag``, s)."""
+    return law == "harmonic" and resolved_law("auto", lag, samples) == "jacobian"
 
 
 def _first_design(
@@ -679,7 +680,7 @@ class LearningCompensator(Saving, Stepping):
         flipped = as_displacement and g is not None and g < 0
         e = anti_windup(e, u, self.compensator, -1.0 if flipped else 1.0)
         if saturated > SATURATED * u.size:
-            other = _other_law(self.law, self.settings, u.size)
+            other = _other_law(self.law, self._lag(), u.size)
             warn(limits_said(index, u, self.compensator, other), LearningWarning)  # fmt: skip
         rolled = False
         if self._first:  # the law, chosen from the first trial learned from
