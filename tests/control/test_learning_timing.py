@@ -133,6 +133,8 @@ def test_the_learner_measures_the_lag_its_model_lacks_and_says_so(tmp_path: Path
     assert ilc.law == "harmonic"
     said = ilc.describe()
     assert "measured on the first trial learned from" in said and "ms lag" in said
+    assert "ms over the trial's fifths, 95 %)" in said  # how sure it is
+    assert 0 <= ilc.design.lag_spread < 0.25 / RATE
     # the state on file resumes with the measured lag: the same commands next
     ilc.save(tmp_path / "state.json")
     again = _learner()
@@ -188,7 +190,8 @@ def test_learn_from_the_shell_says_the_lag_it_measured(tmp_path: Path) -> None:
         assert res.exit_code == 0, res.output
         said.append(res.output)
     assert "measured on the first trial learned from" not in said[0]
-    assert "ms lag measured on the first trial learned from" in said[1], said[1]
+    assert "measured on the first trial learned from" in said[1], said[1]
+    assert "ms over the trial's fifths, 95 %)" in said[1]
 
 
 def test_a_slew_held_trial_names_the_jacobian_law_only_where_no_lag_was_measured() -> None:
@@ -212,3 +215,29 @@ def test_a_slew_held_trial_names_the_jacobian_law_only_where_no_lag_was_measured
         said[tau] = [str(w.message) for w in caught if "trial 2" in str(w.message)]
     assert any("--law jacobian" in m for m in said[0.0])
     assert said[4e-3] and not any("--law jacobian" in m for m in said[4e-3])
+
+
+def test_the_lags_spread_covers_the_truth_as_it_says() -> None:
+    """The jackknife's 95 % half-width: about nothing on exact readings; with 1 % noise it
+    covers the true lag on 20 noise draws as a 95 % interval should."""
+    u = _scan(40.0)
+
+    def respond(v: np.ndarray) -> np.ndarray:
+        return _periodic(H, v)
+
+    clean = respond(periodic_lag(u, 4e-3, RATE))
+    every = np.ones(N, dtype=bool)
+    found = trial_lag(respond, u, clean, every, RATE)
+    assert found is not None
+    # tol: every fifth left out finds the same minimum, to the bracket's 0.01 sample
+    assert found.spread <= 0.01 / RATE
+    covered = 0
+    for seed in range(20):
+        noisy = clean + np.random.default_rng(seed).normal(0.0, 0.01 * np.ptp(clean), N)
+        got = trial_lag(respond, u, noisy, every, RATE)
+        assert got is not None and got.spread > 0
+        covered += abs(got.lag - 4e-3) <= got.spread
+    # at a true 95 %, 15 or fewer of 20 has probability 0.003 (binomial); 19 seen
+    assert covered >= 16
+    short = trial_lag(respond, u[:40], clean[:40], every[:40], RATE)  # too few to split in five
+    assert short is None or np.isnan(short.spread)

@@ -199,7 +199,7 @@ def _first_design(
         args["lag"] = found.lag
     design = design_learning(learner.model, **args, first_error=e, measured=loop)
     if found is not None:
-        design = replace(design, lag_explained=found.explained)
+        design = replace(design, lag_explained=found.explained, lag_spread=found.spread)
     if design.probe_phase:
         warn(f"trial {index}: {design.beyond()}", LearningWarning)
     return design
