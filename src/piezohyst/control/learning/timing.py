@@ -4,7 +4,7 @@ A model identified without input dynamics (``piezohyst fit``'s default on a reco
 cannot tell a lag from hysteresis) has absorbed the amplifier's lag at the record's own
 rates, and not beyond them: behind a 4 ms amplifier a 40 Hz scan's commands arrive 45
 degrees late, its third harmonic 72 degrees, and a law that assumes no lag learns those
-harmonics slowly or not at all (1.5-5.6 % width after 10 trials on the plants of
+harmonics slowly or not at all (0.5-5.7 % width after 10 trials on the plants of
 ``benchmarks/default_path.py``). The lead-in's probe measures the loop's phase with sines
 of 0.2 % of the span, too weak to size the lag on a capacitor whose small-signal response
 is not the amplifier's (:mod:`.probe`; docs/benchmarks.md). The first trial learned from
@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -144,13 +144,14 @@ def trial_lag(
         r = (measured - respond(periodic_lag(commands, tau, sample_rate)))[keep]
         return float(np.std(r))
 
-    def best(keep: FloatArray, lo: float, hi: float) -> float:
+    def best(keep: FloatArray, lo: float, hi: float) -> tuple[float, float]:
+        """The lag that fits the ``keep`` readings best in [lo, hi], and its misfit."""
         found = minimize_scalar(misfit, bounds=(lo, hi), args=(keep,), method="bounded",
                                 options={"xatol": 0.01 * dt})  # fmt: skip
-        return float(found.x)
+        return float(found.x), float(found.fun)
 
-    tau = best(usable, 0.0, top)
-    lag = TrialLag(tau, misfit(0.0, usable), misfit(tau, usable))
+    tau, left = best(usable, 0.0, top)
+    lag = TrialLag(tau, misfit(0.0, usable), left)
     if not math.isfinite(lag.left) or lag.lag > top - dt or lag.explained < EXPLAINED:
         return None
     rows = np.flatnonzero(usable)
@@ -160,9 +161,9 @@ def trial_lag(
     for block in np.array_split(rows, BLOCKS):  # each fifth left out, searched near the lag
         keep = usable.copy()
         keep[block] = False
-        parts.append(best(keep, 0.5 * tau, min(2.0 * tau, top)))
+        parts.append(best(keep, 0.5 * tau, min(2.0 * tau, top))[0])
     jack = np.asarray(parts)
     half = float(student.ppf(0.975, BLOCKS - 1)) * math.sqrt(
         (BLOCKS - 1) / BLOCKS * float(np.sum((jack - jack.mean()) ** 2))
     )
-    return TrialLag(lag.lag, lag.misfit, lag.left, half)
+    return replace(lag, spread=half)
