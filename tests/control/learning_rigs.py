@@ -58,6 +58,7 @@ def make_rig(plant: BenchPreset, model: Callable[[], ph.HysteresisModel], seed: 
 def scan(
     rig: Rig, model: ph.HysteresisModel, f: float, trials: int, *, lag: float = 0.0,
     gap: int | None = None, sensor: bool = False, law: str = "harmonic", strict: bool = True,
+    measure_lag: bool = True,
 ) -> tuple[ph.LearningCompensator, list[tuple[float, float]]]:  # fmt: skip
     """Trials of one second of a sine at ``f``, continuous; per trial the width and the
     offset-free NRMSE of the true displacement. ``strict``: a learning warning from the
@@ -69,7 +70,8 @@ def scan(
     v_min, v_max = model.input_range_
     ilc = ph.LearningCompensator(model, v_min=v_min, v_max=v_max, sample_rate=RATE,
                                  leakage=rig.leak, domain="displacement", gain=p.gain,
-                                 lag=lag, slew_rate=30e3, law=law)  # type: ignore[arg-type]  # fmt: skip
+                                 lag=lag, slew_rate=30e3, law=law,  # type: ignore[arg-type]
+                                 measure_lag=measure_lag)  # fmt: skip
     bench = Bench(p, seed=3 + 10 * rig.seed, voltage=ilc.last_command)
     scores = []
     for j in range(trials):

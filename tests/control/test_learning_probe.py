@@ -171,19 +171,19 @@ def test_the_lead_in_carries_the_probe_and_the_law_uses_what_it_measured() -> No
 
 
 def test_a_loop_lagging_a_model_without_dynamics_is_told_by_the_probe() -> None:
-    """A model that knows no lag, the loop 4 ms behind it (an amplifier), learned with the
-    Jacobian law asked by name (which measures no lag on its first trial, tests/control/
+    """A model that knows no lag, the loop 4 ms behind it (an amplifier), the lag not measured
+    on the trial after the lead-in (``measure_lag=False``; tests/control/
     test_learning_timing.py): the lead-in's probe measures the phase, the law allows for half
     a sample only, and the learner says so once, naming what to do; the same loop with the
-    lag in the model is quiet."""
+    lag in the model is quiet, and so is the model without it where that trial measured it."""
     h = ph.PIHysteresis([0.0, 15.0, 30.0], [1.0e-8, 4e-9, 2e-9])
     plain = ph.ActivePI.from_operator(h)
     plain.input_range_ = (0.0, 140.0)
     d = _scan()
     kw = {"v_min": 0.0, "v_max": 140.0, "sample_rate": RATE, "slew_rate": None, "law": "jacobian"}
     said = {}
-    for name, model in (("plain", plain), ("lagged", _model(()))):
-        ilc = ph.LearningCompensator(model, **kw)  # type: ignore[arg-type]
+    for name, model in (("plain", plain), ("lagged", _model(())), ("measured", plain)):
+        ilc = ph.LearningCompensator(model, **kw, measure_lag=name != "plain")  # type: ignore[arg-type]
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             for _ in range(3):
@@ -198,4 +198,4 @@ def test_a_loop_lagging_a_model_without_dynamics_is_told_by_the_probe() -> None:
             assert 2e-3 <= ilc.design.probe_lag <= 8e-3
     told = [m for m in said["plain"] if "the lead-in's probe measured the loop" in m]
     assert len(told) == 1 and "behind" in told[0] and "input_dynamics='auto'" in told[0]
-    assert not any("probe measured" in m for m in said["lagged"])
+    assert not any("probe measured" in m for m in said["lagged"] + said["measured"])

@@ -108,6 +108,13 @@ def _auto_or_float(value: str) -> float | Literal["auto"]:
     "loop's timing; give it on every call of a run).",
 )
 @click.option(
+    "--no-lag-measurement",
+    is_flag=True,
+    help="Learn from the first trial after the lead-in even where the model holds no lag "
+    "(by default that trial measures the loop's lag, and the model holds it from the next "
+    "trial on: see LearningCompensator's measure_lag); give it on every call of a run.",
+)
+@click.option(
     "--noise-gate",
     type=click.FloatRange(min=0.0, max=100.0),
     default=0.0,
@@ -151,6 +158,7 @@ def learn(
     sensor: bool,
     no_lead_in: bool,
     no_probe: bool,
+    no_lag_measurement: bool,
     noise_gate: float,
     law: str,
     settings: CompensatorSettings,
@@ -197,6 +205,7 @@ def learn(
             sensor=sensor,
             lead_in=not no_lead_in,
             probe=not no_probe,
+            measure_lag=not no_lag_measurement,
             noise_gate=noise_gate,
             law=law,  # type: ignore[arg-type]
             voltage_tolerance=voltage_tolerance,
@@ -210,6 +219,12 @@ def learn(
             ctx.result(
                 f"trial 0: the lead-in (error {trial.error:.3%}: the actuator arriving), not "
                 "learned from"
+            )
+        elif trial.skipped and learner.timing is not None and learner.timing.trial == trial.index:
+            ctx.result(
+                f"trial {trial.index}: error {trial.error:.3%}; it measured the loop's lag "
+                f"({learner.timing.lag * 1e3:.3g} ms, which the model does not hold): not "
+                "learned from, the next trial's commands invert it"
             )
         elif trial.skipped:
             ctx.result(f"trial {trial.index}: {trial.learned} readings to learn from: skipped")

@@ -76,6 +76,7 @@ def learn_file(
     probe: bool = True,
     noise_gate: float = 0.0,
     law: Literal["auto", "harmonic", "jacobian"] = "auto",
+    measure_lag: bool = True,
     voltage_tolerance: float | None = None,
     force: bool = False,
     command_scale: str | float | None = None,
@@ -106,7 +107,7 @@ def learn_file(
         domain and gain.
     leakage : path, optional
         A leakage file (:func:`~piezohyst.calibrate_leakage`); default the model's.
-    lag, learning_gain, cutoff, lead_in, probe, noise_gate, law
+    lag, learning_gain, cutoff, lead_in, probe, noise_gate, law, measure_lag
         See :class:`~piezohyst.LearningCompensator`.
     voltage_scale, reading_scale : str or float, optional
         What one unit of the recording's voltage or reading column is worth, for channels
@@ -198,6 +199,7 @@ def learn_file(
         probe=probe,
         noise_gate=noise_gate,
         law=law,
+        measure_lag=measure_lag,
     )
     trial = None
     check: dict[str, float] = {}
@@ -257,11 +259,12 @@ RUN_OPTIONS = {
     "allow_extrapolation": "--allow-extrapolation", "lag": "--lag",
     "learning_gain": "--learning-gain", "cutoff": "--cutoff", "lead_in": "--no-lead-in",
     "probe": "--no-probe", "noise_gate": "--noise-gate", "law": "--law",
+    "measure_lag": "--no-lag-measurement",
 }  # fmt: skip
 
 
 #: What a run's first call gave for the options added since runs were first saved
-RUN_DEFAULTS = {"noise_gate": 0.0, "law": "harmonic"}
+RUN_DEFAULTS = {"noise_gate": 0.0, "law": "harmonic", "measure_lag": True}
 
 
 def _run_settings(learner: LearningCompensator) -> dict[str, Any]:
@@ -275,6 +278,7 @@ def _run_settings(learner: LearningCompensator) -> dict[str, Any]:
     out = {k: v for k, v in learner.settings.items() if k in RUN_OPTIONS}
     out["noise_gate"] = learner.settings.get("noise_gate", RUN_DEFAULTS["noise_gate"])
     out["law"] = learner.settings.get("law", RUN_DEFAULTS["law"])
+    out["measure_lag"] = learner.settings.get("measure_lag", RUN_DEFAULTS["measure_lag"])
     out["model"] = digest(learner.model.to_dict())
     out["leakage"] = digest(learner.leakage.to_dict())
     out["output_map"] = None if learner.output_map is None else digest(learner.output_map.to_dict())

@@ -47,7 +47,7 @@ from .laws import LAWS, Evidence, Law
 from .probe import Response, probe_bins, probe_signal, response
 from .saving import Saving, digest
 from .stepping import Stepping
-from .timing import TrialLag, trial_lag
+from .timing import TrialLag, timed, trial_lag
 from .trial import (
     Trial,
     anti_windup,
@@ -186,6 +186,19 @@ def _other_law(law: str, lag: float, samples: int) -> bool:
     return law == "harmonic" and resolved_law("auto", lag, samples) == "jacobian"
 
 
+def _design_args(s: dict[str, Any], samples: int) -> dict[str, Any]:
+    """:func:`design_learning`'s arguments from a learner's settings, for a trial."""
+    keys = ("sample_rate", "cutoff", "lag", "lag_tolerance", "slope_error")
+    return {**{k: s[k] for k in keys}, "gain": s["learning_gain"], "samples": samples}
+
+
+def _fingerprint(model: Any, settings: dict[str, Any], leakage: Leakage) -> str:
+    """What a saved state must have been made with: the model, the settings, the leakage."""
+    text = json.dumps(model.to_dict(), sort_keys=True, default=str).encode()
+    rest = json.dumps([settings, leakage.to_dict()], sort_keys=True, default=str).encode()
+    return digest(text + rest)
+
+
 def _first_design(
     learner: LearningCompensator, measured: FloatArray, ok: FloatArray, e: FloatArray, index: int
 ) -> LearningDesign:
@@ -193,30 +206,25 @@ def _first_design(
     warns where that response is beyond every timing the law allows for."""
     d = learner.desired
     loop = _probed(learner._lead, measured, ok, learner._bins, d)
-    args = learner._design_args(d.size)
-    found = _lag_measured(learner, measured, ok)
-    if found is not None:
-        args["lag"] = found.lag
-    design = design_learning(learner.model, **args, first_error=e, measured=loop)
-    if found is not None:
-        design = replace(design, lag_explained=found.explained, lag_spread=found.spread)
+    args = _design_args(learner.settings, d.size)
+    design = design_learning(learner._model, **args, first_error=e, measured=loop)
     if design.probe_phase:
         warn(f"trial {index}: {design.beyond()}", LearningWarning)
     return design
 
 
 def _lag_measured(
-    learner: LearningCompensator, measured: FloatArray, ok: FloatArray
+    learner: LearningCompensator, measured: FloatArray, ok: FloatArray, index: int
 ) -> TrialLag | None:
-    """The loop's lag measured on the first trial learned from (:mod:`.timing`), where the
-    model holds no input dynamics, no lag was stated and the law may invert one (not the
-    Jacobian law asked by name)."""
+    """The loop's lag measured on the first trial after the lead-in (:mod:`.timing`), where
+    the model holds no input dynamics, no lag was stated and ``measure_lag`` is on."""
     s = learner.settings
-    if s["lag"] > 0 or s.get("law", "harmonic") == "jacobian":
+    if s["lag"] > 0 or not s.get("measure_lag", True) or learner.timing is not None:
         return None
     if learner.model.input_dynamics_.active or learner._pending is None:
         return None
-    return trial_lag(_responder(learner), learner._pending, measured, ok, s["sample_rate"])
+    found = trial_lag(_responder(learner), learner._pending, measured, ok, s["sample_rate"])
+    return None if found is None else replace(found, trial=index)
 
 
 def _responder(learner: LearningCompensator) -> Any:
@@ -224,7 +232,7 @@ def _responder(learner: LearningCompensator) -> Any:
     input dynamics, the gain or map included)."""
     n = learner.desired.size
     t = np.arange(2 * n) / learner.settings["sample_rate"]
-    model = learner.model.hysteresis_
+    model = learner._model.hysteresis_
 
     def respond(v: FloatArray) -> FloatArray:
         with warnings.catch_warnings():  # the limits were checked where the commands were made
@@ -272,10 +280,7 @@ class LearningCompensator(Saving, Stepping):
     lag : float, default 0
         s: a lag the model does not hold, inverted by the learning filter
         (see :func:`design_learning`, with ``lag_tolerance``, ``slope_error``). 0 with
-        a model that holds no input dynamics: the first trial learned from measures
-        the loop's lag (:mod:`~piezohyst.control.learning.timing`); where it explains at
-        least half of that trial's misfit, the harmonic law inverts it as if stated, and
-        :meth:`describe` says so (not with ``law="jacobian"``).
+        a model that holds no input dynamics: see ``measure_lag``.
     learning_gain, cutoff : float or "auto", default "auto"
         The fraction of the error learned per trial, and the robustness filter's
         cutoff (Hz); ``"auto"`` chooses them from the first trial's error
@@ -304,16 +309,30 @@ class LearningCompensator(Saving, Stepping):
         the measurement noise's (9: three times its amplitude). 0 learns the noise too,
         and the commands carry it, which dithers the loop narrower; 9 lowered the NRMSE
         on 19 of 20 plant rows and widened the loop on 13 (``docs/realtime.md``).
+    measure_lag : bool, default True
+        Where the model holds no input dynamics and no ``lag`` is stated, the first
+        trial after the lead-in measures the loop's lag
+        (:mod:`~piezohyst.control.learning.timing`): where the lag explains at least
+        half of that trial's misfit, it is not learned from, the commands invert a
+        copy of the model that holds the lag from the next trial on, the law is
+        chosen on that trial, and :meth:`describe` says so (:attr:`timing`).
+        Behind a 4 ms amplifier, fitted without dynamics: 40 Hz scans to 0.2-0.6 %
+        width after 10 trials where the law that assumed no lag left 0.5-5.7 %
+        (docs/benchmarks.md). False: that trial is learned from.
     law : {"auto", "harmonic", "jacobian"}
         How the error is learned: ``"harmonic"`` corrects the reference, each harmonic
         through the model's inverse; ``"jacobian"`` moves the commands through the model's
         Jacobian along them (:mod:`~piezohyst.control.learning.jacobian`: an actuator whose
         output runs on past its reversals too; up to 4000 samples, 0.2-0.7 s per 1000; no
-        ``lag``). ``"auto"``: the Jacobian law where it can (:func:`resolved_law`), the
-        harmonic law where a lag was stated or measured.
+        ``lag``: a lag the model holds, as a measured one, it learns through).
+        ``"auto"``: the Jacobian law where it can (:func:`resolved_law`), the harmonic
+        law where a lag was stated.
 
     Attributes
     ----------
+    timing : TrialLag or None
+        The lag measured (``measure_lag``), where one was: from the next trial on, the
+        commands invert a copy of the model that holds it (the model is not changed).
     design : LearningDesign
         The law in use, chosen when the first trial is learned from (before it: a
         provisional one, gain 0.5 and the widest band that converges).
@@ -360,15 +379,14 @@ class LearningCompensator(Saving, Stepping):
         probe: bool = True,
         noise_gate: float = 0.0,
         law: Literal["auto", "harmonic", "jacobian"] = "auto",
+        measure_lag: bool = True,
     ) -> None:
-        self.model = model
         kept: dict[str, Any] = {"v_min": v_min, "v_max": v_max, "sample_rate": sample_rate,
                                 "domain": domain, "gain": gain, "output_map": output_map,
                                 "allow_extrapolation": allow_extrapolation}  # fmt: skip
-        self.compensator = Compensator(model, slew_rate=slew_rate, **kept)
-        # the trial's commands before the slew limit, which the whole trial then meets at once
-        # (centred_slew); the compensator above holds the limit
-        self._free = Compensator(model, slew_rate=None, **kept)
+        self.model = model
+        self._kept = {**kept, "slew_rate": slew_rate}
+        self._build(model)
         #: The charge -> displacement map of the desired values (None: a gain or charge)
         self.output_map = output_map
         if leakage is None:
@@ -405,31 +423,29 @@ class LearningCompensator(Saving, Stepping):
             LAWS[law].check_lag(float(lag))
         if law != "harmonic":  # the same: the states saved before it existed resume
             self.settings["law"] = law
+        if not _flag(measure_lag, "measure_lag"):  # the same
+            self.settings["measure_lag"] = False
         # checks every design setting now (a one-sample trial stands in for the trajectory)
-        design_learning(model, **self._design_args(2))
-        self._fingerprint = self._make_fingerprint()
+        design_learning(model, **_design_args(self.settings, 2))
+        self._fingerprint = _fingerprint(model, self.settings, self.leakage)
         self.reset(voltage=voltage)
 
+    def _build(self, model: Any) -> None:
+        """The model the commands invert (the one given, or a copy holding a measured lag),
+        and its compensators."""
+        kept = dict(self._kept)
+        self._model = model
+        self.compensator = Compensator(model, **kept)
+        # the trial's commands before the slew limit, which the whole trial then meets at once
+        # (centred_slew); the compensator above holds the limit
+        self._free = Compensator(model, **{**kept, "slew_rate": None})
+
+    def _time(self, found: TrialLag) -> None:
+        """Run a copy of the model given that holds the lag measured (:mod:`.timing`)."""
+        self.timing = found
+        self._build(timed(self.model, found.lag, self.sample_rate))
+
     # ------------------------------------------------------------------ state
-    def _design_args(self, samples: int) -> dict[str, Any]:
-        s = self.settings
-        return {
-            "sample_rate": s["sample_rate"],
-            "samples": samples,
-            "gain": s["learning_gain"],
-            "cutoff": s["cutoff"],
-            "lag": s["lag"],
-            "lag_tolerance": s["lag_tolerance"],
-            "slope_error": s["slope_error"],
-        }
-
-    def _make_fingerprint(self) -> str:
-        model = json.dumps(self.model.to_dict(), sort_keys=True, default=str).encode()
-        rest = json.dumps(
-            [self.settings, self.leakage.to_dict()], sort_keys=True, default=str
-        ).encode()
-        return digest(model + rest)
-
     def reset(self, *, voltage: float | None = None) -> None:
         """Forget the trajectory and what was learned.
 
@@ -439,6 +455,9 @@ class LearningCompensator(Saving, Stepping):
             Where the actuator sits now (V); default the model's initial state.
             The first trial ramps in from there.
         """
+        if self._model is not self.model:
+            self._build(self.model)
+        self.timing: TrialLag | None = None
         self.compensator.reset()
         self._desired: FloatArray | None = None
         self._correction = np.zeros(0)
@@ -473,14 +492,7 @@ class LearningCompensator(Saving, Stepping):
         """The law learning: ``"harmonic"`` or ``"jacobian"``; ``law="auto"`` chooses once the
         trajectory is known (:func:`resolved_law`; before it, ``"auto"``)."""
         law, d = self.settings.get("law", "harmonic"), self._desired
-        return law if d is None else resolved_law(law, self._lag(), d.size)
-
-    def _lag(self) -> float:
-        """s, the lag the law inverts: stated, or measured on the first trial learned from
-        (:mod:`.timing`)."""
-        if self.design is not None and self.design.lag_explained > 0:
-            return self.design.lag
-        return float(self.settings["lag"])
+        return law if d is None else resolved_law(law, self.settings["lag"], d.size)
 
     def _law(self) -> Law:
         """The law learning (:mod:`.laws`), once the trajectory is known."""
@@ -495,7 +507,11 @@ class LearningCompensator(Saving, Stepping):
         """
         if self.design is None:
             return f"law {self.law!r}: chosen with the trajectory (the first command())"
-        return self._law().said(self.design)
+        if self.timing is None:
+            return self._law().said(self.design)
+        if self._first:
+            return f"{self.timing.describe()}; the law is chosen from the next trial"
+        return f"{self.timing.describe()}; {self._law().said(self.design)}"
 
     @property
     def trials(self) -> int:
@@ -542,7 +558,7 @@ class LearningCompensator(Saving, Stepping):
             self._desired = d.copy()
             self._correction = np.zeros(d.size)
             self._previous = np.zeros(d.size)
-            self.design = design_learning(self.model, **self._design_args(d.size))
+            self.design = design_learning(self._model, **_design_args(self.settings, d.size))
             if self.settings["probe"] and self.settings["lead_in"]:
                 self._bins, self._probe = _lead_probe(d)
         elif d.size != self._desired.size or not np.array_equal(d, self._desired):
@@ -680,9 +696,16 @@ class LearningCompensator(Saving, Stepping):
         flipped = as_displacement and g is not None and g < 0
         e = anti_windup(e, u, self.compensator, -1.0 if flipped else 1.0)
         if saturated > SATURATED * u.size:
-            other = _other_law(self.law, self._lag(), u.size)
+            other = _other_law(self.law, self.settings["lag"], u.size)
             warn(limits_said(index, u, self.compensator, other), LearningWarning)  # fmt: skip
         rolled = False
+        found = _lag_measured(self, measured, ok, index) if self._first else None
+        if found is not None:  # a second lead-in: the law is chosen on the next trial
+            self._time(found)
+            self._lead = None  # the probe measured the loop the lag's inverse now changes
+            trial = Trial(index, error, width, 0, self._gain, False, True, bound, saturated)
+            self._close(trial)
+            return trial
         if self._first:  # the law, chosen from the first trial learned from
             self.design = _first_design(self, measured, ok, e, index)
             self._lead, self._gain, self._first = None, self.design.gain, False

@@ -114,13 +114,6 @@ class LearningDesign:
     model_timed : bool
         Whether the model holds input dynamics of its own: the probe's message then says
         they do not describe the loop, not that they are missing.
-    lag_explained : float
-        Where :attr:`lag` was measured on the first trial learned from (the model holds no
-        lag and none was stated: :mod:`.timing`), the share of that trial's misfit variance
-        it removed; 0 where the lag was stated or there is none.
-    lag_spread : float
-        s, the measured lag's 95 % half-width (a jackknife over fifths of the trial,
-        :mod:`.timing`); NaN where not measured or the trial too short to split.
     """
 
     gain: float
@@ -141,8 +134,6 @@ class LearningDesign:
     probe_delay: float = 0.0
     probe_lag: float = 0.0
     model_timed: bool = False
-    lag_explained: float = 0.0
-    lag_spread: float = math.nan
 
     def frequencies(self) -> FloatArray:
         """The harmonics of the trial (Hz), as :func:`numpy.fft.rfftfreq` gives them.
@@ -206,13 +197,6 @@ class LearningDesign:
         """
         cut = "no filter" if math.isinf(self.cutoff) else f"cutoff {self.cutoff:.4g} Hz"
         lag = f", inverting a {self.lag * 1e3:.3g} ms lag" if self.lag > 0 else ""
-        if self.lag_explained > 0:
-            if math.isfinite(self.lag_spread):
-                lag += f" (+- {self.lag_spread * 1e3:.2g} ms over the trial's fifths, 95 %)"
-            lag += (
-                " measured on the first trial learned from (the model holds none; it explains "
-                f"{self.lag_explained:.0%} of that trial's misfit)"
-            )
         sure = "converges monotonically" if self.contraction < 1 else "may NOT converge"
         lags = f", a lag error of {self.lag_error:.0%}" if self.lag_error > 0 else ""
         lags += " (as the lead-in's probe measured the loop)" if self.probed else ""

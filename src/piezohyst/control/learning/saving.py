@@ -19,6 +19,7 @@ import numpy as np
 from ...errors import ModelFileError
 from ...io import atomic_write_text
 from .design import LearningDesign
+from .timing import TrialLag
 from .trial import Trial
 
 FloatArray = np.ndarray
@@ -81,6 +82,7 @@ class Saving:
     _seen: FloatArray
     _awaiting: int | None
     design: LearningDesign | None
+    timing: TrialLag | None
     history: list[Trial]
 
     if TYPE_CHECKING:
@@ -88,6 +90,8 @@ class Saving:
         def reset(self, *, voltage: float | None = None) -> None: ...
 
         def _set_trajectory(self, desired: Any) -> FloatArray: ...
+
+        def _time(self, found: TrialLag) -> None: ...
 
     def to_dict(self) -> dict[str, Any]:
         """The learner's state, JSON-ready (see :meth:`from_dict`).
@@ -117,6 +121,7 @@ class Saving:
             "resend": self._resend,
             "lead": _lead_data(self._lead),
             "design": None if self.design is None else asdict(self.design),
+            "timing": None if self.timing is None else asdict(self.timing),
             "history": [asdict(t) for t in self.history],
             "stepping": self._stepping(),
         }
@@ -175,6 +180,8 @@ class Saving:
             self._resend = bool(data["resend"])
             self._lead = _lead(data.get("lead"), n)
             self.design = None if data["design"] is None else LearningDesign(**data["design"])
+            if data.get("timing") is not None:  # the lag measured (not in states before it)
+                self._time(TrialLag(**data["timing"]))
             self.history = [Trial(**t) for t in data["history"]]
             if self._pending is not None:  # a loop may step the pending trial from its start
                 self._seen = np.full(self._pending.size, np.nan)

@@ -1,4 +1,4 @@
-r"""The loop's lag measured on the first trial learned from, where the model holds none.
+r"""The loop's lag measured on the first trial after the lead-in, where the model holds none.
 
 A model identified without input dynamics (``piezohyst fit``'s default on a record that
 cannot tell a lag from hysteresis) has absorbed the amplifier's lag at the record's own
@@ -7,31 +7,34 @@ degrees late, its third harmonic 72 degrees, and a law that assumes no lag learn
 harmonics slowly or not at all (0.5-5.7 % width after 10 trials on the plants of
 ``benchmarks/default_path.py``). The lead-in's probe measures the loop's phase with sines
 of 0.2 % of the span, too weak to size the lag on a capacitor whose small-signal response
-is not the amplifier's (:mod:`.probe`; docs/benchmarks.md). The first trial learned from
-is a record at the scan's own rate and full amplitude: its readings against the model's
-prediction from its commands, each command through a first-order lag
+is not the amplifier's (:mod:`.probe`; docs/benchmarks.md). The first trial after the
+lead-in is a record at the scan's own rate and full amplitude: its readings against the
+model's prediction from its commands, each command through a first-order lag
 (:func:`periodic_lag`, the trial's periodic steady state), find the lag that explains the
 trial (:func:`trial_lag`). It is kept where it removes at least :data:`EXPLAINED` of the
 trial's misfit variance (a lag the trial shows, not a polish of the model's hysteresis
-error) and lies inside the search; the harmonic law then inverts it as a stated lag, with
-the stated lag's tolerance, and :meth:`~.design.LearningDesign.describe` says it was
-measured and how sure it is: the lag measured again with each fifth of the trial left out
-(a jackknife over :data:`BLOCKS` blocks), the spread of those as a 95 % half-width.
+error) and lies inside the search. The learner then runs a copy of the model that holds the
+lag (:func:`timed`): the next trial's commands invert it, and the law is chosen on that
+trial, as for a model identified with its lag (the trial that measured it is a second
+lead-in, not learned from). How sure: the lag measured again with each fifth of the trial
+left out (a jackknife over :data:`BLOCKS` blocks), the spread of those as a 95 % half-width.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from copy import deepcopy
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
-from ...model.dynamics import filter_response
+from ...model.dynamics import InputDynamics, filter_response
 
 FloatArray = np.ndarray
 
-__all__ = ["BLOCKS", "EXPLAINED", "MAX_LAG", "TrialLag", "periodic_lag", "trial_lag"]
+__all__ = ["BLOCKS", "EXPLAINED", "MAX_LAG", "TrialLag", "periodic_lag", "timed", "trial_lag"]
 
 #: the longest lag searched (s): amplifiers and sensor filters, as the fit's own search
 MAX_LAG = 0.05
@@ -57,12 +60,30 @@ class TrialLag:
         s, the 95 % half-width of the lag from a jackknife over :data:`BLOCKS` blocks of the
         trial (Student's t with ``BLOCKS - 1`` degrees of freedom); NaN where too few
         readings to split.
+    trial : int
+        The trial it was measured on (-1: not said).
     """
 
     lag: float
     misfit: float
     left: float
     spread: float = math.nan
+    trial: int = -1
+
+    def describe(self) -> str:
+        """What the learner says of it: the lag, how sure, where measured, what it explains.
+
+        Returns
+        -------
+        str
+        """
+        sure = f" (+- {self.spread * 1e3:.2g} ms over the trial's fifths, 95 %)"
+        return (
+            f"the model holds a {self.lag * 1e3:.3g} ms lag"
+            + (sure if math.isfinite(self.spread) else "")
+            + f" measured on trial {self.trial}, not learned from (the model given holds none; "
+            f"the lag explains {self.explained:.0%} of that trial's misfit)"
+        )
 
     @property
     def explained(self) -> float:
@@ -103,6 +124,31 @@ def periodic_lag(v: FloatArray, tau: float, sample_rate: float) -> FloatArray:
     f = np.fft.rfftfreq(v.size, 1.0 / sample_rate)
     h = filter_response(0.0, tau, 1.0 / sample_rate, f)
     return np.fft.irfft(np.fft.rfft(v) * h, n=v.size)
+
+
+def timed(model: Any, lag: float, sample_rate: float) -> Any:
+    """A copy of a fitted ``model`` that holds a first-order lag of ``lag`` s before its
+    input (held samples at ``sample_rate`` Hz, as :class:`~piezohyst.InputDynamics` applies
+    it); the model itself is not changed.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        Fitted, without input dynamics.
+    lag : float
+        s.
+    sample_rate : float
+        Hz.
+
+    Returns
+    -------
+    HysteresisModel
+    """
+    copy = deepcopy(model)
+    copy.set_params(input_dynamics="first-order")
+    dyn = InputDynamics("first-order", tau=float(lag), sample_interval=1.0 / sample_rate)
+    copy.take_fit(input_dynamics=dyn)
+    return copy
 
 
 def trial_lag(
