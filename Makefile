@@ -29,7 +29,9 @@ lint: $(BIN)/.installed
 #     compiled nearly all of them, the same work once per core;
 #  1. every test once, compiled, on two workers (a file's tests on one: its module fixtures
 #     are built once), under coverage: numba's compiled kernels are invisible to coverage, so
-#     their lines count in step 2 only;
+#     their lines count in step 2 only. The `heavy` tests (long runs that check accuracy, not
+#     paths: tests/conftest.py) run untraced: the limits' property test took 25 s untraced and
+#     54-59 s traced, and the combined coverage stayed 94 % without them;
 #  2. the tests listed in tests/kernel_paths.txt again with the JIT off, under coverage: what
 #     sees the kernels' Python lines. The list reaches every kernel line that all the tests
 #     of the `kernels` modules reach uncompiled, in a fifth of their time (tests/kernel_paths.py

@@ -59,7 +59,8 @@ def pytest_configure(config: pytest.Config) -> None:
     )
     config.addinivalue_line(
         "markers",
-        "heavy: a long fit or run that checks accuracy, not a kernel's paths: compiled only",
+        "heavy: a long fit or run that checks accuracy, not a kernel's paths: compiled only, "
+        "and not traced by coverage (pytest-cov's no_cover)",
     )
 
 
@@ -76,6 +77,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         if HEAVY_FIXTURES & set(getattr(item, "fixturenames", ())):
             item.add_marker(pytest.mark.heavy)
+        if item.get_closest_marker("heavy"):  # accuracy, not paths: not traced by coverage
+            item.add_marker(pytest.mark.no_cover)
         if item.nodeid in listed:
             item.add_marker(pytest.mark.kernel_paths)
     if "kernel_paths" in (config.getoption("markexpr") or ""):

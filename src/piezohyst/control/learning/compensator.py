@@ -525,7 +525,8 @@ class LearningCompensator(Saving, Stepping):
 
     @property
     def skipped(self) -> int:
-        """Trials not learned from (the lead-in, or under half their readings usable)."""
+        """Trials not learned from (the lead-in, the trial that measured the loop's lag, or
+        under half their readings usable)."""
         return sum(t.skipped for t in self.history)
 
     @property
