@@ -97,3 +97,32 @@ def test_new_parameters_are_used_at_once(models: dict[str, ph.HysteresisModel]) 
     after = model.predict(x)
     np.testing.assert_array_equal(after, _general(model, x, None))
     assert not np.array_equal(before, after)
+
+
+@pytest.mark.parametrize("name", ["classical", "active"])
+def test_a_read_only_or_strided_input_compiles_nothing_more(
+    models: dict[str, ph.HysteresisModel], name: str
+) -> None:
+    """A column read zero-copy from a file is read-only, a record's column a strided view:
+    the kernels take every input through one type (``_validation.frozen``), so neither
+    compiles another specialization (about 2 s each at its first call), and the results are
+    the same."""
+    from numba.core.dispatcher import Dispatcher
+
+    from piezohyst._kernels import play as K
+
+    model = models[name]
+    t = np.arange(500) / 1e3
+    x = 60.0 + 50.0 * np.sin(2 * np.pi * 3.0 * t)
+    want = model.predict(x, t=t)
+    model.propagate(x, t)
+    if not isinstance(K.pi_forward, Dispatcher):  # with the JIT off there is nothing to count
+        return
+    held = {k: len(getattr(K, k).signatures) for k in ("pi_forward", "fast_predict")}
+    ro = x.copy()
+    ro.flags.writeable = False
+    record = np.stack([t, x], axis=1)  # x as a strided column
+    for xs, ts in ((ro, t), (record[:, 1], record[:, 0])):
+        np.testing.assert_array_equal(model.predict(xs, t=ts), want)
+        model.propagate(xs, ts)
+    assert {k: len(getattr(K, k).signatures) for k in held} == held

@@ -16,6 +16,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .._validation import frozen
+
 # The one fastmath policy of every kernel: reassociation lets LLVM vectorise the
 # weighted sums over operators; min/max and comparisons stay exact, so results
 # differ from a sequential sum by rounding only. Never 'nnan'/'ninf': the
@@ -960,27 +962,25 @@ def bank_controller_process(desired, measured, tables, config, state, ctl, cs, o
 
 
 def warm_up() -> None:
-    """Compile every kernel of this module once (numba caches the result on disk);
-    :func:`piezohyst._kernels.signal.warm_up` does the signal kernels."""
-    x = np.zeros(2)
-    r = np.zeros(1)
-    z = np.zeros(1)
-    pi_forward(x, r, np.ones(1), z, np.empty(2))
-    fast_predict(x, x, True, r, np.ones(1), z, 0.0, FAST_INTEGRAL, 1.0, np.empty(2))
+    """Compile every kernel of this module once (numba caches the result on disk), inputs
+    read-only where the library's are (:func:`~piezohyst._validation.frozen`)."""
+    x, r, z, state = np.zeros(2), np.zeros(1), np.zeros(1), np.zeros(5)
+    pi_forward(frozen(x), frozen(r), frozen(np.ones(1)), z, np.empty(2))
+    fast_predict(frozen(x), frozen(x), True, r, np.ones(1), z, 0.0, FAST_INTEGRAL, 1.0, np.empty(2))
     play_states(x, r, z, np.empty((2, 1)))
     tables = np.zeros((5, 1))
     tables[TAB_W] = tables[TAB_S] = tables[TAB_WI] = 1.0
     config = np.zeros(CONFIG_SIZE)
     config[CFG_V_MAX] = config[CFG_INV_GAIN] = config[CFG_BOUND] = config[CFG_STATIC_SCALE] = 1.0
     config[CFG_MAX_STEP] = np.inf
-    state = np.zeros(5)
     inverse_states(tables, config, state)
     compensator_step(0.0, tables, config, state)
     compensator_process(x, tables, config, state, np.empty(2))
     bank_step(x[:1], tables[None], config[None], state[None], np.empty(1))
     bank_process(x[:, None], tables[None], config[None], state[None], np.empty((2, 1)))
     dynamic_process(x, 1, tables, config, state, np.zeros(2), np.zeros(2), np.empty(2))
-    numeric_process(x, tables, np.zeros((3, 0)), np.zeros((3, 0)), config, np.zeros(4), np.empty(2))
+    empty = np.zeros((3, 0))
+    numeric_process(frozen(x), tables, empty, empty, config, np.zeros(4), np.empty(2))
     ctl = np.zeros(CTL_SIZE)
     ctl[CTL_DT] = ctl[CTL_INV_GAIN] = 1.0
     controller_process(x, x, tables, config, state, ctl, np.zeros(CS_SIZE), np.empty(2))

@@ -12,6 +12,7 @@ import math
 import numpy as np
 from numba import njit
 
+from .._validation import frozen
 from .play import FASTMATH
 
 
@@ -296,8 +297,9 @@ def slew_hull(u, step, upper, out):  # type: ignore[no-untyped-def]
 
 
 def warm_up() -> None:
-    """Compile the kernels the fits use first (numba caches the result on disk)."""
-    x = np.zeros(2)
+    """Compile the kernels the fits use first (numba caches the result on disk), with
+    read-only inputs where the library passes them so (:func:`~piezohyst._validation.frozen`)."""
+    x = frozen(np.zeros(2))
     running_integral(x, np.zeros(2), 0.0, np.empty(2))
     reversals(x, 1.0, np.zeros(3))
     lag_filter(x, np.zeros(2), np.ones(1), np.zeros(1), np.empty((2, 1)))

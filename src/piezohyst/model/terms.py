@@ -57,7 +57,7 @@ from numpy.typing import ArrayLike
 
 from .._kernels import packed as P
 from .._kernels import signal as S
-from .._validation import FloatArray
+from .._validation import FloatArray, frozen
 from ..errors import ParameterError, ShapeError
 
 __all__ = [
@@ -343,7 +343,9 @@ class RunningIntegral(Term):
     ) -> FloatArray:
         """See :meth:`Term.columns`: the running integral."""
         out = np.empty((x.size, 1))
-        state[0] = S.running_integral(self.integrand(x), _needs_time(self, dt), state[0], out[:, 0])
+        state[0] = S.running_integral(
+            frozen(self.integrand(x)), _needs_time(self, dt), state[0], out[:, 0]
+        )
         return out
 
     def coefficient_units(self, input_unit: str, output_unit: str) -> tuple[str, ...]:
@@ -606,7 +608,7 @@ class Creep(Term):
     ) -> FloatArray:
         """See :meth:`Term.columns`: the lag outputs (input units)."""
         out = np.empty((x.size, self.width))
-        S.lag_filter(x, _needs_time(self, dt), np.asarray(self.taus), state, out)
+        S.lag_filter(frozen(x), _needs_time(self, dt), np.asarray(self.taus), state, out)
         return out
 
     def lag_shape(self, coefficients: FloatArray) -> LagShape:
@@ -733,7 +735,7 @@ class Relaxation(Term):
         n = self.nodes
         lagged = np.empty((x.size, 1))
         lag = state[0:1].copy()  # the slow core's voltage is the lag's state
-        S.lag_filter(x, _needs_time(self, dt), np.array([self.tau]), lag, lagged)
+        S.lag_filter(frozen(x), _needs_time(self, dt), np.array([self.tau]), lag, lagged)
         packed = np.concatenate([head, np.zeros(n * n)])
         core = state[: P.RV_SIZE]  # views: updated in place
         acc = state[P.RV_SIZE :]

@@ -8,7 +8,7 @@ from typing import cast
 import numpy as np
 
 from ..._kernels import play as K
-from ..._validation import FloatArray, as_signal
+from ..._validation import FloatArray, as_signal, frozen
 from ...errors import ParameterError, ShapeError
 from ...model.cores.play import PIHysteresis
 from ...model.inverse_spec import InverseSpec
@@ -225,7 +225,7 @@ class PlayInverse(Inverse):
             K.compensator_process(d, self.tables, self.config, self.kernel_state, out)
         else:
             K.numeric_process(
-                d, self.tables, self.static, self.lags, self.config, self.kernel_state, out
+                frozen(d), self.tables, self.static, self.lags, self.config, self.kernel_state, out
             )
 
     def closed_loop(self) -> bool:

@@ -499,7 +499,7 @@ class LearningCompensator(Saving, Stepping):
         return LAWS[self.law]
 
     def describe(self) -> str:
-        """One paragraph: the law learning, its gain and filter.
+        """One paragraph: the lag measured (if one was), the law learning, its gain, filter.
 
         Returns
         -------

@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..._kernels import packed as P
-from ..._validation import FloatArray, as_signal
+from ..._validation import FloatArray, as_signal, frozen
 from ...errors import NotInvertibleError, NumericRangeError, ParameterError, ShapeError
 from ...io.blocks import Blocks, Summary
 
@@ -665,7 +665,7 @@ class PackedCore(Core):
     def n_states(self) -> int:
         """Values in the state: the last input, the internal variable (and, for a Preisach
         core, the direction and the stack of reversal points)."""
-        return int(P.state_size(self.packed))
+        return int(P.state_size(frozen(self.packed)))
 
     @property
     def is_invertible(self) -> bool:
@@ -694,13 +694,13 @@ class PackedCore(Core):
         xs = as_signal(x, "x", allow_empty=True)
         z = self._state(state)
         y = np.empty_like(xs)
-        P.core_propagate(self.packed, xs, z, y)
+        P.core_propagate(frozen(self.packed), frozen(xs), z, y)
         return Propagation(y, z)
 
     def output(self, state: ArrayLike) -> float:
         """See :meth:`~piezohyst.model.cores.base.Core.output`."""
         z = self._state(state)
-        return float(P.core_output(self.packed, z))
+        return float(P.core_output(frozen(self.packed), z))
 
     def _repeats(self, z: FloatArray, before: FloatArray) -> bool:
         # the voltage and the memory repeat; the output is compared in output units

@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..._kernels import packed as P
-from ..._validation import FloatArray
+from ..._validation import FloatArray, frozen
 from ...errors import InsufficientDataError, ParameterError, ShapeError
 from ._inmemory import (
     FIT_ROWS,
@@ -281,7 +281,7 @@ def _curvature(nv: int, nq: int) -> FloatArray:
 def _sse(packed: FloatArray, q0: float, x: FloatArray, q: FloatArray) -> float:
     """Squared output error of a Duhem core simulated from q0 (inf if it blows up)."""
     sim = np.empty(x.size)
-    P.duhem_jacobian(packed, x, q0, np.zeros(0, dtype=np.int64), sim, np.zeros((0, 1)))
+    P.duhem_jacobian(frozen(packed), x, q0, np.zeros(0, dtype=np.int64), sim, np.zeros((0, 1)))
     r = sim - q
     total = float(r @ r)
     return total if np.isfinite(total) else math.inf
@@ -298,7 +298,7 @@ def _ratchet(packed: FloatArray, q0: float, x: FloatArray) -> float:
         legs += [hi + (lo - hi) * leg, lo + (hi - lo) * leg]
     path = np.concatenate(legs)
     sim = np.empty(path.size)
-    P.duhem_jacobian(packed, path, q0, np.zeros(0, dtype=np.int64), sim, np.zeros((0, 1)))
+    P.duhem_jacobian(frozen(packed), path, q0, np.zeros(0, dtype=np.int64), sim, np.zeros((0, 1)))
     tops = sim[CYCLE_LEG - 1 :: 2 * CYCLE_LEG]
     span = float(np.ptp(sim[-2 * CYCLE_LEG :]))
     move = abs(float(tops[-1] - tops[-2])) / max(span, 1e-300)
@@ -339,20 +339,20 @@ def _refine_duhem(
         return p, float(theta[-1]) if fit_q0 else q0
 
     p0, start = split(theta0)
-    P.duhem_jacobian(p0, x, start, rows, qsim, jac_core)
+    P.duhem_jacobian(frozen(p0), x, start, rows, qsim, jac_core)
     # the curvature penalty has the weight it had in the linear fit, relative to the data
     col = float(np.mean(np.sum(jac_core[:, :cells2] ** 2, axis=0))) / scale**2
     w_pen = math.sqrt(smoothing * max(col, 1e-300))
 
     def residual(theta: FloatArray) -> FloatArray:
         p, qq = split(theta)
-        P.duhem_jacobian(p, x, qq, no_rows, qsim, no_jac)
+        P.duhem_jacobian(frozen(p), x, qq, no_rows, qsim, no_jac)
         pen = [w_pen * (root @ theta[h : h + cells]) for h in (0, cells)]
         return np.concatenate([(qsim[rows] - q_rows) / scale, *pen])
 
     def jacobian(theta: FloatArray) -> FloatArray:
         p, qq = split(theta)
-        P.duhem_jacobian(p, x, qq, rows, qsim, jac_core)
+        P.duhem_jacobian(frozen(p), x, qq, rows, qsim, jac_core)
         top = jac_core if fit_q0 else jac_core[:, :cells2]
         pen = np.zeros((2 * root.shape[0], theta.size))
         pen[: root.shape[0], :cells] = w_pen * root

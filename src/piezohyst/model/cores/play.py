@@ -20,7 +20,7 @@ import numpy.typing as npt
 from numpy.typing import ArrayLike
 
 from ..._kernels import play as K
-from ..._validation import FloatArray, as_signal, check_int
+from ..._validation import FloatArray, as_signal, check_int, frozen
 from ...errors import NotInvertibleError, NumericRangeError, ParameterError, ShapeError
 from ...io.blocks import Blocks, Summary, array_blocks, without_time
 from ..terms import Integral, Term, TimeTerm
@@ -158,7 +158,7 @@ class PIHysteresis(Core):
         xs = as_signal(x, "x", allow_empty=True)
         z = self._state(state)
         y = np.empty_like(xs)
-        K.pi_forward(xs, self.thresholds, self.weights, z, y)
+        K.pi_forward(frozen(xs), frozen(self.thresholds), frozen(self.weights), z, y)
         if self.offset != 0.0:
             y += self.offset
         return Propagation(y, z)
@@ -331,8 +331,9 @@ class PIHysteresis(Core):
                 type(t) is np.ndarray and t.dtype == np.float64 and t.shape == x.shape
             ):
                 out = np.empty(x.size)
-                if K.fast_predict(x, t if timed else x, timed, r, w, z0, offset, kind,
-                                         coef, out) < 0:  # fmt: skip
+                xc = frozen(x)  # one type of input: one compiled specialization
+                tc = frozen(t) if timed else xc
+                if K.fast_predict(xc, tc, timed, r, w, z0, offset, kind, coef, out) < 0:
                     return out
             return None
 
@@ -521,7 +522,7 @@ def history_state(
     h = as_signal(history, "history")
     thr = as_signal(thresholds, "thresholds")
     z = np.full(thr.size, h[0]) if state is None else np.array(state, dtype=np.float64)
-    K.pi_forward(h, thr, np.zeros(thr.size), z, np.empty_like(h))
+    K.pi_forward(frozen(h), frozen(thr), frozen(np.zeros(thr.size)), z, np.empty(h.size))
     return z
 
 

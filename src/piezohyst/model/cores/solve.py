@@ -41,7 +41,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..._kernels import signal as S
-from ..._validation import FloatArray
+from ..._validation import FloatArray, frozen
 from ...errors import InsufficientDataError
 from ...io.blocks import BLOCK, Blocks, Summary
 from ..dynamics import OutputDynamics
@@ -229,7 +229,7 @@ def _accumulate(
             m = stop - k
             xs = x_blk[k:stop]
             if reversal_band is not None:
-                turns[seg] += int(S.reversals(xs, reversal_band, turn_state))
+                turns[seg] += int(S.reversals(frozen(xs), reversal_band, turn_state))
             ts = None if t_blk is None else t_blk[k:stop]
             dt = None
             if terms and ts is not None:
