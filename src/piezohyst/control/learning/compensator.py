@@ -316,7 +316,7 @@ class LearningCompensator(Saving, Stepping):
         half of that trial's misfit, it is not learned from, the commands invert a
         copy of the model that holds the lag from the next trial on, the law is
         chosen on that trial, and :meth:`describe` says so (:attr:`timing`).
-        Behind a 4 ms amplifier, fitted without dynamics: 40 Hz scans to 0.2-0.6 %
+        Behind a 4 ms amplifier, fitted without dynamics: 40 Hz scans to 0.2-0.7 %
         width after 10 trials where the law that assumed no lag left 0.5-5.7 %
         (docs/benchmarks.md). False: that trial is learned from.
     law : {"auto", "harmonic", "jacobian"}
