@@ -700,7 +700,7 @@ class PackedCore(Core):
     def output(self, state: ArrayLike) -> float:
         """See :meth:`~piezohyst.model.cores.base.Core.output`."""
         z = self._state(state)
-        return float(P.core_output(frozen(self.packed), z))
+        return float(P.core_output(self.packed, z))
 
     def _repeats(self, z: FloatArray, before: FloatArray) -> bool:
         # the voltage and the memory repeat; the output is compared in output units
