@@ -231,6 +231,7 @@ def _solve(job: Solving) -> tuple[BoucWenHysteresis, list[FloatArray]]:
 
     def solver(xv: FloatArray, yv: FloatArray, gv: FloatArray, rows: np.ndarray) -> Any:
         """The variable-projection solve on a record (all of it, or a decimated copy)."""
+        xv = np.ascontiguousarray(xv)  # a decimated copy is strided: one kernel type, once
         hv = np.empty(xv.size)
         g_rows = gv[rows].T if m else np.zeros((0, rows.size))
 
@@ -245,7 +246,7 @@ def _solve(job: Solving) -> tuple[BoucWenHysteresis, list[FloatArray]]:
                                       np.array([xv[0], 0.0]), p[7])  # fmt: skip
             start = _start_inner(probe, xv, initial_state)
             h0 = 0.0 if start is None else float(start[1])
-            P.bw_trace(p, np.ascontiguousarray(xv), h0, hv)
+            P.bw_trace(p, xv, h0, hv)
             hr, xr = hv[rows], xv[rows]
             g_max = float(p[P.BW_G_MAX])
             best_fit: tuple[float, float, FloatArray, FloatArray, float] | None = None
