@@ -98,22 +98,25 @@ class CText:
         return [f"static const real_t {k} = {self.literal(float(v))};" for k, v in values.items()]
 
 
+#: What every step's ``init`` sets beyond its core: the last command and the limits' counts
+INIT_COUNTS = ("s->last = LAST0;", "s->nonfinite = 0;", "s->saturated = 0;", "s->slewed = 0;",
+               "s->extrapolated = 0;")  # fmt: skip
+
+
 def init_extra(statements: list[str]) -> str:
-    """The ``INIT_EXTRA(s)`` macro: what ``init`` sets beyond the core's state (feedback,
-    dynamics, mode, lags).
+    """The ``INIT_EXTRA(s)`` macro: what ``init`` sets beyond the core's state (the last
+    command and the limits' counts, then the engine's: feedback, dynamics, mode, lags).
 
     Parameters
     ----------
     statements : list of str
-        C statements on ``s``.
+        C statements on ``s``, after ``INIT_COUNTS``.
 
     Returns
     -------
     str
     """
-    if not statements:
-        return "#define INIT_EXTRA(s) (void)(s)"
-    body = "".join(f"    {line} \\\n" for line in statements)
+    body = "".join(f"    {line} \\\n" for line in (*INIT_COUNTS, *statements))
     return f"#define INIT_EXTRA(s) do {{ \\\n{body}}} while (0)"
 
 

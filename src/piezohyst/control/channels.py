@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Callable, Sequence
-from typing import Any, Generic, Literal, Protocol, TypeVar
+from typing import Any, Generic, Literal, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -38,29 +38,8 @@ __all__ = ["BankCompensator", "BankController", "ChannelBank", "per_channel"]
 TALLY_ROWS = 64
 
 
-class _Channel(Protocol):
-    @property
-    def v_min(self) -> float: ...
-
-    @property
-    def v_max(self) -> float: ...
-
-    @property
-    def last_command(self) -> float: ...
-
-    @property
-    def saturated_count(self) -> int: ...
-
-    @property
-    def nonfinite_count(self) -> int: ...
-
-    @property
-    def extrapolated_count(self) -> int: ...
-
-    def reset(self) -> None: ...
-
-
-C = TypeVar("C", bound=_Channel)
+#: A bank's channels: compensators, or self-sensing controllers
+C = TypeVar("C", Compensator, SelfSensingController)
 
 
 def per_channel(value: object, c: int, name: str) -> list[Any]:
@@ -99,7 +78,7 @@ class ChannelBank(Generic[C]):
             except (ParameterError, ShapeError) as exc:
                 raise type(exc)(f"channel {i}: {exc}") from None
         self.bank = bank
-        self._channels = channels
+        self._channels: list[C] = channels
         #: True when all channels run in the one parallel kernel (set by the subclass)
         self.fused = False
 

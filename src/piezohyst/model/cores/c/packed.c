@@ -175,11 +175,6 @@ void PREFIX_init(PREFIX_t *s)
     for (i = 0; i < NS; ++i) {
         s->st[i] = ST0[i];
     }
-    s->last = LAST0;
-    s->nonfinite = 0;
-    s->saturated = 0;
-    s->slewed = 0;
-    s->extrapolated = 0;
     s->outside = 0;
     INIT_EXTRA(s);
 }

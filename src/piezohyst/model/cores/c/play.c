@@ -23,11 +23,6 @@ void PREFIX_init(PREFIX_t *s)
         s->z[i] = Z0[i];
     }
     inverse_states(s);
-    s->last = LAST0;
-    s->nonfinite = 0;
-    s->saturated = 0;
-    s->slewed = 0;
-    s->extrapolated = 0;
     INIT_EXTRA(s);
 }
 

@@ -81,11 +81,6 @@ void PREFIX_init(PREFIX_t *s)
         s->c[i] = C0[i];
     }
 #endif
-    s->last = LAST0;
-    s->nonfinite = 0;
-    s->saturated = 0;
-    s->slewed = 0;
-    s->extrapolated = 0;
     INIT_EXTRA(s);
 }
 
