@@ -133,7 +133,8 @@ class CParts:
     files : list of str
         The shipped C files, in order (``piezohyst/model/cores/c``).
     header : str
-        The header template (``play.h`` or ``packed.h``).
+        The header template's first part, the engine's state (``play.h`` or ``packed.h``);
+        ``step.h`` ends it: the input dynamics' and the output mode's state, the init, the step.
     fields : dict
         The template's fields the engine knows (the export adds the compensator's).
     """

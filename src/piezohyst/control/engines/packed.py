@@ -306,7 +306,7 @@ class PackedInverse(Inverse):
         files.append("packed.c")
         fields: dict[str, object] = {
             "core": core.name, "newton_max": P.NEWTON_MAX, "ns": self.n_operators(),
-            "n_lags": n_lags, "libm": core.libm,
+            "n_lags": n_lags, "libm": core.libm, "kind": "compensator",
         }  # fmt: skip
         return CParts(lines, init, files, "packed.h", fields)
 

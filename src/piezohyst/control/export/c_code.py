@@ -133,7 +133,7 @@ def export_c(
     lines += _mode(comp, c, init, files)
     lines.append(init_extra(init))
     spec = comp.spec
-    header = _template(parts.header).substitute(
+    header = Template(_c_file(parts.header) + _c_file("step.h")).substitute(
         _names(prefix, precision), **parts.fields, model=type(comp.model).__name__,
         input_unit=spec.input_unit, output_unit=spec.output_unit,
         desired_unit="m" if comp.domain == "displacement" else spec.output_unit,
@@ -178,10 +178,6 @@ def _notes(comp: Compensator) -> str:
             f"\n * the loop must run at {1.0 / comp.mode.sample_interval:.6g} Hz."
         )
     return notes
-
-
-def _template(name: str) -> Template:
-    return Template(_c_file(name))
 
 
 def _c_file(name: str) -> str:

@@ -14,6 +14,7 @@ typedef ${precision} ${real};
 #define ${upper}_N_LAGS ${n_lags}
 #define ${upper}_DYNAMIC ${dynamic}
 #define ${upper}_MODE ${mode}
+#define ${upper}_CONTROLLER 0
 
 typedef struct {
     ${real} st[${upper}_NS];  /* the core's state: voltage, internal variable, ... */
@@ -23,26 +24,6 @@ typedef struct {
     unsigned long slewed;    /* commands cut by the slew limit */
     unsigned long extrapolated; /* desired values beyond the output map's calibrated range */
     unsigned long outside;   /* commands that would leave the identified region */
-#if ${upper}_DYNAMIC
-    ${real} w, u;               /* input dynamics: after the fractional delay, after the lag (V) */
-#endif
-#if ${upper}_MODE
-    ${real} e1, e2;             /* output mode: the last two desired values (NaN: none) */
-#endif
 #if ${upper}_N_LAGS
     ${real} c[${upper}_N_LAGS];              /* creep lag states (V) */
 #endif
-} ${prefix}_t;
-
-/* Start from the state the compensator had when it was exported. */
-void ${prefix}_init(${prefix}_t *s);
-
-#if ${upper}_MODE
-/* One command (V) for one desired value and the next (see above). */
-${real} ${prefix}_step(${prefix}_t *s, ${real} desired, ${real} next);
-#else
-/* One command (V) for one desired value (see above). */
-${real} ${prefix}_step(${prefix}_t *s, ${real} desired);
-#endif
-
-#endif /* ${guard} */
