@@ -14,11 +14,23 @@ from ..control.selfsensing import LoopSettings
 from ._support import EXISTING, FORCE, Context, _limit_options, _loop_options, _run, _suffix
 
 
-def _export_options(
-    suffix: str, what: str, float_help: str, out_help: str, controller_help: str
-) -> Callable[[Callable[..., None]], Callable[..., None]]:
-    """The options both exports share: the model, its limits, float, the file and the
-    controller (the file's suffix and the help as each export says them)."""
+#: Each export's words, by its file's suffix: what the file is, then the help of --float,
+#: -o/--out and --controller
+_WORDS = {
+    ".c": ("the compensator is C source", "float arithmetic (MCUs without a double FPU).",
+           "C file (the .h goes beside it).",
+           "Export the self-sensing controller (charge feedback; needs --sample-rate)."),
+    ".fmu": ("the compensator is an FMU", "float arithmetic in the step (doubles outside).",
+             "FMU file; its name is the model's identifier (a C identifier).",
+             "The self-sensing controller: a second input, the measured charge."),
+}  # fmt: skip
+
+
+def _export_options(suffix: str) -> Callable[[Callable[..., None]], Callable[..., None]]:
+    """The options both exports share: the model, its limits, float, the file, the
+    controller and its loop, --force (the file's suffix and the words as each export says
+    them, ``_WORDS``); the context object passed."""
+    what, float_help, out_help, controller_help = _WORDS[suffix]
 
     def wrap(f: Callable[..., None]) -> Callable[..., None]:
         for option in reversed(
@@ -36,6 +48,9 @@ def _export_options(
                     help=out_help,
                 ),
                 click.option("--controller", is_flag=True, help=controller_help),
+                _loop_options,
+                FORCE,
+                click.pass_obj,
             )
         ):
             f = option(f)
@@ -81,13 +96,7 @@ def _export(
 
 
 @click.command("export-c")
-@_export_options(
-    ".c",
-    what="the compensator is C source",
-    float_help="float arithmetic (MCUs without a double FPU).",
-    out_help="C file (the .h goes beside it).",
-    controller_help="Export the self-sensing controller (charge feedback; needs --sample-rate).",
-)
+@_export_options(".c")
 @click.option(
     "--shared",
     is_flag=True,
@@ -100,18 +109,15 @@ def _export(
     help="OUT is a MEX gateway (NAME_mex.c) for MATLAB's mex and Octave's mkoctfile --mex: "
     "v = NAME_mex(target), NAME_mex('reset').",
 )
-@_loop_options
-@FORCE
-@click.pass_obj
 def export_c(
     ctx: Context,
     model: Path,
-    settings: CompensatorSettings,
-    use_float: bool,
     out: Path,
-    controller: bool,
     shared: bool,
     mex: bool,
+    settings: CompensatorSettings,
+    use_float: bool,
+    controller: bool,
     loop: LoopSettings,
     force: bool,
 ) -> None:
@@ -132,16 +138,7 @@ def export_c(
 
 
 @click.command("export-fmu")
-@_export_options(
-    ".fmu",
-    what="the compensator is an FMU",
-    float_help="float arithmetic in the step (doubles outside).",
-    out_help="FMU file; its name is the model's identifier (a C identifier).",
-    controller_help="The self-sensing controller: a second input, the measured charge.",
-)
-@_loop_options
-@FORCE
-@click.pass_obj
+@_export_options(".fmu")
 def export_fmu(
     ctx: Context,
     model: Path,
