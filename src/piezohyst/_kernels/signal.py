@@ -52,28 +52,18 @@ def input_filter(x, dt, d_int, d_frac, tau, nominal, state, out):  # type: ignor
     near = 1e-6 * nominal
     n = x.shape[0]
     first = min(n, d_int + 1)  # samples whose delayed inputs reach back into the ring
-    for k in range(first):
+    for k in range(first):  # those delayed inputs first, into ``out``
         head = (head + 1) % size
         state[3 + head] = x[k]
         a = state[3 + (head - d_int) % size]
-        b = state[3 + (head - d_int - 1) % size]
-        v = a + d_frac * (b - a)
-        if tau > 0.0:
-            if abs(dt[k] - nominal) <= near:
-                lag = keep0 * lag + gain0 * v
+        out[k] = a + d_frac * (state[3 + (head - d_int - 1) % size] - a)
+    if tau > 0.0:
+        for k in range(n):  # the lag, the rest of the delayed inputs read from the block itself
+            if k < first:
+                v = out[k]
             else:
-                if dt[k] != dt_seen:
-                    dt_seen = dt[k]
-                    keep = math.exp(-dt_seen / tau)
-                    gain = 1.0 - keep
-                lag = keep * lag + gain * v
-        else:
-            lag = v
-        out[k] = lag
-    if tau > 0.0:  # the rest reads the block itself, in two branch-free loops
-        for k in range(first, n):
-            a = x[k - d_int]
-            v = a + d_frac * (x[k - d_int - 1] - a)
+                a = x[k - d_int]
+                v = a + d_frac * (x[k - d_int - 1] - a)
             if abs(dt[k] - nominal) <= near:  # the chain through ``lag``: one multiply, one add
                 lag = keep0 * lag + gain0 * v
             else:
@@ -86,8 +76,9 @@ def input_filter(x, dt, d_int, d_frac, tau, nominal, state, out):  # type: ignor
     else:
         for k in range(first, n):
             a = x[k - d_int]
-            lag = a + d_frac * (x[k - d_int - 1] - a)
-            out[k] = lag
+            out[k] = a + d_frac * (x[k - d_int - 1] - a)
+        if n > 0:
+            lag = out[n - 1]
     for k in range(max(first, n - size), n):  # the ring ends holding the last inputs
         head = (head + 1) % size
         state[3 + head] = x[k]
