@@ -673,15 +673,10 @@ def core_step(desired, p, cfg, st, region, dyn, dstate, trial):  # type: ignore[
         x = K.undo_fraction(w, dstate[0], last, dyn[0])
         if not math.isfinite(x):
             x = last
-        # the lags' inverse asks beyond a voltage limit: held there (real overshoots only,
-        # not a limit reached but for rounding), counted where the slew limit did not hold
-        # it first (as the play engine's _limit)
-        tol = 1e-12 * (hi - lo)
-        held = held or x < lo - tol or x > hi + tol
-        x = min(max(x, lo), hi)
-        sent = min(max(x, last - step), last + step)
-        held = held and sent == x
-        x = sent
+        # the lags' inverse asks beyond a voltage limit: held there, counted where the slew
+        # limit did not hold it first (as the play engine's _limit)
+        x, slewed, over = K.clamp(x, last, lo, hi, step)
+        held = (held or over) and not slewed
     if dynamic:
         u = _advance(x, last, dyn, dstate)
         if trial[0] != u:

@@ -175,30 +175,38 @@ def inverse_states(tables, config, state):  # type: ignore[no-untyped-def]
     _inverse_states_at(0, tables[np.newaxis], config[np.newaxis], state[np.newaxis])
 
 
-@njit(cache=True, fastmath=FASTMATH)
-def _limit(v, last, config, state):  # type: ignore[no-untyped-def]
-    """A command clamped to the limits (real overshoots counted) and slew; True if they acted."""
-    end = state.shape[0]
-    lo = config[CFG_V_MIN]
-    hi = config[CFG_V_MAX]
-    acted = False
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def clamp(v, last, lo, hi, step):  # type: ignore[no-untyped-def]
+    """A command inside the voltage limits ``[lo, hi]``, then within ``step`` of ``last``.
+
+    Returns ``(sent, slewed, over)``: ``slewed`` when the slew limit cut it, ``over`` when it
+    overshot a voltage limit (a real overshoot, not a limit reached exactly but for
+    rounding). A voltage limit held the command where ``over and not slewed``: sent at the
+    limit, not where the slew limit held it first. Inlined where it is called (a call
+    returning the tuple cost a third of ``compensator_process``, measured).
+    """
     over = False
     if v < lo or v > hi:
-        # count real overshoots, not a limit reached exactly but for rounding
         tol = 1e-12 * (hi - lo)
         over = v < lo - tol or v > hi + tol
         v = min(max(v, lo), hi)
-        acted = True
-    step = config[CFG_MAX_STEP]
+    slewed = True
     if v > last + step:
         v = last + step
-        acted = True
     elif v < last - step:
         v = last - step
-        acted = True
-    elif over:  # held by a voltage limit: sent at it (not where the slew limit held it first)
-        state[end + ST_SATURATED] += 1.0
-    return v, acted
+    else:
+        slewed = False
+    return v, slewed, over
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def _limit(v, last, config, state):  # type: ignore[no-untyped-def]
+    """A command clamped to the limits (real overshoots counted) and slew; True if they acted."""
+    sent, slewed, over = clamp(v, last, config[CFG_V_MIN], config[CFG_V_MAX], config[CFG_MAX_STEP])
+    if over and not slewed:
+        state[state.shape[0] + ST_SATURATED] += 1.0
+    return sent, sent != v
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
@@ -230,27 +238,11 @@ def _step_at(c, desired, tables, config, state):  # type: ignore[no-untyped-def]
         state[c, end + ST_NONFINITE] += 1.0
         _inverse_states_at(c, tables, config, state)
         return last
-    # inline, not _limit(): a helper returning a tuple cost a third of process() (measured)
-    v = x
-    limited = False
-    lo = config[c, CFG_V_MIN]
-    hi = config[c, CFG_V_MAX]
-    over = False
-    if v < lo or v > hi:
-        # count real overshoots, not a limit reached exactly but for rounding
-        tol = 1e-12 * (hi - lo)
-        over = v < lo - tol or v > hi + tol
-        v = min(max(v, lo), hi)
-        limited = True
-    step = config[c, CFG_MAX_STEP]
-    if v > last + step:
-        v = last + step
-        limited = True
-    elif v < last - step:
-        v = last - step
-        limited = True
-    elif over:  # held by a voltage limit: sent at it (not where the slew limit held it first)
+    v, slewed, over = clamp(x, last, config[c, CFG_V_MIN], config[c, CFG_V_MAX],
+                            config[c, CFG_MAX_STEP])  # fmt: skip
+    if over and not slewed:
         state[c, end + ST_SATURATED] += 1.0
+    limited = v != x
     for i in range(n):
         state[c, i] = min(max(state[c, i], v - tables[c, TAB_R, i]), v + tables[c, TAB_R, i])
     if limited:
@@ -461,7 +453,6 @@ def compensator_process(desired, tables, config, state, out):  # type: ignore[no
     ref = config[CFG_REFERENCE]
     inv_gain = config[CFG_INV_GAIN]
     bound = config[CFG_BOUND]
-    tol = 1e-12 * (hi - lo)
     last = state[end + ST_LAST]
     nonfinite = state[end + ST_NONFINITE]
     saturated = state[end + ST_SATURATED]
@@ -485,21 +476,10 @@ def compensator_process(desired, tables, config, state, out):  # type: ignore[no
                 tail += w[i] * state[i]
             out[k] = last
             continue
-        v = x
-        limited = False
-        over = False
-        if v < lo or v > hi:
-            over = v < lo - tol or v > hi + tol
-            v = min(max(v, lo), hi)
-            limited = True
-        if v > last + step:
-            v = last + step
-            limited = True
-        elif v < last - step:
-            v = last - step
-            limited = True
-        elif over:  # sent at the voltage limit (see _limit)
+        v, slewed, over = clamp(x, last, lo, hi, step)
+        if over and not slewed:  # sent at the voltage limit
             saturated += 1.0
+        limited = v != x
         for i in range(n):
             state[i] = min(max(state[i], v - r[i]), v + r[i])
         if limited:
@@ -651,12 +631,9 @@ def numeric_dynamic_step(desired, tables, static, lags, config, state, dyn, dsta
             x = last
         lo = config[CFG_V_MIN]
         hi = config[CFG_V_MAX]
-        tol = 1e-12 * (hi - lo)
-        held = held or x < lo - tol or x > hi + tol  # the lags' inverse asks beyond a limit
-        x = min(max(x, lo), hi)
-        step = config[CFG_MAX_STEP]
-        sent = min(max(x, last - step), last + step)
-        if held and sent == x and (x <= lo or x >= hi):  # held by the voltage limit, sent at it
+        sent, slewed, over = clamp(x, last, lo, hi, config[CFG_MAX_STEP])
+        held = held or over  # out of reach, or the lags' inverse asks beyond a limit
+        if held and not slewed and (sent <= lo or sent >= hi):  # held by it, sent at it
             state[end + ST_SATURATED] += 1.0
         u = advance_dynamics(sent, last, dyn, dstate)
         last = sent
