@@ -33,15 +33,19 @@ def pi_forward(x, r, w, z, y):  # type: ignore[no-untyped-def]
     z : (n,) operator states, updated in place (final state on return);
     y : (N,) output, written: ``y[k] = sum_i w[i] * z_i[k]``.
     """
-    n = r.shape[0]
     for k in range(x.shape[0]):
-        xk = x[k]
-        acc = 0.0
-        for i in range(n):
-            zi = min(max(z[i], xk - r[i]), xk + r[i])
-            z[i] = zi
-            acc += w[i] * zi
-        y[k] = acc
+        y[k] = play_sum(x[k], r, w, z)
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def play_sum(xk, r, w, z):  # type: ignore[no-untyped-def]
+    """The play operators' states ``z`` moved by one input ``xk`` (in place); their weighted sum."""
+    acc = 0.0
+    for i in range(r.shape[0]):
+        zi = min(max(z[i], xk - r[i]), xk + r[i])
+        z[i] = zi
+        acc += w[i] * zi
+    return acc
 
 
 # Fast prediction: the play operators plus at most one running integral, from the model's
@@ -76,16 +80,11 @@ def fast_predict(x, t, timed, r, w, z0, offset, kind, coef, out):  # type: ignor
             for k in range(m):
                 out[k] += offset
         return -1
-    n = r.shape[0]
     integral = 0.0
     t_prev = t[0]
     for k in range(m):
         xk = x[k]
-        acc = 0.0
-        for i in range(n):
-            zi = min(max(z[i], xk - r[i]), xk + r[i])
-            z[i] = zi
-            acc += w[i] * zi
+        acc = play_sum(xk, r, w, z)
         tk = t[k]
         integral += (xk if kind == FAST_INTEGRAL else 1.0) * (tk - t_prev)
         t_prev = tk
