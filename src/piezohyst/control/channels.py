@@ -85,6 +85,54 @@ class ChannelBank(Generic[C]):
     def __len__(self) -> int:
         return len(self._channels)
 
+    def step(
+        self, desired: ArrayLike, measured: ArrayLike | None = None, *,
+        out: FloatArray | None = None,
+    ) -> FloatArray:  # fmt: skip
+        """One command per channel.
+
+        Parameters
+        ----------
+        desired : array_like, shape (C,)
+            Desired output per channel; NaN or infinity holds that channel's
+            last command (counted).
+        measured : array_like, shape (C,), optional
+            The charge read at this sample, per channel: a bank of controllers feeds it
+            back (NaN for a channel, or None for all: feedforward alone), a bank of
+            compensators ignores it (the controllers' one contract,
+            :mod:`~piezohyst.control.contract`).
+        out : ndarray, shape (C,), optional
+            Written in place (a float64 array): nothing is allocated.
+
+        Returns
+        -------
+        ndarray, shape (C,)
+            Commands (V), each inside its channel's limits.
+        """
+        return self._step(desired, measured, out)
+
+    def process(self, desired: ArrayLike, measured: ArrayLike | None = None) -> FloatArray:
+        """Commands for a block: equal to :meth:`step` on each row.
+
+        Parameters
+        ----------
+        desired, measured : array_like, shape (samples, C)
+            As :meth:`step` takes them, a row per sample.
+
+        Returns
+        -------
+        ndarray, shape (samples, C)
+        """
+        return self._process(desired, measured)
+
+    def _step(
+        self, desired: ArrayLike, measured: ArrayLike | None, out: FloatArray | None
+    ) -> FloatArray:
+        raise NotImplementedError
+
+    def _process(self, desired: ArrayLike, measured: ArrayLike | None) -> FloatArray:
+        raise NotImplementedError
+
     # -------------------------------------------------------------- limits that bite
     def _tally_reset(self) -> None:
         """The fused kernels' counts of commands held by the slew limit, from zero."""
@@ -392,28 +440,9 @@ class BankCompensator(ChannelBank[Compensator]):
         self._approach_warned = False
         return out
 
-    def step(
-        self, desired: ArrayLike, measured: ArrayLike | None = None, *,
-        out: FloatArray | None = None,
-    ) -> FloatArray:  # fmt: skip
-        """One command per channel.
-
-        Parameters
-        ----------
-        desired : array_like, shape (C,)
-            Desired output per channel; NaN or infinity holds that channel's
-            last command (counted).
-        measured : array_like, shape (C,), optional
-            Readings: ignored, the bank is feedforward (the controllers' one contract,
-            :mod:`~piezohyst.control.contract`).
-        out : ndarray, shape (C,), optional
-            Written in place (a float64 array): nothing is allocated.
-
-        Returns
-        -------
-        ndarray, shape (C,)
-            Commands (V), each inside its channel's limits.
-        """
+    def _step(
+        self, desired: ArrayLike, measured: ArrayLike | None, out: FloatArray | None
+    ) -> FloatArray:
         (d,) = self._rows([desired], "'desired'", 1)
         out = self._out(out, d.shape)
         if self.fused:
@@ -426,17 +455,7 @@ class BankCompensator(ChannelBank[Compensator]):
                 out[i] = ch.step(float(d[i]))
         return out
 
-    def process(self, desired: ArrayLike, measured: ArrayLike | None = None) -> FloatArray:
-        """Commands for a block: equal to :meth:`step` on each row (``measured`` ignored).
-
-        Parameters
-        ----------
-        desired : array_like, shape (samples, C)
-
-        Returns
-        -------
-        ndarray, shape (samples, C)
-        """
+    def _process(self, desired: ArrayLike, measured: ArrayLike | None) -> FloatArray:
         (d,) = self._rows([desired], "'desired'", 2)
         out = np.empty_like(d)
         if self.fused:
@@ -593,26 +612,9 @@ class BankController(ChannelBank[SelfSensingController]):
             ch.reset()
         self._tally_reset()
 
-    def step(
-        self, desired: ArrayLike, measured: ArrayLike | None = None, *,
-        out: FloatArray | None = None,
-    ) -> FloatArray:  # fmt: skip
-        """One command per channel.
-
-        Parameters
-        ----------
-        desired, measured : array_like, shape (C,)
-            Desired output and the charge read at this sample, per channel
-            (NaN: hold / feedforward alone for that channel; ``measured`` None:
-            no readings, every channel on its feedforward alone).
-        out : ndarray, shape (C,), optional
-            Written in place.
-
-        Returns
-        -------
-        ndarray, shape (C,)
-            Commands (V).
-        """
+    def _step(
+        self, desired: ArrayLike, measured: ArrayLike | None, out: FloatArray | None
+    ) -> FloatArray:
         if measured is None:
             measured = np.full(np.shape(desired), np.nan)
         d, m = self._rows([desired, measured], "'desired' and 'measured'", 1)
@@ -627,17 +629,7 @@ class BankController(ChannelBank[SelfSensingController]):
         self._tally_step(out)
         return out
 
-    def process(self, desired: ArrayLike, measured: ArrayLike | None = None) -> FloatArray:
-        """Commands for recorded blocks (samples, C); equal to :meth:`step` on each row.
-
-        Parameters
-        ----------
-        desired, measured : array_like, shape (samples, C)
-
-        Returns
-        -------
-        ndarray, shape (samples, C)
-        """
+    def _process(self, desired: ArrayLike, measured: ArrayLike | None) -> FloatArray:
         if measured is None:
             measured = np.full(np.shape(desired), np.nan)
         d, m = self._rows([desired, measured], "'desired' and 'measured'", 2)
