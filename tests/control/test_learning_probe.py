@@ -198,4 +198,6 @@ def test_a_loop_lagging_a_model_without_dynamics_is_told_by_the_probe() -> None:
             assert 2e-3 <= ilc.design.probe_lag <= 8e-3
     told = [m for m in said["plain"] if "the lead-in's probe measured the loop" in m]
     assert len(told) == 1 and "behind" in told[0] and "input_dynamics='auto'" in told[0]
+    assert "by default the trial after the lead-in measures the loop's lag" in told[0]
+    assert "this run was told not to (measure_lag=False, --no-lag-measurement)" in told[0]
     assert not any("probe measured" in m for m in said["lagged"] + said["measured"])

@@ -203,7 +203,8 @@ def test_learn_from_the_shell_says_the_lag_it_measured(tmp_path: Path) -> None:
     learned = said["--no-lag-measurement"][1]  # that trial learned from, as before
     assert "trial 1: error " in learned and "learned from 1000 samples" in learned
     assert "it measured the loop's lag" not in learned
-    assert "the lead-in's probe measured the loop" in learned  # the probe's word instead
+    assert "the lead-in's probe measured the loop" in learned  # the probe's word instead,
+    assert "(measure_lag=False, --no-lag-measurement)" in learned  # naming what it turned off
 
 
 def test_a_slew_held_trial_names_the_jacobian_law_also_where_a_lag_was_measured() -> None:
