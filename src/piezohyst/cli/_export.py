@@ -13,7 +13,6 @@ from ..control.compensator import CompensatorSettings
 from ..control.selfsensing import LoopSettings
 from ._support import EXISTING, FORCE, Context, _limit_options, _loop_options, _run, _suffix
 
-
 #: Each export's words, by its file's suffix: what the file is, then the help of --float,
 #: -o/--out and --controller
 _WORDS = {
