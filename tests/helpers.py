@@ -9,11 +9,19 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
+import numba
 import numpy as np
 from click.testing import CliRunner, Result
 
 from piezohyst.cli import main
 from piezohyst.control.export import write_c
+
+#: numba's JIT is off: the run that measures the kernels' Python lines (``make test``'s
+#: second run, tests/kernel_paths.txt). A module's fixtures may then fit on a shorter record:
+#: the tests that run there check structural properties (chunks, files, counts, inversion,
+#: C export, the loop), which hold for any fitted model; the tests that need a long
+#: record's accuracy are not on that list
+UNCOMPILED = bool(numba.config.DISABLE_JIT)
 
 #: the system C compiler, or None (the C tests skip without one)
 CC = shutil.which("cc") or shutil.which("gcc")

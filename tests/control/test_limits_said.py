@@ -27,6 +27,8 @@ import piezohyst as ph
 from piezohyst.errors import LimitWarning
 from piezohyst.model.dynamics import InputDynamics
 
+from ..helpers import UNCOMPILED
+
 pytestmark = pytest.mark.kernels
 
 RATE = 1000.0
@@ -52,7 +54,7 @@ def _make(kind: str) -> ph.HysteresisModel:
 
 @pytest.fixture(scope="module")
 def fitted() -> dict[str, ph.HysteresisModel]:
-    rec = ph.simulate(signal="decaying", duration=8.0, seed=2)
+    rec = ph.simulate(signal="decaying", duration=5.0 if UNCOMPILED else 8.0, seed=2)
     out = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # a short record: the fits say what it cannot tell

@@ -7,7 +7,6 @@ import warnings
 from pathlib import Path
 from typing import Any
 
-import numba
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -21,7 +20,7 @@ from piezohyst.model.cores.duhem import _curvature
 from piezohyst.model.cores.preisach import _curvature_upper
 from piezohyst.simulation import make_signal
 
-from ..helpers import CC, compare_c_with_python
+from ..helpers import CC, UNCOMPILED, compare_c_with_python
 from ..strategies import examples
 
 # these tests drive targets past the voltage and slew limits on purpose (safety, exactness
@@ -32,14 +31,6 @@ pytestmark = [
     pytest.mark.kernels,
     pytest.mark.filterwarnings("ignore::piezohyst.errors.LimitWarning"),
 ]
-
-
-#: numba's JIT is off: the run that measures the kernels' Python lines (``make test``'s
-#: second run, tests marked ``kernels``). The module's models are then fitted on a shorter
-#: record: the tests that use them check structural properties (chunks, files, inversion,
-#: C export, the loop), which hold for any fitted model, and the tests that need the long
-#: record's accuracy are not marked ``kernels``
-UNCOMPILED = bool(numba.config.DISABLE_JIT)
 
 
 @pytest.fixture(scope="module")
