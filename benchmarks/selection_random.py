@@ -261,13 +261,17 @@ RULES: dict[str, Callable[[Run], float]] = {
 
 
 def table(runs: list[Run]) -> list[str]:
-    heads = "rule | within 1.25x of the best default | median ratio | worst ratio | worst plant"
-    lines = [f"| {heads} |", "|---|---|---|---|---|"]
+    heads = ("rule | within 1.25x of the best default | excite records | decaying records | "
+             "median ratio | worst ratio | worst plant")  # fmt: skip
+    lines = [f"| {heads} |", "|---|---|---|---|---|---|---|"]
+    designs = np.array([r["plant"]["design"] for r in runs])
     for label, rule in RULES.items():
         ratios = np.array([rule(r) / min(r["test"].values()) for r in runs])
         worst = runs[int(np.argmax(ratios))]["plant"]
+        by = [f"{int(np.sum(ratios[designs == d] <= 1.25))} of {int(np.sum(designs == d))}"
+              for d in ("excite", "decaying")]  # fmt: skip
         lines.append(
-            f"| {label} | {int(np.sum(ratios <= 1.25))} of {ratios.size} | "
+            f"| {label} | {int(np.sum(ratios <= 1.25))} of {ratios.size} | {by[0]} | {by[1]} | "
             f"{np.median(ratios):.2f} | {ratios.max():.2f} | "
             f"{worst['family']} ({worst['design']}, {worst['seed']}) |"
         )
@@ -276,13 +280,15 @@ def table(runs: list[Run]) -> list[str]:
 
 def plants_table(runs: list[Run]) -> list[str]:
     heads = "plant | family | record | lag | chosen by the mean | not told apart | best on the test"
-    lines = [f"| {heads} | ratio |", "|---|---|---|---|---|---|---|---|"]
+    lines = [f"| {heads} | ratio | ratio, select_model |", "|---|---|---|---|---|---|---|---|---|"]
+    kept = RULES["select_model as it is"]
     for r in runs:
         p, best = r["plant"], min(r["test"], key=lambda n: r["test"][n])
         lines.append(
             f"| {p['seed']} | {p['family']} | {p['design']} | {1e3 * p['amp_tau']:.1f} ms | "
             f"{r['chosen']} | {', '.join(r['undecided']) or '-'} | {best} "
-            f"({100 * r['test'][best]:.2f} %) | {r['test'][r['chosen']] / r['test'][best]:.2f} |"
+            f"({100 * r['test'][best]:.2f} %) | {r['test'][r['chosen']] / r['test'][best]:.2f} | "
+            f"{kept(r) / r['test'][best]:.2f} |"
         )
     return lines
 

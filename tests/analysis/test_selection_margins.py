@@ -28,6 +28,7 @@ from piezohyst.analysis.selection import (
     record_notes,
     select_model,
 )
+from piezohyst.simulation import make_signal
 from piezohyst.workflows.excitation import excitation
 
 
@@ -231,6 +232,12 @@ def test_a_record_with_minor_loops_has_no_such_note() -> None:
     chirp = np.concatenate([70.0 + a * np.sin(2 * np.pi * f * t[: int(3000 / f)])
                             for f, a in ((1.0, 70.0), (3.0, 40.0), (10.0, 20.0))])  # fmt: skip
     assert not any("one frequency" in n for n in record_notes(chirp))
+    # decaying loops reach 0 V only on their first rise: that end unseen afterwards, said
+    _, decaying = make_signal("decaying", amplitude=140.0, duration=40.0)
+    unseen = [n for n in record_notes(decaying) if "never comes back" in n]
+    assert len(unseen) == 1 and "to its lowest values" in unseen[0] and "13.89" in unseen[0]
+    assert not any("never comes back" in n for n in record_notes(decaying[::-1]))  # both ends
+    assert not any("never comes back" in n for n in record_notes(sine) + record_notes(chirp))
     # a slow ramp turns twice at most: too few turns to split by is said too
     assert any("fewer than" in n for n in record_notes(np.linspace(0.0, 1.0, 50)))
 

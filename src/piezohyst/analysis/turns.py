@@ -29,6 +29,9 @@ MIN_TURNS = 8
 NOISE_REACH = 10.0
 #: Reversals spanning at least this share of the input's range belong to the major loop
 MAJOR = 0.9
+#: After its first turn the input never comes back within this share of its range to one of
+#: its ends: the branches at that end are seen on the first move only
+UNSEEN_END = 0.05
 
 #: the input's noise (RMS): one estimator with the record's check
 input_noise = noise_level
@@ -164,6 +167,8 @@ def _record_notes(x: FloatArray, turns: np.ndarray) -> tuple[str, ...]:
                 "grid inside the loop is then a guess). Record loops of several amplitudes "
                 "(piezohyst excite) to choose for them."
             )
+    if turns.size >= 2 and span > 0.0:
+        notes += _unseen_ends(x, turns, span)
     halves = np.diff(turns)[1:-1]  # the first and last may be cut by the record's ends
     middle = float(np.median(halves)) if halves.size else 0.0
     if halves.size >= 3 and np.all((halves >= middle / ONE_RATE) & (halves <= middle * ONE_RATE)):
@@ -176,3 +181,25 @@ def _record_notes(x: FloatArray, turns: np.ndarray) -> tuple[str, ...]:
             "multifreq signal) to choose for other rates."
         )
     return tuple(notes)
+
+
+def _unseen_ends(x: FloatArray, turns: np.ndarray, span: float) -> list[str]:
+    """A note for each end of the input's range it reaches only before its first turn."""
+    after = x[turns[0] :]
+    notes = []
+    for end, reached, back in (("lowest", float(x.min()), float(after.min())),
+                               ("highest", float(x.max()), float(after.max()))):  # fmt: skip
+        gap = abs(back - reached) / span
+        if gap > UNSEEN_END:
+            notes.append(
+                f"After its first turn the input never comes back to its {end} values: it "
+                f"reaches {reached:.4g} before that turn only, and afterwards {back:.4g} at "
+                f"the {end} ({100 * gap:.0f} % of its range short). Loops that return there "
+                "(a scan from rest, a test from 0 V) are predicted by fits that saw that end "
+                "on one move, and the scores cannot rank how the candidates predict them: on "
+                "plants drawn at random, choices from such records (decaying loops) landed "
+                "within 1.25x of the best candidate less often than from records whose loops "
+                "reach both ends (docs/selection-study.md). Record loops that reach both ends "
+                "(piezohyst excite)."
+            )
+    return notes
