@@ -2,8 +2,7 @@
 
 ``python benchmarks/selection_random.py [--dev N] [--test N] [-o docs/selection-study.md]``
 (about 15 minutes for 20 + 20 plants on a 2-core Xeon, 3 minutes for 60 on a 2-core EPYC;
-``-o`` rewrites the tables between the
-page's second pair of markers).
+``-o`` rewrites the tables between the page's second pair of markers).
 
 The matrix's plants (``benchmarks/selection_study.py``) are five fixed designs and their
 production spread. Here each plant is *drawn*: a family (the simulator's Preisach,
