@@ -209,7 +209,8 @@ def _first_design(
     args = _design_args(learner.settings, d.size)
     design = design_learning(learner._model, **args, first_error=e, measured=loop)
     if design.probe_phase:
-        off = not learner.settings.get("measure_lag", True) and not design.model_timed
+        s = learner.settings  # the default would have measured it: no lag stated, none held
+        off = not s.get("measure_lag", True) and s["lag"] <= 0 and not design.model_timed
         default = ("; by default the trial after the lead-in measures the loop's lag and the "
                    "model holds it from then on: this run was told not to (measure_lag=False, "
                    "--no-lag-measurement)") if off else ""  # fmt: skip
