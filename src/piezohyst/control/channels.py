@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from typing import Any, Generic, Literal, TypeVar
 
@@ -67,7 +68,7 @@ def per_channel(value: object, c: int, name: str) -> list[Any]:
     return [float(a) for a in arr]
 
 
-class ChannelBank(Generic[C]):
+class ChannelBank(ABC, Generic[C]):
     """One live object per channel of a fitted bank (see the module documentation)."""
 
     def __init__(self, bank: ModelBank, build: Callable[[int, HysteresisModel], C]) -> None:
@@ -125,13 +126,15 @@ class ChannelBank(Generic[C]):
         """
         return self._process(desired, measured)
 
+    @abstractmethod
     def _step(
         self, desired: ArrayLike, measured: ArrayLike | None, out: FloatArray | None
     ) -> FloatArray:
-        raise NotImplementedError
+        """Each bank's :meth:`step`."""
 
+    @abstractmethod
     def _process(self, desired: ArrayLike, measured: ArrayLike | None) -> FloatArray:
-        raise NotImplementedError
+        """Each bank's :meth:`process`."""
 
     # -------------------------------------------------------------- limits that bite
     def _tally_reset(self) -> None:
