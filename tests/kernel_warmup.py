@@ -31,6 +31,7 @@ MODULES = (
     "piezohyst._kernels.signal",
     "piezohyst._kernels.play",
     "piezohyst._kernels.packed",
+    "piezohyst._kernels.structure",
     "piezohyst.simulation._plant",
 )
 #: Set by ``record``: the folder each worker writes its specializations into at its end.

@@ -104,3 +104,44 @@ def slew_hulls(u: Sequence[float], step: float) -> tuple[list[float], list[float
     upper = [max(tiled[j] - step * abs(k - j) for j in range(3 * n)) for k in range(n, 2 * n)]
     lower = [min(tiled[j] + step * abs(k - j) for j in range(3 * n)) for k in range(n, 2 * n)]
     return upper, lower
+
+
+def structure(
+    a: Sequence[Sequence[float]],
+    b: Sequence[Sequence[float]],
+    c: Sequence[Sequence[float]],
+    d: Sequence[Sequence[float]],
+    e: Sequence[Sequence[float]],
+    t: Sequence[Sequence[float]],
+    r: Sequence[Sequence[float]],
+    off: Sequence[float],
+    v: Sequence[Sequence[float]],
+) -> list[list[float]]:
+    """A structure from rest (StructureModel): y = c x + d v + off; each actuator's stroke
+    s = t y; its play operators (eq. 9-10, states starting at the rest stroke) lag it by
+    p = play - s; x <- a x + b v + e p."""
+    n, m = len(a), len(c)
+    x = [0.0] * n
+    z = [[sum(t[q][o] * off[o] for o in range(m))] * len(r[q]) for q in range(len(r))]
+    out = []
+    for vk in v:
+        y = [
+            off[o]
+            + sum(c[o][s] * x[s] for s in range(n))
+            + sum(d[o][i] * vk[i] for i in range(len(vk)))
+            for o in range(m)
+        ]
+        p = []
+        for q in range(len(r)):
+            sq = sum(t[q][o] * y[o] for o in range(m))
+            for j in range(len(r[q])):
+                z[q][j] = max(sq - r[q][j], min(sq + r[q][j], z[q][j]))
+                p.append(z[q][j] - sq)
+        x = [
+            sum(a[s][u] * x[u] for u in range(n))
+            + sum(b[s][i] * vk[i] for i in range(len(vk)))
+            + sum(e[s][f] * p[f] for f in range(len(p)))
+            for s in range(n)
+        ]
+        out.append(y)
+    return out

@@ -212,7 +212,7 @@ def test_kernels_are_imported_as_modules_and_load_at_first_use() -> None:
     assert type(stand_in) is LazyModule and "DYN_GAIN_B" not in vars(stand_in)
     assert stand_in.DYN_GAIN_B == play.DYN_GAIN_B  # the first lookup loads it
     assert type(stand_in) is types.ModuleType and where["K"] is sys.modules[play.__name__]
-    assert kernels.__all__ == ["packed", "play", "signal"]
+    assert kernels.__all__ == ["packed", "play", "signal", "structure"]
 
 
 def test_no_test_module_imports_another() -> None:

@@ -10,6 +10,7 @@ Models (the scikit-learn estimator contract: ``fit``, ``predict``, ``score``)
     ModelState, History, InverseSpec -- explicit state; what a compensator inverts
     load_model, ModelBank, load_bank -- model files; one model per channel
     CoupledModel -- several actuators moving one structure: a model each, the coupling
+    StructureModel -- a structure's coupled dynamics (state space), hysteresis in the loop
     default_thresholds -- play thresholds spread over an input range
 
 Cores and terms (for people who write their own; ``piezohyst.testing.check_core``)
@@ -90,6 +91,7 @@ __getattr__, __dir__ = attach(
         "BankController": ".control.channels",
         "CoupledCompensator": ".control.coupled",
         "CoupledModel": ".model.coupled",
+        "StructureModel": ".model.structure",
         "Compensator": ".control.compensator",
         "CompensatorState": ".control.compensator",
         "LearningCompensator": ".control.learning",
@@ -154,6 +156,7 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
         OutputMap,
         PIModel,
         PreisachModel,
+        StructureModel,
         Term,
         calibrate_gain,
         calibrate_leakage,
@@ -216,6 +219,7 @@ __all__ = [
     "Selection",
     "SelfSensingController",
     "ShapeError",
+    "StructureModel",
     "Term",
     "TimeAxisError",
     "__version__",

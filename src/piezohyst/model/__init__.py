@@ -14,8 +14,9 @@ What a model holds besides its core
 The calibrations, side by side (``calibrations``: ``leakage`` and ``from_holds``,
 ``output_map`` and ``from_sensor``)
     Leakage, calibrate_leakage, OutputMap, calibrate_gain
-Several actuators moving one structure (``coupled``)
-    CoupledModel
+Several actuators moving one structure (``coupled``; ``structure``, its identification in
+``structure_fit``)
+    CoupledModel, StructureModel
 Files and banks (``persistence``, ``bank``)
     load_model, save_model, model_names, model_class, register; ModelBank, load_bank
 The estimator contract (``estimator``) and the fit (``fit_record``: a record in, the core
@@ -36,6 +37,7 @@ __getattr__, __dir__ = attach(
     {
         "ModelBank": ".bank",
         "CoupledModel": ".coupled",
+        "StructureModel": ".structure",
         "load_bank": ".bank",
         "InputDynamics": ".dynamics",
         "OutputDynamics": ".dynamics",
@@ -83,6 +85,7 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
         PIModel,
         PreisachModel,
     )
+    from .structure import StructureModel
     from .terms import Term, growth_kinds
 
 __all__ = [
@@ -104,6 +107,7 @@ __all__ = [
     "OutputMap",
     "PIModel",
     "PreisachModel",
+    "StructureModel",
     "Term",
     "calibrate_gain",
     "calibrate_leakage",

@@ -1,0 +1,328 @@
+"""The identification of :class:`~piezohyst.model.structure.StructureModel`, in steps.
+
+1. **The best linear approximation**: the frequency response from every input to every
+   output, by least squares over the records at each frequency (a periodic record's own
+   lines; a record from rest by Welch's averaged cross-spectra), each record and output
+   weighted by the inverse of that output's spread (what an error relative to the output's
+   spread, the benchmark's NRMSE, weighs).
+2. **A realization**: its impulse response realized in state space of the order asked by
+   the eigensystem realization algorithm (python-control's ``eigensys_realization``): the
+   poles ``A`` and the read-out ``C``.
+3. **Everything else by least squares** given ``A`` and ``C``: the input matrix ``B``, the
+   feed-through ``D``, the offsets, and the matrix ``E`` through which each actuator's play
+   operators (on its stroke, the outputs mapped back by the inverse of the static gain)
+   act on the next state. The outputs are linear in all of them once the operators read the
+   measured outputs (equation error); the regressors are each input filtered by each mode.
+
+Plain functions over arrays; the class checks inputs and keeps the result.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import signal as sps
+
+from .._kernels import play as P
+from .._kernels import structure as S
+from .._validation import FloatArray
+from ..errors import IdentifiabilityWarning, ParameterError, warn
+
+#: Input lines whose energy is below this share of the strongest are not excited
+EXCITED = 1e-6
+#: A line whose inputs' cross-spectrum is this ill-conditioned cannot separate the inputs
+LINE_COND = 1e8
+#: Periodic records that excite less than this share of the band are warned about
+BAND = 0.8
+#: Eigenvalues at or beyond this modulus are reflected into the unit circle (stable)
+STABLE = 0.9999
+
+
+@dataclass
+class Record:
+    """One record, checked: inputs (N, n), outputs (N, m), and whether it is one period of
+    a periodic steady state (else it starts at rest)."""
+
+    u: FloatArray
+    y: FloatArray
+    periodic: bool
+
+    @property
+    def weights(self) -> FloatArray:
+        """Per output: the inverse of its spread (1 where it does not move)."""
+        sd = np.std(self.y, axis=0)
+        return np.where(sd > 0, 1.0 / np.where(sd > 0, sd, 1.0), 1.0)
+
+
+@dataclass
+class Structure:
+    """A fitted structure: ``x+ = a x + b v + e p``, ``y = c x + d v + off``, ``p`` the play
+    operators of widths ``r`` on the strokes ``t y`` (their lag behind the stroke)."""
+
+    a: FloatArray
+    b: FloatArray
+    c: FloatArray
+    d: FloatArray
+    e: FloatArray
+    t: FloatArray
+    r: FloatArray
+    off: FloatArray
+
+    @property
+    def order(self) -> int:
+        return int(self.a.shape[0])
+
+    def dc_gain(self) -> FloatArray:
+        """The static gain ``d + c (I - a)^-1 b`` (outputs, inputs)."""
+        eye = np.eye(self.order)
+        return np.asarray(self.d + self.c @ np.linalg.solve(eye - self.a, self.b))
+
+    def run(self, u: FloatArray, periodic: bool) -> FloatArray:
+        """The outputs for the inputs ``u`` (N, n): from rest, or in the periodic steady
+        state (one period run first, its end the start)."""
+        x = np.zeros(self.order)
+        z = np.repeat((self.t @ self.off)[:, None], self.r.shape[1], axis=1)
+        out = np.empty((u.shape[0], self.c.shape[0]))
+        ua = np.ascontiguousarray(u)
+        args = (self.a, self.b, self.c, self.d, self.e, self.t, self.r, self.off)
+        if periodic:
+            S.structure_run(*args, x, z, ua, out)
+        S.structure_run(*args, x, z, ua, out)
+        return out
+
+
+def impulse_response(records: list[Record]) -> FloatArray:
+    """The structure's impulse response (outputs, inputs, lags), its first lag the
+    feed-through: from periodic records, the inverse transform of their frequency response
+    (weighted least squares at each excited line, lines not excited 0); from records at
+    rest, a finite impulse response of a quarter of the shortest record's length (at most
+    1024 lags) by weighted least squares (the normal equations from the records'
+    correlations)."""
+    if records[0].periodic:
+        nfft = records[0].u.shape[0]
+        if any(r.u.shape[0] != nfft for r in records):
+            msg = "periodic records must all hold one period of the same length"
+            raise ParameterError(msg)
+        g = _lines(records)
+        return np.asarray(np.fft.irfft(g, n=nfft, axis=0).transpose(1, 2, 0))
+    return _fir(records, min(min(r.u.shape[0] for r in records) // 4, 1024))
+
+
+def _lines(records: list[Record]) -> np.ndarray:
+    """The frequency response at each line of periodic records (lines, outputs, inputs)."""
+    n, m = records[0].u.shape[1], records[0].y.shape[1]
+    lines = records[0].u.shape[0] // 2 + 1
+    suu = np.zeros((m, lines, n, n), dtype=complex)
+    suy = np.zeros((m, lines, n), dtype=complex)
+    energy = np.zeros(lines)
+    for rec in records:
+        uf, yf = np.fft.rfft(rec.u, axis=0), np.fft.rfft(rec.y, axis=0)
+        w2 = rec.weights**2
+        cross = np.einsum("li,lj->lij", uf.conj(), uf)
+        suu += w2[:, None, None, None] * cross[None]
+        suy += w2[:, None, None] * np.einsum("li,lo->oli", uf.conj(), yf)
+        energy += np.real(np.einsum("lii->l", cross))
+    g = np.zeros((lines, m, n), dtype=complex)
+    excited = np.flatnonzero(energy > EXCITED * energy.max())
+    good = excited[np.linalg.cond(suu[0, excited]) < LINE_COND]
+    if good.size < max(excited.size // 2, 1):
+        msg = (
+            f"the records cannot separate the {n} inputs' responses (at {excited.size - good.size} "
+            f"of {excited.size} excited frequencies): record at least {n} realizations whose "
+            "inputs differ (other phases), or drive each input with its own signal"
+        )
+        raise ParameterError(msg)
+    for o in range(m):
+        g[good, o, :] = np.linalg.solve(suu[o, good], suy[o, good][..., None])[..., 0]
+    # the band's ends, 0 and half the sample rate, are real lines a multisine leaves out:
+    # held at the nearest excited line's real part (else the impulse response would lack
+    # the structure's static gain, a constant error of G(0) / N at every lag)
+    if good.size and good[0] > 0:
+        g[: good[0]] = g[good[0]].real
+    if good.size and good[-1] < lines - 1:
+        g[good[-1] + 1 :] = g[good[-1]].real
+    share = good.size / max(lines - 2, 1)  # of the lines between 0 and the Nyquist frequency
+    if share < BAND:
+        warn(
+            f"the periodic records excite {100 * share:.0f} % of the band up to half the "
+            "sample rate: the structure's response elsewhere is taken as zero, which bends "
+            "the realization; excite the whole band (a multisine on every line)",
+            IdentifiabilityWarning,
+        )
+    return g
+
+
+def _fir(records: list[Record], lags: int) -> FloatArray:
+    """A finite impulse response of ``lags`` lags from records at rest (inputs 0 before
+    the first sample) and an offset per output: weighted least squares, the normal
+    equations from the records' correlations (exact: each sum stops at the record's end)."""
+    n, m = records[0].u.shape[1], records[0].y.shape[1]
+    size = n * lags + 1  # the last unknown: the output's offset
+    normal = np.zeros((m, size, size))
+    rhs = np.zeros((m, size))
+    idx = np.arange(lags)
+    shift = idx[:, None] - idx[None, :]  # [j, j'] -> j - j'
+    for rec in records:
+        nn = rec.u.shape[0]
+        pad = int(2 ** np.ceil(np.log2(2 * nn)))
+        uf = np.fft.rfft(rec.u, n=pad, axis=0)
+        yf = np.fft.rfft(rec.y, n=pad, axis=0)
+        # cuu[l, i, i'] = sum_k u_i[k] u_i'[k + l]; cuy[l, i, o] = sum_k u_i[k] y_o[k + l]
+        cuu = np.fft.irfft(np.einsum("li,lj->lij", uf.conj(), uf), n=pad, axis=0)
+        cuy = np.fft.irfft(np.einsum("li,lo->lio", uf.conj(), yf), n=pad, axis=0)
+        block = np.empty((size, size))
+        tail = rec.u[::-1][:lags]  # tail[j - 1] = u[N - j]
+        for i in range(n):
+            for j in range(n):
+                # the sums stop at the record's end: take off what runs past it
+                past = np.zeros((lags, lags))
+                for d in range(1, min(lags, nn + 1)):
+                    past[d, 1:] = past[d - 1, :-1] + tail[d - 1, i] * tail[: lags - 1, j]
+                full = cuu[shift % pad, i, j] - past
+                block[i * lags : (i + 1) * lags, j * lags : (j + 1) * lags] = full
+        # the offset's column: sum_k u_i[k - j] = the sum of u_i over its first N - j samples
+        sums = np.cumsum(rec.u, axis=0)[::-1][:lags]  # sums[j] = sum of u[:N - j]
+        block[:-1, -1] = block[-1, :-1] = sums.T.reshape(-1)
+        block[-1, -1] = nn
+        w2 = rec.weights**2
+        for o in range(m):
+            normal[o] += w2[o] * block
+            rhs[o, :-1] += w2[o] * cuy[:lags, :, o].T.reshape(-1)
+            rhs[o, -1] += w2[o] * rec.y[:, o].sum()
+    h = np.empty((m, n, lags))
+    for o in range(m):
+        ridge = 1e-9 * np.trace(normal[o]) / size
+        h[o] = np.linalg.solve(normal[o] + ridge * np.eye(size), rhs[o])[:-1].reshape(n, lags)
+    return h
+
+
+def realize(h: FloatArray, order: int) -> tuple[FloatArray, FloatArray]:
+    """``A`` and ``C`` of a realization of the impulse response ``h`` (outputs, inputs,
+    lags) of the given order (the eigensystem realization algorithm), every pole inside the
+    unit circle (one outside is reflected in it: the least squares that follow refit the
+    rest)."""
+    import control  # well kept, heavier than the rest: loaded only here
+
+    size = min((h.shape[2] - 3) // 2, max(4 * order, 64))
+    m, n = h.shape[0], h.shape[1]
+    if order > min(m, n) * size:
+        msg = f"order {order} is more than the records can hold (at most {min(m, n) * size})"
+        raise ParameterError(msg)
+    sysd, _ = control.eigensys_realization(h[:, :, : 2 * size + 2], order, m=size, n=size)
+    a, c = np.asarray(sysd.A, dtype=np.float64), np.asarray(sysd.C, dtype=np.float64)
+    lam, vec = np.linalg.eig(a)
+    big = np.abs(lam) >= STABLE
+    if np.any(big):
+        lam = np.where(big, STABLE**2 / np.conj(lam), lam)
+        a = np.real(vec @ np.diag(lam) @ np.linalg.inv(vec))
+    return a, c
+
+
+def _modes(a: FloatArray) -> tuple[np.ndarray, np.ndarray, list[tuple[int, int]]]:
+    """The eigenvalues, eigenvectors, and each real eigenvalue (index, -1) or complex pair
+    (index with positive imaginary part, its conjugate's index)."""
+    lam, vec = np.linalg.eig(a)
+    tol = 1e-9 * max(1.0, float(np.max(np.abs(lam))))
+    reps: list[tuple[int, int]] = []
+    taken: set[int] = set()
+    for k in np.argsort(-lam.imag):
+        k = int(k)
+        if k in taken:
+            continue
+        if abs(lam[k].imag) <= tol:
+            reps.append((k, -1))
+            taken.add(k)
+            continue
+        rest = [j for j in range(lam.size) if j not in taken and j != k]
+        partner = rest[int(np.argmin(np.abs(lam[rest] - np.conj(lam[k]))))]
+        reps.append((k, partner))
+        taken.update((k, partner))
+    return lam, vec, reps
+
+
+def features(rec: Record, t: FloatArray, r: FloatArray) -> FloatArray:
+    """The play operators' lag behind each actuator's measured stroke ``t y``: (N, actuators
+    * K), a periodic record's in its steady state (run twice, the second kept)."""
+    s = rec.y @ t.T  # (N, actuators)
+    na, nk = r.shape
+    out = np.empty((rec.y.shape[0], na * nk))
+    for q in range(na):
+        sq = np.ascontiguousarray(s[:, q])
+        z = np.full(nk, sq[0])
+        cols = np.empty((sq.size, nk))
+        if rec.periodic:
+            P.play_states(sq, np.ascontiguousarray(r[q]), z, cols)
+        P.play_states(sq, np.ascontiguousarray(r[q]), z, cols)
+        out[:, q * nk : (q + 1) * nk] = cols - sq[:, None]
+    return out
+
+
+def least_squares(
+    records: list[Record], a: FloatArray, c: FloatArray, t: FloatArray, r: FloatArray
+) -> Structure:
+    """``B``, ``D``, ``E`` and the offsets given the poles and read-out: one weighted
+    least-squares problem over every record, output and sample."""
+    lam, vec, reps = _modes(a)
+    cv = c @ vec  # (outputs, n)
+    n, m = records[0].u.shape[1], records[0].y.shape[1]
+    nf = r.size
+    cols = n + nf
+    order = a.shape[0]
+    size = order * cols + m * n + m
+    normal = np.zeros((size, size))
+    rhs = np.zeros(size)
+    for rec in records:
+        w = np.column_stack([rec.u, features(rec, t, r)]) if nf else rec.u
+        keep = slice(rec.u.shape[0], None) if rec.periodic else slice(None)
+        ww = np.concatenate([w, w]) if rec.periodic else w
+        filt = np.empty((rec.u.shape[0], len(reps), cols), dtype=complex)
+        for p, (k, _) in enumerate(reps):
+            filt[:, p] = sps.lfilter([0.0, 1.0], [1.0, -lam[k]], ww, axis=0)[keep]
+        for o in range(m):
+            z = filt * np.array([cv[o, k] for k, _ in reps])[None, :, None]
+            blocks = []
+            for p, (_, partner) in enumerate(reps):
+                if partner < 0:
+                    blocks.append(z[:, p].real[:, None])
+                else:
+                    blocks.append(np.stack([2 * z[:, p].real, -2 * z[:, p].imag], axis=1))
+            reg = np.zeros((rec.u.shape[0], size))
+            reg[:, : order * cols] = np.concatenate(blocks, axis=1).reshape(rec.u.shape[0], -1)
+            reg[:, order * cols + o * n : order * cols + (o + 1) * n] = rec.u
+            reg[:, order * cols + m * n + o] = 1.0
+            wo = rec.weights[o] ** 2
+            normal += wo * (reg.T @ reg)
+            rhs += wo * (reg.T @ rec.y[:, o])
+    ridge = 1e-10 * np.trace(normal) / size
+    theta = np.linalg.solve(normal + ridge * np.eye(size), rhs)
+    modal = theta[: order * cols].reshape(order, cols)
+    bt = np.zeros((order, cols), dtype=complex)
+    p = 0
+    for k, partner in reps:
+        if partner < 0:
+            bt[k] = modal[p]
+            p += 1
+        else:
+            bt[k] = modal[p] + 1j * modal[p + 1]
+            bt[partner] = np.conj(bt[k])
+            p += 2
+    be = np.real(vec @ bt)
+    d = theta[order * cols : order * cols + m * n].reshape(m, n)
+    off = theta[order * cols + m * n :]
+    parts = (a, be[:, :n], c, d, be[:, n:], t, r, off)
+    return Structure(*(np.ascontiguousarray(x, dtype=np.float64) for x in parts))
+
+
+def nrmse(structure: Structure, records: list[Record], tail: float = 0.0) -> float:
+    """The mean over records and outputs of RMS(error) / std(measured) (%), on each
+    record's last ``1 - tail`` part (all of it for 0)."""
+    scores = []
+    for rec in records:
+        err = structure.run(rec.u, rec.periodic) - rec.y
+        start = int(tail * rec.u.shape[0])
+        sd = np.std(rec.y[start:], axis=0)
+        rms = np.sqrt(np.mean(err[start:] ** 2, axis=0))
+        scores.append(np.where(sd > 0, rms / np.where(sd > 0, sd, 1.0), rms))
+    value = 100.0 * float(np.mean(scores))
+    return value if np.isfinite(value) else float("inf")

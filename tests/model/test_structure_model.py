@@ -1,0 +1,221 @@
+"""StructureModel: coupled linear dynamics identified in state space (an order chosen by
+held-out records), each actuator's hysteresis in the loop; its kernel against a pure-Python
+reference over generated structures."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import piezohyst as ph
+from piezohyst.model import structure_fit as sf
+
+from .. import reference
+from ..strategies import examples
+
+pytestmark = pytest.mark.kernels
+
+FS = 1000.0
+
+
+def _plant(e_gain: float = 0.0, outputs: int = 3) -> sf.Structure:
+    """Two actuators, two shared modes (|poles| 0.9 and 0.85), ``outputs``
+    outputs read; with ``e_gain`` each actuator's play operators (its stroke's lag) act on
+    the modes (a stiffness that depends on how far it moved)."""
+    rot = lambda rad, th: rad * np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])  # noqa: E731
+    a = np.zeros((4, 4))
+    a[:2, :2], a[2:, 2:] = rot(0.9, 0.5), rot(0.85, 1.1)
+    b = np.array([[1.0, 0.2], [0.0, 0.3], [0.1, 1.0], [0.4, 0.0]])
+    c = np.array([[1.0, 0.0, 0.3, 0.1], [0.2, 0.1, 1.0, 0.0], [0.5, 0.2, 0.5, 0.3]])[:outputs]
+    d = np.zeros((outputs, 2))
+    d[0, 0], d[-1, 1] = 0.05, -0.04
+    t = np.linalg.pinv(d + c @ np.linalg.solve(np.eye(4) - a, b))
+    r = np.array([[0.3, 1.0], [0.2, 0.8]])
+    e = e_gain * np.array([[1.0, 0.5, 0.0, 0.0], [0.3, 0.0, 0.0, 0.2], [0.0, 0.0, 1.0, 0.6],
+                           [0.0, 0.2, 0.4, 0.0]])  # fmt: skip
+    return sf.Structure(a, b, c, d, e, t, r, np.array([0.5, -0.2, 0.1])[:outputs])
+
+
+def _periodic(rng: np.random.Generator, n: int, level: float) -> np.ndarray:
+    """One period of a random-phase multisine per input (every line but 0 and n/2), RMS
+    ``level``."""
+    spec = np.zeros((n // 2 + 1, 2), dtype=complex)
+    spec[1 : n // 2] = np.exp(2j * np.pi * rng.random((n // 2 - 1, 2)))
+    u = np.fft.irfft(spec, n=n, axis=0)
+    return np.asarray(level * u / u.std(axis=0))
+
+
+def test_the_kernel_equals_the_reference() -> None:
+    @settings(max_examples=examples(25), deadline=None)
+    @given(st.integers(0, 2**32 - 1), st.integers(1, 40))
+    def check(seed: int, n: int) -> None:
+        rng = np.random.default_rng(seed)
+        order, ni, m, na, k = rng.integers(1, 4), rng.integers(1, 3), rng.integers(1, 3), 2, 2
+        a = 0.5 * rng.standard_normal((order, order)) / np.sqrt(order)
+        mats = [rng.standard_normal(s) for s in
+                [(order, ni), (m, order), (m, ni), (order, na * k), (na, m)]]  # fmt: skip
+        r = np.abs(rng.standard_normal((na, k)))
+        off = rng.standard_normal(m)
+        v = rng.standard_normal((n, ni))
+        want = reference.structure(a.tolist(), *[x.tolist() for x in mats], r.tolist(),
+                                   off.tolist(), v.tolist())  # fmt: skip
+        got = sf.Structure(a, *mats, r, off).run(v, periodic=False)
+        # tol: a few roundings per sample through a contracting state (|a| < 1 on average)
+        np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9)
+
+    check()
+
+
+def test_a_linear_structure_from_rest_is_found_with_its_order() -> None:
+    rng = np.random.default_rng(1)
+    plant = _plant(outputs=3)
+    u = [rng.standard_normal((600, 2)) for _ in range(4)]
+    y = [plant.run(v, periodic=False) for v in u]
+    model = ph.StructureModel(operators=0).fit(u, y, sample_rate=FS)
+    assert model.order_ == 4  # the smallest order that holds the held-out records
+    assert model.orders_[2] > 100 * model.orders_[4]
+    fresh = rng.standard_normal((800, 2))
+    want = plant.run(fresh, periodic=False)
+    err = np.abs(model.predict(fresh) - want).max() / np.ptp(want, axis=0).min()
+    # tol: the impulse response's ridge (1e-9 of the trace) and its 150 lags' truncation
+    # (the tail past them, 0.9^150 / 0.1 = 1.4e-6 of the first lag, biases the poles)
+    assert err < 1e-4
+    assert "order 4 (chosen from" in model.describe()
+    assert "no operators in the loop" in model.describe()
+
+
+def test_periodic_records_in_their_steady_state() -> None:
+    rng = np.random.default_rng(2)
+    plant = _plant(outputs=2)
+    u = [_periodic(rng, 256, 1.0) for _ in range(4)]
+    y = [plant.run(v, periodic=True) for v in u]
+    model = ph.StructureModel(order=4, operators=0).fit(
+        u, y, sample_rate=FS, initial_state="periodic"
+    )
+    fresh = _periodic(rng, 256, 1.0)
+    want = plant.run(fresh, periodic=True)
+    got = model.predict(fresh, state="periodic")
+    # tol: 0 Hz and half the sample rate, which the multisine leaves out, held at the
+    # nearest line's response (off by its change over one line: 2e-5 of the impulse
+    # response at every lag, 7e-6 of the span here); a period's transient is 0.9^256
+    np.testing.assert_allclose(got, want, atol=1e-4 * np.ptp(want))
+    assert model.orders_ == {}
+    assert "order 4 (stated)" in model.describe()
+
+
+@pytest.fixture(scope="module")
+def looped() -> tuple[ph.StructureModel, sf.Structure, np.random.Generator]:
+    """A structure whose modes feel its actuators' hysteresis, at three drive levels."""
+    rng = np.random.default_rng(3)
+    plant = _plant(e_gain=0.08, outputs=2)
+    u = [_periodic(rng, 512, level) for level in (0.5, 1.0, 1.5) for _ in range(4)]
+    y = [plant.run(v, periodic=True) for v in u]
+    model = ph.StructureModel(order=4).fit(u, y, sample_rate=FS, initial_state="periodic")
+    return model, plant, rng
+
+
+def test_hysteresis_in_the_loop_is_kept_where_it_predicts(looped) -> None:  # type: ignore[no-untyped-def]
+    model, plant, rng = looped
+    assert model.operators_ == 6
+    held = model.held_nrmse_
+    assert held["operators"] < 0.5 * held["linear"]
+    linear = ph.StructureModel(order=4, operators=0)
+    u = [_periodic(rng, 512, level) for level in (0.5, 1.0, 1.5) for _ in range(4)]
+    linear.fit(
+        u, [plant.run(v, periodic=True) for v in u], sample_rate=FS, initial_state="periodic"
+    )
+    for level in (0.5, 1.5):  # fresh inputs at the ends of the levels
+        fresh = _periodic(rng, 512, level)
+        want = plant.run(fresh, periodic=True)
+        ours = np.std(model.predict(fresh, state="periodic") - want)
+        lin = np.std(linear.predict(fresh, state="periodic") - want)
+        assert ours < 0.8 * lin  # the operators' widths are a grid, not the plant's own
+    assert "6 play operators per actuator in the loop" in model.describe()
+
+
+def test_operators_that_do_not_predict_are_not_kept() -> None:
+    rng = np.random.default_rng(4)
+    plant = _plant(outputs=2)  # linear: the operators can only fit the noise
+    u = [_periodic(rng, 256, 1.0) for _ in range(4)]  # draws as the other seeds' tests
+    u = [rng.standard_normal((300, 2)) for _ in range(2)]
+    y = [plant.run(v, periodic=False) + 0.05 * rng.standard_normal((300, 2)) for v in u]
+    model = ph.StructureModel(order=4).fit(u, y, sample_rate=FS)
+    assert model.operators_ == 0
+    assert model.held_nrmse_["operators"] > model.held_nrmse_["linear"]
+    assert "did not predict the held-out records better" in model.describe()
+
+
+def test_files_round_trip(looped, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    model, _, rng = looped
+    path = model.save(tmp_path / "mirror.json")
+    again = ph.StructureModel.load(path)
+    v = _periodic(rng, 512, 1.0)
+    np.testing.assert_array_equal(again.predict(v), model.predict(v))
+    assert again.describe() == model.describe()
+    path.write_text(path.read_text().replace('"sample_rate": 1000.0', '"sample_rate": 999.0'))
+    with pytest.raises(ph.errors.ModelFileError, match="checksum"):
+        ph.StructureModel.load(path)
+
+
+def test_the_estimator_contract() -> None:
+    from sklearn.base import clone
+
+    model = ph.StructureModel(order=8, operators=3, widths=(0.01, 0.2))
+    twin = clone(model)
+    assert twin.get_params() == model.get_params()
+    assert twin.set_params(order="auto").order == "auto"
+    with pytest.raises(ph.errors.ParameterError, match="no parameter 'rank'"):
+        twin.set_params(rank=2)
+    with pytest.raises(ph.errors.NotFittedError, match="not fitted"):
+        model.predict(np.zeros((10, 2)))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"order": 0}, "'order' must be a positive integer or 'auto'"),
+        ({"operators": -1}, "'operators' must be an integer in"),
+        ({"widths": (0.5, 0.1)}, "'widths' must be (smallest, largest)"),
+    ],
+)
+def test_bad_parameters_are_named(kwargs, message) -> None:  # type: ignore[no-untyped-def]
+    u = np.zeros((100, 2))
+    with pytest.raises(
+        ph.errors.ParameterError, match=message.replace("(", r"\(").replace(")", r"\)")
+    ):
+        ph.StructureModel(**kwargs).fit(u, u, sample_rate=FS)
+
+
+def test_bad_records_are_named() -> None:
+    rng = np.random.default_rng(5)
+    u = [rng.standard_normal((100, 2)) for _ in range(2)]
+    y = [v.copy() for v in u]
+    y[1][5, 1] = np.nan
+    with pytest.raises(
+        ph.errors.ShapeError, match="record 1: 'y' holds a non-finite value at row 5, column 1"
+    ):
+        ph.StructureModel().fit(u, y, sample_rate=FS)
+    with pytest.raises(ph.errors.ParameterError, match="give the records' time stamps"):
+        ph.StructureModel().fit(u[0], u[0])
+    t = [np.arange(100) / FS, np.arange(100) / (2 * FS)]
+    with pytest.raises(ph.errors.ShapeError, match="sampled at different rates"):
+        ph.StructureModel().fit(u, [v.copy() for v in u], t=t)
+    with pytest.raises(ph.errors.ShapeError, match="different numbers of inputs or outputs"):
+        ph.StructureModel().fit(u, [u[0], u[1][:, :1]], sample_rate=FS)
+    same = rng.standard_normal((256, 1)) @ np.ones((1, 2))  # two inputs that move together
+    with pytest.raises(ph.errors.ParameterError, match="cannot separate the 2 inputs"):
+        ph.StructureModel(order=2).fit([same, same], [same, same], sample_rate=FS,
+                                       initial_state="periodic")  # fmt: skip
+
+
+def test_predict_holds_to_the_fit_rate(looped) -> None:  # type: ignore[no-untyped-def]
+    model, _, _ = looped
+    v = np.zeros((64, 2))
+    with pytest.raises(ph.errors.ShapeError, match="identified at 1000 Hz"):
+        model.predict(v, t=np.arange(64) / 2000.0)
+    with pytest.raises(ph.errors.ShapeError, match="must have 2 columns"):
+        model.predict(np.zeros((64, 3)))
