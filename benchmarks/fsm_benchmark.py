@@ -256,8 +256,10 @@ def main() -> None:
             [r[0] for r in records], [r[1] for r in records], sample_rate=FS,
             initial_state="periodic")  # fmt: skip
         took = time.perf_counter() - t0
-        kind = f"{model.operators_}/actuator in the loop" if model.operators_ else "none"
-        name = f"StructureModel ({operators} asked), order {model.order_}, operators {kind}"
+        kind = ("linear" if not operators else
+                f"{model.operators_} operators/actuator in the loop" if model.operators_ else
+                "operators asked, none kept")  # fmt: skip
+        name = f"StructureModel order {model.order_}, {kind}"
         models[name] = (
             lambda u_v, m=model: np.stack([m.predict(x, state="periodic") for x in u_v]),
             took,

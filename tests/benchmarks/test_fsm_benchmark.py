@@ -78,9 +78,9 @@ def test_the_script_scores_a_generated_mirror(tmp_path: Path) -> None:
     # the library's StructureModel: the mirror's three modes, in state space of order 6,
     # each level weighed by its own spread, so the compromise sits at the middle level
     # (measured 2.16 / 0.96 / 2.20 %); the operators in the loop are not kept (linear mirror)
-    structure = [v for k, v in rows.items() if k.startswith("StructureModel (6 asked), order 6,")]
-    assert len(structure) == 1 and "operators none" in next(k for k in rows if "(6 asked)" in k)
-    ours = structure[0]
+    structure = [v for k, v in rows.items() if k.startswith("StructureModel order 6, ")]
+    assert len(structure) == 2 and "StructureModel order 6, operators asked, none kept" in rows
+    ours = rows["StructureModel order 6, operators asked, none kept"]
     assert max(ours) < max(linear) and ours[1] < min(ours[0], ours[2])
     described = [line for line in out.splitlines() if "StructureModel: 3 inputs" in line]
     assert len(described) == 2

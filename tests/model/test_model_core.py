@@ -429,9 +429,9 @@ def test_an_active_model_built_without_its_integral_has_no_leakage() -> None:
 
 def test_import_loads_no_heavy_library() -> None:
     """``import piezohyst`` stays light: numba loads when a model first runs, the file,
-    plotting, cluster and CLI libraries when a feature needs them."""
+    plotting, cluster, CLI and state-space libraries when a feature needs them."""
     heavy = ["numba", "scipy", "matplotlib", "dask", "pyarrow", "pint", "h5py", "nptdms",
-             "click", "rich"]  # fmt: skip
+             "click", "rich", "control"]  # fmt: skip
     probe = f"import sys, piezohyst; print([m for m in {heavy!r} if m in sys.modules])"
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
