@@ -199,6 +199,8 @@ def test_bad_records_are_named() -> None:
         ph.errors.ShapeError, match="record 1: 'y' holds a non-finite value at row 5, column 1"
     ):
         ph.StructureModel().fit(u, y, sample_rate=FS)
+    with pytest.raises(ph.errors.ParameterError, match="give two or more periodic records"):
+        ph.StructureModel().fit(u[0], y[0], sample_rate=FS, initial_state="periodic")
     with pytest.raises(ph.errors.ParameterError, match="give the records' time stamps"):
         ph.StructureModel().fit(u[0], u[0])
     t = [np.arange(100) / FS, np.arange(100) / (2 * FS)]

@@ -39,7 +39,11 @@ from ._support import (
 @click.command()
 @click.argument("data", type=EXISTING)
 @_model_options(
-    "Model to identify (auto: each scored inside the record, the best kept).", auto=True
+    "Model to identify (auto: each scored inside the record, the best kept; structure: "
+    "several --input and --output columns, the structure's coupled dynamics with each "
+    "actuator's hysteresis in the loop).",
+    auto=True,
+    structure=True,
 )
 @terms_options
 @click.option(
@@ -102,6 +106,11 @@ def fit(
     """
     from ..workflows import fit_file
 
+    if model_name == "structure":
+        chosen = click.get_current_context().get_parameter_source("operators")
+        loop = 6 if chosen is click.core.ParameterSource.DEFAULT else operators
+        _fit_structure(ctx, data, loop, initial_state, data_spec, out, force)
+        return
     if "," in (data_spec.input_column or "") + (data_spec.output_column or ""):
         given = {"--growth": growth != "default", "--creep": bool(creep),
                  "--relaxation": relaxation is not None,
@@ -179,6 +188,27 @@ def fit(
     if ctx.verbose:
         for label, text in model.operator_.describe(model.input_unit, model.output_unit)[1:]:
             ctx.result(f"{label} {text}")
+    ctx.info(f"saved {out}")
+
+
+def _fit_structure(
+    ctx: Context, data: Path, operators: int, initial_state: str, data_spec: DataSpec,
+    out: Path, force: bool,
+) -> None:  # fmt: skip
+    """``fit --model structure --input vx,vy --output x,y``: :func:`fit_structure_file`."""
+    from ..workflows.stage_files import fit_structure_file, stage_columns
+
+    structure = _run(
+        ctx,
+        lambda: fit_structure_file(
+            data, out,
+            inputs=stage_columns(data_spec.input_column, "--input"),
+            outputs=stage_columns(data_spec.output_column, "--output"),
+            operators=operators, initial_state=initial_state, data_spec=data_spec,
+            force=force,
+        ),
+    )  # fmt: skip
+    ctx.result(structure.describe())
     ctx.info(f"saved {out}")
 
 
@@ -326,7 +356,7 @@ def predict(
     from ..workflows.stage_files import is_stage_file
 
     if is_stage_file(model):
-        _predict_stage(ctx, model, data, data_spec, out, force)
+        _predict_stage(ctx, model, data, data_spec, out, force, initial_state)
         return
 
     with rows_progress(ctx, f"reading {data.name}", data) as progress:
@@ -352,8 +382,9 @@ def predict(
 
 
 def _predict_stage(
-    ctx: Context, model: Path, data: Path, data_spec: DataSpec, out: Path, force: bool
-) -> None:
+    ctx: Context, model: Path, data: Path, data_spec: DataSpec, out: Path, force: bool,
+    initial_state: str = "rest",
+) -> None:  # fmt: skip
     """``predict stage.json --input vx,vy [--output x,y]``: :func:`predict_stage_file`."""
     from ..workflows.stage_files import predict_stage_file, stage_columns
 
@@ -364,7 +395,7 @@ def _predict_stage(
             model, data, out,
             inputs=stage_columns(data_spec.input_column, "--input"),
             outputs=None if outputs in (None, "charge") else stage_columns(outputs, "--output"),
-            data_spec=data_spec, force=force,
+            data_spec=data_spec, force=force, initial_state=initial_state,
         ),
     )  # fmt: skip
     if run.nrmse:

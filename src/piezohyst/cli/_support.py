@@ -595,16 +595,18 @@ def initial_state_option(choices: list[str], help: str) -> Decorator:
 
 
 def _model_options(
-    model_help: str, auto: bool = False
+    model_help: str, auto: bool = False, structure: bool = False
 ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    """--model and --operators, shared by fit and fit-many (``auto``: choose one)."""
+    """--model and --operators, shared by fit and fit-many (``auto``: choose one;
+    ``structure``: a structure's coupled dynamics, for several columns)."""
 
     def decorate(fn: Callable[..., Any]) -> Callable[..., Any]:
         fn = operators_option()(fn)
+        extra = [*(["auto"] if auto else []), *(["structure"] if structure else [])]
         return click.option(
             "--model",
             "model_name",
-            type=click.Choice([*model_names(), *(["auto"] if auto else [])]),
+            type=click.Choice([*model_names(), *extra]),
             default="active-pi",
             show_default=True,
             help=model_help,

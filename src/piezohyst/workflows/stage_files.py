@@ -1,6 +1,8 @@
 """``piezohyst fit``, ``predict`` and ``compensate`` with several input and output columns: a
 coupled stage identified from one file (:class:`~piezohyst.CoupledModel`), saved as a coupled
-model file, run on another record, and compensated (:class:`~piezohyst.CoupledCompensator`)."""
+model file, run on another record, and compensated (:class:`~piezohyst.CoupledCompensator`);
+or a structure's coupled dynamics (:class:`~piezohyst.StructureModel`, ``fit --model
+structure``), which predicts and is not inverted yet."""
 
 from __future__ import annotations
 
@@ -26,6 +28,7 @@ from ..errors import DataFileError, ParameterError
 from ..io import DataSpec, read_table, write_table
 from ..model.coupled import COUPLED_FORMAT, CoupledModel
 from ..model.persistence import model_class
+from ..model.structure import STRUCTURE_FORMAT, StructureModel
 from ._base import PathLike, guard_outputs
 
 __all__ = [
@@ -33,6 +36,7 @@ __all__ = [
     "compensate_stage_file",
     "export_stage_file",
     "fit_stage_file",
+    "fit_structure_file",
     "is_stage_file",
     "predict_stage_file",
     "stage_columns",
@@ -64,7 +68,8 @@ class StageRun:
 
 
 def is_stage_file(path: PathLike) -> bool:
-    """True for a coupled model file (``CoupledModel.save``), read only as far as its format.
+    """True for a coupled model file (``CoupledModel.save``) or a structure model file
+    (``StructureModel.save``), read only as far as its format.
 
     Parameters
     ----------
@@ -80,15 +85,23 @@ def is_stage_file(path: PathLike) -> bool:
             head = fh.read(4096)
     except (OSError, UnicodeDecodeError):
         return False
-    return f'"{COUPLED_FORMAT}"' in head
+    return f'"{COUPLED_FORMAT}"' in head or f'"{STRUCTURE_FORMAT}"' in head
+
+
+def _is_structure(path: PathLike) -> bool:
+    with open(path, encoding="utf-8") as fh:
+        return f'"{STRUCTURE_FORMAT}"' in fh.read(4096)
 
 
 def _read_stage(
     data: PathLike, inputs: Sequence[str], outputs: Sequence[str] | None, spec: DataSpec
 ) -> tuple[FloatArray, FloatArray, FloatArray | None, str | None]:
-    """The pairs' columns on one time axis: t, U (samples x inputs), Y or None, Y's unit."""
-    outs: list[str | None] = list(outputs) if outputs is not None else [None] * len(inputs)
-    pairs = list(zip(inputs, outs, strict=True))
+    """The columns on one time axis: t, U (samples x inputs), Y or None, Y's unit. Read in
+    pairs, as one channel's are (an output beyond the inputs paired with the first input)."""
+    outs: list[str | None] = list(outputs) if outputs is not None else []
+    count = max(len(inputs), len(outs))
+    outs += [None] * (count - len(outs))
+    pairs = [(inputs[k] if k < len(inputs) else inputs[0], outs[k]) for k in range(count)]
     recs = [
         dataclasses.replace(spec, input_column=i, output_column=o).read(
             data, output_required=o is not None
@@ -101,7 +114,7 @@ def _read_stage(
         if rec.t[rec.window].shape != t.shape or not np.array_equal(rec.t[rec.window], t):
             msg = f"{data}: the columns' time axes differ (rows dropped from one, not another?)"
             raise DataFileError(msg)
-    u = np.column_stack([rec.x[rec.window] for rec in recs])
+    u = np.column_stack([rec.x[rec.window] for rec in recs[: len(inputs)]])
     if outputs is None:
         return t, u, None, None
     y = np.column_stack([rec.y[rec.window] for rec in recs if rec.y is not None])
@@ -109,6 +122,13 @@ def _read_stage(
 
 
 def _stage(model_path: PathLike) -> CoupledModel:
+    if _is_structure(model_path):
+        msg = (
+            f"{model_path} is a structure model (StructureModel): it predicts and simulates "
+            "the structure, and is not inverted yet; to compensate, export or report a "
+            "compensation, fit a stage (fit --input vx,vy --output x,y: a coupled model)"
+        )
+        raise ParameterError(msg)
     model = CoupledModel.load(model_path)
     if not isinstance(model, CoupledModel):  # pragma: no cover - load returns its class
         msg = f"{model_path}: not a coupled model file"
@@ -125,13 +145,16 @@ def predict_stage_file(
     outputs: Sequence[str] | None = None,
     data_spec: DataSpec | None = None,
     force: bool = False,
+    initial_state: str = "rest",
 ) -> StageRun:
-    """Run a coupled model on a record's actuator voltages; write each axis's prediction.
+    """Run a coupled or structure model on a record's actuator voltages; write each axis's
+    prediction.
 
     Parameters
     ----------
     model_path : str or os.PathLike
-        A coupled model file (``piezohyst fit --input vx,vy --output x,y``).
+        A coupled model file (``piezohyst fit --input vx,vy --output x,y``) or a structure
+        model file (``--model structure``).
     data, out : str or os.PathLike
         The record, and the file to write: ``time``, ``predicted_<axis>`` per axis and,
         where the record has them, ``measured_<axis>``.
@@ -143,22 +166,33 @@ def predict_stage_file(
         Time column, rate, window, units, as for one channel.
     force : bool
         Replace an existing ``out`` that piezohyst did not write.
+    initial_state : {"rest", "periodic", "model"}
+        A structure model's start: at rest ("model" too), or the record as one period of a
+        steady state; a coupled model starts as its channels do.
 
     Returns
     -------
     StageRun
     """
     guard_outputs([out], [model_path, data], force=force)
-    model = _stage(model_path)
-    n = len(model.channels_)
-    if len(inputs) != n or (outputs is not None and len(outputs) != model.coupling_.shape[0]):
+    model: CoupledModel | StructureModel
+    if _is_structure(model_path):
+        model = StructureModel.load(model_path)
+        n, m = model.n_inputs_, model.n_outputs_
+    else:
+        model = _stage(model_path)
+        n, m = len(model.channels_), model.coupling_.shape[0]
+    if len(inputs) != n or (outputs is not None and len(outputs) != m):
         msg = (
-            f"{model_path} is a stage of {n} actuators and {model.coupling_.shape[0]} axes: "
+            f"{model_path} is a stage of {n} actuators and {m} axes: "
             f"got {len(inputs)} input and {len(outputs or ())} output columns"
         )
         raise ParameterError(msg)
     t, u, y, unit = _read_stage(data, inputs, outputs, data_spec or DataSpec())
-    pred = model.predict(u, t=t)
+    if isinstance(model, StructureModel):
+        pred = model.predict(u, t=t, state="periodic" if initial_state == "periodic" else "rest")
+    else:
+        pred = model.predict(u, t=t)
     names = list(outputs) if outputs is not None else [f"axis{i}" for i in range(pred.shape[1])]
     columns: dict[str, FloatArray] = {"time": t}
     units: dict[str, str | None] = {"time": "s"}
@@ -377,6 +411,57 @@ def fit_stage_file(
     if out is not None:
         stage.save(out)
     return stage
+
+
+def fit_structure_file(
+    data: PathLike,
+    out: PathLike | None = None,
+    *,
+    inputs: Sequence[str],
+    outputs: Sequence[str],
+    operators: int = 6,
+    initial_state: str = "rest",
+    data_spec: DataSpec | None = None,
+    force: bool = False,
+) -> StructureModel:
+    """Fit a structure's coupled dynamics (:class:`~piezohyst.StructureModel`, the order
+    chosen on the record's last 30 %) to a file and save it.
+
+    Parameters
+    ----------
+    data : str or os.PathLike
+        The recording (uniformly sampled).
+    out : str or os.PathLike, optional
+        Where to save the structure model (JSON).
+    inputs, outputs : sequence of str
+        The actuators' voltage columns and the outputs' columns (any number of outputs).
+    operators : int
+        Play operators per actuator in the loop (0: the linear dynamics alone).
+    initial_state : {"rest", "periodic"}
+        The record starts at rest, or is one period of a periodic steady state.
+    data_spec : DataSpec, optional
+        Time column, rate, group, window, units and scales.
+    force : bool
+        Replace an existing ``out`` that piezohyst did not write.
+
+    Returns
+    -------
+    StructureModel
+    """
+    if len(inputs) < 2:
+        msg = (
+            "a structure's dynamics couple several actuators: name two or more --input "
+            "columns (one actuator's mode: --output-dynamics second-order)"
+        )
+        raise ParameterError(msg)
+    if out is not None:
+        guard_outputs([out], [data], force=force)
+    t, u, y, _ = _read_stage(data, inputs, outputs, data_spec or DataSpec())
+    assert y is not None  # outputs given: read or refused
+    model = StructureModel(operators=operators).fit(u, y, t=t, initial_state=initial_state)
+    if out is not None:
+        model.save(out)
+    return model
 
 
 def export_stage_file(
