@@ -221,3 +221,67 @@ def test_predict_holds_to_the_fit_rate(looped) -> None:  # type: ignore[no-untyp
         model.predict(v, t=np.arange(64) / 2000.0)
     with pytest.raises(ph.errors.ShapeError, match="must have 2 columns"):
         model.predict(np.zeros((64, 3)))
+
+
+def test_the_adjoint_gradient_equals_finite_differences() -> None:
+    """The output-error refinement's gradient (reverse mode through the play operators)
+    against central differences of the same loss, every matrix, from rest."""
+    from piezohyst._kernels import structure as S
+
+    rng = np.random.default_rng(6)
+    n, ni, m, na, nk, length = 4, 2, 2, 2, 3, 300
+    a = 0.3 * rng.standard_normal((n, n))
+    mats = [rng.standard_normal(s) for s in [(n, ni), (m, n), (m, ni)]]
+    e = 0.3 * rng.standard_normal((n, na * nk))
+    t, r = rng.standard_normal((na, m)), np.abs(rng.standard_normal((na, nk)))
+    off, v, y = (
+        rng.standard_normal(m),
+        rng.standard_normal((length, ni)),
+        rng.standard_normal((length, m)),
+    )
+
+    def run(p: list[np.ndarray]) -> tuple[float, list[np.ndarray]]:
+        aa, b, c, d, ee = (np.ascontiguousarray(x) for x in p)
+        x, z = np.zeros(n), np.repeat((t @ off)[:, None], nk, axis=1)
+        out, xs, ps = np.empty((length, m)), np.empty((length, n)), np.empty((length, na * nk))
+        moved = np.zeros((length, na * nk), dtype=np.bool_)
+        S.structure_trace(aa, b, c, d, ee, t, r, off, x, z, v, out, xs, ps, moved)
+        grads = [np.zeros_like(q) for q in (aa, b, c, d, ee)] + [np.zeros(m)]
+        S.structure_adjoint(
+            aa, c, ee, t, nk, xs, ps, moved, v, np.ascontiguousarray(out - y), *grads
+        )
+        return 0.5 * float(np.sum((out - y) ** 2)), grads
+
+    params = [a, *mats, e]
+    _, grads = run(params)
+    for k, p in enumerate(params):
+        for idx in [tuple(rng.integers(0, s) for s in p.shape) for _ in range(3)]:
+            up, down = [q.copy() for q in params], [q.copy() for q in params]
+            up[k][idx] += 1e-6
+            down[k][idx] -= 1e-6
+            fd = (run(up)[0] - run(down)[0]) / 2e-6
+            # tol: central differences, step 1e-6: truncation ~1e-12 of the loss's curvature,
+            # rounding ~1e-10 / 1e-6 of a loss near 1e3; no operator switches within the step
+            assert abs(grads[k][idx] - fd) <= 1e-5 * max(1.0, abs(fd))
+
+
+def test_the_output_error_refinement_lowers_the_error(looped) -> None:  # type: ignore[no-untyped-def]
+    model, plant, rng = looped
+    ref = model.refinement_
+    assert ref is not None and ref.kept and ref.after < ref.before and ref.iterations > 0
+    assert "refined by output error" in model.describe()
+    raw = ph.StructureModel(order=4, refine=False)
+    u = [_periodic(rng, 512, level) for level in (0.5, 1.0, 1.5) for _ in range(4)]
+    y = [plant.run(v, periodic=True) for v in u]
+    raw.fit(u, y, sample_rate=FS, initial_state="periodic")
+    assert raw.refinement_ is None
+    fresh = [_periodic(rng, 512, level) for level in (0.5, 1.0, 1.5)]
+    want = [plant.run(v, periodic=True) for v in fresh]
+    err = [
+        sum(
+            float(np.std(m.predict(v, state="periodic") - w))
+            for v, w in zip(fresh, want, strict=True)
+        )
+        for m in (model, raw)
+    ]
+    assert err[0] < err[1]  # on inputs neither saw

@@ -61,3 +61,110 @@ def structure_run(a, b, c, d, e, t, r, off, x, z, v, out):  # type: ignore[no-un
             xn[s] = acc
         for s in range(n):
             x[s] = xn[s]
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def structure_trace(a, b, c, d, e, t, r, off, x, z, v, out, xs, ps, moved):  # type: ignore[no-untyped-def]
+    """:func:`structure_run` keeping what its adjoint needs: the state before each sample
+    ``xs`` (N, n), the operators' lags ``ps`` (N, actuators * K) and whether each operator
+    moved ``moved`` (N, actuators * K), all written."""
+    n = a.shape[0]
+    m = c.shape[0]
+    ni = b.shape[1]
+    na = r.shape[0]
+    nk = r.shape[1]
+    xn = np.empty(n)
+    for k in range(v.shape[0]):
+        for s in range(n):
+            xs[k, s] = x[s]
+        for o in range(m):
+            acc = off[o]
+            for s in range(n):
+                acc += c[o, s] * x[s]
+            for i in range(ni):
+                acc += d[o, i] * v[k, i]
+            out[k, o] = acc
+        for q in range(na):
+            sq = 0.0
+            for o in range(m):
+                sq += t[q, o] * out[k, o]
+            for j in range(nk):
+                old = z[q, j]
+                zj = min(max(old, sq - r[q, j]), sq + r[q, j])
+                z[q, j] = zj
+                moved[k, q * nk + j] = zj != old
+                ps[k, q * nk + j] = zj - sq
+        for s in range(n):
+            acc = 0.0
+            for u in range(n):
+                acc += a[s, u] * x[u]
+            for i in range(ni):
+                acc += b[s, i] * v[k, i]
+            for f in range(na * nk):
+                acc += e[s, f] * ps[k, f]
+            xn[s] = acc
+        for s in range(n):
+            x[s] = xn[s]
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def structure_adjoint(a, c, e, t, nk, xs, ps, moved, v, gy, ga, gb, gc, gd, ge, goff):  # type: ignore[no-untyped-def]
+    """The gradient of ``sum_k gy[k] . out[k]``-weighted losses through a traced run: given
+    ``gy`` (N, outputs), the loss's derivative by each output, accumulate its derivatives by
+    ``a``, ``b``, ``c``, ``d``, ``e`` and ``off`` into ``ga`` ... ``goff`` (reverse mode over
+    the samples; the run's start taken as given). ``nk`` operators per actuator."""
+    n = a.shape[0]
+    m = c.shape[0]
+    ni = v.shape[1]
+    nf = ps.shape[1]
+    na = t.shape[0]
+    lam = np.zeros(n)  # the loss's derivative by the state after the sample
+    mu = np.zeros(nf)  # ... by each operator's state, through the samples after it
+    lam_new = np.empty(n)
+    gp = np.empty(nf)
+    gs = np.empty(na)
+    gyk = np.empty(m)
+    for k in range(v.shape[0] - 1, -1, -1):
+        for s in range(n):
+            ls = lam[s]
+            for u in range(n):
+                ga[s, u] += ls * xs[k, u]
+            for i in range(ni):
+                gb[s, i] += ls * v[k, i]
+            for f in range(nf):
+                ge[s, f] += ls * ps[k, f]
+        for f in range(nf):
+            acc = 0.0
+            for s in range(n):
+                acc += e[s, f] * lam[s]
+            gp[f] = acc
+        for q in range(na):
+            gs[q] = 0.0
+            for j in range(nk):
+                f = q * nk + j
+                muz = mu[f] + gp[f]
+                gs[q] -= gp[f]  # the lag is the operator's state less the stroke
+                if moved[k, f]:  # dragged: its state follows the stroke
+                    gs[q] += muz
+                    mu[f] = 0.0
+                else:
+                    mu[f] = muz
+        for o in range(m):
+            acc = gy[k, o]
+            for q in range(na):
+                acc += t[q, o] * gs[q]
+            gyk[o] = acc
+            goff[o] += acc
+            for i in range(ni):
+                gd[o, i] += acc * v[k, i]
+            for s in range(n):
+                gc[o, s] += acc * xs[k, s]
+        for s in range(n):
+            acc = 0.0
+            for u in range(n):
+                acc += a[u, s] * lam[u]
+            for o in range(m):
+                acc += c[o, s] * gyk[o]
+            lam_new[s] = acc
+        for s in range(n):
+            lam[s] = lam_new[s]

@@ -13,6 +13,8 @@
    operators (on its stroke, the outputs mapped back by the inverse of the static gain)
    act on the next state. The outputs are linear in all of them once the operators read the
    measured outputs (equation error); the regressors are each input filtered by each mode.
+4. **Output error**: all of them, the poles too, refined from there on the simulated
+   outputs' error, its gradient by the adjoint of the recursion (:func:`refine`).
 
 Plain functions over arrays; the class checks inputs and keeps the result.
 """
@@ -35,6 +37,9 @@ EXCITED = 1e-6
 LINE_COND = 1e8
 #: Periodic records that excite less than this share of the band are warned about
 BAND = 0.8
+#: The output-error refinement's iterations, at most (L-BFGS; it stops earlier where the
+#: error no longer falls)
+REFINE_ITERATIONS = 2000
 #: Eigenvalues at or beyond this modulus are reflected into the unit circle (stable)
 STABLE = 0.9999
 
@@ -326,3 +331,79 @@ def nrmse(structure: Structure, records: list[Record], tail: float = 0.0) -> flo
         scores.append(np.where(sd > 0, rms / np.where(sd > 0, sd, 1.0), rms))
     value = 100.0 * float(np.mean(scores))
     return value if np.isfinite(value) else float("inf")
+
+
+@dataclass(frozen=True)
+class Refinement:
+    """What the output-error refinement did: the weighted squared error before and after,
+    the iterations, and whether the result was kept (stable and lower)."""
+
+    before: float
+    after: float
+    iterations: int
+    kept: bool
+
+
+def refine(
+    records: list[Record], structure: Structure, maxiter: int = REFINE_ITERATIONS
+) -> tuple[Structure, Refinement]:
+    """Every matrix and the offsets refined by **output error**: the squared error of the
+    simulated outputs (each record and output weighted by the inverse of its variance), its
+    gradient by the adjoint of the recursion (reverse mode through the play operators),
+    minimised by L-BFGS from the least squares' solution. The equation error the least
+    squares minimise reads the measured outputs in the loop, and is biased where the loop
+    matters; this is the structure's own error. Kept only if stable and lower."""
+    from scipy.optimize import minimize
+
+    st = structure
+    blocks = [st.a, st.b, st.c, st.d, st.e, st.off]
+    shapes = [blk.shape for blk in blocks]
+    cuts = np.cumsum([blk.size for blk in blocks])[:-1]
+    theta0 = np.concatenate([blk.ravel() for blk in blocks])
+    # each block in units of 1 % of its mean size: L-BFGS's first step has length 1, which
+    # must not move the loop far (a unit step on the matrices themselves can make it run away)
+    scale = np.concatenate(
+        [np.full(blk.size, 0.01 * np.mean(np.abs(blk)) + 1e-300 if blk.size else 1.0)
+         for blk in blocks]
+    )  # fmt: skip
+    nk = st.r.shape[1]
+    weights = [
+        1.0 / (np.maximum(np.var(rec.y, axis=0), 1e-300) * rec.y.shape[0] * len(records))
+        for rec in records
+    ]
+
+    def unpack(delta: np.ndarray) -> list[np.ndarray]:
+        parts = np.split(theta0 + scale * delta, cuts)
+        return [np.ascontiguousarray(p.reshape(s)) for p, s in zip(parts, shapes, strict=True)]
+
+    def loss(delta: np.ndarray) -> tuple[float, np.ndarray]:
+        a, b, c, d, e, off = unpack(delta)
+        grads = [np.zeros(s) for s in shapes]
+        total = 0.0
+        for rec, w in zip(records, weights, strict=True):
+            n_s = rec.u.shape[0]
+            x = np.zeros(st.order)
+            z = np.repeat((st.t @ off)[:, None], nk, axis=1)
+            out = np.empty((n_s, c.shape[0]))
+            if rec.periodic:  # the period before, to its steady state
+                S.structure_run(a, b, c, d, e, st.t, st.r, off, x, z, rec.u, out)
+            xs, ps = np.empty((n_s, st.order)), np.empty((n_s, st.r.size))
+            moved = np.zeros((n_s, st.r.size), dtype=np.bool_)
+            S.structure_trace(a, b, c, d, e, st.t, st.r, off, x, z, rec.u, out, xs, ps, moved)
+            res = out - rec.y
+            if not np.all(np.isfinite(res)) or np.max(np.abs(res)) > 1e6 * np.ptp(rec.y):
+                return 1e30, np.zeros_like(delta)  # the loop ran away: a step too far
+            total += 0.5 * float(np.sum(w * res**2))
+            gy = np.ascontiguousarray(w * res)
+            S.structure_adjoint(a, c, e, st.t, nk, xs, ps, moved, rec.u, gy, *grads)
+        return total, np.concatenate([g.ravel() for g in grads]) * scale
+
+    before = loss(np.zeros_like(theta0))[0]
+    opt = minimize(loss, np.zeros_like(theta0), jac=True, method="L-BFGS-B",
+                   options={"maxiter": maxiter, "gtol": 0.0})  # fmt: skip
+    a, b, c, d, e, off = unpack(opt.x)
+    refined = Structure(a, b, c, d, e, st.t, st.r, off)
+    stable = bool(np.max(np.abs(np.linalg.eigvals(refined.a))) < 1.0)
+    kept = stable and bool(opt.fun < before)
+    info = Refinement(before, float(opt.fun), int(opt.nit), kept)
+    return (refined if kept else st), info
