@@ -167,8 +167,11 @@ def test_the_estimator_contract() -> None:
     model = ph.StructureModel(order=8, operators=3, widths=(0.01, 0.2))
     twin = clone(model)
     assert twin.get_params() == model.get_params()
+    assert repr(model) == "StructureModel(order=8, operators=3, widths=(0.01, 0.2))"
     assert twin.set_params(order="auto").order == "auto"
-    with pytest.raises(ph.errors.ParameterError, match="no parameter 'rank'"):
+    with pytest.raises(
+        ph.errors.ParameterError, match="Invalid parameter 'rank' for StructureModel"
+    ):
         twin.set_params(rank=2)
     with pytest.raises(ph.errors.NotFittedError, match="not fitted"):
         model.predict(np.zeros((10, 2)))

@@ -12,6 +12,44 @@ from numba import njit
 from .play import FASTMATH
 
 
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def read_out(c, d, off, x, v, k, out):  # type: ignore[no-untyped-def]
+    """``out[k] = c x + d v[k] + off``."""
+    for o in range(c.shape[0]):
+        acc = off[o]
+        for s in range(x.shape[0]):
+            acc += c[o, s] * x[s]
+        for i in range(v.shape[1]):
+            acc += d[o, i] * v[k, i]
+        out[k, o] = acc
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def advance(a, b, e, x, v, k, p, xn):  # type: ignore[no-untyped-def]
+    """``x <- a x + b v[k] + e p`` (``xn`` the scratch)."""
+    n = x.shape[0]
+    for s in range(n):
+        acc = 0.0
+        for u in range(n):
+            acc += a[s, u] * x[u]
+        for i in range(v.shape[1]):
+            acc += b[s, i] * v[k, i]
+        for f in range(p.shape[0]):
+            acc += e[s, f] * p[f]
+        xn[s] = acc
+    for s in range(n):
+        x[s] = xn[s]
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def stroke(t, out, k, q):  # type: ignore[no-untyped-def]
+    """Actuator ``q``'s stroke ``t[q] . out[k]``."""
+    sq = 0.0
+    for o in range(out.shape[1]):
+        sq += t[q, o] * out[k, o]
+    return sq
+
+
 @njit(cache=True, fastmath=FASTMATH)
 def structure_run(a, b, c, d, e, t, r, off, x, z, v, out):  # type: ignore[no-untyped-def]
     """Run the structure over the inputs ``v`` (N, inputs), sample by sample::
@@ -27,40 +65,19 @@ def structure_run(a, b, c, d, e, t, r, off, x, z, v, out):  # type: ignore[no-un
     out (N, outputs), written. The operators read this sample's output and act on the next
     state: no algebraic loop.
     """
-    n = a.shape[0]
-    m = c.shape[0]
-    ni = b.shape[1]
     na = r.shape[0]
     nk = r.shape[1]
-    xn = np.empty(n)
+    xn = np.empty(a.shape[0])
     p = np.empty(na * nk)
     for k in range(v.shape[0]):
-        for o in range(m):
-            acc = off[o]
-            for s in range(n):
-                acc += c[o, s] * x[s]
-            for i in range(ni):
-                acc += d[o, i] * v[k, i]
-            out[k, o] = acc
+        read_out(c, d, off, x, v, k, out)
         for q in range(na):
-            sq = 0.0
-            for o in range(m):
-                sq += t[q, o] * out[k, o]
+            sq = stroke(t, out, k, q)
             for j in range(nk):
                 zj = min(max(z[q, j], sq - r[q, j]), sq + r[q, j])
                 z[q, j] = zj
                 p[q * nk + j] = zj - sq
-        for s in range(n):
-            acc = 0.0
-            for u in range(n):
-                acc += a[s, u] * x[u]
-            for i in range(ni):
-                acc += b[s, i] * v[k, i]
-            for f in range(na * nk):
-                acc += e[s, f] * p[f]
-            xn[s] = acc
-        for s in range(n):
-            x[s] = xn[s]
+        advance(a, b, e, x, v, k, p, xn)
 
 
 @njit(cache=True, fastmath=FASTMATH)
@@ -68,43 +85,22 @@ def structure_trace(a, b, c, d, e, t, r, off, x, z, v, out, xs, ps, moved):  # t
     """:func:`structure_run` keeping what its adjoint needs: the state before each sample
     ``xs`` (N, n), the operators' lags ``ps`` (N, actuators * K) and whether each operator
     moved ``moved`` (N, actuators * K), all written."""
-    n = a.shape[0]
-    m = c.shape[0]
-    ni = b.shape[1]
     na = r.shape[0]
     nk = r.shape[1]
-    xn = np.empty(n)
+    xn = np.empty(a.shape[0])
     for k in range(v.shape[0]):
-        for s in range(n):
+        for s in range(x.shape[0]):
             xs[k, s] = x[s]
-        for o in range(m):
-            acc = off[o]
-            for s in range(n):
-                acc += c[o, s] * x[s]
-            for i in range(ni):
-                acc += d[o, i] * v[k, i]
-            out[k, o] = acc
+        read_out(c, d, off, x, v, k, out)
         for q in range(na):
-            sq = 0.0
-            for o in range(m):
-                sq += t[q, o] * out[k, o]
+            sq = stroke(t, out, k, q)
             for j in range(nk):
                 old = z[q, j]
                 zj = min(max(old, sq - r[q, j]), sq + r[q, j])
                 z[q, j] = zj
                 moved[k, q * nk + j] = zj != old
                 ps[k, q * nk + j] = zj - sq
-        for s in range(n):
-            acc = 0.0
-            for u in range(n):
-                acc += a[s, u] * x[u]
-            for i in range(ni):
-                acc += b[s, i] * v[k, i]
-            for f in range(na * nk):
-                acc += e[s, f] * ps[k, f]
-            xn[s] = acc
-        for s in range(n):
-            x[s] = xn[s]
+        advance(a, b, e, x, v, k, ps[k], xn)
 
 
 @njit(cache=True, fastmath=FASTMATH)

@@ -42,8 +42,9 @@ from ..errors import (
     warn,
 )
 from ..io import JsonFile
+from .estimator import Params
 from .model import HysteresisModel, is_model
-from .persistence import checksum, model_from_dict, model_to_dict
+from .persistence import checked, model_from_dict, model_to_dict, signed
 from .presets import ClassicalPI
 
 __all__ = ["COUPLED_FORMAT", "TOGETHER", "CoupledModel"]
@@ -56,12 +57,15 @@ COUPLED_FORMAT = "piezohyst-coupled-model"
 COUPLED_VERSION = 1
 
 
-def _columns(a: ArrayLike, name: str, rows: int = 1) -> FloatArray:
+def columns(a: ArrayLike, name: str, rows: int = 1) -> FloatArray:
+    """``a`` as (samples, channels) of at least ``rows`` rows, every value finite, or a
+    one-line error naming the row and column (also :mod:`~piezohyst.model.structure`'s)."""
     x = np.asarray(a, dtype=np.float64)
     if x.ndim == 1:
         x = x[:, None]
     if x.ndim != 2 or x.shape[0] < rows:
-        msg = f"'{name}' must be (samples, channels). Got shape {x.shape}."
+        least = f" with {rows} samples or more" if rows > 1 else ""
+        msg = f"'{name}' must be (samples, channels){least}. Got shape {x.shape}."
         raise ShapeError(msg)
     if not np.all(np.isfinite(x)):
         row, col = np.argwhere(~np.isfinite(x))[0]
@@ -92,7 +96,7 @@ def _warn_together(u: FloatArray) -> None:
                 )
 
 
-class CoupledModel(JsonFile):
+class CoupledModel(JsonFile, Params):
     """A hysteresis model per input and the static coupling between the outputs.
 
     Parameters
@@ -135,40 +139,6 @@ class CoupledModel(JsonFile):
     ) -> None:
         self.channel = channel
         self.rounds = rounds
-
-    # ------------------------------------------------------------ the contract
-    def get_params(self, deep: bool = True) -> dict[str, Any]:
-        """The constructor arguments (scikit-learn's contract).
-
-        Parameters
-        ----------
-        deep : bool, default True
-            Accepted for scikit-learn.
-
-        Returns
-        -------
-        dict
-        """
-        return {"channel": self.channel, "rounds": self.rounds}
-
-    def set_params(self, **params: Any) -> Self:
-        """Set constructor arguments (scikit-learn's contract).
-
-        Parameters
-        ----------
-        **params
-            ``channel``, ``rounds``.
-
-        Returns
-        -------
-        CoupledModel
-        """
-        for name, value in params.items():
-            if name not in ("channel", "rounds"):
-                msg = f"CoupledModel has no parameter {name!r} (channel, rounds)."
-                raise ParameterError(msg)
-            setattr(self, name, value)
-        return self
 
     def _templates(self, n: int) -> list[HysteresisModel]:
         """One template per input, checked."""
@@ -214,7 +184,7 @@ class CoupledModel(JsonFile):
             Not (samples, channels), a non-finite value (named by row and column), or a
             different number of outputs than inputs.
         """
-        us, ys = _columns(u, "u", 2), _columns(y, "y", 2)
+        us, ys = columns(u, "u", 2), columns(y, "y", 2)
         if us.shape[0] != ys.shape[0]:
             msg = f"'u' and 'y' must have as many rows. Got {us.shape[0]} and {ys.shape[0]}."
             raise ShapeError(msg)
@@ -281,7 +251,7 @@ class CoupledModel(JsonFile):
         ndarray, shape (N, inputs)
         """
         self._check_fitted()
-        us = _columns(u, "u")
+        us = columns(u, "u")
         if us.shape[1] != len(self.channels_):
             msg = f"'u' must have {len(self.channels_)} columns. Got {us.shape[1]}."
             raise ShapeError(msg)
@@ -349,8 +319,7 @@ class CoupledModel(JsonFile):
             "output_nrmse": self.output_nrmse_.tolist(),
             "channels": [model_to_dict(ch) for ch in self.channels_],
         }
-        body["checksum"] = checksum(body)
-        return body
+        return signed(body)
 
     @classmethod
     def from_dict(cls, data: Any, where: str = "coupled model") -> CoupledModel:
@@ -371,12 +340,7 @@ class CoupledModel(JsonFile):
         ModelFileError
             Not a coupled model file, a checksum that does not match, or a damaged field.
         """
-        if not isinstance(data, dict) or data.get("format") != COUPLED_FORMAT:
-            msg = f"{where}: not a piezohyst coupled model file"
-            raise ModelFileError(msg)
-        if data.get("checksum") != checksum(data):
-            msg = f"{where}: the checksum does not match its contents (edited or damaged)"
-            raise ModelFileError(msg)
+        data = checked(data, COUPLED_FORMAT, where, "coupled model")
         try:
             channels = [model_from_dict(d) for d in data["channels"]]
             coupling = np.array(data["coupling"], dtype=np.float64)

@@ -23,7 +23,7 @@ from .cores.base import Core, core_class
 from .dynamics import KINDS as DYNAMICS_KINDS
 from .terms import Creep, Term, growth_kinds, make_term
 
-__all__ = ["GROWTH_TERMS", "Estimator", "Rule"]
+__all__ = ["GROWTH_TERMS", "Estimator", "Params", "Rule"]
 
 #: The growth terms "auto" chooses among (any registered growth term can be named)
 GROWTH_TERMS = ("integral", "time", "abs_integral")
@@ -181,27 +181,9 @@ def _settings_rule(value: object, name: str, owner: str) -> dict[str, Any]:
     raise ParameterError(msg)
 
 
-class Estimator:
-    """The scikit-learn estimator contract and the settings' rules (see the module)."""
-
-    _rules: ClassVar[dict[str, Rule]] = {}
-
-    def __sklearn_tags__(self) -> Any:
-        """scikit-learn's tags (1.6 and later ask for them, ``check_is_fitted`` too): a
-        regressor of one input signal, its sample times as ``t``. Imported only here:
-        scikit-learn calls this, so it is there when it runs."""
-        from sklearn.utils import InputTags, RegressorTags, Tags, TargetTags
-
-        return Tags(
-            estimator_type="regressor",
-            target_tags=TargetTags(required=True, one_d_labels=True),
-            regressor_tags=RegressorTags(),
-            input_tags=InputTags(one_d_array=True, two_d_array=False),
-        )
-
-    def __sklearn_is_fitted__(self) -> bool:
-        """Whether :meth:`fit` has run (scikit-learn's ``check_is_fitted`` asks this)."""
-        return hasattr(self, "operator_")
+class Params:
+    """scikit-learn's ``get_params`` and ``set_params``, read from ``__init__``'s signature,
+    and a ``repr`` of the settings that differ from their defaults: every estimator here."""
 
     @classmethod
     def _param_names(cls) -> list[str]:
@@ -233,7 +215,7 @@ class Estimator:
 
         Returns
         -------
-        HysteresisModel
+        object
             ``self``.
         """
         valid = self._param_names()
@@ -255,6 +237,29 @@ class Estimator:
             if not _same(v, sig.parameters[k].default)
         ]
         return f"{type(self).__name__}({', '.join(shown)})"
+
+
+class Estimator(Params):
+    """The scikit-learn estimator contract and the settings' rules (see the module)."""
+
+    _rules: ClassVar[dict[str, Rule]] = {}
+
+    def __sklearn_tags__(self) -> Any:
+        """scikit-learn's tags (1.6 and later ask for them, ``check_is_fitted`` too): a
+        regressor of one input signal, its sample times as ``t``. Imported only here:
+        scikit-learn calls this, so it is there when it runs."""
+        from sklearn.utils import InputTags, RegressorTags, Tags, TargetTags
+
+        return Tags(
+            estimator_type="regressor",
+            target_tags=TargetTags(required=True, one_d_labels=True),
+            regressor_tags=RegressorTags(),
+            input_tags=InputTags(one_d_array=True, two_d_array=False),
+        )
+
+    def __sklearn_is_fitted__(self) -> bool:
+        """Whether :meth:`fit` has run (scikit-learn's ``check_is_fitted`` asks this)."""
+        return hasattr(self, "operator_")
 
     @classmethod
     def parameter_rules(cls) -> dict[str, Rule]:

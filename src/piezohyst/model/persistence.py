@@ -34,6 +34,7 @@ from .terms import Term, make_term
 __all__ = [
     "SCHEMA",
     "SCHEMA_VERSION",
+    "checked",
     "checksum",
     "load_model",
     "model_class",
@@ -42,6 +43,7 @@ __all__ = [
     "model_to_dict",
     "register",
     "save_model",
+    "signed",
 ]
 
 # A model is any registered class with the HysteresisModel methods used below;
@@ -130,6 +132,55 @@ def checksum(body: dict[str, Any]) -> str:
     content = {k: v for k, v in body.items() if k != "checksum"}
     canon = json.dumps(content, sort_keys=True, separators=(",", ":"), allow_nan=False)
     return "sha256:" + hashlib.sha256(canon.encode()).hexdigest()
+
+
+def signed(body: dict[str, Any]) -> dict[str, Any]:
+    """``body`` with its :func:`checksum` added (the last field), for a file's writer.
+
+    Parameters
+    ----------
+    body : dict
+
+    Returns
+    -------
+    dict
+        ``body`` itself.
+    """
+    body["checksum"] = checksum(body)
+    return body
+
+
+def checked(data: Any, fmt: str, where: str, kind: str) -> dict[str, Any]:
+    """A file body of format ``fmt`` whose checksum matches, or a one-line error naming
+    ``where`` and the ``kind`` of file it is not.
+
+    Parameters
+    ----------
+    data : Any
+        What the file held.
+    fmt : str
+        The format field it must carry.
+    where : str
+        Named in errors (a file's path).
+    kind : str
+        The file's kind, as said in errors ("coupled model").
+
+    Returns
+    -------
+    dict
+
+    Raises
+    ------
+    ModelFileError
+        Another format, or a checksum that does not match its contents.
+    """
+    if not isinstance(data, dict) or data.get("format") != fmt:
+        msg = f"{where}: not a piezohyst {kind} file"
+        raise ModelFileError(msg)
+    if data.get("checksum") != checksum(data):
+        msg = f"{where}: the checksum does not match its contents (edited or damaged)"
+        raise ModelFileError(msg)
+    return data
 
 
 def _nullable(value: float) -> float | None:

@@ -34,7 +34,9 @@ from .._validation import FloatArray
 from ..errors import ModelFileError, NotFittedError, ParameterError, PiezohystError, ShapeError
 from ..io import JsonFile
 from . import structure_fit as sf
-from .persistence import checksum
+from .coupled import columns
+from .estimator import Params
+from .persistence import checked, signed
 
 __all__ = ["STRUCTURE_FORMAT", "StructureModel"]
 
@@ -49,21 +51,10 @@ TAIL = 0.7
 PARSIMONY = 1.02
 #: ... or within this NRMSE (%) of it: a difference below any sensor's resolution
 RESOLUTION = 1e-3
-_PARAMS = ("order", "operators", "widths", "max_order", "refine")
 
 
 def _array(a: ArrayLike, name: str) -> FloatArray:
-    x = np.asarray(a, dtype=np.float64)
-    if x.ndim == 1:
-        x = x[:, None]
-    if x.ndim != 2 or x.shape[0] < 8:
-        msg = f"'{name}' must be (samples, channels) with 8 samples or more. Got shape {x.shape}."
-        raise ShapeError(msg)
-    if not np.all(np.isfinite(x)):
-        row, col = np.argwhere(~np.isfinite(x))[0]
-        msg = f"'{name}' holds a non-finite value at row {row}, column {col}."
-        raise ShapeError(msg)
-    return x
+    return columns(a, name, 8)
 
 
 def _listed(a: Any) -> list[Any]:
@@ -103,7 +94,7 @@ def _rate(t: Any, sample_rate: float | None, lengths: list[int]) -> float:
     return float(np.mean(rates))
 
 
-class StructureModel(JsonFile):
+class StructureModel(JsonFile, Params):
     """Coupled linear dynamics of an order chosen from the data, with each actuator's
     hysteresis in the loop (the module's equations).
 
@@ -174,40 +165,6 @@ class StructureModel(JsonFile):
         self.widths = widths
         self.max_order = max_order
         self.refine = refine
-
-    # ------------------------------------------------------------ the contract
-    def get_params(self, deep: bool = True) -> dict[str, Any]:
-        """The constructor arguments (scikit-learn's contract).
-
-        Parameters
-        ----------
-        deep : bool, default True
-            Accepted for scikit-learn.
-
-        Returns
-        -------
-        dict
-        """
-        return {name: getattr(self, name) for name in _PARAMS}
-
-    def set_params(self, **params: Any) -> Self:
-        """Set constructor arguments (scikit-learn's contract).
-
-        Parameters
-        ----------
-        **params
-            ``order``, ``operators``, ``widths``, ``max_order``, ``refine``.
-
-        Returns
-        -------
-        StructureModel
-        """
-        for name, value in params.items():
-            if name not in _PARAMS:
-                msg = f"StructureModel has no parameter {name!r} ({', '.join(_PARAMS)})."
-                raise ParameterError(msg)
-            setattr(self, name, value)
-        return self
 
     def _check_params(self) -> None:
         if not (self.order == "auto" or (isinstance(self.order, int) and self.order >= 1)):
@@ -475,34 +432,35 @@ class StructureModel(JsonFile):
             msg = "This StructureModel is not fitted yet: nothing to save."
             raise NotFittedError(msg)
         st = self.structure_
-        body: dict[str, Any] = {
-            "format": STRUCTURE_FORMAT,
-            "version": STRUCTURE_VERSION,
-            "params": {**self.get_params(), "widths": list(self.widths)},
-            "sample_rate": self.sample_rate_,
-            "orders": {str(k): v for k, v in self.orders_.items()},
-            "operators_kept": self.operators_,
-            "output_nrmse": self.output_nrmse_,
-            "refinement": None
-            if self.refinement_ is None
-            else list(vars(self.refinement_).values()),
-            **{
-                name: getattr(st, name).tolist()
-                for name in ("a", "b", "c", "d", "e", "t", "r", "off")
-            },
-        }
-        body["checksum"] = checksum(body)
-        return body
+        return signed(
+            {
+                "format": STRUCTURE_FORMAT,
+                "version": STRUCTURE_VERSION,
+                "params": {**self.get_params(), "widths": list(self.widths)},
+                "sample_rate": self.sample_rate_,
+                "orders": {str(k): v for k, v in self.orders_.items()},
+                "operators_kept": self.operators_,
+                "output_nrmse": self.output_nrmse_,
+                "refinement": None
+                if self.refinement_ is None
+                else list(vars(self.refinement_).values()),
+                **{
+                    name: getattr(st, name).tolist()
+                    for name in ("a", "b", "c", "d", "e", "t", "r", "off")
+                },
+            }
+        )
 
     @classmethod
     def from_dict(cls, data: Any, where: str = "structure model") -> StructureModel:
-        """Rebuild a fitted model from :meth:`to_dict` data; a bad field is named.
+        """The fitted structure a :meth:`to_dict` body holds, its matrices' shapes checked.
 
         Parameters
         ----------
         data : dict
+            The body (a file's contents).
         where : str
-            Named in errors (a file's path).
+            The file's path, for the errors' one line.
 
         Returns
         -------
@@ -511,14 +469,9 @@ class StructureModel(JsonFile):
         Raises
         ------
         ModelFileError
-            Not a structure model file, a checksum that does not match, or a damaged field.
+            Another kind of file, a checksum that does not match, or a damaged field.
         """
-        if not isinstance(data, dict) or data.get("format") != STRUCTURE_FORMAT:
-            msg = f"{where}: not a piezohyst structure model file"
-            raise ModelFileError(msg)
-        if data.get("checksum") != checksum(data):
-            msg = f"{where}: the checksum does not match its contents (edited or damaged)"
-            raise ModelFileError(msg)
+        data = checked(data, STRUCTURE_FORMAT, where, "structure model")
         try:
             arrays = {
                 name: np.array(data[name], dtype=np.float64, ndmin=2 if name != "off" else 1)
