@@ -288,3 +288,25 @@ def test_the_output_error_refinement_lowers_the_error(looped) -> None:  # type: 
         for m in (model, raw)
     ]
     assert err[0] < err[1]  # on inputs neither saw
+
+
+def test_long_records_are_solved_a_few_rows_at_a_time(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Rows built in chunks (each mode's filter state carried across them) give the least
+    squares of all the rows at once: any length fits in memory."""
+    rng = np.random.default_rng(7)
+    plant = _plant(e_gain=0.05, outputs=2)
+    given = [(rng.standard_normal((3000, 2)), False), (_periodic(rng, 2048, 1.0), True)]
+    recs = [sf.Record(v, plant.run(v, periodic=p), p) for v, p in given]
+    r = np.array([[0.1, 0.5], [0.2, 0.6]])
+    whole = sf.least_squares(recs[:1], plant.a, plant.c, plant.t, r)
+    whole_p = sf.least_squares(recs[1:], plant.a, plant.c, plant.t, r)
+    monkeypatch.setattr(sf, "CHUNK", 700)
+    parts = sf.least_squares(recs[:1], plant.a, plant.c, plant.t, r)
+    parts_p = sf.least_squares(recs[1:], plant.a, plant.c, plant.t, r)
+    for one, other in ((whole, parts), (whole_p, parts_p)):
+        for name in ("b", "d", "e", "off"):
+            # tol: the normal equations summed in another order (rounding), then solved with a
+            # condition number near 1e6
+            np.testing.assert_allclose(
+                getattr(other, name), getattr(one, name), rtol=1e-8, atol=1e-9
+            )

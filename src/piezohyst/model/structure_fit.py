@@ -40,6 +40,8 @@ BAND = 0.8
 #: The output-error refinement's iterations, at most (L-BFGS; it stops earlier where the
 #: error no longer falls)
 REFINE_ITERATIONS = 2000
+#: The least squares' rows are built this many samples at a time (memory, not results)
+CHUNK = 4096
 #: Eigenvalues at or beyond this modulus are reflected into the unit circle (stable)
 STABLE = 0.9999
 
@@ -263,6 +265,24 @@ def features(rec: Record, t: FloatArray, r: FloatArray) -> FloatArray:
     return out
 
 
+def _regressors(
+    filt: np.ndarray, cv_o: np.ndarray, reps: list[tuple[int, int]], size: int
+) -> FloatArray:
+    """One output's rows: each mode's filtered columns read out (a real mode's one column,
+    a complex pair's real and imaginary parts), the feed-through and offset left 0."""
+    z = filt * np.array([cv_o[k] for k, _ in reps])[None, :, None]
+    blocks = []
+    for p, (_, partner) in enumerate(reps):
+        if partner < 0:
+            blocks.append(z[:, p].real[:, None])
+        else:
+            blocks.append(np.stack([2 * z[:, p].real, -2 * z[:, p].imag], axis=1))
+    modal = np.concatenate(blocks, axis=1).reshape(filt.shape[0], -1)
+    reg = np.zeros((filt.shape[0], size))
+    reg[:, : modal.shape[1]] = modal
+    return reg
+
+
 def least_squares(
     records: list[Record], a: FloatArray, c: FloatArray, t: FloatArray, r: FloatArray
 ) -> Structure:
@@ -277,28 +297,27 @@ def least_squares(
     size = order * cols + m * n + m
     normal = np.zeros((size, size))
     rhs = np.zeros(size)
+    ones = [0.0, 1.0]
     for rec in records:
         w = np.column_stack([rec.u, features(rec, t, r)]) if nf else rec.u
-        keep = slice(rec.u.shape[0], None) if rec.periodic else slice(None)
-        ww = np.concatenate([w, w]) if rec.periodic else w
-        filt = np.empty((rec.u.shape[0], len(reps), cols), dtype=complex)
-        for p, (k, _) in enumerate(reps):
-            filt[:, p] = sps.lfilter([0.0, 1.0], [1.0, -lam[k]], ww, axis=0)[keep]
-        for o in range(m):
-            z = filt * np.array([cv[o, k] for k, _ in reps])[None, :, None]
-            blocks = []
-            for p, (_, partner) in enumerate(reps):
-                if partner < 0:
-                    blocks.append(z[:, p].real[:, None])
-                else:
-                    blocks.append(np.stack([2 * z[:, p].real, -2 * z[:, p].imag], axis=1))
-            reg = np.zeros((rec.u.shape[0], size))
-            reg[:, : order * cols] = np.concatenate(blocks, axis=1).reshape(rec.u.shape[0], -1)
-            reg[:, order * cols + o * n : order * cols + (o + 1) * n] = rec.u
-            reg[:, order * cols + m * n + o] = 1.0
-            wo = rec.weights[o] ** 2
-            normal += wo * (reg.T @ reg)
-            rhs += wo * (reg.T @ rec.y[:, o])
+        states = [np.zeros((1, cols), dtype=complex) for _ in reps]
+        if rec.periodic:  # the period before: each mode's state at its end
+            for p, (k, _) in enumerate(reps):
+                states[p] = sps.lfilter(ones, [1.0, -lam[k]], w, axis=0, zi=states[p])[1]
+        for start in range(0, rec.u.shape[0], CHUNK):  # rows a few at a time: any length
+            rows = slice(start, min(start + CHUNK, rec.u.shape[0]))
+            filt = np.empty((rows.stop - start, len(reps), cols), dtype=complex)
+            for p, (k, _) in enumerate(reps):
+                filt[:, p], states[p] = sps.lfilter(
+                    ones, [1.0, -lam[k]], w[rows], axis=0, zi=states[p]
+                )
+            for o in range(m):
+                reg = _regressors(filt, cv[o], reps, size)
+                reg[:, order * cols + o * n : order * cols + (o + 1) * n] = rec.u[rows]
+                reg[:, order * cols + m * n + o] = 1.0
+                wo = rec.weights[o] ** 2
+                normal += wo * (reg.T @ reg)
+                rhs += wo * (reg.T @ rec.y[rows, o])
     ridge = 1e-10 * np.trace(normal) / size
     theta = np.linalg.solve(normal + ridge * np.eye(size), rhs)
     modal = theta[: order * cols].reshape(order, cols)
