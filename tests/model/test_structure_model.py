@@ -310,3 +310,16 @@ def test_long_records_are_solved_a_few_rows_at_a_time(monkeypatch: pytest.Monkey
             np.testing.assert_allclose(
                 getattr(other, name), getattr(one, name), rtol=1e-8, atol=1e-9
             )
+
+
+def test_scikit_learn_sees_a_fitted_model_of_several_channels(looped) -> None:  # type: ignore[no-untyped-def]
+    from sklearn.exceptions import NotFittedError
+    from sklearn.utils.validation import check_is_fitted
+
+    model, _, _ = looped
+    check_is_fitted(model)
+    for fresh in (ph.StructureModel(), ph.CoupledModel()):
+        with pytest.raises(NotFittedError):
+            check_is_fitted(fresh)
+        tags = fresh.__sklearn_tags__()
+        assert tags.input_tags.two_d_array and tags.target_tags.multi_output

@@ -42,7 +42,7 @@ from ..errors import (
     warn,
 )
 from ..io import JsonFile
-from .estimator import Params
+from .estimator import SeveralChannels
 from .model import HysteresisModel, is_model
 from .persistence import checked, model_from_dict, model_to_dict, signed
 from .presets import ClassicalPI
@@ -96,7 +96,7 @@ def _warn_together(u: FloatArray) -> None:
                 )
 
 
-class CoupledModel(JsonFile, Params):
+class CoupledModel(JsonFile, SeveralChannels):
     """A hysteresis model per input and the static coupling between the outputs.
 
     Parameters
@@ -133,6 +133,7 @@ class CoupledModel(JsonFile, Params):
     """
 
     file_kind = "a coupled model file"
+    _fitted = "coupling_"
 
     def __init__(
         self, channel: HysteresisModel | Sequence[HysteresisModel] | None = None, rounds: int = 3

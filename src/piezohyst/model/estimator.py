@@ -23,7 +23,7 @@ from .cores.base import Core, core_class
 from .dynamics import KINDS as DYNAMICS_KINDS
 from .terms import Creep, Term, growth_kinds, make_term
 
-__all__ = ["GROWTH_TERMS", "Estimator", "Params", "Rule"]
+__all__ = ["GROWTH_TERMS", "Estimator", "Params", "Rule", "SeveralChannels"]
 
 #: The growth terms "auto" chooses among (any registered growth term can be named)
 GROWTH_TERMS = ("integral", "time", "abs_integral")
@@ -237,6 +237,28 @@ class Params:
             if not _same(v, sig.parameters[k].default)
         ]
         return f"{type(self).__name__}({', '.join(shown)})"
+
+
+class SeveralChannels(Params):
+    """scikit-learn's view of a model of several inputs and outputs (a stage, a structure):
+    a regressor of 2-D inputs and outputs, fitted once ``_fitted`` is set."""
+
+    _fitted: ClassVar[str] = ""
+
+    def __sklearn_tags__(self) -> Any:
+        """scikit-learn's tags: a regressor of (samples, inputs) to (samples, outputs)."""
+        from sklearn.utils import InputTags, RegressorTags, Tags, TargetTags
+
+        return Tags(
+            estimator_type="regressor",
+            target_tags=TargetTags(required=True, multi_output=True, single_output=False),
+            regressor_tags=RegressorTags(),
+            input_tags=InputTags(two_d_array=True),
+        )
+
+    def __sklearn_is_fitted__(self) -> bool:
+        """Whether :meth:`fit` has run (scikit-learn's ``check_is_fitted`` asks this)."""
+        return hasattr(self, self._fitted)
 
 
 class Estimator(Params):

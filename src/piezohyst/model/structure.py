@@ -35,7 +35,7 @@ from ..errors import ModelFileError, NotFittedError, ParameterError, PiezohystEr
 from ..io import JsonFile
 from . import structure_fit as sf
 from .coupled import columns
-from .estimator import Params
+from .estimator import SeveralChannels
 from .persistence import checked, signed
 
 __all__ = ["STRUCTURE_FORMAT", "StructureModel"]
@@ -94,7 +94,7 @@ def _rate(t: Any, sample_rate: float | None, lengths: list[int]) -> float:
     return float(np.mean(rates))
 
 
-class StructureModel(JsonFile, Params):
+class StructureModel(JsonFile, SeveralChannels):
     """Coupled linear dynamics of an order chosen from the data, with each actuator's
     hysteresis in the loop (the module's equations).
 
@@ -151,6 +151,7 @@ class StructureModel(JsonFile, Params):
     """
 
     file_kind = "a structure model file"
+    _fitted = "structure_"
 
     def __init__(
         self,
