@@ -147,6 +147,8 @@ def test_operators_that_do_not_predict_are_not_kept() -> None:
     assert model.operators_ == 0
     assert model.held_nrmse_["operators"] > model.held_nrmse_["linear"]
     assert "did not predict the held-out records better" in model.describe()
+    again = ph.StructureModel.from_dict(model.to_dict())
+    assert again.describe() == model.describe()
 
 
 def test_files_round_trip(looped, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]

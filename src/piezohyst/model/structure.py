@@ -441,6 +441,7 @@ class StructureModel(JsonFile, SeveralChannels):
                 "sample_rate": self.sample_rate_,
                 "orders": {str(k): v for k, v in self.orders_.items()},
                 "operators_kept": self.operators_,
+                "held_nrmse": getattr(self, "held_nrmse_", None),
                 "output_nrmse": self.output_nrmse_,
                 "refinement": None
                 if self.refinement_ is None
@@ -491,6 +492,8 @@ class StructureModel(JsonFile, SeveralChannels):
             model.order_, model.operators_ = st.order, int(data["operators_kept"])
             model.n_inputs_, model.n_outputs_ = n, m
             model.output_nrmse_ = float(data["output_nrmse"])
+            if data.get("held_nrmse") is not None:
+                model.held_nrmse_ = {k: float(v) for k, v in data["held_nrmse"].items()}
             ref = data.get("refinement")
             model.refinement_ = None if ref is None else sf.Refinement(
                 float(ref[0]), float(ref[1]), int(ref[2]), bool(ref[3]))  # fmt: skip
