@@ -230,7 +230,8 @@ def test_predict_holds_to_the_fit_rate(looped) -> None:  # type: ignore[no-untyp
 
 def test_the_adjoint_gradient_equals_finite_differences() -> None:
     """The output-error refinement's gradient (reverse mode through the play operators)
-    against central differences of the same loss, every matrix, from rest."""
+    against central differences of the same loss: every matrix and the stroke map, from a
+    given start (the operators' states 0, whatever the stroke map)."""
     from piezohyst._kernels import structure as S
 
     rng = np.random.default_rng(6)
@@ -246,18 +247,19 @@ def test_the_adjoint_gradient_equals_finite_differences() -> None:
     )
 
     def run(p: list[np.ndarray]) -> tuple[float, list[np.ndarray]]:
-        aa, b, c, d, ee = (np.ascontiguousarray(x) for x in p)
-        x, z = np.zeros(n), np.repeat((t @ off)[:, None], nk, axis=1)
+        aa, b, c, d, ee, tt = (np.ascontiguousarray(x) for x in p)
+        x, z = np.zeros(n), np.zeros((na, nk))
         out, xs, ps = np.empty((length, m)), np.empty((length, n)), np.empty((length, na * nk))
         moved = np.zeros((length, na * nk), dtype=np.bool_)
-        S.structure_trace(aa, b, c, d, ee, t, r, off, x, z, v, out, xs, ps, moved)
-        grads = [np.zeros_like(q) for q in (aa, b, c, d, ee)] + [np.zeros(m)]
+        S.structure_trace(aa, b, c, d, ee, tt, r, off, x, z, v, out, xs, ps, moved)
+        ga, gb, gc, gd, ge, gt = (np.zeros_like(q) for q in (aa, b, c, d, ee, tt))
+        gy = np.ascontiguousarray(out - y)
         S.structure_adjoint(
-            aa, c, ee, t, nk, xs, ps, moved, v, np.ascontiguousarray(out - y), *grads
+            aa, c, ee, tt, nk, xs, ps, moved, v, out, gy, ga, gb, gc, gd, ge, np.zeros(m), gt
         )
-        return 0.5 * float(np.sum((out - y) ** 2)), grads
+        return 0.5 * float(np.sum((out - y) ** 2)), [ga, gb, gc, gd, ge, gt]
 
-    params = [a, *mats, e]
+    params = [a, *mats, e, t]
     _, grads = run(params)
     for k, p in enumerate(params):
         for idx in [tuple(rng.integers(0, s) for s in p.shape) for _ in range(3)]:

@@ -104,11 +104,12 @@ def structure_trace(a, b, c, d, e, t, r, off, x, z, v, out, xs, ps, moved):  # t
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def structure_adjoint(a, c, e, t, nk, xs, ps, moved, v, gy, ga, gb, gc, gd, ge, goff):  # type: ignore[no-untyped-def]
-    """The gradient of ``sum_k gy[k] . out[k]``-weighted losses through a traced run: given
-    ``gy`` (N, outputs), the loss's derivative by each output, accumulate its derivatives by
-    ``a``, ``b``, ``c``, ``d``, ``e`` and ``off`` into ``ga`` ... ``goff`` (reverse mode over
-    the samples; the run's start taken as given). ``nk`` operators per actuator."""
+def structure_adjoint(a, c, e, t, nk, xs, ps, moved, v, out, gy, ga, gb, gc, gd, ge, goff, gt):  # type: ignore[no-untyped-def]
+    """The gradient of a loss through a traced run (its outputs ``out``): given ``gy``
+    (N, outputs), the loss's derivative by each output, accumulate its derivatives by ``a``,
+    ``b``, ``c``, ``d``, ``e``, ``off`` and the stroke map ``t`` into ``ga`` ... ``goff``,
+    ``gt`` (reverse mode over the samples; the run's start taken as given). ``nk`` operators
+    per actuator."""
     n = a.shape[0]
     m = c.shape[0]
     ni = v.shape[1]
@@ -145,6 +146,9 @@ def structure_adjoint(a, c, e, t, nk, xs, ps, moved, v, gy, ga, gb, gc, gd, ge, 
                     mu[f] = 0.0
                 else:
                     mu[f] = muz
+        for q in range(na):
+            for o in range(m):
+                gt[q, o] += gs[q] * out[k, o]
         for o in range(m):
             acc = gy[k, o]
             for q in range(na):

@@ -366,16 +366,16 @@ class Refinement:
 def refine(
     records: list[Record], structure: Structure, maxiter: int = REFINE_ITERATIONS
 ) -> tuple[Structure, Refinement]:
-    """Every matrix and the offsets refined by **output error**: the squared error of the
-    simulated outputs (each record and output weighted by the inverse of its variance), its
-    gradient by the adjoint of the recursion (reverse mode through the play operators),
-    minimised by L-BFGS from the least squares' solution. The equation error the least
+    """Every matrix (the stroke map too) and the offsets refined by **output error**: the
+    squared error of the simulated outputs (each record and output weighted by the inverse
+    of its variance), its gradient by the adjoint of the recursion (reverse mode through the
+    play operators), minimised by L-BFGS from the least squares' solution. The equation error the least
     squares minimise reads the measured outputs in the loop, and is biased where the loop
     matters; this is the structure's own error. Kept only if stable and lower."""
     from scipy.optimize import minimize
 
     st = structure
-    blocks = [st.a, st.b, st.c, st.d, st.e, st.off]
+    blocks = [st.a, st.b, st.c, st.d, st.e, st.off, st.t]
     shapes = [blk.shape for blk in blocks]
     cuts = np.cumsum([blk.size for blk in blocks])[:-1]
     theta0 = np.concatenate([blk.ravel() for blk in blocks])
@@ -396,32 +396,34 @@ def refine(
         return [np.ascontiguousarray(p.reshape(s)) for p, s in zip(parts, shapes, strict=True)]
 
     def loss(delta: np.ndarray) -> tuple[float, np.ndarray]:
-        a, b, c, d, e, off = unpack(delta)
+        a, b, c, d, e, off, t = unpack(delta)
         grads = [np.zeros(s) for s in shapes]
         total = 0.0
         for rec, w in zip(records, weights, strict=True):
             n_s = rec.u.shape[0]
             x = np.zeros(st.order)
-            z = np.repeat((st.t @ off)[:, None], nk, axis=1)
+            z = np.repeat((t @ off)[:, None], nk, axis=1)
             out = np.empty((n_s, c.shape[0]))
             if rec.periodic:  # the period before, to its steady state
-                S.structure_run(a, b, c, d, e, st.t, st.r, off, x, z, rec.u, out)
+                S.structure_run(a, b, c, d, e, t, st.r, off, x, z, rec.u, out)
             xs, ps = np.empty((n_s, st.order)), np.empty((n_s, st.r.size))
             moved = np.zeros((n_s, st.r.size), dtype=np.bool_)
-            S.structure_trace(a, b, c, d, e, st.t, st.r, off, x, z, rec.u, out, xs, ps, moved)
+            S.structure_trace(a, b, c, d, e, t, st.r, off, x, z, rec.u, out, xs, ps, moved)
             res = out - rec.y
             if not np.all(np.isfinite(res)) or np.max(np.abs(res)) > 1e6 * np.ptp(rec.y):
                 return 1e30, np.zeros_like(delta)  # the loop ran away: a step too far
             total += 0.5 * float(np.sum(w * res**2))
             gy = np.ascontiguousarray(w * res)
-            S.structure_adjoint(a, c, e, st.t, nk, xs, ps, moved, rec.u, gy, *grads)
+            ga, gb, gc, gd, ge, goff, gt = grads
+            S.structure_adjoint(a, c, e, t, nk, xs, ps, moved, rec.u, out, gy, ga, gb, gc, gd, ge,
+                                goff, gt)  # fmt: skip
         return total, np.concatenate([g.ravel() for g in grads]) * scale
 
     before = loss(np.zeros_like(theta0))[0]
     opt = minimize(loss, np.zeros_like(theta0), jac=True, method="L-BFGS-B",
                    options={"maxiter": maxiter, "gtol": 0.0})  # fmt: skip
-    a, b, c, d, e, off = unpack(opt.x)
-    refined = Structure(a, b, c, d, e, st.t, st.r, off)
+    a, b, c, d, e, off, t = unpack(opt.x)
+    refined = Structure(a, b, c, d, e, t, st.r, off)
     stable = bool(np.max(np.abs(np.linalg.eigvals(refined.a))) < 1.0)
     kept = stable and bool(opt.fun < before)
     info = Refinement(before, float(opt.fun), int(opt.nit), kept)
