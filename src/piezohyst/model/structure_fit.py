@@ -369,9 +369,10 @@ def refine(
     """Every matrix (the stroke map too) and the offsets refined by **output error**: the
     squared error of the simulated outputs (each record and output weighted by the inverse
     of its variance), its gradient by the adjoint of the recursion (reverse mode through the
-    play operators), minimised by L-BFGS from the least squares' solution. The equation error the least
-    squares minimise reads the measured outputs in the loop, and is biased where the loop
-    matters; this is the structure's own error. Kept only if stable and lower."""
+    play operators), minimised by L-BFGS from the least squares' solution. The equation
+    error the least squares minimise reads the measured outputs in the loop, and is biased
+    where the loop matters; this is the structure's own error. Kept only if stable and
+    lower."""
     from scipy.optimize import minimize
 
     st = structure
