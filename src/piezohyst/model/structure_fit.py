@@ -22,6 +22,7 @@ Plain functions over arrays; the class checks inputs and keeps the result.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy import signal as sps
@@ -55,9 +56,9 @@ class Record:
     y: FloatArray
     periodic: bool
 
-    @property
+    @cached_property
     def weights(self) -> FloatArray:
-        """Per output: the inverse of its spread (1 where it does not move)."""
+        """Per output: the inverse of its spread (1 where it does not move); once per record."""
         sd = np.std(self.y, axis=0)
         return np.where(sd > 0, 1.0 / np.where(sd > 0, sd, 1.0), 1.0)
 
