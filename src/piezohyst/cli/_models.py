@@ -108,7 +108,7 @@ def fit(
 
     if model_name == "structure":
         chosen = click.get_current_context().get_parameter_source("operators")
-        loop = 6 if chosen is click.core.ParameterSource.DEFAULT else operators
+        loop = None if chosen is click.core.ParameterSource.DEFAULT else operators  # its own
         _fit_structure(ctx, data, loop, initial_state, data_spec, out, force)
         return
     if "," in (data_spec.input_column or "") + (data_spec.output_column or ""):
@@ -192,7 +192,7 @@ def fit(
 
 
 def _fit_structure(
-    ctx: Context, data: Path, operators: int, initial_state: str, data_spec: DataSpec,
+    ctx: Context, data: Path, operators: int | None, initial_state: str, data_spec: DataSpec,
     out: Path, force: bool,
 ) -> None:  # fmt: skip
     """``fit --model structure --input vx,vy --output x,y``: :func:`fit_structure_file`."""

@@ -419,7 +419,7 @@ def fit_structure_file(
     *,
     inputs: Sequence[str],
     outputs: Sequence[str],
-    operators: int = 6,
+    operators: int | None = None,
     initial_state: str = "rest",
     data_spec: DataSpec | None = None,
     force: bool = False,
@@ -435,8 +435,9 @@ def fit_structure_file(
         Where to save the structure model (JSON).
     inputs, outputs : sequence of str
         The actuators' voltage columns and the outputs' columns (any number of outputs).
-    operators : int
-        Play operators per actuator in the loop (0: the linear dynamics alone).
+    operators : int, optional
+        Play operators per actuator in the loop (0: the linear dynamics alone); default the
+        model's own.
     initial_state : {"rest", "periodic"}
         The record starts at rest, or is one period of a periodic steady state.
     data_spec : DataSpec, optional
@@ -458,7 +459,8 @@ def fit_structure_file(
         guard_outputs([out], [data], force=force)
     t, u, y, _ = _read_stage(data, inputs, outputs, data_spec or DataSpec())
     assert y is not None  # outputs given: read or refused
-    model = StructureModel(operators=operators).fit(u, y, t=t, initial_state=initial_state)
+    model = StructureModel() if operators is None else StructureModel(operators=operators)
+    model.fit(u, y, t=t, initial_state=initial_state)
     if out is not None:
         model.save(out)
     return model
