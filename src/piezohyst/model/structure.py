@@ -266,13 +266,14 @@ class StructureModel(JsonFile, SeveralChannels):
         h_fit = sf.impulse_response(fit_on) if held else None  # once, for every candidate
         h_all = sf.impulse_response(records)
         self.orders_: dict[int, float] = {}
+        found: dict[int, tuple[sf.Structure, sf.Structure]] = {}  # order: (linear, asked)
         if self.order == "auto":
             for order in (o for o in ORDERS if o <= self.max_order):
                 try:
-                    cand = self._identify(fit_on, h_fit, order, self.operators)
+                    found[order] = self._identify(fit_on, h_fit, order, self.operators)
                 except ParameterError:
                     break  # the records hold no more
-                self.orders_[order] = sf.nrmse(cand, held, tail)
+                self.orders_[order] = sf.nrmse(found[order][1], held, tail)
             if not self.orders_:
                 msg = "no order could be realized from these records (too short?)"
                 raise ParameterError(msg)
@@ -282,16 +283,13 @@ class StructureModel(JsonFile, SeveralChannels):
             order = int(self.order)
         operators = self.operators
         if operators and held:  # the loop's operators kept where they predict
-            linear = sf.nrmse(self._identify(fit_on, h_fit, order, 0), held, tail)
-            looped = self.orders_.get(order)
-            if looped is None:
-                looped = sf.nrmse(self._identify(fit_on, h_fit, order, operators), held, tail)
+            pair = found.get(order) or self._identify(fit_on, h_fit, order, operators)
+            linear, looped = (sf.nrmse(st, held, tail) for st in pair)
             self.held_nrmse_ = {"linear": linear, "operators": looped}
             operators = operators if looped * PARSIMONY + RESOLUTION < linear else 0
-        self.structure_ = self._identify(records, h_all, order, operators)
+        linear_all, self.structure_ = self._identify(records, h_all, order, operators)
         if operators and not np.isfinite(sf.nrmse(self.structure_, records)):
-            self.structure_ = self._identify(records, h_all, order, 0)
-            operators = 0
+            self.structure_, operators = linear_all, 0
         self.refinement_: sf.Refinement | None = None
         if self.refine:
             self.structure_, self.refinement_ = sf.refine(records, self.structure_)
@@ -319,20 +317,22 @@ class StructureModel(JsonFile, SeveralChannels):
 
     def _identify(
         self, records: list[sf.Record], h: FloatArray | None, order: int, operators: int
-    ) -> sf.Structure:
+    ) -> tuple[sf.Structure, sf.Structure]:
+        """The linear structure of this order, and the one asked (the same without
+        operators; with them, their stroke map from the linear one's static gain)."""
         assert h is not None  # held-out records come with their own impulse response
         a, c = sf.realize(h, order)
         n, m = records[0].u.shape[1], records[0].y.shape[1]
         empty = np.zeros((n, 0))
         linear = sf.least_squares(records, a, c, np.zeros((n, m)), empty)
         if not operators:
-            return linear
+            return linear, linear
         stroke = np.asarray(np.linalg.pinv(linear.dc_gain()), dtype=np.float64)  # y -> strokes
         s = np.concatenate([r.y for r in records]) @ stroke.T
         half = np.maximum(np.ptp(s, axis=0) / 2, 1e-300)
         lo, hi = self.widths
         r = np.asarray(half[:, None] * np.geomspace(lo, hi, operators)[None, :], dtype=np.float64)
-        return sf.least_squares(records, a, c, stroke, r)
+        return linear, sf.least_squares(records, a, c, stroke, r)
 
     # ---------------------------------------------------------------- predict
     def predict(
