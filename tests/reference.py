@@ -145,3 +145,56 @@ def structure(
         ]
         out.append(y)
     return out
+
+
+def structure_compensate(
+    mats: Sequence[Sequence[Sequence[float]]],
+    off: Sequence[float],
+    gain: Sequence[Sequence[float]],
+    ff: Sequence[Sequence[float]],
+    hold: Sequence[bool],
+    lo: Sequence[float],
+    hi: Sequence[float],
+    step: Sequence[float],
+    slack: Sequence[float],
+) -> tuple[list[list[float]], list[bool]]:
+    """The structure's tracker from rest (StructureCompensator), its commands and whether
+    each row asked more than ``slack`` past a limit: each command ``ff[k] - gain x``, moved
+    at most ``step`` from the last and kept in ``[lo, hi]`` (a held row sends the last
+    again); then the structure (:func:`structure`) runs on it. ``mats`` = a, b, c, d, e, t,
+    r."""
+    a, b, c, d, e, t, r = mats
+    n, m, ni = len(a), len(c), len(b[0])
+    x = [0.0] * n
+    z = [[sum(t[q][o] * off[o] for o in range(m))] * len(r[q]) for q in range(len(r))]
+    last = [0.0] * ni
+    cmds, asked = [], []
+    for k, fk in enumerate(ff):
+        past = False
+        if not hold[k]:
+            for i in range(ni):
+                want = fk[i] - sum(gain[i][s] * x[s] for s in range(n))
+                slewed = min(last[i] + step[i], max(last[i] - step[i], want))
+                past = past or not lo[i] - slack[i] <= slewed <= hi[i] + slack[i]
+                last[i] = min(hi[i], max(lo[i], slewed))
+        y = [
+            off[o]
+            + sum(c[o][s] * x[s] for s in range(n))
+            + sum(d[o][i] * last[i] for i in range(ni))
+            for o in range(m)
+        ]
+        p = []
+        for q in range(len(r)):
+            sq = sum(t[q][o] * y[o] for o in range(m))
+            for j in range(len(r[q])):
+                z[q][j] = max(sq - r[q][j], min(sq + r[q][j], z[q][j]))
+                p.append(z[q][j] - sq)
+        x = [
+            sum(a[s][u] * x[u] for u in range(n))
+            + sum(b[s][i] * last[i] for i in range(ni))
+            + sum(e[s][f] * p[f] for f in range(len(p)))
+            for s in range(n)
+        ]
+        cmds.append(list(last))
+        asked.append(past)
+    return cmds, asked

@@ -26,6 +26,7 @@ Compensation and control
     LearningCompensator -- learning a repeated scan from the charge
     BankCompensator, BankController -- many channels in one kernel
     CoupledCompensator -- a coupled stage: the coupling's inverse, then each actuator's
+    StructureCompensator -- a structure's inverse through its shared modes, with preview
 
 Choosing and checking a model
     compare_models, Comparison, ComparisonRow -- held-out scores of several models
@@ -92,6 +93,7 @@ __getattr__, __dir__ = attach(
         "CoupledCompensator": ".control.coupled",
         "CoupledModel": ".model.coupled",
         "StructureModel": ".model.structure",
+        "StructureCompensator": ".control.structure",
         "Compensator": ".control.compensator",
         "CompensatorState": ".control.compensator",
         "LearningCompensator": ".control.learning",
@@ -139,6 +141,7 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .control.coupled import CoupledCompensator
     from .control.learning import LearningCompensator
     from .control.selfsensing import ControllerState, SelfSensingController
+    from .control.structure import StructureCompensator
     from .io import read_recording, read_table, write_table
     from .model import (  # the model package's face: one name each, as it exports them
         ActivePI,
@@ -219,6 +222,7 @@ __all__ = [
     "Selection",
     "SelfSensingController",
     "ShapeError",
+    "StructureCompensator",
     "StructureModel",
     "Term",
     "TimeAxisError",

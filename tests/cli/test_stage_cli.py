@@ -259,8 +259,22 @@ def test_a_structure_from_the_shell(tmp_path: Path) -> None:
     v = np.column_stack([ph.read_table(fresh).get(c) for c in ("vx", "vy")])
     # tol: the CSV's full-precision decimal round trip (17 digits)
     np.testing.assert_allclose(table.get("predicted_z"), model.predict(v)[:, 2], rtol=1e-12)
-    one_line_error(run("compensate", out, fresh, "--column", "x", "--v-min", "-50", "--v-max", "50",
-                       "-o", tmp_path / "c.csv"),
-                   "is a structure model (StructureModel)", "not inverted yet")  # fmt: skip
+    cmds = tmp_path / "c.csv"
+    res = run("compensate", out, fresh, "--column", "x,y,z", "--v-min", "-50", "--v-max", "50",
+              "-o", cmds)  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "2000 rows (500 of ramp-in first); actuator 0: " in res.output
+    sent = ph.read_table(cmds)
+    got = np.column_stack([sent.get("command_0"), sent.get("command_1")])[500:]
+    # the targets are what vx, vy moved: after the ramp's state has rung out (|poles| 0.9),
+    # and before the file's last rows (whose preview runs past its end: the target taken to
+    # hold), the inverse sends them back; tol: the truncated preview (1e-6 of its largest
+    # gain) and the fit's own error (1e-5 of the span) on a 10 V signal, 2e-5 V each
+    np.testing.assert_allclose(got[300:-100], v[300:-100], atol=1e-4 * 10)  # measured 1.9e-4 V
+    assert np.all(np.abs(got) <= 50.0)
+    one_line_error(run("export-c", out, "-o", tmp_path / "s.c", "--v-min", "-50",
+                       "--v-max", "50"),
+                   "is a structure model (StructureModel)",
+                   "C export and report are not built")  # fmt: skip
     one_line_error(run("fit", data, "--input", "vx", "--output", "x", "--model", "structure",
                        "-o", tmp_path / "one.json"), "two or more --input columns")  # fmt: skip

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from . import play as P
 from .play import FASTMATH
 
 
@@ -168,3 +169,48 @@ def structure_adjoint(a, c, e, t, nk, xs, ps, moved, v, out, gy, ga, gb, gc, gd,
             lam_new[s] = acc
         for s in range(n):
             lam[s] = lam_new[s]
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def structure_compensate(  # type: ignore[no-untyped-def]
+    a, b, c, d, e, t, r, off, gain, ff, hold, lo, hi, step, slack, x, z, last, tally, cmd, beyond
+):
+    """The structure's inverse with preview, sample by sample: each command the state
+    feedback ``ff[k] - gain x`` (``ff`` (N, inputs) the preview's feed-forward, from the
+    desired outputs ahead), then each actuator's slew limit ``step`` and voltage limits
+    ``lo``, ``hi`` (inputs,) applied and the command counted in ``tally[i]``
+    (:func:`~piezohyst._kernels.play.tally_command`); a row with ``hold[k]`` sends ``last``
+    again; ``beyond[k]`` says whether the tracker asked an actuator for more than ``slack``
+    (V, per input) past a voltage limit there (the target out of the structure's reach). The
+    structure then runs on the commands sent, as :func:`structure_run` (its operators on the
+    strokes it moves): ``x``, ``z`` and ``last`` updated in place, ``cmd`` (N, inputs) and
+    ``beyond`` (N,) written."""
+    na = r.shape[0]
+    nk = r.shape[1]
+    n = a.shape[0]
+    xn = np.empty(n)
+    p = np.empty(na * nk)
+    out = np.empty((1, c.shape[0]))
+    for k in range(ff.shape[0]):
+        beyond[k] = False
+        for i in range(ff.shape[1]):
+            ci = last[i]
+            if not hold[k]:
+                acc = ff[k, i]
+                for s in range(n):
+                    acc -= gain[i, s] * x[s]
+                ci = min(max(acc, last[i] - step[i]), last[i] + step[i])
+                if ci < lo[i] - slack[i] or ci > hi[i] + slack[i]:
+                    beyond[k] = True
+                ci = min(max(ci, lo[i]), hi[i])
+            last[i] = ci
+            cmd[k, i] = ci
+            P.tally_command(ci, tally[i])
+        read_out(c, d, off, x, cmd[k : k + 1], 0, out)
+        for q in range(na):
+            sq = stroke(t, out, 0, q)
+            for j in range(nk):
+                zj = min(max(z[q, j], sq - r[q, j]), sq + r[q, j])
+                z[q, j] = zj
+                p[q * nk + j] = zj - sq
+        advance(a, b, e, x, cmd, k, p, xn)

@@ -162,7 +162,7 @@ def _compensate_stage(
     per = "; ".join(
         f"actuator {k}: {int(comp.saturated_count[k])} at a voltage limit, "
         f"{int(comp.slew_limited_count[k])} slew-limited"
-        for k in range(len(comp.compensators))
+        for k in range(comp.last_command.size)
     )
     ctx.result(
         f"{run.samples} rows ({run.preamble} of ramp-in first); {per}; "

@@ -10,6 +10,8 @@ subpackage ``engines``)
     Compensator, CompensatorSettings, CompensatorState
 A coupled stage: the coupling's inverse, then each actuator's compensator (``coupled``)
     CoupledCompensator
+A structure's shared modes: the tracker with preview of a ``StructureModel`` (``structure``)
+    StructureCompensator
 Feedback on the measured charge (``selfsensing``)
     SelfSensingController, ControllerState, LoopSettings
 Learning a repeated scan (the subpackage ``learning``: the compensator in
@@ -44,6 +46,7 @@ __getattr__, __dir__ = attach(
         "Controller": ".contract",
         "Compensator": ".compensator",
         "CoupledCompensator": ".coupled",
+        "StructureCompensator": ".structure",
         "CompensatorSettings": ".compensator",
         "CompensatorState": ".compensator",
         "CCode": ".export",
@@ -71,6 +74,7 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .export import CCode, export_c, write_c, write_fmu, write_mex, write_shared
     from .learning import LearningCompensator, LearningDesign, Trial, design_learning
     from .selfsensing import ControllerState, LoopSettings, SelfSensingController
+    from .structure import StructureCompensator
 
 __all__ = [
     "BankCompensator",
@@ -87,6 +91,7 @@ __all__ = [
     "LearningDesign",
     "LoopSettings",
     "SelfSensingController",
+    "StructureCompensator",
     "Trial",
     "design_learning",
     "export_c",

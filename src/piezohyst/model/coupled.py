@@ -19,8 +19,8 @@ and the compensator inverts them with one sample of preview (a flexure whose cou
 kinematic: y's sensor sees x's motion, mode and all; ``simulation.XY_DYNAMIC``). Modes
 *after* the coupling (a structure's own modes shared by the axes) and modes that move with
 the drive level (the measured fine-steering mirror: hysteresis inside the dynamics' loop,
-``docs/validation.md``) are :class:`~piezohyst.StructureModel`'s, which predicts them and is
-not inverted yet.
+``docs/validation.md``) are :class:`~piezohyst.StructureModel`'s, which predicts them
+(:class:`~piezohyst.StructureCompensator` inverts it).
 """
 
 from __future__ import annotations

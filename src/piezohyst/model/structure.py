@@ -19,7 +19,8 @@ coupled linear dynamics alone.
 Beside :class:`~piezohyst.CoupledModel`: that one is a hysteresis model per actuator and a
 static coupling (each actuator's lag and mode its own), and the compensator and the
 exports invert it. This one identifies the structure's own shared modes and the coupling
-in one state space, for prediction and simulation; it is not inverted yet.
+in one state space; :class:`~piezohyst.StructureCompensator` inverts it (the tracker with
+preview).
 """
 
 from __future__ import annotations

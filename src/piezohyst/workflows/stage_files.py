@@ -2,7 +2,7 @@
 coupled stage identified from one file (:class:`~piezohyst.CoupledModel`), saved as a coupled
 model file, run on another record, and compensated (:class:`~piezohyst.CoupledCompensator`);
 or a structure's coupled dynamics (:class:`~piezohyst.StructureModel`, ``fit --model
-structure``), which predicts and is not inverted yet."""
+structure``), compensated by :class:`~piezohyst.StructureCompensator`."""
 
 from __future__ import annotations
 
@@ -24,6 +24,7 @@ from ..control.export.stage_c import (
     write_stage_mex,
     write_stage_shared,
 )
+from ..control.structure import StructureCompensator
 from ..errors import DataFileError, ParameterError
 from ..io import DataSpec, read_table, write_table
 from ..model.coupled import COUPLED_FORMAT, CoupledModel
@@ -63,7 +64,7 @@ class StageRun:
 
     samples: int
     nrmse: tuple[float, ...] = ()
-    compensator: CoupledCompensator | None = None
+    compensator: CoupledCompensator | StructureCompensator | None = None
     preamble: int = 0
 
 
@@ -124,9 +125,10 @@ def _read_stage(
 def _stage(model_path: PathLike) -> CoupledModel:
     if _is_structure(model_path):
         msg = (
-            f"{model_path} is a structure model (StructureModel): it predicts and simulates "
-            "the structure, and is not inverted yet; to compensate, export or report a "
-            "compensation, fit a stage (fit --input vx,vy --output x,y: a coupled model)"
+            f"{model_path} is a structure model (StructureModel): `predict` runs it and "
+            "`compensate` inverts it (in Python: ph.StructureCompensator); its C export and "
+            "report are not built yet: for those, fit a stage (fit --input vx,vy --output x,y: "
+            "a coupled model)"
         )
         raise ParameterError(msg)
     model = CoupledModel.load(model_path)
@@ -233,7 +235,9 @@ def compensate_stage_file(
     Parameters
     ----------
     model_path : str or os.PathLike
-        A coupled model file.
+        A coupled model file, or a structure model file (its inverse through the shared
+        modes, :class:`~piezohyst.StructureCompensator`: the target sampled at the rate it
+        was identified at; no slew limit unless ``slew_rate`` gives one).
     target : str or os.PathLike
         The desired positions: a time column (``time``, s) and one column per axis.
     out : str or os.PathLike
@@ -264,8 +268,11 @@ def compensate_stage_file(
         mostly held back by the slew limit.
     """
     guard_outputs([out], [model_path, target], force=force)
-    model = _stage(model_path)
-    m = model.coupling_.shape[0]
+    structure = _is_structure(model_path)
+    model: CoupledModel | StructureModel = (
+        StructureModel.load(model_path) if structure else _stage(model_path)
+    )
+    m = model.n_outputs_ if isinstance(model, StructureModel) else model.coupling_.shape[0]
     if len(columns) != m:
         msg = f"{model_path} moves {m} axes: got {len(columns)} target columns ({columns})"
         raise ParameterError(msg)
@@ -276,11 +283,25 @@ def compensate_stage_file(
         msg = f"{target}: the time column must increase, one row per sample"
         raise DataFileError(msg)
     fs = float(sample_rate) if sample_rate is not None else float(1.0 / np.median(np.diff(t)))
-    comp = CoupledCompensator(model, v_min=v_min, v_max=v_max, sample_rate=fs,
-                              slew_rate=slew_rate, allow_extrapolation=allow_extrapolation)  # type: ignore[arg-type]  # fmt: skip
-    lo = np.array([c.v_min for c in comp.compensators])
-    comp.reset(voltage=lo)
-    rest = model.predict(lo[None, :], t=[0.0])[0]
+    comp: CoupledCompensator | StructureCompensator
+    if isinstance(model, StructureModel):
+        if abs(fs - model.sample_rate_) > 1e-6 * model.sample_rate_:
+            msg = (
+                f"{target} is sampled at {fs:.6g} Hz and {model_path} was identified at "
+                f"{model.sample_rate_:.6g} Hz: a structure's dynamics hold at that rate only"
+            )
+            raise ParameterError(msg)
+        slew = None if slew_rate in (None, "trained") else float(slew_rate)
+        comp = StructureCompensator(model, v_min=v_min, v_max=v_max, slew_rate=slew)
+        lo = comp.v_min
+        comp.reset(voltage=lo)
+        rest = comp.output
+    else:
+        comp = CoupledCompensator(model, v_min=v_min, v_max=v_max, sample_rate=fs,
+                                  slew_rate=slew_rate, allow_extrapolation=allow_extrapolation)  # type: ignore[arg-type]  # fmt: skip
+        lo = np.array([c.v_min for c in comp.compensators])
+        comp.reset(voltage=lo)
+        rest = model.predict(lo[None, :], t=[0.0])[0]
     first = desired[np.all(np.isfinite(desired), axis=1)][:1]
     n_ramp = max(2, round(ramp * fs)) if first.size else 0
     path = np.linspace(rest, first[0], n_ramp) if n_ramp else np.empty((0, m))

@@ -1,0 +1,235 @@
+"""StructureCompensator (issue 57): a structure's inverse through its shared modes, the
+tracker with preview of a StructureModel; on a structure whose zeros lie outside the unit
+circle (no stable plain inverse), with each actuator's operators in the loop; its kernel
+against a pure-Python reference."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+import scipy.linalg as sl
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import piezohyst as ph
+from piezohyst._kernels import play as K
+from piezohyst._kernels import structure as S
+from piezohyst.errors import LimitWarning, ParameterError, ShapeError
+from piezohyst.model import structure_fit as sf
+from piezohyst.model.persistence import signed
+from piezohyst.model.structure import STRUCTURE_FORMAT, StructureModel
+
+from .. import reference
+from ..strategies import examples
+
+pytestmark = pytest.mark.kernels
+
+FS = 1000.0
+RISE = 300  # samples of the ramp from rest that starts every target
+
+
+def _structure(e_gain: float = 0.01) -> sf.Structure:
+    """Two actuators, two shared modes (|poles| 0.97 and 0.95), two outputs read through
+    both modes with opposite signs: two transmission zeros outside the unit circle; each
+    actuator's two play operators act on the modes with ``e_gain``."""
+    rot = lambda rad, th: rad * np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])  # noqa: E731
+    a = np.zeros((4, 4))
+    a[:2, :2], a[2:, 2:] = rot(0.97, 0.3), rot(0.95, 0.7)
+    b = 0.5 * np.array([[0.05, 0.01], [0.0, 0.015], [0.005, 0.05], [0.02, 0.0]])
+    c = -np.array([[1.0, -0.9, 0.3, 0.1], [0.2, 0.1, 1.0, -0.8]])
+    d = np.zeros((2, 2))
+    t = np.linalg.pinv(d + c @ np.linalg.solve(np.eye(4) - a, b))
+    r = np.array([[0.3, 1.0], [0.2, 0.8]])
+    e = e_gain * np.array([[1.0, 0.5, 0.0, 0.0], [0.3, 0.0, 0.0, 0.2], [0.0, 0.0, 1.0, 0.6],
+                           [0.0, 0.2, 0.4, 0.0]])  # fmt: skip
+    return sf.Structure(a, b, c, d, e, t, r, np.array([0.5, -0.2]))
+
+
+def _model(structure: sf.Structure) -> StructureModel:
+    """A fitted StructureModel holding ``structure``, through its file format."""
+    body = {
+        "format": STRUCTURE_FORMAT,
+        "version": 1,
+        "params": {**StructureModel(order=structure.order).get_params(), "widths": [0.003, 0.3]},
+        "sample_rate": FS,
+        "orders": {},
+        "operators_kept": structure.r.shape[1],
+        "held_nrmse": None,
+        "output_nrmse": 0.0,
+        "refinement": None,
+        **{k: getattr(structure, k).tolist() for k in ("a", "b", "c", "d", "e", "t", "r", "off")},
+    }
+    return StructureModel.from_dict(signed(body))
+
+
+def _raster(model: StructureModel, n: int = 3000, rate: float = 2.0) -> np.ndarray:
+    """A triangle on output 0 (40-60 % of its span at 0-100 V, ``rate`` Hz), output 1 held
+    at mid-span, after a ramp from rest."""
+    lo = model.predict(np.zeros((8, 2)))[0]
+    hi = model.structure_.dc_gain() @ np.full(2, 100.0) + model.structure_.off
+    k = np.arange(n)
+    tri = np.abs((k / FS * rate) % 1.0 * 2 - 1)
+    target = np.column_stack([lo[0] + (hi[0] - lo[0]) * (0.4 + 0.2 * tri),
+                              np.full(n, 0.5 * (lo[1] + hi[1]))])  # fmt: skip
+    ramp = np.linspace(0.0, 1.0, RISE)[:, None]
+    return np.vstack([lo + ramp * (target[0] - lo), target])
+
+
+def _error(model: StructureModel, cmd: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Each output's RMS tracking error after the ramp, in its span over the targets."""
+    got = model.predict(cmd)[RISE:]
+    return np.sqrt(np.mean((got - target[RISE:]) ** 2, axis=0)) / np.ptp(target, axis=0).clip(
+        np.ptp(target[:, 0])
+    )
+
+
+def test_the_kernel_equals_the_reference() -> None:
+    @settings(max_examples=examples(25), deadline=None)
+    @given(st.integers(0, 2**32 - 1), st.integers(1, 30))
+    def check(seed: int, n: int) -> None:
+        rng = np.random.default_rng(seed)
+        order, ni, m, na, k = rng.integers(1, 4), rng.integers(1, 3), rng.integers(1, 3), 2, 2
+        a = 0.5 * rng.standard_normal((order, order)) / np.sqrt(order)
+        mats = [rng.standard_normal(s) for s in
+                [(order, ni), (m, order), (m, ni), (order, na * k), (na, m)]]  # fmt: skip
+        r = np.abs(rng.standard_normal((na, k)))
+        off = rng.standard_normal(m)
+        gain = rng.standard_normal((ni, order))
+        ff = 2 * rng.standard_normal((n, ni))
+        hold = rng.random(n) < 0.2
+        lo, hi = -rng.random(ni) - 0.5, rng.random(ni) + 0.5
+        step = np.where(rng.random(ni) < 0.5, np.inf, 0.3)
+        slack = np.full(ni, 0.1)
+        want_cmd, want_past = reference.structure_compensate(
+            [a.tolist(), *[x.tolist() for x in mats], r.tolist()], off.tolist(), gain.tolist(),
+            ff.tolist(), hold.tolist(), lo.tolist(), hi.tolist(), step.tolist(), slack.tolist(),
+        )  # fmt: skip
+        x = np.zeros(order)
+        z = np.repeat((mats[4] @ off)[:, None], k, axis=1)
+        last = np.zeros(ni)
+        tally = np.zeros((ni, K.TALLY_SIZE))
+        tally[:, K.TALLY_TOL], tally[:, K.TALLY_LOW], tally[:, K.TALLY_HIGH] = np.inf, lo, hi
+        cmd, past = np.empty((n, ni)), np.empty(n, dtype=bool)
+        S.structure_compensate(a, *mats, r, off, gain, ff, hold, lo, hi, step, slack, x, z,
+                               last, tally, cmd, past)  # fmt: skip
+        # tol: a few roundings per sample through a contracting state (|a| < 1 on average)
+        np.testing.assert_allclose(cmd, want_cmd, rtol=1e-9, atol=1e-9)
+        np.testing.assert_array_equal(past, want_past)
+        assert np.all((cmd >= lo) & (cmd <= hi))
+        at = (cmd <= lo) | (cmd >= hi)
+        counted = tally[:, K.TALLY_AT_LOW] + tally[:, K.TALLY_AT_HIGH]
+        np.testing.assert_array_equal(counted, at.sum(axis=0))
+
+    check()
+
+
+def test_zeros_outside_the_circle_are_met_by_preview() -> None:
+    """The structure's zeros lie outside the unit circle (a plain inverse has unstable
+    poles there); with its preview the tracker follows a raster through the modes and the
+    operators to rounding, without it (targets taken to hold) by about a per cent."""
+    structure = _structure()
+    pencil = np.block([[structure.a, structure.b], [structure.c, structure.d]])
+    rest = np.block([[np.eye(4), np.zeros((4, 2))], [np.zeros((2, 6))]])
+    zeros = sl.eigvals(pencil, rest)
+    assert np.abs(zeros[np.isfinite(zeros)]).min() > 1.05
+    model = _model(structure)
+    comp = ph.StructureCompensator(model, v_min=0.0, v_max=100.0)
+    assert 50 < comp.preview < 1000  # the closed loop's slowest pole, |z| 0.9 or so
+    target = _raster(model)
+    cmd = comp.process(target)
+    # tol: the commands' weight (effort 1e-6 of the spans) against the tracking error: its
+    # trade-off leaves ~1e-7 of the span (measured 1.8e-7 and 2.1e-7)
+    assert np.all(_error(model, cmd, target) < 2e-6)
+    assert np.all((cmd >= 0.0) & (cmd <= 100.0))
+    comp.reset()
+    blind = np.array([comp.step(row) for row in target])
+    err = _error(model, blind, target)
+    assert err[0] > 0.005  # the preview is what tracks: 1.1 % without it
+
+
+@pytest.mark.filterwarnings("ignore::piezohyst.errors.LimitWarning")
+def test_step_with_its_preview_equals_process() -> None:
+    model = _model(_structure())
+    comp = ph.StructureCompensator(model, v_min=0.0, v_max=100.0, slew_rate=1000.0)
+    target = _raster(model, n=700, rate=5.0)
+    block = comp.process(target)
+    counts = comp.slew_limited_count.copy(), comp.saturated_count.copy()
+    assert counts[0].sum() > 0  # the 5 Hz raster's corners are slew-limited
+    comp.reset()
+    stepped = np.array(
+        [comp.step(target[k], preview=target[k + 1 : k + 1 + comp.preview])
+         for k in range(target.shape[0])]
+    )  # fmt: skip
+    # tol: the same sums in another order (the preview's rows one at a time)
+    np.testing.assert_allclose(stepped, block, rtol=0, atol=1e-9 * 100)
+    np.testing.assert_array_equal(comp.slew_limited_count, counts[0])
+    np.testing.assert_array_equal(comp.saturated_count, counts[1])
+
+
+def test_the_limits_hold_commands_and_say_so() -> None:
+    model = _model(_structure())
+    target = _raster(model)
+    target[:, 1] += 0.6 * np.ptp(target[:, 0])  # y beyond what actuator 1 reaches
+    comp = ph.StructureCompensator(model, v_min=0.0, v_max=[100.0, 60.0], slew_rate=3000.0)
+    with pytest.warns(LimitWarning) as said:
+        cmd = comp.process(target)
+    assert np.all(cmd >= 0.0) and np.all(cmd[:, 0] <= 100.0) and np.all(cmd[:, 1] <= 60.0)
+    at = (cmd <= comp.v_min) | (cmd >= comp.v_max)
+    np.testing.assert_array_equal(comp.saturated_count, at.sum(axis=0))
+    moved = np.abs(np.diff(np.vstack([np.zeros(2), cmd]), axis=0))
+    assert np.all(moved <= 3.0 + 1e-9)  # 3000 V/s at 1 kHz
+    assert comp.saturated_count[1] > 0.01 * target.shape[0]
+    text = " | ".join(str(w.message) for w in said)
+    assert f"actuator 1: the voltage limits [0, 60] V held {comp.saturated_count[1]} " in text
+    assert "outside what the structure reaches within the limits" in text
+    assert comp.outside_count > 0.5 * target.shape[0]
+
+
+def test_a_nan_holds_the_last_command() -> None:
+    model = _model(_structure())
+    comp = ph.StructureCompensator(model, v_min=0.0, v_max=100.0)
+    target = _raster(model, n=400)
+    target[350:360, 0] = np.nan
+    cmd = comp.process(target)
+    assert np.all(np.isfinite(cmd))
+    np.testing.assert_array_equal(cmd[350:360], np.repeat(cmd[349:350], 10, axis=0))
+    assert comp.nonfinite_count == 10
+
+
+def test_reset_at_a_voltage_settles_there() -> None:
+    model = _model(_structure(e_gain=0.0))
+    comp = ph.StructureCompensator(model, v_min=0.0, v_max=100.0)
+    where = np.array([30.0, 70.0])
+    comp.reset(voltage=where)
+    held = model.structure_.dc_gain() @ where + model.structure_.off
+    cmd = comp.process(np.tile(held, (50, 1)))
+    # tol: the preview's gains cut where they fall below 1e-6 of the largest (PREVIEW_TOL):
+    # the commands off by that share of the sum of gains, 1e-6 of the range (measured 1.3e-4 V)
+    np.testing.assert_allclose(cmd, np.tile(where, (50, 1)), atol=1e-5 * 100)
+    np.testing.assert_array_equal(comp.last_command, cmd[-1])
+
+
+def test_bad_input_is_named() -> None:
+    model = _model(_structure())
+    with pytest.raises(ParameterError, match=r"takes a fitted ph\.StructureModel"):
+        ph.StructureCompensator(ph.StructureModel(), v_min=0.0, v_max=1.0)  # type: ignore[arg-type]
+    with pytest.raises(ParameterError, match="'v_max' must be a finite number or one per"):
+        ph.StructureCompensator(model, v_min=0.0, v_max=[1.0, 2.0, 3.0])
+    with pytest.raises(ParameterError, match="below its 'v_max'"):
+        ph.StructureCompensator(model, v_min=5.0, v_max=1.0)
+    with pytest.raises(ParameterError, match="'effort' must be a positive number"):
+        ph.StructureCompensator(model, v_min=0.0, v_max=1.0, effort=0.0)
+    with pytest.raises(ParameterError, match="'slew_rate' must be positive"):
+        ph.StructureCompensator(model, v_min=0.0, v_max=1.0, slew_rate=-1.0)
+    comp = ph.StructureCompensator(model, v_min=0.0, v_max=100.0)
+    with pytest.raises(ShapeError, match=r"'desired' must be \(samples, 2\)"):
+        comp.process(np.zeros((5, 3)))
+    with pytest.raises(ShapeError, match=r"'preview' must be \(samples, 2\)"):
+        comp.step([0.0, 0.0], preview=np.zeros((3, 1)))
+    with pytest.raises(ParameterError, match=r"a CoupledModel has ph\.CoupledCompensator"):
+        ph.StructureCompensator(ph.CoupledModel(), v_min=0.0, v_max=1.0)  # type: ignore[arg-type]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert comp.process(np.empty((0, 2))).shape == (0, 2)
