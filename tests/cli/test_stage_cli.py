@@ -272,9 +272,15 @@ def test_a_structure_from_the_shell(tmp_path: Path) -> None:
     # gain) and the fit's own error (1e-5 of the span) on a 10 V signal, 2e-5 V each
     np.testing.assert_allclose(got[300:-100], v[300:-100], atol=1e-4 * 10)  # measured 1.9e-4 V
     assert np.all(np.abs(got) <= 50.0)
-    one_line_error(run("export-c", out, "-o", tmp_path / "s.c", "--v-min", "-50",
+    res = run("export-c", out, "-o", tmp_path / "s.c", "--v-min", "-50", "--v-max", "50")
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "s.h").exists() and "#define S_PREVIEW " in (tmp_path / "s.h").read_text()
+    one_line_error(run("export-fmu", out, "-o", tmp_path / "s.fmu", "--v-min", "-50",
                        "--v-max", "50"),
+                   "is a structure model (StructureModel)", "its FMU is not built yet")  # fmt: skip
+    one_line_error(run("report", out, data, "--input", "vx,vy", "--output", "x,y,z", "--out",
+                       tmp_path / "rep"),
                    "is a structure model (StructureModel)",
-                   "C export and report are not built")  # fmt: skip
+                   "its report is not built yet")  # fmt: skip
     one_line_error(run("fit", data, "--input", "vx", "--output", "x", "--model", "structure",
                        "-o", tmp_path / "one.json"), "two or more --input columns")  # fmt: skip

@@ -62,7 +62,7 @@ PREVIEW_TOL = 1e-6
 #: Samples of preview at most (a closed loop slower than that is truncated, and said)
 MAX_PREVIEW = 8192
 #: Blocks at least this large (samples x preview) compute the preview's sum by FFT
-FFT_FROM = 200_000
+FFT_FROM = 2_000_000
 
 
 def _design(

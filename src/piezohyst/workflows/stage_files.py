@@ -125,9 +125,9 @@ def _read_stage(
 def _stage(model_path: PathLike) -> CoupledModel:
     if _is_structure(model_path):
         msg = (
-            f"{model_path} is a structure model (StructureModel): `predict` runs it and "
-            "`compensate` inverts it (in Python: ph.StructureCompensator); its C export and "
-            "report are not built yet: for those, fit a stage (fit --input vx,vy --output x,y: "
+            f"{model_path} is a structure model (StructureModel): `predict` runs it, "
+            "`compensate` and `export-c` invert it (in Python: ph.StructureCompensator); its "
+            "report is not built yet: for that, fit a stage (fit --input vx,vy --output x,y: "
             "a coupled model)"
         )
         raise ParameterError(msg)
@@ -530,6 +530,10 @@ def export_stage_file(
     list of Path
         The files written, the stage's ``.c`` first (the library last).
     """
+    if _is_structure(model_path):
+        return _export_structure(model_path, out, v_min=v_min, v_max=v_max,
+                                 slew_rate=slew_rate, precision=precision, shared=shared,
+                                 mex=mex, force=force)  # fmt: skip
     model = _stage(model_path)
     if str(out).endswith(".fmu"):  # an FMU: two target inputs... one voltage per actuator
         guard_outputs([out], [model_path], force=force)
@@ -548,6 +552,32 @@ def export_stage_file(
         files, lib = write_stage_shared(comp, c_path, precision=precision)  # type: ignore[arg-type]
         return [*files, lib]
     return list(write_stage_c(comp, c_path, precision=precision))  # type: ignore[arg-type]
+
+
+def _export_structure(
+    model_path: PathLike, out: PathLike, *, v_min: float, v_max: float,
+    slew_rate: float | str | None, precision: str, shared: bool, mex: bool, force: bool,
+) -> list[os.PathLike[str]]:  # fmt: skip
+    """A structure model's compensator as C (:func:`~piezohyst.control.export.structure_c.
+    write_structure_c`), with ``shared`` its library; its MEX gateway and FMU are not built."""
+    from ..control.export.structure_c import write_structure_c, write_structure_shared
+
+    if mex or str(out).endswith(".fmu"):
+        what = "MEX gateway" if mex else "FMU"
+        msg = (
+            f"{model_path} is a structure model (StructureModel): its C and shared library "
+            f"are exported (export-c, --shared), its {what} is not built yet"
+        )
+        raise ParameterError(msg)
+    c_path, h_path, _ = c_paths(out)
+    guard_outputs([c_path, h_path], [model_path], force=force)
+    model = StructureModel.load(model_path)
+    slew = None if slew_rate in (None, "trained") else float(slew_rate)
+    comp = StructureCompensator(model, v_min=v_min, v_max=v_max, slew_rate=slew)
+    if shared:
+        files, lib = write_structure_shared(comp, c_path, precision=precision)  # type: ignore[arg-type]
+        return [*files, lib]
+    return list(write_structure_c(comp, c_path, precision=precision))  # type: ignore[arg-type]
 
 
 def stage_report(
