@@ -275,9 +275,11 @@ def test_a_structure_from_the_shell(tmp_path: Path) -> None:
     res = run("export-c", out, "-o", tmp_path / "s.c", "--v-min", "-50", "--v-max", "50")
     assert res.exit_code == 0, res.output
     assert (tmp_path / "s.h").exists() and "#define S_PREVIEW " in (tmp_path / "s.h").read_text()
-    one_line_error(run("export-fmu", out, "-o", tmp_path / "s.fmu", "--v-min", "-50",
-                       "--v-max", "50"),
-                   "is a structure model (StructureModel)", "its FMU is not built yet")  # fmt: skip
+    res = run("export-c", out, "-o", tmp_path / "t_mex.c", "--v-min", "-50", "--v-max", "50",
+              "--mex")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "t_mex('preview')" in (tmp_path / "t_mex.c").read_text()
+    assert (tmp_path / "t.c").exists()
     one_line_error(run("report", out, data, "--input", "vx,vy", "--output", "x,y,z", "--out",
                        tmp_path / "rep"),
                    "is a structure model (StructureModel)",

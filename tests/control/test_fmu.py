@@ -284,3 +284,44 @@ def test_a_model_with_a_mode_as_an_fmu_takes_the_next_target(tmp_path: Path) -> 
         np.testing.assert_allclose(out, expected, rtol=0, atol=1e-9)
         slave.close()
     assert np.abs(py - blind).max() > 1e-3  # the preview matters: it shows
+
+
+def test_a_structure_fmu_in_fmpy_equals_python(tmp_path: Path) -> None:
+    """Issue 57: a structure's compensator (the tracker with preview) as an FMU: one input
+    per output (the target its preview ahead), one voltage output per actuator, the counts;
+    FMPy's checker finds nothing, and stepped through FMPy it equals Python's process of the
+    same run from rest to 1e-9 V, with the same counts."""
+    from fmpy.validation import validate_fmu
+
+    from piezohyst.control.export.structure_c import write_structure_fmu
+
+    from .test_structure_compensator import _model, _raster, _structure
+
+    model = _model(_structure())
+    comp = ph.StructureCompensator(model, v_min=0.0, v_max=[100.0, 80.0], slew_rate=2000.0)
+    path = write_structure_fmu(comp, tmp_path / "ph_st.fmu")
+    assert validate_fmu(str(path)) == []
+    target = _raster(model, n=700, rate=5.0)
+    target[400:450, 1] += 0.3 * np.ptp(target[:, 0])  # y out of actuator 1's reach
+    target[500] = np.nan
+    n = comp.preview
+    pushed = np.vstack([target, np.repeat(target[-1:], n, axis=0)])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ph.LimitWarning)  # compared, not said
+        py = comp.process(np.vstack([np.repeat(comp.output[None], n, axis=0), target]))
+    slave = Slave(path)
+    vr = slave.vr
+    fmu_cmds = np.empty_like(py)
+    for i, row in enumerate(pushed):
+        slave.fmu.setReal([vr["ahead_0"], vr["ahead_1"]], [float(row[0]), float(row[1])])
+        slave.fmu.doStep(currentCommunicationPoint=i / FS, communicationStepSize=1 / FS)
+        fmu_cmds[i] = slave.fmu.getReal([vr["voltage_0"], vr["voltage_1"]])
+    # tol: C and numba round apart by an ulp per step, not integrated: issue 41's 1e-9 V
+    np.testing.assert_allclose(fmu_cmds, py, rtol=0, atol=1e-9)
+    names = ["outside", "nonfinite", "saturated_0", "slewed_0", "saturated_1", "slewed_1"]
+    counts = slave.fmu.getInteger([vr[k] for k in names])
+    said = [comp.outside_count, comp.nonfinite_count]
+    for k in range(2):
+        said += [int(comp.saturated_count[k]), int(comp.slew_limited_count[k])]
+    assert counts == said and counts[0] > 0 and counts[1] == 1
+    slave.close()

@@ -558,26 +558,32 @@ def _export_structure(
     model_path: PathLike, out: PathLike, *, v_min: float, v_max: float,
     slew_rate: float | str | None, precision: str, shared: bool, mex: bool, force: bool,
 ) -> list[os.PathLike[str]]:  # fmt: skip
-    """A structure model's compensator as C (:func:`~piezohyst.control.export.structure_c.
-    write_structure_c`), with ``shared`` its library; its MEX gateway and FMU are not built."""
-    from ..control.export.structure_c import write_structure_c, write_structure_shared
+    """A structure model's compensator as C (:mod:`~piezohyst.control.export.structure_c`),
+    with ``shared`` its library, with ``mex`` its MEX gateway, or an FMU (``out`` ``.fmu``)."""
+    from ..control.export import structure_c as sc
 
-    if mex or str(out).endswith(".fmu"):
-        what = "MEX gateway" if mex else "FMU"
-        msg = (
-            f"{model_path} is a structure model (StructureModel): its C and shared library "
-            f"are exported (export-c, --shared), its {what} is not built yet"
-        )
-        raise ParameterError(msg)
-    c_path, h_path, _ = c_paths(out)
-    guard_outputs([c_path, h_path], [model_path], force=force)
     model = StructureModel.load(model_path)
     slew = None if slew_rate in (None, "trained") else float(slew_rate)
+    fmu = str(out).endswith(".fmu")
+    c_path, h_path, name = c_paths(out)
+    if fmu:
+        written = [Path(out).with_suffix(".fmu")]
+    elif mex:
+        step = name[: -len("_mex")] if name.endswith("_mex") else f"{name}_step"
+        written = [c_path, c_path.with_name(f"{step}.c"), c_path.with_name(f"{step}.h")]
+    else:
+        written = [c_path, h_path]
+    guard_outputs(written, [model_path], force=force)
     comp = StructureCompensator(model, v_min=v_min, v_max=v_max, slew_rate=slew)
+    prec = precision
+    if fmu:
+        return [sc.write_structure_fmu(comp, out, precision=prec)]  # type: ignore[arg-type]
+    if mex:
+        return list(sc.write_structure_mex(comp, c_path, precision=prec))  # type: ignore[arg-type]
     if shared:
-        files, lib = write_structure_shared(comp, c_path, precision=precision)  # type: ignore[arg-type]
+        files, lib = sc.write_structure_shared(comp, c_path, precision=prec)  # type: ignore[arg-type]
         return [*files, lib]
-    return list(write_structure_c(comp, c_path, precision=precision))  # type: ignore[arg-type]
+    return list(sc.write_structure_c(comp, c_path, precision=prec))  # type: ignore[arg-type]
 
 
 def stage_report(

@@ -16,8 +16,10 @@ module             what it holds
                    coupled stage's compensator, each actuator's step and the coupling's
                    inverse around them, its library, FMU and MEX gateway
 ``structure_c``    :func:`~.structure_c.write_structure_c`,
-                   :func:`~.structure_c.write_structure_shared`: a structure's compensator
-                   (the tracker with preview of a ``StructureModel``) and its library
+                   :func:`~.structure_c.write_structure_shared`,
+                   :func:`~.structure_c.write_structure_mex`,
+                   :func:`~.structure_c.write_structure_fmu`: a structure's compensator (the
+                   tracker with preview of a ``StructureModel``), its library, MEX and FMU
 ``c/``             the hosts' C templates (the shared API, the MEX gateway, the FMI functions)
 =================  =========================================================================
 """

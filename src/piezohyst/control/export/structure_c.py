@@ -12,6 +12,7 @@ acts ahead, as it does in Python on a block that starts at rest).
 
 from __future__ import annotations
 
+import hashlib
 import os
 from importlib import resources
 from pathlib import Path
@@ -26,7 +27,13 @@ from ..coupled import REACH_SLACK
 from ..structure import StructureCompensator
 from .c_code import c_paths
 
-__all__ = ["export_structure_c", "write_structure_c", "write_structure_shared"]
+__all__ = [
+    "export_structure_c",
+    "write_structure_c",
+    "write_structure_fmu",
+    "write_structure_mex",
+    "write_structure_shared",
+]
 
 
 def _template(name: str) -> Template:
@@ -192,3 +199,166 @@ def write_structure_shared(
     lib = library_path(c_path, prefix)
     build_library([c_path], lib)
     return [c_path, h_path], lib
+
+
+def write_structure_mex(
+    compensator: StructureCompensator,
+    path: str | os.PathLike[str],
+    *,
+    precision: Precision = "double",
+) -> list[Path]:
+    """A MEX gateway ``NAME.c`` for MATLAB and Octave, and the structure's C beside it.
+
+    ``NAME`` comes from ``path`` (``ph_st_mex.c``: the function ``ph_st_mex``); the step's
+    files are named after it without ``_mex`` (``ph_st.c``, ``ph_st.h``). Build with
+    ``mkoctfile --mex`` (or ``mex``) on the gateway and the step's ``.c``. ``v = NAME(target)``
+    takes one row per sample (each the preview ahead of its command row), ``[v, counts]``
+    the counts as :func:`write_structure_shared`'s, ``NAME('preview')`` the preview.
+
+    Parameters
+    ----------
+    compensator : StructureCompensator
+    path : str or os.PathLike
+        The gateway's ``.c`` file.
+    precision : {"double", "float"}
+
+    Returns
+    -------
+    list of Path
+        The gateway, the step's source and header.
+    """
+    from .shared import _version_text, mex_commands
+
+    gate, _, name = c_paths(path)
+    prefix = name[: -len("_mex")] if name.endswith("_mex") else f"{name}_step"
+    files = write_structure_c(compensator, gate.with_name(f"{prefix}.c"), precision=precision)
+    n, m = compensator.model.n_inputs_, compensator.model.n_outputs_
+    version = _version_text(f"{name}, the compensator of a structure of {n} actuators")
+    text = _template("structure_mex.c").substitute(
+        name=name, prefix=prefix, upper=prefix.upper(), n=n, m=m, n_counts=2 + 2 * n,
+        preview=compensator.preview, version=version,
+        run_command=mex_commands(name, prefix, version),
+    )  # fmt: skip
+    atomic_write_text(gate, text)
+    return [gate, *files]
+
+
+def write_structure_fmu(
+    compensator: StructureCompensator,
+    path: str | os.PathLike[str],
+    *,
+    precision: Precision = "double",
+) -> Path:
+    """An FMI 2.0 Co-Simulation FMU of a structure's compensator.
+
+    Real inputs ``ahead_0`` ... (one per output, value references 0 ...: the target
+    ``preview`` steps ahead of the commands this step returns; start: the rest outputs), real
+    outputs ``voltage_0`` ... (one per actuator, after the inputs), integer outputs
+    ``outside`` (0), ``nonfinite`` (1), then per actuator k ``saturated_k``, ``slewed_k``
+    (2 + 2k, 3 + 2k). One ``fmi2DoStep`` is one sample at the rate the model was identified
+    at.
+
+    Parameters
+    ----------
+    compensator : StructureCompensator
+    path, precision
+        As for :func:`~piezohyst.control.export.write_fmu`.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ParameterError
+        A name that is not a C identifier, no C compiler.
+    """
+    from .fmu import fmi2_wrapper, package_fmu
+
+    out = Path(path).with_suffix(".fmu")
+    name = out.stem
+    if not name.isidentifier() or not name.isascii():
+        msg = f"the FMU's name {name!r} (its file name) must be a C identifier"
+        raise ParameterError(msg)
+    n, m = compensator.model.n_inputs_, compensator.model.n_outputs_
+    rate, preview = compensator.sample_rate, compensator.preview
+    period = 1.0 / float(rate)
+    what = (f"{name}: the compensator of a structure of {n} actuators and {m} outputs, "
+            f"{rate:g} Hz, targets {preview} steps ahead")  # fmt: skip
+    files = export_structure_c(compensator, precision=precision, prefix=name)
+    counts = ["c->s.outside", "c->s.nonfinite"]
+    counts += [f"c->s.{f}[{k}]" for k in range(n) for f in ("saturated", "slewed")]
+    rest = compensator.model.structure_.off
+    files[f"{name}.c"] += fmi2_wrapper(
+        name, period, what, n_real=m + n,
+        layout=f"0-{m - 1} the targets ahead, {m}-{m + n - 1} the voltages",
+        not_input=f"vr[i] >= {m}", inputs="the targets ahead", counts=tuple(counts),
+        counts_said="0 targets out of reach, 1 non-finite targets, then per actuator k:\n * "
+        "2 + 2k commands at a voltage limit, 3 + 2k cut by the slew limit",
+        step_statement=f"{name}_step_doubles(&c->s, c->r, c->r + {m})",
+        start_outputs="\n    ".join([*(f"c->r[{i}] = {float(rest[i])!r};" for i in range(m)),
+                                      *(f"c->r[{m + k}] = (fmi2Real)c->s.last[{k}];"
+                                        for k in range(n))]),
+    )  # fmt: skip
+    guid = "{" + hashlib.sha256("".join(files.values()).encode()).hexdigest()[:32] + "}"
+    files[f"{name}.c"] = files[f"{name}.c"].replace(f'"{{{name}-GUID}}"', f'"{guid}"')
+    xml = _fmu_description(name, guid, n, m, period, what, rest, preview)
+    return package_fmu(out, name, files, xml, what)
+
+
+def _fmu_description(
+    name: str, guid: str, n: int, m: int, period: float, what: str, rest: np.ndarray,
+    preview: int,
+) -> str:  # fmt: skip
+    """The structure FMU's ``modelDescription.xml``."""
+    from xml.sax.saxutils import escape
+
+    from ..._version import __version__
+
+    def var(label: str, ref: int, causality: str, kind: str, said: str, start: str = "") -> str:
+        extra = ' variability="continuous"' if causality == "input" else (
+            ' variability="discrete" initial="calculated"')  # fmt: skip
+        start = f' start="{start}"' if causality == "input" else ""
+        return (f'    <ScalarVariable name="{label}" valueReference="{ref}" causality="{causality}"'
+                f'{extra} description="{escape(said)}">\n      <{kind}{start}/>\n'
+                "    </ScalarVariable>")  # fmt: skip
+
+    rows = [var(f"ahead_{i}", i, "input", "Real", f"output {i}'s target {preview} steps "
+                "ahead of this step's commands (start: at rest)", repr(float(rest[i])))
+            for i in range(m)]  # fmt: skip
+    rows += [var(f"voltage_{k}", m + k, "output", "Real", f"actuator {k}'s command (V)")
+             for k in range(n)]  # fmt: skip
+    rows.append(var("outside", 0, "output", "Integer", "targets out of reach"))
+    rows.append(var("nonfinite", 1, "output", "Integer", "non-finite targets (held)"))
+    for k in range(n):
+        for j, field in enumerate(("saturated", "slewed")):
+            rows.append(var(f"{field}_{k}", 2 + 2 * k + j, "output", "Integer",
+                            f"actuator {k}: {field} commands since the last reset"))  # fmt: skip
+    outputs = range(m + 1, m + n + 2 + 2 * n + 1)  # 1-based: every one after the inputs
+    return f"""<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{guid}"
+  description="{escape(what)}" generationTool="piezohyst {__version__}"
+  variableNamingConvention="flat" numberOfEventIndicators="0">
+  <CoSimulation modelIdentifier="{name}" needsExecutionTool="false"
+    canHandleVariableCommunicationStepSize="false" canInterpolateInputs="false"
+    canRunAsynchronuously="false" canBeInstantiatedOnlyOncePerProcess="false"
+    canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="false"
+    canSerializeFMUstate="false" providesDirectionalDerivative="false">
+    <SourceFiles>
+      <File name="{name}.c"/>
+    </SourceFiles>
+  </CoSimulation>
+  <DefaultExperiment startTime="0" stepSize="{period!r}"/>
+  <ModelVariables>
+{chr(10).join(rows)}
+  </ModelVariables>
+  <ModelStructure>
+    <Outputs>
+{chr(10).join(f'      <Unknown index="{i}"/>' for i in outputs)}
+    </Outputs>
+    <InitialUnknowns>
+{chr(10).join(f'      <Unknown index="{i}" dependencies=""/>' for i in outputs)}
+    </InitialUnknowns>
+  </ModelStructure>
+</fmiModelDescription>
+"""

@@ -174,3 +174,18 @@ void ${prefix}_step(${prefix}_t *s, const real_t *ahead, real_t *command)
     }
     s->head = (s->head + 1) % ${slots};
 }
+
+/* The step on doubles, as a host passes them (the shared library's rows, an FMU's
+ * variables). */
+void ${prefix}_step_doubles(${prefix}_t *s, const double *ahead, double *command)
+{
+    real_t d[${m}], v[${n}];
+    int i;
+    for (i = 0; i < ${m}; ++i) {
+        d[i] = (real_t)ahead[i];
+    }
+    ${prefix}_step(s, d, v);
+    for (i = 0; i < ${n}; ++i) {
+        command[i] = (double)v[i];
+    }
+}

@@ -41,4 +41,7 @@ void ${prefix}_init(${prefix}_t *s);
  * command will hold). */
 void ${prefix}_step(${prefix}_t *s, const ${prefix}_real *ahead, ${prefix}_real *command);
 
+/* The same on doubles (ahead[${m}] in, command[${n}] out) whatever the precision. */
+void ${prefix}_step_doubles(${prefix}_t *s, const double *ahead, double *command);
+
 #endif
