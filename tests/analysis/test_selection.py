@@ -121,3 +121,46 @@ def test_the_choice_with_the_amplifiers_lag_identified_by_every_candidate(
                                         *option, "-o", str(tmp_path / "m.json")])  # fmt: skip
         assert res.exit_code == 2 and f"{option[0]} set one model's terms" in res.output
         assert not (tmp_path / "m.json").exists()
+
+
+def test_a_record_that_never_comes_back_low_is_chosen_for_by_the_candidates_median() -> None:
+    """Decaying loops reach 0 V on their first rise only: the scores cannot rank how the
+    candidates predict loops from there. select_model then takes, among the candidates
+    scoring within 1.5x of the best, the one whose loops from the bottom lie nearest the
+    candidates' median (chosen on plants drawn at random, docs/selection-study.md), and says
+    so. Recomputed here from the candidates' own fits; a record whose loops reach both ends
+    is left to the scores."""
+    from piezohyst.analysis.selection import MEDIAN_WITHIN, candidate_model, probe_loops
+
+    rec = ph.simulate(plant="two-state", signal="decaying", duration=40.0, seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sel = select_model(rec.voltage, rec.charge, rec.t)
+        best = min(r.score for r in sel.rows)
+        close = [r.name for r in sel.rows if r.score <= MEDIAN_WITHIN * best]
+        loops = probe_loops(rec.voltage, "lowest", 1e-3)
+        tl = np.arange(loops.size) * 1e-3
+        preds = {
+            n: candidate_model(n, 10, ("V", "C"), rec.t)
+            .fit(rec.voltage, rec.charge, t=rec.t)
+            .predict(loops, t=tl)
+            for n in close
+        }
+    assert len(close) >= 3 and loops.min() == rec.voltage.min()
+    median = np.median(np.array(list(preds.values())), axis=0)
+    nearest = min(preds, key=lambda n: float(np.sqrt(np.mean((preds[n] - median) ** 2))))
+    assert sel.name == nearest == "bouc-wen"
+    assert sel.rows[0].name != sel.name  # the scores alone took another
+    said = [n for n in sel.notes if "nearest the candidates' median" in n]
+    assert len(said) == 1 and "bouc-wen chosen (rather than" in said[0]
+    assert type(sel.model).__name__ == "BoucWenModel"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ph.ExtrapolationWarning)  # the loops leave the record
+        again = sel.model.predict(loops, t=tl)
+    np.testing.assert_array_equal(again, preds["bouc-wen"])
+    # loops to both ends: the scores decide, nothing said of a median
+    both = ph.simulate(plant="two-state", signal="multi", duration=20.0, seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        plain = select_model(both.voltage, both.charge, both.t)
+    assert not any("candidates' median" in n for n in plain.notes)

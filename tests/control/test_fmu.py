@@ -295,13 +295,13 @@ def test_a_structure_fmu_in_fmpy_equals_python(tmp_path: Path) -> None:
 
     from piezohyst.control.export.structure_c import write_structure_fmu
 
-    from .test_structure_compensator import _model, _raster, _structure
+    from .structures import model_of, raster, structure
 
-    model = _model(_structure())
+    model = model_of(structure())
     comp = ph.StructureCompensator(model, v_min=0.0, v_max=[100.0, 80.0], slew_rate=2000.0)
     path = write_structure_fmu(comp, tmp_path / "ph_st.fmu")
     assert validate_fmu(str(path)) == []
-    target = _raster(model, n=700, rate=5.0)
+    target = raster(model, n=700, rate=5.0)
     target[400:450, 1] += 0.3 * np.ptp(target[:, 0])  # y out of actuator 1's reach
     target[500] = np.nan
     n = comp.preview

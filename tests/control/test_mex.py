@@ -224,11 +224,11 @@ def test_a_structure_mex_in_octave(tmp_path: Path) -> None:
     per actuator."""
     from piezohyst.control.export.structure_c import write_structure_mex
 
-    from .test_structure_compensator import _model, _raster, _structure
+    from .structures import model_of, raster, structure
 
-    model = _model(_structure())
+    model = model_of(structure())
     comp = ph.StructureCompensator(model, v_min=0.0, v_max=[100.0, 80.0], slew_rate=2000.0)
-    target = _raster(model, n=900, rate=5.0)
+    target = raster(model, n=900, rate=5.0)
     target[600:650, 1] += 0.3 * np.ptp(target[:, 0])  # y out of actuator 1's reach
     target[700] = np.nan
     files = write_structure_mex(comp, tmp_path / "ph_st_mex.c")

@@ -17,74 +17,15 @@ import piezohyst as ph
 from piezohyst._kernels import play as K
 from piezohyst._kernels import structure as S
 from piezohyst.errors import LimitWarning, ParameterError, ShapeError
-from piezohyst.model import structure_fit as sf
-from piezohyst.model.persistence import signed
-from piezohyst.model.structure import STRUCTURE_FORMAT, StructureModel
 
 from .. import reference
 from ..helpers import CC
 from ..strategies import examples
+from .structures import error, model_of, raster, structure
 
 pytestmark = pytest.mark.kernels
 
 FS = 1000.0
-RISE = 300  # samples of the ramp from rest that starts every target
-
-
-def _structure(e_gain: float = 0.1) -> sf.Structure:
-    """Two actuators, two shared modes (|poles| 0.97 and 0.95), two outputs read through
-    both modes with opposite signs: two transmission zeros outside the unit circle; each
-    actuator's two play operators act on the modes with ``e_gain`` (0.1: the tracker's loop
-    stays stable where every operator sticks, pole radius 0.97)."""
-    rot = lambda rad, th: rad * np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])  # noqa: E731
-    a = np.zeros((4, 4))
-    a[:2, :2], a[2:, 2:] = rot(0.97, 0.3), rot(0.95, 0.7)
-    b = 10.0 * np.array([[0.05, 0.01], [0.0, 0.015], [0.005, 0.05], [0.02, 0.0]])
-    c = -np.array([[1.0, -0.9, 0.3, 0.1], [0.2, 0.1, 1.0, -0.8]])
-    d = np.zeros((2, 2))
-    t = np.linalg.pinv(d + c @ np.linalg.solve(np.eye(4) - a, b))
-    r = np.array([[0.3, 1.0], [0.2, 0.8]])
-    e = e_gain * np.array([[1.0, 0.5, 0.0, 0.0], [0.3, 0.0, 0.0, 0.2], [0.0, 0.0, 1.0, 0.6],
-                           [0.0, 0.2, 0.4, 0.0]])  # fmt: skip
-    return sf.Structure(a, b, c, d, e, t, r, np.array([0.5, -0.2]))
-
-
-def _model(structure: sf.Structure) -> StructureModel:
-    """A fitted StructureModel holding ``structure``, through its file format."""
-    body = {
-        "format": STRUCTURE_FORMAT,
-        "version": 1,
-        "params": {**StructureModel(order=structure.order).get_params(), "widths": [0.003, 0.3]},
-        "sample_rate": FS,
-        "orders": {},
-        "operators_kept": structure.r.shape[1],
-        "held_nrmse": None,
-        "output_nrmse": 0.0,
-        "refinement": None,
-        **{k: getattr(structure, k).tolist() for k in ("a", "b", "c", "d", "e", "t", "r", "off")},
-    }
-    return StructureModel.from_dict(signed(body))
-
-
-def _raster(model: StructureModel, n: int = 3000, rate: float = 2.0) -> np.ndarray:
-    """A triangle on output 0 (40-60 % of its span at 0-100 V, ``rate`` Hz), output 1 held
-    at mid-span, after a ramp from rest."""
-    lo = model.predict(np.zeros((8, 2)))[0]
-    hi = model.structure_.dc_gain() @ np.full(2, 100.0) + model.structure_.off
-    k = np.arange(n)
-    tri = np.abs((k / FS * rate) % 1.0 * 2 - 1)
-    target = np.column_stack([lo[0] + (hi[0] - lo[0]) * (0.4 + 0.2 * tri),
-                              np.full(n, 0.5 * (lo[1] + hi[1]))])  # fmt: skip
-    ramp = np.linspace(0.0, 1.0, RISE)[:, None]
-    return np.vstack([lo + ramp * (target[0] - lo), target])
-
-
-def _error(model: StructureModel, cmd: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """Each output's RMS tracking error after the ramp, in its span over the targets."""
-    got = model.predict(cmd)[RISE:]
-    return np.sqrt(np.mean((got - target[RISE:]) ** 2, axis=0)) / np.ptp(target, axis=0).clip(
-        np.ptp(target[:, 0])
-    )
 
 
 def test_the_kernel_equals_the_reference() -> None:
@@ -131,31 +72,31 @@ def test_zeros_outside_the_circle_are_met_by_preview() -> None:
     """The structure's zeros lie outside the unit circle (a plain inverse has unstable
     poles there); with its preview the tracker follows a raster through the modes and the
     operators to rounding, without it (targets taken to hold) by about a per cent."""
-    structure = _structure()
-    pencil = np.block([[structure.a, structure.b], [structure.c, structure.d]])
+    plant = structure()
+    pencil = np.block([[plant.a, plant.b], [plant.c, plant.d]])
     rest = np.block([[np.eye(4), np.zeros((4, 2))], [np.zeros((2, 6))]])
     zeros = sl.eigvals(pencil, rest)
     assert np.abs(zeros[np.isfinite(zeros)]).min() > 1.05
-    model = _model(structure)
+    model = model_of(plant)
     comp = ph.StructureCompensator(model, v_min=0.0, v_max=100.0)
     assert 50 < comp.preview < 1000  # the closed loop's slowest pole, |z| 0.9 or so
-    target = _raster(model)
+    target = raster(model)
     cmd = comp.process(target)
     # tol: the commands' weight (effort 1e-6 of the spans) against the tracking error: its
     # trade-off leaves ~1e-7 of the span (measured 3.0e-7 and 0.9e-7)
-    assert np.all(_error(model, cmd, target) < 2e-6)
+    assert np.all(error(model, cmd, target) < 2e-6)
     assert np.all((cmd >= 0.0) & (cmd <= 100.0))
     comp.reset()
     blind = np.array([comp.step(row) for row in target])
-    err = _error(model, blind, target)
+    err = error(model, blind, target)
     assert err[0] > 0.005  # the preview is what tracks: 1.8 % without it
 
 
 @pytest.mark.filterwarnings("ignore::piezohyst.errors.LimitWarning")
 def test_step_with_its_preview_equals_process() -> None:
-    model = _model(_structure())
+    model = model_of(structure())
     comp = ph.StructureCompensator(model, v_min=0.0, v_max=100.0, slew_rate=1000.0)
-    target = _raster(model, n=700, rate=5.0)
+    target = raster(model, n=700, rate=5.0)
     block = comp.process(target)
     counts = comp.slew_limited_count.copy(), comp.saturated_count.copy()
     assert counts[0].sum() > 0  # the 5 Hz raster's corners are slew-limited
@@ -171,8 +112,8 @@ def test_step_with_its_preview_equals_process() -> None:
 
 
 def test_the_limits_hold_commands_and_say_so() -> None:
-    model = _model(_structure())
-    target = _raster(model)
+    model = model_of(structure())
+    target = raster(model)
     target[:, 1] += 0.6 * np.ptp(target[:, 0])  # y beyond what actuator 1 reaches
     comp = ph.StructureCompensator(model, v_min=0.0, v_max=[100.0, 60.0], slew_rate=3000.0)
     with pytest.warns(LimitWarning) as said:
@@ -190,9 +131,9 @@ def test_the_limits_hold_commands_and_say_so() -> None:
 
 
 def test_a_nan_holds_the_last_command() -> None:
-    model = _model(_structure())
+    model = model_of(structure())
     comp = ph.StructureCompensator(model, v_min=0.0, v_max=100.0)
-    target = _raster(model, n=400)
+    target = raster(model, n=400)
     target[350:360, 0] = np.nan
     cmd = comp.process(target)
     assert np.all(np.isfinite(cmd))
@@ -201,7 +142,7 @@ def test_a_nan_holds_the_last_command() -> None:
 
 
 def test_reset_at_a_voltage_settles_there() -> None:
-    model = _model(_structure(e_gain=0.0))
+    model = model_of(structure(e_gain=0.0))
     comp = ph.StructureCompensator(model, v_min=0.0, v_max=100.0)
     where = np.array([30.0, 70.0])
     comp.reset(voltage=where)
@@ -214,7 +155,7 @@ def test_reset_at_a_voltage_settles_there() -> None:
 
 
 def test_bad_input_is_named() -> None:
-    model = _model(_structure())
+    model = model_of(structure())
     with pytest.raises(ParameterError, match=r"takes a fitted ph\.StructureModel"):
         ph.StructureCompensator(ph.StructureModel(), v_min=0.0, v_max=1.0)  # type: ignore[arg-type]
     with pytest.raises(ParameterError, match="'v_max' must be a finite number or one per"):
@@ -249,9 +190,9 @@ def test_the_c_library_equals_python(tmp_path, e_gain: float) -> None:  # type: 
 
     from piezohyst.control.export.structure_c import write_structure_shared
 
-    model = _model(_structure(e_gain))
+    model = model_of(structure(e_gain))
     comp = ph.StructureCompensator(model, v_min=0.0, v_max=[100.0, 80.0], slew_rate=2000.0)
-    target = _raster(model, n=1500, rate=5.0)
+    target = raster(model, n=1500, rate=5.0)
     target[900:1000, 1] += 0.3 * np.ptp(target[:, 0])  # y out of actuator 1's reach
     target[1200:1210] = np.nan
     files, lib_path = write_structure_shared(comp, tmp_path / "ph_st.c")

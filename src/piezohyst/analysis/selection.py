@@ -11,7 +11,12 @@ the input before it left the actuator (the model runs on from its training start
 score is the mean of the scored parts' NRMSE (:data:`WEIGHTS`); the candidate with the
 lowest wins, a simpler one (earlier in :data:`CANDIDATES`) on a tie within 2 %. Where the
 record does not tell the winner from others (below), the one of them that forecast the
-record's latest part best is taken (:func:`latest_of_close`), and the notes say so.
+record's latest part best is taken (:func:`latest_of_close`), and the notes say so. Where
+the record never comes back to an end of its range after its first turn (decaying loops
+that reach 0 V on their first rise only), the scores cannot rank how the candidates predict
+loops from there: among the candidates scoring within :data:`MEDIAN_WITHIN` of the best,
+the one whose loops from that end lie nearest the candidates' median is taken
+(:func:`median_choice`), and the notes say so.
 
 How sure the choice is: each scored part is cut into blocks at the input's turns (a
 half-cycle each), and every candidate's margin over the chosen one gets a paired
@@ -41,12 +46,11 @@ from ..errors import (
     ParameterError,
     RecordWarning,
 )
-from ..io.blocks import Summary, array_blocks
-from ..model.fit_record import holds_show_rise, screened
+from ..model.fit_record import screened
 from ..model.model import HysteresisModel, InitialState
 from ..model.persistence import model_class, model_names
 from ..model.terms import creep_time_constants
-from ..units import is_length
+from .beyond import MEDIAN_WITHIN, median_choice, median_said, probe_loops, rise_not_held
 from .comparison import compare_models
 from .turns import (
     MAJOR,
@@ -61,6 +65,7 @@ from .turns import (
     record_notes,
     several_rates,
     turn_band,
+    unseen_ends,
 )
 
 __all__ = [
@@ -70,6 +75,7 @@ __all__ = [
     "FOLDS",
     "LOOP_CANDIDATES",
     "MAJOR",
+    "MEDIAN_WITHIN",
     "MIN_TURNS",
     "NOISE_REACH",
     "SEVERAL_RATES",
@@ -90,11 +96,15 @@ __all__ = [
     "is_candidate",
     "jackknife",
     "latest_of_close",
+    "median_choice",
+    "median_said",
+    "probe_loops",
     "record_notes",
     "select_model",
     "several_rates",
     "turn_band",
     "undecided",
+    "unseen_ends",
     "verdict",
     "with_margins",
 ]
@@ -743,10 +753,20 @@ def select_model(
         msg = f"no candidate could be fitted: {ranked[0].name}: {ranked[0].error}"
         raise InsufficientDataError(msg)
     first, winner = decide(rows)
-    model = candidate_model(winner.name, operators, units, ts, **dyn)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RecordWarning)  # said above
-        model.fit(xs, ys, t=ts, initial_state=initial_state)
+
+    said: dict[str, list[warnings.WarningMessage]] = {}
+
+    def fitted(name: str) -> HysteresisModel:
+        """A candidate fitted on the whole record, what its fit warned kept (said of the
+        chosen one alone)."""
+        m = candidate_model(name, operators, units, ts, **dyn)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            warnings.simplefilter("ignore", RecordWarning)  # said above
+            m.fit(xs, ys, t=ts, initial_state=initial_state)
+        said[name] = caught
+        return m
+
     notes = _record_notes(xs, turns)
     if winner.name != first.name:
         notes = (
@@ -755,28 +775,18 @@ def select_model(
             f"against {100 * first.folds[-1]:.3g} %): {winner.name} chosen.",
             *notes,
         )
-    notes = (*notes, *_rise_not_held(model, winner.name, xs, ys, ts))
+    near = median_choice(rows, xs, ts, fitted, turns)
+    if near is not None and near[0].name != winner.name:
+        notes = (median_said(near[0].name, winner.name, xs, turns), *notes)
+    if near is not None:
+        winner, model = near
+        for w in said.get(winner.name, []):  # what the chosen one's fit warned
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    else:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RecordWarning)  # said above
+            model = candidate_model(winner.name, operators, units, ts, **dyn)
+            model.fit(xs, ys, t=ts, initial_state=initial_state)
+    notes = (*notes, *rise_not_held(model, winner.name, xs, ys, ts))
     ranked = sorted(with_margins(rows, winner), key=lambda r: r.score)
     return Selection(model, winner.name, tuple(ranked), notes)
-
-
-def _rise_not_held(
-    model: HysteresisModel, name: str, x: FloatArray, y: FloatArray, t: FloatArray | None
-) -> tuple[str, ...]:
-    """A sentence where a charge record's holds show the leak rising with the voltage and the
-    chosen model holds no term for it (``abs_integral``): its prediction at another mean
-    voltage than the record's drifts. Seen on a plant drawn at random whose leak rose 142 %
-    to 140 V: ActivePI, chosen, drifted 6.2 % of the span over the test, where the Preisach
-    model, which takes the rise, left 0.96 % (``docs/selection-study.md``)."""
-    if t is None or is_length(model.output_unit):
-        return ()
-    if any(term.kind == "abs_integral" for term in model.terms_):
-        return ()
-    blocks = array_blocks(x, y, t)
-    if not holds_show_rise(blocks, Summary.of(blocks)):
-        return ()
-    return (
-        f"The record's holds show the leak rising with the voltage, which {name} holds no "
-        "term for: where a use's mean voltage is not the record's, its prediction drifts "
-        "(the Preisach, Duhem and Bouc-Wen defaults take the rise where holds show it).",
-    )

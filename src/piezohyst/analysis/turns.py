@@ -183,6 +183,29 @@ def _record_notes(x: FloatArray, turns: np.ndarray) -> tuple[str, ...]:
     return tuple(notes)
 
 
+def unseen_ends(x: FloatArray, turns: np.ndarray) -> tuple[str, ...]:
+    """The ends of the input's range (``"lowest"``, ``"highest"``) it reaches only before
+    its first turn, by more than :data:`UNSEEN_END` of its range.
+
+    Parameters
+    ----------
+    x : ndarray, shape (N,)
+        The input.
+    turns : ndarray
+        Its turns (:func:`turn_points`).
+
+    Returns
+    -------
+    tuple of str
+    """
+    span = float(np.ptp(x)) if x.size else 0.0
+    if turns.size < 2 or span <= 0.0:
+        return ()
+    after = x[turns[0] :]
+    gaps = {"lowest": float(after.min() - x.min()), "highest": float(x.max() - after.max())}
+    return tuple(end for end, gap in gaps.items() if gap / span > UNSEEN_END)
+
+
 def _unseen_ends(x: FloatArray, turns: np.ndarray, span: float) -> list[str]:
     """A note for each end of the input's range it reaches only before its first turn."""
     after = x[turns[0] :]
@@ -190,7 +213,7 @@ def _unseen_ends(x: FloatArray, turns: np.ndarray, span: float) -> list[str]:
     for end, reached, back in (("lowest", float(x.min()), float(after.min())),
                                ("highest", float(x.max()), float(after.max()))):  # fmt: skip
         gap = abs(back - reached) / span
-        if gap > UNSEEN_END:
+        if end in unseen_ends(x, turns):
             notes.append(
                 f"After its first turn the input never comes back to its {end} values: it "
                 f"reaches {reached:.4g} before that turn only, and afterwards {back:.4g} at "

@@ -24,6 +24,8 @@ from ..analysis.selection import (
     decide,
     forward_scores,
     is_candidate,
+    median_choice,
+    median_said,
     record_notes,
     select_model,
     several_rates,
@@ -495,7 +497,22 @@ def compare_file(
     inner = forward_scores(estimators, rec.x[w][a:b], rec.y[w][a:b], rec.t[w][a:b], start)
     if any(math.isfinite(r.score) for r in inner):  # chosen inside the training part alone
         _, winner = decide(inner)  # as select_model decides
-        said = verdict(with_margins(inner, winner), winner.name, record_notes(rec.x[w][a:b]))
+        part = (rec.x[w][a:b], rec.y[w][a:b], rec.t[w][a:b])
+        notes = record_notes(part[0])
+
+        def fitted(name: str) -> Any:
+            with warnings.catch_warnings():  # the candidates' own fits: said by compare above
+                warnings.simplefilter("ignore")
+                fresh = candidate_model(
+                    name, operators, units, times, input_dynamics=input_dynamics
+                )
+                return fresh.fit(*part[:2], t=part[2], initial_state=start)
+
+        near = median_choice(inner, part[0], part[2], fitted)
+        if near is not None and near[0].name != winner.name:
+            notes = (median_said(near[0].name, winner.name, part[0]), *notes)
+            winner = near[0]
+        said = verdict(with_margins(inner, winner), winner.name, notes)
         result = dataclasses.replace(result, recommended=winner.name, recommendation_notes=said)
     if w.start:  # the samples scored, as rows of the record
         (a, b), (c, d) = result.train, result.test
