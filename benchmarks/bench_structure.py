@@ -7,7 +7,10 @@ Run: ``python benchmarks/bench_structure.py [--order 48] [--samples 16384]``.
    with 6 operators per actuator (the fine-steering mirror's size): the numba kernel
    (``StructureModel.predict``) against the same recursion written with NumPy products per
    sample; the outputs compared, the ratio printed.
-2. Identification of a generated three-actuator structure of that order from 12 periodic
+2. Its inverse (``StructureCompensator.process``: the tracker with preview) on the outputs
+   of step 1, against the same tracker written with NumPy products per sample (the
+   feed-forward of the targets ahead summed row by row); the commands compared.
+3. Identification of a generated three-actuator structure of that order from 12 periodic
    records of 8192 samples (the benchmark's layout), the order chosen by held-out records.
 
 Not a test: nothing here asserts a time.
@@ -34,6 +37,34 @@ def naive(st: sf.Structure, v: np.ndarray) -> np.ndarray:
         s = st.t @ out[k]
         z = np.minimum(np.maximum(z, s[:, None] - st.r), s[:, None] + st.r)
         x = st.a @ x + st.b @ v[k] + st.e @ (z - s[:, None]).reshape(-1)
+    return out
+
+
+def naive_inverse(comp: ph.StructureCompensator, targets: np.ndarray) -> np.ndarray:
+    """The tracker's step with NumPy products per sample: the operators on the targets'
+    strokes, the feed-forward of the targets ahead (held past the end), the feedback, the
+    model run on the commands (no limits)."""
+    st, g = comp.model.structure_, comp._g
+    nk = st.r.shape[1]
+    zd = np.repeat((st.t @ st.off)[:, None], nk, axis=1)
+    rows = []
+    for row in targets:  # each target's row: less the offsets, then its operators' lags
+        s = st.t @ row
+        zd = np.minimum(np.maximum(zd, s[:, None] - st.r), s[:, None] + st.r)
+        rows.append(np.concatenate([row - st.off, (zd - s[:, None]).reshape(-1)]))
+    z = np.array(rows)
+    ahead = g["ahead"]
+    x = np.zeros(st.order)
+    zm = np.repeat((st.t @ st.off)[:, None], nk, axis=1)
+    out = np.empty((targets.shape[0], st.b.shape[1]))
+    for k in range(targets.shape[0]):
+        idx = np.minimum(np.arange(k + 1, k + 1 + ahead.shape[0]), z.shape[0] - 1)
+        u = g["f0"] @ z[k] + np.einsum("jic,jc->i", ahead, z[idx]) - g["gain"] @ x
+        y = st.c @ x + st.d @ u + st.off
+        s = st.t @ y
+        zm = np.minimum(np.maximum(zm, s[:, None] - st.r), s[:, None] + st.r)
+        x = st.a @ x + st.b @ u + st.e @ (zm - s[:, None]).reshape(-1)
+        out[k] = u
     return out
 
 
@@ -69,6 +100,21 @@ def main() -> None:
     print(f"simulation, order {args.order}, {args.samples} samples x 3 inputs, 18 operators:")
     print(f"  kernel {1e3 * best:.1f} ms, naive NumPy loop {1e3 * ref_t:.0f} ms: "
           f"{ref_t / best:.0f}x; largest difference {diff:.2g}")  # fmt: skip
+
+    model = ph.StructureModel(order=args.order)
+    model.structure_, model.sample_rate_ = st, 6400.0
+    model.n_inputs_ = model.n_outputs_ = 3
+    lim = 100.0 * np.abs(v).max()  # no command held: the naive loop has no limits
+    comp = ph.StructureCompensator(model, v_min=-lim, v_max=lim)
+    targets = st.run(v, periodic=False)
+    comp.process(targets[:10])  # compile
+    best = min(_timed(lambda: (comp.reset(), comp.process(targets))) for _ in range(3))
+    ref_t = _timed(lambda: naive_inverse(comp, targets))
+    comp.reset()
+    diff = np.abs(comp.process(targets) - naive_inverse(comp, targets)).max()
+    print(f"its inverse with preview ({comp.preview} samples ahead), the same targets:")
+    print(f"  process {1e3 * best:.1f} ms, naive NumPy loop {1e3 * ref_t:.0f} ms: "
+          f"{ref_t / best:.0f}x; largest difference {diff:.2g} V")  # fmt: skip
 
     spec = np.zeros((4097, 3), dtype=complex)
     u, y = [], []
