@@ -191,11 +191,11 @@ class StructureCompensator:
         slew_rate: float | ArrayLike | None = None,
         effort: float = EFFORT,
     ) -> None:
-        if not isinstance(model, StructureModel) or not hasattr(model, "structure_"):
-            msg = (
-                "StructureCompensator takes a fitted ph.StructureModel "
-                f"(got {type(model).__name__}); a CoupledModel has ph.CoupledCompensator."
-            )
+        fitted = isinstance(model, StructureModel) and hasattr(model, "structure_")
+        if not fitted:
+            kind = type(model).__name__
+            msg = (f"StructureCompensator takes a fitted ph.StructureModel (got {kind}); a "
+                   "CoupledModel has ph.CoupledCompensator.")  # fmt: skip
             raise ParameterError(msg)
         n, m = model.n_inputs_, model.n_outputs_
         lo, hi = _per_actuator(v_min, n, "v_min"), _per_actuator(v_max, n, "v_max")
@@ -400,12 +400,12 @@ class StructureCompensator:
     def step(
         self, desired: ArrayLike, measured: Any = None, preview: ArrayLike | None = None
     ) -> FloatArray:
-        """One command per actuator for one desired output.
+        """The commands for one target: one per actuator.
 
         Parameters
         ----------
-        desired : array_like, shape (outputs,)
-            The desired outputs (the model's units); NaN holds the last command.
+        desired : array_like of one value per output
+            The target (the model's units); NaN holds the last commands.
         measured : optional
             A reading: ignored (feedforward; the controllers' one contract).
         preview : array_like, shape (k, outputs), optional
@@ -431,12 +431,14 @@ class StructureCompensator:
         Parameters
         ----------
         desired : array_like, shape (N, outputs)
+            The targets, one row per sample (the model's units; a NaN row holds).
         measured : optional
-            Ignored (feedforward).
+            A reading: not used (the commands are feedforward).
 
         Returns
         -------
         ndarray, shape (N, actuators)
+            Commands (V), each inside its actuator's limits.
         """
         d = self._check(desired, "desired")
         if d.shape[0] == 0:

@@ -34,6 +34,7 @@ import subprocess
 import sys
 import tempfile
 import zipfile
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, cast
 from xml.sax.saxutils import escape
@@ -137,6 +138,107 @@ def fmi2_wrapper(
     )  # fmt: skip
 
 
+def stamp_guid(name: str, files: dict[str, str]) -> str:
+    """Put the FMU's GUID (a digest of its sources) in place of ``{NAME-GUID}`` in its
+    ``NAME.c``, and return it.
+
+    Parameters
+    ----------
+    name : str
+        The model identifier.
+    files : dict of str to str
+        The sources by file name; ``NAME.c`` is changed in place.
+
+    Returns
+    -------
+    str
+    """
+    guid = "{" + hashlib.sha256("".join(files.values()).encode()).hexdigest()[:32] + "}"
+    files[f"{name}.c"] = files[f"{name}.c"].replace(f'"{{{name}-GUID}}"', f'"{guid}"')
+    return guid
+
+
+def scalar(label: str, ref: int, causality: str, kind: str, said: str, start: str = "0") -> str:
+    """One ``ScalarVariable`` of a model description: an input (continuous, with its start)
+    or an output (discrete, calculated).
+
+    Parameters
+    ----------
+    label : str
+    ref : int
+        Its value reference.
+    causality : {"input", "output"}
+    kind : {"Real", "Integer"}
+    said : str
+        Its description.
+    start : str
+        An input's start value.
+
+    Returns
+    -------
+    str
+    """
+    extra = ' variability="continuous"' if causality == "input" else (
+        ' variability="discrete" initial="calculated"')  # fmt: skip
+    begin = f' start="{start}"' if causality == "input" else ""
+    return (f'    <ScalarVariable name="{label}" valueReference="{ref}" causality="{causality}"'
+            f'{extra} description="{escape(said)}">\n      <{kind}{begin}/>\n'
+            "    </ScalarVariable>")  # fmt: skip
+
+
+def cosim_description(
+    name: str, guid: str, what: str, period: float, sources: list[str], rows: list[str],
+    outputs: Sequence[int],
+) -> str:  # fmt: skip
+    """An FMI 2.0 Co-Simulation ``modelDescription.xml``: its variables (:func:`scalar`),
+    the C sources it is built from, and the outputs by index (1-based).
+
+    Parameters
+    ----------
+    name, guid, what : str
+        The model identifier, its GUID, one line naming what it holds.
+    period : float
+        Its step (s).
+    sources : list of str
+        The C files.
+    rows : list of str
+        The variables, in order.
+    outputs : sequence of int
+        The outputs' indices.
+
+    Returns
+    -------
+    str
+    """
+    files = "".join(f'      <File name="{f}"/>\n' for f in sources)
+    return f"""<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{guid}"
+  description="{escape(what)}" generationTool="piezohyst {__version__}"
+  variableNamingConvention="flat" numberOfEventIndicators="0">
+  <CoSimulation modelIdentifier="{name}" needsExecutionTool="false"
+    canHandleVariableCommunicationStepSize="false" canInterpolateInputs="false"
+    canRunAsynchronuously="false" canBeInstantiatedOnlyOncePerProcess="false"
+    canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="false"
+    canSerializeFMUstate="false" providesDirectionalDerivative="false">
+    <SourceFiles>
+{files}    </SourceFiles>
+  </CoSimulation>
+  <DefaultExperiment startTime="0" stepSize="{period!r}"/>
+  <ModelVariables>
+{chr(10).join(rows)}
+  </ModelVariables>
+  <ModelStructure>
+    <Outputs>
+{chr(10).join(f'      <Unknown index="{i}"/>' for i in outputs)}
+    </Outputs>
+    <InitialUnknowns>
+{chr(10).join(f'      <Unknown index="{i}" dependencies=""/>' for i in outputs)}
+    </InitialUnknowns>
+  </ModelStructure>
+</fmiModelDescription>
+"""
+
+
 def _model_description(
     name: str, guid: str, third: str, period: float, desired_unit: str, what: str
 ) -> str:
@@ -145,77 +247,26 @@ def _model_description(
         "next": ("NaN", f"the next step's desired value ({desired_unit}; NaN: extrapolated), "
                         "for the model's mechanical mode"),
     }  # fmt: skip
-    charge = (
-        f'    <ScalarVariable name="{third}" valueReference="2" causality="input" '
-        f'variability="continuous" description="{escape(said[third][1])}">\n      '
-        f'<Real start="{said[third][0]}"/>\n    </ScalarVariable>\n'
-        if third
-        else ""
-    )
-    first_count = 4 if third else 3  # the counts follow target, voltage (and charge or next)
-    return f"""<?xml version="1.0" encoding="UTF-8"?>
-<fmiModelDescription
-  fmiVersion="2.0"
-  modelName="{name}"
-  guid="{guid}"
-  description="{escape(what)}"
-  generationTool="piezohyst {__version__}"
-  variableNamingConvention="flat"
-  numberOfEventIndicators="0">
-  <CoSimulation
-    modelIdentifier="{name}"
-    needsExecutionTool="false"
-    canHandleVariableCommunicationStepSize="false"
-    canInterpolateInputs="false"
-    canRunAsynchronuously="false"
-    canBeInstantiatedOnlyOncePerProcess="false"
-    canNotUseMemoryManagementFunctions="true"
-    canGetAndSetFMUstate="false"
-    canSerializeFMUstate="false"
-    providesDirectionalDerivative="false">
-    <SourceFiles>
-      <File name="{name}.c"/>
-    </SourceFiles>
-  </CoSimulation>
-  <DefaultExperiment startTime="0" stepSize="{period!r}"/>
-  <ModelVariables>
-    <ScalarVariable name="target" valueReference="0" causality="input" variability="continuous" description="the desired value ({escape(desired_unit)})">
-      <Real start="0"/>
-    </ScalarVariable>
-    <ScalarVariable name="voltage" valueReference="1" causality="output" variability="discrete" initial="calculated" description="the command (V), inside the limits">
-      <Real/>
-    </ScalarVariable>
-{charge}    <ScalarVariable name="nonfinite" valueReference="0" causality="output" variability="discrete" initial="calculated" description="non-finite targets since the last reset (the last command held)">
-      <Integer/>
-    </ScalarVariable>
-    <ScalarVariable name="saturated" valueReference="1" causality="output" variability="discrete" initial="calculated" description="targets out of reach since the last reset (the nearer voltage limit sent)">
-      <Integer/>
-    </ScalarVariable>
-    <ScalarVariable name="slewed" valueReference="2" causality="output" variability="discrete" initial="calculated" description="commands cut by the slew limit since the last reset">
-      <Integer/>
-    </ScalarVariable>
-    <ScalarVariable name="extrapolated" valueReference="3" causality="output" variability="discrete" initial="calculated" description="targets beyond the output map's calibrated range since the last reset (the map extended linearly; 0 without a map)">
-      <Integer/>
-    </ScalarVariable>
-  </ModelVariables>
-  <ModelStructure>
-    <Outputs>
-      <Unknown index="2"/>
-      <Unknown index="{first_count}"/>
-      <Unknown index="{first_count + 1}"/>
-      <Unknown index="{first_count + 2}"/>
-      <Unknown index="{first_count + 3}"/>
-    </Outputs>
-    <InitialUnknowns>
-      <Unknown index="2" dependencies=""/>
-      <Unknown index="{first_count}" dependencies=""/>
-      <Unknown index="{first_count + 1}" dependencies=""/>
-      <Unknown index="{first_count + 2}" dependencies=""/>
-      <Unknown index="{first_count + 3}" dependencies=""/>
-    </InitialUnknowns>
-  </ModelStructure>
-</fmiModelDescription>
-"""  # noqa: E501 - XML attributes on one line, as hosts write them
+    rows = [
+        scalar("target", 0, "input", "Real", f"the desired value ({desired_unit})"),
+        scalar("voltage", 1, "output", "Real", "the command (V), inside the limits"),
+    ]
+    if third:
+        rows.append(scalar(third, 2, "input", "Real", said[third][1], said[third][0]))
+    rows += [
+        scalar("nonfinite", 0, "output", "Integer",
+               "non-finite targets since the last reset (the last command held)"),
+        scalar("saturated", 1, "output", "Integer",
+               "targets out of reach since the last reset (the nearer voltage limit sent)"),
+        scalar("slewed", 2, "output", "Integer",
+               "commands cut by the slew limit since the last reset"),
+        scalar("extrapolated", 3, "output", "Integer",
+               "targets beyond the output map's calibrated range since the last reset (the "
+               "map extended linearly; 0 without a map)"),
+    ]  # fmt: skip
+    first = 4 if third else 3  # the counts follow target, voltage (and charge or next)
+    outputs = [2, *range(first, first + 4)]
+    return cosim_description(name, guid, what, period, [f"{name}.c"], rows, outputs)
 
 
 def write_fmu(

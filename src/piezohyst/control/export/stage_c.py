@@ -9,7 +9,6 @@ each actuator's compensator step on its own share.
 
 from __future__ import annotations
 
-import hashlib
 import os
 from dataclasses import dataclass
 from importlib import resources
@@ -317,7 +316,7 @@ def write_stage_fmu(
     ParameterError
         No sample rate, a name that is not a C identifier, no C compiler.
     """
-    from .fmu import fmi2_wrapper, package_fmu
+    from .fmu import fmi2_wrapper, package_fmu, stamp_guid
 
     rate = compensator.compensators[0].sample_rate
     if rate is None:
@@ -352,8 +351,7 @@ def write_stage_fmu(
                                       *(f"c->r[{m + p + k}] = (fmi2Real)c->s.a{k}.last;"
                                         for k in range(n))]),
     )  # fmt: skip
-    guid = "{" + hashlib.sha256("".join(files.values()).encode()).hexdigest()[:32] + "}"
-    files[f"{name}.c"] = files[f"{name}.c"].replace(f'"{{{name}-GUID}}"', f'"{guid}"')
+    guid = stamp_guid(name, files)
     unit = compensator.model.channels_[0].output_unit
     xml = _stage_description(name, guid, n, m, period, what, unit, ahead=bool(p))
     return package_fmu(out, name, files, xml, what)
@@ -363,60 +361,24 @@ def _stage_description(
     name: str, guid: str, n: int, m: int, period: float, what: str, unit: str, *, ahead: bool
 ) -> str:
     """The stage FMU's ``modelDescription.xml`` (``ahead``: the next targets' inputs too)."""
-    from xml.sax.saxutils import escape
-
-    from ..._version import __version__
-
-    def var(label: str, ref: int, causality: str, kind: str, said: str, start: str = "0") -> str:
-        extra = ' variability="continuous"' if causality == "input" else (
-            ' variability="discrete" initial="calculated"')  # fmt: skip
-        start = f' start="{start}"' if causality == "input" else ""
-        return (f'    <ScalarVariable name="{label}" valueReference="{ref}" causality="{causality}"'
-                f'{extra} description="{escape(said)}">\n      <{kind}{start}/>\n'
-                "    </ScalarVariable>")  # fmt: skip
+    from .fmu import cosim_description, scalar
 
     p = m if ahead else 0
-    rows = [var(f"target_{i}", i, "input", "Real", f"axis {i}'s desired position ({unit})")
+    rows = [scalar(f"target_{i}", i, "input", "Real", f"axis {i}'s desired position ({unit})")
             for i in range(m)]  # fmt: skip
-    rows += [var(f"next_{i}", m + i, "input", "Real", f"axis {i}'s desired position at the "
-                 f"next step ({unit}; NaN: extrapolated), for the actuators' modes", "NaN")
+    rows += [scalar(f"next_{i}", m + i, "input", "Real", f"axis {i}'s desired position at the "
+                    f"next step ({unit}; NaN: extrapolated), for the actuators' modes", "NaN")
              for i in range(p)]  # fmt: skip
-    rows += [var(f"voltage_{k}", m + p + k, "output", "Real", f"actuator {k}'s command (V)")
+    rows += [scalar(f"voltage_{k}", m + p + k, "output", "Real", f"actuator {k}'s command (V)")
              for k in range(n)]  # fmt: skip
-    rows.append(var("outside", 0, "output", "Integer", "desired positions beyond the reach"))
+    rows.append(scalar("outside", 0, "output", "Integer", "desired positions beyond the reach"))
     for k in range(n):
         for j, field in enumerate(("nonfinite", "saturated", "slewed")):
-            rows.append(var(f"{field}_{k}", 1 + 3 * k + j, "output", "Integer",
-                            f"actuator {k}: {field} commands since the last reset"))  # fmt: skip
+            rows.append(scalar(f"{field}_{k}", 1 + 3 * k + j, "output", "Integer",
+                               f"actuator {k}: {field} commands since the last reset"))  # fmt: skip
     outputs = range(m + p + 1, m + p + n + 1 + 1 + 3 * n)  # 1-based: every one after the inputs
-    sources = "".join(f'      <File name="{name}{part}.c"/>\n'
-                      for part in ["", *(f"_a{k}" for k in range(n))])  # fmt: skip
-    return f"""<?xml version="1.0" encoding="UTF-8"?>
-<fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{guid}"
-  description="{escape(what)}" generationTool="piezohyst {__version__}"
-  variableNamingConvention="flat" numberOfEventIndicators="0">
-  <CoSimulation modelIdentifier="{name}" needsExecutionTool="false"
-    canHandleVariableCommunicationStepSize="false" canInterpolateInputs="false"
-    canRunAsynchronuously="false" canBeInstantiatedOnlyOncePerProcess="false"
-    canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="false"
-    canSerializeFMUstate="false" providesDirectionalDerivative="false">
-    <SourceFiles>
-{sources}    </SourceFiles>
-  </CoSimulation>
-  <DefaultExperiment startTime="0" stepSize="{period!r}"/>
-  <ModelVariables>
-{chr(10).join(rows)}
-  </ModelVariables>
-  <ModelStructure>
-    <Outputs>
-{chr(10).join(f'      <Unknown index="{i}"/>' for i in outputs)}
-    </Outputs>
-    <InitialUnknowns>
-{chr(10).join(f'      <Unknown index="{i}" dependencies=""/>' for i in outputs)}
-    </InitialUnknowns>
-  </ModelStructure>
-</fmiModelDescription>
-"""
+    sources = [f"{name}{part}.c" for part in ["", *(f"_a{k}" for k in range(n))]]
+    return cosim_description(name, guid, what, period, sources, rows, outputs)
 
 
 def write_stage_mex(

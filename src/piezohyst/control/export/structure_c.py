@@ -12,7 +12,6 @@ acts ahead, as it does in Python on a block that starts at rest).
 
 from __future__ import annotations
 
-import hashlib
 import os
 from importlib import resources
 from pathlib import Path
@@ -150,23 +149,25 @@ def write_structure_shared(
     *,
     precision: Precision = "double",
 ) -> tuple[list[Path], Path]:
-    """The structure's C files with a shared-library API, and the library.
+    """The structure's C files and its shared library, built with the system C compiler.
 
-    The API (doubles, row by row): ``NAME_new``, ``NAME_free``, ``NAME_reset``,
-    ``int NAME_process(NAME_t *s, const double *target, double *volts, long n)`` (``target``
-    n rows of one value per output, each the target ``NAME_preview()`` samples ahead of the
-    command row written at its place in ``volts``, n rows of one command per actuator),
-    ``int NAME_counts(const NAME_t *s, unsigned long *counts)`` (the targets out of reach,
-    the non-finite ones, then per actuator its voltage-limit and slew counts),
-    ``int NAME_preview(void)``, ``NAME_version``.
+    Its functions, on doubles, row by row:
+
+    * ``NAME_new``, ``NAME_free``, ``NAME_reset``: a handle at rest;
+    * ``int NAME_process(NAME_t *s, const double *target, double *volts, long n)``: n rows
+      of one value per output in ``target``, each the target ``NAME_preview()`` samples ahead
+      of the command row written at its place in ``volts`` (one command per actuator);
+    * ``int NAME_counts(const NAME_t *s, unsigned long *counts)``: the targets out of reach,
+      the non-finite ones, then per actuator its voltage-limit and slew counts;
+    * ``int NAME_preview(void)`` and ``NAME_version``.
 
     Parameters
     ----------
     compensator : StructureCompensator
     path : str or os.PathLike
-        The ``.c`` file; the header and the library go beside it.
+        The ``.c`` file (NAME from it); its header and the library are written next to it.
     precision : {"double", "float"}
-        The C type of the step's reals (the API takes and returns doubles).
+        The step's C reals; the library's functions pass doubles either way.
 
     Returns
     -------
@@ -219,8 +220,9 @@ def write_structure_mex(
     ----------
     compensator : StructureCompensator
     path : str or os.PathLike
-        The gateway's ``.c`` file.
+        Where the gateway goes (``NAME.c``); the step's two files are written beside it.
     precision : {"double", "float"}
+        The step's C reals (MATLAB's arrays are doubles either way).
 
     Returns
     -------
@@ -261,19 +263,22 @@ def write_structure_fmu(
     Parameters
     ----------
     compensator : StructureCompensator
-    path, precision
-        As for :func:`~piezohyst.control.export.write_fmu`.
+    path : str or os.PathLike
+        Where the FMU goes; the file's stem is the model identifier (a C identifier).
+    precision : {"double", "float"}
+        The step's C reals (the FMI variables are doubles either way).
 
     Returns
     -------
     Path
+        Where the FMU was written.
 
     Raises
     ------
     ParameterError
-        A name that is not a C identifier, no C compiler.
+        A file name that is not a C identifier, or no C compiler to build the FMU with.
     """
-    from .fmu import fmi2_wrapper, package_fmu
+    from .fmu import fmi2_wrapper, package_fmu, stamp_guid
 
     out = Path(path).with_suffix(".fmu")
     name = out.stem
@@ -300,8 +305,7 @@ def write_structure_fmu(
                                       *(f"c->r[{m + k}] = (fmi2Real)c->s.last[{k}];"
                                         for k in range(n))]),
     )  # fmt: skip
-    guid = "{" + hashlib.sha256("".join(files.values()).encode()).hexdigest()[:32] + "}"
-    files[f"{name}.c"] = files[f"{name}.c"].replace(f'"{{{name}-GUID}}"', f'"{guid}"')
+    guid = stamp_guid(name, files)
     xml = _fmu_description(name, guid, n, m, period, what, rest, preview)
     return package_fmu(out, name, files, xml, what)
 
@@ -311,54 +315,18 @@ def _fmu_description(
     preview: int,
 ) -> str:  # fmt: skip
     """The structure FMU's ``modelDescription.xml``."""
-    from xml.sax.saxutils import escape
+    from .fmu import cosim_description, scalar
 
-    from ..._version import __version__
-
-    def var(label: str, ref: int, causality: str, kind: str, said: str, start: str = "") -> str:
-        extra = ' variability="continuous"' if causality == "input" else (
-            ' variability="discrete" initial="calculated"')  # fmt: skip
-        start = f' start="{start}"' if causality == "input" else ""
-        return (f'    <ScalarVariable name="{label}" valueReference="{ref}" causality="{causality}"'
-                f'{extra} description="{escape(said)}">\n      <{kind}{start}/>\n'
-                "    </ScalarVariable>")  # fmt: skip
-
-    rows = [var(f"ahead_{i}", i, "input", "Real", f"output {i}'s target {preview} steps "
-                "ahead of this step's commands (start: at rest)", repr(float(rest[i])))
+    rows = [scalar(f"ahead_{i}", i, "input", "Real", f"output {i}'s target {preview} steps "
+                   "ahead of this step's commands (start: at rest)", repr(float(rest[i])))
             for i in range(m)]  # fmt: skip
-    rows += [var(f"voltage_{k}", m + k, "output", "Real", f"actuator {k}'s command (V)")
+    rows += [scalar(f"voltage_{k}", m + k, "output", "Real", f"actuator {k}'s command (V)")
              for k in range(n)]  # fmt: skip
-    rows.append(var("outside", 0, "output", "Integer", "targets out of reach"))
-    rows.append(var("nonfinite", 1, "output", "Integer", "non-finite targets (held)"))
+    rows.append(scalar("outside", 0, "output", "Integer", "targets out of reach"))
+    rows.append(scalar("nonfinite", 1, "output", "Integer", "non-finite targets (held)"))
     for k in range(n):
         for j, field in enumerate(("saturated", "slewed")):
-            rows.append(var(f"{field}_{k}", 2 + 2 * k + j, "output", "Integer",
-                            f"actuator {k}: {field} commands since the last reset"))  # fmt: skip
+            rows.append(scalar(f"{field}_{k}", 2 + 2 * k + j, "output", "Integer",
+                               f"actuator {k}: {field} commands since the last reset"))  # fmt: skip
     outputs = range(m + 1, m + n + 2 + 2 * n + 1)  # 1-based: every one after the inputs
-    return f"""<?xml version="1.0" encoding="UTF-8"?>
-<fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{guid}"
-  description="{escape(what)}" generationTool="piezohyst {__version__}"
-  variableNamingConvention="flat" numberOfEventIndicators="0">
-  <CoSimulation modelIdentifier="{name}" needsExecutionTool="false"
-    canHandleVariableCommunicationStepSize="false" canInterpolateInputs="false"
-    canRunAsynchronuously="false" canBeInstantiatedOnlyOncePerProcess="false"
-    canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="false"
-    canSerializeFMUstate="false" providesDirectionalDerivative="false">
-    <SourceFiles>
-      <File name="{name}.c"/>
-    </SourceFiles>
-  </CoSimulation>
-  <DefaultExperiment startTime="0" stepSize="{period!r}"/>
-  <ModelVariables>
-{chr(10).join(rows)}
-  </ModelVariables>
-  <ModelStructure>
-    <Outputs>
-{chr(10).join(f'      <Unknown index="{i}"/>' for i in outputs)}
-    </Outputs>
-    <InitialUnknowns>
-{chr(10).join(f'      <Unknown index="{i}" dependencies=""/>' for i in outputs)}
-    </InitialUnknowns>
-  </ModelStructure>
-</fmiModelDescription>
-"""
+    return cosim_description(name, guid, what, period, [f"{name}.c"], rows, outputs)

@@ -18,18 +18,18 @@
 #include "mex.h"
 #include "${prefix}.h"
 
-static ${prefix}_t state;
-static int ready = 0;
+static ${prefix}_t state; /* the tracker's state and the targets ahead, between calls */
+static int ready = 0;       /* set at rest on the first call */
 
 ${run_command}
 
 void mexFunction(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
 {
+    ${prefix}_real d[${m}], v[${n}];
+    double *volts, *counts;
+    const double *target;
     mwSize rows, k;
     int i;
-    const double *target;
-    double *volts, *counts;
-    ${prefix}_real d[${m}], v[${n}];
     if (!ready) {
         ${prefix}_init(&state);
         ready = 1;
@@ -50,11 +50,10 @@ void mexFunction(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
                           "double matrix of ${m} columns (one per output), or "
                           "${name}('reset')");
     }
-    rows = mxGetM(prhs[0]);
     target = mxGetPr(prhs[0]);
-    plhs[0] = mxCreateDoubleMatrix(rows, ${n}, mxREAL);
-    volts = mxGetPr(plhs[0]);
-    for (k = 0; k < rows; ++k) { /* MATLAB's matrices go column by column */
+    rows = mxGetM(prhs[0]);
+    volts = mxGetPr(plhs[0] = mxCreateDoubleMatrix(rows, ${n}, mxREAL));
+    for (k = 0; k < rows; ++k) { /* column by column, as MATLAB stores a matrix */
         for (i = 0; i < ${m}; ++i) {
             d[i] = (${prefix}_real)target[k + i * rows];
         }
