@@ -127,6 +127,12 @@ def test_the_limits_hold_commands_and_say_so() -> None:
     text = " | ".join(str(w.message) for w in said)
     assert f"actuator 1: the voltage limits [0, 60] V held {comp.saturated_count[1]} " in text
     assert "outside what the structure reaches within the limits" in text
+    slow = ph.StructureCompensator(model, v_min=0.0, v_max=100.0, slew_rate=300.0)
+    with pytest.warns(LimitWarning) as said:
+        slow.process(raster(model, n=700, rate=5.0))
+    text = " | ".join(str(w.message) for w in said)
+    assert f"actuator 0: the slew limit (300 V/s) held {slow.slew_limited_count[0]} " in text
+    assert "training record" not in text  # its slew limit is the one set, nothing trained
     assert comp.outside_count > 0.5 * target.shape[0]
 
 

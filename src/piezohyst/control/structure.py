@@ -368,7 +368,7 @@ class StructureCompensator:
         if "reach" not in self._said:
             self._said.add("reach")
             warn(
-                f"StructureCompensator: {rows.size} targets lie outside what the structure "
+                f"StructureCompensator: {rows.size} target(s) lie outside what the structure "
                 f"reaches within the limits (first at sample {first + int(rows[0])} since the "
                 "reset: an actuator asked for more than its range allows, through the "
                 "structure's dynamics; what it reaches is not a box); their commands are held "
@@ -389,7 +389,7 @@ class StructureCompensator:
                 int(t[K.TALLY_GIVEN]), int(t[K.TALLY_AT_LOW] + t[K.TALLY_AT_HIGH]),
                 int(t[K.TALLY_HELD]), (float(self.v_min[i]), float(self.v_max[i])),
                 float(self.max_step[i]), rate, given=given,
-                sides=(int(t[K.TALLY_AT_LOW]), int(t[K.TALLY_AT_HIGH])),
+                sides=(int(t[K.TALLY_AT_LOW]), int(t[K.TALLY_AT_HIGH])), trained=False,
             )  # fmt: skip
             new = {k: v for k, v in parts.items() if f"{k}{i}" not in self._said}
             if new:

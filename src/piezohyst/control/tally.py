@@ -211,6 +211,7 @@ def limit_parts(
     given: int | None = None,
     sides: tuple[int, int] | None = None,
     outside: int = 0,
+    trained: bool = True,
 ) -> dict[str, str]:
     """What each limit that held over :data:`LIMIT_SHARE` of the commands did: ``"slew"``,
     ``"voltage"`` and ``"region"`` keys, each a sentence with its count and the setting to
@@ -236,6 +237,9 @@ def limit_parts(
     outside : int, default 0
         Commands held back because they would have left the (voltage, output) region the
         model was identified on (a compensator that does not extrapolate).
+    trained : bool, default True
+        The slew limit's default is the training record's fastest change (said); False
+        for a compensator whose slew limit is only what the user set.
 
     Returns
     -------
@@ -246,9 +250,10 @@ def limit_parts(
         per_s = f"{max_step * sample_rate:.4g} V/s" if sample_rate else f"{max_step:.4g} V/sample"
         parts["slew"] = (
             f"the slew limit ({per_s}) held {slewed} of {issued} commands "
-            f"({100 * slewed / issued:.1f} %): the trajectory is faster than the limit (by "
-            "default the training record's fastest change); set slew_rate (--slew-rate) to "
-            "what the amplifier allows, or identify on faster loops"
+            f"({100 * slewed / issued:.1f} %): the trajectory is faster than the limit"
+            + (" (by default the training record's fastest change)" if trained else "")
+            + "; set slew_rate (--slew-rate) to what the amplifier allows, "
+            + ("or identify on faster loops" if trained else "or slow the target")
         )
     total = max(issued, saturated if given is None else given)
     if saturated > LIMIT_SHARE * total:
