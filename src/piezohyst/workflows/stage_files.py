@@ -10,7 +10,7 @@ import dataclasses
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -24,12 +24,14 @@ from ..control.export.stage_c import (
     write_stage_mex,
     write_stage_shared,
 )
-from ..control.structure import StructureCompensator
 from ..errors import DataFileError, ParameterError
 from ..io import DataSpec, read_table, write_table
 from ..model.coupled import COUPLED_FORMAT, CoupledModel
 from ..model.persistence import model_class
 from ..model.structure import STRUCTURE_FORMAT, StructureModel
+
+if TYPE_CHECKING:
+    from ..control.structure import StructureCompensator
 from ._base import PathLike, guard_outputs
 
 __all__ = [
@@ -285,6 +287,8 @@ def compensate_stage_file(
     fs = float(sample_rate) if sample_rate is not None else float(1.0 / np.median(np.diff(t)))
     comp: CoupledCompensator | StructureCompensator
     if isinstance(model, StructureModel):
+        from ..control.structure import StructureCompensator  # SciPy's Riccati: loaded here
+
         if abs(fs - model.sample_rate_) > 1e-6 * model.sample_rate_:
             msg = (
                 f"{target} is sampled at {fs:.6g} Hz and {model_path} was identified at "
@@ -561,6 +565,7 @@ def _export_structure(
     """A structure model's compensator as C (:mod:`~piezohyst.control.export.structure_c`),
     with ``shared`` its library, with ``mex`` its MEX gateway, or an FMU (``out`` ``.fmu``)."""
     from ..control.export import structure_c as sc
+    from ..control.structure import StructureCompensator
 
     model = StructureModel.load(model_path)
     slew = None if slew_rate in (None, "trained") else float(slew_rate)
