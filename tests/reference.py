@@ -106,6 +106,49 @@ def slew_hulls(u: Sequence[float], step: float) -> tuple[list[float], list[float
     return upper, lower
 
 
+def _structure_sample(
+    mats: Sequence[Sequence[Sequence[float]]],
+    off: Sequence[float],
+    x: list[float],
+    z: list[list[float]],
+    vk: Sequence[float],
+) -> tuple[list[float], list[float]]:
+    """One sample of a structure: its outputs ``y = c x + d v + off``, each actuator's
+    operators (eq. 9-10) moved by its stroke ``t y`` (``z`` updated in place), and the next
+    state ``a x + b v + e p`` with ``p`` their lags. ``mats`` = a, b, c, d, e, t, r."""
+    a, b, c, d, e, t, r = mats
+    n, m = len(a), len(c)
+    y = [
+        off[o]
+        + sum(c[o][s] * x[s] for s in range(n))
+        + sum(d[o][i] * vk[i] for i in range(len(vk)))
+        for o in range(m)
+    ]
+    p = []
+    for q in range(len(r)):
+        sq = sum(t[q][o] * y[o] for o in range(m))
+        for j in range(len(r[q])):
+            z[q][j] = max(sq - r[q][j], min(sq + r[q][j], z[q][j]))
+            p.append(z[q][j] - sq)
+    nxt = [
+        sum(a[s][u] * x[u] for u in range(n))
+        + sum(b[s][i] * vk[i] for i in range(len(vk)))
+        + sum(e[s][f] * p[f] for f in range(len(p)))
+        for s in range(n)
+    ]
+    return y, nxt
+
+
+def _at_rest(
+    mats: Sequence[Sequence[Sequence[float]]], off: Sequence[float]
+) -> tuple[list[float], list[list[float]]]:
+    """A structure's state at rest and its operators at the rest stroke ``t off``."""
+    a, _, c, _, _, t, r = mats
+    return [0.0] * len(a), [
+        [sum(t[q][o] * off[o] for o in range(len(c)))] * len(r[q]) for q in range(len(r))
+    ]
+
+
 def structure(
     a: Sequence[Sequence[float]],
     b: Sequence[Sequence[float]],
@@ -120,29 +163,11 @@ def structure(
     """A structure from rest (StructureModel): y = c x + d v + off; each actuator's stroke
     s = t y; its play operators (eq. 9-10, states starting at the rest stroke) lag it by
     p = play - s; x <- a x + b v + e p."""
-    n, m = len(a), len(c)
-    x = [0.0] * n
-    z = [[sum(t[q][o] * off[o] for o in range(m))] * len(r[q]) for q in range(len(r))]
+    mats = (a, b, c, d, e, t, r)
+    x, z = _at_rest(mats, off)
     out = []
     for vk in v:
-        y = [
-            off[o]
-            + sum(c[o][s] * x[s] for s in range(n))
-            + sum(d[o][i] * vk[i] for i in range(len(vk)))
-            for o in range(m)
-        ]
-        p = []
-        for q in range(len(r)):
-            sq = sum(t[q][o] * y[o] for o in range(m))
-            for j in range(len(r[q])):
-                z[q][j] = max(sq - r[q][j], min(sq + r[q][j], z[q][j]))
-                p.append(z[q][j] - sq)
-        x = [
-            sum(a[s][u] * x[u] for u in range(n))
-            + sum(b[s][i] * vk[i] for i in range(len(vk)))
-            + sum(e[s][f] * p[f] for f in range(len(p)))
-            for s in range(n)
-        ]
+        y, x = _structure_sample(mats, off, x, z, vk)
         out.append(y)
     return out
 
@@ -163,38 +188,18 @@ def structure_compensate(
     at most ``step`` from the last and kept in ``[lo, hi]`` (a held row sends the last
     again); then the structure (:func:`structure`) runs on it. ``mats`` = a, b, c, d, e, t,
     r."""
-    a, b, c, d, e, t, r = mats
-    n, m, ni = len(a), len(c), len(b[0])
-    x = [0.0] * n
-    z = [[sum(t[q][o] * off[o] for o in range(m))] * len(r[q]) for q in range(len(r))]
-    last = [0.0] * ni
+    x, z = _at_rest(mats, off)
+    last = [0.0] * len(gain)
     cmds, asked = [], []
     for k, fk in enumerate(ff):
         past = False
         if not hold[k]:
-            for i in range(ni):
-                want = fk[i] - sum(gain[i][s] * x[s] for s in range(n))
+            for i in range(len(gain)):
+                want = fk[i] - sum(gain[i][s] * x[s] for s in range(len(x)))
                 slewed = min(last[i] + step[i], max(last[i] - step[i], want))
                 past = past or not lo[i] - slack[i] <= slewed <= hi[i] + slack[i]
                 last[i] = min(hi[i], max(lo[i], slewed))
-        y = [
-            off[o]
-            + sum(c[o][s] * x[s] for s in range(n))
-            + sum(d[o][i] * last[i] for i in range(ni))
-            for o in range(m)
-        ]
-        p = []
-        for q in range(len(r)):
-            sq = sum(t[q][o] * y[o] for o in range(m))
-            for j in range(len(r[q])):
-                z[q][j] = max(sq - r[q][j], min(sq + r[q][j], z[q][j]))
-                p.append(z[q][j] - sq)
-        x = [
-            sum(a[s][u] * x[u] for u in range(n))
-            + sum(b[s][i] * last[i] for i in range(ni))
-            + sum(e[s][f] * p[f] for f in range(len(p)))
-            for s in range(n)
-        ]
+        _, x = _structure_sample(mats, off, x, z, last)
         cmds.append(list(last))
         asked.append(past)
     return cmds, asked

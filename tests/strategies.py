@@ -41,3 +41,14 @@ def examples(n: int) -> int:
     """A test's own example count, scaled with the profile: as written under ``ci``, five
     times as many under ``dev`` (see ``conftest.py``)."""
     return n * 5 if os.environ.get("HYPOTHESIS_PROFILE") == "dev" else n
+
+
+def random_structure(rng: np.random.Generator) -> tuple[np.ndarray, list[np.ndarray]]:
+    """A structure of 1-3 states, 1-2 inputs and outputs, two actuators of two play
+    operators each, drawn from ``rng``: its contracting ``a`` (|a| < 1 on average), then
+    ``[b, c, d, e, t, r, off]`` (the operators' widths positive)."""
+    order, ni, m, na, k = rng.integers(1, 4), rng.integers(1, 3), rng.integers(1, 3), 2, 2
+    a = 0.5 * rng.standard_normal((order, order)) / np.sqrt(order)
+    mats = [rng.standard_normal(s) for s in
+            [(order, ni), (m, order), (m, ni), (order, na * k), (na, m)]]  # fmt: skip
+    return a, [*mats, np.abs(rng.standard_normal((na, k))), rng.standard_normal(m)]

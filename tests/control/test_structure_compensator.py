@@ -20,7 +20,7 @@ from piezohyst.errors import LimitWarning, ParameterError, ShapeError
 
 from .. import reference
 from ..helpers import CC
-from ..strategies import examples
+from ..strategies import examples, random_structure
 from .structures import error, model_of, raster, structure
 
 pytestmark = pytest.mark.kernels
@@ -33,12 +33,9 @@ def test_the_kernel_equals_the_reference() -> None:
     @given(st.integers(0, 2**32 - 1), st.integers(1, 30))
     def check(seed: int, n: int) -> None:
         rng = np.random.default_rng(seed)
-        order, ni, m, na, k = rng.integers(1, 4), rng.integers(1, 3), rng.integers(1, 3), 2, 2
-        a = 0.5 * rng.standard_normal((order, order)) / np.sqrt(order)
-        mats = [rng.standard_normal(s) for s in
-                [(order, ni), (m, order), (m, ni), (order, na * k), (na, m)]]  # fmt: skip
-        r = np.abs(rng.standard_normal((na, k)))
-        off = rng.standard_normal(m)
+        a, (*mats, r, off) = random_structure(rng)
+        order, ni = a.shape[0], mats[0].shape[1]
+        k = r.shape[1]
         gain = rng.standard_normal((ni, order))
         ff = 2 * rng.standard_normal((n, ni))
         hold = rng.random(n) < 0.2

@@ -15,7 +15,7 @@ import piezohyst as ph
 from piezohyst.model import structure_fit as sf
 
 from .. import reference
-from ..strategies import examples
+from ..strategies import examples, random_structure
 
 pytestmark = pytest.mark.kernels
 
@@ -54,13 +54,8 @@ def test_the_kernel_equals_the_reference() -> None:
     @given(st.integers(0, 2**32 - 1), st.integers(1, 40))
     def check(seed: int, n: int) -> None:
         rng = np.random.default_rng(seed)
-        order, ni, m, na, k = rng.integers(1, 4), rng.integers(1, 3), rng.integers(1, 3), 2, 2
-        a = 0.5 * rng.standard_normal((order, order)) / np.sqrt(order)
-        mats = [rng.standard_normal(s) for s in
-                [(order, ni), (m, order), (m, ni), (order, na * k), (na, m)]]  # fmt: skip
-        r = np.abs(rng.standard_normal((na, k)))
-        off = rng.standard_normal(m)
-        v = rng.standard_normal((n, ni))
+        a, (*mats, r, off) = random_structure(rng)
+        v = rng.standard_normal((n, mats[0].shape[1]))
         want = reference.structure(a.tolist(), *[x.tolist() for x in mats], r.tolist(),
                                    off.tolist(), v.tolist())  # fmt: skip
         got = sf.Structure(a, *mats, r, off).run(v, periodic=False)

@@ -8,27 +8,34 @@ typedef ${prefix}_real real_t;
 
 ${tables}
 
+/* Each actuator's operators z moved by its stroke T y; their lags behind it into lag. */
+static void play(const real_t *y, real_t z[${na}][${nk}], real_t *lag)
+{
+    int o, q, j;
+    for (q = 0; q < ${na}; ++q) {
+        real_t sq = 0;
+        for (o = 0; o < ${m}; ++o) {
+            sq += T[q][o] * y[o];
+        }
+        for (j = 0; j < ${nk}; ++j) {
+            real_t zj = z[q][j];
+            zj = zj > sq - R[q][j] ? zj : sq - R[q][j];
+            zj = zj < sq + R[q][j] ? zj : sq + R[q][j];
+            z[q][j] = zj;
+            lag[q * ${nk} + j] = zj - sq;
+        }
+    }
+}
+
 /* A target's row of the ring: the target less the offsets, then each actuator's operators'
  * lags behind its stroke (the operators on the targets' strokes advanced by it). */
 static void push(${prefix}_t *s, const real_t *target, long slot)
 {
-    int o, q, j;
+    int o;
     for (o = 0; o < ${m}; ++o) {
         s->ring[slot][o] = target[o] - OFF[o];
     }
-    for (q = 0; q < ${na}; ++q) {
-        real_t sq = 0;
-        for (o = 0; o < ${m}; ++o) {
-            sq += T[q][o] * target[o];
-        }
-        for (j = 0; j < ${nk}; ++j) {
-            real_t zj = s->zd[q][j];
-            zj = zj > sq - R[q][j] ? zj : sq - R[q][j];
-            zj = zj < sq + R[q][j] ? zj : sq + R[q][j];
-            s->zd[q][j] = zj;
-            s->ring[slot][${m} + q * ${nk} + j] = zj - sq;
-        }
-    }
+    play(target, s->zd, s->ring[slot] + ${m});
 }
 
 void ${prefix}_init(${prefix}_t *s)
@@ -69,7 +76,7 @@ void ${prefix}_init(${prefix}_t *s)
 
 void ${prefix}_step(${prefix}_t *s, const real_t *ahead, real_t *command)
 {
-    int i, o, c, q, j, finite = 1, beyond = 0;
+    int i, o, c, j, finite = 1, beyond = 0;
     long k, slot;
     real_t y[${m}], p[${na} * ${nk}], xn[${nx}];
     /* the target ahead enters the ring's last slot (the one the command leaves) */
@@ -143,19 +150,7 @@ void ${prefix}_step(${prefix}_t *s, const real_t *ahead, real_t *command)
         }
         y[o] = acc;
     }
-    for (q = 0; q < ${na}; ++q) {
-        real_t sq = 0;
-        for (o = 0; o < ${m}; ++o) {
-            sq += T[q][o] * y[o];
-        }
-        for (j = 0; j < ${nk}; ++j) {
-            real_t zj = s->z[q][j];
-            zj = zj > sq - R[q][j] ? zj : sq - R[q][j];
-            zj = zj < sq + R[q][j] ? zj : sq + R[q][j];
-            s->z[q][j] = zj;
-            p[q * ${nk} + j] = zj - sq;
-        }
-    }
+    play(y, s->z, p);
     for (j = 0; j < ${nx}; ++j) {
         real_t acc = 0;
         for (c = 0; c < ${nx}; ++c) {
