@@ -51,6 +51,19 @@ def stroke(t, out, k, q):  # type: ignore[no-untyped-def]
     return sq
 
 
+@njit(cache=True, fastmath=FASTMATH, inline="always")
+def lags(t, r, out, k, z, p):  # type: ignore[no-untyped-def]
+    """Each actuator's operators ``z`` moved by its stroke ``t out[k]``; their lags behind it
+    written into ``p`` (actuator by actuator, ``r.shape[1]`` each)."""
+    nk = r.shape[1]
+    for q in range(r.shape[0]):
+        sq = stroke(t, out, k, q)
+        for j in range(nk):
+            zj = min(max(z[q, j], sq - r[q, j]), sq + r[q, j])
+            z[q, j] = zj
+            p[q * nk + j] = zj - sq
+
+
 @njit(cache=True, fastmath=FASTMATH)
 def structure_run(a, b, c, d, e, t, r, off, x, z, v, out):  # type: ignore[no-untyped-def]
     """Run the structure over the inputs ``v`` (N, inputs), sample by sample::
@@ -72,12 +85,7 @@ def structure_run(a, b, c, d, e, t, r, off, x, z, v, out):  # type: ignore[no-un
     p = np.empty(na * nk)
     for k in range(v.shape[0]):
         read_out(c, d, off, x, v, k, out)
-        for q in range(na):
-            sq = stroke(t, out, k, q)
-            for j in range(nk):
-                zj = min(max(z[q, j], sq - r[q, j]), sq + r[q, j])
-                z[q, j] = zj
-                p[q * nk + j] = zj - sq
+        lags(t, r, out, k, z, p)
         advance(a, b, e, x, v, k, p, xn)
 
 
@@ -207,10 +215,5 @@ def structure_compensate(  # type: ignore[no-untyped-def]
             cmd[k, i] = ci
             P.tally_command(ci, tally[i])
         read_out(c, d, off, x, cmd[k : k + 1], 0, out)
-        for q in range(na):
-            sq = stroke(t, out, 0, q)
-            for j in range(nk):
-                zj = min(max(z[q, j], sq - r[q, j]), sq + r[q, j])
-                z[q, j] = zj
-                p[q * nk + j] = zj - sq
+        lags(t, r, out, 0, z, p)
         advance(a, b, e, x, cmd, k, p, xn)
