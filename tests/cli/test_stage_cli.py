@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pytest
 
 import piezohyst as ph
 from piezohyst.simulation import XY_COUPLING, make_signal, simulate_stage
@@ -238,8 +239,8 @@ def _structure_csv(path: Path, seed: int) -> Path:
 
 
 def test_a_structure_from_the_shell(tmp_path: Path) -> None:
-    """fit --model structure: two actuators, three outputs; predict it; what it cannot do yet
-    is said in one line."""
+    """fit --model structure: two actuators, three outputs; predict, compensate and export it;
+    what it cannot take is said in one line."""
     data, fresh = _structure_csv(tmp_path / "s.csv", 0), _structure_csv(tmp_path / "f.csv", 1)
     out = tmp_path / "structure.json"
     res = run("fit", data, "--input", "vx,vy", "--output", "x,y,z", "--model", "structure",
@@ -280,9 +281,56 @@ def test_a_structure_from_the_shell(tmp_path: Path) -> None:
     assert res.exit_code == 0, res.output
     assert "t_mex('preview')" in (tmp_path / "t_mex.c").read_text()
     assert (tmp_path / "t.c").exists()
-    one_line_error(run("report", out, data, "--input", "vx,vy", "--output", "x,y,z", "--out",
-                       tmp_path / "rep"),
-                   "is a structure model (StructureModel)",
-                   "its report is not built yet")  # fmt: skip
     one_line_error(run("fit", data, "--input", "vx", "--output", "x", "--model", "structure",
                        "-o", tmp_path / "one.json"), "two or more --input columns")  # fmt: skip
+
+
+def test_report_a_structure_from_the_shell(tmp_path: Path) -> None:
+    """``report`` on a structure model file: each axis scored (as ``predict`` scores it), the
+    static gain, the modes and the frequency response of the structure the record came from."""
+    data, fresh = _structure_csv(tmp_path / "s.csv", 0), _structure_csv(tmp_path / "f.csv", 1)
+    model_file = tmp_path / "structure.json"
+    res = run("fit", data, "--input", "vx,vy", "--output", "x,y,z", "--model", "structure",
+              "-o", model_file)  # fmt: skip
+    assert res.exit_code == 0, res.output
+    out = tmp_path / "rep"
+    res = run("report", model_file, fresh, "--input", "vx,vy", "--output", "x,y,z", "--out", out)
+    assert res.exit_code == 0, res.output
+    metrics = json.loads((out / "metrics.json").read_text())
+    values = {k: v["value"] for k, v in metrics["metrics"].items()}
+    model = ph.StructureModel.load(model_file)
+    table = ph.read_table(fresh)
+    v = np.column_stack([table.get(c) for c in ("vx", "vy")])
+    y = np.column_stack([table.get(c) for c in "xyz"])
+    pred = model.predict(v)
+    for i, axis in enumerate("xyz"):
+        want = 100 * np.sqrt(np.mean((pred[:, i] - y[:, i]) ** 2)) / np.ptp(y[:, i])
+        # tol: the same prediction, through JSON's 17 significant digits
+        assert values[f"nrmse_{axis}_pct"] == pytest.approx(want, rel=1e-9)
+        assert values[f"nrmse_sd_{axis}_pct"] < 1e-3  # noise-free: the fit's own error
+        assert f"{axis} {values[f'nrmse_{axis}_pct']:.4g} %" in res.output
+    assert values["order"] == 4 and values["operators_per_actuator"] == 0
+    # the record's structure (_structure_csv): poles 0.9 e^{+-0.5j} and 0.85 e^{+-1.1j}, its
+    # static gain c (I - a)^-1 b; the report's four significant digits
+    modes = metrics["tables"]["Modes"]["modes, damping ratio: operators sliding (large strokes)"]
+    found = [(float(m.split(" Hz (")[0]), float(m.split("(")[1].rstrip(")")))
+             for m in modes.split(", ")]  # fmt: skip
+    want = sorted((abs(s) * 1e3 / (2 * np.pi), -s.real / abs(s))
+                  for s in (np.log(0.9) + 0.5j, np.log(0.85) + 1.1j))  # fmt: skip
+    # tol: printed to 5 and 3 significant digits (noise-free: identified to rounding)
+    np.testing.assert_allclose(found, want, rtol=2e-3)
+    gain = json.loads(model_file.read_text())
+    said = metrics["tables"]["Structure"]
+    (key,) = [k for k in said if k.startswith("static gain (m/V; rows: x, y, z; columns: vx, vy)")]
+    rows = [[float(x) for x in row.strip(" []").split(",")] for row in said[key].split(";")]
+    static = ph.StructureModel.from_dict(gain).structure_.dc_gain()
+    # tol: printed to 4 significant digits
+    np.testing.assert_allclose(rows, static, rtol=5e-4)
+    assert {"fit_x.png", "loop_x.png", "loop_y.png", "fit_z.png", "response.png",
+            "report.html"} <= {p.name for p in out.iterdir()}  # fmt: skip
+    assert "loop_z.png" not in {p.name for p in out.iterdir()}  # no actuator of its own
+    one_line_error(run("report", model_file, fresh, "--input", "vx,vy", "--output", "x,y",
+                       "--out", tmp_path / "r2"),
+                   "a structure of 2 actuators and 3 axes")  # fmt: skip
+    assert_clean_error(run("report", model_file, fresh, "--input", "vx,vy", "--output", "x,y,z",
+                           "--gain", "125", "--out", tmp_path / "r3"), code=2)  # fmt: skip

@@ -322,3 +322,50 @@ def test_scikit_learn_sees_a_fitted_model_of_several_channels(looped) -> None:  
             check_is_fitted(fresh)
         tags = fresh.__sklearn_tags__()
         assert tags.input_tags.two_d_array and tags.target_tags.multi_output
+
+
+def _steady_sine(structure: sf.Structure, f: float, amp: float) -> np.ndarray:
+    """The outputs' complex amplitude (outputs,) in the steady state of a sine of ``amp`` V
+    at ``f`` Hz on the first input (the last 1000 samples, whole periods)."""
+    k = np.arange(3000)
+    v = np.zeros((k.size, 2))
+    v[:, 0] = amp * np.sin(2 * np.pi * f * k / FS)
+    y = structure.run(v, periodic=False)[-1000:]
+    y = y - y.mean(axis=0)
+    basis = np.exp(2j * np.pi * f * k[-1000:] / FS)
+    return np.asarray(2j * (basis.conj() @ y) / 1000 / amp)  # sin = Im(e^{jwt}): G e^{jwt}
+
+
+def test_the_frequency_response_is_what_a_sine_drives() -> None:
+    """``frequency_response`` against a simulated sine's steady state: small strokes (all
+    operators stuck: their lag feeds each stroke back) and large ones (all sliding: a
+    constant lag, the loop open); ``modes`` are the poles' own."""
+    plant = _plant(e_gain=0.08, outputs=2)
+    model = ph.StructureModel(order=4)
+    model.structure_, model.sample_rate_ = plant, FS
+    for f in (20.0, 50.0, 125.0):  # whole periods in 1000 samples
+        # 0.01 V: each stroke moves about 0.01, inside the narrowest operator (0.2 each side)
+        small = model.frequency_response([f], strokes="small")[0][:, 0]
+        # tol: the transient left after 2000 samples (|poles| < 0.95: < 1e-40) and rounding
+        np.testing.assert_allclose(_steady_sine(plant, f, 0.01), small, rtol=1e-9)
+        sliding = sf.Structure(plant.a, plant.b, plant.c, plant.d, plant.e, plant.t,
+                               1e-9 * plant.r, plant.off)  # fmt: skip
+        large = model.frequency_response([f], strokes="large")[0][:, 0]
+        # tol: the sliding operators' lag is +-1e-9 (their width), through E (0.08): a
+        # few 1e-10 of the 1 V sine's response
+        np.testing.assert_allclose(_steady_sine(sliding, f, 1.0), large, rtol=1e-7)
+        assert np.max(np.abs(small - large)) > 0.01 * np.max(np.abs(large))  # they differ
+    # the plant's poles: 0.9 e^{+-0.5j}, 0.85 e^{+-1.1j}
+    want = sorted(
+        (abs(s) * FS / (2 * np.pi), -s.real / abs(s))
+        for s in (np.log(0.9) + 0.5j, np.log(0.85) + 1.1j)
+    )
+    # tol: the eigenvalues of a 4 x 4 matrix, to rounding
+    np.testing.assert_allclose(model.modes(), want, rtol=1e-10)
+    assert model.modes(strokes="small") != model.modes()
+    with pytest.raises(ph.errors.ParameterError, match="'strokes' must be"):
+        model.modes(strokes="medium")
+    with pytest.raises(ph.errors.ParameterError, match="half the sample rate"):
+        model.frequency_response([600.0])
+    with pytest.raises(ph.errors.NotFittedError):
+        ph.StructureModel().frequency_response([1.0])

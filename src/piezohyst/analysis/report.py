@@ -190,8 +190,9 @@ class Report:
             Shown under it in the report.
         panels : sequence of dict
             Each: ``curves`` [(x, y, label, style)], ``xunit``, ``yunit``,
-            ``xlabel``, ``ylabel`` (quantity names), ``title``; units are
-            given SI prefixes and put in the axis labels.
+            ``xlabel``, ``ylabel`` (quantity names), ``title``, ``xscale``,
+            ``yscale`` ("linear", "log"); units are given SI prefixes and put in
+            the axis labels.
         stacked : bool
             Panels above each other sharing the x axis (a signal and its
             residual), instead of side by side.
@@ -221,6 +222,8 @@ class Report:
             if not stacked or ax is axes_list[-1]:
                 ax.set_xlabel(f"{panel['xlabel']} ({xunit})" if xunit else panel["xlabel"])
             ax.set_ylabel(f"{panel['ylabel']} ({yunit})" if yunit else panel["ylabel"])
+            ax.set_xscale(panel.get("xscale", "linear"))
+            ax.set_yscale(panel.get("yscale", "linear"))
             ax.set_title(panel.get("title", ""), fontsize=10)
             ax.grid(True, lw=0.3)
             ax.legend(fontsize=8, loc="best")

@@ -16,6 +16,7 @@ from ._support import (
     _data_options,
     _gain_option,
     _run,
+    initial_state_option,
     rows_progress,
 )
 
@@ -53,6 +54,11 @@ from ._support import (
     default=None,
     help="What one unit of it is worth, for a sensor logged in V: '10 um/V'.",
 )
+@initial_state_option(
+    ["rest", "periodic"],
+    "A structure model's start (periodic: DATA is one period of a drive already running, "
+    "a multisine's period); other models start as they were fitted.",
+)
 @FORCE
 @click.pass_obj
 def report(
@@ -65,13 +71,15 @@ def report(
     displacement_column: str | None,
     displacement_unit: str | None,
     displacement_scale: str | None,
+    initial_state: str,
     force: bool,
 ) -> None:
     """Figures (loop, fit, residual, growth removal) and metrics of MODEL on DATA; with
     --gain, the displacement in metres too.
 
-    A stage's model file (``fit --input vx,vy --output x,y``) takes the same columns and
-    scores each axis.
+    A stage's model file (``fit --input vx,vy --output x,y``) or a structure's (``--model
+    structure``) takes the same columns and scores each axis; a structure's report adds its
+    static gain, modes and frequency response.
 
     \b
     Example:
@@ -81,7 +89,8 @@ def report(
           --displacement-column displacement --out report-m
     """
     from ..workflows import model_report
-    from ..workflows.stage_files import is_stage_file, stage_columns, stage_report
+    from ..workflows.stage_files import is_stage_file, stage_columns
+    from ..workflows.stage_report import stage_report
 
     command = _command_line()
     if is_stage_file(model):  # a coupled stage: each axis scored, the coupling said
@@ -89,14 +98,16 @@ def report(
                  if v is not None]  # fmt: skip
         if given:
             raise click.UsageError(f"{', '.join(given)}: not for a stage's model file")
+        outputs = _run(ctx, lambda: stage_columns(data_spec.output_column, "--output"))
         res = _run(ctx, lambda: stage_report(
             model, data, out, inputs=stage_columns(data_spec.input_column, "--input"),
-            outputs=stage_columns(data_spec.output_column, "--output"), data_spec=data_spec,
-            command=command, force=force))  # fmt: skip
-        per_axis = ", ".join(f"{k[6:-4]} {v:.4g} %" for k, v in res.metrics.items()
-                             if k.startswith("nrmse_"))  # fmt: skip
+            outputs=outputs, data_spec=data_spec, command=command, force=force,
+            initial_state=initial_state))  # fmt: skip
+        per_axis = ", ".join(f"{o} {res.metrics[f'nrmse_{o}_pct']:.4g} %" for o in outputs)
         ctx.result(f"NRMSE {per_axis}; report in {out / 'report.html'}")
         return
+    if initial_state != "rest":
+        raise click.UsageError(f"--initial-state {initial_state}: for a structure model's report")
     with rows_progress(ctx, f"reading {data.name}, then drawing the report", data) as progress:
         res = _run(
             ctx,

@@ -373,6 +373,70 @@ class StructureModel(JsonFile, SeveralChannels):
                 raise ShapeError(msg)
         return self.structure_.run(ua, state == "periodic")
 
+    def _linear(self, strokes: str) -> tuple[FloatArray, FloatArray]:
+        """``A`` and ``B`` of the linear structure for ``strokes``: "large" (the operators
+        slide: their lag is their width, a constant, and the loop is open) or "small" (all
+        stuck: each one's output constant, so its lag ``-s`` feeds each stroke back through
+        the sum of its actuator's columns of ``E``)."""
+        if not hasattr(self, "structure_"):
+            msg = "This StructureModel is not fitted yet: call fit(u, y, sample_rate=...) first."
+            raise NotFittedError(msg)
+        if strokes not in ("large", "small"):
+            msg = f"'strokes' must be 'large' or 'small'. Got {strokes!r}."
+            raise ParameterError(msg)
+        st = self.structure_
+        na, nk = st.r.shape
+        if strokes == "large" or not nk:
+            return st.a, st.b
+        e_sum = st.e.reshape(st.order, na, nk).sum(axis=2)
+        return st.a - e_sum @ st.t @ st.c, st.b - e_sum @ st.t @ st.d
+
+    def frequency_response(self, frequencies: ArrayLike, *, strokes: str = "large") -> np.ndarray:
+        """The structure's linear frequency response from each actuator to each output.
+
+        With play operators in the loop the structure is linear in two limits: large
+        strokes, where every operator slides, and small strokes, where every one sticks; a
+        drive between them moves between the two (what shifts a mirror's modes with its
+        drive level).
+
+        Parameters
+        ----------
+        frequencies : array_like
+            Hz, below half the sample rate.
+        strokes : {"large", "small"}
+
+        Returns
+        -------
+        ndarray of complex, shape (frequencies, outputs, inputs)
+            In output units per volt.
+        """
+        a, b = self._linear(strokes)
+        st = self.structure_
+        f = np.atleast_1d(np.asarray(frequencies, dtype=np.float64))
+        if f.ndim != 1 or not np.all((f >= 0) & (f <= self.sample_rate_ / 2)):
+            msg = (
+                "'frequencies' must be a list of frequencies from 0 to half the sample rate "
+                f"({self.sample_rate_ / 2:.6g} Hz)"
+            )
+            raise ParameterError(msg)
+        eye = np.eye(st.order)
+        z = np.exp(2j * np.pi * f / self.sample_rate_)
+        return np.array([st.d + st.c @ np.linalg.solve(zk * eye - a, b) for zk in z])
+
+    def modes(self, *, strokes: str = "large") -> list[tuple[float, float]]:
+        """Each lightly or heavily damped mode (a complex pole pair): its frequency (Hz) and
+        damping ratio, the lowest frequency first; ``strokes`` as
+        :meth:`frequency_response` takes it.
+
+        Returns
+        -------
+        list of (float, float)
+        """
+        s = np.log(np.linalg.eigvals(self._linear(strokes)[0]).astype(complex))
+        s = s * self.sample_rate_
+        return sorted((float(abs(sk)) / (2 * np.pi), float(-sk.real / max(abs(sk), 1e-300)))
+                      for sk in s if sk.imag > 0)  # fmt: skip
+
     def describe(self) -> str:
         """The order, its modes, the loop's operators and the fit, one paragraph.
 
@@ -382,14 +446,7 @@ class StructureModel(JsonFile, SeveralChannels):
         """
         if not hasattr(self, "structure_"):
             return "StructureModel (not fitted)"
-        lam = np.linalg.eigvals(self.structure_.a)
-        s = np.log(lam.astype(complex)) * self.sample_rate_
-        f = np.abs(s) / (2 * np.pi)
-        modes = sorted(
-            (float(fk), float(-sk.real / max(abs(sk), 1e-300)))
-            for fk, sk in zip(f, s, strict=True)
-            if sk.imag > 0
-        )
+        modes = self.modes()
         said = ", ".join(f"{fk:.4g} Hz ({zk:.2g})" for fk, zk in modes[:6])
         more = f" and {len(modes) - 6} more" if len(modes) > 6 else ""
         chosen = (

@@ -16,7 +16,9 @@ module                   commands (functions)
 ``model_files``          ``fit``, ``select``/``fit --model auto``, ``compare``, ``predict``
                          (:func:`fit_file`, :func:`select_file`, :func:`compare_file`,
                          :func:`predict_file`, :class:`Prediction`)
-``stage_files``          ``fit --input vx,vy --output x,y``: a coupled stage (``fit_stage_file``)
+``stage_files``          ``fit``, ``predict``, ``compensate``, ``export-c`` with several columns: a
+                         coupled stage or a structure (``fit_stage_file``, ``fit_structure_file``)
+``stage_report``         ``report`` of a stage or a structure (``stage_report``)
 ``compensate``           ``compensate`` (:func:`compensate_file`, :class:`Compensation`)
 ``calibrate_files``      ``calibrate-leakage``, ``calibrate-gain`` (:func:`calibrate_leakage_file`,
                          :func:`calibrate_gain_file`)

@@ -10,7 +10,7 @@ import dataclasses
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -43,7 +43,6 @@ __all__ = [
     "is_stage_file",
     "predict_stage_file",
     "stage_columns",
-    "stage_report",
 ]
 
 
@@ -125,14 +124,6 @@ def _read_stage(
 
 
 def _stage(model_path: PathLike) -> CoupledModel:
-    if _is_structure(model_path):
-        msg = (
-            f"{model_path} is a structure model (StructureModel): `predict` runs it, "
-            "`compensate` and `export-c` invert it (in Python: ph.StructureCompensator); its "
-            "report is not built yet: for that, fit a stage (fit --input vx,vy --output x,y: "
-            "a coupled model)"
-        )
-        raise ParameterError(msg)
     model = CoupledModel.load(model_path)
     if not isinstance(model, CoupledModel):  # pragma: no cover - load returns its class
         msg = f"{model_path}: not a coupled model file"
@@ -589,108 +580,3 @@ def _export_structure(
         files, lib = sc.write_structure_shared(comp, c_path, precision=prec)  # type: ignore[arg-type]
         return [*files, lib]
     return list(sc.write_structure_c(comp, c_path, precision=prec))  # type: ignore[arg-type]
-
-
-def stage_report(
-    model_path: PathLike,
-    data: PathLike,
-    out: PathLike,
-    *,
-    inputs: Sequence[str],
-    outputs: Sequence[str],
-    data_spec: DataSpec | None = None,
-    command: str | None = None,
-    force: bool = False,
-) -> Any:
-    """A coupled stage's model scored on a record: per axis its NRMSE and figures (the
-    position over time with the residual, and the axis against its own actuator's voltage),
-    the coupling and each actuator's model, in ``report.html``, ``report.md`` and
-    ``metrics.json``.
-
-    Parameters
-    ----------
-    model_path : str or os.PathLike
-        A coupled model file.
-    data : str or os.PathLike
-        The record.
-    out : str or os.PathLike
-        The report's folder (written whole, or not at all).
-    inputs, outputs : sequence of str
-        The actuators' voltage columns and the axes' position columns, in the model's order.
-    data_spec : DataSpec, optional
-    command : str, optional
-        The command line, recorded in the report.
-    force : bool
-        Replace a folder piezohyst did not write.
-
-    Returns
-    -------
-    ReportResult
-    """
-    from datetime import UTC, datetime
-
-    from ..analysis.report import Report, file_facts
-    from ..io import atomic_folder
-    from ..metrics import nrmse
-    from ._base import check_folder
-    from .report_files import ReportResult
-
-    guard_outputs([check_folder(out, "the figures and the report")], [model_path, data],
-                  force=force)  # fmt: skip
-    model = _stage(model_path)
-    if len(inputs) != len(model.channels_) or len(outputs) != model.coupling_.shape[0]:
-        msg = (
-            f"{model_path} is a stage of {len(model.channels_)} actuators and "
-            f"{model.coupling_.shape[0]} axes: got {len(inputs)} input and {len(outputs)} "
-            "output columns"
-        )
-        raise ParameterError(msg)
-    t, u, y, unit = _read_stage(data, inputs, outputs, data_spec or DataSpec())
-    assert y is not None
-    pred = model.predict(u, t=t)
-    unit = unit or "m"
-    with atomic_folder(out) as folder:
-        rep = Report(f"a stage of {u.shape[1]} actuators on {Path(data).name}", folder)
-        rep.metadata = {
-            "written": datetime.now(UTC).isoformat(timespec="seconds"),
-            "command": command or "(called from Python)",
-            "data_file": file_facts(data), "model_file": file_facts(model_path),
-            "columns": {"inputs": list(inputs), "outputs": list(outputs)},
-            "time_window_s": [float(t[0]), float(t[-1])],
-        }  # fmt: skip
-        rep.tables["Stage"] = [
-            ("coupling (rows: axes, columns: actuators)",
-             "; ".join("[" + ", ".join(f"{x:.4g}" for x in row) + "]" for row in model.coupling_)),
-            *((f"actuator {k} ({inputs[k]})", type(ch).__name__)
-              for k, ch in enumerate(model.channels_)),
-        ]  # fmt: skip
-        rep.add("samples", "samples", int(t.size))
-        cross = [abs(x) for i, row in enumerate(model.coupling_) for j, x in enumerate(row)
-                 if i != j]  # fmt: skip
-        if cross:
-            rep.add("largest_cross_term_pct", "largest cross term of the coupling",
-                    100 * max(cross), "%")  # fmt: skip
-        measured = {"color": "0.2", "lw": 0.8, "zorder": 3}
-        model_line = {"color": "C0", "lw": 3.0, "alpha": 0.45, "zorder": 2}
-        for i, axis in enumerate(outputs):
-            score = 100 * nrmse(y[:, i], pred[:, i])
-            rep.add(f"nrmse_{axis}_pct", f"NRMSE of {axis} (RMSE / its span)", score, "%")
-            rep.figure(f"fit_{axis}.png", f"{axis} over time, and the residual "
-                       f"(NRMSE {score:.3g} %)", [
-                {"curves": [(t, y[:, i], "measured", measured),
-                            (t, pred[:, i], "model", model_line)],
-                 "xlabel": "time", "xunit": "s", "ylabel": axis, "yunit": unit},
-                {"curves": [(t, y[:, i] - pred[:, i], "measured - model",
-                             {"lw": 0.7, "color": "C3"})],
-                 "xlabel": "time", "xunit": "s", "ylabel": "residual", "yunit": unit},
-            ], stacked=True)  # fmt: skip
-            if i < u.shape[1]:
-                rep.figure(f"loop_{axis}.png", f"{axis} against {inputs[i]}: data (dark line) "
-                           "and model (blue band); the other actuators move it too", [
-                    {"curves": [(u[:, i], y[:, i], "measured", measured),
-                                (u[:, i], pred[:, i], "model", model_line)],
-                     "xlabel": inputs[i], "xunit": "V", "ylabel": axis, "yunit": unit,
-                     "title": ""},
-                ])  # fmt: skip
-        files = [Path(out) / f.name for f in rep.write()]
-    return ReportResult({m.key: m.value for m in rep.metrics}, files)
