@@ -45,7 +45,7 @@ def test_every_excitation_starts_and_ends_at_rest_inside_the_limits_and_slew(
         i0, i1 = round(start * rate), round(stop * rate)
         assert stop - start == pytest.approx(2.0, abs=1 / rate)  # tol: one sample
         np.testing.assert_array_equal(exc.voltage[i0:i1], level)
-    if kind != "holds":
+    if kind not in ("holds", "multisine"):
         assert exc.frequencies[0] <= 1.0 and all(f <= rate / 20 for f in exc.frequencies)
 
 
@@ -69,6 +69,46 @@ def test_the_kinds_hold_what_they_say() -> None:
     assert bipolar.voltage.min() == -30.0 and bipolar.voltage.max() == 120.0  # a full cycle each
 
 
+def test_a_multisine_gives_each_actuator_its_own_lines() -> None:
+    """Three actuators: in every steady period each column holds its own lines (every
+    third, from 1 Hz to the band) and nothing else, periods repeat exactly, the peak is the
+    range's half, the crest factor is flattened from a random-phase multisine's ~3."""
+    exc = excitation("multisine", v_min=45, v_max=95, sample_rate=1000, band=300,
+                     actuators=3, periods=3, seed=4)  # fmt: skip
+    v = exc.voltage
+    assert v.shape == (exc.t.size, 3) and exc.actuators == 3
+    np.testing.assert_array_equal(v[0], 45.0)  # at rest (the limit nearer 0 V), exactly
+    np.testing.assert_array_equal(v[-1], 45.0)
+    assert v.min() >= 45 and v.max() <= 95
+    a, b = exc.steady
+    assert b - a == 3 * 1000
+    steady = v[a:b].reshape(3, 1000, 3)
+    np.testing.assert_array_equal(steady[1], steady[0])  # periodic, to the bit
+    np.testing.assert_array_equal(steady[2], steady[0])
+    spec = np.abs(np.fft.rfft(steady[0] - 70.0, axis=0)) ** 2
+    for q in range(3):
+        own = np.arange(1 + q, 301, 3)  # lines k = q + 1, q + 4, ... <= 300 Hz
+        elsewhere = np.delete(spec[:, q], own)
+        # tol: the lines' power against rounding's (1e-16 of the signal, squared)
+        assert elsewhere.max() < 1e-20 * spec[own, q].min()
+        # equal amplitudes on its lines (the crest reduction keeps them)
+        np.testing.assert_allclose(spec[own, q], spec[own, q].mean(), rtol=1e-9)  # tol: rounding
+        x = steady[0][:, q] - 70.0
+        crest = np.max(np.abs(x)) / np.sqrt(np.mean(x**2))
+        assert crest < 2.0  # a random-phase multisine's is near 3-3.5
+    # the peak is the half range about the middle: 25 V (to rounding)
+    assert np.max(np.abs(v[a:b] - 70.0)) == pytest.approx(25.0, rel=1e-12)  # tol: rounding
+    assert exc.lines == (1.0, 300.0, 100) and exc.swing == (70.0, pytest.approx(25.0), False)
+    assert "3 actuators, each on its own 100 lines (every third, interleaved)" in exc.summary()
+    slow = excitation("multisine", v_min=45, v_max=95, sample_rate=1000, band=300,
+                      actuators=2, slew_rate=5000.0)  # fmt: skip
+    # tol: the same chord rule as every excitation's
+    assert slow.peak_slew <= 5000.0 * (1 + 1e-9) and slow.swing[2]
+    assert "(the slew limit lowered it)" in slow.summary()
+    one = excitation("multisine", v_min=0, v_max=140, sample_rate=2000)  # the default band
+    assert one.voltage.ndim == 1 and one.lines == (1.0, 800.0, 800)
+
+
 def test_bad_requests_get_one_clear_error() -> None:
     for kwargs, match in [
         ({"v_min": 10, "v_max": 10}, "v_max must be above v_min"),
@@ -79,6 +119,15 @@ def test_bad_requests_get_one_clear_error() -> None:
             excitation(sample_rate=1000, **kwargs)  # type: ignore[arg-type]
     with pytest.raises(ph.ParameterError, match="must be one of identification, holds"):
         excitation("chirp", v_min=0, v_max=1, sample_rate=1000)
+    for kwargs, match in [
+        ({"kind": "holds", "actuators": 2}, "a holds excitation drives one actuator"),
+        ({"kind": "multisine", "band": 500.0}, "below half the sample rate"),
+        ({"kind": "multisine", "band": 3.0, "actuators": 2}, "holds 3 lines"),
+        ({"kind": "multisine", "periods": 0}, "'periods' must be an integer"),
+        ({"kind": "multisine", "actuators": 0}, "'actuators' must be an integer"),
+    ]:
+        with pytest.raises(ph.ParameterError, match=match):
+            excitation(v_min=0, v_max=140, sample_rate=1000, **kwargs)  # type: ignore[arg-type]
 
 
 def test_holds_are_long_enough_for_the_leakage_calibration() -> None:
@@ -156,3 +205,25 @@ def test_a_leakage_file_is_piezohyst_s_own(tmp_path: Path) -> None:
         assert res.exit_code == 0, res.output
     assert ph.io.is_piezohyst_output(tmp_path / "leak.json")
     assert ph.Leakage.load(tmp_path / "leak.json").holds
+
+
+def test_a_multisine_for_a_stage_from_the_shell(tmp_path: Path) -> None:
+    """excite --kind multisine --actuators 2: a column per actuator, the same samples as
+    Python's, in the DAQ's volts with --command-scale."""
+    out = tmp_path / "ms.csv"
+    res = CliRunner().invoke(main, ["excite", "--kind", "multisine", "--actuators", "2",
+                                    "--v-min", "45", "--v-max", "95", "--sample-rate", "1000",
+                                    "--band", "300", "--periods", "2", "--command-scale", "10",
+                                    "-o", str(out)])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "2 actuators, each on its own 150 lines (every second, interleaved)" in res.output
+    table = ph.read_table(out)
+    assert list(table.columns) == ["time", "voltage_0", "voltage_1"]
+    want = excitation("multisine", v_min=45, v_max=95, sample_rate=1000, band=300,
+                      actuators=2, periods=2)  # fmt: skip
+    # tol: the CSV's full-precision decimal round trip (17 digits)
+    np.testing.assert_allclose(table.get("voltage_1"), want.voltage[:, 1] / 10, rtol=1e-15)
+    res = CliRunner().invoke(main, ["excite", "--actuators", "2", "--v-min", "0", "--v-max",
+                                    "140", "--sample-rate", "1000", "-o",
+                                    str(tmp_path / "x.csv")])  # fmt: skip
+    assert res.exit_code == 1 and "several take --kind multisine" in res.stderr

@@ -99,7 +99,8 @@ def simulate(
     default="identification",
     show_default=True,
     help="identification: holds, then loops at two frequencies; holds: the leakage "
-    "staircase; multifreq: loops at 1, 10 and 40 times --frequency.",
+    "staircase; multifreq: loops at 1, 10 and 40 times --frequency; multisine: a random-phase "
+    "multisine on every multiple of --frequency to --band, for a structure's dynamics.",
 )
 @click.option("--v-min", type=float, required=True, help="Lowest voltage, V.")
 @click.option("--v-max", type=float, required=True, help="Highest voltage, V.")
@@ -111,6 +112,31 @@ def simulate(
     "--frequency", type=float, default=1.0, show_default=True, help="Base loop frequency, Hz."
 )
 @click.option("--hold", type=float, default=5.0, show_default=True, help="Each hold's length, s.")
+@click.option(
+    "--actuators",
+    type=int,
+    default=1,
+    show_default=True,
+    help="multisine: the actuators driven, each on its own lines (interleaved), one "
+    "column each (voltage_0, voltage_1, ...).",
+)
+@click.option(
+    "--band",
+    type=float,
+    default=None,
+    help="multisine: its highest line, Hz (default 0.4 x --sample-rate).",
+)
+@click.option(
+    "--periods",
+    type=int,
+    default=8,
+    show_default=True,
+    help="multisine: its steady periods (of 1 / --frequency s each), after one that "
+    "fades it in and before one that fades it out.",
+)
+@click.option(
+    "--seed", type=int, default=0, show_default=True, help="multisine: its random phases."
+)
 @out_file(
     "Output file (.csv, .mat, .tdms, .npz or .parquet).",
     *(".csv", ".mat", ".tdms", ".npz", ".parquet"),
@@ -128,11 +154,16 @@ def excite(
     slew_rate: float | None,
     frequency: float,
     hold: float,
+    actuators: int,
+    band: float | None,
+    periods: int,
+    seed: int,
     out: Path,
     command_scale: str | None,
     force: bool,
 ) -> None:
-    """Write a voltage excitation to play on the rig: time,voltage (s, V).
+    """Write a voltage excitation to play on the rig: time,voltage (s, V), or a voltage
+    column per actuator for a multisine of several.
 
     It starts and ends at rest (0 V or the nearer limit), stays in [--v-min,
     --v-max] and under --slew-rate, and holds long enough for a leakage
@@ -142,12 +173,15 @@ def excite(
     \b
     Example:
       piezohyst excite --v-min 0 --v-max 140 --sample-rate 1000 -o excite.csv
+      piezohyst excite --kind multisine --actuators 2 --v-min 45 --v-max 95 \\
+          --sample-rate 1000 --band 300 -o stage-multisine.csv
     """
     from ..workflows import excite_file
 
     def make() -> Excitation:
         return excitation(kind, v_min=v_min, v_max=v_max, sample_rate=sample_rate,
-                          slew_rate=slew_rate, frequency=frequency, hold=hold)  # fmt: skip
+                          slew_rate=slew_rate, frequency=frequency, hold=hold,
+                          actuators=actuators, band=band, periods=periods, seed=seed)  # fmt: skip
 
     exc = _run(ctx, lambda: excite_file(out, make(), force=force, command_scale=command_scale))
     ctx.result(exc.summary())

@@ -94,8 +94,8 @@ def excite_file(
     force: bool = False,
     command_scale: str | float | None = None,
 ) -> Excitation:
-    """Write an excitation to play on the rig: ``time,voltage`` (s, V) as CSV, MAT, TDMS,
-    NPZ or Parquet.
+    """Write an excitation to play on the rig: ``time,voltage`` (s, V), or a column
+    ``voltage_0``, ``voltage_1``, ... per actuator, as CSV, MAT, TDMS, NPZ or Parquet.
 
     Parameters
     ----------
@@ -116,6 +116,7 @@ def excite_file(
     """
     gain = command_gain(command_scale)
     guard_outputs([out], [], force=force)
-    write_table(out, {"time": exc.t, "voltage": exc.voltage / gain},
-                units={"time": "s", "voltage": "V"})  # fmt: skip
+    v = exc.voltage / gain
+    volts = {"voltage": v} if v.ndim == 1 else {f"voltage_{q}": v[:, q] for q in range(v.shape[1])}
+    write_table(out, {"time": exc.t, **volts}, units={"time": "s", **dict.fromkeys(volts, "V")})
     return exc
