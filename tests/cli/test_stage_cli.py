@@ -321,11 +321,20 @@ def test_report_a_structure_from_the_shell(tmp_path: Path) -> None:
     np.testing.assert_allclose(found, want, rtol=2e-3)
     gain = json.loads(model_file.read_text())
     said = metrics["tables"]["Structure"]
-    (key,) = [k for k in said if k.startswith("static gain (m/V; rows: x, y, z; columns: vx, vy)")]
+    (key,) = [k for k in said if k.startswith("the model's static gain, at 0 Hz (m/V; rows: x")]
     rows = [[float(x) for x in row.strip(" []").split(",")] for row in said[key].split(";")]
     static = ph.StructureModel.from_dict(gain).structure_.dc_gain()
     # tol: printed to 4 significant digits
     np.testing.assert_allclose(rows, static, rtol=5e-4)
+    # the record's own response estimate against the model's, estimated the same way from
+    # its simulated outputs: the model is the structure (noise-free), so they agree
+    for axis in "xyz":
+        # tol: the model's own error on its record, 5e-4 % (fit_nrmse_pct), 20 times over
+        assert 0 < values[f"response_error_{axis}_pct"] < 1e-2
+    # tol: as above; the cross terms of the same two estimates
+    assert values["model_cross_term_pct"] == pytest.approx(values["measured_cross_term_pct"],
+                                                           rel=1e-4)  # fmt: skip
+    assert "Welch's H1 over 256-sample segments" in str(said)
     assert {"fit_x.png", "loop_x.png", "loop_y.png", "fit_z.png", "response.png",
             "report.html"} <= {p.name for p in out.iterdir()}  # fmt: skip
     assert "loop_z.png" not in {p.name for p in out.iterdir()}  # no actuator of its own

@@ -8,6 +8,8 @@ input tells it, in ``turns``)
     select_model, Selection, SelectionRow
 A model's report: its numbers and figures (``report``)
     Report
+A record's own frequency response from several inputs, without a model (``response``)
+    measured_response, MeasuredResponse
 """
 
 from __future__ import annotations
@@ -23,9 +25,11 @@ __getattr__, __dir__ = attach(
         "Comparison": ".comparison",
         "ComparisonRow": ".comparison",
         "compare_models": ".comparison",
+        "MeasuredResponse": ".response",
         "Report": ".report",
         "Selection": ".selection",
         "SelectionRow": ".selection",
+        "measured_response": ".response",
         "select_model": ".selection",
     },
 )
@@ -33,14 +37,17 @@ __getattr__, __dir__ = attach(
 if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .comparison import Comparison, ComparisonRow, compare_models
     from .report import Report
+    from .response import MeasuredResponse, measured_response
     from .selection import Selection, SelectionRow, select_model
 
 __all__ = [
     "Comparison",
     "ComparisonRow",
+    "MeasuredResponse",
     "Report",
     "Selection",
     "SelectionRow",
     "compare_models",
+    "measured_response",
     "select_model",
 ]

@@ -26,6 +26,8 @@ __all__ = ["stage_report"]
 
 #: The modes a structure's report lists, the lowest first (the rest are counted)
 LISTED_MODES = 12
+#: The record's lowest estimated frequencies its low-frequency gain is averaged over
+LOW_BINS = 5
 #: Frequencies of the frequency-response figure, log-spaced from a 2000th of the sample rate
 #: to half of it
 RESPONSE_POINTS = 400
@@ -120,7 +122,7 @@ def stage_report(
         }  # fmt: skip
         rep.add("samples", "samples", int(t.size))
         if isinstance(model, StructureModel):
-            _structure_said(rep, model, inputs, outputs, unit)
+            _structure_said(rep, model, u, y, pred, inputs, outputs, unit)
         else:
             rep.tables["Stage"] = [
                 ("coupling (rows: axes, columns: actuators)", _matrix(model.coupling_)),
@@ -137,12 +139,12 @@ def _matrix(a: FloatArray) -> str:
     return "; ".join("[" + ", ".join(f"{x:.4g}" for x in row) + "]" for row in a)
 
 
-def _cross(rep: Report, gain: FloatArray, label: str) -> None:
+def _cross(rep: Report, gain: FloatArray, label: str, key: str = "largest_cross_term_pct") -> None:
     """The largest off-diagonal term of each axis's row over its own actuator's (%)."""
     cross = [abs(gain[i, j]) / abs(gain[i, i]) for i in range(min(gain.shape))
              for j in range(gain.shape[1]) if j != i and gain[i, i] != 0]  # fmt: skip
     if cross:
-        rep.add("largest_cross_term_pct", label, 100 * float(max(cross)), "%")
+        rep.add(key, label, 100 * float(max(cross)), "%")
 
 
 def _axes(
@@ -184,11 +186,15 @@ def _axes(
 
 
 def _structure_said(
-    rep: Report, model: StructureModel, inputs: Sequence[str], outputs: Sequence[str],
-    unit: str,
+    rep: Report, model: StructureModel, u: FloatArray, y: FloatArray, pred: FloatArray,
+    inputs: Sequence[str], outputs: Sequence[str], unit: str,
 ) -> None:  # fmt: skip
-    """A structure's order, operators, static gain and modes (tables and metrics), and its
-    frequency response (a figure)."""
+    """A structure's order, operators, static gain and modes (tables and metrics); its
+    frequency response (a figure) beside the record's own estimate of it; and where the
+    record holds one, the two compared (the model's estimated from its simulated outputs the
+    same way, like with like)."""
+    from ..analysis.response import measured_response
+
     st = model.structure_
     gain = st.dc_gain()
     rep.add("order", "order of the state space", model.order_)
@@ -196,22 +202,60 @@ def _structure_said(
             model.operators_)  # fmt: skip
     rep.add("fit_nrmse_pct", "the fit's own NRMSE on its records (RMSE / standard deviation)",
             model.output_nrmse_, "%")  # fmt: skip
-    _cross(rep, gain, "largest cross term of the static gain (over the axis's own actuator)")
-    rep.tables["Structure"] = [
-        ("model", model.describe()),
-        (f"static gain ({unit}/V; rows: {', '.join(outputs)}; columns: {', '.join(inputs)})",
-         _matrix(gain)),
-    ]  # fmt: skip
+    _cross(rep, gain, "largest cross term of the model's static gain (over the axis's own "
+           "actuator)")  # fmt: skip
+    paths = f"rows: {', '.join(outputs)}; columns: {', '.join(inputs)}"
+    rows = [("model", model.describe()),
+            (f"the model's static gain, at 0 Hz ({unit}/V; {paths})", _matrix(gain))]  # fmt: skip
+    measured = measured_response(u, y, model.sample_rate_)
+    if measured.frequency.size:
+        simulated = measured_response(u, pred, model.sample_rate_)
+        low = slice(0, LOW_BINS)
+        f_lo, f_hi = measured.frequency[0], measured.frequency[:LOW_BINS][-1]
+        there = f"{f_lo:.3g}-{f_hi:.3g} Hz"
+        gains = [measured.response[low].real.mean(axis=0)]
+        rows.append((f"gain at {there}, the record's own estimate ({unit}/V)",
+                     _matrix(gains[0])))  # fmt: skip
+        _cross(rep, gains[0], f"largest cross term at {there}, the record's own estimate",
+               key="measured_cross_term_pct")  # fmt: skip
+        if np.array_equal(simulated.frequency, measured.frequency):
+            gains.append(simulated.response[low].real.mean(axis=0))
+            rows.append((f"gain at {there}, the model's, estimated the same way",
+                         _matrix(gains[1])))  # fmt: skip
+            _cross(rep, gains[1], f"largest cross term at {there}, the model's",
+                   key="model_cross_term_pct")  # fmt: skip
+            diff = simulated.response - measured.response
+            for i, o in enumerate(outputs):
+                err = np.sqrt(np.mean(np.abs(diff[:, i]) ** 2))
+                size = np.sqrt(np.mean(np.abs(measured.response[:, i]) ** 2))
+                rep.add(f"response_error_{o}_pct", f"the model's response to {o} against the "
+                        "record's own estimate (RMS over the estimated frequencies, over the "
+                        "estimate's)", 100 * float(err / size), "%")  # fmt: skip
+        rows.append(("the record's own estimate", f"Welch's H1 over {measured.segment}-sample "
+                     f"segments: {measured.frequency.size} frequencies from {f_lo:.4g} to "
+                     f"{measured.frequency[-1]:.4g} Hz, median coherence "
+                     f"{float(np.median(measured.coherence)):.3g}"))  # fmt: skip
+    else:
+        rows.append(("the record's own estimate", "none: the record is too short, or its "
+                     "inputs move together at every frequency (one realization of one "
+                     "multisine on every input: give each actuator its own lines, as excite "
+                     "--kind multisine does)"))  # fmt: skip
+    rep.tables["Structure"] = rows
     cases = [("operators sliding (large strokes)", "large")]
     if model.operators_:
         cases.append(("operators stuck (small strokes)", "small"))
-    rows = []
+    modes_said = []
+    top = float(measured.frequency[-1]) if measured.frequency.size else np.inf
     for label, strokes in cases:
         modes = model.modes(strokes=strokes)
-        said = ", ".join(f"{f:.5g} Hz ({z:.3g})" for f, z in modes[:LISTED_MODES])
+        said = ", ".join(f"{f:.5g} Hz ({z:.3g})" + ("*" if f > top else "")
+                         for f, z in modes[:LISTED_MODES])  # fmt: skip
         more = f" and {len(modes) - LISTED_MODES} more" if len(modes) > LISTED_MODES else ""
-        rows.append((f"modes, damping ratio: {label}", (said or "none") + more))
-    rep.tables["Modes"] = rows
+        modes_said.append((f"modes, damping ratio: {label}", (said or "none") + more))
+    if any(f > top for case in cases for f, _ in model.modes(strokes=case[1])):
+        modes_said.append(("*", f"above the highest frequency the record holds ({top:.4g} Hz): "
+                           "the realization's, not measured"))  # fmt: skip
+    rep.tables["Modes"] = modes_said
     fs = model.sample_rate_
     f = np.geomspace(fs / 2000, 0.499 * fs, RESPONSE_POINTS)
     curves = []
@@ -224,9 +268,15 @@ def _structure_said(
                 tag = f"{v} -> {o}" + (f", {short}" if len(cases) > 1 else "")
                 color = f"C{(i * len(inputs) + j) % 10}"
                 curves.append((f, g[:, i, j], tag, {**style, "color": color}))
+    dots = {"ls": "", "marker": ".", "ms": 2.5}
+    for i in range(len(outputs) if measured.frequency.size else 0):
+        for j in range(len(inputs)):
+            color = f"C{(i * len(inputs) + j) % 10}"
+            curves.append((measured.frequency, np.abs(measured.response[:, i, j]), "_",
+                           {**dots, "color": color}))  # fmt: skip
+    said = " (solid: operators sliding, large strokes; dashed: stuck, small strokes)"
     rep.figure("response.png", "the structure's frequency response, each actuator to each "
-               "axis" + (" (solid: operators sliding, large strokes; dashed: stuck, small "
-                         "strokes)" if len(cases) > 1 else ""),
-               [{"curves": curves, "xlabel": "frequency", "xunit": "Hz",
-                 "ylabel": "gain", "yunit": f"{unit}/V", "xscale": "log", "yscale": "log",
-                 "title": ""}])  # fmt: skip
+               "axis" + (said if len(cases) > 1 else "") + "; dots: the record's own "
+               "estimate", [{"curves": curves, "xlabel": "frequency", "xunit": "Hz",
+                             "ylabel": "gain", "yunit": f"{unit}/V", "xscale": "log",
+                             "yscale": "log", "title": ""}])  # fmt: skip
