@@ -369,3 +369,24 @@ def test_the_frequency_response_is_what_a_sine_drives() -> None:
         model.frequency_response([600.0])
     with pytest.raises(ph.errors.NotFittedError):
         ph.StructureModel().frequency_response([1.0])
+
+
+def test_a_loop_unstable_where_its_operators_stick_is_not_kept() -> None:
+    """A passive structure at rest is stable: a model whose loop, with every operator stuck
+    (a small drive's linear end), has a pole outside the unit circle is not one; the linear
+    dynamics are kept instead, and ``describe`` says why. Here the plant itself is such a
+    loop (E's sign flipped): the operators predict it better and are still refused."""
+    rng = np.random.default_rng(3)
+    plant = _plant(e_gain=-0.3, outputs=2)
+    assert plant.radius() > 1.1 and np.max(np.abs(np.linalg.eigvals(plant.a))) < 1
+    u = [_periodic(rng, 512, level) for level in (0.5, 1.0, 1.5) for _ in range(4)]
+    y = [plant.run(v, periodic=True) for v in u]
+    model = ph.StructureModel(order=4).fit(u, y, sample_rate=FS, initial_state="periodic")
+    assert model.held_nrmse_["operators"] < 0.8 * model.held_nrmse_["linear"]
+    assert model.operators_ == 0 and model.unstable_stuck_ is not None
+    assert model.unstable_stuck_ > 1.0 and model.structure_.radius() < 1.0
+    assert "unstable where every operator sticks (small strokes; a pole of modulus" in (
+        model.describe()
+    )
+    again = ph.StructureModel.from_dict(model.to_dict())
+    assert again.describe() == model.describe()

@@ -108,7 +108,9 @@ class StructureModel(JsonFile, SeveralChannels):
     operators : int, default 6
         Play operators per actuator in the loop; 0 for the linear dynamics alone. Kept only
         where they predict the held-out records at least 2 % (and 0.001 % of the outputs'
-        spread) better than the linear dynamics (said in ``describe``).
+        spread) better than the linear dynamics, and the loop stays stable with every
+        operator stuck (a small drive's linear end: ``modes(strokes="small")``); said in
+        ``describe``.
     widths : (float, float), default (0.003, 0.3)
         The smallest and largest operator width, as shares of each stroke's half-range
         (spaced geometrically).
@@ -132,6 +134,10 @@ class StructureModel(JsonFile, SeveralChannels):
     refinement_ : Refinement or None
         The output-error refinement's weighted squared error before and after, its
         iterations, and whether it was kept (None: not asked).
+    unstable_stuck_ : float or None
+        Where the operators predicted better but their loop, with every operator stuck (a
+        small drive), had a pole of this modulus (>= 1): the model is the linear dynamics
+        instead (said in ``describe``).
 
     Examples
     --------
@@ -294,6 +300,14 @@ class StructureModel(JsonFile, SeveralChannels):
         self.refinement_: sf.Refinement | None = None
         if self.refine:
             self.structure_, self.refinement_ = sf.refine(records, self.structure_)
+        self.unstable_stuck_: float | None = None
+        if operators and self.structure_.radius() >= 1.0:
+            # a loop that rings up once every operator sticks (small drives) is not a model
+            # of a structure at every amplitude: the linear dynamics instead, said
+            self.unstable_stuck_ = self.structure_.radius()
+            self.structure_, operators = linear_all, 0
+            if self.refine:
+                self.structure_, self.refinement_ = sf.refine(records, self.structure_)
         self.order_, self.operators_, self.sample_rate_ = order, operators, rate
         self.n_inputs_, self.n_outputs_ = records[0].u.shape[1], records[0].y.shape[1]
         self.output_nrmse_ = sf.nrmse(self.structure_, records)
@@ -384,12 +398,7 @@ class StructureModel(JsonFile, SeveralChannels):
         if strokes not in ("large", "small"):
             msg = f"'strokes' must be 'large' or 'small'. Got {strokes!r}."
             raise ParameterError(msg)
-        st = self.structure_
-        na, nk = st.r.shape
-        if strokes == "large" or not nk:
-            return st.a, st.b
-        e_sum = st.e.reshape(st.order, na, nk).sum(axis=2)
-        return st.a - e_sum @ st.t @ st.c, st.b - e_sum @ st.t @ st.d
+        return self.structure_.linear(stuck=strokes == "small")
 
     def frequency_response(self, frequencies: ArrayLike, *, strokes: str = "large") -> np.ndarray:
         """The structure's linear frequency response from each actuator to each output.
@@ -425,8 +434,12 @@ class StructureModel(JsonFile, SeveralChannels):
 
     def modes(self, *, strokes: str = "large") -> list[tuple[float, float]]:
         """Each lightly or heavily damped mode (a complex pole pair): its frequency (Hz) and
-        damping ratio, the lowest frequency first; ``strokes`` as
-        :meth:`frequency_response` takes it.
+        damping ratio, the lowest frequency first.
+
+        Parameters
+        ----------
+        strokes : {"large", "small"}
+            The loop's linear end, as :meth:`frequency_response` takes it.
 
         Returns
         -------
@@ -457,7 +470,12 @@ class StructureModel(JsonFile, SeveralChannels):
             if self.operators_
             else "no operators in the loop (linear dynamics)"
         )
-        if self.operators and not self.operators_ and hasattr(self, "held_nrmse_"):
+        if self.operators and not self.operators_ and getattr(self, "unstable_stuck_", None):
+            loop += (
+                ": with them the loop was unstable where every operator sticks (small "
+                f"strokes; a pole of modulus {self.unstable_stuck_:.4g})"
+            )
+        elif self.operators and not self.operators_ and hasattr(self, "held_nrmse_"):
             h = self.held_nrmse_
             loop += (
                 f": the operators did not predict the held-out records better "
@@ -500,6 +518,7 @@ class StructureModel(JsonFile, SeveralChannels):
                 "orders": {str(k): v for k, v in self.orders_.items()},
                 "operators_kept": self.operators_,
                 "held_nrmse": getattr(self, "held_nrmse_", None),
+                "unstable_stuck": getattr(self, "unstable_stuck_", None),
                 "output_nrmse": self.output_nrmse_,
                 "refinement": None
                 if self.refinement_ is None
@@ -550,6 +569,8 @@ class StructureModel(JsonFile, SeveralChannels):
             model.order_, model.operators_ = st.order, int(data["operators_kept"])
             model.n_inputs_, model.n_outputs_ = n, m
             model.output_nrmse_ = float(data["output_nrmse"])
+            stuck = data.get("unstable_stuck")
+            model.unstable_stuck_ = None if stuck is None else float(stuck)
             if data.get("held_nrmse") is not None:
                 model.held_nrmse_ = {k: float(v) for k, v in data["held_nrmse"].items()}
             ref = data.get("refinement")

@@ -81,6 +81,23 @@ class Structure:
     def order(self) -> int:
         return int(self.a.shape[0])
 
+    def linear(self, stuck: bool = False) -> tuple[FloatArray, FloatArray]:
+        """``a`` and ``b`` of the linear structure the loop is at either end of its
+        amplitudes: every operator sliding (its lag its width, a constant: the loop open), or
+        every one ``stuck`` (its output constant, so its lag ``-s`` feeds each stroke back
+        through the sum of its actuator's columns of ``e``)."""
+        na, nk = self.r.shape
+        if not stuck or not nk:
+            return self.a, self.b
+        e_sum = self.e.reshape(self.order, na, nk).sum(axis=2)
+        return self.a - e_sum @ self.t @ self.c, self.b - e_sum @ self.t @ self.d
+
+    def radius(self) -> float:
+        """The largest pole modulus of the two linear ends (:meth:`linear`): below 1, the
+        structure is stable at every amplitude's end."""
+        return max(float(np.max(np.abs(np.linalg.eigvals(self.linear(stuck)[0]))))
+                   for stuck in (False, True))  # fmt: skip
+
     def dc_gain(self) -> FloatArray:
         """The static gain ``d + c (I - a)^-1 b`` (outputs, inputs)."""
         eye = np.eye(self.order)
@@ -372,8 +389,8 @@ def refine(
     of its variance), its gradient by the adjoint of the recursion (reverse mode through the
     play operators), minimised by L-BFGS from the least squares' solution. The equation
     error the least squares minimise reads the measured outputs in the loop, and is biased
-    where the loop matters; this is the structure's own error. Kept only if stable and
-    lower."""
+    where the loop matters; this is the structure's own error. Kept only if stable (with
+    the operators sliding and stuck: :meth:`Structure.radius`) and lower."""
     from scipy.optimize import minimize
 
     st = structure
@@ -426,7 +443,6 @@ def refine(
                    options={"maxiter": maxiter, "gtol": 0.0})  # fmt: skip
     a, b, c, d, e, off, t = unpack(opt.x)
     refined = Structure(a, b, c, d, e, t, st.r, off)
-    stable = bool(np.max(np.abs(np.linalg.eigvals(refined.a))) < 1.0)
-    kept = stable and bool(opt.fun < before)
+    kept = refined.radius() < 1.0 and bool(opt.fun < before)
     info = Refinement(before, float(opt.fun), int(opt.nit), kept)
     return (refined if kept else st), info
