@@ -157,6 +157,33 @@ def test_reset_at_a_voltage_settles_there() -> None:
     np.testing.assert_array_equal(comp.last_command, cmd[-1])
 
 
+def test_reset_at_a_position_finds_its_voltages() -> None:
+    """A stated position: the voltages that settle there, the operators' lags included (the
+    static inverse alone misses by their share), and the commands that hold it stay there."""
+    model = model_of(structure(e_gain=0.1))
+    comp = ph.StructureCompensator(model, v_min=0.0, v_max=100.0)
+    where = np.array([30.0, 70.0])
+    comp.reset(voltage=where)
+    there = comp.output  # where 30 V and 70 V settle, operators and all
+    plain = comp.static_inverse @ (there - model.structure_.off)
+    assert np.max(np.abs(plain - where)) > 0.1  # the lags' share: the static inverse misses
+    comp.reset(position=there)
+    # tol: SETTLE_ROUNDS corrections, each taking the lags' share off what is left
+    # (measured 1e-11 V after them); 1e-6 of the range
+    np.testing.assert_allclose(comp.last_command, where, atol=1e-6 * 100)
+    np.testing.assert_allclose(comp.output, there, rtol=1e-9)  # tol: the same
+    comp.process(np.tile(there, (400, 1)))
+    # the tracker holds it from there (its commands move within the operators' play: other
+    # voltages hold the same position); tol: the preview's cut (PREVIEW_TOL); measured 8e-7
+    np.testing.assert_allclose(comp.output, there, rtol=1e-5)
+    with pytest.raises(ParameterError, match=r"is out of reach: it needs actuator \d"):
+        comp.reset(position=3 * there)
+    with pytest.raises(ParameterError, match="not both"):
+        comp.reset(voltage=where, position=there)
+    with pytest.raises(ParameterError, match="'position' must be 2 finite numbers"):
+        comp.reset(position=[1.0, np.nan])
+
+
 def test_bad_input_is_named() -> None:
     model = model_of(structure())
     with pytest.raises(ParameterError, match=r"takes a fitted ph\.StructureModel"):

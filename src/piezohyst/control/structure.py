@@ -57,6 +57,9 @@ __all__ = ["EFFORT", "MAX_PREVIEW", "PREVIEW_TOL", "StructureCompensator"]
 #: The commands' weight against the outputs', each in its span (small: track closely; the
 #: static inverse is what the commands are drawn to, so it costs no offset at rest)
 EFFORT = 1e-6
+#: Rounds of correcting a stated position's voltages for the operators' lags (each one a
+#: settling run; the correction falls by the lags' share each round)
+SETTLE_ROUNDS = 8
 #: The preview ends where the feed-forward's gains have fallen below this share of the largest
 PREVIEW_TOL = 1e-6
 #: Samples of preview at most (a closed loop slower than that is truncated, and said)
@@ -232,26 +235,36 @@ class StructureCompensator:
         self.reset()
 
     # ------------------------------------------------------------------ state
-    def reset(self, *, voltage: float | ArrayLike | None = None) -> None:
-        """The model back at rest (or settled at ``voltage``), the counts to zero.
+    def reset(
+        self, *, voltage: float | ArrayLike | None = None, position: ArrayLike | None = None
+    ) -> None:
+        """The model back at rest (or settled at ``voltage``, or at ``position``), the counts
+        to zero.
 
         Parameters
         ----------
         voltage : float or array_like, optional
             Where the actuators sit now (V): the model is run to rest there (a ramp from
             0 V, then a hold).
+        position : array_like, optional
+            Where the outputs sit now (the model's units; one per output), instead: the
+            voltages that settle there are found (the static inverse, then corrected for the
+            operators' lags, a few rounds) and the model run to rest at them. A position
+            whose voltages are past a limit is refused; with more outputs than inputs the
+            nearest in the least-squares sense is taken.
         """
         st, n = self._st, self.model.n_inputs_
+        if voltage is not None and position is not None:
+            msg = "give where the structure sits as 'voltage' or as 'position', not both"
+            raise ParameterError(msg)
+        if position is not None:
+            voltage = self._voltage_at(position)
         self._x = np.zeros(st.order)
         self._z = np.repeat((st.t @ st.off)[:, None], st.r.shape[1], axis=1)
         self._last = np.zeros(n)
         if voltage is not None:
             v = _per_actuator(voltage, n, "voltage")
-            settle = max(4 * self.preview, 1000)
-            ramp = np.vstack([np.linspace(0.0, 1.0, settle)[:, None] * v, np.tile(v, (settle, 1))])
-            out = np.empty((ramp.shape[0], st.c.shape[0]))
-            S.structure_run(st.a, st.b, st.c, st.d, st.e, st.t, st.r, st.off, self._x,
-                            self._z, np.ascontiguousarray(ramp), out)  # fmt: skip
+            self._x, self._z = self._settled(v)
             self._last = v.copy()
         y_now = st.c @ self._x + st.d @ self._last + st.off
         self._target = y_now  # the last finite target (a NaN holds it)
@@ -264,6 +277,47 @@ class StructureCompensator:
         self.outside_count = 0
         self._said: set[str] = set()
         self._until_check = LIMIT_CHECK_FIRST
+
+    def _settled(self, v: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """The model's state and operators at rest at the voltages ``v``: a ramp from 0 V
+        over the longer of four previews and 1000 samples, then as long a hold."""
+        st = self._st
+        x = np.zeros(st.order)
+        z = np.repeat((st.t @ st.off)[:, None], st.r.shape[1], axis=1)
+        settle = max(4 * self.preview, 1000)
+        ramp = np.vstack([np.linspace(0.0, 1.0, settle)[:, None] * v, np.tile(v, (settle, 1))])
+        out = np.empty((ramp.shape[0], st.c.shape[0]))
+        S.structure_run(st.a, st.b, st.c, st.d, st.e, st.t, st.r, st.off, x, z,
+                        np.ascontiguousarray(ramp), out)  # fmt: skip
+        return x, z
+
+    def _voltage_at(self, position: ArrayLike) -> FloatArray:
+        """The voltages at whose rest the outputs sit at ``position``: the static inverse,
+        corrected by it for what the operators' lags leave (:data:`SETTLE_ROUNDS`)."""
+        st, m = self._st, self.model.n_outputs_
+        p = np.asarray(position, dtype=np.float64).reshape(-1)
+        if p.size != m or not np.all(np.isfinite(p)):
+            msg = f"'position' must be {m} finite numbers, one per output. Got {position!r}."
+            raise ParameterError(msg)
+        ms = self.static_inverse
+        v = ms @ (p - st.off)  # the operators' lags taken as none, at first
+        for _ in range(SETTLE_ROUNDS):
+            if np.any(v < self.v_min) or np.any(v > self.v_max):
+                break
+            x, _ = self._settled(v)
+            step = ms @ (p - (st.c @ x + st.d @ v + st.off))
+            v = v + step
+            if np.all(np.abs(step) <= 1e-9 * (self.v_max - self.v_min)):
+                break
+        # the settling rounds' last correction (1e-9 of the range) and rounding
+        slack = 1e-6 * (self.v_max - self.v_min)
+        beyond = (v < self.v_min - slack) | (v > self.v_max + slack)
+        if np.any(beyond):
+            past = [f"actuator {q}: {v[q]:.6g} V" for q in np.flatnonzero(beyond)]
+            msg = (f"the position {np.array2string(p, precision=6)} is out of reach: it needs "
+                   f"{', '.join(past)}, past the limits")  # fmt: skip
+            raise ParameterError(msg)
+        return np.asarray(np.clip(v, self.v_min, self.v_max))
 
     @property
     def output(self) -> FloatArray:

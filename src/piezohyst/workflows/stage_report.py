@@ -49,7 +49,9 @@ def stage_report(
     (the position over time with the residual, and the axis against its own actuator's
     voltage), and the model: a stage's coupling and each actuator's model; a structure's
     order, static gain, modes and frequency response (with operators in the loop, for small
-    strokes, where they stick, and large ones, where they slide).
+    strokes, where they stick, and large ones, where they slide), beside the record's own
+    estimate of the response (:func:`~piezohyst.analysis.response.measured_response`) and
+    compared with it.
 
     Parameters
     ----------
