@@ -42,6 +42,11 @@ def _per_actuator(value: float | ArrayLike, n: int, name: str) -> FloatArray:
     return arr
 
 
+def _counted(n: int, what: str) -> str:
+    """``3 desired positions lie``, ``1 desired position lies``: a warning's count."""
+    return f"{n} {what}s lie" if n != 1 else f"1 {what} lies"
+
+
 class CoupledCompensator:
     """Feedforward compensation of a coupled stage (the controllers' one contract).
 
@@ -180,10 +185,10 @@ class CoupledCompensator:
                     for i in np.flatnonzero(beyond[k])
                 )
                 warn(
-                    f"CoupledCompensator: {rows.size} desired positions lie outside what the "
-                    f"stage reaches (first at sample {k}: {axes}); the reachable set is the "
-                    "actuators' ranges through the coupling, not a box; those commands sit at "
-                    "the limits (counted in saturated_count)",
+                    f"CoupledCompensator: {_counted(rows.size, 'desired position')} outside "
+                    f"what the stage reaches (first at sample {k}: {axes}); the reachable set "
+                    "is the actuators' ranges through the coupling, not a box; those commands "
+                    "sit at the limits (counted in saturated_count)",
                     LimitWarning,
                 )
         return np.asarray(own)

@@ -49,7 +49,7 @@ from .._kernels import structure as S
 from .._validation import FloatArray
 from ..errors import LimitWarning, ParameterError, ShapeError, warn
 from ..model.structure import StructureModel
-from .coupled import REACH_SLACK, _per_actuator
+from .coupled import REACH_SLACK, _counted, _per_actuator
 from .tally import LIMIT_CHECK_FIRST, limit_parts
 
 __all__ = ["EFFORT", "MAX_PREVIEW", "PREVIEW_TOL", "StructureCompensator"]
@@ -422,7 +422,8 @@ class StructureCompensator:
         if "reach" not in self._said:
             self._said.add("reach")
             warn(
-                f"StructureCompensator: {rows.size} target(s) lie outside what the structure "
+                f"StructureCompensator: {_counted(rows.size, 'desired position')} outside what "
+                "the structure "
                 f"reaches within the limits (first at sample {first + int(rows[0])} since the "
                 "reset: an actuator asked for more than its range allows, through the "
                 "structure's dynamics; what it reaches is not a box); their commands are held "
