@@ -373,20 +373,53 @@ def test_the_frequency_response_is_what_a_sine_drives() -> None:
 
 def test_a_loop_unstable_where_its_operators_stick_is_not_kept() -> None:
     """A passive structure at rest is stable: a model whose loop, with every operator stuck
-    (a small drive's linear end), has a pole outside the unit circle is not one; the linear
-    dynamics are kept instead, and ``describe`` says why. Here the plant itself is such a
-    loop (E's sign flipped): the operators predict it better and are still refused."""
+    (a small drive's linear end), has a pole outside the unit circle rings by itself. Here
+    the plant itself is such a loop (E's sign flipped). The refinement keeps the model's
+    stuck poles within STUCK_RADIUS (a penalty) and still predicts better than the linear
+    dynamics; without the refinement, the least squares' loop is unstable stuck, and the
+    linear dynamics are kept instead, said in ``describe``."""
     rng = np.random.default_rng(3)
     plant = _plant(e_gain=-0.3, outputs=2)
     assert plant.radius() > 1.1 and np.max(np.abs(np.linalg.eigvals(plant.a))) < 1
     u = [_periodic(rng, 512, level) for level in (0.5, 1.0, 1.5) for _ in range(4)]
     y = [plant.run(v, periodic=True) for v in u]
     model = ph.StructureModel(order=4).fit(u, y, sample_rate=FS, initial_state="periodic")
-    assert model.held_nrmse_["operators"] < 0.8 * model.held_nrmse_["linear"]
-    assert model.operators_ == 0 and model.unstable_stuck_ is not None
-    assert model.unstable_stuck_ > 1.0 and model.structure_.radius() < 1.0
+    assert model.operators_ == 6 and model.unstable_stuck_ is None
+    # tol: the penalty is soft: its excess squared times 100 against the error's decrease
+    assert model.structure_.radius() < sf.STUCK_RADIUS + 1e-3
+    assert model.output_nrmse_ < 0.5 * model.held_nrmse_["linear"]
+    plain = ph.StructureModel(order=4, refine=False)
+    plain.fit(u, y, sample_rate=FS, initial_state="periodic")
+    assert plain.held_nrmse_["operators"] < 0.8 * plain.held_nrmse_["linear"]
+    assert plain.operators_ == 0 and plain.unstable_stuck_ is not None
+    assert plain.unstable_stuck_ > 1.0 and plain.structure_.radius() < 1.0
     assert "unstable where every operator sticks (small strokes; a pole of modulus" in (
-        model.describe()
+        plain.describe()
     )
-    again = ph.StructureModel.from_dict(model.to_dict())
-    assert again.describe() == model.describe()
+    again = ph.StructureModel.from_dict(plain.to_dict())
+    assert again.describe() == plain.describe()
+
+
+def test_the_stuck_penalty_s_gradient_equals_finite_differences() -> None:
+    """The refinement's penalty on the stuck loop's poles: its gradient (the eigenvalues'
+    first-order perturbation, through ``a - E' t c``) against central differences."""
+    st = _plant(e_gain=-0.3, outputs=2)
+    nk = st.r.shape[1]
+    blocks = {"a": st.a, "c": st.c, "e": st.e, "t": st.t}
+
+    def value(**given: np.ndarray) -> tuple[float, list[np.ndarray]]:
+        grads = [np.zeros(x.shape) for x in (st.a, st.b, st.c, st.d, st.e, st.off, st.t)]
+        args = {**blocks, **given}
+        return sf.stuck_penalty(args["a"], args["c"], args["e"], args["t"], nk, grads), grads
+
+    total, grads = value()
+    assert total > 0  # the plant's stuck loop is past the radius
+    rng = np.random.default_rng(0)
+    for name, k in (("a", 0), ("c", 2), ("e", 4), ("t", 6)):
+        step = rng.standard_normal(blocks[name].shape)
+        h = 1e-6
+        up = value(**{name: blocks[name] + h * step})[0]
+        down = value(**{name: blocks[name] - h * step})[0]
+        # tol: central differences' truncation (h^2 times the third derivative) and the
+        # penalty's rounding over 2h (1e-16 * 4.5 / 1e-6): 1e-6 relative
+        assert (up - down) / (2 * h) == pytest.approx(np.sum(grads[k] * step), rel=1e-6)

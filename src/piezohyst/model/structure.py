@@ -109,8 +109,9 @@ class StructureModel(JsonFile, SeveralChannels):
         Play operators per actuator in the loop; 0 for the linear dynamics alone. Kept only
         where they predict the held-out records at least 2 % (and 0.001 % of the outputs'
         spread) better than the linear dynamics, and the loop stays stable with every
-        operator stuck (a small drive's linear end: ``modes(strokes="small")``); said in
-        ``describe``.
+        operator stuck (a small drive's linear end: ``modes(strokes="small")``; the
+        refinement keeps it there, a penalty on the poles past
+        :data:`~piezohyst.model.structure_fit.STUCK_RADIUS`); said in ``describe``.
     widths : (float, float), default (0.003, 0.3)
         The smallest and largest operator width, as shares of each stroke's half-range
         (spaced geometrically).
