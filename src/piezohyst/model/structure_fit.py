@@ -50,7 +50,7 @@ STABLE = 0.9999
 STUCK_RADIUS = 0.9995
 #: ... by a penalty of this weight on their squared excess (the error it is added to is
 #: about 0.5 NRMSE^2 per output: 0.002 at 6 %)
-STUCK_WEIGHT = 100.0
+STUCK_WEIGHT = 1000.0
 
 
 @dataclass
@@ -376,6 +376,12 @@ def nrmse(structure: Structure, records: list[Record], tail: float = 0.0) -> flo
     return value if np.isfinite(value) else float("inf")
 
 
+def _order(blocks: list[np.ndarray], r: FloatArray) -> tuple[np.ndarray, ...]:
+    """The refinement's blocks ``a, b, c, d, e, off, t`` in :class:`Structure`'s order."""
+    a, b, c, d, e, off, t = blocks
+    return a, b, c, d, e, t, r, off
+
+
 def stuck_penalty(
     a: FloatArray, c: FloatArray, e: FloatArray, t: FloatArray, nk: int, grads: list[FloatArray]
 ) -> float:
@@ -424,9 +430,11 @@ def refine(
     play operators), minimised by L-BFGS from the least squares' solution. The equation
     error the least squares minimise reads the measured outputs in the loop, and is biased
     where the loop matters; this is the structure's own error. With operators in the loop,
-    their loop's poles where every operator sticks are kept within :data:`STUCK_RADIUS`
-    (:func:`stuck_penalty`). Kept only if stable (with the operators sliding and stuck:
-    :meth:`Structure.radius`) and lower, or stable where the start was not."""
+    where the refined loop is unstable with every operator stuck, the operators' action on
+    the state is scaled down until it is stable, and it is refined again from there with
+    its poles held within :data:`STUCK_RADIUS` (:func:`stuck_penalty`). Kept
+    only if stable (with the operators sliding and stuck: :meth:`Structure.radius`) and
+    lower, or stable where the start was not."""
     from scipy.optimize import minimize
 
     st = structure
@@ -474,14 +482,32 @@ def refine(
                                 goff, gt)  # fmt: skip
         return total, np.concatenate([g.ravel() for g in grads]) * scale
 
-    opt = minimize(loss, np.zeros_like(theta0), jac=True, method="L-BFGS-B",
-                   options={"maxiter": maxiter, "gtol": 0.0})  # fmt: skip
-    a, b, c, d, e, off, t = unpack(opt.x)
-    refined = Structure(a, b, c, d, e, t, st.r, off)
+    # the output error first; where its loop is unstable with every operator stuck, again
+    # from there with the penalty on those poles (from a start far from stable, the penalty
+    # alone holds the refinement back from the fit)
+    options = {"maxiter": maxiter, "gtol": 0.0}
+    opt = minimize(lambda x: loss(x, penalized=False), np.zeros_like(theta0), jac=True,
+                   method="L-BFGS-B", options=options)  # fmt: skip
+    iterations = int(opt.nit)
+    if nk and Structure(*_order(unpack(opt.x), st.r)).radius() >= 1.0:
+        # back inside first: the operators' action on the state scaled down until the stuck
+        # loop is stable (a bisection on the scale), then refined with the penalty from there
+        parts = unpack(opt.x)
+        a, c, e, t = parts[0], parts[2], parts[4], parts[6]
+        pull = e.reshape(e.shape[0], t.shape[0], nk).sum(axis=2) @ t @ c
+        lo_s, hi_s = 0.0, 1.0
+        for _ in range(30):
+            mid = 0.5 * (lo_s + hi_s)
+            inside = np.max(np.abs(np.linalg.eigvals(a - mid * pull))) < STUCK_RADIUS
+            lo_s, hi_s = (mid, hi_s) if inside else (lo_s, mid)
+        parts[4] = lo_s * e
+        start = (np.concatenate([blk.ravel() for blk in parts]) - theta0) / scale
+        opt = minimize(loss, start, jac=True, method="L-BFGS-B", options=options)
+        iterations += int(opt.nit)
+    refined = Structure(*_order(unpack(opt.x), st.r))
     before = loss(np.zeros_like(theta0), penalized=False)[0]
     after = loss(opt.x, penalized=False)[0]
     # kept where stable at both linear ends and lower, or stable where the start was not
-    stable = refined.radius() < 1.0
-    kept = stable and (after < before or structure.radius() >= 1.0)
-    info = Refinement(before, after, int(opt.nit), kept)
+    kept = refined.radius() < 1.0 and (after < before or structure.radius() >= 1.0)
+    info = Refinement(before, after, iterations, kept)
     return (refined if kept else st), info
