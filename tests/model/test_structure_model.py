@@ -400,9 +400,10 @@ def test_a_loop_unstable_where_its_operators_stick_is_not_kept() -> None:
     assert again.describe() == plain.describe()
     # a refinement kept for its stable loop though its error is above the unstable start's
     model.refinement_ = sf.Refinement(1.0, 1.68, 10, True)
-    assert "68 % more squared error than the least squares' loop, which was unstable" in (
-        model.describe()
-    )
+    said = model.describe()
+    assert "68 % more squared error than the least squares' loop, which was unstable" in said
+    first = model.modes()[0]  # the modes said beside it, their own words
+    assert f"modes (damping) {first[0]:.4g} Hz ({first[1]:.2g})" in said
 
 
 def test_the_stuck_penalty_s_gradient_equals_finite_differences() -> None:

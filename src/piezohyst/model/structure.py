@@ -486,14 +486,14 @@ class StructureModel(JsonFile, SeveralChannels):
         refined = ""
         if ref is not None:
             change = 100 * (1 - ref.after / ref.before) if ref.before > 0 else 0.0
-            said = (
+            error = (
                 f"{change:.0f} % less squared error"
                 if change >= 0
                 else f"{-change:.0f} % more squared error than the least squares' loop, "
                 "which was unstable where every operator sticks"
             )
             refined = (
-                f"; refined by output error ({said}, {ref.iterations} iterations)"
+                f"; refined by output error ({error}, {ref.iterations} iterations)"
                 if ref.kept
                 else "; the output-error refinement was not kept (not stable or not lower)"
             )
