@@ -493,14 +493,14 @@ def refine(
         # back inside first: the operators' action on the state scaled down until the stuck
         # loop is stable (a bisection on the scale), then refined with the penalty from there
         parts = unpack(opt.x)
-        a, c, e, t = parts[0], parts[2], parts[4], parts[6]
-        pull = e.reshape(e.shape[0], t.shape[0], nk).sum(axis=2) @ t @ c
+        a = parts[0]
+        pull = a - Structure(*_order(parts, st.r)).linear(stuck=True)[0]  # E' t c
         lo_s, hi_s = 0.0, 1.0
         for _ in range(30):
             mid = 0.5 * (lo_s + hi_s)
             inside = np.max(np.abs(np.linalg.eigvals(a - mid * pull))) < STUCK_RADIUS
             lo_s, hi_s = (mid, hi_s) if inside else (lo_s, mid)
-        parts[4] = lo_s * e
+        parts[4] = lo_s * parts[4]
         start = (np.concatenate([blk.ravel() for blk in parts]) - theta0) / scale
         opt = minimize(loss, start, jac=True, method="L-BFGS-B", options=options)
         iterations += int(opt.nit)
