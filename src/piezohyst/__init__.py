@@ -24,6 +24,7 @@ Compensation and control
     Leakage, calibrate_leakage -- the leakage from constant-voltage holds
     OutputMap, calibrate_gain -- charge to displacement, from a sensor once (eq. 6-7)
     LearningCompensator -- learning a repeated scan from the charge
+    CoupledLearningCompensator -- learning a repeated scan on a coupled stage
     BankCompensator, BankController -- many channels in one kernel
     CoupledCompensator -- a coupled stage: the coupling's inverse, then each actuator's
     StructureCompensator -- a structure's inverse through its shared modes, with preview
@@ -97,6 +98,7 @@ __getattr__, __dir__ = attach(
         "Compensator": ".control.compensator",
         "CompensatorState": ".control.compensator",
         "LearningCompensator": ".control.learning",
+        "CoupledLearningCompensator": ".control.learning",
         "ControllerState": ".control.selfsensing",
         "SelfSensingController": ".control.selfsensing",
         "read_recording": ".io",
@@ -139,7 +141,7 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .control.channels import BankCompensator, BankController
     from .control.compensator import Compensator, CompensatorState
     from .control.coupled import CoupledCompensator
-    from .control.learning import LearningCompensator
+    from .control.learning import CoupledLearningCompensator, LearningCompensator
     from .control.selfsensing import ControllerState, SelfSensingController
     from .control.structure import StructureCompensator
     from .io import read_recording, read_table, write_table
@@ -188,6 +190,7 @@ __all__ = [
     "ControllerState",
     "Core",
     "CoupledCompensator",
+    "CoupledLearningCompensator",
     "CoupledModel",
     "DataFileError",
     "DuhemHysteresis",

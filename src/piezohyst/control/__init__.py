@@ -19,6 +19,9 @@ Learning a repeated scan (the subpackage ``learning``: the compensator in
 ``learning.jacobian``, the lead-in's probe in ``learning.probe``, a trial's trajectory and limits
 in ``learning.trial``, the laws behind one interface in ``learning.laws``)
     LearningCompensator, Trial, LearningDesign, design_learning
+A repeated scan on a coupled stage: the coupling's inverse, one learner per actuator
+(``learning.coupled``)
+    CoupledLearningCompensator, CoupledTrial
 Desired displacements as charges through the calibrated map (``charges``; the map itself,
 ``OutputMap`` and ``calibrate_gain``, is a calibration: ``piezohyst.model.calibrations``)
     Charges
@@ -54,6 +57,8 @@ __getattr__, __dir__ = attach(
         "write_c": ".export",
         "write_fmu": ".export",
         "LearningCompensator": ".learning",
+        "CoupledLearningCompensator": ".learning",
+        "CoupledTrial": ".learning",
         "Trial": ".learning",
         "LearningDesign": ".learning",
         "design_learning": ".learning",
@@ -72,7 +77,14 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .contract import Controller
     from .coupled import CoupledCompensator
     from .export import CCode, export_c, write_c, write_fmu, write_mex, write_shared
-    from .learning import LearningCompensator, LearningDesign, Trial, design_learning
+    from .learning import (
+        CoupledLearningCompensator,
+        CoupledTrial,
+        LearningCompensator,
+        LearningDesign,
+        Trial,
+        design_learning,
+    )
     from .selfsensing import ControllerState, LoopSettings, SelfSensingController
     from .structure import StructureCompensator
 
@@ -87,6 +99,8 @@ __all__ = [
     "Controller",
     "ControllerState",
     "CoupledCompensator",
+    "CoupledLearningCompensator",
+    "CoupledTrial",
     "LearningCompensator",
     "LearningDesign",
     "LoopSettings",

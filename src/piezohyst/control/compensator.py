@@ -160,6 +160,12 @@ class Compensator(Tallied):
         return int(self.inverse.n_operators())
 
     @property
+    def reference(self) -> float:
+        """The model output that ``domain="displacement"`` takes as displacement 0: the
+        actuator at rest in the model's initial state (0 in the charge domain)."""
+        return float(self.inverse.config[self.inverse.slots()[0]])
+
+    @property
     def state(self) -> CompensatorState:
         """The forward states and the last command (copies; see :meth:`reset`)."""
         return self.inverse.state()

@@ -166,8 +166,23 @@ class CoupledCompensator:
         self.outside_count, self._outside_said = 0, False
 
     # ---------------------------------------------------------------- commands
-    def _own(self, desired: FloatArray) -> FloatArray:
-        """What each actuator alone must move, and the count of targets out of reach."""
+    @property
+    def inverse(self) -> FloatArray:
+        """The coupling's inverse: what each actuator moved, ``inverse @ (y - offset)``."""
+        return np.array(self._inverse)
+
+    def actuator_targets(self, desired: FloatArray) -> FloatArray:
+        """What each actuator alone must move for the desired positions (its axis's units),
+        the targets out of the stage's reach counted in :attr:`outside_count` and said once.
+
+        Parameters
+        ----------
+        desired : ndarray, shape (N, outputs)
+
+        Returns
+        -------
+        ndarray, shape (N, actuators)
+        """
         own = (desired - self.model.offset_) @ self._inverse.T
         span = self.reach[:, 1] - self.reach[:, 0]
         beyond = (own < self.reach[:, 0] - REACH_SLACK * span) | (
@@ -221,7 +236,7 @@ class CoupledCompensator:
         if d.shape[1] != m:
             msg = f"'desired' must hold {m} positions. Got {d.size}."
             raise ShapeError(msg)
-        own = self._own(d)[0]
+        own = self.actuator_targets(d)[0]
         if preview is None:
             return np.array([c.step(float(own[i])) for i, c in enumerate(self.compensators)])
         ahead = np.atleast_2d(np.asarray(preview, dtype=np.float64))
@@ -253,7 +268,7 @@ class CoupledCompensator:
                 f"Got shape {d.shape}."
             )
             raise ShapeError(msg)
-        own = self._own(d)
+        own = self.actuator_targets(d)
         return np.column_stack(
             [c.process(np.ascontiguousarray(own[:, i])) for i, c in enumerate(self.compensators)]
         )

@@ -52,6 +52,9 @@ class PythonInverse(Inverse):
     def n_operators(self) -> int:
         return int(self.kernel_state.size - 3)
 
+    def slots(self) -> tuple[int, int]:
+        return 1, 0
+
     def state(self) -> CompensatorState:
         n = self.n_operators()
         return CompensatorState(self.kernel_state[:n].copy(), np.zeros(0), self.last_command())

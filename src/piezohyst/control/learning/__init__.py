@@ -6,6 +6,8 @@ module           what it holds
 ===============  =========================================================================
 ``compensator``  :class:`LearningCompensator` (command a trial, learn from its readings),
                  :func:`resolved_law`
+``coupled``      :class:`CoupledLearningCompensator`: a coupled stage's scan, the coupling's
+                 inverse and one learner per actuator; :class:`CoupledTrial`
 ``design``       the harmonic law's design: :func:`design_learning`, :class:`LearningDesign`
 ``jacobian``     the Jacobian law's step through the model's sensitivity
 ``laws``         the laws behind one interface (:class:`~.laws.Law`): ``"harmonic"``,
@@ -21,7 +23,16 @@ module           what it holds
 """
 
 from .compensator import LearningCompensator, resolved_law
+from .coupled import CoupledLearningCompensator, CoupledTrial
 from .design import LearningDesign, design_learning
 from .trial import Trial
 
-__all__ = ["LearningCompensator", "LearningDesign", "Trial", "design_learning", "resolved_law"]
+__all__ = [
+    "CoupledLearningCompensator",
+    "CoupledTrial",
+    "LearningCompensator",
+    "LearningDesign",
+    "Trial",
+    "design_learning",
+    "resolved_law",
+]
