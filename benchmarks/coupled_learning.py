@@ -31,7 +31,7 @@ import piezohyst as ph
 from piezohyst.metrics import hysteresis_width
 from piezohyst.simulation import PRESETS, XY_COUPLING, XY_DYNAMIC, make_signal
 
-TRIALS = int(__import__("os").environ.get("TRIALS", "12"))
+TRIALS = 12
 ALL = {"development stage (XY_DYNAMIC)": ((PRESETS[XY_DYNAMIC[0]], PRESETS[XY_DYNAMIC[1]]),
                                           XY_COUPLING, None), **STAGES}  # fmt: skip
 

@@ -47,7 +47,7 @@ def _trials(
 
 # a trial whose error grew is undone and said (the learner's own safeguard), per actuator
 @pytest.mark.filterwarnings(
-    "ignore:actuator .. trial .*the error grew:piezohyst.errors.LearningWarning"
+    "ignore:actuator .. trial .*the error (grew|crept):piezohyst.errors.LearningWarning"
 )
 def test_a_fast_raster_is_learned_to_the_issues_bounds() -> None:
     """The 10 Hz raster line through each axis's lag and mode: the feedforward alone leaves

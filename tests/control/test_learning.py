@@ -233,6 +233,35 @@ def test_a_trial_whose_error_grew_is_rolled_back(pi_model: ph.ClassicalPI) -> No
     np.testing.assert_allclose(ilc.correction, want, rtol=0, atol=1e-12 * np.ptp(d))
 
 
+def test_an_error_that_creeps_up_is_rolled_back_to_the_best_trial(
+    pi_model: ph.ClassicalPI,
+) -> None:
+    """An error that grows by less than the noise threshold each trial (5 % a trial, the
+    threshold over the last trial 3/sqrt(64) = 37.5 %) passes that check every time; once it
+    stands more than twice the threshold above the best trial's (75 %: the twelfth trial at
+    1.05^k), the best trial's correction is sent again and the gain halved."""
+    d = cosine(pi_model)
+    shape = np.sin(2 * np.pi * 3 * np.arange(d.size) / d.size) * 0.01 * np.ptp(d)
+    ilc = ph.LearningCompensator(pi_model, v_min=0.0, v_max=140.0, sample_rate=RATE,
+                                 slew_rate=None, learning_gain=0.5, cutoff=100.0,
+                                 lead_in=False, law="harmonic")  # fmt: skip
+    corrections, said = [], []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for k in range(14):
+            ilc.command(d)
+            corrections.append(ilc.correction.copy())
+            trial = ilc.learn(d - 1.05**k * shape)  # readings that ignore what was learned
+            if trial.rolled_back:
+                break
+        said = [str(w.message) for w in caught]
+    assert trial.index == 12 and trial.rolled_back and trial.gain == 0.25
+    assert [t.rolled_back for t in ilc.history].count(True) == 1
+    assert len(said) == 1 and said[0].startswith("trial 12: the error crept up from")
+    assert "(the best trial's)" in said[0]
+    np.testing.assert_array_equal(ilc.correction, corrections[0])  # trial 0's: the best
+
+
 def test_a_noise_gate_keeps_the_noise_out_of_the_commands(
     pi_model: ph.ClassicalPI, tmp_path: Path
 ) -> None:

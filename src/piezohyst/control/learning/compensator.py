@@ -70,6 +70,9 @@ SATURATED = 0.02
 GROWTH_SIGMAS = 3.0
 #: learning stops halving its gain below the first gain over this
 GAIN_FLOOR = 64.0
+#: a trial whose error has crept above the best trial's by this many times the growth
+#: threshold is rolled back to the best: a slow divergence, within the noise each trial
+CREEP = 2.0
 
 
 def _flag(value: object, name: str) -> bool:
@@ -230,6 +233,40 @@ def _lag_measured(
         return None
     found = trial_lag(_responder(learner), learner._pending, measured, ok, s["sample_rate"])
     return None if found is None else replace(found, trial=index)
+
+
+def _rollback(
+    good: tuple[FloatArray, float] | None,
+    best: tuple[FloatArray, float] | None,
+    error: float,
+    floor: float,
+    learned: int,
+) -> tuple[tuple[FloatArray, float], bool] | None:
+    """Where a trial's error says to roll back to: the last good trial (the error grew
+    beyond :data:`GROWTH_SIGMAS` standard errors over it), or the best trial (it crept
+    beyond :data:`CREEP` times that over the best since, by less each trial: a mode the
+    model misplaces, learned a little wrong every trial); None: learn from it. The flag
+    says which."""
+    step = GROWTH_SIGMAS / math.sqrt(learned)
+    if good is not None and error > max(good[1], floor) * (1 + step):
+        return good, False
+    if best is not None and error > max(best[1], floor) * (1 + CREEP * step):
+        return best, True
+    return None
+
+
+def _rolled(index: int, was: float, error: float, gain: float, crept: bool) -> str:
+    """The warning of a trial rolled back (:func:`_rollback`)."""
+    if crept:
+        return (
+            f"trial {index}: the error crept up from {was:.3%} (the best trial's) to "
+            f"{error:.3%} over the trials since: their updates are undone (the best trial's "
+            f"correction is sent again) and the learning gain halved to {gain:.3g}"
+        )
+    return (
+        f"trial {index}: the error grew from {was:.3%} to {error:.3%}: the last update is "
+        f"undone (its correction is sent again) and the learning gain halved to {gain:.3g}"
+    )
 
 
 def _responder(learner: LearningCompensator) -> Any:
@@ -468,6 +505,7 @@ class LearningCompensator(Saving, Stepping):
         self._correction = np.zeros(0)
         self._previous = np.zeros(0)  # the reference correction of the trial before
         self._good: tuple[FloatArray, float] | None = None  # the last good correction, error
+        self._best: tuple[FloatArray, float] | None = None  # the best since the last rollback
         self._resend = False  # the correction now is the last good one, sent again
         self._pending: FloatArray | None = None
         self._clamped = np.zeros(0, dtype=bool)
@@ -717,23 +755,17 @@ class LearningCompensator(Saving, Stepping):
             self._lead, self._gain, self._first = None, self.design.gain, False
         assert self.design is not None
         floor = self.design.noise * math.sqrt(1.0 + self.design.noise_gain**2) / span
-        grown = self._good is not None and error > max(self._good[1], floor) * (
-            1 + GROWTH_SIGMAS / math.sqrt(learned)
-        )
-        if grown and not self._resend:
-            assert self._good is not None
+        back = None if self._resend else _rollback(self._good, self._best, error, floor, learned)
+        if back is not None:
+            (kept, was), crept = back
             rolled = True
             self._gain = max(self._gain / 2, self.design.gain / GAIN_FLOOR)
-            warn(
-                f"trial {index}: the error grew from {self._good[1]:.3%} to {error:.3%}: the "
-                "last update is undone (its correction is sent again) and the learning gain "
-                f"halved to {self._gain:.3g}",
-                LearningWarning,
-            )
-            self._correction = self._good[0].copy()
-            self._resend = True
-        else:  # a better trial, or the last good correction measured again: learn from it
+            warn(_rolled(index, was, error, self._gain, crept), LearningWarning)
+            self._correction, self._resend = kept.copy(), True
+        else:  # a good trial, or a correction rolled back to measured again: learn from it
             self._good = (self._correction.copy(), error)
+            if self._best is None or self._resend or error < self._best[1]:
+                self._best = self._good
             self._resend = False
             assert self.design is not None
             s = self.settings

@@ -70,6 +70,7 @@ class Saving:
     _correction: FloatArray
     _previous: FloatArray
     _good: tuple[FloatArray, float] | None
+    _best: tuple[FloatArray, float] | None
     _pending: FloatArray | None
     _clamped: FloatArray
     _last: float
@@ -100,9 +101,11 @@ class Saving:
         -------
         dict
         """
-        good = None
+        good = best = None
         if self._good is not None:
             good = {"correction": self._good[0].tolist(), "metric": self._good[1]}
+        if self._best is not None:
+            best = {"correction": self._best[0].tolist(), "metric": self._best[1]}
         return {
             "format": FORMAT,
             "version": 1,
@@ -112,6 +115,7 @@ class Saving:
             "correction": self._correction.tolist(),
             "previous": self._previous.tolist(),
             "good": good,
+            "best": best,
             "pending": None if self._pending is None else self._pending.tolist(),
             "clamped": np.flatnonzero(self._clamped).tolist(),
             "last_command": self._last,
@@ -168,6 +172,9 @@ class Saving:
             good = data["good"]
             if good is not None:
                 self._good = (np.array(good["correction"], dtype=np.float64), float(good["metric"]))
+            best = data.get("best", good)  # a state saved before it: the last good
+            if best is not None:
+                self._best = (np.array(best["correction"], dtype=np.float64), float(best["metric"]))
             pending = data["pending"]
             self._pending = None if pending is None else np.array(pending, dtype=np.float64)
             n = 0 if self._desired is None else self._desired.size

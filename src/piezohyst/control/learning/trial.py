@@ -55,7 +55,8 @@ class Trial:
     gain : float
         The learning gain of the update made after this trial.
     rolled_back : bool
-        The error grew over the trial before: that update was undone and the gain halved.
+        The error grew over the trial before (that update was undone), or crept above the
+        best trial's since (their updates were undone); the gain halved.
     skipped : bool
         Nothing learned: the lead-in (the first trial, see ``lead_in``), or too
         few readings (under half the trial).
