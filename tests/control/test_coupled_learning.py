@@ -3,6 +3,7 @@ learner per actuator (:class:`ph.CoupledLearningCompensator`), on the simulated 
 
 from __future__ import annotations
 
+import json
 import re
 import warnings
 
@@ -149,12 +150,13 @@ def test_limits_and_warnings_name_the_actuator(static_stage: ph.CoupledModel) ->
     assert ilc.outside_count > 0 and np.all((u >= 0.0) & (u <= 140.0))
     assert trial.saturated[0] > 0
     told = [(w.category, str(w.message)) for w in said]
-    assert (LimitWarning, "CoupledCompensator: ") in [(c, m[:20]) for c, m in told]
+    outside = r"CoupledLearningCompensator: \d+ desired positions lie outside what the stage"
+    assert any(c is LimitWarning and re.match(outside, m) for c, m in told)
     assert any(c is LimitWarning and m.startswith("actuator 0: the voltage limits [0, 140] V held")
                for c, m in told)  # fmt: skip
     held = r"actuator 0: trial 1: the limits held \d+ of 500"
     assert any(c is LearningWarning and re.match(held, m) for c, m in told)
-    assert all(m.startswith(("actuator 0", "CoupledCompensator")) for _, m in told)
+    assert all(m.startswith(("actuator 0", "CoupledLearningCompensator")) for _, m in told)
 
 
 def test_bad_input_is_named(static_stage: ph.CoupledModel) -> None:
@@ -186,3 +188,51 @@ def test_bad_input_is_named(static_stage: ph.CoupledModel) -> None:
     ilc.learn(scan)
     with pytest.raises(ph.ParameterError, match="belongs to another scan"):
         ilc.command(scan[::-1])
+
+
+@pytest.mark.filterwarnings(
+    "ignore:actuator .. trial .*the error (grew|crept):piezohyst.errors.LearningWarning"
+)
+def test_a_saved_learner_resumes_exactly(static_stage: ph.CoupledModel, tmp_path) -> None:
+    """Saved between trials (or with a trial waiting for its readings), a learner made again
+    with the same model and settings gives the same next commands, to the bit, and the same
+    record; a file of another kind is refused."""
+    kw = {"v_min": 0.0, "v_max": 140.0, "sample_rate": FS, "slew_rate": None}
+    ilc = ph.CoupledLearningCompensator(static_stage, **kw)
+    (x0, x1), (y0, y1) = ilc.feedforward.reach
+    k = np.arange(400)
+    own = np.column_stack([x0 + (x1 - x0) * (0.4 + 0.2 * np.sin(2 * np.pi * 5 * k / FS)),
+                           np.full(k.size, 0.5 * (y0 + y1))])  # fmt: skip
+    scan = own @ static_stage.coupling_.T + static_stage.offset_  # actuator 1 held
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        ilc.command(scan)
+        ilc.learn(scan + 2e-7 * rng.standard_normal(scan.shape))
+    ilc.save(tmp_path / "between.json")
+    nxt = ilc.command()
+    ilc.save(tmp_path / "waiting.json")
+    readings = scan + 2e-7 * rng.standard_normal(scan.shape)
+    trial = ilc.learn(readings)
+    after = ilc.command()
+
+    again = ph.CoupledLearningCompensator(static_stage, **kw)
+    again.load(tmp_path / "between.json")
+    assert again.trials == 3 and again.learners[1] is None
+    np.testing.assert_array_equal(again.command(), nxt)
+    waiting = ph.CoupledLearningCompensator(static_stage, **kw)
+    waiting.load(tmp_path / "waiting.json")
+    resumed = waiting.learn(readings)
+    np.testing.assert_array_equal(resumed.error, trial.error)
+    np.testing.assert_array_equal(waiting.command(), after)
+    assert [t.skipped for t in waiting.history] == [t.skipped for t in ilc.history]
+
+    (tmp_path / "other.json").write_text(json.dumps({"format": "piezohyst-learning"}))
+    with pytest.raises(ph.errors.ModelFileError, match="not a piezohyst coupled learning state"):
+        again.load(tmp_path / "other.json")
+    data = json.loads((tmp_path / "between.json").read_text())
+    data["learners"][0]["fingerprint"] = "0" * 16
+    (tmp_path / "other.json").write_text(json.dumps(data))
+    with pytest.raises(
+        ph.errors.ModelFileError, match=r"^\S+other.json, actuator 0: made with another model"
+    ):
+        again.load(tmp_path / "other.json")

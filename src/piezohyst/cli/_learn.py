@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import click
 
@@ -177,12 +177,46 @@ def learn(
     reading the DAQ lost is written NaN and not learned from (an empty cell is
     refused as a damaged row). The first trial is the lead-in, not learned from.
 
+    A coupled stage's model file (``fit --input vx,vy --output x,y``) learns a scan of every
+    axis: --column x,y names the desired columns (the first call), the recording holds one
+    voltage column per actuator (--voltage-column, default voltage_0,voltage_1,...) and the
+    positions read (--reading-column, default the desired columns' names), and the commands
+    file one column per actuator.
+
     \b
     Example:
       piezohyst learn model.json --desired scan.csv --state learn.json -o next.csv
       piezohyst learn model.json trial.csv --state learn.json -o next.csv
+      piezohyst learn stage.json --desired raster.csv --column x,y --v-min 0 --v-max 140 \\
+        --state learn.json -o next.csv
     """
     from ..workflows.learning_files import learn_file
+    from ..workflows.stage_files import is_stage_file
+
+    if is_stage_file(model):
+        given = click.get_current_context().get_parameter_source
+        default = click.core.ParameterSource.DEFAULT
+        unused = [f"--{name.replace('_', '-')}" for name, value in (
+            ("leakage", leakage), ("voltage_scale", voltage_scale),
+            ("reading_scale", reading_scale), ("command_scale", command_scale),
+            ("sensor", sensor)) if value]  # fmt: skip
+        if unused:
+            raise click.UsageError(
+                f"a stage learns from its sensors' positions in the model's units: "
+                f"{', '.join(unused)} not taken"
+            )
+        options = {"learning_gain": _auto_or_float(learning_gain),
+                   "cutoff": _auto_or_float(cutoff), "lead_in": not no_lead_in,
+                   "probe": not no_probe, "measure_lag": not no_lag_measurement,
+                   "noise_gate": noise_gate, "law": law}  # fmt: skip
+        if lag:
+            options["lag"] = lag
+        _learn_stage(ctx, model, state, out, recorded, desired, settings, force, options,
+                     None if given("column") == default else column,
+                     None if given("voltage_column") == default else voltage_column,
+                     None if given("reading_column") == default else reading_column,
+                     voltage_tolerance)  # fmt: skip
+        return
 
     result = _run(
         ctx,
@@ -236,5 +270,48 @@ def learn(
                 f"learned from {trial.learned} samples{back}{held}"
             )
     if learner.design is not None and trial is not None:
+        ctx.info(learner.describe())
+    ctx.result(f"trial {learner.trials}'s commands: {out}")
+
+
+def _learn_stage(
+    ctx: Context, model: Path, state: Path, out: Path, recorded: Path | None,
+    desired: Path | None, settings: CompensatorSettings, force: bool, options: dict[str, Any],
+    column: str | None, voltage_column: str | None, reading_column: str | None,
+    voltage_tolerance: float | None,
+) -> None:  # fmt: skip
+    """``learn stage.json ... --column x,y``: :func:`learn_stage_file`."""
+    from ..workflows.stage_files import stage_columns
+    from ..workflows.stage_learning import learn_stage_file
+
+    if settings.v_min is None or settings.v_max is None:
+        raise click.UsageError("a stage's commands need --v-min and --v-max (V, every actuator)")
+
+    def names(spec: str | None, what: str) -> list[str] | None:
+        return None if spec is None else stage_columns(spec, what)
+
+    run = _run(
+        ctx,
+        lambda: learn_stage_file(
+            model, state, out, recorded=recorded, desired=desired,
+            columns=names(column, "--column"), v_min=settings.v_min,  # type: ignore[arg-type]
+            v_max=settings.v_max,  # type: ignore[arg-type]
+            sample_rate=settings.sample_rate, slew_rate=settings.slew_rate,
+            allow_extrapolation=settings.allow_extrapolation,
+            voltage_columns=names(voltage_column, "--voltage-column"),
+            reading_columns=names(reading_column, "--reading-column"),
+            voltage_tolerance=voltage_tolerance, force=force, **options,
+        ),
+    )  # fmt: skip
+    trial, learner = run.trial, run.learner
+    if trial is not None:
+        errors = ", ".join(f"{100 * e:.3g} %" for e in trial.error)
+        held = "; ".join(f"actuator {k}: the limits held {int(c)} commands"
+                         for k, c in enumerate(trial.saturated) if c)  # fmt: skip
+        said = "the lead-in, not learned from" if trial.skipped else "learned from"
+        ctx.result(
+            f"trial {trial.index}: error per axis {errors} of what the stage reaches there "
+            f"({said})" + (f"; {held}" if held else "")
+        )
         ctx.info(learner.describe())
     ctx.result(f"trial {learner.trials}'s commands: {out}")

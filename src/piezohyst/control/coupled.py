@@ -86,6 +86,8 @@ class CoupledCompensator:
 
     #: False: the commands do not depend on readings (the controllers' one contract)
     reads = False
+    #: Who its warnings name (a learner built on it names itself)
+    owner = "CoupledCompensator"
 
     def __init__(
         self,
@@ -200,7 +202,7 @@ class CoupledCompensator:
                     for i in np.flatnonzero(beyond[k])
                 )
                 warn(
-                    f"CoupledCompensator: {_counted(rows.size, 'desired position')} outside "
+                    f"{self.owner}: {_counted(rows.size, 'desired position')} outside "
                     f"what the stage reaches (first at sample {k}: {axes}); the reachable set "
                     "is the actuators' ranges through the coupling, not a box; those commands "
                     "sit at the limits (counted in saturated_count)",

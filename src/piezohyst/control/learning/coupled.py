@@ -19,15 +19,19 @@ undo) has nothing to learn: it is held by its feedforward compensator, and
 
 from __future__ import annotations
 
+import json
 import math
+import os
 import warnings
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ...errors import LearningWarning, ParameterError, ShapeError, warn
+from ...errors import LearningWarning, ModelFileError, ParameterError, ShapeError, warn
+from ...io import atomic_write_text
 from ...metrics import hysteresis_width
 from ..coupled import CoupledCompensator, _per_actuator
 from .compensator import LearningCompensator
@@ -35,7 +39,9 @@ from .trial import Trial
 
 FloatArray = np.ndarray
 
-__all__ = ["CoupledLearningCompensator", "CoupledTrial"]
+__all__ = ["FORMAT", "CoupledLearningCompensator", "CoupledTrial"]
+
+FORMAT = "piezohyst-coupled-learning"
 
 #: The learning options passed on to each actuator's learner (as LearningCompensator takes
 #: them); the limits, the rate and the domain are the stage's
@@ -181,6 +187,9 @@ class CoupledLearningCompensator:
             model, v_min=v_min, v_max=v_max, sample_rate=sample_rate, slew_rate=slew_rate,
             allow_extrapolation=allow_extrapolation,
         )  # fmt: skip
+        self.feedforward.owner = "CoupledLearningCompensator"
+        for i, comp in enumerate(self.feedforward.compensators):  # a held actuator's warnings
+            comp.owner = f"CoupledLearningCompensator, actuator {i}"
         self.model = model
         n = len(model.channels_)
         self._voltage = None if voltage is None else _per_actuator(voltage, n, "voltage")
@@ -224,6 +233,16 @@ class CoupledLearningCompensator:
             (lrn.last_command if lrn is not None else comp.last_command)
             for lrn, comp in zip(self.learners, self.feedforward.compensators, strict=True)
         ])  # fmt: skip
+
+    @property
+    def pending(self) -> FloatArray | None:
+        """The commands of the trial waiting for its readings (None: none waits)."""
+        return None if self._pending is None else self._pending.copy()
+
+    @property
+    def desired(self) -> FloatArray | None:
+        """The scan, one period (None until the first :meth:`command`)."""
+        return None if self._desired is None else self._desired.copy()
 
     @property
     def trials(self) -> int:
@@ -405,3 +424,140 @@ class CoupledLearningCompensator:
         off = self.model.offset_
         return np.column_stack([off + np.minimum(a, b).sum(axis=1),
                                 off + np.maximum(a, b).sum(axis=1)])  # fmt: skip
+
+    # ------------------------------------------------------------------ files
+    def to_dict(self) -> dict[str, Any]:
+        """The stage's learning state, JSON-ready: the scan, each actuator's learner's own
+        state (:meth:`~piezohyst.LearningCompensator.to_dict`; None for a held actuator),
+        the trial waiting for its readings and the record of the trials.
+
+        Returns
+        -------
+        dict
+        """
+
+        def nulled(a: FloatArray) -> list[float | None]:
+            return [float(v) if math.isfinite(v) else None for v in a]
+
+        return {
+            "format": FORMAT,
+            "version": 1,
+            "desired": None if self._desired is None else self._desired.tolist(),
+            "pending": None if self._pending is None else self._pending.tolist(),
+            "held": self._held.tolist(),
+            "learners": [None if lrn is None else lrn.to_dict() for lrn in self.learners],
+            "history": [
+                {
+                    "error": nulled(t.error),
+                    "width": nulled(t.width),
+                    "saturated": t.saturated.tolist(),
+                    "skipped": t.skipped,
+                }
+                for t in self.history
+            ],
+        }
+
+    def restore(self, data: dict[str, Any], where: str = "coupled learning state") -> None:
+        """Continue from :meth:`to_dict`'s contents, made with the same model and settings:
+        the next :meth:`command` (or :meth:`learn`) is the one the saved learner would have
+        given.
+
+        Parameters
+        ----------
+        data : dict
+        where : str
+            Named in errors (a file's path).
+
+        Raises
+        ------
+        ModelFileError
+            Not a coupled learning state, a damaged one, or one of another model or settings.
+        """
+        if not isinstance(data, dict) or data.get("format") != FORMAT:
+            msg = f"{where}: not a piezohyst coupled learning state"
+            raise ModelFileError(msg)
+        try:
+            self.reset()
+            if data["desired"] is None:
+                return
+            with warnings.catch_warnings():  # said when the run sent them; not again
+                warnings.simplefilter("ignore")
+                self._scan(np.array(data["desired"], dtype=np.float64))
+                saved = data["learners"]
+                if len(saved) != len(self.learners) or any(
+                    (s is None) != (lrn is None)
+                    for s, lrn in zip(saved, self.learners, strict=True)
+                ):
+                    raise ValueError("its actuators are not this scan's")
+                sent = len(data["history"]) + (data["pending"] is not None)
+                for i, lrn in enumerate(self.learners):
+                    if lrn is None:  # a held actuator's compensator: its trials again
+                        comp = self.feedforward.compensators[i]
+                        for _ in range(sent):
+                            comp.process(self._own[:, i].copy())
+                    else:
+                        lrn.restore(saved[i], f"{where}, actuator {i}")
+            self._held = np.array(data["held"], dtype=np.int64)
+            self._pending = (
+                None if data["pending"] is None else np.array(data["pending"], dtype=np.float64)
+            )
+            self.history = [
+                CoupledTrial(
+                    k,
+                    np.array([math.nan if v is None else v for v in t["error"]]),
+                    np.array([math.nan if v is None else v for v in t["width"]]),
+                    tuple(None if lrn is None else lrn.history[k] for lrn in self.learners),
+                    np.array(t["saturated"], dtype=np.int64),
+                    bool(t["skipped"]),
+                )
+                for k, t in enumerate(data["history"])
+            ]
+        except ModelFileError:  # an actuator's own state refused: said as it is
+            self.reset()
+            raise
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            self.reset()
+            msg = f"{where}: a damaged coupled learning state ({exc})"
+            raise ModelFileError(msg) from None
+
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write :meth:`to_dict` as JSON, atomically (a reader sees the old file or the new).
+
+        Parameters
+        ----------
+        path : path
+
+        Returns
+        -------
+        Path
+        """
+        return self.save_dict(path, self.to_dict())
+
+    def save_dict(self, path: str | os.PathLike[str], data: dict[str, Any]) -> Path:
+        """Write ``data`` (:meth:`to_dict`'s, perhaps with keys added) as JSON, atomically.
+
+        Parameters
+        ----------
+        path : path
+        data : dict
+
+        Returns
+        -------
+        Path
+        """
+        return atomic_write_text(Path(path), json.dumps(data))
+
+    def load(self, path: str | os.PathLike[str]) -> None:
+        """Continue from a file :meth:`save` wrote (see :meth:`restore`).
+
+        Parameters
+        ----------
+        path : path
+        """
+        p = Path(path)
+        try:
+            data = json.loads(p.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            msg = f"{p}: cannot read the learning state ({exc})"
+            raise ModelFileError(msg) from None
+        self.restore(data, str(p))
