@@ -51,9 +51,6 @@ def _trial(commands: Path, benches: list[Bench], path: Path) -> Path:
     return path
 
 
-# the lead-in's probe after an arrival the slew limit held misreads the loop's timing here:
-# the single actuator's learner says the same on this model (left; the learning is not hurt)
-@pytest.mark.filterwarnings("ignore:actuator 0. trial 1. the lead-in's probe measured")
 def test_learn_a_stage_from_the_shell(stage: tuple[Path, Path], tmp_path: Path) -> None:
     """Five calls: the first writes the lead-in, each later one learns from the recording of
     the trial before; the error per axis falls, the commands are Python's learner's."""

@@ -94,6 +94,51 @@ def test_the_loops_response_is_measured_with_an_error_that_covers_it(seed: int) 
     assert response(lead, after, np.arange(N) >= 700, bins, d) is None  # too few usable
 
 
+def test_a_stretch_that_cannot_tell_the_sines_from_the_scan_measures_nothing() -> None:
+    """The probe's sines sit at odd harmonics of a trial of two scan periods; over the
+    trial's second half alone (a lead-in the slew limit ramped in: the samples until its
+    extremes wiped the ramp out are not usable) they are sums of the scan's harmonics there,
+    so nothing tells them apart: no response, rather than one read 175 degrees off. The
+    whole trial measures it."""
+    k = np.arange(500)
+    d = 1e-6 * (1.0 + 0.4 * np.abs((k / RATE * 4.0) % 1.0 * 2 - 1))  # 4 Hz, two periods
+    bins = probe_bins(d)
+    assert scan_bin(d) == 2 and np.all(bins % 2 == 1)
+    probe = probe_signal(bins, k.size, float(np.ptp(d)))
+    lead, after = d + probe, d.copy()
+    assert response(lead, after, k >= 250, bins, d) is None
+    whole = response(lead, after, np.ones(k.size, dtype=bool), bins, d)
+    assert whole is not None
+    # tol: noise-free: the fit's rounding over 400 settled samples
+    np.testing.assert_allclose(whole.ratio, 1.0, rtol=0, atol=1e-9)
+
+
+def test_a_lead_in_the_slew_limit_ramps_in_says_nothing_false() -> None:
+    """A 4 Hz scan of 500 samples from rest under a 30 kV/s slew limit: the lead-in is ramped
+    in, half of it cannot measure the probe, and the learner learns without the probe's
+    word instead of saying the loop lags by half a period."""
+    from piezohyst.simulation import Bench, make_signal, simulate
+
+    t, v = make_signal("decaying", duration=8.0)
+    rec = simulate(np.clip(2 * v, 0.0, 140.0), t, seed=0)
+    model = ph.ClassicalPI(10, output_unit="m").fit(rec.voltage, rec.displacement, t=rec.t)
+    lo, hi = model.hysteresis_.predict(np.array([0.0, 140.0]))
+    ilc = ph.LearningCompensator(model, v_min=0.0, v_max=140.0, sample_rate=RATE,
+                                 slew_rate=30e3, domain="displacement", gain=1.0)  # fmt: skip
+    zero = ilc.compensator.reference
+    k = np.arange(500)
+    d = lo + (hi - lo) * (0.3 + 0.4 * np.abs((k / RATE * 4.0) % 1.0 * 2 - 1)) - zero
+    bench = Bench(seed=0, voltage=ilc.last_command)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the probe's misreading warned here before
+        for _ in range(4):
+            run = bench.run(ilc.command(d))
+            ilc.learn(displacement=run.displacement - zero)
+    assert ilc.history[0].saturated > 0  # the arrival: ramped in by the slew limit
+    assert ilc.design is not None and not ilc.design.probed
+    assert ilc.history[-1].error < 0.5 * ilc.history[1].error
+
+
 def _model(covariance: tuple[float, ...]) -> ph.ActivePI:
     h = ph.PIHysteresis([0.0, 15.0, 30.0], [1.0e-8, 4e-9, 2e-9])
     model = ph.ActivePI.from_operator(h)

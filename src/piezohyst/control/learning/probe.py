@@ -43,6 +43,12 @@ HARMONICS = 64
 #: whose fast part reaches the sines (on the two-state capacitor it doubled their phases'
 #: errors when the first 200 ms were used)
 SETTLE = 0.2
+#: a fit worse conditioned than this measures nothing: over part of the trial (a lead-in the
+#: slew limit ramped in, and the samples until its extremes wiped the ramp out) the sines,
+#: at odd harmonics of the trial, are sums of the scan's even ones there; on a 4 Hz scan of
+#: 500 samples half of them were usable and the condition number was 2e15 (the phases read
+#: 175 degrees off, and the learner said the loop was late), 6 over the whole trial
+CONDITION = 1e8
 
 
 @dataclass(frozen=True)
@@ -161,7 +167,8 @@ def response(
     Returns
     -------
     Response or None
-        None where too few readings are usable.
+        None where too few readings are usable, or where they cannot tell the sines from the
+        scan's harmonics (:data:`CONDITION`).
     """
     n = with_probe.size
     settled = np.arange(n) >= SETTLE * n  # the arrival's fast transient has decayed
@@ -186,6 +193,8 @@ def response(
     for h in scan:  # the scan's own harmonics: what else the two trials differ by
         columns += [np.cos(2 * math.pi * h * x), np.sin(2 * math.pi * h * x)]
     a = np.column_stack(columns)
+    if np.linalg.cond(a) > CONDITION:  # the stretch cannot tell the sines from the scan's
+        return None
     diff = (with_probe - without)[ok]
     coef, *_ = np.linalg.lstsq(a, diff, rcond=None)
     resid = diff - a @ coef
