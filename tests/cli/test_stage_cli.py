@@ -343,3 +343,40 @@ def test_report_a_structure_from_the_shell(tmp_path: Path) -> None:
                    "a structure of 2 actuators and 3 axes")  # fmt: skip
     assert_clean_error(run("report", model_file, fresh, "--input", "vx,vy", "--output", "x,y,z",
                            "--gain", "125", "--out", tmp_path / "r3"), code=2)  # fmt: skip
+
+
+def test_a_stage_with_a_third_sensor_from_the_shell(tmp_path: Path) -> None:
+    """Two actuators, three position columns: the first two are the actuators' own axes, the
+    third a further reading; fit, predict and compensate take them, and a target off what
+    the actuators move the three outputs to is counted with the out-of-reach ones."""
+    three = np.array([[1.0, -0.03], [0.04, 1.0], [0.6, 0.45]])
+    t, a = make_signal("decaying", duration=8.0)
+    _, b = make_signal("triangle", duration=8.0, frequency=1.3)
+    rec = simulate_stage(np.column_stack([np.clip(2 * a, 0, 140), b]), t, coupling=three, seed=0)
+    cols = {"time": rec.t, "vx": rec.voltage[:, 0], "vy": rec.voltage[:, 1],
+            "x": rec.position[:, 0], "y": rec.position[:, 1], "z": rec.position[:, 2]}  # fmt: skip
+    units = {"time": "s", "vx": "V", "vy": "V", **dict.fromkeys("xyz", "m")}
+    ph.write_table(tmp_path / "three.csv", cols, units=units)
+    model_file = tmp_path / "three.json"
+    res = run("fit", tmp_path / "three.csv", "--input", "vx,vy", "--output", "x,y,z",
+              "-o", model_file)  # fmt: skip
+    assert res.exit_code == 0, res.output
+    model = ph.CoupledModel.load(model_file)
+    # tol: as in Python (tests/control/test_coupled.py): the per-axis misfit, 0.005
+    np.testing.assert_allclose(model.coupling_, three, atol=5e-3)
+    res = run("predict", model_file, tmp_path / "three.csv", "--input", "vx,vy", "--output",
+              "x,y,z", "-o", tmp_path / "pred.csv")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    k = np.arange(2000)
+    own = np.column_stack([60e-6 + 30e-6 * np.sin(2 * np.pi * k / 1000), np.full(k.size, 50e-6)])
+    target = own @ model.coupling_.T + model.offset_
+    target[300:350, 2] += 5e-6  # off the plane
+    ph.write_table(tmp_path / "target.csv", {"time": k / 1000, "x": target[:, 0],
+                                              "y": target[:, 1], "z": target[:, 2]})  # fmt: skip
+    limits = ("--v-min", "0", "--v-max", "140", "--slew-rate", "1e6")
+    res = run("compensate", model_file, tmp_path / "target.csv", "--column", "x,y,z", *limits,
+              "-o", tmp_path / "c.csv")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "50 desired positions outside the stage's reach" in res.output
+    written = ph.read_table(tmp_path / "c.csv")
+    assert "command_1" in written and "command_2" not in written

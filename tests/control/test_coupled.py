@@ -165,8 +165,8 @@ def test_what_the_coupled_model_refuses() -> None:
         bad = u.copy()
         bad[3, 1] = np.nan
         ph.CoupledModel().fit(bad, u)
-    with pytest.raises(ph.ShapeError, match="2 inputs, 3 outputs"):
-        ph.CoupledModel().fit(u, np.column_stack([u, u[:, :1]]))
+    with pytest.raises(ph.ShapeError, match=r"2 inputs, 1 outputs \(fewer outputs than"):
+        ph.CoupledModel().fit(u, u[:, :1])
     with pytest.raises(ph.ParameterError, match="'rounds'"):
         ph.CoupledModel(rounds=0).fit(u, u)
     with pytest.raises(ph.ParameterError, match="holds 1 models for 2 inputs"):
@@ -276,4 +276,90 @@ def test_the_stage_as_a_shared_library_equals_python(
         assert counts[[2, 5]].tolist() == comp.saturated_count.tolist()
         lib.ph_xy_reset(handle)
     assert lib.ph_xy_process(handle, None, volts.ctypes.data, 1) == -1
+    lib.ph_xy_free(handle)
+
+
+#: Two actuators read by three sensors: x, y and a third between them (a tip-tilt mirror's
+#: extra reading point, a stage's redundant capacitive sensor)
+THREE = np.array([[1.0, -0.03], [0.04, 1.0], [0.6, 0.45]])
+
+
+@pytest.fixture(scope="module")
+def three_sensors() -> ph.CoupledModel:
+    t, a = make_signal("decaying", duration=8.0)
+    _, b = make_signal("triangle", duration=8.0, frequency=1.3)
+    rec = simulate_stage(np.column_stack([np.clip(2 * a, 0.0, 140.0), b]), t, coupling=THREE,
+                         seed=0)  # fmt: skip
+    return ph.CoupledModel().fit(rec.voltage, rec.position, t=rec.t)
+
+
+def test_more_sensors_than_actuators_is_a_least_squares(three_sensors: ph.CoupledModel) -> None:
+    """Output i is actuator i's own axis, the third a further reading: the coupling is
+    identified (3 x 2), a raster on x with y held tracks as the square stage's does, and a
+    target off what the two actuators move the three outputs to is followed in least
+    squares, counted and said."""
+    model = three_sensors
+    # tol: as the square stage's (the per-axis models' misfit in the least squares): 0.005
+    np.testing.assert_allclose(model.coupling_, THREE, atol=5e-3)
+    assert model.coupling_.shape == (3, 2) and np.all(model.output_nrmse_ < 0.005)
+    comp = ph.CoupledCompensator(model, v_min=0.0, v_max=140.0, sample_rate=FS, slew_rate=None)
+    (x0, x1), (y0, y1) = comp.reach
+    k = np.arange(3000)
+    tri = np.abs(((k / FS * 2.0) % 1.0) * 2 - 1)
+    own = np.column_stack([x0 + (x1 - x0) * (0.2 + 0.6 * tri), np.full(k.size, (y0 + y1) / 2)])
+    desired = own @ model.coupling_.T + model.offset_  # every output's: on the plane
+    volts = comp.process(desired)
+    assert comp.outside_count == comp.off_plane_count == 0
+    moved = simulate_stage(volts, np.arange(k.size) / FS, coupling=THREE, seed=5).true_position
+    span = np.ptp(desired, axis=0)
+    e = moved[1000:] - desired[1000:]  # offset-free, as the square stage's (the simulated
+    error = np.std(e, axis=0) / span  # stage rests where its first command leaves it)
+    # measured 0.76 / 1.45 / 0.75 % of each output's span (y's span is x's coupling alone,
+    # 4 % of x's: its error is 0.06 % of x's span); the square stage's x: 0.78 %
+    assert error[0] < 0.01 and error[2] < 0.01 and error[1] * span[1] < 0.002 * span[0]
+    off = desired.copy()
+    off[500:600, 2] += 0.02 * span[2]  # the third reading asked 2 % of its span off the plane
+    comp.reset()
+    said = r"100 desired positions lie off what the 2 actuators move the stage's 3 outputs"
+    with pytest.warns(ph.LimitWarning, match=said + r" to \(first at sample 500\)"):
+        nearest = comp.process(off)
+    assert comp.off_plane_count == comp.outside_count == 100
+    ls = np.linalg.lstsq(model.coupling_, (off - model.offset_).T, rcond=None)[0].T
+    projected = ls @ model.coupling_.T + model.offset_  # the nearest position they give
+    comp.reset()
+    # tol: pinv against lstsq, the same least squares: rounding of ~1e-4 m through the
+    # inverses (the lag-free PI inverse: no amplification), 1e-9 V
+    np.testing.assert_allclose(nearest, comp.process(projected), rtol=0, atol=1e-9)
+
+
+@pytest.mark.skipif(CC is None, reason="no C compiler on this machine")
+@pytest.mark.filterwarnings("ignore::piezohyst.errors.LimitWarning")  # off the plane on purpose
+def test_more_sensors_than_actuators_in_c_equals_python(
+    three_sensors: ph.CoupledModel, tmp_path: Path
+) -> None:
+    """The stage's library with three outputs and two actuators: the least squares' commands
+    equal Python's to 1e-9 V, and a target off the plane counts as out of reach in C too."""
+    import ctypes
+
+    comp = ph.CoupledCompensator(three_sensors, v_min=0.0, v_max=140.0, sample_rate=FS,
+                                 slew_rate=2e4)  # fmt: skip
+    _, lib_path = write_stage_shared(comp, tmp_path / "ph_xy.c")
+    own = hosts.sines_in_reach(comp, 2000, (3, 2), 0.35, FS)
+    desired = own @ three_sensors.coupling_.T + three_sensors.offset_
+    desired[400:450, 2] -= 0.05 * np.ptp(desired[:, 2])  # off the plane
+    py = comp.process(desired)
+    lib = ctypes.CDLL(str(lib_path))
+    lib.ph_xy_new.restype = ctypes.c_void_p
+    lib.ph_xy_process.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_long]
+    lib.ph_xy_counts.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
+    lib.ph_xy_free.argtypes = [ctypes.c_void_p]
+    handle = lib.ph_xy_new()
+    volts = np.empty((2000, 2))
+    target = np.ascontiguousarray(desired)
+    assert lib.ph_xy_process(handle, target.ctypes.data, volts.ctypes.data, 2000) == 0
+    # tol: an ulp per step of a feedforward step (not integrated), as the square stage's C
+    np.testing.assert_allclose(volts, py, rtol=0, atol=1e-9)
+    counts = np.zeros(7, dtype=np.uint64)
+    assert lib.ph_xy_counts(handle, counts.ctypes.data) == 0
+    assert counts[0] == comp.outside_count == comp.off_plane_count == 50
     lib.ph_xy_free(handle)

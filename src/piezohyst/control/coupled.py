@@ -119,10 +119,32 @@ class CoupledCompensator:
         if not math.isfinite(cond) or cond > 1e6:
             msg = f"the coupling cannot be inverted (condition number {cond:.3g})"
             raise ParameterError(msg)
-        self._inverse = np.linalg.inv(model.coupling_)
+        c = model.coupling_
+        # more outputs than actuators: the least squares (what each actuator moves for the
+        # nearest position they reach); a target off it is counted (actuator_targets)
+        self._inverse = np.linalg.inv(c) if c.shape[0] == c.shape[1] else np.linalg.pinv(c)
         self.reach = np.array([self._reach(c) for c in self.compensators])
         self.outside_count = 0  # desired positions out of the stage's reach since the reset
-        self._outside_said = False
+        self.off_plane_count = 0  # of them, off what the actuators move the outputs to
+        self._outside_said = self._off_said = False
+
+    def _off_plane(self, desired: FloatArray, own: FloatArray) -> NDArray[np.bool_]:
+        """Rows whose position the actuators cannot give (more outputs than actuators): the
+        least squares' residual beyond :data:`REACH_SLACK` of an output's reach."""
+        c = self.model.coupling_
+        if c.shape[0] == c.shape[1]:
+            return np.zeros(desired.shape[0], dtype=bool)
+        resid = (desired - self.model.offset_) - own @ c.T
+        return np.asarray(np.any(np.abs(resid) > self.plane_slack, axis=1))
+
+    @property
+    def plane_slack(self) -> FloatArray:
+        """How far (each output's units) a desired position may lie off what the actuators
+        move the stage to before it counts as out of reach: :data:`REACH_SLACK` of the
+        output's extent over the actuators' ranges."""
+        c = self.model.coupling_
+        lo, hi = c * self.reach[:, 0], c * self.reach[:, 1]
+        return np.asarray(REACH_SLACK * (np.maximum(lo, hi) - np.minimum(lo, hi)).sum(axis=1))
 
     @staticmethod
     def _reach(comp: Compensator) -> tuple[float, float]:
@@ -165,7 +187,8 @@ class CoupledCompensator:
         v = None if voltage is None else _per_actuator(voltage, n, "voltage")
         for i, comp in enumerate(self.compensators):
             comp.reset(voltage=None if v is None else float(v[i]))
-        self.outside_count, self._outside_said = 0, False
+        self.outside_count = self.off_plane_count = 0
+        self._outside_said = self._off_said = False
 
     # ---------------------------------------------------------------- commands
     @property
@@ -190,9 +213,22 @@ class CoupledCompensator:
         beyond = (own < self.reach[:, 0] - REACH_SLACK * span) | (
             own > self.reach[:, 1] + REACH_SLACK * span
         )
+        off = self._off_plane(desired, own)
+        if off.any():  # a position the actuators cannot move the stage to: the nearest
+            self.off_plane_count += int(off.sum())
+            if not self._off_said:
+                self._off_said = True
+                k = int(np.flatnonzero(off)[0])
+                warn(
+                    f"{self.owner}: {_counted(int(off.sum()), 'desired position')} off what "
+                    f"the {own.shape[1]} actuators move the stage's {desired.shape[1]} outputs "
+                    f"to (first at sample {k}): the nearest position they reach, in least "
+                    "squares, is followed (counted in outside_count and off_plane_count)",
+                    LimitWarning,
+                )
+        self.outside_count += int(np.count_nonzero(beyond.any(axis=1) | off))
         rows = np.flatnonzero(beyond.any(axis=1))
         if rows.size:
-            self.outside_count += int(rows.size)
             if not self._outside_said:
                 self._outside_said = True
                 k = int(rows[0])

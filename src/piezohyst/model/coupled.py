@@ -116,7 +116,10 @@ class CoupledModel(JsonFile, SeveralChannels):
         One fitted model per input, in its own axis's units.
     coupling_ : ndarray, shape (outputs, inputs)
         The static coupling, about 1 on the diagonal (each model in its own axis's units;
-        the last round's least squares, not forced).
+        the last round's least squares, not forced). Output ``i`` is actuator ``i``'s own
+        axis; outputs beyond the actuators (a third sensor on a two-actuator stage) are
+        further readings of the same motion, and the actuators' parts are then a least
+        squares over all of them.
     offset_ : ndarray, shape (outputs,)
     output_nrmse_ : ndarray, shape (outputs,)
         The fit's error per output, over its span.
@@ -191,10 +194,10 @@ class CoupledModel(JsonFile, SeveralChannels):
             msg = f"'u' and 'y' must have as many rows. Got {us.shape[0]} and {ys.shape[0]}."
             raise ShapeError(msg)
         n, m = us.shape[1], ys.shape[1]
-        if m != n:
+        if m < n:
             msg = (
-                f"CoupledModel pairs each actuator with one output: {n} inputs, {m} outputs "
-                "(more outputs than actuators: fit on the actuators' own axes first)"
+                f"CoupledModel pairs each actuator with one output, its own axis: {n} inputs, "
+                f"{m} outputs (fewer outputs than actuators cannot tell them apart)"
             )
             raise ShapeError(msg)
         templates = self._templates(n)
@@ -203,7 +206,7 @@ class CoupledModel(JsonFile, SeveralChannels):
         # the start: the linear voltage map, each column scaled to its own axis
         a = np.column_stack([us, np.ones(us.shape[0])])
         lin = np.linalg.lstsq(a, ys, rcond=None)[0]  # (n + 1, m)
-        coupling = (lin[:n] / np.diag(lin[:n])[:, None]).T  # C[:, i] = column i of the map
+        coupling = (lin[:n] / np.diag(lin[:n, :n])[:, None]).T  # C[:, i]: column i of the map
         offset = np.zeros(m)
         channels: list[HysteresisModel] = []
         for k in range(self.rounds):
@@ -215,7 +218,12 @@ class CoupledModel(JsonFile, SeveralChannels):
                     "its own signal (inputs that move together are named in the warning)"
                 )
                 raise ParameterError(msg)
-            virtual = np.linalg.solve(coupling, (ys - offset).T).T  # each actuator's own part
+            # each actuator's own part (with more outputs than actuators, in least squares)
+            virtual = (
+                np.linalg.solve(coupling, (ys - offset).T).T
+                if m == n
+                else np.linalg.lstsq(coupling, (ys - offset).T, rcond=None)[0].T
+            )
             channels = [
                 type(tp)(**tp.get_params()).fit(us[:, i], virtual[:, i], t=ts)
                 for i, tp in enumerate(templates)
@@ -349,8 +357,9 @@ class CoupledModel(JsonFile, SeveralChannels):
             offset = np.array(data["offset"], dtype=np.float64)
             nrmse = np.array(data["output_nrmse"], dtype=np.float64)
             n = len(channels)
-            if coupling.shape != (n, n) or offset.shape != (n,) or nrmse.shape != (n,):
-                raise ValueError(f"a coupling for {n} channels must be {n} x {n}")
+            m = coupling.shape[0] if coupling.ndim == 2 else 0
+            if coupling.shape != (m, n) or m < n or offset.shape != (m,) or nrmse.shape != (m,):
+                raise ValueError(f"a coupling for {n} channels must be (outputs >= {n}) x {n}")
         except (KeyError, TypeError, ValueError, PiezohystError) as exc:
             msg = f"{where}: a damaged coupled model ({exc})"
             raise ModelFileError(msg) from None

@@ -404,10 +404,11 @@ def fit_stage_file(
     DataFileError
         The pairs' time axes differ (a column read with another window).
     """
-    if len(inputs) != len(outputs) or len(inputs) < 2:
+    if len(outputs) < len(inputs) or len(inputs) < 2:
         msg = (
-            f"a stage pairs each actuator's voltage with one axis's position: got "
-            f"{len(inputs)} input and {len(outputs)} output columns (two or more of each)"
+            f"a stage pairs each actuator's voltage with one axis's position (its own, in "
+            f"order; further outputs are more readings): got {len(inputs)} input and "
+            f"{len(outputs)} output columns (two or more inputs, at least as many outputs)"
         )
         raise ParameterError(msg)
     if out is not None:

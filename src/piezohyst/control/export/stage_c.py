@@ -118,11 +118,35 @@ def export_stage_c(
         code = export_c(comp, precision=precision, prefix=f"{prefix}_a{k}")
         files[f"{prefix}_a{k}.h"] = code.header
         files[f"{prefix}_a{k}.c"] = code.source
-    inverse = np.linalg.inv(compensator.model.coupling_)
+    inverse = compensator.inverse  # the least squares where more outputs than actuators
     span = compensator.reach[:, 1] - compensator.reach[:, 0]
-    rows = ",\n    ".join("{" + ", ".join(c.literal(x) for x in row) + "}" for row in inverse)
+
+    def matrix(a: np.ndarray) -> str:
+        return ",\n    ".join("{" + ", ".join(c.literal(x) for x in row) + "}" for row in a)
+
+    plane, planes = "", []
+    if m > n:  # a position off what the actuators move the outputs to is out of reach too
+        planes = [
+            f"static const {prefix}_real COUPLING[{m}][{n}] = {{\n    "
+            f"{matrix(compensator.model.coupling_)}\n}};",
+            f"static const {prefix}_real PLANE[{m}] = {{"
+            + ", ".join(c.literal(float(x)) for x in compensator.plane_slack)
+            + "};",
+        ]
+        plane = (
+            f"    for (j = 0; j < {m}; ++j) {{ /* off what the actuators move it to */\n"
+            f"        {prefix}_real r = desired[j] - OFFSET[j];\n"
+            f"        for (i = 0; i < {n}; ++i) {{\n"
+            "            r -= COUPLING[j][i] * own[i];\n"
+            "        }\n"
+            "        if (r < -PLANE[j] || r > PLANE[j]) {\n"
+            "            beyond = 1;\n"
+            "        }\n"
+            "    }\n"
+        )
     tables = "\n".join([
-        f"static const {prefix}_real INVERSE[{n}][{m}] = {{\n    {rows}\n}};",
+        f"static const {prefix}_real INVERSE[{n}][{m}] = {{\n    {matrix(inverse)}\n}};",
+        *planes,
         *(f"static const {prefix}_real {name}[{len(values)}] = {{"
           + ", ".join(c.literal(float(x)) for x in values) + "};"
           for name, values in (("OFFSET", compensator.model.offset_),
@@ -138,7 +162,7 @@ def export_stage_c(
         members="\n".join(f"    {prefix}_a{k}_t a{k};" for k in range(n)),
     )  # fmt: skip
     files[f"{prefix}.c"] = _template("stage.c").substitute(
-        **looks, prefix=prefix, n=n, m=m, tables=tables,
+        **looks, prefix=prefix, n=n, m=m, tables=tables, plane=plane,
         inits="\n".join(f"    {prefix}_a{k}_init(&s->a{k});" for k in range(n)),
         steps="\n".join(f"    command[{k}] = {prefix}_a{k}_step(&s->a{k}, own[{k}]"
                         + (f", own_next[{k}]" if comp.mode.active else "") + ");"

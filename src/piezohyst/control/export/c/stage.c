@@ -24,7 +24,7 @@ void ${prefix}_step(${prefix}_t *s, const ${prefix}_real *desired${next_param}, 
             beyond = 1;
         }
     }
-    if (beyond) {
+${plane}    if (beyond) {
         s->outside++;
     }
 ${next_own}${steps}
