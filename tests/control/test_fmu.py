@@ -214,6 +214,38 @@ def test_a_stage_fmu_in_fmpy_equals_python(tmp_path: Path) -> None:
     slave.close()
 
 
+@pytest.mark.filterwarnings("ignore::piezohyst.errors.LimitWarning")  # off the plane on purpose
+def test_a_stage_read_by_three_sensors_as_an_fmu(tmp_path: Path) -> None:
+    """Two actuators, three outputs (the least squares): three target inputs, two voltage
+    outputs, equal to Python to 1e-9 V, a stretch off what the actuators reach counted."""
+    from piezohyst.control.export import write_stage_fmu
+    from piezohyst.simulation import make_signal, simulate_stage
+
+    three = np.array([[1.0, -0.03], [0.04, 1.0], [0.6, 0.45]])
+    t, a = make_signal("decaying", duration=8.0)
+    _, b = make_signal("triangle", duration=8.0, frequency=1.3)
+    rec = simulate_stage(np.column_stack([np.clip(2 * a, 0.0, 140.0), b]), t, coupling=three,
+                         seed=0)  # fmt: skip
+    model = ph.CoupledModel().fit(rec.voltage, rec.position, t=rec.t)
+    comp = ph.CoupledCompensator(model, v_min=0.0, v_max=140.0, sample_rate=FS, slew_rate=2e4)
+    path = write_stage_fmu(comp, tmp_path / "ph_xy.fmu")
+    own = hosts.sines_in_reach(comp, 800, (3, 2), 0.4, FS)
+    desired = own @ model.coupling_.T + model.offset_
+    desired[300:340, 2] += 0.05 * np.ptp(desired[:, 2])  # off the plane
+    py = comp.process(desired)
+    slave = Slave(path)
+    vr = slave.vr
+    fmu_cmds = np.empty_like(py)
+    for i, row in enumerate(desired):
+        slave.fmu.setReal([vr[f"target_{j}"] for j in range(3)], [float(x) for x in row])
+        slave.fmu.doStep(currentCommunicationPoint=i / FS, communicationStepSize=1 / FS)
+        fmu_cmds[i] = slave.fmu.getReal([vr["voltage_0"], vr["voltage_1"]])
+    # tol: C and numba round apart by an ulp per step, not integrated: issue 41's 1e-9 V
+    np.testing.assert_allclose(fmu_cmds, py, rtol=0, atol=1e-9)
+    assert slave.fmu.getInteger([vr["outside"]]) == [comp.outside_count] == [40]
+    slave.close()
+
+
 def test_a_stage_with_modes_as_an_fmu_takes_the_next_positions(tmp_path: Path) -> None:
     """Issue 57: a stage whose actuators hold a lag and a mode: the FMU takes each axis's
     next position as an input (``next_0`` ...), the preview its modes' inverse needs; fed the
