@@ -236,3 +236,49 @@ def test_a_saved_learner_resumes_exactly(static_stage: ph.CoupledModel, tmp_path
         ph.errors.ModelFileError, match=r"^\S+other.json, actuator 0: made with another model"
     ):
         again.load(tmp_path / "other.json")
+
+
+def test_a_loop_that_steps_the_stage_learns_as_whole_trials_do(
+    static_stage: ph.CoupledModel, tmp_path
+) -> None:
+    """``step`` per sample, the positions read after each command passed with the next call:
+    the same commands, to the bit, as ``command`` and ``learn`` on whole trials (the
+    controllers' one contract); saved mid-trial, the loop resumes where it stood."""
+    kw = {"v_min": 0.0, "v_max": 140.0, "sample_rate": FS, "slew_rate": None}
+    whole = ph.CoupledLearningCompensator(static_stage, **kw)
+    (x0, x1), (y0, y1) = whole.feedforward.reach
+    k = np.arange(200)
+    scan = np.column_stack([x0 + (x1 - x0) * (0.5 + 0.2 * np.sin(2 * np.pi * 10 * k / FS)),
+                            np.full(k.size, 0.5 * (y0 + y1))])  # fmt: skip
+    rng = np.random.default_rng(4)
+    readings = [scan + 3e-7 * rng.standard_normal(scan.shape) for _ in range(3)]
+    sent = []
+    for r in readings:
+        sent.append(whole.command(scan))
+        whole.learn(r)
+    sent.append(whole.command())
+
+    loop = ph.CoupledLearningCompensator(static_stage, **kw)
+    loop.command(scan)  # the scan, once: its commands are the first trial's
+    assert loop.reads
+    got, before = [], None
+    for trial in range(4):
+        rows = []
+        for j in range(k.size):
+            if trial == 1 and j == 50:  # saved mid-trial and resumed by another learner
+                loop.save(tmp_path / "mid.json")
+                loop = ph.CoupledLearningCompensator(static_stage, **kw)
+                loop.load(tmp_path / "mid.json")
+            rows.append(loop.step(scan[j], before))
+            before = readings[trial][j] if trial < 3 else None
+        got.append(np.array(rows))
+    for a, b in zip(got, sent, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert loop.trials == 3
+    fresh = ph.CoupledLearningCompensator(static_stage, **kw)
+    with pytest.raises(ph.ParameterError, match=r"give it once with command\(desired\)"):
+        fresh.step(scan[0])
+    fresh.command(scan)
+    fresh.step(scan[0])
+    with pytest.raises(ph.ParameterError, match="the learner repeats one scan"):
+        fresh.step(scan[1] + 1e-6)

@@ -19,29 +19,23 @@ undo) has nothing to learn: it is held by its feedforward compensator, and
 
 from __future__ import annotations
 
-import json
 import math
-import os
 import warnings
-from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ...errors import LearningWarning, ModelFileError, ParameterError, ShapeError, warn
-from ...io import atomic_write_text
+from ...errors import LearningWarning, ParameterError, ShapeError, warn
 from ...metrics import hysteresis_width
 from ..coupled import CoupledCompensator, _per_actuator
 from .compensator import LearningCompensator
-from .trial import Trial
+from .coupled_saving import FORMAT, CoupledSaving
+from .trial import CoupledTrial, Trial
 
 FloatArray = np.ndarray
 
 __all__ = ["FORMAT", "CoupledLearningCompensator", "CoupledTrial"]
-
-FORMAT = "piezohyst-coupled-learning"
 
 #: The learning options passed on to each actuator's learner (as LearningCompensator takes
 #: them); the limits, the rate and the domain are the stage's
@@ -57,39 +51,6 @@ HELD = 1e-9
 SMALL_SHARE = 0.1
 
 
-@dataclass(frozen=True)
-class CoupledTrial:
-    """What one trial of the stage measured, per output and per actuator.
-
-    Attributes
-    ----------
-    index : int
-        0 for the first trial.
-    error : ndarray, shape (outputs,)
-        RMS of the desired minus the measured position over the trial, as a fraction of
-        what the stage reaches along that output (the same measure for a moving and a held
-        axis); NaN readings left out.
-    width : ndarray, shape (outputs,)
-        Loop width of the measured against the desired position (fraction of the measured
-        span, as :func:`~piezohyst.metrics.hysteresis_width`); NaN for an output whose
-        desired position does not move.
-    actuators : tuple of (Trial or None)
-        Each actuator's learner's own record of the trial (in what that actuator alone
-        moved); None for an actuator held by its feedforward compensator.
-    saturated : ndarray of int, shape (actuators,)
-        Commands of the trial at a voltage limit or moved by the whole slew limit.
-    skipped : bool
-        Nothing learned (every learner's lead-in).
-    """
-
-    index: int
-    error: FloatArray
-    width: FloatArray
-    actuators: tuple[Trial | None, ...]
-    saturated: FloatArray
-    skipped: bool
-
-
 def _relayed(i: int, call: Any) -> Any:
     """Run ``call`` and say its warnings again, each naming actuator ``i``."""
     with warnings.catch_warnings(record=True) as caught:
@@ -100,7 +61,7 @@ def _relayed(i: int, call: Any) -> Any:
     return out
 
 
-class CoupledLearningCompensator:
+class CoupledLearningCompensator(CoupledSaving):
     """Iterative learning control of a repeated scan on a coupled stage.
 
     Each trial is one period of the scan, sent right after the one before:
@@ -219,6 +180,9 @@ class CoupledLearningCompensator:
         self._desired: FloatArray | None = None
         self._pending: FloatArray | None = None
         self._held = np.zeros(len(self.learners), dtype=np.int64)
+        self._cursor = 0  # a stepping loop's place in the trial, and the reading it awaits
+        self._awaiting: int | None = None
+        self._seen = np.empty((0, self.model.coupling_.shape[0]))
 
     # ---------------------------------------------------------------- state
     @property
@@ -343,7 +307,88 @@ class CoupledLearningCompensator:
                 cols.append(_relayed(i, lambda lrn=lrn, i=i, z=zero: lrn.command(own[:, i] - z)))
         u = np.column_stack(cols)
         self._pending = u
+        self._cursor, self._awaiting = 0, None
+        self._seen = np.full((u.shape[0], self.model.coupling_.shape[0]), np.nan)
         return u
+
+    # ------------------------------------------------------- a stepping loop
+    #: True: the trial's readings are learned from (the controllers' one contract)
+    reads = True
+
+    def step(self, desired: ArrayLike, measured: ArrayLike | None = None) -> FloatArray:
+        """One sample of the repeated scan, for a loop that reads after each command.
+
+        Each call sends the next of the trial's commands and keeps ``measured``, the
+        positions read after the command before, as that sample's; the readings of a trial's
+        last sample arrive with the next trial's first call, which learns from the trial
+        (:meth:`learn`) and begins the next. Equal to :meth:`command` and :meth:`learn` on
+        whole trials.
+
+        Parameters
+        ----------
+        desired : array_like, shape (outputs,)
+            The scan's positions at this sample (checked against the scan given to the
+            first :meth:`command`).
+        measured : array_like, shape (outputs,), optional
+            The positions read after the command before; None or NaN: none.
+
+        Returns
+        -------
+        ndarray, shape (actuators,)
+            The commands (V).
+
+        Raises
+        ------
+        ParameterError
+            No scan yet, or ``desired`` is not the scan's row at this point of the trial.
+        """
+        if self._desired is None:
+            msg = (
+                "step() repeats a known scan: give it once with command(desired), whose "
+                "commands are the first trial's, which step() then sends"
+            )
+            raise ParameterError(msg)
+        m = self._desired.shape[1]
+        if self._awaiting is not None:
+            seen = np.full(m, np.nan) if measured is None else np.asarray(measured, np.float64)
+            if seen.shape != (m,):
+                msg = f"'measured' must hold {m} positions. Got shape {seen.shape}."
+                raise ShapeError(msg)
+            self._seen[self._awaiting] = seen
+            self._awaiting = None
+        if self._pending is not None and self._cursor == self._pending.shape[0]:
+            self.learn(self._seen.copy())
+        if self._pending is None:
+            self.command()
+        assert self._pending is not None
+        k, d = self._cursor, self._desired
+        want = np.asarray(desired, dtype=np.float64).reshape(-1)
+        if want.shape != (m,) or not np.all(np.abs(want - d[k]) <= 1e-9 * np.ptp(d, axis=0)):
+            msg = (
+                f"step(): desired {want.tolist()} at sample {k} of the trial, where the scan "
+                f"is {d[k].tolist()}: the learner repeats one scan (reset() for another)"
+            )
+            raise ParameterError(msg)
+        self._cursor, self._awaiting = k + 1, k
+        return np.array(self._pending[k])
+
+    def process(self, desired: ArrayLike, measured: ArrayLike | None = None) -> FloatArray:
+        """:meth:`step` on each row of a block (readings known beforehand: a playback).
+
+        Parameters
+        ----------
+        desired, measured : array_like, shape (N, outputs)
+
+        Returns
+        -------
+        ndarray, shape (N, actuators)
+        """
+        d = np.asarray(desired, dtype=np.float64)
+        r = np.full(d.shape, np.nan) if measured is None else np.asarray(measured, np.float64)
+        if d.ndim != 2 or r.shape != d.shape:
+            msg = f"'desired' and 'measured' must be (samples, outputs), alike. Got {d.shape}."
+            raise ShapeError(msg)
+        return np.array([self.step(a, b) for a, b in zip(d, r, strict=True)])
 
     def learn(self, positions: ArrayLike) -> CoupledTrial:
         """Learn from the stage's positions measured over the trial just sent.
@@ -424,140 +469,3 @@ class CoupledLearningCompensator:
         off = self.model.offset_
         return np.column_stack([off + np.minimum(a, b).sum(axis=1),
                                 off + np.maximum(a, b).sum(axis=1)])  # fmt: skip
-
-    # ------------------------------------------------------------------ files
-    def to_dict(self) -> dict[str, Any]:
-        """The stage's learning state, JSON-ready: the scan, each actuator's learner's own
-        state (:meth:`~piezohyst.LearningCompensator.to_dict`; None for a held actuator),
-        the trial waiting for its readings and the record of the trials.
-
-        Returns
-        -------
-        dict
-        """
-
-        def nulled(a: FloatArray) -> list[float | None]:
-            return [float(v) if math.isfinite(v) else None for v in a]
-
-        return {
-            "format": FORMAT,
-            "version": 1,
-            "desired": None if self._desired is None else self._desired.tolist(),
-            "pending": None if self._pending is None else self._pending.tolist(),
-            "held": self._held.tolist(),
-            "learners": [None if lrn is None else lrn.to_dict() for lrn in self.learners],
-            "history": [
-                {
-                    "error": nulled(t.error),
-                    "width": nulled(t.width),
-                    "saturated": t.saturated.tolist(),
-                    "skipped": t.skipped,
-                }
-                for t in self.history
-            ],
-        }
-
-    def restore(self, data: dict[str, Any], where: str = "coupled learning state") -> None:
-        """Continue from :meth:`to_dict`'s contents, made with the same model and settings:
-        the next :meth:`command` (or :meth:`learn`) is the one the saved learner would have
-        given.
-
-        Parameters
-        ----------
-        data : dict
-        where : str
-            Named in errors (a file's path).
-
-        Raises
-        ------
-        ModelFileError
-            Not a coupled learning state, a damaged one, or one of another model or settings.
-        """
-        if not isinstance(data, dict) or data.get("format") != FORMAT:
-            msg = f"{where}: not a piezohyst coupled learning state"
-            raise ModelFileError(msg)
-        try:
-            self.reset()
-            if data["desired"] is None:
-                return
-            with warnings.catch_warnings():  # said when the run sent them; not again
-                warnings.simplefilter("ignore")
-                self._scan(np.array(data["desired"], dtype=np.float64))
-                saved = data["learners"]
-                if len(saved) != len(self.learners) or any(
-                    (s is None) != (lrn is None)
-                    for s, lrn in zip(saved, self.learners, strict=True)
-                ):
-                    raise ValueError("its actuators are not this scan's")
-                sent = len(data["history"]) + (data["pending"] is not None)
-                for i, lrn in enumerate(self.learners):
-                    if lrn is None:  # a held actuator's compensator: its trials again
-                        comp = self.feedforward.compensators[i]
-                        for _ in range(sent):
-                            comp.process(self._own[:, i].copy())
-                    else:
-                        lrn.restore(saved[i], f"{where}, actuator {i}")
-            self._held = np.array(data["held"], dtype=np.int64)
-            self._pending = (
-                None if data["pending"] is None else np.array(data["pending"], dtype=np.float64)
-            )
-            self.history = [
-                CoupledTrial(
-                    k,
-                    np.array([math.nan if v is None else v for v in t["error"]]),
-                    np.array([math.nan if v is None else v for v in t["width"]]),
-                    tuple(None if lrn is None else lrn.history[k] for lrn in self.learners),
-                    np.array(t["saturated"], dtype=np.int64),
-                    bool(t["skipped"]),
-                )
-                for k, t in enumerate(data["history"])
-            ]
-        except ModelFileError:  # an actuator's own state refused: said as it is
-            self.reset()
-            raise
-        except (KeyError, TypeError, ValueError, IndexError) as exc:
-            self.reset()
-            msg = f"{where}: a damaged coupled learning state ({exc})"
-            raise ModelFileError(msg) from None
-
-    def save(self, path: str | os.PathLike[str]) -> Path:
-        """Write :meth:`to_dict` as JSON, atomically (a reader sees the old file or the new).
-
-        Parameters
-        ----------
-        path : path
-
-        Returns
-        -------
-        Path
-        """
-        return self.save_dict(path, self.to_dict())
-
-    def save_dict(self, path: str | os.PathLike[str], data: dict[str, Any]) -> Path:
-        """Write ``data`` (:meth:`to_dict`'s, perhaps with keys added) as JSON, atomically.
-
-        Parameters
-        ----------
-        path : path
-        data : dict
-
-        Returns
-        -------
-        Path
-        """
-        return atomic_write_text(Path(path), json.dumps(data))
-
-    def load(self, path: str | os.PathLike[str]) -> None:
-        """Continue from a file :meth:`save` wrote (see :meth:`restore`).
-
-        Parameters
-        ----------
-        path : path
-        """
-        p = Path(path)
-        try:
-            data = json.loads(p.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            msg = f"{p}: cannot read the learning state ({exc})"
-            raise ModelFileError(msg) from None
-        self.restore(data, str(p))

@@ -21,6 +21,7 @@ from ..compensator import Compensator
 FloatArray = np.ndarray
 
 __all__ = [
+    "CoupledTrial",
     "Trial",
     "anti_windup",
     "at_limits",
@@ -127,6 +128,39 @@ def count_saturated(u: FloatArray, comp: Compensator) -> int:
     """Commands at a voltage limit or moved by the whole slew limit."""
     top, bottom, slewed = held_by_limits(u, comp)
     return int(np.count_nonzero(top | bottom | slewed))
+
+
+@dataclass(frozen=True)
+class CoupledTrial:
+    """What one trial of the stage measured, per output and per actuator.
+
+    Attributes
+    ----------
+    index : int
+        0 for the first trial.
+    error : ndarray, shape (outputs,)
+        RMS of the desired minus the measured position over the trial, as a fraction of
+        what the stage reaches along that output (the same measure for a moving and a held
+        axis); NaN readings left out.
+    width : ndarray, shape (outputs,)
+        Loop width of the measured against the desired position (fraction of the measured
+        span, as :func:`~piezohyst.metrics.hysteresis_width`); NaN for an output whose
+        desired position does not move.
+    actuators : tuple of (Trial or None)
+        Each actuator's learner's own record of the trial (in what that actuator alone
+        moved); None for an actuator held by its feedforward compensator.
+    saturated : ndarray of int, shape (actuators,)
+        Commands of the trial at a voltage limit or moved by the whole slew limit.
+    skipped : bool
+        Nothing learned (every learner's lead-in).
+    """
+
+    index: int
+    error: FloatArray
+    width: FloatArray
+    actuators: tuple[Trial | None, ...]
+    saturated: FloatArray
+    skipped: bool
 
 
 def limits_said(index: int, u: FloatArray, comp: Compensator, other_law: bool = False) -> str:
