@@ -6,18 +6,15 @@ actuators' learners have learned and resumes from it exactly (each learner's own
 
 from __future__ import annotations
 
-import json
 import math
-import os
 import warnings
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from ...errors import ModelFileError
-from ...io import atomic_write_text
+from .saving import StateFile
 from .trial import CoupledTrial
 
 if TYPE_CHECKING:
@@ -31,7 +28,7 @@ __all__ = ["FORMAT", "CoupledSaving"]
 FORMAT = "piezohyst-coupled-learning"
 
 
-class CoupledSaving:
+class CoupledSaving(StateFile):
     """Writes a coupled stage's learner's state and resumes from it (mixed into the coupled
     learning compensator, whose attributes it reads and sets)."""
 
@@ -98,8 +95,9 @@ class CoupledSaving:
         Parameters
         ----------
         data : dict
+            What :meth:`to_dict` gave (read back from JSON).
         where : str
-            Named in errors (a file's path).
+            What the errors name: the file's path.
 
         Raises
         ------
@@ -162,45 +160,3 @@ class CoupledSaving:
             self.reset()
             msg = f"{where}: a damaged coupled learning state ({exc})"
             raise ModelFileError(msg) from None
-
-    def save(self, path: str | os.PathLike[str]) -> Path:
-        """Write :meth:`to_dict` as JSON, atomically (a reader sees the old file or the new).
-
-        Parameters
-        ----------
-        path : path
-
-        Returns
-        -------
-        Path
-        """
-        return self.save_dict(path, self.to_dict())
-
-    def save_dict(self, path: str | os.PathLike[str], data: dict[str, Any]) -> Path:
-        """Write ``data`` (:meth:`to_dict`'s, perhaps with keys added) as JSON, atomically.
-
-        Parameters
-        ----------
-        path : path
-        data : dict
-
-        Returns
-        -------
-        Path
-        """
-        return atomic_write_text(Path(path), json.dumps(data))
-
-    def load(self, path: str | os.PathLike[str]) -> None:
-        """Continue from a file :meth:`save` wrote (see :meth:`restore`).
-
-        Parameters
-        ----------
-        path : path
-        """
-        p = Path(path)
-        try:
-            data = json.loads(p.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            msg = f"{p}: cannot read the learning state ({exc})"
-            raise ModelFileError(msg) from None
-        self.restore(data, str(p))

@@ -24,7 +24,7 @@ from .trial import Trial
 
 FloatArray = np.ndarray
 
-__all__ = ["FORMAT", "Saving", "digest"]
+__all__ = ["FORMAT", "Saving", "StateFile", "digest"]
 
 FORMAT = "piezohyst-learning"
 
@@ -61,7 +61,62 @@ def _lead_data(lead: tuple[FloatArray, FloatArray] | None) -> list[Any] | None:
     return [seen, np.flatnonzero(lead[1]).tolist()]
 
 
-class Saving:
+class StateFile:
+    """A learner's state as a JSON file, written atomically and read back: ``save``,
+    ``save_dict`` and ``load`` around a ``to_dict`` and a ``restore`` (the single learner's
+    :class:`Saving`, the coupled stage's
+    :class:`~piezohyst.control.learning.coupled_saving.CoupledSaving`)."""
+
+    if TYPE_CHECKING:
+
+        def to_dict(self) -> dict[str, Any]: ...
+
+        def restore(self, data: dict[str, Any], where: str = ...) -> None: ...
+
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write :meth:`to_dict` as JSON, atomically (a reader sees the old file or the new).
+
+        Parameters
+        ----------
+        path : path
+
+        Returns
+        -------
+        Path
+        """
+        return self.save_dict(path, self.to_dict())
+
+    def save_dict(self, path: str | os.PathLike[str], data: dict[str, Any]) -> Path:
+        """Write ``data`` (:meth:`to_dict`'s, perhaps with keys added) as JSON, atomically.
+
+        Parameters
+        ----------
+        path : path
+        data : dict
+
+        Returns
+        -------
+        Path
+        """
+        return atomic_write_text(Path(path), json.dumps(data))
+
+    def load(self, path: str | os.PathLike[str]) -> None:
+        """Continue from a file :meth:`save` wrote (see :meth:`restore`).
+
+        Parameters
+        ----------
+        path : path
+        """
+        p = Path(path)
+        try:
+            data = json.loads(p.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            msg = f"{p}: cannot read the learning state ({exc})"
+            raise ModelFileError(msg) from None
+        self.restore(data, str(p))
+
+
+class Saving(StateFile):
     """Writes a learner's state and resumes from it (mixed into the learning compensator,
     whose attributes it reads and sets)."""
 
@@ -205,45 +260,3 @@ class Saving:
             self.reset()
             msg = f"{where}: a damaged learning state ({exc})"
             raise ModelFileError(msg) from None
-
-    def save(self, path: str | os.PathLike[str]) -> Path:
-        """Write :meth:`to_dict` as JSON, atomically (a reader sees the old file or the new).
-
-        Parameters
-        ----------
-        path : path
-
-        Returns
-        -------
-        Path
-        """
-        return self.save_dict(path, self.to_dict())
-
-    def save_dict(self, path: str | os.PathLike[str], data: dict[str, Any]) -> Path:
-        """Write ``data`` (:meth:`to_dict`'s, perhaps with keys added) as JSON, atomically.
-
-        Parameters
-        ----------
-        path : path
-        data : dict
-
-        Returns
-        -------
-        Path
-        """
-        return atomic_write_text(Path(path), json.dumps(data))
-
-    def load(self, path: str | os.PathLike[str]) -> None:
-        """Continue from a file :meth:`save` wrote (see :meth:`restore`).
-
-        Parameters
-        ----------
-        path : path
-        """
-        p = Path(path)
-        try:
-            data = json.loads(p.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            msg = f"{p}: cannot read the learning state ({exc})"
-            raise ModelFileError(msg) from None
-        self.restore(data, str(p))
