@@ -125,6 +125,19 @@ def run_stage_c(
     return cmds, [int(x) for x in lines[rows.shape[0]].split()]
 
 
+def stage_library(path: Any) -> Any:
+    """The stage's shared library ``ph_xy`` through ctypes, its functions typed (as LabVIEW's
+    or MATLAB's loadlibrary declare them)."""
+    import ctypes
+
+    lib = ctypes.CDLL(str(path))
+    lib.ph_xy_new.restype = ctypes.c_void_p
+    lib.ph_xy_process.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_long]
+    lib.ph_xy_counts.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
+    lib.ph_xy_reset.argtypes = lib.ph_xy_free.argtypes = [ctypes.c_void_p]
+    return lib
+
+
 def stage_harness(ahead: bool = False) -> str:
     """A C main for the stage ``ph_xy``: each stdin line one desired position (and, with
     ``ahead``, the next one: a mode's preview), each stdout line the commands, then the

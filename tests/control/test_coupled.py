@@ -245,7 +245,6 @@ def test_the_stage_as_a_shared_library_equals_python(
 ) -> None:
     """The stage's library through ctypes (as LabVIEW or MATLAB's loadlibrary call it): the
     commands of a raster equal Python's to 1e-9 V, the counts equal, a reset starts again."""
-    import ctypes
 
     model, _ = stage
     comp = ph.CoupledCompensator(model, v_min=0.0, v_max=140.0, sample_rate=FS, slew_rate=2e4)
@@ -257,11 +256,7 @@ def test_the_stage_as_a_shared_library_equals_python(
     desired[700:760, 1] = y1 + 0.3 * (y1 - y0)  # beyond y's reach
     desired[900, 0] = np.nan
     py = comp.process(desired)
-    lib = ctypes.CDLL(str(lib_path))
-    lib.ph_xy_new.restype = ctypes.c_void_p
-    lib.ph_xy_process.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_long]
-    lib.ph_xy_counts.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
-    lib.ph_xy_reset.argtypes = lib.ph_xy_free.argtypes = [ctypes.c_void_p]
+    lib = hosts.stage_library(lib_path)
     handle = lib.ph_xy_new()
     target = np.ascontiguousarray(desired)
     volts = np.empty((k.size, 2))
@@ -339,7 +334,6 @@ def test_more_sensors_than_actuators_in_c_equals_python(
 ) -> None:
     """The stage's library with three outputs and two actuators: the least squares' commands
     equal Python's to 1e-9 V, and a target off the plane counts as out of reach in C too."""
-    import ctypes
 
     comp = ph.CoupledCompensator(three_sensors, v_min=0.0, v_max=140.0, sample_rate=FS,
                                  slew_rate=2e4)  # fmt: skip
@@ -348,11 +342,7 @@ def test_more_sensors_than_actuators_in_c_equals_python(
     desired = own @ three_sensors.coupling_.T + three_sensors.offset_
     desired[400:450, 2] -= 0.05 * np.ptp(desired[:, 2])  # off the plane
     py = comp.process(desired)
-    lib = ctypes.CDLL(str(lib_path))
-    lib.ph_xy_new.restype = ctypes.c_void_p
-    lib.ph_xy_process.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_long]
-    lib.ph_xy_counts.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
-    lib.ph_xy_free.argtypes = [ctypes.c_void_p]
+    lib = hosts.stage_library(lib_path)
     handle = lib.ph_xy_new()
     volts = np.empty((2000, 2))
     target = np.ascontiguousarray(desired)

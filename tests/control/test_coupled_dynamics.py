@@ -177,7 +177,6 @@ def test_the_dynamic_stage_as_a_shared_library_equals_python(
 ) -> None:
     """The library's process takes a block, its own preview as Python's ``process``: a
     block split in two gives Python's two calls (each block's last row extrapolated)."""
-    import ctypes
 
     model, _ = stage
     comp = ph.CoupledCompensator(model, **_limits(model), sample_rate=FS, slew_rate=3e4)
@@ -185,11 +184,7 @@ def test_the_dynamic_stage_as_a_shared_library_equals_python(
     desired = _from_rest(model, hosts.sines_in_reach(comp, 2000, (9, 6), 0.35, FS))
     desired[1800, 1] = np.nan
     py = np.vstack([comp.process(desired[:1200]), comp.process(desired[1200:])])
-    lib = ctypes.CDLL(str(lib_path))
-    lib.ph_xy_new.restype = ctypes.c_void_p
-    lib.ph_xy_process.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_long]
-    lib.ph_xy_counts.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
-    lib.ph_xy_free.argtypes = [ctypes.c_void_p]
+    lib = hosts.stage_library(lib_path)
     handle = lib.ph_xy_new()
     target = np.ascontiguousarray(desired)
     volts = np.empty((desired.shape[0], 2))
