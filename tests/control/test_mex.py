@@ -169,6 +169,34 @@ def test_a_stage_mex_in_octave(tmp_path: Path) -> None:
     assert "matrix of 2 columns" in (tmp_path / "errors.txt").read_text()
 
 
+def test_a_stage_read_by_three_sensors_mex_in_octave(tmp_path: Path) -> None:
+    """Two actuators, three outputs (the least squares): a matrix of three columns in, two
+    out, equal to Python to 1e-9 V, a stretch off what the actuators reach counted."""
+    from piezohyst.control.export import write_stage_mex
+    from piezohyst.simulation import simulate_stage
+
+    three = np.array([[1.0, -0.03], [0.04, 1.0], [0.6, 0.45]])
+    t, a = make_signal("decaying", duration=8.0)
+    _, b = make_signal("triangle", duration=8.0, frequency=1.3)
+    rec = simulate_stage(np.column_stack([np.clip(2 * a, 0.0, 140.0), b]), t, coupling=three,
+                         seed=0)  # fmt: skip
+    model = ph.CoupledModel().fit(rec.voltage, rec.position, t=rec.t)
+    comp = ph.CoupledCompensator(model, v_min=0.0, v_max=140.0, sample_rate=1000.0,
+                                 slew_rate=2e4)  # fmt: skip
+    files = write_stage_mex(comp, tmp_path / "ph_xy_mex.c")
+    d = hosts.sines_in_reach(comp, 1000, (3, 2), 0.4) @ model.coupling_.T + model.offset_
+    d[400:430, 2] += 0.05 * np.ptp(d[:, 2])  # off the plane
+    out = _in_octave(tmp_path, [p.name for p in files if p.suffix == ".c"], d, STAGE_SCRIPT)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ph.LimitWarning)  # off the plane on purpose
+        py = comp.process(d)
+    # tol: C and numba round apart by an ulp per step, not integrated: issue 41's 1e-9 V
+    np.testing.assert_allclose(out[d.shape[0] :], py, rtol=0, atol=1e-9)
+    counts = np.loadtxt(tmp_path / "counts.txt").astype(int).tolist()
+    assert counts[0] == comp.outside_count == comp.off_plane_count == 30
+    assert "matrix of 3 columns" in (tmp_path / "errors.txt").read_text()
+
+
 def test_a_stage_with_modes_mex_in_octave(tmp_path: Path) -> None:
     """Issue 57: a stage whose actuators hold a lag and a mode: the gateway takes a block,
     its own preview (each row's next position the row after it), as Python's ``process``:
