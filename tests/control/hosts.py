@@ -125,6 +125,24 @@ def run_stage_c(
     return cmds, [int(x) for x in lines[rows.shape[0]].split()]
 
 
+#: Two actuators read by three sensors: x, y and a third between them (a tip-tilt mirror's
+#: extra reading point, a stage's redundant capacitive sensor)
+THREE = np.array([[1.0, -0.03], [0.04, 1.0], [0.6, 0.45]])
+
+
+@functools.cache  # fitted once per worker: the tests only read it
+def three_sensor_stage() -> ph.CoupledModel:
+    """The static stage read by :data:`THREE`'s sensors, fitted on x's decaying loops and a
+    1.3 Hz triangle on y."""
+    from piezohyst.simulation import simulate_stage
+
+    t, a = make_signal("decaying", duration=8.0)
+    _, b = make_signal("triangle", duration=8.0, frequency=1.3)
+    rec = simulate_stage(np.column_stack([np.clip(2 * a, 0.0, 140.0), b]), t, coupling=THREE,
+                         seed=0)  # fmt: skip
+    return ph.CoupledModel().fit(rec.voltage, rec.position, t=rec.t)
+
+
 def stage_library(path: Any) -> Any:
     """The stage's shared library ``ph_xy`` through ctypes, its functions typed (as LabVIEW's
     or MATLAB's loadlibrary declare them)."""

@@ -274,18 +274,12 @@ def test_the_stage_as_a_shared_library_equals_python(
     lib.ph_xy_free(handle)
 
 
-#: Two actuators read by three sensors: x, y and a third between them (a tip-tilt mirror's
-#: extra reading point, a stage's redundant capacitive sensor)
-THREE = np.array([[1.0, -0.03], [0.04, 1.0], [0.6, 0.45]])
+THREE = hosts.THREE
 
 
 @pytest.fixture(scope="module")
 def three_sensors() -> ph.CoupledModel:
-    t, a = make_signal("decaying", duration=8.0)
-    _, b = make_signal("triangle", duration=8.0, frequency=1.3)
-    rec = simulate_stage(np.column_stack([np.clip(2 * a, 0.0, 140.0), b]), t, coupling=THREE,
-                         seed=0)  # fmt: skip
-    return ph.CoupledModel().fit(rec.voltage, rec.position, t=rec.t)
+    return hosts.three_sensor_stage()
 
 
 def test_more_sensors_than_actuators_is_a_least_squares(three_sensors: ph.CoupledModel) -> None:

@@ -219,14 +219,8 @@ def test_a_stage_read_by_three_sensors_as_an_fmu(tmp_path: Path) -> None:
     """Two actuators, three outputs (the least squares): three target inputs, two voltage
     outputs, equal to Python to 1e-9 V, a stretch off what the actuators reach counted."""
     from piezohyst.control.export import write_stage_fmu
-    from piezohyst.simulation import make_signal, simulate_stage
 
-    three = np.array([[1.0, -0.03], [0.04, 1.0], [0.6, 0.45]])
-    t, a = make_signal("decaying", duration=8.0)
-    _, b = make_signal("triangle", duration=8.0, frequency=1.3)
-    rec = simulate_stage(np.column_stack([np.clip(2 * a, 0.0, 140.0), b]), t, coupling=three,
-                         seed=0)  # fmt: skip
-    model = ph.CoupledModel().fit(rec.voltage, rec.position, t=rec.t)
+    model = hosts.three_sensor_stage()
     comp = ph.CoupledCompensator(model, v_min=0.0, v_max=140.0, sample_rate=FS, slew_rate=2e4)
     path = write_stage_fmu(comp, tmp_path / "ph_xy.fmu")
     own = hosts.sines_in_reach(comp, 800, (3, 2), 0.4, FS)

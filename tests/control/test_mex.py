@@ -173,14 +173,8 @@ def test_a_stage_read_by_three_sensors_mex_in_octave(tmp_path: Path) -> None:
     """Two actuators, three outputs (the least squares): a matrix of three columns in, two
     out, equal to Python to 1e-9 V, a stretch off what the actuators reach counted."""
     from piezohyst.control.export import write_stage_mex
-    from piezohyst.simulation import simulate_stage
 
-    three = np.array([[1.0, -0.03], [0.04, 1.0], [0.6, 0.45]])
-    t, a = make_signal("decaying", duration=8.0)
-    _, b = make_signal("triangle", duration=8.0, frequency=1.3)
-    rec = simulate_stage(np.column_stack([np.clip(2 * a, 0.0, 140.0), b]), t, coupling=three,
-                         seed=0)  # fmt: skip
-    model = ph.CoupledModel().fit(rec.voltage, rec.position, t=rec.t)
+    model = hosts.three_sensor_stage()
     comp = ph.CoupledCompensator(model, v_min=0.0, v_max=140.0, sample_rate=1000.0,
                                  slew_rate=2e4)  # fmt: skip
     files = write_stage_mex(comp, tmp_path / "ph_xy_mex.c")
