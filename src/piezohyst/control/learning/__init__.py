@@ -10,10 +10,13 @@ module              what it holds
                     inverse and one learner per actuator
 ``coupled_saving``  the coupled learner's state as a file, resumed exactly
 ``design``          the harmonic law's design: :func:`design_learning`, :class:`LearningDesign`
+``harmonics``       each harmonic's response measured between trials, learned through where
+                    the model's would grow the error (a misplaced mode)
 ``jacobian``        the Jacobian law's step through the model's sensitivity
 ``laws``            the laws behind one interface (:class:`~.laws.Law`): ``"harmonic"``,
                     ``"jacobian"``, by name in :data:`~.laws.LAWS`
 ``probe``           the lead-in's probe: small sines whose response measures the loop's timing
+``safety``          when a trial's error says to undo learning (rollbacks), and the warning
 ``saving``          a learner's state as a file, resumed exactly
 ``stepping``        ``step`` and ``process``: the learner in a loop that reads each sample
 ``timing``          the loop's lag measured on the first trial learned from, where the model

@@ -42,9 +42,11 @@ from ...model.calibrations.output_map import OutputMap
 from ..arguments import Domain
 from ..compensator import Compensator
 from .design import LearningDesign, design_learning
+from .harmonics import Harmonics, band
 from .jacobian import MAX_SAMPLES
 from .laws import LAWS, Evidence, Law
 from .probe import Response, probe_bins, probe_signal, response
+from .safety import GAIN_FLOOR, rollback, rolled_said
 from .saving import Saving, digest
 from .stepping import Stepping
 from .timing import TrialLag, timed, trial_lag
@@ -66,13 +68,6 @@ __all__ = ["LearningCompensator", "resolved_law"]
 
 #: the share of a trial's commands at a limit beyond which it is out of the actuator's reach
 SATURATED = 0.02
-#: a trial's error counts as grown beyond this many standard errors of its estimate
-GROWTH_SIGMAS = 3.0
-#: learning stops halving its gain below the first gain over this
-GAIN_FLOOR = 64.0
-#: a trial whose error has crept above the best trial's by this many times the growth
-#: threshold is rolled back to the best: a slow divergence, within the noise each trial
-CREEP = 2.0
 
 
 def _flag(value: object, name: str) -> bool:
@@ -235,38 +230,44 @@ def _lag_measured(
     return None if found is None else replace(found, trial=index)
 
 
-def _rollback(
-    good: tuple[FloatArray, float] | None,
-    best: tuple[FloatArray, float] | None,
-    error: float,
-    floor: float,
-    learned: int,
-) -> tuple[tuple[FloatArray, float], bool] | None:
-    """Where a trial's error says to roll back to: the last good trial (the error grew
-    beyond :data:`GROWTH_SIGMAS` standard errors over it), or the best trial (it crept
-    beyond :data:`CREEP` times that over the best since, by less each trial: a mode the
-    model misplaces, learned a little wrong every trial); None: learn from it. The flag
-    says which."""
-    step = GROWTH_SIGMAS / math.sqrt(learned)
-    if good is not None and error > max(good[1], floor) * (1 + step):
-        return good, False
-    if best is not None and error > max(best[1], floor) * (1 + CREEP * step):
-        return best, True
-    return None
+def _update(
+    learner: LearningCompensator, e: FloatArray, sensor: bool, u: FloatArray, index: int
+) -> FloatArray:
+    """The law's next correction from a good trial's error ``e``, each harmonic through the
+    model's response or, where that made the error grow, the measured one (said once)."""
+    design, s, gain = learner.design, learner.settings, learner._gain
+    assert design is not None
+    law = learner._law()
+    said = learner._harmonics.said_once(index, learner.sample_rate)
+    if said is not None:
+        warn(said, LearningWarning)
+    steer = learner._harmonics.steering(law.own(design))
+    return law.update(
+        Evidence(design, gain, learner._correction, e, sensor, s.get("noise_gate", 0.0), u,
+                 _responder(learner), s["v_max"] - s["v_min"], steer)
+    )  # fmt: skip
 
 
-def _rolled(index: int, was: float, error: float, gain: float, crept: bool) -> str:
-    """The warning of a trial rolled back (:func:`_rollback`)."""
-    if crept:
-        return (
-            f"trial {index}: the error crept up from {was:.3%} (the best trial's) to "
-            f"{error:.3%} over the trials since: their updates are undone (the best trial's "
-            f"correction is sent again) and the learning gain halved to {gain:.3g}"
+def _described(learner: LearningCompensator) -> str:
+    """:meth:`LearningCompensator.describe`'s paragraph."""
+    design = learner.design
+    if design is None:
+        return f"law {learner.law!r}: chosen with the trajectory (the first command())"
+    if learner.timing is not None and learner._first:
+        return f"{learner.timing.describe()}; the law is chosen from the next trial"
+    law = learner._law()
+    said = law.said(design)
+    if learner.timing is not None:
+        said = f"{learner.timing.describe()}; {said}"
+    bins = learner._harmonics.steered()
+    if bins.size:
+        step = learner.sample_rate / design.samples
+        said += (
+            f"; {bins.size} harmonic{'s' if bins.size > 1 else ''} ({bins[0] * step:.4g}-"
+            f"{bins[-1] * step:.4g} Hz) learned through the loop's response measured between "
+            "trials, where the model's made the error grow"
         )
-    return (
-        f"trial {index}: the error grew from {was:.3%} to {error:.3%}: the last update is "
-        f"undone (its correction is sent again) and the learning gain halved to {gain:.3g}"
-    )
+    return said
 
 
 def _responder(learner: LearningCompensator) -> Any:
@@ -529,6 +530,7 @@ class LearningCompensator(Saving, Stepping):
         self._cursor = 0  # step(): the next sample of the pending trial
         self._seen = np.zeros(0)  # step(): the pending trial's readings so far
         self._awaiting: int | None = None  # step(): the sample whose reading comes next
+        self._harmonics = Harmonics()  # each harmonic's response, measured between trials
 
     @property
     def law(self) -> str:
@@ -548,13 +550,7 @@ class LearningCompensator(Saving, Stepping):
         -------
         str
         """
-        if self.design is None:
-            return f"law {self.law!r}: chosen with the trajectory (the first command())"
-        if self.timing is None:
-            return self._law().said(self.design)
-        if self._first:
-            return f"{self.timing.describe()}; the law is chosen from the next trial"
-        return f"{self.timing.describe()}; {self._law().said(self.design)}"
+        return _described(self)
 
     @property
     def trials(self) -> int:
@@ -602,6 +598,7 @@ class LearningCompensator(Saving, Stepping):
             self._desired = d.copy()
             self._correction = np.zeros(d.size)
             self._previous = np.zeros(d.size)
+            self._harmonics = Harmonics(d.size)
             self.design = design_learning(self._model, **_design_args(self.settings, d.size))
             if self.settings["probe"] and self.settings["lead_in"]:
                 self._bins, self._probe = _lead_probe(d)
@@ -736,6 +733,7 @@ class LearningCompensator(Saving, Stepping):
         error = float(np.sqrt(np.mean(e[ok] ** 2))) / span
         width = hysteresis_width(d[ok], measured[ok]) if learned > 2 else math.nan
         e = periodic_fill(e, ok)
+        filled = e
         g, as_displacement = _desired_gain(self.settings, self.output_map)
         flipped = as_displacement and g is not None and g < 0
         e = anti_windup(e, u, self.compensator, -1.0 if flipped else 1.0)
@@ -754,26 +752,25 @@ class LearningCompensator(Saving, Stepping):
             self.design = _first_design(self, measured, ok, e, index)
             self._lead, self._gain, self._first = None, self.design.gain, False
         assert self.design is not None
+        q = band(self.design.q())
+        self._harmonics.observe(u, filled, self.design.noise, _responder(self), q)
         floor = self.design.noise * math.sqrt(1.0 + self.design.noise_gain**2) / span
-        back = None if self._resend else _rollback(self._good, self._best, error, floor, learned)
+        back = None if self._resend else rollback(self._good, self._best, error, floor, learned)
         if back is not None:
             (kept, was), crept = back
             rolled = True
             self._gain = max(self._gain / 2, self.design.gain / GAIN_FLOOR)
-            warn(_rolled(index, was, error, self._gain, crept), LearningWarning)
+            warn(rolled_said(index, was, error, self._gain, crept), LearningWarning)
             self._correction, self._resend = kept.copy(), True
         else:  # a good trial, or a correction rolled back to measured again: learn from it
             self._good = (self._correction.copy(), error)
             if self._best is None or self._resend or error < self._best[1]:
                 self._best = self._good
             self._resend = False
-            assert self.design is not None
-            s = self.settings
-            self._correction = self._law().update(
-                Evidence(self.design, self._gain, self._correction, e, sensor,
-                         s.get("noise_gate", 0.0), u, _responder(self), s["v_max"] - s["v_min"])
-            )  # fmt: skip
-        trial = Trial(index, error, width, learned, self._gain, rolled, False, bound, saturated)
+            self._correction = _update(self, e, sensor, u, index)
+        steered = int(self._harmonics.steered().size)
+        trial = Trial(index, error, width, learned, self._gain, rolled, False, bound, saturated,
+                      steered)  # fmt: skip
         self._close(trial)
         return trial
 

@@ -29,8 +29,9 @@ from numpy.typing import ArrayLike
 from ...errors import LearningWarning, ParameterError, ShapeError, warn
 from ...metrics import hysteresis_width
 from ..coupled import CoupledCompensator, _per_actuator
-from .compensator import LearningCompensator
+from .compensator import LearningCompensator, _responder
 from .coupled_saving import FORMAT, CoupledSaving
+from .harmonics import told_the_others
 from .trial import CoupledTrial, Trial
 
 FloatArray = np.ndarray
@@ -49,6 +50,18 @@ HELD = 1e-9
 #: they sink below a sensor's noise (on the simulated stage a 1.6 % share's probe "measured"
 #: a 20 ms delay)
 SMALL_SHARE = 0.1
+
+
+def _crosstalk(learners: list[LearningCompensator | None]) -> None:
+    """Each learner told the others' change at each harmonic since their trial before (their
+    model's), which reaches its readings through the coupling's error
+    (:func:`~.harmonics.told_the_others`)."""
+    live, changes = [], []
+    for lrn in learners:
+        if lrn is not None and lrn._pending is not None:
+            live.append(lrn._harmonics)
+            changes.append(live[-1].change(lrn._pending, _responder(lrn)))
+    told_the_others(live, changes)
 
 
 def _relayed(i: int, call: Any) -> Any:
@@ -422,6 +435,7 @@ class CoupledLearningCompensator(CoupledSaving):
             msg = f"'positions' must be {d.shape} (one row per command). Got shape {y.shape}."
             raise ShapeError(msg)
         moved = (y - self.model.offset_) @ self.feedforward.inverse.T
+        _crosstalk(self.learners)  # before they learn
         records: list[Trial | None] = []
         for i, lrn in enumerate(self.learners):
             if lrn is None:

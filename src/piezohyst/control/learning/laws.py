@@ -63,6 +63,9 @@ class Evidence:
         Commands -> the model's output in the desired's units, the trial run after itself.
     volt_span : float
         ``v_max - v_min`` (V).
+    steer : complex or ndarray of complex
+        The factor each harmonic of the error is learned through (1; the measured
+        response's inverse where the model's would grow the error: :mod:`.harmonics`).
     """
 
     design: LearningDesign
@@ -74,6 +77,7 @@ class Evidence:
     commands: FloatArray
     respond: Callable[[FloatArray], FloatArray]
     volt_span: float
+    steer: Any = 1.0
 
 
 class Law(Protocol):
@@ -94,6 +98,10 @@ class Law(Protocol):
 
     def said(self, design: LearningDesign) -> str:
         """One sentence on the law and its setting."""
+        ...
+
+    def own(self, design: LearningDesign) -> Any:
+        """The law's own factor at each harmonic, beside the model's (:mod:`.harmonics`)."""
         ...
 
     def check_lag(self, lag: float) -> None:
@@ -142,13 +150,16 @@ class HarmonicLaw:
         return previous, correction + probe, None
 
     def update(self, ev: Evidence) -> FloatArray:
-        old, err = np.fft.rfft(ev.correction), gated(ev.design, ev.error, ev.gate)
+        old, err = np.fft.rfft(ev.correction), gated(ev.design, ev.error, ev.gate) * ev.steer
         spectrum = old + ev.gain * ev.design.l() * err
         spectrum[0] = old[0] + (ev.gain * err[0] if ev.sensor else 0.0)
         return np.fft.irfft(ev.design.q() * spectrum, n=ev.correction.size)
 
     def said(self, design: LearningDesign) -> str:
         return design.describe()
+
+    def own(self, design: LearningDesign) -> Any:
+        return design.l()
 
     def check_lag(self, lag: float) -> None:
         return None
@@ -170,7 +181,7 @@ class JacobianLaw:
 
     def update(self, ev: Evidence) -> FloatArray:
         e = ev.error
-        err = gated(ev.design, e, ev.gate)
+        err = gated(ev.design, e, ev.gate) * ev.steer
         offset = float(err[0].real) / e.size if ev.sensor else 0.0  # a sensor's: as a shift
         err[0] = 0.0
         ef = np.fft.irfft(ev.design.q() * err, n=e.size)
@@ -186,6 +197,9 @@ class JacobianLaw:
             "(the harmonic law's design; its condition does not bound this law: a trial whose "
             "error grows is undone and the gain halved)"
         )
+
+    def own(self, design: LearningDesign) -> Any:
+        return 1.0
 
     def check_lag(self, lag: float) -> None:
         if lag > 0:

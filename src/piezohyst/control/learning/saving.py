@@ -19,6 +19,7 @@ import numpy as np
 from ...errors import ModelFileError
 from ...io import atomic_write_text
 from .design import LearningDesign
+from .harmonics import Harmonics
 from .timing import TrialLag
 from .trial import Trial
 
@@ -137,6 +138,7 @@ class Saving(StateFile):
     _cursor: int
     _seen: FloatArray
     _awaiting: int | None
+    _harmonics: Harmonics
     design: LearningDesign | None
     timing: TrialLag | None
     history: list[Trial]
@@ -183,6 +185,7 @@ class Saving(StateFile):
             "timing": None if self.timing is None else asdict(self.timing),
             "history": [asdict(t) for t in self.history],
             "stepping": self._stepping(),
+            "harmonics": self._harmonics.to_dict(),
         }
 
     def _stepping(self) -> dict[str, Any] | None:
@@ -245,6 +248,7 @@ class Saving(StateFile):
             if data.get("timing") is not None:  # the lag measured (not in states before it)
                 self._time(TrialLag(**data["timing"]))
             self.history = [Trial(**t) for t in data["history"]]
+            self._harmonics = Harmonics.from_dict(data.get("harmonics"), n)  # None: older
             if self._pending is not None:  # a loop may step the pending trial from its start
                 self._seen = np.full(self._pending.size, np.nan)
             stepping = data.get("stepping")  # a state saved mid-trial by a stepping loop

@@ -68,6 +68,9 @@ class Trial:
     saturated : int
         Commands at a voltage limit or moved by the whole slew limit (beyond 2 %
         of the trial, a ``LearningWarning``: the trajectory is out of reach).
+    steered : int
+        Harmonics learned through the loop's response measured between trials, where the
+        model's would grow the error (:mod:`~piezohyst.control.learning.harmonics`).
     """
 
     index: int
@@ -79,6 +82,7 @@ class Trial:
     skipped: bool
     leakage_bound: float
     saturated: int = 0
+    steered: int = 0
 
 
 def periodic_fill(values: FloatArray, ok: FloatArray) -> FloatArray:
