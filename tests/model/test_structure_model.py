@@ -225,8 +225,9 @@ def test_predict_holds_to_the_fit_rate(looped) -> None:  # type: ignore[no-untyp
 
 def test_the_adjoint_gradient_equals_finite_differences() -> None:
     """The output-error refinement's gradient (reverse mode through the play operators)
-    against central differences of the same loss: every matrix and the stroke map, from a
-    given start (the operators' states 0, whatever the stroke map)."""
+    against central differences of the same loss: every matrix and the stroke map, and the
+    dynamics a drive's level schedules, from a given start (the operators' states 0,
+    whatever the stroke map)."""
     from piezohyst._kernels import structure as S
 
     rng = np.random.default_rng(6)
@@ -240,21 +241,24 @@ def test_the_adjoint_gradient_equals_finite_differences() -> None:
         rng.standard_normal((length, ni)),
         rng.standard_normal((length, m)),
     )
+    a1, b1 = 0.2 * rng.standard_normal((n, n)), rng.standard_normal((n, ni))
+    e1, rho = 0.2 * rng.standard_normal((n, na * nk)), 0.5 * rng.standard_normal(length)
 
     def run(p: list[np.ndarray]) -> tuple[float, list[np.ndarray]]:
-        aa, b, c, d, ee, tt = (np.ascontiguousarray(x) for x in p)
+        aa, b, c, d, ee, tt, aa1, bb1, ee1 = (np.ascontiguousarray(x) for x in p)
         x, z = np.zeros(n), np.zeros((na, nk))
         out, xs, ps = np.empty((length, m)), np.empty((length, n)), np.empty((length, na * nk))
         moved = np.zeros((length, na * nk), dtype=np.bool_)
-        S.structure_trace(aa, b, c, d, ee, tt, r, off, x, z, v, out, xs, ps, moved)
-        ga, gb, gc, gd, ge, gt = (np.zeros_like(q) for q in (aa, b, c, d, ee, tt))
+        sched = (rho, aa1, bb1, ee1)
+        S.structure_trace(aa, b, c, d, ee, tt, r, off, *sched, x, z, v, out, xs, ps, moved)
+        grads = [np.zeros_like(q) for q in (aa, b, c, d, ee, tt, aa1, bb1, ee1)]
+        ga, gb, gc, gd, ge, gt, ga1, gb1, ge1 = grads
         gy = np.ascontiguousarray(out - y)
-        S.structure_adjoint(
-            aa, c, ee, tt, nk, xs, ps, moved, v, out, gy, ga, gb, gc, gd, ge, np.zeros(m), gt
-        )
-        return 0.5 * float(np.sum((out - y) ** 2)), [ga, gb, gc, gd, ge, gt]
+        S.structure_adjoint(aa, c, ee, tt, nk, rho, aa1, ee1, xs, ps, moved, v, out, gy, ga, gb,
+                            gc, gd, ge, np.zeros(m), gt, ga1, gb1, ge1)  # fmt: skip
+        return 0.5 * float(np.sum((out - y) ** 2)), grads
 
-    params = [a, *mats, e, t]
+    params = [a, *mats, e, t, a1, b1, e1]
     _, grads = run(params)
     for k, p in enumerate(params):
         for idx in [tuple(rng.integers(0, s) for s in p.shape) for _ in range(3)]:
@@ -429,3 +433,81 @@ def test_the_stuck_penalty_s_gradient_equals_finite_differences() -> None:
         # tol: central differences' truncation (h^2 times the third derivative) and the
         # penalty's rounding over 2h (1e-16 * 4.5 / 1e-6): 1e-6 relative
         assert (up - down) / (2 * h) == pytest.approx(np.sum(grads[k] * step), rel=1e-6)
+
+
+def test_the_scheduled_kernel_equals_a_plain_loop() -> None:
+    """``x+ = a x + b v + e p + rho (a1 x + b1 v + e1 p)`` sample by sample, written out with
+    NumPy, against the kernel over generated structures and levels."""
+
+    @settings(max_examples=examples(15), deadline=None)
+    @given(st.integers(0, 2**32 - 1), st.integers(1, 40))
+    def check(seed: int, n: int) -> None:
+        rng = np.random.default_rng(seed)
+        a, (b, c, d, e, t, r, off) = random_structure(rng)
+        a1 = 0.3 * rng.standard_normal(a.shape)
+        b1, e1 = rng.standard_normal(b.shape), rng.standard_normal(e.shape)
+        v, rho = rng.standard_normal((n, b.shape[1])), 0.5 * rng.standard_normal(n)
+        x, z = np.zeros(a.shape[0]), np.repeat((t @ off)[:, None], r.shape[1], axis=1)
+        want = []
+        for k in range(n):
+            y = c @ x + d @ v[k] + off
+            s = t @ y
+            z = np.clip(z, s[:, None] - r, s[:, None] + r)
+            p = (z - s[:, None]).ravel()
+            x = a @ x + b @ v[k] + e @ p + rho[k] * (a1 @ x + b1 @ v[k] + e1 @ p)
+            want.append(y)
+        from piezohyst._kernels import structure as S
+
+        got = np.empty((n, c.shape[0]))
+        S.structure_run(a, b, c, d, e, t, r, off, rho, a1, b1, e1, np.zeros(a.shape[0]),
+                        np.repeat((t @ off)[:, None], r.shape[1], axis=1), v, got)  # fmt: skip
+        # tol: a few roundings per sample through a contracting state (|a| < 1 on average,
+        # the schedule adding at most half of a1's)
+        np.testing.assert_allclose(got, np.array(want), rtol=1e-9, atol=1e-9)
+
+    check()
+
+
+def _levelled() -> sf.Structure:
+    """:func:`_plant` whose poles grow 8 % per unit of the drive's level over 1.4 (its
+    stiffness falls the harder it is driven)."""
+    p = _plant(outputs=2)
+    sched = sf.Schedule(0.08 * p.a, np.zeros_like(p.b), np.zeros_like(p.e), 1.4, 50.0, -1.0,
+                        np.inf)  # fmt: skip
+    return sf.Structure(p.a, p.b, p.c, p.d, p.e, p.t, p.r, p.off, sched)
+
+
+def test_dynamics_that_follow_the_drive_level_are_scheduled() -> None:
+    """Records at three levels of a structure whose modes move with the level: one linear
+    model for all of them leaves 9-11 % at levels between and beside them; scheduled by the
+    level (the inputs' running RMS), 0.5-0.8 % (measured), said in ``describe``. Records at
+    one level are not scheduled."""
+    rng = np.random.default_rng(4)
+    plant = _levelled()
+    u = [_periodic(rng, 512, level) for level in (0.5, 1.0, 1.5) for _ in range(4)]
+    y = [plant.run(v, periodic=True) for v in u]
+    kw = {"sample_rate": FS, "initial_state": "periodic"}
+    fitted = {s: ph.StructureModel(order=4, operators=0, scheduled=s).fit(u, y, **kw)
+              for s in (True, False)}  # fmt: skip
+    for level in (0.75, 1.25):
+        v = _periodic(rng, 512, level)
+        want = plant.run(v, periodic=True)
+        err = {s: float(np.mean(np.sqrt(np.mean((m.predict(v, state="periodic") - want) ** 2,
+                                                axis=0)) / np.std(want, axis=0)))
+               for s, m in fitted.items()}  # fmt: skip
+        # measured: 0.54 / 0.82 % scheduled against 9.4 / 11.4 % (the level's reach)
+        assert err[True] < 0.015 and err[False] > 0.05
+    said = fitted[True].describe()
+    assert "scheduled by the drive's level (the inputs' RMS over 0.1 s" in said
+    assert fitted[True].structure_.schedule is not None
+    assert fitted[False].structure_.schedule is None and "scheduled" not in fitted[False].describe()
+    one = [_periodic(rng, 512, 1.0) for _ in range(4)]
+    m1 = ph.StructureModel(order=4, operators=0).fit(
+        one, [plant.run(v, periodic=True) for v in one], **kw
+    )
+    assert m1.schedule_refinement_ is None and m1.structure_.schedule is None
+    # the compensator inverts the structure at a level (default the records' mean), said bad
+    comp = ph.StructureCompensator(fitted[True], v_min=-10.0, v_max=10.0, level=1.0)
+    assert comp.preview > 0
+    with pytest.raises(ph.errors.ParameterError, match="'level' must be a positive RMS"):
+        ph.StructureCompensator(fitted[True], v_min=-10.0, v_max=10.0, level=-1.0)

@@ -43,6 +43,31 @@ def advance(a, b, e, x, v, k, p, xn):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, fastmath=FASTMATH, inline="always")
+def advance_scheduled(a, b, e, a1, b1, e1, rk, x, v, k, p, xn):  # type: ignore[no-untyped-def]
+    """``x <- a x + b v[k] + e p + rk (a1 x + b1 v[k] + e1 p)``: the dynamics at the drive's
+    level ``rk`` (``a1`` with no rows: :func:`advance`)."""
+    if a1.shape[0] == 0:
+        advance(a, b, e, x, v, k, p, xn)
+        return
+    n = x.shape[0]
+    for s in range(n):
+        acc = 0.0
+        acc1 = 0.0
+        for u in range(n):
+            acc += a[s, u] * x[u]
+            acc1 += a1[s, u] * x[u]
+        for i in range(v.shape[1]):
+            acc += b[s, i] * v[k, i]
+            acc1 += b1[s, i] * v[k, i]
+        for f in range(p.shape[0]):
+            acc += e[s, f] * p[f]
+            acc1 += e1[s, f] * p[f]
+        xn[s] = acc + rk * acc1
+    for s in range(n):
+        x[s] = xn[s]
+
+
+@njit(cache=True, fastmath=FASTMATH, inline="always")
 def stroke(t, out, k, q):  # type: ignore[no-untyped-def]
     """Actuator ``q``'s stroke ``t[q] . out[k]``."""
     sq = 0.0
@@ -65,16 +90,17 @@ def lags(t, r, out, k, z, p):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def structure_run(a, b, c, d, e, t, r, off, x, z, v, out):  # type: ignore[no-untyped-def]
+def structure_run(a, b, c, d, e, t, r, off, rho, a1, b1, e1, x, z, v, out):  # type: ignore[no-untyped-def]
     """Run the structure over the inputs ``v`` (N, inputs), sample by sample::
 
         out[k] = c x[k] + d v[k] + off
         s[k]   = t out[k]                    (each actuator's stroke, from the outputs)
         p[k]   = play_r(s[k]) - s[k]         (each actuator's play operators, their lag)
-        x[k+1] = a x[k] + b v[k] + e p[k]
+        x[k+1] = a x[k] + b v[k] + e p[k] + rho[k] (a1 x[k] + b1 v[k] + e1 p[k])
 
     a (n, n), b (n, inputs), c (outputs, n), d (outputs, inputs), e (n, actuators * K),
-    t (actuators, outputs), r (actuators, K) the operators' widths, off (outputs,);
+    t (actuators, outputs), r (actuators, K) the operators' widths, off (outputs,); rho (N,)
+    the drive's level and a1, b1, e1 the dynamics it schedules (a1 with no rows: none);
     x (n,) and z (actuators, K), the state and the operators' states, updated in place;
     out (N, outputs), written. The operators read this sample's output and act on the next
     state: no algebraic loop.
@@ -86,11 +112,11 @@ def structure_run(a, b, c, d, e, t, r, off, x, z, v, out):  # type: ignore[no-un
     for k in range(v.shape[0]):
         read_out(c, d, off, x, v, k, out)
         lags(t, r, out, k, z, p)
-        advance(a, b, e, x, v, k, p, xn)
+        advance_scheduled(a, b, e, a1, b1, e1, rho[k] if rho.size else 0.0, x, v, k, p, xn)
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def structure_trace(a, b, c, d, e, t, r, off, x, z, v, out, xs, ps, moved):  # type: ignore[no-untyped-def]
+def structure_trace(a, b, c, d, e, t, r, off, rho, a1, b1, e1, x, z, v, out, xs, ps, moved):  # type: ignore[no-untyped-def]
     """:func:`structure_run` keeping what its adjoint needs: the state before each sample
     ``xs`` (N, n), the operators' lags ``ps`` (N, actuators * K) and whether each operator
     moved ``moved`` (N, actuators * K), all written."""
@@ -109,16 +135,41 @@ def structure_trace(a, b, c, d, e, t, r, off, x, z, v, out, xs, ps, moved):  # t
                 z[q, j] = zj
                 moved[k, q * nk + j] = zj != old
                 ps[k, q * nk + j] = zj - sq
-        advance(a, b, e, x, v, k, ps[k], xn)
+        advance_scheduled(a, b, e, a1, b1, e1, rho[k] if rho.size else 0.0, x, v, k, ps[k], xn)
 
 
 @njit(cache=True, fastmath=FASTMATH)
-def structure_adjoint(a, c, e, t, nk, xs, ps, moved, v, out, gy, ga, gb, gc, gd, ge, goff, gt):  # type: ignore[no-untyped-def]
+def structure_adjoint(  # type: ignore[no-untyped-def]
+    a,
+    c,
+    e,
+    t,
+    nk,
+    rho,
+    a1,
+    e1,
+    xs,
+    ps,
+    moved,
+    v,
+    out,
+    gy,
+    ga,
+    gb,
+    gc,
+    gd,
+    ge,
+    goff,
+    gt,
+    ga1,
+    gb1,
+    ge1,
+):
     """The gradient of a loss through a traced run (its outputs ``out``): given ``gy``
     (N, outputs), the loss's derivative by each output, accumulate its derivatives by ``a``,
-    ``b``, ``c``, ``d``, ``e``, ``off`` and the stroke map ``t`` into ``ga`` ... ``goff``,
-    ``gt`` (reverse mode over the samples; the run's start taken as given). ``nk`` operators
-    per actuator."""
+    ``b``, ``c``, ``d``, ``e``, ``off``, the stroke map ``t`` and the scheduled ``a1``,
+    ``b1``, ``e1`` (none where ``a1`` has no rows) into ``ga`` ... ``ge1`` (reverse mode over
+    the samples; the run's start taken as given). ``nk`` operators per actuator."""
     n = a.shape[0]
     m = c.shape[0]
     ni = v.shape[1]
@@ -130,7 +181,9 @@ def structure_adjoint(a, c, e, t, nk, xs, ps, moved, v, out, gy, ga, gb, gc, gd,
     gp = np.empty(nf)
     gs = np.empty(na)
     gyk = np.empty(m)
+    sched = a1.shape[0] > 0
     for k in range(v.shape[0] - 1, -1, -1):
+        rk = rho[k] if sched else 0.0
         for s in range(n):
             ls = lam[s]
             for u in range(n):
@@ -139,10 +192,20 @@ def structure_adjoint(a, c, e, t, nk, xs, ps, moved, v, out, gy, ga, gb, gc, gd,
                 gb[s, i] += ls * v[k, i]
             for f in range(nf):
                 ge[s, f] += ls * ps[k, f]
+            if sched:
+                lr = ls * rk
+                for u in range(n):
+                    ga1[s, u] += lr * xs[k, u]
+                for i in range(ni):
+                    gb1[s, i] += lr * v[k, i]
+                for f in range(nf):
+                    ge1[s, f] += lr * ps[k, f]
         for f in range(nf):
             acc = 0.0
             for s in range(n):
                 acc += e[s, f] * lam[s]
+                if sched:
+                    acc += rk * e1[s, f] * lam[s]
             gp[f] = acc
         for q in range(na):
             gs[q] = 0.0
@@ -172,6 +235,8 @@ def structure_adjoint(a, c, e, t, nk, xs, ps, moved, v, out, gy, ga, gb, gc, gd,
             acc = 0.0
             for u in range(n):
                 acc += a[u, s] * lam[u]
+                if sched:
+                    acc += rk * a1[u, s] * lam[u]
             for o in range(m):
                 acc += c[o, s] * gyk[o]
             lam_new[s] = acc

@@ -145,6 +145,11 @@ class StructureCompensator:
         Each actuator's largest command change (V/s); None: no slew limit.
     effort : float, default :data:`EFFORT`
         The commands' weight against the tracking error, each relative to its span.
+    level : float, optional
+        Where the model's dynamics are scheduled by the drive's level
+        (``StructureModel(scheduled=True)``): the commands' RMS (V, over all actuators) the
+        structure is inverted at; default the identification records' mean. Held within the
+        levels the records held; ignored by a model without a schedule.
 
     Attributes
     ----------
@@ -193,6 +198,7 @@ class StructureCompensator:
         v_max: float | ArrayLike,
         slew_rate: float | ArrayLike | None = None,
         effort: float = EFFORT,
+        level: float | None = None,
     ) -> None:
         fitted = isinstance(model, StructureModel) and hasattr(model, "structure_")
         if not fitted:
@@ -219,7 +225,12 @@ class StructureCompensator:
             step = per_s / rate
         self.model, self.v_min, self.v_max, self.sample_rate = model, lo, hi, rate
         self.max_step, self.effort = step, float(effort)
-        self._st = model.structure_
+        sc = model.structure_.schedule
+        if level is not None and not (isinstance(level, (int, float)) and level > 0):
+            msg = f"'level' must be a positive RMS (V). Got {level!r}."
+            raise ParameterError(msg)
+        rho = 0.0 if sc is None or level is None else float(level) / sc.ref - 1.0
+        self._st = model.structure_.at(rho)  # the structure at that level (itself: unscheduled)
         self._g = _gains(self._st, lo, hi, self.effort)
         self.preview = int(self._g["ahead"].shape[0])
         self.static_inverse = np.asarray(self._g["static"][0])
@@ -287,8 +298,10 @@ class StructureCompensator:
         settle = max(4 * self.preview, 1000)
         ramp = np.vstack([np.linspace(0.0, 1.0, settle)[:, None] * v, np.tile(v, (settle, 1))])
         out = np.empty((ramp.shape[0], st.c.shape[0]))
-        S.structure_run(st.a, st.b, st.c, st.d, st.e, st.t, st.r, st.off, x, z,
-                        np.ascontiguousarray(ramp), out)  # fmt: skip
+        ramp = np.ascontiguousarray(ramp)
+        rho, a1, b1, e1 = st.scheduled(ramp, False)  # none: the structure at one level
+        S.structure_run(st.a, st.b, st.c, st.d, st.e, st.t, st.r, st.off, rho, a1, b1, e1, x, z,
+                        ramp, out)  # fmt: skip
         return x, z
 
     def _voltage_at(self, position: ArrayLike) -> FloatArray:

@@ -135,6 +135,9 @@ class StructureModel(JsonFile, SeveralChannels):
     refinement_ : Refinement or None
         The output-error refinement's weighted squared error before and after, its
         iterations, and whether it was kept (None: not asked).
+    schedule_refinement_ : Refinement or None
+        The scheduled refinement (None: not tried, the records at one level); the schedule
+        itself is ``structure_.schedule`` (None: not kept).
     unstable_stuck_ : float or None
         Where the operators predicted better but their loop, with every operator stuck (a
         small drive), had a pole of this modulus (>= 1): the model is the linear dynamics
@@ -168,12 +171,14 @@ class StructureModel(JsonFile, SeveralChannels):
         widths: tuple[float, float] = (0.003, 0.3),
         max_order: int = 64,
         refine: bool = True,
+        scheduled: bool = True,
     ) -> None:
         self.order = order
         self.operators = operators
         self.widths = widths
         self.max_order = max_order
         self.refine = refine
+        self.scheduled = scheduled
 
     def _check_params(self) -> None:
         if not (self.order == "auto" or (isinstance(self.order, int) and self.order >= 1)):
@@ -193,6 +198,12 @@ class StructureModel(JsonFile, SeveralChannels):
             msg = (
                 "StructureModel's 'widths' must be (smallest, largest) in (0, 1]. "
                 f"Got {self.widths!r}."
+            )
+            raise ParameterError(msg)
+        if not isinstance(self.scheduled, bool) or not isinstance(self.refine, bool):
+            msg = (
+                "StructureModel's 'refine' and 'scheduled' must be True or False. "
+                f"Got {self.refine!r} and {self.scheduled!r}."
             )
             raise ParameterError(msg)
         if not isinstance(self.max_order, int) or self.max_order < 1:
@@ -309,10 +320,30 @@ class StructureModel(JsonFile, SeveralChannels):
             self.structure_, operators = linear_all, 0
             if self.refine:
                 self.structure_, self.refinement_ = sf.refine(records, self.structure_)
+        self.schedule_refinement_: sf.Refinement | None = None
+        if self.scheduled and self.refine:
+            self._schedule(records, rate)
         self.order_, self.operators_, self.sample_rate_ = order, operators, rate
         self.n_inputs_, self.n_outputs_ = records[0].u.shape[1], records[0].y.shape[1]
         self.output_nrmse_ = sf.nrmse(self.structure_, records)
         return self
+
+    def _schedule(self, records: list[sf.Record], rate: float) -> None:
+        """The dynamics scheduled by the drive's level, where the records hold several
+        levels, refined from the structure fitted; kept where stable and clearly lower."""
+        rms = np.array([np.sqrt(np.mean(np.sum(r.u**2, axis=1))) for r in records])
+        if not rms.min() > 0 or rms.max() < sf.LEVEL_SPREAD * rms.min():
+            return
+        ref, tau = float(np.mean(rms)), sf.LEVEL_TIME * rate
+        seen = np.concatenate([sf.levels(r.u, r.periodic, ref, tau) for r in records])
+        st = self.structure_
+        n, nf = st.order, st.e.shape[1]
+        start = sf.Schedule(np.zeros((n, n)), np.zeros_like(st.b), np.zeros((n, nf)), ref, tau,
+                            float(seen.min()), float(seen.max()))  # fmt: skip
+        scheduled, info = sf.refine(records, st, schedule=start)
+        self.schedule_refinement_ = info
+        if info.kept and info.after <= (1.0 - sf.LEVEL_GAIN) * info.before:
+            self.structure_ = scheduled
 
     @staticmethod
     def _split(records: list[sf.Record]) -> tuple[list[sf.Record], list[sf.Record], float]:
@@ -458,50 +489,7 @@ class StructureModel(JsonFile, SeveralChannels):
         -------
         str
         """
-        if not hasattr(self, "structure_"):
-            return "StructureModel (not fitted)"
-        modes = self.modes()
-        said = ", ".join(f"{fk:.4g} Hz ({zk:.2g})" for fk, zk in modes[:6])
-        more = f" and {len(modes) - 6} more" if len(modes) > 6 else ""
-        chosen = (
-            f"chosen from {len(self.orders_)} on held-out records" if self.orders_ else "stated"
-        )
-        loop = (
-            f"{self.operators_} play operators per actuator in the loop"
-            if self.operators_
-            else "no operators in the loop (linear dynamics)"
-        )
-        if self.operators and not self.operators_ and getattr(self, "unstable_stuck_", None):
-            loop += (
-                ": with them the loop was unstable where every operator sticks (small "
-                f"strokes; a pole of modulus {self.unstable_stuck_:.4g})"
-            )
-        elif self.operators and not self.operators_ and hasattr(self, "held_nrmse_"):
-            h = self.held_nrmse_
-            loop += (
-                f": the operators did not predict the held-out records better "
-                f"({h['operators']:.3g} % against {h['linear']:.3g} %)"
-            )
-        ref = self.refinement_
-        refined = ""
-        if ref is not None:
-            change = 100 * (1 - ref.after / ref.before) if ref.before > 0 else 0.0
-            error = (
-                f"{change:.0f} % less squared error"
-                if change >= 0
-                else f"{-change:.0f} % more squared error than the least squares' loop, "
-                "which was unstable where every operator sticks"
-            )
-            refined = (
-                f"; refined by output error ({error}, {ref.iterations} iterations)"
-                if ref.kept
-                else "; the output-error refinement was not kept (not stable or not lower)"
-            )
-        return (
-            f"StructureModel: {self.n_inputs_} inputs, {self.n_outputs_} outputs at "
-            f"{self.sample_rate_:.6g} Hz; order {self.order_} ({chosen}); modes (damping) "
-            f"{said or 'none'}{more}; {loop}{refined}; fit NRMSE {self.output_nrmse_:.3g} %"
-        )
+        return _described(self)
 
     # ------------------------------------------------------------------ files
     def to_dict(self) -> dict[str, Any]:
@@ -533,8 +521,14 @@ class StructureModel(JsonFile, SeveralChannels):
                     name: getattr(st, name).tolist()
                     for name in ("a", "b", "c", "d", "e", "t", "r", "off")
                 },
+                "schedule": None if st.schedule is None else {
+                    k: v.tolist() if isinstance(v, np.ndarray) else v
+                    for k, v in vars(st.schedule).items()
+                },
+                "schedule_refinement": None if self.schedule_refinement_ is None
+                else list(vars(self.schedule_refinement_).values()),
             }
-        )
+        )  # fmt: skip
 
     @classmethod
     def from_dict(cls, data: Any, where: str = "structure model") -> StructureModel:
@@ -562,10 +556,21 @@ class StructureModel(JsonFile, SeveralChannels):
                 name: np.array(data[name], dtype=np.float64, ndmin=2 if name != "off" else 1)
                 for name in ("a", "b", "c", "d", "e", "t", "r", "off")
             }
-            st = sf.Structure(**arrays)
+            sched = data.get("schedule")  # None: unscheduled, or a file saved before it
+            if sched is not None:
+                m1 = [np.array(sched[k], dtype=np.float64, ndmin=2) for k in ("a1", "b1", "e1")]
+                lv = [float(sched[k]) for k in ("ref", "tau", "lo", "hi")]
+                sched = sf.Schedule(m1[0], m1[1], m1[2], lv[0], lv[1], lv[2], lv[3])
+            st = sf.Structure(**arrays, schedule=sched)
             n, m = st.b.shape[1], st.c.shape[0]
             if st.a.shape != (st.order, st.order) or st.d.shape != (m, n) or st.off.shape != (m,):
                 raise ValueError("the matrices' shapes do not agree")
+            if sched is not None and (sched.a1.shape, sched.b1.shape, sched.e1.shape) != (
+                st.a.shape,
+                st.b.shape,
+                st.e.shape,
+            ):
+                raise ValueError("the scheduled matrices' shapes do not agree")
             params = dict(data["params"])
             params["widths"] = tuple(params["widths"])
             model = cls(**params)
@@ -582,7 +587,72 @@ class StructureModel(JsonFile, SeveralChannels):
             ref = data.get("refinement")
             model.refinement_ = None if ref is None else sf.Refinement(
                 float(ref[0]), float(ref[1]), int(ref[2]), bool(ref[3]))  # fmt: skip
+            ref = data.get("schedule_refinement")
+            model.schedule_refinement_ = None if ref is None else sf.Refinement(
+                float(ref[0]), float(ref[1]), int(ref[2]), bool(ref[3]))  # fmt: skip
         except (KeyError, TypeError, ValueError, PiezohystError) as exc:
             msg = f"{where}: a damaged structure model ({exc})"
             raise ModelFileError(msg) from None
         return model
+
+
+def _described(model: StructureModel) -> str:
+    """:meth:`StructureModel.describe`'s paragraph."""
+    if not hasattr(model, "structure_"):
+        return "StructureModel (not fitted)"
+    modes = model.modes()
+    said = ", ".join(f"{fk:.4g} Hz ({zk:.2g})" for fk, zk in modes[:6])
+    more = f" and {len(modes) - 6} more" if len(modes) > 6 else ""
+    chosen = f"chosen from {len(model.orders_)} on held-out records" if model.orders_ else "stated"
+    loop = (
+        f"{model.operators_} play operators per actuator in the loop"
+        if model.operators_
+        else "no operators in the loop (linear dynamics)"
+    )
+    if model.operators and not model.operators_ and getattr(model, "unstable_stuck_", None):
+        loop += (
+            ": with them the loop was unstable where every operator sticks (small "
+            f"strokes; a pole of modulus {model.unstable_stuck_:.4g})"
+        )
+    elif model.operators and not model.operators_ and hasattr(model, "held_nrmse_"):
+        h = model.held_nrmse_
+        loop += (
+            f": the operators did not predict the held-out records better "
+            f"({h['operators']:.3g} % against {h['linear']:.3g} %)"
+        )
+    ref = model.refinement_
+    refined = ""
+    if ref is not None:
+        change = 100 * (1 - ref.after / ref.before) if ref.before > 0 else 0.0
+        error = (
+            f"{change:.0f} % less squared error"
+            if change >= 0
+            else f"{-change:.0f} % more squared error than the least squares' loop, "
+            "which was unstable where every operator sticks"
+        )
+        refined = (
+            f"; refined by output error ({error}, {ref.iterations} iterations)"
+            if ref.kept
+            else "; the output-error refinement was not kept (not stable or not lower)"
+        )
+    return (
+        f"StructureModel: {model.n_inputs_} inputs, {model.n_outputs_} outputs at "
+        f"{model.sample_rate_:.6g} Hz; order {model.order_} ({chosen}); modes (damping) "
+        f"{said or 'none'}{more}; {loop}{refined}{_scheduled_said(model)}; fit NRMSE "
+        f"{model.output_nrmse_:.3g} %"
+    )
+
+
+def _scheduled_said(model: StructureModel) -> str:
+    """What :meth:`describe` says of the schedule by the drive's level."""
+    sc, info = model.structure_.schedule, getattr(model, "schedule_refinement_", None)
+    if sc is not None and info is not None:
+        lo, hi = (sc.ref * (1 + x) for x in (sc.lo, sc.hi))
+        return (
+            f"; its dynamics scheduled by the drive's level (the inputs' RMS over "
+            f"{sc.tau / model.sample_rate_:.3g} s, {lo:.3g}-{hi:.3g} seen: "
+            f"{100 * (1 - info.after / info.before):.0f} % less squared error)"
+        )
+    if info is not None:
+        return "; not scheduled by the drive's level (not stable, or not 5 % lower)"
+    return ""

@@ -51,6 +51,50 @@ STUCK_RADIUS = 0.9995
 #: ... by a penalty of this weight on their squared excess (the error it is added to is
 #: about 0.5 NRMSE^2 per output: 0.002 at 6 %)
 STUCK_WEIGHT = 1000.0
+#: The drive's level (:class:`Schedule`) is the inputs' RMS over this time constant (s): long
+#: beside a structure's modes, short beside a record
+LEVEL_TIME = 0.1
+#: The dynamics are scheduled by the level only where the records' levels differ by this
+#: factor at least (max over min of their RMS) ...
+LEVEL_SPREAD = 1.2
+#: ... and the scheduled refinement lowers the squared error by this share at least
+LEVEL_GAIN = 0.05
+
+
+@dataclass
+class Schedule:
+    """The dynamics the drive's level schedules: ``x+ = ... + rho (a1 x + b1 v + e1 p)``, with
+    ``rho`` the inputs' RMS over ``tau`` samples (a first-order running mean of their squared
+    norm) over ``ref``, less 1, held within ``[lo, hi]`` (the levels the records held: beyond
+    them the schedule is not known)."""
+
+    a1: FloatArray
+    b1: FloatArray
+    e1: FloatArray
+    ref: float
+    tau: float
+    lo: float
+    hi: float
+
+    def levels(self, u: FloatArray, periodic: bool) -> FloatArray:
+        """``rho`` at each sample of the inputs ``u`` (N, inputs): from their mean square
+        (a record's start), or in the periodic steady state (one period run first)."""
+        return levels(u, periodic, self.ref, self.tau, self.lo, self.hi)
+
+
+def levels(
+    u: FloatArray, periodic: bool, ref: float, tau: float, lo: float = -1.0, hi: float = np.inf
+) -> FloatArray:
+    """The drive's level ``rho`` at each sample (:class:`Schedule`)."""
+    power = np.sum(u**2, axis=1)
+    alpha = 1.0 / max(tau, 1.0)
+    start = float(np.mean(power)) if power.size else 0.0
+    if periodic:  # the period before, to its steady state: the running mean at its end
+        start = float(
+            sps.lfilter([alpha], [1.0, alpha - 1.0], power, zi=[(1 - alpha) * start])[0][-1]
+        )
+    run = sps.lfilter([alpha], [1.0, alpha - 1.0], power, zi=[(1 - alpha) * start])[0]
+    return np.asarray(np.clip(np.sqrt(np.maximum(run, 0.0)) / ref - 1.0, lo, hi), dtype=np.float64)
 
 
 @dataclass
@@ -82,10 +126,30 @@ class Structure:
     t: FloatArray
     r: FloatArray
     off: FloatArray
+    schedule: Schedule | None = None
 
     @property
     def order(self) -> int:
         return int(self.a.shape[0])
+
+    def at(self, rho: float) -> Structure:
+        """The structure at one level of the drive (itself where it holds no schedule)."""
+        sc = self.schedule
+        if sc is None:
+            return self
+        rho = float(np.clip(rho, sc.lo, sc.hi))
+        return Structure(self.a + rho * sc.a1, self.b + rho * sc.b1, self.c, self.d,
+                         self.e + rho * sc.e1, self.t, self.r, self.off)  # fmt: skip
+
+    def scheduled(
+        self, u: FloatArray, periodic: bool
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """The kernels' schedule arguments for the inputs ``u``: ``rho``, ``a1``, ``b1``,
+        ``e1`` (empty where the structure holds no schedule)."""
+        sc = self.schedule
+        if sc is None:
+            return np.zeros(0), np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0))
+        return sc.levels(u, periodic), sc.a1, sc.b1, sc.e1
 
     def linear(self, stuck: bool = False) -> tuple[FloatArray, FloatArray]:
         """``a`` and ``b`` of the linear structure the loop is at either end of its
@@ -99,8 +163,11 @@ class Structure:
         return self.a - e_sum @ self.t @ self.c, self.b - e_sum @ self.t @ self.d
 
     def radius(self) -> float:
-        """The largest pole modulus of the two linear ends (:meth:`linear`): below 1, the
-        structure is stable at every amplitude's end."""
+        """The largest pole modulus of the two linear ends (:meth:`linear`), at both ends of
+        the drive's levels where the structure holds a schedule: below 1, the structure is
+        stable at every amplitude's end."""
+        if self.schedule is not None:
+            return max(self.at(rho).radius() for rho in (self.schedule.lo, self.schedule.hi))
         return max(float(np.max(np.abs(np.linalg.eigvals(self.linear(stuck)[0]))))
                    for stuck in (False, True))  # fmt: skip
 
@@ -116,7 +183,8 @@ class Structure:
         z = np.repeat((self.t @ self.off)[:, None], self.r.shape[1], axis=1)
         out = np.empty((u.shape[0], self.c.shape[0]))
         ua = np.ascontiguousarray(u)
-        args = (self.a, self.b, self.c, self.d, self.e, self.t, self.r, self.off)
+        rho, a1, b1, e1 = self.scheduled(ua, periodic)
+        args = (self.a, self.b, self.c, self.d, self.e, self.t, self.r, self.off, rho, a1, b1, e1)
         if periodic:
             S.structure_run(*args, x, z, ua, out)
         S.structure_run(*args, x, z, ua, out)
@@ -359,7 +427,8 @@ def least_squares(
     d = theta[order * cols : order * cols + m * n].reshape(m, n)
     off = theta[order * cols + m * n :]
     parts = (a, be[:, :n], c, d, be[:, n:], t, r, off)
-    return Structure(*(np.ascontiguousarray(x, dtype=np.float64) for x in parts))
+    a_, b_, c_, d_, e_, t_, r_, off_ = (np.ascontiguousarray(x, dtype=np.float64) for x in parts)
+    return Structure(a_, b_, c_, d_, e_, t_, r_, off_)
 
 
 def nrmse(structure: Structure, records: list[Record], tail: float = 0.0) -> float:
@@ -376,10 +445,15 @@ def nrmse(structure: Structure, records: list[Record], tail: float = 0.0) -> flo
     return value if np.isfinite(value) else float("inf")
 
 
-def _order(blocks: list[np.ndarray], r: FloatArray) -> tuple[np.ndarray, ...]:
-    """The refinement's blocks ``a, b, c, d, e, off, t`` in :class:`Structure`'s order."""
-    a, b, c, d, e, off, t = blocks
-    return a, b, c, d, e, t, r, off
+def _built(blocks: list[np.ndarray], r: FloatArray, schedule: Schedule | None) -> Structure:
+    """The refinement's blocks ``a, b, c, d, e, off, t`` (and ``a1, b1, e1`` where the
+    dynamics are scheduled) as a :class:`Structure`."""
+    a, b, c, d, e, off, t, *rest = blocks
+    sched = None
+    if schedule is not None:
+        a1, b1, e1 = rest
+        sched = Schedule(a1, b1, e1, schedule.ref, schedule.tau, schedule.lo, schedule.hi)
+    return Structure(a, b, c, d, e, t, r, off, sched)
 
 
 def stuck_penalty(
@@ -422,7 +496,10 @@ class Refinement:
 
 
 def refine(
-    records: list[Record], structure: Structure, maxiter: int = REFINE_ITERATIONS
+    records: list[Record],
+    structure: Structure,
+    maxiter: int = REFINE_ITERATIONS,
+    schedule: Schedule | None = None,
 ) -> tuple[Structure, Refinement]:
     """Every matrix (the stroke map too) and the offsets refined by **output error**: the
     squared error of the simulated outputs (each record and output weighted by the inverse
@@ -434,80 +511,136 @@ def refine(
     the state is scaled down until it is stable, and it is refined again from there with
     its poles held within :data:`STUCK_RADIUS` (:func:`stuck_penalty`). Kept
     only if stable (with the operators sliding and stuck: :meth:`Structure.radius`) and
-    lower, or stable where the start was not."""
+    lower, or stable where the start was not.
+
+    With a ``schedule`` (its levels; its matrices the start, or the structure's own), the
+    dynamics the drive's level schedules are refined with the rest, from a stable start,
+    with the stuck loop's penalty at both ends of the levels from the first step."""
     from scipy.optimize import minimize
 
     st = structure
+    sched = schedule if schedule is not None else st.schedule
     blocks = [st.a, st.b, st.c, st.d, st.e, st.off, st.t]
+    if sched is not None:
+        blocks += [sched.a1, sched.b1, sched.e1]
     shapes = [blk.shape for blk in blocks]
     cuts = np.cumsum([blk.size for blk in blocks])[:-1]
     theta0 = np.concatenate([blk.ravel() for blk in blocks])
     # each block in units of 1 % of its mean size: L-BFGS's first step has length 1, which
-    # must not move the loop far (a unit step on the matrices themselves can make it run away)
+    # must not move the loop far (a unit step on the matrices themselves can make it run away);
+    # a scheduled block in its unscheduled twin's units (it may start at 0)
+    sizes = [0.01 * np.mean(np.abs(blk)) + 1e-300 if blk.size else 1.0 for blk in blocks]
+    if sched is not None:
+        sizes[7:] = [sizes[0], sizes[1], sizes[4]]
     scale = np.concatenate(
-        [np.full(blk.size, 0.01 * np.mean(np.abs(blk)) + 1e-300 if blk.size else 1.0)
-         for blk in blocks]
-    )  # fmt: skip
+        [np.full(blk.size, size) for blk, size in zip(blocks, sizes, strict=True)]
+    )
     nk = st.r.shape[1]
     weights = [
         1.0 / (np.maximum(np.var(rec.y, axis=0), 1e-300) * rec.y.shape[0] * len(records))
         for rec in records
     ]
+    rhos = [np.zeros(0) if sched is None else sched.levels(rec.u, rec.periodic) for rec in records]
 
     def unpack(delta: np.ndarray) -> list[np.ndarray]:
         parts = np.split(theta0 + scale * delta, cuts)
         return [np.ascontiguousarray(p.reshape(s)) for p, s in zip(parts, shapes, strict=True)]
 
+    start_error = [np.inf]  # the start's, once known: the height of the runaway wall
+
     def loss(delta: np.ndarray, penalized: bool = True) -> tuple[float, np.ndarray]:
-        a, b, c, d, e, off, t = unpack(delta)
+        parts = unpack(delta)
+        a, b, c, d, e, off, t = parts[:7]
+        empty = np.zeros((0, 0))
+        a1, b1, e1 = parts[7:] if sched is not None else (empty, empty, empty)
         grads = [np.zeros(s) for s in shapes]
-        total = stuck_penalty(a, c, e, t, nk, grads) if penalized and nk else 0.0
-        for rec, w in zip(records, weights, strict=True):
+        total = _penalty(parts, sched, nk, grads) if penalized and nk else 0.0
+        ga1, gb1, ge1 = grads[7:] if sched is not None else (empty, empty, empty)
+        for rec, w, rho in zip(records, weights, rhos, strict=True):
             n_s = rec.u.shape[0]
             x = np.zeros(st.order)
             z = np.repeat((t @ off)[:, None], nk, axis=1)
             out = np.empty((n_s, c.shape[0]))
+            run = (a, b, c, d, e, t, st.r, off, rho, a1, b1, e1)
             if rec.periodic:  # the period before, to its steady state
-                S.structure_run(a, b, c, d, e, t, st.r, off, x, z, rec.u, out)
+                S.structure_run(*run, x, z, rec.u, out)
             xs, ps = np.empty((n_s, st.order)), np.empty((n_s, st.r.size))
             moved = np.zeros((n_s, st.r.size), dtype=np.bool_)
-            S.structure_trace(a, b, c, d, e, t, st.r, off, x, z, rec.u, out, xs, ps, moved)
+            S.structure_trace(*run, x, z, rec.u, out, xs, ps, moved)
             res = out - rec.y
             if not np.all(np.isfinite(res)) or np.max(np.abs(res)) > 1e6 * np.ptp(rec.y):
-                return 1e30, np.zeros_like(delta)  # the loop ran away: a step too far
+                # the loop ran away: a step too far. A wall rising away from the start, ten
+                # times the start's error, so that the line search steps back part of the way
+                # (1e30 and a zero gradient there collapsed the step to nothing and ended it)
+                wall = 10.0 * start_error[0]
+                return wall, 2 * wall * delta / max(float(delta @ delta), 1e-300)
             total += 0.5 * float(np.sum(w * res**2))
             gy = np.ascontiguousarray(w * res)
-            ga, gb, gc, gd, ge, goff, gt = grads
-            S.structure_adjoint(a, c, e, t, nk, xs, ps, moved, rec.u, out, gy, ga, gb, gc, gd, ge,
-                                goff, gt)  # fmt: skip
+            ga, gb, gc, gd, ge, goff, gt = grads[:7]
+            S.structure_adjoint(a, c, e, t, nk, rho, a1, e1, xs, ps, moved, rec.u, out, gy, ga,
+                                gb, gc, gd, ge, goff, gt, ga1, gb1, ge1)  # fmt: skip
+        if not np.isfinite(start_error[0]):
+            start_error[0] = total
         return total, np.concatenate([g.ravel() for g in grads]) * scale
 
     # the output error first; where its loop is unstable with every operator stuck, again
     # from there with the penalty on those poles (from a start far from stable, the penalty
-    # alone holds the refinement back from the fit)
+    # alone holds the refinement back from the fit); a schedule from a stable start: with it
     options = {"maxiter": maxiter, "gtol": 0.0}
-    opt = minimize(lambda x: loss(x, penalized=False), np.zeros_like(theta0), jac=True,
-                   method="L-BFGS-B", options=options)  # fmt: skip
+    opt = minimize(lambda x: loss(x, penalized=schedule is not None), np.zeros_like(theta0),
+                   jac=True, method="L-BFGS-B", options=options)  # fmt: skip
     iterations = int(opt.nit)
-    if nk and Structure(*_order(unpack(opt.x), st.r)).radius() >= 1.0:
+    if nk and _built(unpack(opt.x), st.r, sched).radius() >= 1.0:
         # back inside first: the operators' action on the state scaled down until the stuck
         # loop is stable (a bisection on the scale), then refined with the penalty from there
         parts = unpack(opt.x)
-        a = parts[0]
-        pull = a - Structure(*_order(parts, st.r)).linear(stuck=True)[0]  # E' t c
         lo_s, hi_s = 0.0, 1.0
         for _ in range(30):
             mid = 0.5 * (lo_s + hi_s)
-            inside = np.max(np.abs(np.linalg.eigvals(a - mid * pull))) < STUCK_RADIUS
+            trial = [*parts[:4], mid * parts[4], *parts[5:]]
+            if sched is not None:
+                trial[9] = mid * parts[9]
+            inside = _stuck_radius(_built(trial, st.r, sched)) < STUCK_RADIUS
             lo_s, hi_s = (mid, hi_s) if inside else (lo_s, mid)
         parts[4] = lo_s * parts[4]
+        if sched is not None:
+            parts[9] = lo_s * parts[9]
         start = (np.concatenate([blk.ravel() for blk in parts]) - theta0) / scale
         opt = minimize(loss, start, jac=True, method="L-BFGS-B", options=options)
         iterations += int(opt.nit)
-    refined = Structure(*_order(unpack(opt.x), st.r))
+    refined = _built(unpack(opt.x), st.r, sched)
     before = loss(np.zeros_like(theta0), penalized=False)[0]
     after = loss(opt.x, penalized=False)[0]
     # kept where stable at both linear ends and lower, or stable where the start was not
     kept = refined.radius() < 1.0 and (after < before or structure.radius() >= 1.0)
     info = Refinement(before, after, iterations, kept)
     return (refined if kept else st), info
+
+
+def _stuck_radius(structure: Structure) -> float:
+    """The largest pole modulus of the loop with every operator stuck (at both ends of the
+    drive's levels where the dynamics are scheduled)."""
+    sc = structure.schedule
+    ends = (0.0,) if sc is None else (sc.lo, sc.hi)
+    return max(float(np.max(np.abs(np.linalg.eigvals(structure.at(rho).linear(stuck=True)[0]))))
+               for rho in ends)  # fmt: skip
+
+
+def _penalty(
+    parts: list[np.ndarray], sched: Schedule | None, nk: int, grads: list[np.ndarray]
+) -> float:
+    """:func:`stuck_penalty` on the refinement's blocks, at both ends of the drive's levels
+    where the dynamics are scheduled (its gradient carried to the scheduled blocks)."""
+    a, _, c, _, e, _, t = parts[:7]
+    if sched is None:
+        return stuck_penalty(a, c, e, t, nk, grads)
+    a1, _, e1 = parts[7:]
+    total = 0.0
+    for rho in (sched.lo, sched.hi):
+        g = [np.zeros_like(x) for x in grads[:7]]
+        total += stuck_penalty(a + rho * a1, c, e + rho * e1, t, nk, g)
+        for i in range(7):
+            grads[i] += g[i]
+        grads[7] += rho * g[0]
+        grads[9] += rho * g[4]
+    return total

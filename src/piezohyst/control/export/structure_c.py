@@ -70,7 +70,7 @@ def export_structure_c(
             f"{type(compensator).__name__}); a coupled stage has write_stage_c"
         )
         raise ParameterError(msg)
-    st, g = compensator.model.structure_, compensator._g
+    st, g = compensator._st, compensator._g  # at the level it inverts at
     n, m, nx = st.b.shape[1], st.c.shape[0], st.order
     na, nk = st.r.shape
     r, e = st.r, st.e
