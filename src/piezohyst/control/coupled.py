@@ -23,7 +23,7 @@ from ..errors import LimitWarning, ParameterError, ShapeError, warn
 from ..model.coupled import CoupledModel
 from .compensator import Compensator
 
-__all__ = ["CoupledCompensator"]
+__all__ = ["CoupledCompensator", "plane_slack", "stage_targets"]
 
 #: A desired position counts as out of reach when an actuator would have to move beyond its
 #: range by more than this share of the range (rounding at the range's edge is not)
@@ -45,6 +45,87 @@ def _per_actuator(value: float | ArrayLike, n: int, name: str) -> FloatArray:
 def _counted(n: int, what: str) -> str:
     """``3 desired positions lie``, ``1 desired position lies``: a warning's count."""
     return f"{n} {what}s lie" if n != 1 else f"1 {what} lies"
+
+
+def plane_slack(coupling: FloatArray, reach: FloatArray) -> FloatArray:
+    """How far (each output's units) a desired position may lie off what the actuators move
+    the stage to before it counts as out of reach: :data:`REACH_SLACK` of each output's
+    extent over the actuators' ranges ``reach`` (actuators x 2).
+
+    Parameters
+    ----------
+    coupling : ndarray, shape (outputs, actuators)
+    reach : ndarray, shape (actuators, 2)
+
+    Returns
+    -------
+    ndarray, shape (outputs,)
+    """
+    lo, hi = coupling * reach[:, 0], coupling * reach[:, 1]
+    return np.asarray(REACH_SLACK * (np.maximum(lo, hi) - np.minimum(lo, hi)).sum(axis=1))
+
+
+def stage_targets(
+    tally: Any, desired: FloatArray, coupling: FloatArray, offset: FloatArray
+) -> FloatArray:
+    """What each actuator alone must move for the desired positions, through the coupling's
+    inverse (``tally.inverse``; least squares with more outputs than actuators); the rows the
+    stage cannot reach (beyond an actuator's ``tally.reach``, or off what the actuators move
+    the outputs to) counted in ``tally.outside_count`` (and ``off_plane_count``) and said once
+    each, naming ``tally.owner`` (the coupled compensator's and the stage's self-sensing
+    loop's one rule).
+
+    Parameters
+    ----------
+    tally : object
+        Holds ``inverse``, ``reach``, ``owner``, the counts and whether each was said.
+    desired : ndarray, shape (N, outputs)
+    coupling : ndarray, shape (outputs, actuators)
+    offset : ndarray, shape (outputs,)
+
+    Returns
+    -------
+    ndarray, shape (N, actuators)
+    """
+    reach = tally.reach
+    # per row, the same arithmetic for a block as for one row (a matrix product's blocking
+    # would round a block otherwise): process equals step to the bit
+    own = ((desired - offset)[:, None, :] * tally.inverse[None, :, :]).sum(axis=2)
+    span = reach[:, 1] - reach[:, 0]
+    beyond = (own < reach[:, 0] - REACH_SLACK * span) | (own > reach[:, 1] + REACH_SLACK * span)
+    off = np.zeros(desired.shape[0], dtype=bool)
+    if coupling.shape[0] != coupling.shape[1]:  # a position the actuators cannot give
+        resid = (desired - offset) - own @ coupling.T
+        off = np.any(np.abs(resid) > plane_slack(coupling, reach), axis=1)
+    if off.any():  # the nearest position they reach
+        tally.off_plane_count += int(off.sum())
+        if not tally._off_said:
+            tally._off_said = True
+            k = int(np.flatnonzero(off)[0])
+            warn(
+                f"{tally.owner}: {_counted(int(off.sum()), 'desired position')} off what "
+                f"the {own.shape[1]} actuators move the stage's {desired.shape[1]} outputs "
+                f"to (first at sample {k}): the nearest position they reach, in least "
+                "squares, is followed (counted in outside_count and off_plane_count)",
+                LimitWarning,
+            )
+    tally.outside_count += int(np.count_nonzero(beyond.any(axis=1) | off))
+    rows = np.flatnonzero(beyond.any(axis=1))
+    if rows.size and not tally._outside_said:
+        tally._outside_said = True
+        k = int(rows[0])
+        axes = ", ".join(
+            f"actuator {i} {own[k, i]:.4g} outside [{reach[i, 0]:.4g}, {reach[i, 1]:.4g}]"
+            for i in np.flatnonzero(beyond[k])
+        )
+        warn(
+            f"{tally.owner}: {_counted(rows.size, 'desired position')} outside what the "
+            f"stage reaches (first at sample {k}: {axes}); the reachable set is the "
+            "actuators' ranges through the coupling, not a box; those commands sit at the "
+            "limits (counted in saturated_count)",
+            LimitWarning,
+        )
+    return np.asarray(own)
 
 
 class CoupledCompensator:
@@ -128,23 +209,12 @@ class CoupledCompensator:
         self.off_plane_count = 0  # of them, off what the actuators move the outputs to
         self._outside_said = self._off_said = False
 
-    def _off_plane(self, desired: FloatArray, own: FloatArray) -> NDArray[np.bool_]:
-        """Rows whose position the actuators cannot give (more outputs than actuators): the
-        least squares' residual beyond :data:`REACH_SLACK` of an output's reach."""
-        c = self.model.coupling_
-        if c.shape[0] == c.shape[1]:
-            return np.zeros(desired.shape[0], dtype=bool)
-        resid = (desired - self.model.offset_) - own @ c.T
-        return np.asarray(np.any(np.abs(resid) > self.plane_slack, axis=1))
-
     @property
     def plane_slack(self) -> FloatArray:
         """How far (each output's units) a desired position may lie off what the actuators
         move the stage to before it counts as out of reach: :data:`REACH_SLACK` of the
         output's extent over the actuators' ranges."""
-        c = self.model.coupling_
-        lo, hi = c * self.reach[:, 0], c * self.reach[:, 1]
-        return np.asarray(REACH_SLACK * (np.maximum(lo, hi) - np.minimum(lo, hi)).sum(axis=1))
+        return plane_slack(self.model.coupling_, self.reach)
 
     @staticmethod
     def _reach(comp: Compensator) -> tuple[float, float]:
@@ -208,43 +278,7 @@ class CoupledCompensator:
         -------
         ndarray, shape (N, actuators)
         """
-        own = (desired - self.model.offset_) @ self._inverse.T
-        span = self.reach[:, 1] - self.reach[:, 0]
-        beyond = (own < self.reach[:, 0] - REACH_SLACK * span) | (
-            own > self.reach[:, 1] + REACH_SLACK * span
-        )
-        off = self._off_plane(desired, own)
-        if off.any():  # a position the actuators cannot move the stage to: the nearest
-            self.off_plane_count += int(off.sum())
-            if not self._off_said:
-                self._off_said = True
-                k = int(np.flatnonzero(off)[0])
-                warn(
-                    f"{self.owner}: {_counted(int(off.sum()), 'desired position')} off what "
-                    f"the {own.shape[1]} actuators move the stage's {desired.shape[1]} outputs "
-                    f"to (first at sample {k}): the nearest position they reach, in least "
-                    "squares, is followed (counted in outside_count and off_plane_count)",
-                    LimitWarning,
-                )
-        self.outside_count += int(np.count_nonzero(beyond.any(axis=1) | off))
-        rows = np.flatnonzero(beyond.any(axis=1))
-        if rows.size:
-            if not self._outside_said:
-                self._outside_said = True
-                k = int(rows[0])
-                axes = ", ".join(
-                    f"actuator {i} {own[k, i]:.4g} outside [{self.reach[i, 0]:.4g}, "
-                    f"{self.reach[i, 1]:.4g}]"
-                    for i in np.flatnonzero(beyond[k])
-                )
-                warn(
-                    f"{self.owner}: {_counted(rows.size, 'desired position')} outside "
-                    f"what the stage reaches (first at sample {k}: {axes}); the reachable set "
-                    "is the actuators' ranges through the coupling, not a box; those commands "
-                    "sit at the limits (counted in saturated_count)",
-                    LimitWarning,
-                )
-        return np.asarray(own)
+        return stage_targets(self, desired, self.model.coupling_, self.model.offset_)
 
     def step(
         self, desired: ArrayLike, measured: Any = None, preview: ArrayLike | None = None
