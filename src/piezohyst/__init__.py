@@ -27,6 +27,8 @@ Compensation and control
     CoupledLearningCompensator -- learning a repeated scan on a coupled stage
     BankCompensator, BankController -- many channels in one kernel
     CoupledCompensator -- a coupled stage: the coupling's inverse, then each actuator's
+    StageMap, calibrate_stage -- a stage's positions from its actuators' charges
+    CoupledSelfSensingController -- a coupled stage on its charges, without sensors
     StructureCompensator -- a structure's inverse through its shared modes, with preview
 
 Choosing and checking a model
@@ -89,6 +91,9 @@ __getattr__, __dir__ = attach(
         "select_model": ".analysis.selection",
         "OutputMap": ".model.calibrations",
         "calibrate_gain": ".model.calibrations",
+        "StageMap": ".model.calibrations",
+        "calibrate_stage": ".model.calibrations",
+        "CoupledSelfSensingController": ".control.coupled_selfsensing",
         "BankCompensator": ".control.channels",
         "BankController": ".control.channels",
         "CoupledCompensator": ".control.coupled",
@@ -141,6 +146,7 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .control.channels import BankCompensator, BankController
     from .control.compensator import Compensator, CompensatorState
     from .control.coupled import CoupledCompensator
+    from .control.coupled_selfsensing import CoupledSelfSensingController
     from .control.learning import CoupledLearningCompensator, LearningCompensator
     from .control.selfsensing import ControllerState, SelfSensingController
     from .control.structure import StructureCompensator
@@ -161,10 +167,12 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
         OutputMap,
         PIModel,
         PreisachModel,
+        StageMap,
         StructureModel,
         Term,
         calibrate_gain,
         calibrate_leakage,
+        calibrate_stage,
         load_bank,
         load_model,
         terms,
@@ -192,6 +200,7 @@ __all__ = [
     "CoupledCompensator",
     "CoupledLearningCompensator",
     "CoupledModel",
+    "CoupledSelfSensingController",
     "DataFileError",
     "DuhemHysteresis",
     "DuhemModel",
@@ -225,6 +234,7 @@ __all__ = [
     "Selection",
     "SelfSensingController",
     "ShapeError",
+    "StageMap",
     "StructureCompensator",
     "StructureModel",
     "Term",
@@ -232,6 +242,7 @@ __all__ = [
     "__version__",
     "calibrate_gain",
     "calibrate_leakage",
+    "calibrate_stage",
     "compare_models",
     "default_thresholds",
     "io",

@@ -201,6 +201,8 @@ class SelfSensingController:
     #: True: each command depends on the reading before it (the controllers' one contract,
     #: :mod:`~piezohyst.control.contract`)
     reads = True
+    #: Who its warnings name (a stage's loop names its actuator)
+    owner = "SelfSensingController"
 
     def __init__(
         self,
@@ -459,7 +461,7 @@ class SelfSensingController:
             c = comp.inverse.controller_step(d, m, loop, comp.delay_target(d, preview))
         else:
             c = comp.inverse.controller_step(d, m, loop)
-        comp.tally_one(c, "SelfSensingController")
+        comp.tally_one(c, self.owner)
         return c
 
     def process(self, desired: ArrayLike, measured: ArrayLike | None = None) -> FloatArray:
@@ -491,7 +493,7 @@ class SelfSensingController:
         if comp.charges is not None:
             d = comp.charges.block(d)
         comp.inverse.controller_process(d, m, (self.config, self.ctl, self.feedback), out)
-        comp.tally(out, "SelfSensingController")
+        comp.tally(out, self.owner)
         return out
 
     @property

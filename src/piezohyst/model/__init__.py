@@ -12,8 +12,8 @@ What a model holds besides its core
     Term, growth_kinds (``terms``); InputDynamics, OutputDynamics (``dynamics``, their
     search in ``fit_dynamics``)
 The calibrations, side by side (``calibrations``: ``leakage`` and ``from_holds``,
-``output_map`` and ``from_sensor``)
-    Leakage, calibrate_leakage, OutputMap, calibrate_gain
+``output_map`` and ``from_sensor``, ``stage_map``)
+    Leakage, calibrate_leakage, OutputMap, calibrate_gain, StageMap, calibrate_stage
 Several actuators moving one structure (``coupled``; ``structure``, its identification in
 ``structure_fit``)
     CoupledModel, StructureModel
@@ -46,6 +46,8 @@ __getattr__, __dir__ = attach(
         "calibrate_leakage": ".calibrations",
         "OutputMap": ".calibrations",
         "calibrate_gain": ".calibrations",
+        "StageMap": ".calibrations",
+        "calibrate_stage": ".calibrations",
         "History": ".model",
         "HysteresisModel": ".model",
         "InverseSpec": ".inverse_spec",
@@ -69,7 +71,14 @@ __getattr__, __dir__ = attach(
 
 if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .bank import ModelBank, load_bank
-    from .calibrations import Leakage, OutputMap, calibrate_gain, calibrate_leakage
+    from .calibrations import (
+        Leakage,
+        OutputMap,
+        StageMap,
+        calibrate_gain,
+        calibrate_leakage,
+        calibrate_stage,
+    )
     from .coupled import CoupledModel
     from .dynamics import InputDynamics, OutputDynamics
     from .estimator import Estimator
@@ -107,10 +116,12 @@ __all__ = [
     "OutputMap",
     "PIModel",
     "PreisachModel",
+    "StageMap",
     "StructureModel",
     "Term",
     "calibrate_gain",
     "calibrate_leakage",
+    "calibrate_stage",
     "growth_kinds",
     "load_bank",
     "load_model",

@@ -48,7 +48,7 @@ from .model import HysteresisModel, is_model
 from .persistence import checked, model_from_dict, model_to_dict, signed
 from .presets import ClassicalPI
 
-__all__ = ["COUPLED_FORMAT", "TOGETHER", "CoupledModel"]
+__all__ = ["COUPLED_FORMAT", "TOGETHER", "CoupledModel", "columns", "warn_together"]
 
 #: Inputs whose changes correlate beyond this move together: the record cannot tell which
 #: of them moved an output (the coupling between their axes is not determined)
@@ -79,7 +79,7 @@ def columns(a: ArrayLike, name: str, rows: int = 1) -> FloatArray:
 COND_LIMIT = 1e8
 
 
-def _warn_together(u: FloatArray) -> None:
+def warn_together(u: FloatArray) -> None:
     """Warn where two inputs' changes correlate beyond :data:`TOGETHER` (named)."""
     du = np.diff(u, axis=0)
     if du.shape[0] < 2 or np.any(np.std(du, axis=0) == 0):
@@ -201,7 +201,7 @@ class CoupledModel(JsonFile, SeveralChannels):
             )
             raise ShapeError(msg)
         templates = self._templates(n)
-        _warn_together(us)
+        warn_together(us)
         ts = None if t is None else np.asarray(t, dtype=np.float64)
         # the start: the linear voltage map, each column scaled to its own axis
         a = np.column_stack([us, np.ones(us.shape[0])])

@@ -17,7 +17,15 @@ from .bench import (
 from .loop import run_loop
 from .model_plant import ModelPlant, PlantRun, run_on_model
 from .signals import SIGNALS, make_signal
-from .stage import XY_COUPLING, XY_DYNAMIC, StageRecord, simulate_stage
+from .stage import (
+    XY_COUPLING,
+    XY_DYNAMIC,
+    Stage,
+    StageReading,
+    StageRecord,
+    run_stage_loop,
+    simulate_stage,
+)
 
 __all__ = [
     "DEFAULT_PRESET",
@@ -32,11 +40,14 @@ __all__ = [
     "ModelPlant",
     "PlantRun",
     "Reading",
+    "Stage",
+    "StageReading",
     "StageRecord",
     "batch_unit",
     "make_signal",
     "run_loop",
     "run_on_model",
+    "run_stage_loop",
     "simulate",
     "simulate_stage",
 ]

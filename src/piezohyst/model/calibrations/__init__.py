@@ -11,6 +11,8 @@ module            what it holds
 ``output_map``    :class:`OutputMap`: charge -> displacement (eq. 6-7), its uncertainty,
                   its calibrated range
 ``from_sensor``   :func:`calibrate_gain`: the map from one record with a displacement sensor
+``stage_map``     :class:`StageMap` and :func:`calibrate_stage`: a coupled stage's positions
+                  from its actuators' charges (each actuator's map and the coupling)
 ================  ==========================================================================
 """
 
@@ -31,6 +33,8 @@ __getattr__, __dir__ = attach(
         "Hold": ".leakage",
         "Leakage": ".leakage",
         "OutputMap": ".output_map",
+        "StageMap": ".stage_map",
+        "calibrate_stage": ".stage_map",
     },
 )
 
@@ -39,5 +43,15 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .from_sensor import calibrate_gain
     from .leakage import Hold, Leakage
     from .output_map import OutputMap
+    from .stage_map import StageMap, calibrate_stage
 
-__all__ = ["Hold", "Leakage", "OutputMap", "calibrate_gain", "calibrate_leakage", "find_holds"]
+__all__ = [
+    "Hold",
+    "Leakage",
+    "OutputMap",
+    "StageMap",
+    "calibrate_gain",
+    "calibrate_leakage",
+    "calibrate_stage",
+    "find_holds",
+]
