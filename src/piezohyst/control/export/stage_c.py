@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from string import Template
+from typing import Any
 
 import numpy as np
 
@@ -21,7 +22,9 @@ from ...errors import ParameterError
 from ...io import atomic_write_text
 from ..c_text import CText, Precision
 from ..compensator import Compensator
-from ..coupled import REACH_SLACK, CoupledCompensator
+from ..coupled import REACH_SLACK, CoupledCompensator, plane_slack
+from ..coupled_selfsensing import CoupledSelfSensingController
+from ..selfsensing import SelfSensingController
 from .c_code import c_paths, export_c
 
 __all__ = [
@@ -67,6 +70,41 @@ def stage_paths(path: str | os.PathLike[str], actuators: int, *, mex: bool = Fal
     return gate + [c_path.with_name(name) for name in names]
 
 
+@dataclass(frozen=True)
+class _Stage:
+    """What a stage's export needs of a coupled compensator or a stage's self-sensing loop."""
+
+    steps: list[Any]  # each actuator's Compensator or SelfSensingController
+    coupling: np.ndarray
+    offset: np.ndarray
+    inverse: np.ndarray
+    reach: np.ndarray
+    plane: np.ndarray
+    reads: bool  # each step also takes its actuator's measured charge
+    unit: str
+
+
+def _stage(obj: CoupledCompensator | CoupledSelfSensingController) -> _Stage:
+    if isinstance(obj, CoupledSelfSensingController):
+        st = obj.stage
+        return _Stage(list(obj.loops), st.coupling, st.offset, obj.inverse, obj.reach,
+                      plane_slack(st.coupling, obj.reach), True, st.output_unit)  # fmt: skip
+    if not isinstance(obj, CoupledCompensator):
+        msg = (
+            "a stage's export takes a CoupledCompensator or a CoupledSelfSensingController. "
+            f"Got {type(obj).__name__}."
+        )
+        raise ParameterError(msg)
+    model = obj.model
+    return _Stage(list(obj.compensators), model.coupling_, model.offset_, obj.inverse, obj.reach,
+                  obj.plane_slack, False, model.channels_[0].output_unit)  # fmt: skip
+
+
+def _compensator(step: Any) -> Compensator:
+    """An actuator's compensator (a loop's own)."""
+    return step.compensator if isinstance(step, SelfSensingController) else step
+
+
 def _template(name: str) -> Template:
     """A C template shipped with the package (``piezohyst/control/export/c``), without its
     first two lines (the note that it is one)."""
@@ -88,19 +126,25 @@ class StageCode:
 
 
 def export_stage_c(
-    compensator: CoupledCompensator, *, precision: Precision = "double", prefix: str = "ph_stage"
+    compensator: CoupledCompensator | CoupledSelfSensingController,
+    *,
+    precision: Precision = "double",
+    prefix: str = "ph_stage",
 ) -> StageCode:
     """C99 files implementing ``compensator`` from its current state.
 
     The API: ``ph_stage_t`` (every actuator's state and the out-of-reach count),
     ``void ph_stage_init(ph_stage_t *s)`` and
     ``void ph_stage_step(ph_stage_t *s, const ph_stage_real *desired, ph_stage_real *command)``;
-    each actuator's own counts (``s->a0.saturated``, ...) are those of :func:`export_c`.
+    each actuator's own counts (``s->a0.saturated``, ...) are those of :func:`export_c`. A
+    stage's self-sensing loop (:class:`~piezohyst.CoupledSelfSensingController`) exports
+    ``ph_stage_step(s, desired, measured, command)``: ``measured`` each actuator's charge
+    read before this step (NaN: that loop runs on feedforward this sample).
 
     Parameters
     ----------
-    compensator : CoupledCompensator
-        Its actuators' compensators each exportable by :func:`export_c`.
+    compensator : CoupledCompensator or CoupledSelfSensingController
+        Its actuators' compensators (or loops) each exportable by :func:`export_c`.
     precision : {"double", "float"}
         The C type of every real.
     prefix : str
@@ -111,15 +155,15 @@ def export_stage_c(
     StageCode
     """
     c = CText(precision, prefix)
-    comps = compensator.compensators
-    n, m = len(comps), compensator.model.coupling_.shape[0]
+    st = _stage(compensator)
+    comps = [_compensator(step) for step in st.steps]
+    n, m = len(comps), st.coupling.shape[0]
     files: dict[str, str] = {}
-    for k, comp in enumerate(comps):
-        code = export_c(comp, precision=precision, prefix=f"{prefix}_a{k}")
+    for k, step in enumerate(st.steps):
+        code = export_c(step, precision=precision, prefix=f"{prefix}_a{k}")
         files[f"{prefix}_a{k}.h"] = code.header
         files[f"{prefix}_a{k}.c"] = code.source
-    inverse = compensator.inverse  # the least squares where more outputs than actuators
-    span = compensator.reach[:, 1] - compensator.reach[:, 0]
+    span = st.reach[:, 1] - st.reach[:, 0]
 
     def matrix(a: np.ndarray) -> str:
         return ",\n    ".join("{" + ", ".join(c.literal(x) for x in row) + "}" for row in a)
@@ -127,10 +171,9 @@ def export_stage_c(
     plane, planes = "", []
     if m > n:  # a position off what the actuators move the outputs to is out of reach too
         planes = [
-            f"static const {prefix}_real COUPLING[{m}][{n}] = {{\n    "
-            f"{matrix(compensator.model.coupling_)}\n}};",
+            f"static const {prefix}_real COUPLING[{m}][{n}] = {{\n    {matrix(st.coupling)}\n}};",
             f"static const {prefix}_real PLANE[{m}] = {{"
-            + ", ".join(c.literal(float(x)) for x in compensator.plane_slack)
+            + ", ".join(c.literal(float(x)) for x in st.plane)
             + "};",
         ]
         plane = (
@@ -145,30 +188,51 @@ def export_stage_c(
             "    }\n"
         )
     tables = "\n".join([
-        f"static const {prefix}_real INVERSE[{n}][{m}] = {{\n    {matrix(inverse)}\n}};",
+        f"static const {prefix}_real INVERSE[{n}][{m}] = {{\n    {matrix(st.inverse)}\n}};",
         *planes,
         *(f"static const {prefix}_real {name}[{len(values)}] = {{"
           + ", ".join(c.literal(float(x)) for x in values) + "};"
-          for name, values in (("OFFSET", compensator.model.offset_),
-                               ("REACH_LO", compensator.reach[:, 0]),
-                               ("REACH_HI", compensator.reach[:, 1]),
+          for name, values in (("OFFSET", st.offset),
+                               ("REACH_LO", st.reach[:, 0]),
+                               ("REACH_HI", st.reach[:, 1]),
                                ("SLACK", REACH_SLACK * span))),
     ])  # fmt: skip
-    looks = _next_fields(comps, prefix, n, m)
+    looks = {**_next_fields(comps, prefix, n, m), **_measured_fields(st.reads, prefix, n)}
+    read = ", measured[{k}]" if st.reads else ""
     files[f"{prefix}.h"] = _template("stage.h").substitute(
         **looks, prefix=prefix, upper=prefix.upper(), n=n, m=m, precision=precision,
         parts=", ".join(f"{prefix}_a{k}.c" for k in range(n)),
         includes="\n".join(f'#include "{prefix}_a{k}.h"' for k in range(n)),
         members="\n".join(f"    {prefix}_a{k}_t a{k};" for k in range(n)),
+        what="self-sensing loop" if st.reads else "compensator",
     )  # fmt: skip
     files[f"{prefix}.c"] = _template("stage.c").substitute(
         **looks, prefix=prefix, n=n, m=m, tables=tables, plane=plane,
         inits="\n".join(f"    {prefix}_a{k}_init(&s->a{k});" for k in range(n)),
         steps="\n".join(f"    command[{k}] = {prefix}_a{k}_step(&s->a{k}, own[{k}]"
+                        + read.format(k=k)
                         + (f", own_next[{k}]" if comp.mode.active else "") + ");"
                         for k, comp in enumerate(comps)),
     )  # fmt: skip
     return StageCode(files)
+
+
+def _measured_fields(reads: bool, prefix: str, n: int) -> dict[str, str]:
+    """The template's fields for a step that also takes each actuator's measured charge (a
+    stage's self-sensing loop; empty fields otherwise)."""
+    if not reads:
+        return {"measured_param": "", "measured_double": "", "measured_copy_decl": "",
+                "measured_copy": "", "measured_arg": "", "measured_said": ""}  # fmt: skip
+    return {
+        "measured_param": f", const {prefix}_real *measured",
+        "measured_double": ", const double *measured",
+        "measured_copy_decl": f" {prefix}_real q[{n}];",
+        "measured_copy": (f"\n    for (i = 0; i < {n}; ++i) {{\n"
+                          f"        q[i] = ({prefix}_real)measured[i];\n    }}"),
+        "measured_arg": ", q",
+        "measured_said": (f"\n * Each actuator's loop reads its charge (measured[{n}], read before "
+                          "this step;\n * NaN: that loop runs on feedforward this sample)."),
+    }  # fmt: skip
 
 
 def _looks_ahead(comps: list[Compensator]) -> bool:
@@ -225,7 +289,7 @@ def _block_fields(comps: list[Compensator], prefix: str, n: int, m: int) -> dict
 
 
 def write_stage_c(
-    compensator: CoupledCompensator,
+    compensator: CoupledCompensator | CoupledSelfSensingController,
     path: str | os.PathLike[str],
     *,
     precision: Precision = "double",
@@ -235,7 +299,7 @@ def write_stage_c(
 
     Parameters
     ----------
-    compensator : CoupledCompensator
+    compensator : CoupledCompensator or CoupledSelfSensingController
     path : str or os.PathLike
         The stage's ``.c`` file; NAME, the C prefix, from it.
     precision : {"double", "float"}
@@ -260,7 +324,7 @@ def _write(files: dict[str, str], c_path: Path) -> list[Path]:
 
 
 def write_stage_shared(
-    compensator: CoupledCompensator,
+    compensator: CoupledCompensator | CoupledSelfSensingController,
     path: str | os.PathLike[str],
     *,
     precision: Precision = "double",
@@ -272,11 +336,12 @@ def write_stage_shared(
     n rows of one position per axis, ``volts`` n rows of one command per actuator),
     ``int NAME_counts(const NAME_t *s, unsigned long *counts)`` (the out-of-reach count,
     then per actuator its non-finite targets, voltage-limit and slew counts),
-    ``NAME_version``.
+    ``NAME_version``. A stage's self-sensing loop takes each row's charges too:
+    ``NAME_process(s, target, measured, volts, n)``.
 
     Parameters
     ----------
-    compensator : CoupledCompensator
+    compensator : CoupledCompensator or CoupledSelfSensingController
     path : str or os.PathLike
         The stage's ``.c`` file; the other files and the library go beside it.
     precision : {"double", "float"}
@@ -296,14 +361,28 @@ def write_stage_shared(
 
     c_path, _, prefix = c_paths(path)
     code = export_stage_c(compensator, precision=precision, prefix=prefix).files
-    n, m = len(compensator.compensators), compensator.model.coupling_.shape[0]
+    st = _stage(compensator)
+    comps = [_compensator(step) for step in st.steps]
+    n, m = len(comps), st.coupling.shape[0]
     count_lines = "\n".join(f"    counts[{i}] = s->{c};" for i, c in enumerate(_counts(n)) if i)
+    block = _block_fields(comps, prefix, n, m)
+    api = {"api_measured": "", "api_measured_null": "", "api_measured_said": ""}
+    what = "compensator"
+    if st.reads:  # each row also the actuators' charges read before it
+        what = "self-sensing loop"
+        block["process_step"] = block["process_step"].replace(
+            f"target + k * {m}, ", f"target + k * {m}, measured + k * {n}, "
+        )
+        api = {"api_measured": ", const double *measured",
+               "api_measured_null": " || measured == NULL",
+               "api_measured_said": (f"\n * measured holds n rows of the {n} actuators' charges, "
+                                     "each read before its row's step.")}  # fmt: skip
     code[c_path.name] += _template("handle.c").substitute(prefix=prefix) + _template(
         "stage_api.c"
     ).substitute(
         prefix=prefix, n=n, m=m, counts=1 + 3 * n, count_lines=count_lines,
-        version=_version_text(f"{prefix}, the compensator of a stage of {n} actuators"),
-        **_block_fields(compensator.compensators, prefix, n, m),
+        version=_version_text(f"{prefix}, the {what} of a stage of {n} actuators"),
+        **block, **api,
     )  # fmt: skip
     files = _write(code, c_path)
     lib = library_path(c_path, prefix)
@@ -340,6 +419,12 @@ def write_stage_fmu(
     ParameterError
         No sample rate, a name that is not a C identifier, no C compiler.
     """
+    if isinstance(compensator, CoupledSelfSensingController):
+        msg = (
+            "the stage's self-sensing loop is exported as C and as a shared library "
+            "(write_stage_c, write_stage_shared); not yet as an FMU or a MEX gateway"
+        )
+        raise ParameterError(msg)
     from .fmu import fmi2_wrapper, package_fmu, stamp_guid
 
     rate = compensator.compensators[0].sample_rate
@@ -429,6 +514,12 @@ def write_stage_mex(
     list of Path
         The gateway first, then the stage's files.
     """
+    if isinstance(compensator, CoupledSelfSensingController):
+        msg = (
+            "the stage's self-sensing loop is exported as C and as a shared library "
+            "(write_stage_c, write_stage_shared); not yet as an FMU or a MEX gateway"
+        )
+        raise ParameterError(msg)
     from .shared import _version_text, mex_commands
 
     gate, _, name = c_paths(path)

@@ -11,7 +11,8 @@ ${inits}
     s->outside = 0;
 }
 
-void ${prefix}_step(${prefix}_t *s, const ${prefix}_real *desired${next_param}, ${prefix}_real *command)
+void ${prefix}_step(${prefix}_t *s, const ${prefix}_real *desired${measured_param}${next_param},
+    ${prefix}_real *command)
 {
     ${prefix}_real own[${n}];${next_decl}
     int i, j, beyond = 0;
@@ -32,14 +33,15 @@ ${next_own}${steps}
 
 /* The step on doubles, as a host passes them (the shared library's rows, an FMU's
  * variables). */
-void ${prefix}_step_doubles(${prefix}_t *s, const double *desired${next_double}, double *command)
+void ${prefix}_step_doubles(${prefix}_t *s, const double *desired${measured_double}${next_double},
+    double *command)
 {
-    ${prefix}_real d[${m}], v[${n}];${next_copy_decl}
+    ${prefix}_real d[${m}], v[${n}];${next_copy_decl}${measured_copy_decl}
     int i;
     for (i = 0; i < ${m}; ++i) {
         d[i] = (${prefix}_real)desired[i];${next_copy}
-    }
-    ${prefix}_step(s, d${next_arg}, v);
+    }${measured_copy}
+    ${prefix}_step(s, d${measured_arg}${next_arg}, v);
     for (i = 0; i < ${n}; ++i) {
         command[i] = (double)v[i];
     }

@@ -4,11 +4,12 @@
 /* ---- shared-library API of a coupled stage (piezohyst.control.export.write_stage_shared) */
 #include <math.h>
 /* n samples: target holds n rows of ${m} desired positions, volts gets n rows of ${n}
- * commands (V), both row by row. 0; -1 for a NULL pointer, -2 for n < 0.${process_said} */
-PH_EXPORT int ${prefix}_process(${prefix}_t *s, const double *target, double *volts, long n)
+ * commands (V), both row by row. 0; -1 for a NULL pointer, -2 for n < 0.${api_measured_said}${process_said} */
+PH_EXPORT int ${prefix}_process(${prefix}_t *s, const double *target${api_measured}, double *volts,
+    long n)
 {
     long k;${process_decl}
-    if (s == NULL || target == NULL || volts == NULL) {
+    if (s == NULL || target == NULL || volts == NULL${api_measured_null}) {
         return -1;
     }
     if (n < 0) {
