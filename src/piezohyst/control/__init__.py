@@ -14,6 +14,10 @@ A structure's shared modes: the tracker with preview of a ``StructureModel`` (``
     StructureCompensator
 Feedback on the measured charge (``selfsensing``)
     SelfSensingController, ControllerState, LoopSettings
+A coupled stage on its actuators' charges: the coupling's inverse, then each actuator's
+self-sensing loop (``coupled_selfsensing``; the stage's map, ``StageMap`` and
+``calibrate_stage``, is a calibration)
+    CoupledSelfSensingController
 Learning a repeated scan (the subpackage ``learning``: the compensator in
 ``learning.compensator``, the harmonic law's design in ``learning.design``, the Jacobian law in
 ``learning.jacobian``, the lead-in's probe in ``learning.probe``, a trial's trajectory and limits
@@ -49,6 +53,7 @@ __getattr__, __dir__ = attach(
         "Controller": ".contract",
         "Compensator": ".compensator",
         "CoupledCompensator": ".coupled",
+        "CoupledSelfSensingController": ".coupled_selfsensing",
         "StructureCompensator": ".structure",
         "CompensatorSettings": ".compensator",
         "CompensatorState": ".compensator",
@@ -76,6 +81,7 @@ if TYPE_CHECKING:  # the same names, for type checkers and editors
     from .compensator import Compensator, CompensatorSettings, CompensatorState
     from .contract import Controller
     from .coupled import CoupledCompensator
+    from .coupled_selfsensing import CoupledSelfSensingController
     from .export import CCode, export_c, write_c, write_fmu, write_mex, write_shared
     from .learning import (
         CoupledLearningCompensator,
@@ -100,6 +106,7 @@ __all__ = [
     "ControllerState",
     "CoupledCompensator",
     "CoupledLearningCompensator",
+    "CoupledSelfSensingController",
     "CoupledTrial",
     "LearningCompensator",
     "LearningDesign",

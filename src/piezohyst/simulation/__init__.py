@@ -1,5 +1,6 @@
 """The simulated bench: actuator, charge circuit, sensors and excitation signals; a coupled
-stage of several benches (``stage``)."""
+stage of several benches (``stage``: :func:`simulate_stage` in one run, :class:`Stage` and
+:func:`run_stage_loop` one sample at a time for a stage's closed loops)."""
 
 from __future__ import annotations
 

@@ -14,7 +14,8 @@ module             what it holds
 ``stage_c``        :func:`export_stage_c`, :func:`write_stage_c`, :func:`write_stage_shared`,
                    :func:`write_stage_fmu`, :func:`write_stage_mex`, :class:`StageCode`: a
                    coupled stage's compensator, each actuator's step and the coupling's
-                   inverse around them, its library, FMU and MEX gateway
+                   inverse around them, its library, FMU and MEX gateway (a stage's
+                   self-sensing loop: its C and library)
 ``structure_c``    :func:`~.structure_c.write_structure_c`,
                    :func:`~.structure_c.write_structure_shared`,
                    :func:`~.structure_c.write_structure_mex`,
