@@ -201,3 +201,35 @@ def sines_in_reach(
     wave = np.column_stack([np.sin(2 * np.pi * rates[0] * k / fs),
                             np.sin(2 * np.pi * rates[1] * k / fs)])  # fmt: skip
     return np.asarray(np.array([x0, y0]) + np.array([x1 - x0, y1 - y0]) * (0.5 + depth * wave))
+
+
+def stage_loop() -> tuple[Any, np.ndarray, np.ndarray]:
+    """A stage's self-sensing loop (``ph.CoupledSelfSensingController``, the paper's model per
+    actuator, slew-limited) at its reset state, a Lissajous with a stretch beyond x's reach
+    and a NaN hold, and the charges a closed-loop run on the simulated stage read before each
+    row (what a host's loop feeds back)."""
+    from piezohyst.simulation import Stage, run_stage_loop, simulate_stage
+
+    t, a = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=8.0)
+    _, b = make_signal("multifreq", amplitude=140.0, frequency=1.9, duration=8.0)
+    rec = simulate_stage(np.column_stack([a, b]), t, seed=0)
+    models = [ph.ActivePI(10).fit(rec.voltage[:, i], rec.charge[:, i], t=rec.t) for i in range(2)]
+    stage = ph.calibrate_stage(models, rec.voltage, rec.charge, rec.position, rec.t)
+    ctl = ph.CoupledSelfSensingController(
+        models, stage, sample_rate=1000.0, slew_rate=2e4,
+        v_min=[m.input_range_[0] for m in models], v_max=[m.input_range_[1] for m in models],
+    )  # fmt: skip
+    (x0, x1), (y0, y1) = ctl.reach
+    phase = 2 * np.pi * np.arange(1200) / 1000.0
+    own = np.column_stack([x0 + (x1 - x0) * (0.5 + 0.3 * np.sin(10 * phase)),
+                           y0 + (y1 - y0) * (0.5 + 0.3 * np.sin(7.5 * phase + 0.5))])  # fmt: skip
+    d = own @ stage.coupling.T + stage.offset
+    d[500:540, 0] = x1 * 1.2  # beyond x's reach
+    d[800, 1] = np.nan
+    plant = Stage(seed=4, voltage=ctl.last_command)
+    first = plant.reading.charge.copy()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # out of reach on purpose, the map beyond its charges
+        run = run_stage_loop(ctl, d, plant)
+    ctl.reset()
+    return ctl, d, np.vstack([first, run.charge[:-1]])

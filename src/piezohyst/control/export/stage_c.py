@@ -391,21 +391,22 @@ def write_stage_shared(
 
 
 def write_stage_fmu(
-    compensator: CoupledCompensator,
+    compensator: CoupledCompensator | CoupledSelfSensingController,
     path: str | os.PathLike[str],
     *,
     precision: Precision = "double",
 ) -> Path:
-    """An FMI 2.0 Co-Simulation FMU of a coupled stage's compensator.
+    """An FMI 2.0 Co-Simulation FMU of a coupled stage's compensator (or self-sensing loop).
 
-    Real inputs ``target_0`` ... (one per axis, value references 0 ...), real outputs
-    ``voltage_0`` ... (one per actuator, after the targets), integer outputs ``outside`` (0)
-    then per actuator k ``nonfinite_k``, ``saturated_k``, ``slewed_k`` (1 + 3k ...). One
-    ``fmi2DoStep`` is one sample of the compensator's rate.
+    Real inputs ``target_0`` ... (one per axis, value references 0 ...), a stage's loop then
+    ``charge_0`` ... (each actuator's charge read before the step; NaN: that loop runs on
+    feedforward), real outputs ``voltage_0`` ... (one per actuator, after the inputs),
+    integer outputs ``outside`` (0) then per actuator k ``nonfinite_k``, ``saturated_k``,
+    ``slewed_k`` (1 + 3k ...). One ``fmi2DoStep`` is one sample of the compensator's rate.
 
     Parameters
     ----------
-    compensator : CoupledCompensator
+    compensator : CoupledCompensator or CoupledSelfSensingController
         With its ``sample_rate``.
     path, precision
         As for :func:`~piezohyst.control.export.write_fmu`.
@@ -419,15 +420,11 @@ def write_stage_fmu(
     ParameterError
         No sample rate, a name that is not a C identifier, no C compiler.
     """
-    if isinstance(compensator, CoupledSelfSensingController):
-        msg = (
-            "the stage's self-sensing loop is exported as C and as a shared library "
-            "(write_stage_c, write_stage_shared); not yet as an FMU or a MEX gateway"
-        )
-        raise ParameterError(msg)
     from .fmu import fmi2_wrapper, package_fmu, stamp_guid
 
-    rate = compensator.compensators[0].sample_rate
+    st = _stage(compensator)
+    comps = [_compensator(step) for step in st.steps]
+    rate = comps[0].sample_rate
     if rate is None:
         msg = "an FMU steps at the loop's rate: give the sample rate (sample_rate=)"
         raise ParameterError(msg)
@@ -436,62 +433,101 @@ def write_stage_fmu(
     if not name.isidentifier() or not name.isascii():
         msg = f"the FMU's name {name!r} (its file name) must be a C identifier"
         raise ParameterError(msg)
-    n, m = len(compensator.compensators), compensator.model.coupling_.shape[0]
+    n, m = len(comps), st.coupling.shape[0]
     # a mode's inverse needs the next position: inputs next_0 ... after the targets (NaN, the
-    # start, extrapolates, as Python without a preview)
-    p = m if _looks_ahead(compensator.compensators) else 0
+    # start, extrapolates, as Python without a preview); a loop's charges after those
+    p = m if _looks_ahead(comps) else 0
+    r = n if st.reads else 0
     period = 1.0 / float(rate)
-    what = f"{name}: the compensator of a stage of {n} actuators and {m} axes, {rate:g} Hz"
+    kind = "self-sensing loop" if st.reads else "compensator"
+    what = f"{name}: the {kind} of a stage of {n} actuators and {m} axes, {rate:g} Hz"
     files = export_stage_c(compensator, precision=precision, prefix=name).files
     counts = [f"c->s.{c}" for c in _counts(n)]
     ahead = f", c->r + {m}" if p else ""
+    charges = f", c->r + {m + p}" if r else ""
+    first = m + p + r  # the first voltage
     files[f"{name}.c"] += fmi2_wrapper(
-        name, period, what, n_real=m + p + n,
+        name, period, what, n_real=first + n,
         layout=(f"0-{m - 1} the targets, "
                 + (f"{m}-{2 * m - 1} the next targets, " if p else "")
-                + f"{m + p}-{m + p + n - 1} the voltages"),
-        not_input=f"vr[i] >= {m + p}",
-        inputs="the targets" + (" and the next targets" if p else ""), counts=tuple(counts),
+                + (f"{m + p}-{m + p + r - 1} the charges, " if r else "")
+                + f"{first}-{first + n - 1} the voltages"),
+        not_input=f"vr[i] >= {first}",
+        inputs="the targets" + (" and the next targets" if p else "")
+        + (" and the charges" if r else ""),
+        counts=tuple(counts),
         counts_said="0 desired positions beyond the reach, then per actuator k: 1 + 3k\n * "
         "non-finite targets, 2 + 3k commands at a voltage limit, 3 + 3k cut by the slew limit",
-        step_statement=f"{name}_step_doubles(&c->s, c->r{ahead}, c->r + {m + p})",
+        step_statement=f"{name}_step_doubles(&c->s, c->r{charges}{ahead}, c->r + {first})",
         start_outputs="\n    ".join([*(f"c->r[{i}] = 0.0;" for i in range(m)),
-                                      *(f"c->r[{m + i}] = NAN;" for i in range(p)),
-                                      *(f"c->r[{m + p + k}] = (fmi2Real)c->s.a{k}.last;"
+                                      *(f"c->r[{m + i}] = NAN;" for i in range(p + r)),
+                                      *(f"c->r[{first + k}] = (fmi2Real)c->s.a{k}.last;"
                                         for k in range(n))]),
     )  # fmt: skip
     guid = stamp_guid(name, files)
-    unit = compensator.model.channels_[0].output_unit
-    xml = _stage_description(name, guid, n, m, period, what, unit, ahead=bool(p))
+    xml = _stage_description(name, guid, n, m, period, what, st.unit, ahead=bool(p),
+                             reads=st.reads)  # fmt: skip
     return package_fmu(out, name, files, xml, what)
 
 
 def _stage_description(
-    name: str, guid: str, n: int, m: int, period: float, what: str, unit: str, *, ahead: bool
-) -> str:
-    """The stage FMU's ``modelDescription.xml`` (``ahead``: the next targets' inputs too)."""
+    name: str, guid: str, n: int, m: int, period: float, what: str, unit: str, *, ahead: bool,
+    reads: bool = False,
+) -> str:  # fmt: skip
+    """The stage FMU's ``modelDescription.xml`` (``ahead``: the next targets' inputs too;
+    ``reads``: each actuator's charge too, a stage's loop)."""
     from .fmu import cosim_description, scalar
 
     p = m if ahead else 0
+    r = n if reads else 0
     rows = [scalar(f"target_{i}", i, "input", "Real", f"axis {i}'s desired position ({unit})")
             for i in range(m)]  # fmt: skip
     rows += [scalar(f"next_{i}", m + i, "input", "Real", f"axis {i}'s desired position at the "
                     f"next step ({unit}; NaN: extrapolated), for the actuators' modes", "NaN")
              for i in range(p)]  # fmt: skip
-    rows += [scalar(f"voltage_{k}", m + p + k, "output", "Real", f"actuator {k}'s command (V)")
-             for k in range(n)]  # fmt: skip
+    rows += [scalar(f"charge_{k}", m + p + k, "input", "Real", f"actuator {k}'s charge read "
+                    "before this step (its model's unit; NaN: none, feedforward)", "NaN")
+             for k in range(r)]  # fmt: skip
+    rows += [scalar(f"voltage_{k}", m + p + r + k, "output", "Real",
+                    f"actuator {k}'s command (V)") for k in range(n)]  # fmt: skip
     rows.append(scalar("outside", 0, "output", "Integer", "desired positions beyond the reach"))
     for k in range(n):
         for j, field in enumerate(("nonfinite", "saturated", "slewed")):
             rows.append(scalar(f"{field}_{k}", 1 + 3 * k + j, "output", "Integer",
                                f"actuator {k}: {field} commands since the last reset"))  # fmt: skip
-    outputs = range(m + p + 1, m + p + n + 1 + 1 + 3 * n)  # 1-based: every one after the inputs
+    outputs = range(m + p + r + 1, m + p + r + n + 1 + 1 + 3 * n)  # 1-based: after the inputs
     sources = [f"{name}{part}.c" for part in ["", *(f"_a{k}" for k in range(n))]]
     return cosim_description(name, guid, what, period, sources, rows, outputs)
 
 
+def _mex_measured_fields(reads: bool, n: int) -> dict[str, str]:
+    """The MEX gateway's fields for a stage's loop: a second matrix, each actuator's charges
+    read before each row's step (empty fields for a compensator)."""
+    if not reads:
+        empty = ("mex_usage", "mex_usage_said", "mex_measured_decl", "mex_q_decl",
+                 "mex_measured_check", "mex_usage_error", "mex_measured_get",
+                 "mex_measured_copy", "mex_measured_arg")  # fmt: skip
+        return {**dict.fromkeys(empty, ""), "mex_nrhs": "1"}
+    return {
+        "mex_usage": ", measured",
+        "mex_usage_said": (f"\n *        measured: each actuator's charge ({n} columns, a row "
+                           "per target row), read before that row's step"),
+        "mex_measured_decl": "\n    const double *measured;",
+        "mex_q_decl": f", q[{n}]",
+        "mex_nrhs": "2",
+        "mex_measured_check": ("\n        || !mxIsDouble(prhs[1]) || mxIsComplex(prhs[1]) || "
+                               f"mxIsSparse(prhs[1])\n        || mxGetN(prhs[1]) != {n} || "
+                               "mxGetM(prhs[1]) != mxGetM(prhs[0])"),
+        "mex_usage_error": f" and measured the charges, {n} columns",
+        "mex_measured_get": "\n    measured = mxGetPr(prhs[1]);",
+        "mex_measured_copy": (f"\n        for (i = 0; i < {n}; ++i) {{\n"
+                              "            q[i] = measured[k + i * rows];\n        }"),
+        "mex_measured_arg": ", q",
+    }  # fmt: skip
+
+
 def write_stage_mex(
-    compensator: CoupledCompensator,
+    compensator: CoupledCompensator | CoupledSelfSensingController,
     path: str | os.PathLike[str],
     *,
     precision: Precision = "double",
@@ -500,11 +536,12 @@ def write_stage_mex(
 
     ``NAME`` comes from ``path`` (``ph_xy_mex.c``: the function ``ph_xy_mex``); the stage's
     files are named after it without ``_mex`` (``ph_xy.c``, ``ph_xy_a0.c``, ...). Build with
-    ``mkoctfile --mex`` (or ``mex``) on the gateway and the stage's ``.c`` files.
+    ``mkoctfile --mex`` (or ``mex``) on the gateway and the stage's ``.c`` files. A stage's
+    self-sensing loop takes each row's charges too: ``v = NAME(target, measured)``.
 
     Parameters
     ----------
-    compensator : CoupledCompensator
+    compensator : CoupledCompensator or CoupledSelfSensingController
     path : str or os.PathLike
         The gateway's ``.c`` file.
     precision : {"double", "float"}
@@ -514,25 +551,22 @@ def write_stage_mex(
     list of Path
         The gateway first, then the stage's files.
     """
-    if isinstance(compensator, CoupledSelfSensingController):
-        msg = (
-            "the stage's self-sensing loop is exported as C and as a shared library "
-            "(write_stage_c, write_stage_shared); not yet as an FMU or a MEX gateway"
-        )
-        raise ParameterError(msg)
     from .shared import _version_text, mex_commands
 
     gate, _, name = c_paths(path)
-    n, m = len(compensator.compensators), compensator.model.coupling_.shape[0]
+    st = _stage(compensator)
+    comps = [_compensator(step) for step in st.steps]
+    n, m = len(comps), st.coupling.shape[0]
     step = stage_paths(gate, n, mex=True)[1]
     prefix = step.stem
     files = write_stage_c(compensator, step, precision=precision)
     count_lines = "\n".join(
         f"        counts[{i}] = (double)state.{c};" for i, c in enumerate(_counts(n)) if i
     )
-    version = _version_text(f"{name}, the compensator of a stage of {n} actuators")
+    kind = "self-sensing loop" if st.reads else "compensator"
+    version = _version_text(f"{name}, the {kind} of a stage of {n} actuators")
     text = _template("stage_mex.c").substitute(
-        **_block_fields(compensator.compensators, prefix, n, m),
+        **_block_fields(comps, prefix, n, m), **_mex_measured_fields(st.reads, n),
         name=name, prefix=prefix, n=n, m=m, n_counts=1 + 3 * n, count_lines=count_lines,
         sources=" ".join(p.name for p in files if p.suffix == ".c"), version=version,
         run_command=mex_commands(name, prefix, version),

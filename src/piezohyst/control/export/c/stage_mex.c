@@ -4,7 +4,7 @@
  *
  * Build: MATLAB  mex ${name}.c ${sources}
  *        Octave  mkoctfile --mex ${name}.c ${sources}
- * Use:   v = ${name}(target);   target: one row per sample, one column per axis (${m});
+ * Use:   v = ${name}(target${mex_usage});   target: one row per sample, one column per axis (${m});${mex_usage_said}
  *        v: one row per sample, one column per actuator (${n}), V; the state kept between
  *        calls. [v, counts] = ... also returns what the limits held since the last reset:
  *        [beyond the stage's reach, then per actuator: non-finite targets (held), at a
@@ -25,8 +25,8 @@ void mexFunction(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
 {
     mwSize rows, k;
     int i;
-    const double *target;
-    double *volts, *counts, d[${m}], v[${n}]${mex_next_decl};
+    const double *target;${mex_measured_decl}
+    double *volts, *counts, d[${m}], v[${n}]${mex_next_decl}${mex_q_decl};
     if (!ready) {
         ${prefix}_init(&state);
         ready = 1;
@@ -34,20 +34,21 @@ void mexFunction(int nlhs, mxArray *plhs[], int nrhs, const mxArray *prhs[])
     if (run_command(nrhs, plhs, prhs)) {
         return;
     }
-    if (nrhs != 1 || nlhs > 2 || !mxIsDouble(prhs[0]) || mxIsComplex(prhs[0])
-        || mxIsSparse(prhs[0]) || mxGetN(prhs[0]) != ${m}) {
-        mexErrMsgIdAndTxt("${name}:usage", "usage v = ${name}(target) with target a real "
-                          "double matrix of ${m} columns (one per axis), or ${name}('reset')");
+    if (nrhs != ${mex_nrhs} || nlhs > 2 || !mxIsDouble(prhs[0]) || mxIsComplex(prhs[0])
+        || mxIsSparse(prhs[0]) || mxGetN(prhs[0]) != ${m}${mex_measured_check}) {
+        mexErrMsgIdAndTxt("${name}:usage", "usage v = ${name}(target${mex_usage}) with target a real "
+                          "double matrix of ${m} columns (one per axis)${mex_usage_error}, or "
+                          "${name}('reset')");
     }
     rows = mxGetM(prhs[0]);
-    target = mxGetPr(prhs[0]);
+    target = mxGetPr(prhs[0]);${mex_measured_get}
     plhs[0] = mxCreateDoubleMatrix(rows, ${n}, mxREAL);
     volts = mxGetPr(plhs[0]);
     for (k = 0; k < rows; ++k) { /* MATLAB's matrices go column by column */
         for (i = 0; i < ${m}; ++i) {
             d[i] = target[k + i * rows];${mex_next}
-        }
-        ${prefix}_step_doubles(&state, d${mex_next_arg}, v);
+        }${mex_measured_copy}
+        ${prefix}_step_doubles(&state, d${mex_measured_arg}${mex_next_arg}, v);
         for (i = 0; i < ${n}; ++i) {
             volts[k + i * rows] = v[i];
         }
