@@ -380,3 +380,60 @@ def test_a_stage_with_a_third_sensor_from_the_shell(tmp_path: Path) -> None:
     assert "50 desired positions outside the stage's reach" in res.output
     written = ph.read_table(tmp_path / "c.csv")
     assert "command_1" in written and "command_2" not in written
+
+
+def test_a_stage_on_its_charges_from_the_shell(tmp_path: Path) -> None:
+    """``calibrate-stage`` maps the actuators' charges to the stage's positions from a record
+    (each actuator's model fitted on its own columns first), as ``ph.calibrate_stage`` does
+    on the same columns; ``export-c`` of the map with ``--models`` writes the stage's
+    self-sensing loop as ``export_stage_c`` does; what is missing or miscounted is named."""
+    t, a = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=8.0)
+    _, b = make_signal("multifreq", amplitude=140.0, frequency=1.9, duration=8.0)
+    rec = simulate_stage(np.column_stack([a, b]), t, seed=0)
+    data = tmp_path / "stage-q.csv"
+    cols = {"time": rec.t, "vx": rec.voltage[:, 0], "vy": rec.voltage[:, 1],
+            "qx": rec.charge[:, 0], "qy": rec.charge[:, 1],
+            "x": rec.position[:, 0], "y": rec.position[:, 1]}  # fmt: skip
+    ph.write_table(data, cols, units={"time": "s", "vx": "V", "vy": "V", "qx": "C", "qy": "C",
+                                      "x": "m", "y": "m"})  # fmt: skip
+    for axis in ("x", "y"):
+        out = tmp_path / f"a{axis}.json"
+        res = run("fit", data, "--input", f"v{axis}", "--output", f"q{axis}", "--model",
+                  "active-pi", "--input-dynamics", "none", "-o", out)  # fmt: skip
+        assert res.exit_code == 0, res.output
+    maps = tmp_path / "stage-map.json"
+    models = f"{tmp_path / 'ax.json'},{tmp_path / 'ay.json'}"
+    res = run("calibrate-stage", data, "--models", models, "--input", "vx,vy", "--charge",
+              "qx,qy", "--output", "x,y", "-o", maps)  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "coupling [" in res.output and "actuator 1: gain" in res.output
+    table = ph.read_table(data)
+    fitted = [ph.load_model(tmp_path / f"a{axis}.json") for axis in ("x", "y")]
+    cols_of = {k: np.asarray(table.get(k)) for k in ("vx", "vy", "qx", "qy", "x", "y")}
+    mine = ph.calibrate_stage(
+        fitted, np.column_stack([cols_of["vx"], cols_of["vy"]]),
+        np.column_stack([cols_of["qx"], cols_of["qy"]]),
+        np.column_stack([cols_of["x"], cols_of["y"]]), np.asarray(table.get("time")),
+    )  # fmt: skip
+    saved = ph.StageMap.load(maps)
+    np.testing.assert_array_equal(saved.coupling, mine.coupling)
+    res = run("export-c", maps, "--models", models, "--sample-rate", "1000", "--slew-rate",
+              "2e4", "-o", tmp_path / "ph_xy.c")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    from piezohyst.control.export import export_stage_c
+
+    loop = ph.CoupledSelfSensingController(
+        fitted, saved, sample_rate=1000.0, slew_rate=2e4,
+        v_min=[m.input_range_[0] for m in fitted], v_max=[m.input_range_[1] for m in fitted],
+    )  # fmt: skip
+    for name, text in export_stage_c(loop, prefix="ph_xy").files.items():
+        assert (tmp_path / name).read_text() == text, name
+    assert_clean_error(run("export-c", maps, "--sample-rate", "1000", "-o",
+                           tmp_path / "other.c"), code=2)  # fmt: skip
+    one_line_error(run("export-c", maps, "--models", str(tmp_path / "ax.json"),
+                       "--sample-rate", "1000", "-o", tmp_path / "other.c"),
+                   "holds 2 actuators")  # fmt: skip
+    one_line_error(run("calibrate-stage", data, "--models", models, "--input", "vx,vy",
+                       "--charge", "qx,qz", "--output", "x,y", "-o", tmp_path / "m2.json"),
+                   "no column 'qz'", "--charge")  # fmt: skip
+    assert not (tmp_path / "other.c").exists() and not (tmp_path / "m2.json").exists()

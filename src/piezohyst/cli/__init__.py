@@ -15,7 +15,7 @@ module           commands
 ``_compensate``  ``compensate``
 ``_report``      ``report``
 ``_loop``        ``simulate-loop``
-``_calibrate``   ``calibrate-leakage``, ``calibrate-gain``
+``_calibrate``   ``calibrate-leakage``, ``calibrate-gain``, ``calibrate-stage``
 ``_export``      ``export-c``, ``export-fmu``
 ``_learn``       ``learn``
 ``_demo``        ``demo``

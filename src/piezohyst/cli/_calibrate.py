@@ -1,5 +1,5 @@
-"""The calibration commands: ``calibrate-leakage`` (holds) and ``calibrate-gain`` (a
-displacement sensor, once)."""
+"""The calibration commands: ``calibrate-leakage`` (holds), ``calibrate-gain`` (a
+displacement sensor, once) and ``calibrate-stage`` (a stage's sensors, once)."""
 
 from __future__ import annotations
 
@@ -169,4 +169,63 @@ def calibrate_gain(
         f"holds for displacements [{s_lo:.4g}, {s_hi:.4g}] {om.output_unit}; "
         f"{om.n_samples} samples (worth {om.n_effective} independent ones)"
     )
+    ctx.info(f"saved {out}")
+
+
+@click.command("calibrate-stage")
+@click.argument("data", type=EXISTING)
+@_data_options
+@click.option(
+    "--models",
+    required=True,
+    help="Each actuator's model file (fitted on its own voltage -> charge), comma-separated.",
+)
+@click.option(
+    "--charge",
+    "charge_columns",
+    required=True,
+    help="Each actuator's charge column, comma-separated, in the models' order.",
+)
+@OUT_FILE_JSON
+@FORCE
+@click.pass_obj
+def calibrate_stage(
+    ctx: Context,
+    data: Path,
+    data_spec: DataSpec,
+    models: str,
+    charge_columns: str,
+    out: Path,
+    force: bool,
+) -> None:
+    """Calibrate a stage's positions from its actuators' charges, once, from a record with
+    the stage's sensors: each actuator's charge to what it moves, then the coupling.
+
+    DATA holds each actuator's voltage (--input vx,vy) and charge (--charge qx,qy) and each
+    axis's position (--output x,y, actuator i's own axis i-th), sampled together. Then the
+    stage runs on its charges alone, its sensors unplugged: export-c STAGE_MAP --models ...
+    writes each actuator's self-sensing loop behind the coupling's inverse.
+
+    \b
+    Example:
+      piezohyst calibrate-stage stage.csv --models ax.json,ay.json --input vx,vy \\
+          --charge qx,qy --output x,y -o stage-map.json
+    """
+    from ..workflows.stage_files import stage_columns
+    from ..workflows.stage_loop_files import calibrate_stage_file
+
+    stage = _run(
+        ctx,
+        lambda: calibrate_stage_file(
+            data,
+            out,
+            models=[Path(p) for p in stage_columns(models, "--models")],
+            inputs=stage_columns(data_spec.input_column, "--input"),
+            charges=stage_columns(charge_columns, "--charge"),
+            outputs=stage_columns(data_spec.output_column, "--output"),
+            data_spec=data_spec,
+            force=force,
+        ),
+    )
+    ctx.result(stage.describe())
     ctx.info(f"saved {out}")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import click
 
@@ -47,6 +47,13 @@ def _export_options(suffix: str) -> Callable[[Callable[..., None]], Callable[...
                     help=out_help,
                 ),
                 click.option("--controller", is_flag=True, help=controller_help),
+                click.option(
+                    "--models",
+                    default=None,
+                    help="With a stage map (calibrate-stage) as MODEL: each actuator's model "
+                    "file, comma-separated; exports the stage's self-sensing loop (--leakage: "
+                    "one file per actuator, comma-separated).",
+                ),
                 _loop_options,
                 FORCE,
                 click.pass_obj,
@@ -65,19 +72,33 @@ def _export(
     settings: CompensatorSettings,
     use_float: bool,
     controller: LoopSettings | None,
-    **build: bool,
+    loop: LoopSettings,
+    **build: Any,
 ) -> tuple[Path, ...]:
     from ..workflows import export_file
     from ..workflows.stage_files import export_stage_file, is_stage_file
+    from ..workflows.stage_loop_files import is_stage_map_file
 
     precision: Literal["float", "double"] = "float" if use_float else "double"
+    models = build.pop("models", None)
+    if is_stage_map_file(model):  # a stage on its charges: each actuator's loop
+        return _export_stage_loop(ctx, model, out, settings, precision, loop, models, **build)
+    if models is not None:
+        raise click.UsageError(
+            f"--models goes with a stage map (calibrate-stage); {model} is not one"
+        )
     if is_stage_file(model):  # a coupled stage: its C, the coupling's inverse around each step
         flags = ["--controller"] if controller is not None else []
         if flags or settings.v_min is None or settings.v_max is None:
+            said = (
+                "--controller: a stage's loop runs on its actuators' charges (calibrate-stage, "
+                "then export-c STAGE_MAP --models ...)"
+                if flags
+                else "the limits are needed"
+            )
             raise click.UsageError(
                 "a stage's model file exports (C, --shared, --mex, export-fmu) with --v-min and "
-                "--v-max "
-                f"(V, every actuator); {', '.join(flags) or 'the limits'}: not for a stage yet"
+                f"--v-max (V, every actuator); {said}"
             )
         return tuple(_run(ctx, lambda: export_stage_file(
             model, out, v_min=settings.v_min, v_max=settings.v_max,  # type: ignore[arg-type]
@@ -92,6 +113,40 @@ def _export(
         ),
     )
     return paths
+
+
+def _export_stage_loop(
+    ctx: Context,
+    model: Path,
+    out: Path,
+    settings: CompensatorSettings,
+    precision: str,
+    loop: LoopSettings,
+    models: str | None,
+    **build: Any,
+) -> tuple[Path, ...]:
+    """``export-c STAGE_MAP --models ax.json,ay.json``: the stage's self-sensing loop."""
+    from ..workflows.stage_files import stage_columns
+    from ..workflows.stage_loop_files import export_stage_loop_file
+
+    if models is None:
+        raise click.UsageError(
+            f"{model} is a stage map: give each actuator's model file with --models "
+            "ax.json,ay.json (the ones calibrate-stage used)"
+        )
+    if settings.domain != "charge" or settings.gain is not None or loop.refresh_leakage:
+        raise click.UsageError(
+            "a stage map's loop takes its targets in the map's units (positions): --domain, "
+            "--gain and --refresh-leakage are not for a stage"
+        )
+    leak = None if loop.leakage is None else stage_columns(str(loop.leakage), "--leakage")
+    return tuple(_run(ctx, lambda: export_stage_loop_file(
+        model, out, models=[Path(p) for p in stage_columns(models, "--models")],
+        sample_rate=settings.sample_rate, v_min=settings.v_min, v_max=settings.v_max,
+        slew_rate=settings.slew_rate, allow_extrapolation=settings.allow_extrapolation,
+        leakage=None if leak is None else [Path(p) for p in leak], ki=loop.ki, kp=loop.kp,
+        precision=precision, shared=bool(build.get("shared")), mex=bool(build.get("mex")),
+        force=bool(build.get("force")))))  # fmt: skip
 
 
 @click.command("export-c")
@@ -117,22 +172,26 @@ def export_c(
     settings: CompensatorSettings,
     use_float: bool,
     controller: bool,
+    models: str | None,
     loop: LoopSettings,
     force: bool,
 ) -> None:
     """Write a dependency-free C99 compensator (NAME.c and NAME.h) for a microcontroller.
 
     With --controller, the self-sensing controller: NAME_step(s, desired,
-    measured) takes the charge read at each sample as well.
+    measured) takes the charge read at each sample as well. MODEL a stage's model file:
+    the coupled compensator; a stage map (calibrate-stage) with --models: the stage's
+    self-sensing loop, NAME_step(s, desired, measured, command).
 
     \b
     Examples:
       piezohyst export-c model.json --v-min 0 --v-max 140 -o ph_comp.c
       piezohyst export-c model.json --controller --leakage leak.json \\
           --sample-rate 1000 -o ph_loop.c
+      piezohyst export-c stage-map.json --models ax.json,ay.json --sample-rate 1000 -o ph_xy.c
     """
-    paths = _export(ctx, model, out, settings, use_float, loop if controller else None,
-                    force=force, shared=shared, mex=mex)  # fmt: skip
+    paths = _export(ctx, model, out, settings, use_float, loop if controller else None, loop,
+                    force=force, shared=shared, mex=mex, models=models)  # fmt: skip
     ctx.result("\n".join(str(p) for p in paths))
 
 
@@ -145,6 +204,7 @@ def export_fmu(
     use_float: bool,
     out: Path,
     controller: bool,
+    models: str | None,
     loop: LoopSettings,
     force: bool,
 ) -> None:
@@ -160,6 +220,6 @@ def export_fmu(
     Example:
       piezohyst export-fmu model.json --v-min 0 --v-max 140 --sample-rate 1000 -o ph_comp.fmu
     """
-    paths = _export(ctx, model, out, settings, use_float, loop if controller else None,
-                    force=force)  # fmt: skip
+    paths = _export(ctx, model, out, settings, use_float, loop if controller else None, loop,
+                    force=force, models=models)  # fmt: skip
     ctx.result(str(paths[0]))

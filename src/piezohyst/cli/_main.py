@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from .._version import __version__
-from ._calibrate import calibrate_gain, calibrate_leakage
+from ._calibrate import calibrate_gain, calibrate_leakage, calibrate_stage
 from ._compensate import compensate
 from ._demo import demo
 from ._export import export_c, export_fmu
@@ -39,6 +39,6 @@ def main(click_ctx: click.Context, quiet: bool, verbose: bool, debug: bool) -> N
 
 
 for _command in (simulate, excite, fit, compare, predict, compensate, report, fit_many_cmd,
-                 simulate_loop, demo, calibrate_leakage, calibrate_gain, export_c, export_fmu,
-                 learn):  # fmt: skip
+                 simulate_loop, demo, calibrate_leakage, calibrate_gain, calibrate_stage,
+                 export_c, export_fmu, learn):  # fmt: skip
     main.add_command(_command)

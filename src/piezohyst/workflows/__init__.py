@@ -19,6 +19,9 @@ module                   commands (functions)
 ``stage_files``          ``fit``, ``predict``, ``compensate``, ``export-c`` with several columns: a
                          coupled stage or a structure (``fit_stage_file``, ``fit_structure_file``)
 ``stage_report``         ``report`` of a stage or a structure (``stage_report``)
+``stage_loop_files``     ``calibrate-stage``, and ``export-c``/``export-fmu`` of a stage map: a
+                         stage on its actuators' charges (``calibrate_stage_file``,
+                         ``export_stage_loop_file``)
 ``compensate``           ``compensate`` (:func:`compensate_file`, :class:`Compensation`)
 ``calibrate_files``      ``calibrate-leakage``, ``calibrate-gain`` (:func:`calibrate_leakage_file`,
                          :func:`calibrate_gain_file`)

@@ -1,0 +1,213 @@
+"""A stage on its actuators' charges from files: ``calibrate-stage`` (the stage's positions
+from the charges, :func:`~piezohyst.calibrate_stage`, saved as a stage map) and the exports of
+a stage map with its actuators' model files (``export-c``, ``--shared``, ``--mex``,
+``export-fmu``: :class:`~piezohyst.CoupledSelfSensingController` outside Python)."""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from ..control.coupled_selfsensing import CoupledSelfSensingController
+from ..control.export.c_code import c_paths
+from ..control.export.stage_c import (
+    stage_paths,
+    write_stage_c,
+    write_stage_fmu,
+    write_stage_mex,
+    write_stage_shared,
+)
+from ..errors import DataFileError, ParameterError
+from ..io import DataSpec
+from ..model.calibrations.leakage import Leakage
+from ..model.calibrations.stage_map import STAGE_MAP_FORMAT, StageMap, calibrate_stage
+from ..model.persistence import load_model
+from ._base import PathLike, guard_outputs
+from .stage_files import _read_stage
+
+__all__ = ["calibrate_stage_file", "export_stage_loop_file", "is_stage_map_file"]
+
+
+def is_stage_map_file(path: PathLike) -> bool:
+    """True for a stage map file (``StageMap.save``), read only as far as its format.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Any file: one that cannot be read, or is not JSON, is not a stage map.
+
+    Returns
+    -------
+    bool
+    """
+    try:
+        with open(path, encoding="utf-8") as f:
+            head = f.read(200)
+    except (OSError, UnicodeDecodeError):
+        return False
+    if f'"format": "{STAGE_MAP_FORMAT}"' in head:
+        return True
+    try:
+        with open(path, encoding="utf-8") as f:
+            data = json.load(f)
+    except (OSError, ValueError, UnicodeDecodeError):
+        return False
+    return isinstance(data, dict) and data.get("format") == STAGE_MAP_FORMAT
+
+
+def _models(paths: Sequence[PathLike]) -> list[Any]:
+    return [load_model(p) for p in paths]
+
+
+def calibrate_stage_file(
+    data: PathLike,
+    out: PathLike | None = None,
+    *,
+    models: Sequence[PathLike],
+    inputs: Sequence[str],
+    charges: Sequence[str],
+    outputs: Sequence[str],
+    data_spec: DataSpec | None = None,
+    force: bool = False,
+) -> StageMap:
+    """Calibrate a stage's positions from its actuators' charges from one record (each
+    actuator's voltage and charge, each axis's position, sampled together) and save the map.
+
+    Parameters
+    ----------
+    data : str or os.PathLike
+        The recording.
+    out : str or os.PathLike, optional
+        Where to save the stage map (JSON).
+    models : sequence of path
+        One model file per actuator, each fitted on its own voltage -> charge.
+    inputs, charges, outputs : sequence of str
+        The actuators' voltage and charge columns and the axes' position columns (outputs
+        at least as many as actuators, actuator ``i``'s own axis ``i``-th).
+    data_spec : DataSpec, optional
+        Time column, rate, group, window, units and scales.
+    force : bool
+        Replace an existing ``out`` that piezohyst did not write.
+
+    Returns
+    -------
+    StageMap
+
+    Raises
+    ------
+    ParameterError
+        Not one model, voltage and charge column per actuator, or fewer positions.
+    """
+    n = len(models)
+    if len(inputs) != n or len(charges) != n or len(outputs) < n or n < 2:
+        msg = (
+            "calibrate-stage takes one model, one voltage and one charge column per actuator "
+            f"(two or more) and a position column per axis: got {n} models, {len(inputs)} "
+            f"voltage, {len(charges)} charge and {len(outputs)} position columns"
+        )
+        raise ParameterError(msg)
+    if out is not None:
+        guard_outputs([out], [data, *models], force=force)
+    spec = data_spec or DataSpec()
+    try:
+        t, u, q, _ = _read_stage(data, inputs, charges, spec)
+    except DataFileError as exc:  # the charges are read as outputs: name their own option
+        said = str(exc).replace("--output (output_column=)", "--charge")
+        raise DataFileError(said.replace("output column", "charge column")) from None
+    t2, _, y, unit = _read_stage(data, inputs, outputs, spec)
+    assert q is not None and y is not None and t2.shape == t.shape  # columns given: read
+    stage = calibrate_stage(_models(models), u, q, y, t, output_unit=unit or "m")
+    if out is not None:
+        stage.save(out)
+    return stage
+
+
+def export_stage_loop_file(
+    map_path: PathLike,
+    out: PathLike,
+    *,
+    models: Sequence[PathLike],
+    sample_rate: float | None,
+    v_min: float | None = None,
+    v_max: float | None = None,
+    slew_rate: float | str | None = "trained",
+    allow_extrapolation: bool = False,
+    leakage: Sequence[PathLike] | None = None,
+    ki: float = 0.5,
+    kp: float = 0.0,
+    precision: str = "double",
+    shared: bool = False,
+    mex: bool = False,
+    force: bool = False,
+) -> list[os.PathLike[str]]:
+    """A stage's self-sensing loop as C files, with ``shared`` its library, with ``mex`` a
+    MEX gateway, or where ``out`` ends in ``.fmu`` an FMU.
+
+    Parameters
+    ----------
+    map_path : str or os.PathLike
+        A stage map file (``calibrate-stage``).
+    out : str or os.PathLike
+        The stage's ``.c`` file (each actuator's pair beside it), a gateway, or an FMU.
+    models : sequence of path
+        The actuators' model files the map was calibrated through, in its order.
+    sample_rate : float
+        Hz, of the loop.
+    v_min, v_max : float, optional
+        Every actuator's voltage limits (V); default each model's training range.
+    slew_rate, allow_extrapolation, ki, kp
+        As for :class:`~piezohyst.CoupledSelfSensingController`.
+    leakage : sequence of path, optional
+        One leakage file per actuator (``calibrate-leakage``); default the models' growth
+        terms.
+    precision : {"double", "float"}
+    shared, mex : bool
+    force : bool
+        Replace existing files piezohyst did not write.
+
+    Returns
+    -------
+    list of Path
+        The files written, the stage's ``.c`` first (the library last).
+
+    Raises
+    ------
+    ParameterError
+        No sample rate, or not one model (and leakage file) per actuator.
+    """
+    if sample_rate is None:
+        msg = "a stage's self-sensing loop needs the loop's sample rate (--sample-rate, Hz)"
+        raise ParameterError(msg)
+    stage = StageMap.load(map_path)
+    n = len(stage.maps)
+    if len(models) != n or (leakage is not None and len(leakage) != n):
+        msg = (
+            f"the stage map {map_path} holds {n} actuators: give one model file (--models) "
+            f"and, if any, one leakage file (--leakage) per actuator, comma-separated"
+        )
+        raise ParameterError(msg)
+    fitted = _models(models)
+    leaks = None if leakage is None else [Leakage.load(p) for p in leakage]
+    lo = [m.input_range_[0] for m in fitted] if v_min is None else v_min
+    hi = [m.input_range_[1] for m in fitted] if v_max is None else v_max
+    loop = CoupledSelfSensingController(
+        fitted, stage, v_min=lo, v_max=hi, sample_rate=sample_rate, leakage=leaks, ki=ki, kp=kp,
+        slew_rate=slew_rate,  # type: ignore[arg-type]
+        allow_extrapolation=allow_extrapolation,
+    )  # fmt: skip
+    sources = [map_path, *models, *(leakage or [])]
+    kind: Any = precision
+    if str(out).endswith(".fmu"):
+        guard_outputs([out], sources, force=force)
+        return [write_stage_fmu(loop, out, precision=kind)]
+    c_path = c_paths(out)[0]
+    guard_outputs(stage_paths(c_path, n, mex=mex), sources, force=force)
+    if mex:
+        return list(write_stage_mex(loop, c_path, precision=kind))
+    if shared:
+        files, lib = write_stage_shared(loop, c_path, precision=kind)
+        return [*files, lib]
+    return list(write_stage_c(loop, Path(c_path), precision=kind))
