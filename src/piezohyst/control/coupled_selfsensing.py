@@ -252,10 +252,12 @@ class CoupledSelfSensingController:
         Parameters
         ----------
         desired : ndarray, shape (N, outputs)
+            The stage's positions (the map's units).
 
         Returns
         -------
         ndarray, shape (N, actuators)
+            Each actuator's own share, in its axis's units.
         """
         return stage_targets(self, desired, self.stage.coupling, self.stage.offset)
 

@@ -40,6 +40,7 @@ __all__ = [
     "export_stage_file",
     "fit_stage_file",
     "fit_structure_file",
+    "holds_format",
     "is_stage_file",
     "predict_stage_file",
     "stage_columns",
@@ -82,12 +83,31 @@ def is_stage_file(path: PathLike) -> bool:
     -------
     bool
     """
+    return holds_format(path, COUPLED_FORMAT, STRUCTURE_FORMAT)
+
+
+def holds_format(path: PathLike, *formats: str) -> bool:
+    """True where the file's start names one of ``formats`` (a file's own format comes
+    first in piezohyst's JSON files); one that cannot be read names none.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Any file.
+    *formats : str
+        The formats looked for (``"piezohyst-coupled-model"``...).
+
+    Returns
+    -------
+    bool
+        Whether one of them is named there.
+    """
     try:
         with open(path, encoding="utf-8") as fh:
             head = fh.read(4096)
     except (OSError, UnicodeDecodeError):
         return False
-    return f'"{COUPLED_FORMAT}"' in head or f'"{STRUCTURE_FORMAT}"' in head
+    return any(f'"{fmt}"' in head for fmt in formats)
 
 
 def _is_structure(path: PathLike) -> bool:

@@ -5,7 +5,6 @@ a stage map with its actuators' model files (``export-c``, ``--shared``, ``--mex
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -26,7 +25,7 @@ from ..model.calibrations.leakage import Leakage
 from ..model.calibrations.stage_map import STAGE_MAP_FORMAT, StageMap, calibrate_stage
 from ..model.persistence import load_model
 from ._base import PathLike, guard_outputs
-from .stage_files import _read_stage
+from .stage_files import _read_stage, holds_format
 
 __all__ = ["calibrate_stage_file", "export_stage_loop_file", "is_stage_map_file"]
 
@@ -43,86 +42,11 @@ def is_stage_map_file(path: PathLike) -> bool:
     -------
     bool
     """
-    try:
-        with open(path, encoding="utf-8") as f:
-            head = f.read(200)
-    except (OSError, UnicodeDecodeError):
-        return False
-    if f'"format": "{STAGE_MAP_FORMAT}"' in head:
-        return True
-    try:
-        with open(path, encoding="utf-8") as f:
-            data = json.load(f)
-    except (OSError, ValueError, UnicodeDecodeError):
-        return False
-    return isinstance(data, dict) and data.get("format") == STAGE_MAP_FORMAT
+    return holds_format(path, STAGE_MAP_FORMAT)
 
 
 def _models(paths: Sequence[PathLike]) -> list[Any]:
     return [load_model(p) for p in paths]
-
-
-def calibrate_stage_file(
-    data: PathLike,
-    out: PathLike | None = None,
-    *,
-    models: Sequence[PathLike],
-    inputs: Sequence[str],
-    charges: Sequence[str],
-    outputs: Sequence[str],
-    data_spec: DataSpec | None = None,
-    force: bool = False,
-) -> StageMap:
-    """Calibrate a stage's positions from its actuators' charges from one record (each
-    actuator's voltage and charge, each axis's position, sampled together) and save the map.
-
-    Parameters
-    ----------
-    data : str or os.PathLike
-        The recording.
-    out : str or os.PathLike, optional
-        Where to save the stage map (JSON).
-    models : sequence of path
-        One model file per actuator, each fitted on its own voltage -> charge.
-    inputs, charges, outputs : sequence of str
-        The actuators' voltage and charge columns and the axes' position columns (outputs
-        at least as many as actuators, actuator ``i``'s own axis ``i``-th).
-    data_spec : DataSpec, optional
-        Time column, rate, group, window, units and scales.
-    force : bool
-        Replace an existing ``out`` that piezohyst did not write.
-
-    Returns
-    -------
-    StageMap
-
-    Raises
-    ------
-    ParameterError
-        Not one model, voltage and charge column per actuator, or fewer positions.
-    """
-    n = len(models)
-    if len(inputs) != n or len(charges) != n or len(outputs) < n or n < 2:
-        msg = (
-            "calibrate-stage takes one model, one voltage and one charge column per actuator "
-            f"(two or more) and a position column per axis: got {n} models, {len(inputs)} "
-            f"voltage, {len(charges)} charge and {len(outputs)} position columns"
-        )
-        raise ParameterError(msg)
-    if out is not None:
-        guard_outputs([out], [data, *models], force=force)
-    spec = data_spec or DataSpec()
-    try:
-        t, u, q, _ = _read_stage(data, inputs, charges, spec)
-    except DataFileError as exc:  # the charges are read as outputs: name their own option
-        said = str(exc).replace("--output (output_column=)", "--charge")
-        raise DataFileError(said.replace("output column", "charge column")) from None
-    t2, _, y, unit = _read_stage(data, inputs, outputs, spec)
-    assert q is not None and y is not None and t2.shape == t.shape  # columns given: read
-    stage = calibrate_stage(_models(models), u, q, y, t, output_unit=unit or "m")
-    if out is not None:
-        stage.save(out)
-    return stage
 
 
 def export_stage_loop_file(
@@ -165,13 +89,14 @@ def export_stage_loop_file(
         terms.
     precision : {"double", "float"}
     shared, mex : bool
+        Also build the library; or write a MEX gateway (``out``) with the C beside it.
     force : bool
-        Replace existing files piezohyst did not write.
+        Overwrite files even where piezohyst did not write them.
 
     Returns
     -------
     list of Path
-        The files written, the stage's ``.c`` first (the library last).
+        Every file written: the stage's ``.c`` first, a library last.
 
     Raises
     ------
@@ -211,3 +136,66 @@ def export_stage_loop_file(
         files, lib = write_stage_shared(loop, c_path, precision=kind)
         return [*files, lib]
     return list(write_stage_c(loop, Path(c_path), precision=kind))
+
+
+def calibrate_stage_file(
+    data: PathLike,
+    out: PathLike | None = None,
+    *,
+    models: Sequence[PathLike],
+    inputs: Sequence[str],
+    charges: Sequence[str],
+    outputs: Sequence[str],
+    data_spec: DataSpec | None = None,
+    force: bool = False,
+) -> StageMap:
+    """Calibrate a stage's positions from its actuators' charges from one record (each
+    actuator's voltage and charge, each axis's position, sampled together) and save the map.
+
+    Parameters
+    ----------
+    data : str or os.PathLike
+        The recording.
+    out : str or os.PathLike, optional
+        Where to save the stage map (JSON).
+    models : sequence of path
+        One model file per actuator, each fitted on its own voltage -> charge.
+    inputs, charges, outputs : sequence of str
+        The actuators' voltage and charge columns and the axes' position columns (outputs
+        at least as many as actuators, actuator ``i``'s own axis ``i``-th).
+    data_spec : DataSpec, optional
+        How the file is read (its time column or rate, group, window, units, scales).
+    force : bool
+        Overwrite ``out`` even where piezohyst did not write it.
+
+    Returns
+    -------
+    StageMap
+
+    Raises
+    ------
+    ParameterError
+        Not one model, voltage and charge column per actuator, or fewer positions.
+    """
+    n = len(models)
+    if len(inputs) != n or len(charges) != n or len(outputs) < n or n < 2:
+        msg = (
+            "calibrate-stage takes one model, one voltage and one charge column per actuator "
+            f"(two or more) and a position column per axis: got {n} models, {len(inputs)} "
+            f"voltage, {len(charges)} charge and {len(outputs)} position columns"
+        )
+        raise ParameterError(msg)
+    if out is not None:
+        guard_outputs([out], [data, *models], force=force)
+    spec = data_spec or DataSpec()
+    try:
+        t, u, q, _ = _read_stage(data, inputs, charges, spec)
+    except DataFileError as exc:  # the charges are read as outputs: name their own option
+        said = str(exc).replace("--output (output_column=)", "--charge")
+        raise DataFileError(said.replace("output column", "charge column")) from None
+    t2, _, y, unit = _read_stage(data, inputs, outputs, spec)
+    assert q is not None and y is not None and t2.shape == t.shape  # columns given: read
+    stage = calibrate_stage(_models(models), u, q, y, t, output_unit=unit or "m")
+    if out is not None:
+        stage.save(out)
+    return stage

@@ -34,7 +34,7 @@ from ..._validation import FloatArray, as_time
 from ...errors import InsufficientDataError, ModelFileError, ParameterError, ShapeError
 from ...io import JsonFile
 from ..coupled import columns, warn_together
-from ..persistence import checksum
+from ..persistence import checked, signed
 from .from_sensor import calibrate_gain
 from .output_map import OutputMap
 
@@ -147,11 +147,13 @@ class StageMap(JsonFile):
 
     # ------------------------------------------------------------------ files
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready contents with a schema version and a checksum.
+        """The map as a file holds it.
 
         Returns
         -------
         dict
+            Its format and schema version, each actuator's map, the coupling, offsets and
+            misfit, and the checksum over them.
         """
         body: dict[str, Any] = {
             "format": STAGE_MAP_FORMAT,
@@ -162,8 +164,7 @@ class StageMap(JsonFile):
             "residual": [None if math.isnan(v) else float(v) for v in self.residual],
             "output_unit": self.output_unit,
         }
-        body["checksum"] = checksum(body)
-        return body
+        return signed(body)
 
     @classmethod
     def from_dict(cls, data: Any, where: str = "stage map") -> StageMap:
@@ -183,17 +184,9 @@ class StageMap(JsonFile):
         ------
         ModelFileError
         """
-        if not isinstance(data, dict) or data.get("format") != STAGE_MAP_FORMAT:
-            msg = f'{where}: not a piezohyst stage map (expected "format": "{STAGE_MAP_FORMAT}")'
-            raise ModelFileError(msg)
+        data = checked(data, STAGE_MAP_FORMAT, where, "stage map")
         if data.get("schema_version") != STAGE_MAP_VERSION:
             msg = f"{where}: schema_version {data.get('schema_version')!r} is not 1"
-            raise ModelFileError(msg)
-        if "checksum" in data and data["checksum"] != checksum(data):
-            msg = (
-                f"{where}: checksum mismatch: the file was modified after it was saved "
-                '(delete the "checksum" field to accept a deliberate edit)'
-            )
             raise ModelFileError(msg)
         try:
             maps = tuple(
@@ -208,12 +201,10 @@ class StageMap(JsonFile):
                 ),
                 output_unit=str(data.get("output_unit", "m")),
             )
-        except KeyError as exc:
-            msg = f"{where}: field {exc.args[0]!r} is missing"
-            raise ModelFileError(msg) from None
-        except (TypeError, ValueError, IndexError, ParameterError) as exc:
-            msg = f"{where}: {str(exc).splitlines()[0]}"
-            raise ModelFileError(msg) from None
+        except (KeyError, TypeError, ValueError, IndexError, ParameterError) as exc:
+            missing = isinstance(exc, KeyError)
+            said = f"field {exc.args[0]!r} is missing" if missing else str(exc).splitlines()[0]
+            raise ModelFileError(f"{where}: {said}") from None
 
 
 def _delayed(s: FloatArray, samples: int) -> FloatArray:
