@@ -166,6 +166,19 @@ def test_gaps_hold_and_missing_charges_are_counted(rig: tuple) -> None:  # type:
     np.testing.assert_array_equal(held[-1], held[48])  # the gap held the last command
 
 
+def test_it_says_what_it_runs_and_preconditions_every_actuator(rig: tuple) -> None:  # type: ignore[type-arg]
+    ctl = _controller(rig, slew_rate=2e4)
+    said = ctl.describe()
+    assert "actuator 0: ActivePI" in said and "actuator 1: ActivePI" in said
+    assert "each loop closed on its own charge" in said
+    cycle = ctl.precondition(500)
+    assert cycle.shape[1] == 2 and cycle.shape[0] >= 500
+    for i, loop in enumerate(ctl.loops):  # each actuator's full-range cycle, ends reached
+        assert cycle[:, i].min() == loop.v_min and cycle[:, i].max() == loop.v_max
+        assert np.all(np.abs(np.diff(cycle[:, i])) <= 20.0 + 1e-9)  # inside the slew limit
+    np.testing.assert_array_equal(ctl.last_command, cycle[-1])
+
+
 def test_process_equals_step(rig: tuple) -> None:  # type: ignore[type-arg]
     ctl = _controller(rig)
     d = _scans(ctl, 400)["lissajous"]

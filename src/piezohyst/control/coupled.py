@@ -23,7 +23,7 @@ from ..errors import LimitWarning, ParameterError, ShapeError, warn
 from ..model.coupled import CoupledModel
 from .compensator import Compensator
 
-__all__ = ["CoupledCompensator", "plane_slack", "stage_targets"]
+__all__ = ["CoupledCompensator", "actuator_reach", "plane_slack", "stage_targets"]
 
 #: A desired position counts as out of reach when an actuator would have to move beyond its
 #: range by more than this share of the range (rounding at the range's edge is not)
@@ -45,6 +45,25 @@ def _per_actuator(value: float | ArrayLike, n: int, name: str) -> FloatArray:
 def _counted(n: int, what: str) -> str:
     """``3 desired positions lie``, ``1 desired position lies``: a warning's count."""
     return f"{n} {what}s lie" if n != 1 else f"1 {what} lies"
+
+
+def actuator_reach(comp: Compensator) -> tuple[float, float]:
+    """What an actuator's hysteresis gives over its compensator's limits (both branches'
+    extremes, its model's output units).
+
+    Parameters
+    ----------
+    comp : Compensator
+
+    Returns
+    -------
+    tuple of float
+        The lowest and the highest output.
+    """
+    h = comp.model.hysteresis_.operator_
+    path = np.array([comp.v_min, comp.v_max, comp.v_min, comp.v_max])
+    q = np.asarray(h.propagate(path, h.rest_state(comp.v_min)).output)
+    return float(q.min()), float(q.max())
 
 
 def plane_slack(coupling: FloatArray, reach: FloatArray) -> FloatArray:
@@ -204,7 +223,7 @@ class CoupledCompensator:
         # more outputs than actuators: the least squares (what each actuator moves for the
         # nearest position they reach); a target off it is counted (actuator_targets)
         self._inverse = np.linalg.inv(c) if c.shape[0] == c.shape[1] else np.linalg.pinv(c)
-        self.reach = np.array([self._reach(c) for c in self.compensators])
+        self.reach = np.array([actuator_reach(c) for c in self.compensators])
         self.outside_count = 0  # desired positions out of the stage's reach since the reset
         self.off_plane_count = 0  # of them, off what the actuators move the outputs to
         self._outside_said = self._off_said = False
@@ -215,14 +234,6 @@ class CoupledCompensator:
         move the stage to before it counts as out of reach: :data:`REACH_SLACK` of the
         output's extent over the actuators' ranges."""
         return plane_slack(self.model.coupling_, self.reach)
-
-    @staticmethod
-    def _reach(comp: Compensator) -> tuple[float, float]:
-        """What an actuator's hysteresis gives over its limits (both branches' extremes)."""
-        h = comp.model.hysteresis_.operator_
-        path = np.array([comp.v_min, comp.v_max, comp.v_min, comp.v_max])
-        q = np.asarray(h.propagate(path, h.rest_state(comp.v_min)).output)
-        return float(q.min()), float(q.max())
 
     # ------------------------------------------------------------------ counts
     @property

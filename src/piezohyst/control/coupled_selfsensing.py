@@ -35,7 +35,7 @@ from .._validation import FloatArray
 from ..errors import ParameterError, ShapeError
 from ..model.calibrations.leakage import Leakage
 from ..model.calibrations.stage_map import StageMap
-from .coupled import CoupledCompensator, _per_actuator, stage_targets
+from .coupled import _per_actuator, actuator_reach, stage_targets
 from .selfsensing import SelfSensingController
 
 __all__ = ["CoupledSelfSensingController"]
@@ -159,7 +159,7 @@ class CoupledSelfSensingController:
     @staticmethod
     def _reach(loop: SelfSensingController) -> tuple[float, float]:
         """What an actuator moves over its limits: its hysteresis's charges through its map."""
-        q = CoupledCompensator._reach(loop.compensator)
+        q = actuator_reach(loop.compensator)
         assert loop.compensator.output_map is not None
         with warnings.catch_warnings():  # the map extended past its calibrated charges
             warnings.simplefilter("ignore")
