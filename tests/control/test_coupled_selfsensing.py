@@ -114,13 +114,13 @@ def test_a_raster_and_a_lissajous_on_the_charges_alone(rig: tuple) -> None:  # t
         assert not ctl.saturated_count.any() and not ctl.slew_limited_count.any()
     err, width, held = got["raster"]
     assert err[0] < 0.01 and width < 0.01 and held < 0.005  # measured 0.6 %, 0.6 %, 0.2 %
-    assert np.all(got["lissajous"][0] < 0.01)  # measured 0.3 / 0.6 %
+    assert np.all(got["lissajous"][0] < 0.01)  # measured 0.6 / 0.6 %
 
 
 def test_the_charge_loops_take_out_what_the_models_leave(rig: tuple) -> None:  # type: ignore[type-arg]
     """Decaying loops on x, y held: the minor loops a Prandtl-Ishlinskii model makes
     congruent and the bench's actuator does not. The same models and map as feedforward
-    alone (ki = 0) leave a loop about three times as wide."""
+    alone (ki = 0) leave a loop more than twice as wide."""
     _, shape = make_signal("decaying", amplitude=1.0, duration=3.0)
     got = {}
     for ki in (0.5, 0.0):
@@ -134,7 +134,7 @@ def test_the_charge_loops_take_out_what_the_models_leave(rig: tuple) -> None:  #
         keep = slice(500, None)
         got[ki] = (hysteresis_width(d[keep, 0], out.true_position[keep, 0]),
                    np.ptp(out.true_position[keep, 1]) / (y1 - y0))  # fmt: skip
-    assert got[0.5][0] < 0.01 and got[0.5][0] < 0.5 * got[0.0][0]  # measured 0.5 against 1.9 %
+    assert got[0.5][0] < 0.01 and got[0.5][0] < 0.5 * got[0.0][0]  # measured 0.8 against 1.9 %
     assert got[0.5][1] < 0.005  # the held axis
 
 
