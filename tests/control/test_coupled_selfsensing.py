@@ -262,3 +262,36 @@ def test_the_stage_loop_in_c_equals_python(rig: tuple, tmp_path: Path) -> None: 
         lib.ph_xy_reset(handle)
     assert lib.ph_xy_process(handle, target.ctypes.data, None, volts.ctypes.data, 1) == -1
     lib.ph_xy_free(handle)
+
+
+def test_a_third_sensor_is_a_least_squares(rig: tuple) -> None:  # type: ignore[type-arg]
+    """Two actuators read at x, y and a point between them: the map is (3 x 2), a raster
+    tracks as the square stage's does, and a target off what the two actuators move the
+    three outputs to is followed in least squares, counted and said."""
+    models, _, rec = rig
+    three = np.vstack([XY_COUPLING, [0.5, 0.5]])
+    t = rec.t
+    rec3 = simulate_stage(rec.voltage, t, coupling=three, seed=0)
+    stage = ph.calibrate_stage(models, rec3.voltage, rec3.charge, rec3.position, t)
+    assert stage.coupling.shape == (3, 2)
+    # tol: as the square stage's (above): the charge misfit left in the least squares
+    np.testing.assert_allclose(stage.coupling, three, atol=1e-2)
+    ctl = ph.CoupledSelfSensingController(
+        models, stage, sample_rate=FS, slew_rate=None,
+        v_min=[m.input_range_[0] for m in models], v_max=[m.input_range_[1] for m in models],
+    )  # fmt: skip
+    (x0, x1), (y0, y1) = ctl.reach
+    k = np.arange(2000)
+    tri = np.abs((k / FS * 10.0) % 1.0 * 2 - 1)
+    own = np.column_stack([x0 + (x1 - x0) * (0.2 + 0.6 * tri), np.full(k.size, 0.5 * (y0 + y1))])
+    d = own @ stage.coupling.T + stage.offset
+    out = run_stage_loop(ctl, d, Stage(coupling=three, seed=5, voltage=ctl.last_command))
+    span = ctl.reach[0, 1] - ctl.reach[0, 0]
+    err = np.sqrt(np.mean((out.true_position[1000:, 0] - d[1000:, 0]) ** 2)) / span
+    assert err < 0.01 and ctl.off_plane_count == 0  # measured 0.6 %, as the square stage's
+    off = d[:300].copy()
+    off[:, 2] += 0.05 * np.ptp(d[:, 2])  # the middle point 5 % off what x and y give
+    ctl.reset()
+    with pytest.warns(LimitWarning, match="off what the 2 actuators move"):
+        ctl.process(off)
+    assert ctl.off_plane_count == 300 and ctl.outside_count == 300
