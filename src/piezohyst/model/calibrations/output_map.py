@@ -88,6 +88,10 @@ class OutputMap(JsonFile):
     input_unit: str = "C"
     output_unit: str = "m"
     model: str = ""
+    _edges: tuple[float, float, float, float, float, float] = field(
+        init=False, repr=False, compare=False
+    )
+    _monotone: bool = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         c = self.coefficients
@@ -104,6 +108,12 @@ class OutputMap(JsonFile):
         if c[1] == 0.0 and len(c) == 2:
             msg = "an OutputMap with a zero gain maps every charge to one displacement"
             raise ParameterError(msg)
+        # derived once (the map is frozen): a loop inverts it every sample, and these two
+        # were most of a stepping self-sensing loop's time (polynomial derivatives each call)
+        object.__setattr__(self, "_edges", self._find_edges())
+        lo, hi = self.charge_range
+        slopes = self.slope(np.linspace(lo, hi, 513))
+        object.__setattr__(self, "_monotone", bool(np.all(slopes > 0) or np.all(slopes < 0)))
 
     # ------------------------------------------------------------------ numbers
     @property
@@ -124,9 +134,7 @@ class OutputMap(JsonFile):
     @property
     def monotone(self) -> bool:
         """True when the displacement rises (or falls) throughout the calibrated charges."""
-        lo, hi = self.charge_range
-        s = self.slope(np.linspace(lo, hi, 513))
-        return bool(np.all(s > 0) or np.all(s < 0))
+        return self._monotone
 
     def _u(self, q: FloatArray) -> FloatArray:
         return (q - self.center) / self.scale
@@ -147,6 +155,9 @@ class OutputMap(JsonFile):
         -------
         tuple of float
         """
+        return self._edges
+
+    def _find_edges(self) -> tuple[float, float, float, float, float, float]:
         lo, hi = self.charge_range
         ul, uh = float(self._u(np.array(lo))), float(self._u(np.array(hi)))
         return (lo, hi, float(self._poly(np.array(ul))), float(self._poly(np.array(uh))),
