@@ -29,6 +29,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
+import warnings
 
 import numpy as np
 
@@ -243,6 +244,67 @@ def cost(operators: int) -> None:
     print(f"  NumPy loop over time      {numpy_rate / 1e6:6.3f} M samples/s ({ratio:.0f}x)")
 
 
+def cost_in_metres() -> None:
+    """A step with desired displacements through an output map, and a stage's step (two
+    actuators, each its loop and map behind the coupling's inverse), against the charge
+    step with the map inverted beside it in plain Python floats (measured in the same run)."""
+    from piezohyst.simulation import make_signal, simulate_stage
+
+    t, a = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=8.0)
+    _, b = make_signal("multifreq", amplitude=140.0, frequency=1.9, duration=8.0)
+    rec = simulate_stage(np.column_stack([a, b]), t, seed=0)
+    models = [ph.ActivePI(10).fit(rec.voltage[:, i], rec.charge[:, i], t=rec.t) for i in range(2)]
+    stage = ph.calibrate_stage(models, rec.voltage, rec.charge, rec.position, rec.t)
+    om, m = stage.maps[0], models[0]
+    limits = {"v_min": m.input_range_[0], "v_max": m.input_range_[1], "sample_rate": 1000.0}
+    reps = 5000
+    s = np.linspace(0.3, 0.7, reps) * (om.displacement_range()[1] - om.displacement_range()[0])
+    s += om.displacement_range()[0]
+    measured = np.full(reps, np.nan)
+    c0, c1 = om.coefficients[:2]
+
+    def best(run) -> float:  # type: ignore[no-untyped-def]
+        out = math.inf
+        for _ in range(5):
+            t0 = time.perf_counter()
+            run()
+            out = min(out, (time.perf_counter() - t0) / reps)
+        return out
+
+    metres = ph.SelfSensingController(m, output_map=om, **limits)
+    charge = ph.SelfSensingController(m, **limits)
+
+    def in_metres() -> None:
+        metres.reset()
+        for k in range(reps):
+            metres.step(float(s[k]), float(measured[k]))
+
+    def by_hand() -> None:  # the linear map inverted in floats, then the charge step
+        charge.reset()
+        for k in range(reps):
+            charge.step(om.center + om.scale * (float(s[k]) - c0) / c1, float(measured[k]))
+
+    loop = ph.CoupledSelfSensingController(
+        models, stage, sample_rate=1000.0, v_min=[x.input_range_[0] for x in models],
+        v_max=[x.input_range_[1] for x in models],
+    )  # fmt: skip
+    d = np.column_stack([s, np.full(reps, s.mean())]) @ stage.coupling.T + stage.offset
+    q2 = np.full((reps, 2), np.nan)
+
+    def stage_step() -> None:
+        loop.reset()
+        for k in range(reps):
+            loop.step(d[k], q2[k])
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        t_m, t_h, t_s = best(in_metres), best(by_hand), best(stage_step)
+    print("cost in metres (ActivePI with 10 operators, a linear output map), best of 5:")
+    print(f"  step() with the map       {t_m * 1e6:6.2f} us")
+    print(f"  charge step + map by hand {t_h * 1e6:6.2f} us   ({t_m / t_h:.1f}x)")
+    print(f"  a stage's step, 2 loops   {t_s * 1e6:6.2f} us   ({t_s / (2 * t_m):.2f}x two steps)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--seeds", type=int, default=3)
@@ -251,7 +313,13 @@ def main() -> None:
                         help="only the plants, the loop through every core it runs")  # fmt: skip
     parser.add_argument("--flat-guard", action="store_true",
                         help="with --every-core: the controllers' flat_guard on")  # fmt: skip
+    parser.add_argument("--cost-only", action="store_true",
+                        help="only the costs per sample (charge, metres, a stage)")  # fmt: skip
     args = parser.parse_args()
+    if args.cost_only:
+        cost(args.operators)
+        cost_in_metres()
+        return
     if args.every_core:
         print("plants of other physics, the loop through each core (60 s of decaying loops):")
         for seed in range(args.seeds):

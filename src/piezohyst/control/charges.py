@@ -6,6 +6,7 @@ it), (the arithmetic, for one map or a bank's at once:
 
 from __future__ import annotations
 
+import math
 import warnings
 from typing import Any
 
@@ -42,6 +43,9 @@ class Charges:
         lo_s, hi_s = (output_map.edges()[2:4] if output_map.monotone
                       else output_map.displacement_range())  # fmt: skip
         self._reach = (min(lo_s, hi_s), max(lo_s, hi_s))
+        #: a linear monotone map: one sample inverted in floats (:meth:`one`), the same
+        #: arithmetic as the block's, without arrays (a loop calls it every sample)
+        self._linear = output_map.monotone and output_map.order == 1
 
     @classmethod
     def of(cls, output_map: Any, gain: float | None, model: Any = None) -> Charges | None:
@@ -131,4 +135,36 @@ class Charges:
         ahead = None
         if preview is not None:
             ahead = self.output_map.inverse(np.asarray(preview, dtype=np.float64), self.last)
+        elif self._linear:
+            return self._one_linear(float(desired)), None
         return float(self.block(np.array([float(desired)]))[0]), ahead
+
+    def _one_linear(self, s: float) -> float:
+        """:meth:`block` of one displacement on a linear monotone map, in floats: the same
+        operations in the same order as :func:`monotone_charges` (so a loop's ``step``
+        equals its ``process`` to the bit), the same count and warning."""
+        if not math.isfinite(s):
+            return math.nan
+        om = self.output_map
+        lo, hi, s_lo, s_hi, d_lo, d_hi = om.edges()
+        c0, c1 = om.coefficients
+        rising = s_hi > s_lo
+        low_end, high_end = (s_lo, s_hi) if rising else (s_hi, s_lo)
+        if s < low_end:
+            q = lo + (s - s_lo) / d_lo if rising else hi + (s - s_hi) / d_hi
+        elif s > high_end:
+            q = hi + (s - s_hi) / d_hi if rising else lo + (s - s_lo) / d_lo
+        else:
+            q = om.center + om.scale * (s - c0) / c1
+        low, high = self._reach
+        if s < low or s > high:
+            self.outside += 1
+            if not self._said:
+                self._said = True
+                om._warn_outside(
+                    f"desired displacements from {s:.4g} to {s:.4g} {om.output_unit} (the "
+                    "first since the start: later ones are counted, extrapolated_count, not "
+                    "said again)"
+                )
+        self.last = q
+        return q
