@@ -428,6 +428,21 @@ def test_a_stage_on_its_charges_from_the_shell(tmp_path: Path) -> None:
     )  # fmt: skip
     for name, text in export_stage_c(loop, prefix="ph_xy").files.items():
         assert (tmp_path / name).read_text() == text, name
+    k = np.arange(2000)
+    (lo, hi), (y0, y1) = loop.reach
+    x = lo + (hi - lo) * (0.2 + 0.6 * np.abs(((k / 1000 * 10.0) % 1.0) * 2 - 1))
+    target = tmp_path / "raster.csv"
+    ph.write_table(target, {"time": k / 1000, "x": x, "y": np.full(k.size, 0.5 * (y0 + y1))})
+    res = run("simulate-loop", maps, target, "--models", models, "--column", "x,y",
+              "--slew-rate", "1e6", "-o", tmp_path / "loop.csv")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "built-in XY stage" in res.output and "(held: moved" in res.output
+    got = ph.read_table(tmp_path / "loop.csv")
+    assert {"command_0", "charge_1", "position_x", "desired_y"} <= set(got.columns)
+    volts = np.column_stack([got.get("command_0"), got.get("command_1")])
+    assert np.all(volts >= 0.0) and np.all(volts <= 140.0)
+    assert_clean_error(run("simulate-loop", maps, target, "--column", "x,y", "-o",
+                           tmp_path / "other.csv"), code=2)  # fmt: skip
     assert_clean_error(run("export-c", maps, "--sample-rate", "1000", "-o",
                            tmp_path / "other.c"), code=2)  # fmt: skip
     one_line_error(run("export-c", maps, "--models", str(tmp_path / "ax.json"),
@@ -437,3 +452,4 @@ def test_a_stage_on_its_charges_from_the_shell(tmp_path: Path) -> None:
                        "--charge", "qx,qz", "--output", "x,y", "-o", tmp_path / "m2.json"),
                    "no column 'qz'", "--charge")  # fmt: skip
     assert not (tmp_path / "other.c").exists() and not (tmp_path / "m2.json").exists()
+    assert not (tmp_path / "other.csv").exists()

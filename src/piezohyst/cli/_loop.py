@@ -46,6 +46,12 @@ from ._support import (
     "on it instead of the built-in bench, another actuator (--preset, --extra-bias, --seed "
     "are the bench's).",
 )
+@click.option(
+    "--models",
+    default=None,
+    help="With a stage map (calibrate-stage) as MODEL: each actuator's model file, "
+    "comma-separated; the loop runs on the built-in XY stage (--column x,y).",
+)
 @OUT_FILE
 @FORCE
 @click.pass_obj
@@ -61,6 +67,7 @@ def simulate_loop(
     extra_bias: float,
     seed: int,
     plant: Path | None,
+    models: str | None,
     out: Path,
     force: bool,
 ) -> None:
@@ -77,6 +84,12 @@ def simulate_loop(
       piezohyst simulate-loop model.json target.csv --feedforward --plant model.json -o ff.csv
     """
     from ..workflows import simulate_loop_file
+    from ..workflows.stage_loop_files import is_stage_map_file
+
+    if is_stage_map_file(model):
+        _simulate_stage(ctx, model, target, column, settings, loop, feedforward, seed, models,
+                        out, force, other=plant is not None or extra_bias != 0.0)  # fmt: skip
+        return
 
     run = _run(
         ctx,
@@ -104,4 +117,41 @@ def simulate_loop(
             f" (the first {run.arrived} samples, the ramp from rest at the slew limit, left out)"
         )
     ctx.result(f"{line}; {run.saturated} samples saturated")
+    ctx.info(f"saved {out}")
+
+
+def _simulate_stage(
+    ctx: Context, model: Path, target: Path, column: str | None, settings: CompensatorSettings,
+    loop: LoopSettings, feedforward: bool, seed: int, models: str | None, out: Path,
+    force: bool, *, other: bool,
+) -> None:  # fmt: skip
+    """``simulate-loop STAGE_MAP target.csv --models ax.json,ay.json --column x,y``."""
+    from ..workflows.stage_files import stage_columns
+    from ..workflows.stage_loop_files import simulate_stage_loop_file
+
+    if models is None or column is None or other:
+        raise click.UsageError(
+            f"{model} is a stage map: give each actuator's model file (--models ax.json,ay.json)"
+            " and the target's axis columns (--column x,y); it runs on the built-in XY stage "
+            "(--plant and --extra-bias are one actuator's)"
+        )
+    leak = None if loop.leakage is None else stage_columns(str(loop.leakage), "--leakage")
+    run = _run(ctx, lambda: simulate_stage_loop_file(
+        model, target, out, models=[Path(p) for p in stage_columns(models, "--models")],
+        columns=stage_columns(column, "--column"), feedforward=feedforward,
+        v_min=settings.v_min, v_max=settings.v_max, slew_rate=settings.slew_rate,
+        allow_extrapolation=settings.allow_extrapolation,
+        leakage=None if leak is None else [Path(p) for p in leak], ki=loop.ki, kp=loop.kp,
+        seed=seed, force=force))  # fmt: skip
+    ctx.info("simulated stage: the built-in XY stage (two of the bench's actuators, x moves y "
+             "by 4 %, y x by -3 %): another stage than yours")  # fmt: skip
+    what = "feedforward" if feedforward else "charge loops"
+    axes = stage_columns(column, "--column")
+    said = ", ".join(
+        f"{c} NRMSE {100 * e:.3g} %"
+        + (f" width {100 * w:.3g} %" if w == w else f" (held: moved {100 * d:.3g} %)")
+        for c, e, w, d in zip(axes, run.nrmse, run.width, run.moved, strict=True)
+    )
+    counts = run.loop.saturated_count.tolist()
+    ctx.result(f"{what}: {said}; at a voltage limit per actuator {counts}")
     ctx.info(f"saved {out}")
