@@ -128,6 +128,7 @@ def _export_stage_loop(
     """``export-c STAGE_MAP --models ax.json,ay.json``: the stage's self-sensing loop."""
     from ..workflows.stage_files import stage_columns
     from ..workflows.stage_loop_files import export_stage_loop_file
+    from ._support import stage_loop_settings
 
     if models is None:
         raise click.UsageError(
@@ -139,12 +140,9 @@ def _export_stage_loop(
             "a stage map's loop takes its targets in the map's units (positions): --domain, "
             "--gain and --refresh-leakage are not for a stage"
         )
-    leak = None if loop.leakage is None else stage_columns(str(loop.leakage), "--leakage")
     return tuple(_run(ctx, lambda: export_stage_loop_file(
         model, out, models=[Path(p) for p in stage_columns(models, "--models")],
-        sample_rate=settings.sample_rate, v_min=settings.v_min, v_max=settings.v_max,
-        slew_rate=settings.slew_rate, allow_extrapolation=settings.allow_extrapolation,
-        leakage=None if leak is None else [Path(p) for p in leak], ki=loop.ki, kp=loop.kp,
+        sample_rate=settings.sample_rate, settings=stage_loop_settings(settings, loop),
         precision=precision, shared=bool(build.get("shared")), mex=bool(build.get("mex")),
         force=bool(build.get("force")))))  # fmt: skip
 

@@ -128,6 +128,7 @@ def _simulate_stage(
     """``simulate-loop STAGE_MAP target.csv --models ax.json,ay.json --column x,y``."""
     from ..workflows.stage_files import stage_columns
     from ..workflows.stage_loop_files import simulate_stage_loop_file
+    from ._support import stage_loop_settings
 
     if models is None or column is None or other:
         raise click.UsageError(
@@ -135,14 +136,10 @@ def _simulate_stage(
             " and the target's axis columns (--column x,y); it runs on the built-in XY stage "
             "(--plant and --extra-bias are one actuator's)"
         )
-    leak = None if loop.leakage is None else stage_columns(str(loop.leakage), "--leakage")
     run = _run(ctx, lambda: simulate_stage_loop_file(
         model, target, out, models=[Path(p) for p in stage_columns(models, "--models")],
         columns=stage_columns(column, "--column"), feedforward=feedforward,
-        v_min=settings.v_min, v_max=settings.v_max, slew_rate=settings.slew_rate,
-        allow_extrapolation=settings.allow_extrapolation,
-        leakage=None if leak is None else [Path(p) for p in leak], ki=loop.ki, kp=loop.kp,
-        seed=seed, force=force))  # fmt: skip
+        settings=stage_loop_settings(settings, loop), seed=seed, force=force))  # fmt: skip
     ctx.info("simulated stage: the built-in XY stage (two of the bench's actuators, x moves y "
              "by 4 %, y x by -3 %): another stage than yours")  # fmt: skip
     what = "feedforward" if feedforward else "charge loops"

@@ -698,3 +698,27 @@ def describe(model: HysteresisModel) -> str:
         delay = f"{1e3 * dyn.delay:.4g}" + (f" ± {se_d:.2g}" if se_d == se_d else "")
         text += f"; input dynamics {dyn.kind}: lag {lag} ms, delay {delay} ms"
     return text
+
+
+def stage_loop_settings(settings: CompensatorSettings, loop: LoopSettings) -> Any:
+    """A stage's loop settings from the limit and loop options (``--leakage lx.json,ly.json``:
+    one file per actuator).
+
+    Parameters
+    ----------
+    settings : CompensatorSettings
+    loop : LoopSettings
+
+    Returns
+    -------
+    StageLoopSettings
+    """
+    from ..workflows.stage_files import stage_columns
+    from ..workflows.stage_loop_files import StageLoopSettings
+
+    leak = None if loop.leakage is None else stage_columns(str(loop.leakage), "--leakage")
+    return StageLoopSettings(
+        v_min=settings.v_min, v_max=settings.v_max, slew_rate=settings.slew_rate,
+        allow_extrapolation=settings.allow_extrapolation,
+        leakage=None if leak is None else tuple(Path(p) for p in leak), ki=loop.ki, kp=loop.kp,
+    )  # fmt: skip

@@ -33,6 +33,7 @@ from .stage_files import _read_stage, holds_format
 
 __all__ = [
     "StageLoopRun",
+    "StageLoopSettings",
     "calibrate_stage_file",
     "export_stage_loop_file",
     "is_stage_map_file",
@@ -55,19 +56,48 @@ def is_stage_map_file(path: PathLike) -> bool:
     return holds_format(path, STAGE_MAP_FORMAT)
 
 
+@dataclass(frozen=True)
+class StageLoopSettings:
+    """A stage's loop from files: its limits and gains (as
+    :class:`~piezohyst.CoupledSelfSensingController` takes them).
+
+    Attributes
+    ----------
+    v_min, v_max : float or None
+        Every actuator's voltage limits (V); None: each what its model was identified on.
+    slew_rate : float, "trained" or None
+    allow_extrapolation : bool
+    leakage : tuple of path, optional
+        One leakage file per actuator (``calibrate-leakage``); None: the models' growth terms.
+    ki, kp : float
+        Each loop's integral and proportional gains.
+    """
+
+    v_min: float | None = None
+    v_max: float | None = None
+    slew_rate: float | str | None = "trained"
+    allow_extrapolation: bool = False
+    leakage: tuple[PathLike, ...] | None = None
+    ki: float = 0.5
+    kp: float = 0.0
+
+
 def _models(paths: Sequence[PathLike]) -> list[Any]:
     return [load_model(p) for p in paths]
 
 
 def _loop(
-    map_path: PathLike, models: Sequence[PathLike], sample_rate: float, v_min: float | None,
-    v_max: float | None, slew_rate: float | str | None, allow_extrapolation: bool,
-    leakage: Sequence[PathLike] | None, ki: float, kp: float,
-) -> CoupledSelfSensingController:  # fmt: skip
-    """The stage's loop from its files: the map, one model (and leakage) file per actuator;
-    each actuator's limits default to what its model was identified on."""
+    map_path: PathLike,
+    models: Sequence[PathLike],
+    sample_rate: float,
+    cfg: StageLoopSettings,
+    gains: bool = True,
+) -> CoupledSelfSensingController:
+    """The stage's loop from its files: the map, one model (and leakage) file per actuator
+    (``gains`` False: the loops' gains at 0, feedforward alone)."""
     stage = StageMap.load(map_path)
     n = len(stage.maps)
+    leakage = cfg.leakage
     if len(models) != n or (leakage is not None and len(leakage) != n):
         msg = (
             f"the stage map {map_path} holds {n} actuators: give one model file (--models) "
@@ -76,12 +106,13 @@ def _loop(
         raise ParameterError(msg)
     fitted = _models(models)
     leaks = None if leakage is None else [Leakage.load(p) for p in leakage]
-    lo = [m.input_range_[0] for m in fitted] if v_min is None else v_min
-    hi = [m.input_range_[1] for m in fitted] if v_max is None else v_max
+    lo = [m.input_range_[0] for m in fitted] if cfg.v_min is None else cfg.v_min
+    hi = [m.input_range_[1] for m in fitted] if cfg.v_max is None else cfg.v_max
     return CoupledSelfSensingController(
-        fitted, stage, v_min=lo, v_max=hi, sample_rate=sample_rate, leakage=leaks, ki=ki, kp=kp,
-        slew_rate=slew_rate,  # type: ignore[arg-type]
-        allow_extrapolation=allow_extrapolation,
+        fitted, stage, v_min=lo, v_max=hi, sample_rate=sample_rate, leakage=leaks,
+        ki=cfg.ki if gains else 0.0, kp=cfg.kp if gains else 0.0,
+        slew_rate=cfg.slew_rate,  # type: ignore[arg-type]
+        allow_extrapolation=cfg.allow_extrapolation,
     )  # fmt: skip
 
 
@@ -91,13 +122,7 @@ def export_stage_loop_file(
     *,
     models: Sequence[PathLike],
     sample_rate: float | None,
-    v_min: float | None = None,
-    v_max: float | None = None,
-    slew_rate: float | str | None = "trained",
-    allow_extrapolation: bool = False,
-    leakage: Sequence[PathLike] | None = None,
-    ki: float = 0.5,
-    kp: float = 0.0,
+    settings: StageLoopSettings | None = None,
     precision: str = "double",
     shared: bool = False,
     mex: bool = False,
@@ -116,13 +141,8 @@ def export_stage_loop_file(
         The actuators' model files the map was calibrated through, in its order.
     sample_rate : float
         Hz, of the loop.
-    v_min, v_max : float, optional
-        Every actuator's voltage limits (V); default each model's training range.
-    slew_rate, allow_extrapolation, ki, kp
-        As for :class:`~piezohyst.CoupledSelfSensingController`.
-    leakage : sequence of path, optional
-        One leakage file per actuator (``calibrate-leakage``); default the models' growth
-        terms.
+    settings : StageLoopSettings, optional
+        Its limits, leakage files and gains.
     precision : {"double", "float"}
     shared, mex : bool
         Also build the library; or write a MEX gateway (``out``) with the C beside it.
@@ -142,10 +162,10 @@ def export_stage_loop_file(
     if sample_rate is None:
         msg = "a stage's self-sensing loop needs the loop's sample rate (--sample-rate, Hz)"
         raise ParameterError(msg)
-    loop = _loop(map_path, models, sample_rate, v_min, v_max, slew_rate, allow_extrapolation,
-                 leakage, ki, kp)  # fmt: skip
+    cfg = settings or StageLoopSettings()
+    loop = _loop(map_path, models, sample_rate, cfg)
     n = len(loop.loops)
-    sources = [map_path, *models, *(leakage or [])]
+    sources = [map_path, *models, *(cfg.leakage or [])]
     kind: Any = precision
     if str(out).endswith(".fmu"):
         guard_outputs([out], sources, force=force)
@@ -259,14 +279,8 @@ def simulate_stage_loop_file(
     *,
     models: Sequence[PathLike],
     columns: Sequence[str],
+    settings: StageLoopSettings | None = None,
     feedforward: bool = False,
-    v_min: float | None = None,
-    v_max: float | None = None,
-    slew_rate: float | str | None = "trained",
-    allow_extrapolation: bool = False,
-    leakage: Sequence[PathLike] | None = None,
-    ki: float = 0.5,
-    kp: float = 0.0,
     seed: int = 0,
     force: bool = False,
 ) -> StageLoopRun:
@@ -285,10 +299,10 @@ def simulate_stage_loop_file(
         The actuators' model files the map was calibrated through.
     columns : sequence of str
         The target's axis columns, in the map's order.
+    settings : StageLoopSettings, optional
+        Its limits, leakage files and gains.
     feedforward : bool
         The loops' gains at 0: the models and the map as feedforward alone.
-    v_min, v_max, slew_rate, allow_extrapolation, leakage, ki, kp
-        As for :func:`export_stage_loop_file`.
     seed : int
         The stage's noise.
     force : bool
@@ -307,9 +321,9 @@ def simulate_stage_loop_file(
     from ..metrics import hysteresis_width
     from ..simulation import Stage, run_stage_loop
 
-    guard_outputs([out], [map_path, target, *models, *(leakage or [])], force=force)
-    loop = _loop(map_path, models, 1000.0, v_min, v_max, slew_rate, allow_extrapolation,
-                 leakage, 0.0 if feedforward else ki, 0.0 if feedforward else kp)  # fmt: skip
+    cfg = settings or StageLoopSettings()
+    guard_outputs([out], [map_path, target, *models, *(cfg.leakage or [])], force=force)
+    loop = _loop(map_path, models, 1000.0, cfg, gains=not feedforward)
     n, m = len(loop.loops), loop.stage.coupling.shape[0]
     if n != 2 or m != 2:
         msg = (
