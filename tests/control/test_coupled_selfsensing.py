@@ -206,6 +206,10 @@ def test_bad_input_is_named(rig: tuple) -> None:  # type: ignore[type-arg]
         ctl.step([1e-6])
     with pytest.raises(ShapeError, match="2 charges per sample"):
         ctl.step([1e-6, 1e-6], [0.0])
+    with pytest.raises(ShapeError, match="one number or one per actuator"):
+        Stage(voltage=[0.0, 1.0, 2.0])
+    with pytest.raises(ShapeError, match="one command per actuator"):
+        Stage().apply([1.0])
     with pytest.raises(ShapeError, match="one model per actuator"):
         ph.calibrate_stage(models, rec.voltage[:, :1], rec.charge, rec.position, rec.t)
     bad = rec.position.copy()

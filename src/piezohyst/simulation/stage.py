@@ -198,7 +198,11 @@ class Stage:
             raise ShapeError(msg)
         n = c.shape[1]
         chosen = _actuators(presets, n)
-        v0 = np.broadcast_to(np.asarray(voltage, dtype=np.float64).reshape(-1), (n,))
+        given = np.asarray(voltage, dtype=np.float64).reshape(-1)
+        if given.size not in (1, n):
+            msg = f"'voltage' must be one number or one per actuator ({n}). Got {given.size}."
+            raise ShapeError(msg)
+        v0 = np.broadcast_to(given, (n,))
         self.coupling = c
         self.benches = [Bench(p, voltage=float(v0[i]), seed=seed + i) for i, p in enumerate(chosen)]
         self.reading = self._read()
