@@ -27,8 +27,7 @@ from ..errors import DataFileError, ParameterError
 from ..io import DataSpec
 from ..model.calibrations.leakage import Leakage
 from ..model.calibrations.stage_map import STAGE_MAP_FORMAT, StageMap, calibrate_stage
-from ..model.persistence import load_model
-from ._base import PathLike, guard_outputs
+from ._base import PathLike, _load, guard_outputs
 from .stage_files import _read_stage, holds_format
 
 __all__ = [
@@ -82,10 +81,6 @@ class StageLoopSettings:
     kp: float = 0.0
 
 
-def _models(paths: Sequence[PathLike]) -> list[Any]:
-    return [load_model(p) for p in paths]
-
-
 def _loop(
     map_path: PathLike,
     models: Sequence[PathLike],
@@ -104,7 +99,7 @@ def _loop(
             f"and, if any, one leakage file (--leakage) per actuator, comma-separated"
         )
         raise ParameterError(msg)
-    fitted = _models(models)
+    fitted = [_load(p) for p in models]
     leaks = None if leakage is None else [Leakage.load(p) for p in leakage]
     lo = [m.input_range_[0] for m in fitted] if cfg.v_min is None else cfg.v_min
     hi = [m.input_range_[1] for m in fitted] if cfg.v_max is None else cfg.v_max
@@ -237,7 +232,7 @@ def calibrate_stage_file(
         raise DataFileError(said.replace("output column", "charge column")) from None
     t2, _, y, unit = _read_stage(data, inputs, outputs, spec)
     assert q is not None and y is not None and t2.shape == t.shape  # columns given: read
-    stage = calibrate_stage(_models(models), u, q, y, t, output_unit=unit or "m")
+    stage = calibrate_stage([_load(p) for p in models], u, q, y, t, output_unit=unit or "m")
     if out is not None:
         stage.save(out)
     return stage
