@@ -15,6 +15,11 @@ sampled together):
   semi-bipolar drive or near the coercive field); never curved by default;
 * a sensor delay (whole samples; a sensor's lag is absorbed by the delay that
   fits best) if the record shows one, and an offset (the sensor's zero);
+* a mechanical mode between the charge and the displacement (a bender's first bending
+  mode, a stage's flexure: the charge does not ring, the sensor does) where the record
+  shows one ringing: a resonance (damping at most :data:`MODE_ZETA_MAX`; a sensor's own
+  low-pass is a delay, not a mode) that takes at least :data:`MODE_SHARE` of the misfit
+  away, on strong evidence;
 * standard errors from a covariance that allows for correlated residuals
   (Newey-West), so the uncertainty stated is not that of white noise.
 
@@ -40,6 +45,7 @@ from ...errors import (
     ParameterError,
     warn,
 )
+from ..dynamics import OutputDynamics
 from .output_map import (
     EVIDENCE,
     MAX_DELAY,
@@ -49,6 +55,15 @@ from .output_map import (
     OutputMap,
     model_fingerprint,
 )
+
+#: The most damped mode taken as one (a resonance that overshoots); a sensor's low-pass
+#: filter fits as a delay instead
+MODE_ZETA_MAX = 0.3
+#: The share of the map's squared misfit a mode must take away to be kept (beside the
+#: evidence), so that a long record's noise cannot buy a mode that does not matter
+MODE_SHARE = 0.1
+#: The damping ratios the mode's search starts from
+MODE_ZETAS = (0.01, 0.02, 0.04, 0.08, 0.15, 0.3)
 
 __all__ = ["calibrate_gain"]
 
@@ -89,6 +104,7 @@ def calibrate_gain(
     evidence: float = EVIDENCE,
     max_delay: float = MAX_DELAY,
     output_unit: str = "m",
+    output_dynamics: str = "auto",
 ) -> OutputMap:
     """Identify the map from the capacitor's charge to the displacement (eq. 6-7) from a
     record with a displacement sensor: the one step that needs the sensor.
@@ -106,6 +122,9 @@ def calibrate_gain(
     max_delay : float, default 0.05
         Longest sensor delay searched (s).
     output_unit : str, default "m"
+    output_dynamics : {"auto", "none", "second-order"}, default "auto"
+        A mechanical mode between the charge and the displacement: kept where the record
+        shows one ringing ("auto", on evidence: see the module's notes), never, or always.
 
     Returns
     -------
@@ -129,6 +148,11 @@ def calibrate_gain(
     if isinstance(max_order, bool) or not isinstance(max_order, int) or not 1 <= max_order <= 5:
         msg = f"'max_order' must be an int in [1, 5]. Got {max_order!r}."
         raise ParameterError(msg)
+    if output_dynamics not in ("auto", "none", "second-order"):
+        msg = (
+            f"'output_dynamics' must be 'auto', 'none' or 'second-order'. Got {output_dynamics!r}."
+        )
+        raise ParameterError(msg)
     if v.size < MIN_SAMPLES:
         msg = (
             f"calibrate_gain needs at least {MIN_SAMPLES} samples to tell the map from the "
@@ -146,10 +170,12 @@ def calibrate_gain(
     center, scale = 0.5 * (lo + hi), 0.5 * (hi - lo)
     leak = _leak_columns(v, q, ts)  # what the displacement tells the model's growth from
 
+    mode = OutputDynamics()
+
     def design(delay: int, order: int) -> tuple[FloatArray, FloatArray]:
         u = (qc[: qc.size - delay] - center) / scale
         x = np.column_stack([u**k for k in range(order + 1)] + [leak[: u.size]])
-        return x, s[delay:]
+        return _through(mode, x), s[delay:]
 
     # the delay that fits best with the richest map (a delay is a shift, not a shape)
     sse = []
@@ -159,7 +185,13 @@ def calibrate_gain(
         r = y - x @ coef
         sse.append(float(r @ r) / r.size)
     delay = int(np.argmin(sse))
-    order, found = 1, {}
+    found: dict[str, float] = {}
+    if output_dynamics != "none":
+        x, y = design(delay, max_order)
+        mode, strength = _find_mode(x, y, dt, output_dynamics == "second-order", evidence)
+        if mode.active:
+            found["mode"] = strength
+    order = 1
     fits: dict[int, tuple[Any, Any, FloatArray, int]] = {}
     for k in range(1, max_order + 1):
         x, y = design(delay, k)
@@ -192,6 +224,9 @@ def calibrate_gain(
         input_unit=getattr(model, "output_unit", "C"),
         output_unit=output_unit,
         model=model_fingerprint(model),
+        mode_f0=mode.f0,
+        mode_zeta=mode.zeta,
+        mode_dt=mode.sample_interval,
     )
     sure = max(abs(c) / math.sqrt(max(float(cov[k, k]), 1e-300)) for k, c in enumerate(coef) if k)
     if sure < evidence:  # no term of the map stands out from its error
@@ -211,6 +246,61 @@ def calibrate_gain(
             UserWarning,
         )
     return om
+
+
+def _through(mode: OutputDynamics, x: FloatArray) -> FloatArray:
+    """Every column of a design but the first (the constant) through the mode, each from
+    rest at its first value (a unit-gain filter: the map's coefficients stay its own)."""
+    if not mode.active:
+        return x
+    out = x.copy()
+    out[:, 1:] = mode.apply_columns(np.ascontiguousarray(x[:, 1:]), mode.rest_state(x[0, 1:]))
+    return out
+
+
+def _find_mode(
+    x: FloatArray, y: FloatArray, dt: float, always: bool, evidence: float
+) -> tuple[OutputDynamics, float]:
+    """The mode that fits the displacement best through the design ``x`` (a grid of
+    resonances from the record's length to 0.4 of the sample rate and of damping ratios,
+    then refined), and how strong its evidence is (the likelihood ratio's square root,
+    with as many independent samples as the residuals' correlation is worth, comparable
+    with a coefficient's ``|c / stderr|``). Without ``always`` it is kept only where that is
+    at least ``evidence``, the damping at most :data:`MODE_ZETA_MAX` and the squared misfit
+    falls by :data:`MODE_SHARE`."""
+    from scipy.optimize import minimize
+
+    def sse(f0: float, zeta: float) -> float:
+        if not (f_lo <= f0 <= f_hi and 1e-3 <= zeta <= 1.0):
+            return math.inf
+        xf = _through(OutputDynamics(f0, zeta, dt), x)
+        coef, *_ = np.linalg.lstsq(xf, y, rcond=None)
+        r = y - xf @ coef
+        return float(r @ r)
+
+    coef, *_ = np.linalg.lstsq(x, y, rcond=None)
+    r0 = y - x @ coef
+    base = float(r0 @ r0)
+    f_lo, f_hi = max(2.0, 20.0 / (y.size * dt)), 0.4 / dt
+    if not f_hi > f_lo or base == 0.0:
+        return OutputDynamics(), 0.0
+    grid = [(f, z) for f in np.geomspace(f_lo, f_hi, 48) for z in MODE_ZETAS]
+    start = min(grid, key=lambda p: sse(*p))
+    best = minimize(
+        lambda p: sse(math.exp(p[0]), math.exp(p[1])), np.log(start), method="Nelder-Mead",
+        options={"xatol": 1e-4, "fatol": 1e-9 * base, "maxiter": 400},
+    )  # fmt: skip
+    f0, zeta = (float(math.exp(p)) for p in best.x)
+    low = min(float(best.fun), sse(*start))
+    if low == sse(*start):
+        f0, zeta = start
+    rho = _lag1(r0)
+    n_eff = y.size * (1 - rho) / (1 + rho) if rho > 0 else y.size
+    strength = math.sqrt(max(n_eff * math.log(base / max(low, 1e-300)), 0.0))
+    kept = always or (
+        strength >= evidence and zeta <= MODE_ZETA_MAX and low <= (1 - MODE_SHARE) * base
+    )
+    return (OutputDynamics(f0, zeta, dt), strength) if kept else (OutputDynamics(), strength)
 
 
 def _leak_columns(v: FloatArray, q: FloatArray, t: FloatArray) -> FloatArray:

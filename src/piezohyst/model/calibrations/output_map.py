@@ -1,10 +1,11 @@
 """The map from the capacitor's charge to the displacement (eq. 6-7), as calibrated:
-:class:`OutputMap` (its polynomial, uncertainty, calibrated range and file). It is identified
-by :func:`~.from_sensor.calibrate_gain`."""
+:class:`OutputMap` (its polynomial, uncertainty, calibrated range, a mechanical mode where the
+record shows one, and file). It is identified by :func:`~.from_sensor.calibrate_gain`."""
 
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -21,12 +22,16 @@ from ...errors import (
     warn,
 )
 from ...io import JsonFile
+from ..dynamics import OutputDynamics
 from ..persistence import checksum, model_to_dict
 
 __all__ = ["OUTPUT_MAP_FORMAT", "OutputMap", "model_fingerprint", "monotone_charges"]
 
 OUTPUT_MAP_FORMAT = "piezohyst-output-map"
 OUTPUT_MAP_VERSION = 1
+#: The version a map with a mechanical mode is written as (a reader that knows no mode
+#: refuses it rather than dropping the mode); both are read
+OUTPUT_MAP_MODE_VERSION = 2
 #: |coefficient / standard error| a curvature term needs to be kept (strong evidence)
 EVIDENCE = 5.0
 #: Highest polynomial order tried
@@ -45,7 +50,13 @@ class OutputMap(JsonFile):
 
     :math:`s = \sum_k c_k u^k` with :math:`u = (q - q_0) / q_s`: ``coefficients``
     ``c_0`` (the offset: the displacement at ``center``), ``c_1``, ... in output
-    units; built by :func:`calibrate_gain`.
+    units; built by :func:`calibrate_gain`. Where the record shows the structure ringing
+    (a bender's first bending mode, a stage's flexure), the charge passes through that
+    mode first (:attr:`mode`, unit gain at DC, :class:`~piezohyst.model.dynamics.
+    OutputDynamics`): :math:`s = P(H q)`. A unit-gain filter commutes with a linear map,
+    so for a linear map it is the mode on the displacement itself; for a curved one the
+    two orders differ by the curvature times the mode's transient, and this order is the
+    one whose inverse is exact (the mode's inverse after the map's).
 
     Attributes
     ----------
@@ -71,6 +82,9 @@ class OutputMap(JsonFile):
         and the start of its file's checksum (:func:`model_fingerprint`); "" for a map
         made by hand or written before this field. A compensator built on another model
         says so: that model's hysteresis charge can differ in offset and scale.
+    mode_f0, mode_zeta, mode_dt : float
+        The mechanical mode between the charge and the displacement: resonance (Hz; 0:
+        none), damping ratio, and the calibration's sample interval (s).
     """
 
     file_kind: ClassVar[str] = "an output map"
@@ -88,6 +102,9 @@ class OutputMap(JsonFile):
     input_unit: str = "C"
     output_unit: str = "m"
     model: str = ""
+    mode_f0: float = 0.0
+    mode_zeta: float = 0.0
+    mode_dt: float = 0.0
     _edges: tuple[float, float, float, float, float, float] = field(
         init=False, repr=False, compare=False
     )
@@ -108,6 +125,7 @@ class OutputMap(JsonFile):
         if c[1] == 0.0 and len(c) == 2:
             msg = "an OutputMap with a zero gain maps every charge to one displacement"
             raise ParameterError(msg)
+        OutputDynamics(self.mode_f0, self.mode_zeta, self.mode_dt)  # its own checks
         # derived once (the map is frozen): a loop inverts it every sample, and these two
         # were most of a stepping self-sensing loop's time (polynomial derivatives each call)
         object.__setattr__(self, "_edges", self._find_edges())
@@ -116,6 +134,11 @@ class OutputMap(JsonFile):
         object.__setattr__(self, "_monotone", bool(np.all(slopes > 0) or np.all(slopes < 0)))
 
     # ------------------------------------------------------------------ numbers
+    @property
+    def mode(self) -> OutputDynamics:
+        """The mechanical mode between the charge and the displacement (inactive: none)."""
+        return OutputDynamics(self.mode_f0, self.mode_zeta, self.mode_dt)
+
     @property
     def order(self) -> int:
         """1 for a linear map, 2 with a quadratic (electrostrictive) term, ..."""
@@ -201,6 +224,31 @@ class OutputMap(JsonFile):
             s = np.where(below, s_lo + d_lo * (q - lo), s)
             s = np.where(above, s_hi + d_hi * (q - hi), s)
         return np.asarray(s)
+
+    def respond(self, charge: ArrayLike) -> FloatArray:
+        """The displacement for a record of capacitor charges sampled every ``mode_dt``: the
+        charge through the map's mode (from rest at its first value), then the map
+        (:meth:`predict`, which is the quasi-static displacement). Without a mode, the same
+        as :meth:`predict`.
+
+        Parameters
+        ----------
+        charge : array_like, shape (N,)
+            C, one sample per ``mode_dt``.
+
+        Returns
+        -------
+        ndarray, shape (N,)
+        """
+        q = np.asarray(charge, dtype=np.float64)
+        if not self.mode.active or q.ndim != 1 or q.size == 0:
+            return self.predict(q)
+        lo, hi = self.charge_range
+        if np.nanmin(q) < lo or np.nanmax(q) > hi:  # said for the charges given, not for the
+            self._warn_outside(f"charges down to {np.nanmin(q):.4g} / up to {np.nanmax(q):.4g}")
+        with warnings.catch_warnings():  # mode's ringing a little past them
+            warnings.simplefilter("ignore", ExtrapolationWarning)
+            return self.predict(self.mode.apply(q)[0])
 
     def stderr(self, charge: ArrayLike) -> FloatArray:
         """The map's standard error (output units) at ``charge``: how sure the displacement
@@ -350,6 +398,9 @@ class OutputMap(JsonFile):
             "gain": self.gain,  # for a reader: derived, not read back
             "gain_stderr": self.gain_stderr,
         }
+        if self.mode.active:  # written only where there is one: older maps keep their checksum
+            body["schema_version"] = OUTPUT_MAP_MODE_VERSION
+            body["mode"] = self.mode.to_dict()
         body["checksum"] = checksum(body)
         return body
 
@@ -376,9 +427,10 @@ class OutputMap(JsonFile):
         if not isinstance(data, dict) or data.get("format") != OUTPUT_MAP_FORMAT:
             msg = f'{where}: not a piezohyst output map (expected "format": "{OUTPUT_MAP_FORMAT}")'
             raise ModelFileError(msg)
-        if data.get("schema_version") != OUTPUT_MAP_VERSION:
+        if data.get("schema_version") not in (OUTPUT_MAP_VERSION, OUTPUT_MAP_MODE_VERSION):
             found = data.get("schema_version")
-            msg = f"{where}: schema_version {found!r} is not {OUTPUT_MAP_VERSION}"
+            msg = (f"{where}: schema_version {found!r} is not {OUTPUT_MAP_VERSION} or "
+                   f"{OUTPUT_MAP_MODE_VERSION}")  # fmt: skip
             raise ModelFileError(msg)
         if "checksum" in data and data["checksum"] != checksum(data):
             msg = (
@@ -388,6 +440,10 @@ class OutputMap(JsonFile):
             raise ModelFileError(msg)
         try:
             residual = data.get("residual")
+            mode = data.get("mode") or {}
+            if not isinstance(mode, dict):
+                msg = f"'mode' must be an object with f0, zeta and sample_interval. Got {mode!r}."
+                raise ParameterError(msg)
             return cls(
                 coefficients=tuple(float(c) for c in data["coefficients"]),
                 center=float(data["center"]),
@@ -402,6 +458,9 @@ class OutputMap(JsonFile):
                 input_unit=str(data.get("input_unit", "C")),
                 output_unit=str(data.get("output_unit", "m")),
                 model=str(data.get("model", "")),
+                mode_f0=float(mode.get("f0", 0.0)),
+                mode_zeta=float(mode.get("zeta", 0.0)),
+                mode_dt=float(mode.get("sample_interval", 0.0)),
             )
         except KeyError as exc:
             msg = f"{where}: field {exc.args[0]!r} is missing"
@@ -440,6 +499,8 @@ class OutputMap(JsonFile):
         """
         lo, hi = self.charge_range
         curve = "" if self.order == 1 else f", order {self.order} (curvature by evidence)"
+        if self.mode.active:
+            curve += f", a mode at {self.mode_f0:.4g} Hz (damping {self.mode_zeta:.3g})"
         return (
             f"gain {self.gain:.6g} ± {self.gain_stderr:.2g} {self.output_unit}/{self.input_unit}"
             f"{curve}, delay {1e3 * self.delay:.3g} ms, RMS misfit {self.residual:.3g} "

@@ -11,13 +11,15 @@ follows its capacitor's charge (eq. 6-7). So the stage's positions are
 
 with :math:`q_i` actuator *i*'s capacitor charge (its measured charge less the leakage its
 model's growth terms hold, eq. 19), :math:`g_i` its :class:`~.output_map.OutputMap` (what
-it moves along its own axis) and :math:`C` the coupling (about 1 on the diagonal), as
-:class:`~piezohyst.CoupledModel` has it for voltages. Identified by alternation: each
-actuator's map from what it alone moved, :math:`C^{-1}(y - c)`, by
-:func:`~.from_sensor.calibrate_gain` (its delay and curvature by evidence); the coupling
-and offsets by least squares on the maps' outputs; three rounds. What the map does not hold:
-a charge that the flexure's load on a stack moves (the direct effect under stress; eq. 6-7
-are at zero stress), and modes between an actuator's charge and the stage's motion.
+it moves along its own axis, through its mode where the stage rings) and :math:`C` the
+coupling (about 1 on the diagonal), as :class:`~piezohyst.CoupledModel` has it for voltages.
+Identified by alternation: each actuator's map from what it alone moved,
+:math:`C^{-1}(y - c)`, by :func:`~.from_sensor.calibrate_gain` (its delay, curvature and
+mode by evidence); the coupling and offsets by least squares on the maps' outputs; three
+rounds. What the map does not hold: a charge that the flexure's load on a stack moves (the
+direct effect under stress; eq. 6-7 are at zero stress), and modes of the structure after
+the coupling (one mode shared by the axes), which each actuator's own mode only
+approximates.
 """
 
 from __future__ import annotations
@@ -222,6 +224,7 @@ def calibrate_stage(
     t: ArrayLike,
     *,
     output_unit: str = "m",
+    output_dynamics: str = "auto",
 ) -> StageMap:
     """Calibrate a coupled stage's positions from its actuators' charges, with its sensors
     once (the one step that needs them; :class:`StageMap` says what it holds).
@@ -239,6 +242,9 @@ def calibrate_stage(
     t : array_like, shape (samples,)
         s.
     output_unit : str, default "m"
+    output_dynamics : {"auto", "none", "second-order"}, default "auto"
+        Each actuator's mode between its charge and what it moves (as
+        :func:`calibrate_gain`): where the stage rings.
 
     Returns
     -------
@@ -289,11 +295,19 @@ def calibrate_stage(
     for _ in range(ROUNDS):
         own = (y - off) @ np.linalg.pinv(c).T
         maps = [
-            calibrate_gain(m, u[:, i], q[:, i], own[:, i], ts, output_unit=output_unit)
+            calibrate_gain(
+                m,
+                u[:, i],
+                q[:, i],
+                own[:, i],
+                ts,
+                output_unit=output_unit,
+                output_dynamics=output_dynamics,
+            )
             for i, m in enumerate(models)
         ]
         moved = np.column_stack(
-            [_delayed(mp.predict(qc[:, i]), round(mp.delay / dt)) for i, mp in enumerate(maps)]
+            [_delayed(mp.respond(qc[:, i]), round(mp.delay / dt)) for i, mp in enumerate(maps)]
         )
         coef, *_ = np.linalg.lstsq(np.column_stack([moved, np.ones(u.shape[0])]), y, rcond=None)
         c, off = coef[:n].T, coef[n]
