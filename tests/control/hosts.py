@@ -203,18 +203,36 @@ def sines_in_reach(
     return np.asarray(np.array([x0, y0]) + np.array([x1 - x0, y1 - y0]) * (0.5 + depth * wave))
 
 
-def stage_loop() -> tuple[Any, np.ndarray, np.ndarray]:
+@functools.cache  # fitted once per worker: the tests only read it
+def fast_stage_rig() -> tuple[list[ph.ActivePI], ph.StageMap, Any]:
+    """The stage with lags and modes (``XY_DYNAMIC``) on its charges: the paper's model per
+    actuator with its amplifier's lag, fitted on its own voltage -> charge, and the stage's
+    map (each actuator's mode found in it), from :func:`dynamic_record`."""
+    rec = dynamic_record()
+    models = [ph.ActivePI(10, input_dynamics="first-order").fit(rec.voltage[:, i],
+                                                                rec.charge[:, i], t=rec.t)
+              for i in range(2)]  # fmt: skip
+    stage = ph.calibrate_stage(models, rec.voltage, rec.charge, rec.position, rec.t)
+    return models, stage, rec
+
+
+def stage_loop(fast: bool = False) -> tuple[Any, np.ndarray, np.ndarray]:
     """A stage's self-sensing loop (``ph.CoupledSelfSensingController``, the paper's model per
     actuator, slew-limited) at its reset state, a Lissajous with a stretch beyond x's reach
     and a NaN hold, and the charges a closed-loop run on the simulated stage read before each
-    row (what a host's loop feeds back)."""
-    from piezohyst.simulation import Stage, run_stage_loop, simulate_stage
+    row (what a host's loop feeds back). ``fast``: the stage with lags and modes
+    (:func:`fast_stage_rig`; each actuator's step then takes the next position too)."""
+    from piezohyst.simulation import XY_DYNAMIC, Stage, run_stage_loop, simulate_stage
 
-    t, a = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=8.0)
-    _, b = make_signal("multifreq", amplitude=140.0, frequency=1.9, duration=8.0)
-    rec = simulate_stage(np.column_stack([a, b]), t, seed=0)
-    models = [ph.ActivePI(10).fit(rec.voltage[:, i], rec.charge[:, i], t=rec.t) for i in range(2)]
-    stage = ph.calibrate_stage(models, rec.voltage, rec.charge, rec.position, rec.t)
+    if fast:
+        models, stage, _ = fast_stage_rig()
+    else:
+        t, a = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=8.0)
+        _, b = make_signal("multifreq", amplitude=140.0, frequency=1.9, duration=8.0)
+        rec = simulate_stage(np.column_stack([a, b]), t, seed=0)
+        models = [ph.ActivePI(10).fit(rec.voltage[:, i], rec.charge[:, i], t=rec.t)
+                  for i in range(2)]  # fmt: skip
+        stage = ph.calibrate_stage(models, rec.voltage, rec.charge, rec.position, rec.t)
     ctl = ph.CoupledSelfSensingController(
         models, stage, sample_rate=1000.0, slew_rate=2e4,
         v_min=[m.input_range_[0] for m in models], v_max=[m.input_range_[1] for m in models],
@@ -226,10 +244,40 @@ def stage_loop() -> tuple[Any, np.ndarray, np.ndarray]:
     d = own @ stage.coupling.T + stage.offset
     d[500:540, 0] = x1 * 1.2  # beyond x's reach
     d[800, 1] = np.nan
-    plant = Stage(seed=4, voltage=ctl.last_command)
+    plant = Stage(XY_DYNAMIC if fast else None, seed=4, voltage=ctl.last_command)
     first = plant.reading.charge.copy()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # out of reach on purpose, the map beyond its charges
         run = run_stage_loop(ctl, d, plant)
     ctl.reset()
     return ctl, d, np.vstack([first, run.charge[:-1]])
+
+
+@functools.cache  # built once per worker: the tests only read it (and reset the loop)
+def mode_loop() -> tuple[Any, np.ndarray, np.ndarray]:
+    """One actuator's self-sensing loop in metres through an output map with a mode (the
+    bench with its 150 Hz bending mode, ``calibrate_gain`` finding it), at its reset state;
+    a 10 Hz triangle ramped in from rest with a NaN hold; and the charges a closed-loop run
+    on the bench read before each sample."""
+    from piezohyst.simulation import Bench, run_loop
+
+    t, v = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=12.0)
+    rec = ph.simulate(v, t, preset="T226-H4-203X-mode", seed=0)
+    model = ph.ActivePI(10, input_dynamics="first-order").fit(rec.voltage, rec.charge, t=rec.t)
+    om = ph.calibrate_gain(model, rec.voltage, rec.charge, rec.displacement, rec.t)
+    ctl = ph.SelfSensingController(model, v_min=model.input_range_[0],
+                                   v_max=model.input_range_[1], sample_rate=1000.0,
+                                   output_map=om, slew_rate=2e4)  # fmt: skip
+    lo, hi = om.displacement_range()
+    k = np.arange(1500)
+    tri = lo + (hi - lo) * (0.2 + 0.6 * np.abs((k / 1000.0 * 10.0) % 1.0 * 2 - 1))
+    ramp = np.minimum(k / 300.0, 1.0)
+    d = np.asarray(lo + ramp * (tri - lo))
+    d[900] = np.nan
+    bench = Bench("T226-H4-203X-mode", seed=4, voltage=ctl.last_command)
+    first = bench.reading.charge
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the rest a hair below the calibrated charges
+        run = run_loop(ctl, d, bench)
+    ctl.reset()
+    return ctl, d, np.concatenate([[first], run.charge[:-1]])

@@ -80,6 +80,17 @@ def _configurations() -> dict[str, object]:
             ph.GeneralizedPI(6, growth_terms=()).fit(v, q, t=t), v_min=lo, v_max=hi
         ),
     }
+    # the controller in metres through a map with a mode, linear (not folded) and curved
+    reach = active.hysteresis_.predict(np.linspace(lo, hi, 101))
+    c, h = 0.5 * float(reach.min() + reach.max()), 0.5 * float(np.ptp(reach))
+    mode = {"mode_f0": 150.0, "mode_zeta": 0.05, "mode_dt": 1e-3}
+    for name, coef in (("linear", (125.0 * c, 125.0 * h)),
+                       ("curved", (125.0 * c, 125.0 * h, 3.0 * h))):  # fmt: skip
+        om = ph.OutputMap(coef, c, h, ((0.0,) * len(coef),) * len(coef),
+                          (float(reach.min()), float(reach.max())), **mode)  # fmt: skip
+        cfg[f"play-controller-{name}-map-mode"] = ph.SelfSensingController(
+            active, v_min=lo, v_max=hi, sample_rate=1e3, output_map=om
+        )
     return cfg
 
 

@@ -162,6 +162,27 @@ def test_the_controller_library_takes_the_charge_too(kinds, record: Any, tmp_pat
     so.ph_comp_free(s)
 
 
+def test_a_loop_through_a_maps_mode_takes_the_charge_and_the_blocks_next(
+    tmp_path: Path,
+) -> None:
+    """One actuator's loop in metres through an output map with a mode: the library's
+    process takes the charges and each target's next from the block, equal to Python's
+    process to 1e-9 V."""
+    ctl, d, measured = hosts.mode_loop()
+    _, _, lib = write_shared(ctl, tmp_path / "ph_comp.c")
+    so = _load(lib, controller=True)
+    s = so.ph_comp_new()
+    out = np.empty_like(d)
+    assert so.ph_comp_process(s, d, measured, out, d.size) == 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the rest a hair below the calibrated charges
+        py = ctl.process(d, measured)
+    ctl.reset()
+    # tol: 1e-9 V over 1.5 s, as issue 41 states for the controller
+    np.testing.assert_allclose(out, py, rtol=0, atol=1e-9)
+    so.ph_comp_free(s)
+
+
 def test_an_output_mode_takes_its_preview_from_the_block(tmp_path: Path) -> None:
     """A model with a mechanical mode: the library's process takes each target's next from
     the block, as Python's process (the block's last: extrapolated), blocks and NaN holds

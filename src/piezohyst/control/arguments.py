@@ -60,6 +60,7 @@ def resolve(
     domain: Domain,
     gain: float | None,
     allow_extrapolation: bool,
+    map_mode: OutputDynamics | None = None,
 ) -> Resolved:
     """The checks and settings every compensator shares.
 
@@ -68,6 +69,9 @@ def resolve(
     model : HysteresisModel
     v_min, v_max, slew_rate, sample_rate, domain, gain, allow_extrapolation
         As :class:`~piezohyst.Compensator` takes them.
+    map_mode : OutputDynamics, optional
+        An output map's mechanical mode (between the charge and the displacement): inverted
+        as a model's own mode is, after the map's inverse.
 
     Returns
     -------
@@ -144,6 +148,14 @@ def resolve(
     delay_samples = 0
     frac = lag_gain = 0.0
     mode = spec.output_dynamics
+    if map_mode is not None and map_mode.active:
+        if mode.active:
+            msg = (
+                "the model holds a mode and so does the output map: a map's mode belongs to a "
+                "model of the charge (which has none)"
+            )
+            raise ParameterError(msg)
+        mode = map_mode
     if mode.active and sample_rate is not None:  # differences at the loop's rate
         mode = replace(mode, sample_interval=1.0 / float(sample_rate))
     if dyn.active:

@@ -130,6 +130,7 @@ class Compensator(Tallied):
         a = resolve(
             model, v_min, v_max, slew_rate, sample_rate,
             "charge" if output_map is not None else domain, gain, allow_extrapolation,
+            None if output_map is None else output_map.mode,
         )  # fmt: skip
         spec, settings = a.spec, a.settings
         self.model, self.spec, self.gain, self.sample_rate = model, spec, gain, sample_rate
@@ -288,8 +289,22 @@ class Compensator(Tallied):
         return _cycle_commands([start, high, low, start], samples, self._max_step, settle)
 
     # -------------------------------------------------------------- commands
-    def _through_mode(self, desired: FloatArray, preview: ArrayLike | None) -> FloatArray:
-        """The hysteresis output that makes the model's mode follow ``desired``."""
+    def through_mode(self, desired: FloatArray, preview: ArrayLike | None) -> FloatArray:
+        """The hysteresis output that makes the model's (or the output map's) mode follow
+        ``desired``; the two desired values before the next are kept (:attr:`mode_history`).
+
+        Parameters
+        ----------
+        desired : ndarray
+            Desired values after the output map's inverse (model output units).
+        preview : array_like or None
+            The next desired values (the first is used; None: extrapolated, or, for a block,
+            the block's own next values).
+
+        Returns
+        -------
+        ndarray
+        """
         if not self.mode.active:
             return desired
         ahead = np.asarray(preview if preview is not None else [], dtype=np.float64).reshape(-1)
@@ -371,7 +386,7 @@ class Compensator(Tallied):
         if self.mode.active and self.dynamic and self.delay_samples:
             return self._step_mode_delayed(float(desired), preview)
         if self.mode.active:
-            desired = float(self._through_mode(np.array([float(desired)]), preview)[0])
+            desired = float(self.through_mode(np.array([float(desired)]), preview)[0])
         if self.dynamic:
             return self._inner_step(self.delay_target(float(desired), preview))
         return self._inner_step(float(desired))
@@ -454,7 +469,7 @@ class Compensator(Tallied):
         if self.charges is not None:
             d = self.charges.block(d)
         if self.mode.active:
-            d = np.ascontiguousarray(self._through_mode(d, None))
+            d = np.ascontiguousarray(self.through_mode(d, None))
         out = np.empty_like(d)
         prev = self.last_command
         self._inner_process(d, out)

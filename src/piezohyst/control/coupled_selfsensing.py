@@ -271,7 +271,16 @@ class CoupledSelfSensingController:
             raise ShapeError(msg)
         return m
 
-    def step(self, desired: ArrayLike, measured: ArrayLike | None = None) -> FloatArray:
+    @property
+    def previews(self) -> int:
+        """The next desired positions :meth:`step` uses where a planned trajectory gives
+        them (``preview``): one where an actuator's map holds a mode; 0: none."""
+        return max(loop.previews for loop in self.loops)
+
+    def step(
+        self, desired: ArrayLike, measured: ArrayLike | None = None,
+        preview: ArrayLike | None = None,
+    ) -> FloatArray:  # fmt: skip
         """The commands for one sample.
 
         Parameters
@@ -281,6 +290,11 @@ class CoupledSelfSensingController:
         measured : array_like, shape (actuators,), optional
             Each actuator's charge read at this sample, before these commands act (its
             model's units); None or NaN: that loop runs on feedforward for this sample.
+        preview : array_like, shape (k, outputs), optional
+            The next desired positions, for actuators whose maps hold a mode (the
+            trajectory's derivatives; extrapolated from the last two without them; with
+            them, ``step`` equals ``process`` to the bit). Not counted: each is counted
+            when its own sample comes.
 
         Returns
         -------
@@ -294,8 +308,14 @@ class CoupledSelfSensingController:
             raise ShapeError(msg)
         q = self._readings(measured, (len(self.loops),))
         own = self.actuator_targets(d)[0]
-        return np.array([loop.step(float(own[i]), float(q[i])) for i, loop in
-                         enumerate(self.loops)])  # fmt: skip
+        ahead = None
+        if preview is not None and self.previews:
+            p = np.asarray(preview, dtype=np.float64).reshape(-1, m_out)
+            ahead = ((p - self.stage.offset)[:, None, :] * self.inverse[None, :, :]).sum(axis=2)
+        return np.array([
+            loop.step(float(own[i]), float(q[i]), None if ahead is None else ahead[:, i])
+            for i, loop in enumerate(self.loops)
+        ])  # fmt: skip
 
     def process(self, desired: ArrayLike, measured: ArrayLike | None = None) -> FloatArray:
         """Commands for recorded blocks; equal to :meth:`step` on each row (the loops are

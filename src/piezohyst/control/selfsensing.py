@@ -244,11 +244,17 @@ class SelfSensingController:
                 "asymmetry or creep beside play operators, or its core has no compiled step"
             )
             raise ParameterError(msg)
-        if comp.mode.active:
+        if comp.mode.active and output_map is None:
             msg = (
-                f"SelfSensingController does not invert output dynamics (a mode) yet; this "
-                f"{type(model).__name__} holds one: fit it without, or use the Compensator "
-                "(feedforward) with this model"
+                f"SelfSensingController closes its loop on the charge, which has no mode; this "
+                f"{type(model).__name__} holds one (fitted on a displacement): fit the model on "
+                "the charge, and the mode into the output map (calibrate_gain finds it)"
+            )
+            raise ParameterError(msg)
+        if comp.mode.active and comp.delay_samples:
+            msg = (
+                "SelfSensingController inverts the output map's mode or a delay of whole "
+                f"samples ({comp.delay_samples}), not both: fit the model without the delay"
             )
             raise ParameterError(msg)
         if leakage is None:
@@ -314,6 +320,13 @@ class SelfSensingController:
         if self._first is None:
             self._first = _first_slope(self.compensator, self._span)
         return self._first
+
+    @property
+    def previews(self) -> int:
+        """The next desired values :meth:`step` uses where a planned trajectory gives them
+        (``preview``): a delay's whole samples, or one for an output map's mode; 0: none."""
+        comp = self.compensator
+        return max(comp.delay_samples, 1 if comp.mode.active else 0)
 
     @property
     def v_min(self) -> float:
@@ -441,7 +454,9 @@ class SelfSensingController:
             The desired values of the next samples, for a model with an input delay
             (as :meth:`Compensator.step <piezohyst.Compensator.step>`): the command is
             computed for ``preview[delay_samples - 1]``, the reading still compared with
-            ``desired``. Lags need none.
+            ``desired``. Lags need none. With an output map that holds a mode, ``preview[0]``
+            gives the trajectory's derivatives (extrapolated from the last two without it;
+            with it, ``step`` equals ``process`` to the bit).
 
         Returns
         -------
@@ -452,6 +467,8 @@ class SelfSensingController:
         d = float(desired)
         if comp.charges is not None:  # metres through the output map, to the model's charge
             d, preview = comp.charges.one(d, preview)
+            if comp.mode.active:  # and the map's mode inverted: the charge that rings there
+                d = float(comp.through_mode(np.array([d]), preview)[0])
         try:  # the common case inline (a step runs per sample); reading() names the rest
             m = math.nan if measured is None else float(measured)
         except (TypeError, ValueError):
@@ -492,6 +509,8 @@ class SelfSensingController:
         comp = self.compensator
         if comp.charges is not None:
             d = comp.charges.block(d)
+            if comp.mode.active:
+                d = np.ascontiguousarray(comp.through_mode(d, None))
         comp.inverse.controller_process(d, m, (self.config, self.ctl, self.feedback), out)
         comp.tally(out, self.owner)
         return out

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -18,7 +20,8 @@ def run_loop(controller: Controller, desired: ArrayLike, bench: Bench) -> BenchR
     Any controller of the one contract (:mod:`~piezohyst.control.contract`): one that
     reads (``reads``: the self-sensing controller, the learning compensator) gets,
     each sample, the charge the bench read after the previous command (as on a rig: read
-    the ADC, compute, write the DAC); a feedforward one (the compensator) is sent the
+    the ADC, compute, write the DAC), and the trajectory's next values where it takes them
+    (``previews``: an output map's mode, a delay); a feedforward one (the compensator) is sent the
     whole trajectory at once. Sample ``k`` of the result is what the bench read after
     command ``k``, so ``displacement[k]`` is the response to ``desired[k]``.
 
@@ -42,8 +45,14 @@ def run_loop(controller: Controller, desired: ArrayLike, bench: Bench) -> BenchR
     if not controller.reads:
         return bench.run(controller.process(d))
     rows = np.empty((d.size, 7))
+    ahead = int(getattr(controller, "previews", 0))  # a planned trajectory's next values
+    previewed: Any = controller  # one that says ``previews`` takes them (beyond the contract)
     for k in range(d.size):
-        r = bench.apply(controller.step(float(d[k]), bench.reading.charge))
+        if ahead:
+            c = previewed.step(float(d[k]), bench.reading.charge, d[k + 1 : k + 1 + ahead])
+        else:
+            c = controller.step(float(d[k]), bench.reading.charge)
+        r = bench.apply(c)
         rows[k] = (
             r.t,
             r.voltage,

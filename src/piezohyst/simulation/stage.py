@@ -273,9 +273,14 @@ def run_stage_loop(controller: Any, desired: ArrayLike, stage: Stage) -> StageRe
         rows = [stage.apply(v) for v in volts]
     else:
         charge = getattr(controller, "senses", "position") == "charge"
+        ahead = int(getattr(controller, "previews", 0))  # a planned trajectory's next rows
         for k in range(d.shape[0]):
             seen = stage.reading.charge if charge else stage.reading.position
-            rows.append(stage.apply(controller.step(d[k], seen)))
+            if ahead:
+                c = controller.step(d[k], seen, d[k + 1 : k + 1 + ahead])
+            else:
+                c = controller.step(d[k], seen)
+            rows.append(stage.apply(c))
     return StageRecord(
         np.array([r.t for r in rows]),
         np.array([r.voltage for r in rows]),

@@ -93,7 +93,7 @@ def export_c(
             "would need the preview): run it in Python, or fit the model without the delay"
         )
         raise ParameterError(msg)
-    if comp.mode.active and (controller is not None or comp.delay_samples):
+    if comp.mode.active and comp.delay_samples:
         msg = (
             "C export inverts an output mode only without an integer input delay (the mode "
             "would need the preview of several samples): pass the pre-inverted target "
@@ -125,7 +125,7 @@ def export_c(
         raise ParameterError(msg)
     c = CText(precision, prefix)
     fold = None
-    if om is not None and om.order == 1:  # a linear map folded into the step's scale
+    if om is not None and om.order == 1 and not comp.mode.active:  # folded into the scale
         fold = (1.0 / om.gain, om.center - om.coefficients[0] / om.gain)
     loop = None if controller is None else (controller.config, controller.ctl, controller.feedback)
     parts = comp.inverse.c_parts(c, fold, loop)  # the engine's own arrays, files and fields
@@ -173,8 +173,9 @@ def _notes(comp: Compensator) -> str:
         )
     if comp.mode.active:
         notes += (
-            f"\n * With the model's mechanical mode ({comp.mode.f0:.6g} Hz), also pass the"
-            "\n * desired value of the next sample (NaN: extrapolated from the last two);"
+            f"\n * With the mechanical mode ({comp.mode.f0:.6g} Hz: the model's or its output"
+            "\n * map's), also pass the desired value of the next sample (NaN: extrapolated"
+            "\n * from the last two);"
             f"\n * the loop must run at {1.0 / comp.mode.sample_interval:.6g} Hz."
         )
     return notes
@@ -188,29 +189,38 @@ def _c_file(name: str) -> str:
 def _target_map(comp: Compensator, precision: Precision) -> list[str]:
     """The constants of ``map.c``: any output map's calibrated displacements (beyond them a
     desired value is counted), and a curved map's coefficients and edges (a linear one is
-    folded into the step's REFERENCE and SCALE by its engine)."""
+    folded into the step's REFERENCE and SCALE by its engine, but before an output mode,
+    whose inverse runs on the map's charges: there its coefficients and edges too)."""
     om = comp.output_map
     if om is None:
-        return ["#define HAS_MAP 0", "#define CURVED_MAP 0"]
+        return ["#define HAS_MAP 0", "#define CURVED_MAP 0", "#define LINEAR_MAP 0"]
     text = CText(precision)
     lo, hi, s_lo, s_hi, d_lo, d_hi = om.edges()
     rising = s_hi > s_lo
     low_end, high_end = (s_lo, s_hi) if rising else (s_hi, s_lo)
     ends = text.constants(MAP_LOW_END=low_end, MAP_HIGH_END=high_end)
+    edges = text.constants(MAP_CENTER=om.center, MAP_SCALE=om.scale, MAP_LO=lo, MAP_HI=hi,
+                           MAP_S_LO=s_lo, MAP_S_HI=s_hi, MAP_D_LO=d_lo, MAP_D_HI=d_hi)  # fmt: skip
+    if om.order == 1 and comp.mode.active:  # before the mode's inverse, as Python inverts it
+        c0, c1 = om.coefficients
+        return ["#define HAS_MAP 1", "#define CURVED_MAP 0", "#define LINEAR_MAP 1", *ends,
+                f"#define MAP_RISING {int(rising)}", *edges,
+                *text.constants(MAP_C0=c0, MAP_C1=c1)]  # fmt: skip
     if om.order == 1:
-        return ["#define HAS_MAP 1", "#define CURVED_MAP 0", *ends]
+        return ["#define HAS_MAP 1", "#define CURVED_MAP 0", "#define LINEAR_MAP 0", *ends]
     c = np.array(om.coefficients, dtype=np.float64)
     tol = (1e-13 if precision == "double" else 1e-6) * max(abs(high_end - low_end), 1e-300)
     return [
         "#define HAS_MAP 1",
         "#define CURVED_MAP 1",
+        "#define LINEAR_MAP 0",
         *ends,
         f"#define MAP_ORDER {om.order}",
         f"#define MAP_RISING {int(rising)}",
         text.table("MAP_C", str(c.size), c),
         text.table("MAP_DC", str(c.size - 1), np.polynomial.polynomial.polyder(c)),
-        *text.constants(MAP_CENTER=om.center, MAP_SCALE=om.scale, MAP_LO=lo, MAP_HI=hi,
-                        MAP_S_LO=s_lo, MAP_S_HI=s_hi, MAP_D_LO=d_lo, MAP_D_HI=d_hi, MAP_TOL=tol),
+        *edges,
+        *text.constants(MAP_TOL=tol),
     ]  # fmt: skip
 
 

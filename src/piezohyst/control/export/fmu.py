@@ -7,7 +7,9 @@ machine it runs on with the system C compiler, and zips ``modelDescription.xml``
 ``binaries/<platform>/NAME.so`` and ``sources/`` (to build for another platform):
 
 * input ``target`` (Real; the desired value in the model's output unit, or m), with
-  ``--controller`` a second input ``charge``; output ``voltage`` (Real, V);
+  ``--controller`` a second input ``charge``, and where a mode is inverted (the model's, or
+  a controller's output map's) then ``next``, the next step's target; output ``voltage``
+  (Real, V);
 * one ``fmi2DoStep`` of ``1/sample_rate`` is one compensator step: a step of another size
   is refused with ``fmi2Error`` and a log message, as is any call out of the standard's
   order (a step before initialization, after terminate...), never a crash;
@@ -67,27 +69,25 @@ def fmu_platform() -> str:
     return f"{name}{bits}"
 
 
-def _wrapper(prefix: str, third: str, period: float, what: str) -> str:
-    """The FMI 2.0 Co-Simulation functions around the step; ``third`` names the step's
-    second input, value reference 2 ("charge" for the controller, "next" for a model with a
-    mode: the next target, its inverse's preview; "" for none)."""
-    n_real = 3 if third else 2
-    step_call = (
-        f"{prefix}_step(&c->s, ({prefix}_real)c->r[0], ({prefix}_real)c->r[2])"
-        if third
-        else f"{prefix}_step(&c->s, ({prefix}_real)c->r[0])"
-    )
-    start = "NAN" if third == "next" else "0.0"
+def _wrapper(prefix: str, extras: tuple[str, ...], period: float, what: str) -> str:
+    """The FMI 2.0 Co-Simulation functions around the step; ``extras`` names the step's
+    further inputs, value references 2, 3 ("charge" for the controller, then "next" for a
+    mode: the next target, its inverse's preview; none for a plain compensator)."""
+    n_real = 2 + len(extras)
+    args = "".join(f", ({prefix}_real)c->r[{2 + k}]" for k in range(len(extras)))
+    step_call = f"{prefix}_step(&c->s, ({prefix}_real)c->r[0]{args})"
+    starts = "".join(f"\n    c->r[{2 + k}] = {'NAN' if x == 'next' else '0.0'};"
+                     for k, x in enumerate(extras))  # fmt: skip
+    layout = ", ".join(["0 target", "1 voltage"] + [f"{2 + k} {x}" for k, x in enumerate(extras)])
     return fmi2_wrapper(
         prefix, period, what, n_real=n_real,
-        layout=f"0 target, 1 voltage, 2 {third or 'unused'}", not_input="vr[i] == 1",
-        inputs=f"target, {third}" if third else "target",
+        layout=layout, not_input="vr[i] == 1",
+        inputs=", ".join(["target", *extras]),
         counts=("c->s.nonfinite", "c->s.saturated", "c->s.slewed", "c->s.extrapolated"),
         counts_said="0 non-finite targets, 1 targets out of reach,\n * 2 commands cut by the "
         "slew limit, 3 targets beyond the output map's calibrated range",
         step_statement=f"c->r[1] = (fmi2Real){step_call}",
-        start_outputs="c->r[0] = 0.0;\n    c->r[1] = (fmi2Real)c->s.last;"
-        + (f"\n    c->r[2] = {start};" if third else ""),
+        start_outputs="c->r[0] = 0.0;\n    c->r[1] = (fmi2Real)c->s.last;" + starts,
     )  # fmt: skip
 
 
@@ -240,19 +240,19 @@ def cosim_description(
 
 
 def _model_description(
-    name: str, guid: str, third: str, period: float, desired_unit: str, what: str
+    name: str, guid: str, extras: tuple[str, ...], period: float, desired_unit: str, what: str
 ) -> str:
     said = {
         "charge": ("0", "the charge read at this step (model output units)"),
         "next": ("NaN", f"the next step's desired value ({desired_unit}; NaN: extrapolated), "
-                        "for the model's mechanical mode"),
+                        "for the mechanical mode (the model's or its output map's)"),
     }  # fmt: skip
     rows = [
         scalar("target", 0, "input", "Real", f"the desired value ({desired_unit})"),
         scalar("voltage", 1, "output", "Real", "the command (V), inside the limits"),
     ]
-    if third:
-        rows.append(scalar(third, 2, "input", "Real", said[third][1], said[third][0]))
+    for k, extra in enumerate(extras):
+        rows.append(scalar(extra, 2 + k, "input", "Real", said[extra][1], said[extra][0]))
     rows += [
         scalar("nonfinite", 0, "output", "Integer",
                "non-finite targets since the last reset (the last command held)"),
@@ -264,7 +264,7 @@ def _model_description(
                "targets beyond the output map's calibrated range since the last reset (the "
                "map extended linearly; 0 without a map)"),
     ]  # fmt: skip
-    first = 4 if third else 3  # the counts follow target, voltage (and charge or next)
+    first = 3 + len(extras)  # the counts follow target, voltage (and charge, next)
     outputs = [2, *range(first, first + 4)]
     return cosim_description(name, guid, what, period, [f"{name}.c"], rows, outputs)
 
@@ -293,9 +293,10 @@ def write_fmu(
     Raises
     ------
     ParameterError
-        No sample rate, a model the C export does not cover, no C compiler. A model with an
-        output mode has a second input, ``next`` (the next step's target, the preview its
-        inverse needs; start NaN: extrapolated).
+        No sample rate, a model the C export does not cover, no C compiler. A model (or a
+        controller's output map) with a mode has a further input, ``next`` (the next step's
+        target, the preview its inverse needs; start NaN: extrapolated), after a
+        controller's ``charge``.
     """
     comp = cast(Compensator, getattr(compensator, "compensator", compensator))
     controller = comp is not compensator
@@ -313,12 +314,12 @@ def write_fmu(
     code = export_c(compensator, precision=precision, prefix=name)
     kind = "self-sensing controller" if controller else "compensator"
     what = f"{name}: the {kind} of a {type(comp.model).__name__}, {comp.sample_rate:g} Hz"
-    third = "charge" if controller else "next" if comp.mode.active else ""
-    source = code.source + _wrapper(name, third, period, what)
+    extras = (("charge",) if controller else ()) + (("next",) if comp.mode.active else ())
+    source = code.source + _wrapper(name, extras, period, what)
     guid = "{" + hashlib.sha256((code.header + source).encode()).hexdigest()[:32] + "}"
     source = source.replace(f'"{{{name}-GUID}}"', f'"{guid}"')
     unit = "m" if comp.domain == "displacement" else comp.spec.output_unit
-    xml = _model_description(name, guid, third, period, unit, what)
+    xml = _model_description(name, guid, extras, period, unit, what)
     return package_fmu(out, name, {f"{name}.c": source, code.header_name: code.header}, xml, what)
 
 

@@ -90,8 +90,8 @@ def _api(prefix: str, controller: bool, what: str, mode: bool = False) -> tuple[
     charge_arg = "const double *charge, " if controller else ""
     charge_null = " || charge == NULL" if controller else ""
     charge_use = ", (" + prefix + "_real)charge[k]" if controller else ""
-    if mode:  # a mode's step takes the next target (never with the controller: refused)
-        charge_use = _block_next(prefix)
+    if mode:  # a mode's step takes the next target too (a controller's: after the charge)
+        charge_use += _block_next(prefix)
     version = _version_text(what)
     declarations = f"""
 /* Shared-library API (piezohyst export-c --shared): one handle per channel. */
@@ -237,8 +237,8 @@ def _mex_gateway(name: str, prefix: str, controller: bool, what: str, mode: bool
     nargs = 2 if controller else 1
     version = _version_text(what)
     measured = ", (" + prefix + "_real)charge[k]" if controller else ""
-    if mode:  # the block is its own preview (see _block_next)
-        measured = _block_next(prefix)
+    if mode:  # the block is its own preview (see _block_next), after a controller's charge
+        measured += _block_next(prefix)
     charge_check = (
         f"""
     if (mxGetNumberOfElements(prhs[1]) != n || !mxIsDouble(prhs[1]) || mxIsComplex(prhs[1])

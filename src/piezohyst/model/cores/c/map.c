@@ -1,12 +1,38 @@
 /* The desired value as the step's reference. Without an output map, or with a linear one
- * folded into REFERENCE and SCALE, an affine map; with a curved map from capacitor charge to
+ * folded into REFERENCE and SCALE, an affine map (a linear map before an output mode is not
+ * folded: LINEAR_MAP, its inverse as OutputMap.inverse computes it); with a curved map from capacitor charge to
  * displacement (calibrate_gain, monotone over its calibrated charges), its inverse first, as
  * OutputMap.inverse computes it: Newton's method from the chord, kept inside the calibrated
  * range, and the linear extension from the range's edge beyond it. With any map, a desired
  * value beyond the calibrated displacements is counted (s->extrapolated), as the
  * compensator's extrapolated_count. With an output mode, mode.c maps the desired values
  * before the mode's inverse (the compensator's order) and the step takes charges. */
-#if CURVED_MAP
+#if CURVED_MAP || LINEAR_MAP
+/* beyond the calibrated displacements: the edge's tangent (0: inside) */
+static int map_beyond(real_t d, real_t *q)
+{
+    if (d < MAP_LOW_END) {
+        *q = MAP_RISING ? MAP_LO + (d - MAP_S_LO) / MAP_D_LO : MAP_HI + (d - MAP_S_HI) / MAP_D_HI;
+        return 1;
+    }
+    if (d > MAP_HIGH_END) {
+        *q = MAP_RISING ? MAP_HI + (d - MAP_S_HI) / MAP_D_HI : MAP_LO + (d - MAP_S_LO) / MAP_D_LO;
+        return 1;
+    }
+    return 0;
+}
+#endif
+#if LINEAR_MAP /* before an output mode: not folded, the inverse in monotone_charges' order */
+static real_t map_charge(real_t d)
+{
+    real_t q;
+    if (map_beyond(d, &q)) {
+        return q;
+    }
+    return MAP_CENTER + MAP_SCALE * (d - MAP_C0) / MAP_C1;
+}
+#define MAP_D(d) map_charge(d)
+#elif CURVED_MAP
 static real_t map_horner(const real_t *c, int order, real_t u)
 {
     real_t y = c[order];
@@ -19,11 +45,8 @@ static real_t map_horner(const real_t *c, int order, real_t u)
 static real_t map_charge(real_t d)
 {
     real_t q, f;
-    if (d < MAP_LOW_END) { /* below the calibrated displacements: the edge's tangent */
-        return MAP_RISING ? MAP_LO + (d - MAP_S_LO) / MAP_D_LO : MAP_HI + (d - MAP_S_HI) / MAP_D_HI;
-    }
-    if (d > MAP_HIGH_END) {
-        return MAP_RISING ? MAP_HI + (d - MAP_S_HI) / MAP_D_HI : MAP_LO + (d - MAP_S_LO) / MAP_D_LO;
+    if (map_beyond(d, &q)) {
+        return q;
     }
     q = MAP_LO + (MAP_HI - MAP_LO) * (d - MAP_S_LO) / (MAP_S_HI - MAP_S_LO);
     for (int it = 0; it < 50; ++it) {

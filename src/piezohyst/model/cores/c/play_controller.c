@@ -32,7 +32,11 @@ static real_t model_output(const PREFIX_t *s)
     return y;
 }
 
+#if MODE /* the public step inverts the output map's mode first (mode.c) */
+static real_t controller_step(PREFIX_t *s, real_t desired, real_t measured)
+#else
 real_t PREFIX_step(PREFIX_t *s, real_t desired, real_t measured)
+#endif
 {
     real_t e = 0, current, qc, d, integral, u, v, y, k, yi, m, den, slope;
     int delivered;

@@ -9,7 +9,12 @@
 /* Start from the state the ${kind} had when it was exported. */
 void ${prefix}_init(${prefix}_t *s);
 
-#if ${upper}_CONTROLLER
+#if ${upper}_CONTROLLER && ${upper}_MODE
+/* One command (V): desired output, the charge read at this sample before this
+ * command acts (NaN/inf: feedforward alone for this sample), and the next desired
+ * value (see above). */
+${real} ${prefix}_step(${prefix}_t *s, ${real} desired, ${real} measured, ${real} next);
+#elif ${upper}_CONTROLLER
 /* One command (V): desired output, and the charge read at this sample before
  * this command acts (NaN/inf: feedforward alone for this sample). */
 ${real} ${prefix}_step(${prefix}_t *s, ${real} desired, ${real} measured);
