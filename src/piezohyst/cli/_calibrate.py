@@ -3,7 +3,9 @@ displacement sensor, once) and ``calibrate-stage`` (a stage's sensors, once)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -101,6 +103,18 @@ def calibrate_leakage(
     ctx.info(f"saved {out}")
 
 
+def _mode_option(between: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """``--output-dynamics``: a mode between ``between`` (calibrate_gain's argument)."""
+    return click.option(
+        "--output-dynamics",
+        type=click.Choice(["auto", "none", "second-order"]),
+        default="auto",
+        show_default=True,
+        help=f"A mechanical mode between {between}: auto keeps one where the record shows it, "
+        "on evidence.",
+    )
+
+
 @click.command("calibrate-gain")
 @click.argument("model", type=EXISTING)
 @click.argument("data", type=EXISTING)
@@ -121,6 +135,7 @@ def calibrate_leakage(
     default=None,
     help="What one unit of it is worth, for a sensor logged in V: '10 um/V'.",
 )
+@_mode_option("the charge and the displacement (the sensor rings, the charge does not)")
 @OUT_FILE_JSON
 @FORCE
 @click.pass_obj
@@ -132,6 +147,7 @@ def calibrate_gain(
     displacement_column: str,
     displacement_unit: str | None,
     displacement_scale: str | None,
+    output_dynamics: str,
     out: Path,
     force: bool,
 ) -> None:
@@ -141,7 +157,9 @@ def calibrate_gain(
     DATA holds voltage, charge and displacement sampled together; MODEL was
     fitted on voltage -> charge (its growth is removed from the charge). The
     map is linear (g, in m/C, with its standard error) unless the record's
-    evidence asks for curvature; a sensor delay and offset are found too.
+    evidence asks for curvature; a sensor delay and offset are found too, and
+    a mechanical mode where the sensor rings (a bender's first bending mode):
+    the self-sensing loop then inverts it from the desired trajectory.
     Then compensate in metres with the sensor unplugged: --gain gain.json.
 
     \b
@@ -161,6 +179,7 @@ def calibrate_gain(
             displacement_scale=displacement_scale,
             data_spec=data_spec,
             force=force,
+            output_dynamics=output_dynamics,
         ),
     )
     ctx.result(om.summary())
@@ -186,6 +205,7 @@ def calibrate_gain(
     required=True,
     help="Each actuator's charge column, comma-separated, in the models' order.",
 )
+@_mode_option("each actuator's charge and what it moves (the stage rings, the charges do not)")
 @OUT_FILE_JSON
 @FORCE
 @click.pass_obj
@@ -195,6 +215,7 @@ def calibrate_stage(
     data_spec: DataSpec,
     models: str,
     charge_columns: str,
+    output_dynamics: str,
     out: Path,
     force: bool,
 ) -> None:
@@ -225,6 +246,7 @@ def calibrate_stage(
             outputs=stage_columns(data_spec.output_column, "--output"),
             data_spec=data_spec,
             force=force,
+            output_dynamics=output_dynamics,
         ),
     )
     ctx.result(stage.describe())

@@ -96,6 +96,7 @@ def calibrate_gain_file(
     displacement_scale: str | float | None = None,
     data_spec: DataSpec | None = None,
     force: bool = False,
+    output_dynamics: str = "auto",
 ) -> OutputMap:
     """Calibrate the charge -> displacement map from a record with a displacement sensor
     (voltage, charge and displacement sampled together) and save it (JSON) to ``out``.
@@ -118,6 +119,8 @@ def calibrate_gain_file(
         Columns, units, scales and window of the voltage and charge.
     force : bool
         Replace an existing ``out`` that piezohyst did not write.
+    output_dynamics : {"auto", "none", "second-order"}, default "auto"
+        A mode between the charge and the displacement (:func:`~piezohyst.calibrate_gain`).
 
     Returns
     -------
@@ -140,7 +143,8 @@ def calibrate_gain_file(
     if sensor.units[1] is None:
         span = float(np.ptp(sensor.y[w]))
         warn_assumed_span(span, "m", displacement_column, data, "--displacement-unit")
-    om = calibrate_gain(model, rec.x[w], rec.y[w], sensor.y[w], rec.t[w], output_unit=unit)
+    om = calibrate_gain(model, rec.x[w], rec.y[w], sensor.y[w], rec.t[w], output_unit=unit,
+                        output_dynamics=output_dynamics)  # fmt: skip
     if out is not None:
         om.save(out)
     return om

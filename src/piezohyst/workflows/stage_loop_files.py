@@ -185,6 +185,7 @@ def calibrate_stage_file(
     outputs: Sequence[str],
     data_spec: DataSpec | None = None,
     force: bool = False,
+    output_dynamics: str = "auto",
 ) -> StageMap:
     """Calibrate a stage's positions from its actuators' charges from one record (each
     actuator's voltage and charge, each axis's position, sampled together) and save the map.
@@ -204,6 +205,9 @@ def calibrate_stage_file(
         How the file is read (its time column or rate, group, window, units, scales).
     force : bool
         Overwrite ``out`` even where piezohyst did not write it.
+    output_dynamics : {"auto", "none", "second-order"}, default "auto"
+        Each actuator's mode between its charge and what it moves
+        (:func:`~piezohyst.calibrate_gain`).
 
     Returns
     -------
@@ -232,7 +236,8 @@ def calibrate_stage_file(
         raise DataFileError(said.replace("output column", "charge column")) from None
     t2, _, y, unit = _read_stage(data, inputs, outputs, spec)
     assert q is not None and y is not None and t2.shape == t.shape  # columns given: read
-    stage = calibrate_stage([_load(p) for p in models], u, q, y, t, output_unit=unit or "m")
+    stage = calibrate_stage([_load(p) for p in models], u, q, y, t, output_unit=unit or "m",
+                            output_dynamics=output_dynamics)  # fmt: skip
     if out is not None:
         stage.save(out)
     return stage
