@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import piezohyst as ph
+from piezohyst.metrics import hysteresis_width
 from piezohyst.simulation import XY_COUPLING, make_signal, simulate_stage
 
 from ..control import hosts
@@ -453,3 +454,55 @@ def test_a_stage_on_its_charges_from_the_shell(tmp_path: Path) -> None:
                    "no column 'qz'", "--charge")  # fmt: skip
     assert not (tmp_path / "other.c").exists() and not (tmp_path / "m2.json").exists()
     assert not (tmp_path / "other.csv").exists()
+
+
+def test_a_fast_stage_on_its_charges_from_the_shell(tmp_path: Path) -> None:
+    """The stage with lags and modes: each actuator's model fitted with its lag from its own
+    columns, ``calibrate-stage`` finds each actuator's mode (said in its lines), and
+    ``simulate-loop`` runs the map on the built-in stage that rings (the models hold lags, the
+    map modes), saying so, and tracks a 10 Hz raster line there; with ``--output-dynamics
+    none`` no mode is kept, and the same raster rings."""
+    rec = hosts.dynamic_record()
+    data = tmp_path / "fast.csv"
+    cols = {"time": rec.t, "vx": rec.voltage[:, 0], "vy": rec.voltage[:, 1],
+            "qx": rec.charge[:, 0], "qy": rec.charge[:, 1],
+            "x": rec.position[:, 0], "y": rec.position[:, 1]}  # fmt: skip
+    ph.write_table(data, cols, units={"time": "s", "vx": "V", "vy": "V", "qx": "C", "qy": "C",
+                                      "x": "m", "y": "m"})  # fmt: skip
+    for axis in ("x", "y"):
+        res = run("fit", data, "--input", f"v{axis}", "--output", f"q{axis}", "--model",
+                  "active-pi", "--input-dynamics", "first-order", "-o",
+                  tmp_path / f"a{axis}.json")  # fmt: skip
+        assert res.exit_code == 0, res.output
+    models = f"{tmp_path / 'ax.json'},{tmp_path / 'ay.json'}"
+    widths = {}
+    for mode in ("auto", "none"):
+        maps = tmp_path / f"map-{mode}.json"
+        res = run("calibrate-stage", data, "--models", models, "--input", "vx,vy", "--charge",
+                  "qx,qy", "--output", "x,y", "--output-dynamics", mode, "-o", maps)  # fmt: skip
+        assert res.exit_code == 0, res.output
+        assert ("a mode at 150 Hz" in res.output) == (mode == "auto"), res.output
+        assert ("a mode at 120 Hz" in res.output) == (mode == "auto"), res.output
+        stage = ph.StageMap.load(maps)
+        (lo, hi) = stage.maps[0].displacement_range()
+        k = np.arange(2500)
+        x = lo + (hi - lo) * (0.2 + 0.6 * np.abs(((k / 1000 * 10.0) % 1.0) * 2 - 1))
+        y = np.full(k.size, float(np.mean(stage.maps[1].displacement_range())))
+        ramp = np.minimum(k / 500.0, 1.0)  # from where the stage rests, as a scan starts
+        x, y = (float(om.predict(np.array([0.0]))[0]) * (1 - ramp) + ramp * w
+                for om, w in zip(stage.maps, (x, y), strict=True))  # fmt: skip
+        target = tmp_path / "raster.csv"
+        own = np.column_stack([x, y]) @ stage.coupling.T + stage.offset
+        own[500:, 1] = own[500, 1]  # y held still in the stage's frame once arrived
+        ph.write_table(target, {"time": k / 1000, "x": own[:, 0], "y": own[:, 1]})
+        res = run("simulate-loop", maps, target, "--models", models, "--column", "x,y",
+                  "--slew-rate", "1e6", "-o", tmp_path / f"loop-{mode}.csv")  # fmt: skip
+        assert res.exit_code == 0, res.output
+        assert "built-in XY stage with lags and modes" in res.output
+        got = ph.read_table(tmp_path / f"loop-{mode}.csv")
+        keep = slice(1500, None)
+        widths[mode] = hysteresis_width(own[keep, 0], np.asarray(got.get("position_x"))[keep])
+    # measured 1.06 % against 6.9 % without the modes; the same loop's width on the Python
+    # test's scan is 0.68-0.94 % over eight noise draws (tests/control/test_stage_modes.py), so
+    # this draw and scan sit at the issue's 1 %: the bound here is the modes' effect
+    assert widths["auto"] < 0.015 and widths["none"] > 4 * widths["auto"]

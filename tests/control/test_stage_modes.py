@@ -193,6 +193,8 @@ def test_a_fast_raster_and_a_lissajous_on_the_charges_alone() -> None:
                                hysteresis_width(dk[:, 0], p[:, 0]),
                                np.ptp(p[:, 1]) / span[1])  # fmt: skip
     err, width, held = got["modes"]["raster"]
+    # measured 0.50 %, 0.82 %, 0.45 % (this noise draw; over eight: 0.50-0.59 %, 0.68-0.94 %
+    # and 0.38-0.53 %: the held axis sits at the bound on some draws)
     assert err[0] < 0.01 and width < 0.01 and held < 0.005
     assert np.all(got["modes"]["lissajous"][0] < 0.01)
     assert got["none"]["raster"][1] > 3 * width  # the rings, without the modes

@@ -140,8 +140,7 @@ def _simulate_stage(
         model, target, out, models=[Path(p) for p in stage_columns(models, "--models")],
         columns=stage_columns(column, "--column"), feedforward=feedforward,
         settings=stage_loop_settings(settings, loop), seed=seed, force=force))  # fmt: skip
-    ctx.info("simulated stage: the built-in XY stage (two of the bench's actuators, x moves y "
-             "by 4 %, y x by -3 %): another stage than yours")  # fmt: skip
+    ctx.info(f"simulated stage: {run.stage}: another stage than yours")
     what = "feedforward" if feedforward else "charge loops"
     axes = stage_columns(column, "--column")
     said = ", ".join(

@@ -247,6 +247,14 @@ def calibrate_stage_file(
 #: the loops settle their charge frames (on the built-in stage a held axis arrives within
 #: 50 ms, 1.6 um of 320 um against 1.85 um after)
 ARRIVAL = 100
+#: What the built-in stage a map runs on is, without lags and modes and with them (a map that
+#: holds modes, or models with lags, run on the one that has them: their inverses shape the
+#: commands for them)
+BUILT_IN_STAGES = {
+    False: "the built-in XY stage (two of the bench's actuators, x moves y by 4 %, y x by -3 %)",
+    True: ("the built-in XY stage with lags and modes (two of the bench's actuators behind 4 "
+           "and 3 ms amplifiers, modes at 150 and 120 Hz, x moves y by 4 %, y x by -3 %)"),
+}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -264,12 +272,16 @@ class StageLoopRun:
         Per axis, the lasers' peak-to-peak over the same span (a held axis's motion).
     loop : CoupledSelfSensingController
         After the run: its counts per actuator.
+    stage : str
+        Which built-in stage it ran on (the one with lags and modes where the map holds
+        modes or the models lags).
     """
 
     nrmse: tuple[float, ...]
     width: tuple[float, ...]
     moved: tuple[float, ...]
     loop: CoupledSelfSensingController
+    stage: str = ""
 
 
 def simulate_stage_loop_file(
@@ -286,7 +298,8 @@ def simulate_stage_loop_file(
 ) -> StageLoopRun:
     """A stage map's self-sensing loop (or its feedforward alone) run on the built-in
     simulated stage (:class:`~piezohyst.simulation.Stage`: two of the bench's actuators, the
-    default XY coupling; another stage than a lab's) over a target file, at 1 kHz.
+    default XY coupling; with their amplifiers' lags and modes, ``XY_DYNAMIC``, where the map
+    holds modes or the models lags; another stage than a lab's) over a target file, at 1 kHz.
 
     Writes ``time``, ``desired_<axis>``, ``command_<k>`` (V), ``charge_<k>`` (C) and the
     stage's lasers ``position_<axis>`` (m, for checking: the loop reads the charges only).
@@ -319,7 +332,7 @@ def simulate_stage_loop_file(
     """
     from ..io import read_table, write_table
     from ..metrics import hysteresis_width
-    from ..simulation import Stage, run_stage_loop
+    from ..simulation import XY_DYNAMIC, Stage, run_stage_loop
 
     cfg = settings or StageLoopSettings()
     guard_outputs([out], [map_path, target, *models, *(cfg.leakage or [])], force=force)
@@ -340,7 +353,12 @@ def simulate_stage_loop_file(
         msg = f"{target}: the built-in stage samples at 1 kHz; give the target at that rate"
         raise DataFileError(msg)
     desired = np.column_stack([table.get(c, finite=False) for c in columns])
-    run = run_stage_loop(loop, desired, Stage(seed=seed, voltage=loop.last_command))
+    # a map with modes (or models with lags) inverts what the stage with lags and modes has
+    dynamic = any(om.mode.active for om in loop.stage.maps) or any(
+        m.input_dynamics_.active for m in loop.models
+    )
+    plant = Stage(XY_DYNAMIC if dynamic else None, seed=seed, voltage=loop.last_command)
+    run = run_stage_loop(loop, desired, plant)
     written: dict[str, Any] = {"time": t}
     units: dict[str, str | None] = {"time": "s"}
     for i, c in enumerate(columns):
@@ -363,4 +381,5 @@ def simulate_stage_loop_file(
         for i in range(m)
     )  # fmt: skip
     moved = tuple(float(x) for x in np.ptp(run.position[ok], axis=0) / span)
-    return StageLoopRun(tuple(float(e) for e in err), width, moved, loop)
+    said = BUILT_IN_STAGES[dynamic]
+    return StageLoopRun(tuple(float(e) for e in err), width, moved, loop, said)
