@@ -47,6 +47,14 @@ STAGES = {
 }  # fmt: skip
 
 
+def three_rates() -> tuple[np.ndarray, np.ndarray]:
+    """The identification record's times and commands: 12 s of three-rate signals per axis
+    (2.5 and 1.9 Hz bases: the two inputs do not move together)."""
+    t, a = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=12.0)
+    _, b = make_signal("multifreq", amplitude=140.0, frequency=1.9, duration=12.0)
+    return t, np.column_stack([a, b])
+
+
 def run(volts: np.ndarray, stage: tuple, seed: int) -> np.ndarray:  # type: ignore[type-arg]
     """The stage's true positions (and its lasers' readings) for the commands."""
     presets, coupling, after = stage
@@ -61,9 +69,7 @@ def run(volts: np.ndarray, stage: tuple, seed: int) -> np.ndarray:  # type: igno
 
 def main() -> None:
     warnings.simplefilter("ignore")
-    t, a = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=12.0)
-    _, b = make_signal("multifreq", amplitude=140.0, frequency=1.9, duration=12.0)
-    ident = np.column_stack([a, b])
+    t, ident = three_rates()
     k = np.arange(3000)
     tri = np.abs((k / FS * 10.0) % 1.0 * 2 - 1)
     phase = 2 * np.pi * k / FS

@@ -25,11 +25,11 @@ import time
 import warnings
 
 import numpy as np
-from coupled_dynamics_other_physics import FS, KW, STAGES, run
+from coupled_dynamics_other_physics import FS, KW, STAGES, run, three_rates
 
 import piezohyst as ph
 from piezohyst.metrics import hysteresis_width
-from piezohyst.simulation import PRESETS, XY_COUPLING, XY_DYNAMIC, make_signal
+from piezohyst.simulation import PRESETS, XY_COUPLING, XY_DYNAMIC
 
 TRIALS = 12
 ALL = {"development stage (XY_DYNAMIC)": ((PRESETS[XY_DYNAMIC[0]], PRESETS[XY_DYNAMIC[1]]),
@@ -64,9 +64,7 @@ def learn(model: ph.CoupledModel, stage: tuple, scan: np.ndarray) -> list[np.nda
 
 def main() -> None:
     warnings.simplefilter("ignore")
-    t, a = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=12.0)
-    _, b = make_signal("multifreq", amplitude=140.0, frequency=1.9, duration=12.0)
-    ident = np.column_stack([a, b])
+    t, ident = three_rates()
     print("| stage | trial | raster NRMSE | width | held | Lissajous NRMSE x / y |")
     print("|---|---|---|---|---|---|")
     for name, stage in ALL.items():

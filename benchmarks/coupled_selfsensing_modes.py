@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 from coupled_dynamics_other_physics import STAGES as OTHER
+from coupled_dynamics_other_physics import three_rates
 from coupled_selfsensing import scans, score
 
 import piezohyst as ph
@@ -38,7 +39,6 @@ from piezohyst.simulation import (
     XY_COUPLING,
     XY_DYNAMIC,
     Stage,
-    make_signal,
     run_stage_loop,
     simulate_stage,
 )
@@ -60,9 +60,7 @@ def ring(positions: np.ndarray, after: Any) -> np.ndarray:
 
 def main() -> None:
     warnings.simplefilter("ignore")
-    t, a = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=12.0)
-    _, b = make_signal("multifreq", amplitude=140.0, frequency=1.9, duration=12.0)
-    ident = np.column_stack([a, b])
+    t, ident = three_rates()
     print("| stage | models | map | raster NRMSE | width | held | Lissajous NRMSE x / y |")
     print("|---|---|---|---|---|---|---|")
     for name, (presets, coupling, after) in STAGES.items():

@@ -383,6 +383,23 @@ def test_a_stage_with_a_third_sensor_from_the_shell(tmp_path: Path) -> None:
     assert "command_1" in written and "command_2" not in written
 
 
+def _charges_file(rec: Any, data: Path, dynamics: str) -> Path:
+    """A stage record as a lab's file (each actuator's voltage and charge, each axis's
+    position), and each actuator's model fitted from the shell on its own columns (``ax.json``,
+    ``ay.json`` beside it, with ``--input-dynamics dynamics``)."""
+    cols = {"time": rec.t, "vx": rec.voltage[:, 0], "vy": rec.voltage[:, 1],
+            "qx": rec.charge[:, 0], "qy": rec.charge[:, 1],
+            "x": rec.position[:, 0], "y": rec.position[:, 1]}  # fmt: skip
+    ph.write_table(data, cols, units={"time": "s", "vx": "V", "vy": "V", "qx": "C", "qy": "C",
+                                      "x": "m", "y": "m"})  # fmt: skip
+    for axis in ("x", "y"):
+        res = run("fit", data, "--input", f"v{axis}", "--output", f"q{axis}", "--model",
+                  "active-pi", "--input-dynamics", dynamics, "-o",
+                  data.with_name(f"a{axis}.json"))  # fmt: skip
+        assert res.exit_code == 0, res.output
+    return data
+
+
 def test_a_stage_on_its_charges_from_the_shell(tmp_path: Path) -> None:
     """``calibrate-stage`` maps the actuators' charges to the stage's positions from a record
     (each actuator's model fitted on its own columns first), as ``ph.calibrate_stage`` does
@@ -391,17 +408,7 @@ def test_a_stage_on_its_charges_from_the_shell(tmp_path: Path) -> None:
     t, a = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=8.0)
     _, b = make_signal("multifreq", amplitude=140.0, frequency=1.9, duration=8.0)
     rec = simulate_stage(np.column_stack([a, b]), t, seed=0)
-    data = tmp_path / "stage-q.csv"
-    cols = {"time": rec.t, "vx": rec.voltage[:, 0], "vy": rec.voltage[:, 1],
-            "qx": rec.charge[:, 0], "qy": rec.charge[:, 1],
-            "x": rec.position[:, 0], "y": rec.position[:, 1]}  # fmt: skip
-    ph.write_table(data, cols, units={"time": "s", "vx": "V", "vy": "V", "qx": "C", "qy": "C",
-                                      "x": "m", "y": "m"})  # fmt: skip
-    for axis in ("x", "y"):
-        out = tmp_path / f"a{axis}.json"
-        res = run("fit", data, "--input", f"v{axis}", "--output", f"q{axis}", "--model",
-                  "active-pi", "--input-dynamics", "none", "-o", out)  # fmt: skip
-        assert res.exit_code == 0, res.output
+    data = _charges_file(rec, tmp_path / "stage-q.csv", "none")
     maps = tmp_path / "stage-map.json"
     models = f"{tmp_path / 'ax.json'},{tmp_path / 'ay.json'}"
     res = run("calibrate-stage", data, "--models", models, "--input", "vx,vy", "--charge",
@@ -462,18 +469,7 @@ def test_a_fast_stage_on_its_charges_from_the_shell(tmp_path: Path) -> None:
     ``simulate-loop`` runs the map on the built-in stage that rings (the models hold lags, the
     map modes), saying so, and tracks a 10 Hz raster line there; with ``--output-dynamics
     none`` no mode is kept, and the same raster rings."""
-    rec = hosts.dynamic_record()
-    data = tmp_path / "fast.csv"
-    cols = {"time": rec.t, "vx": rec.voltage[:, 0], "vy": rec.voltage[:, 1],
-            "qx": rec.charge[:, 0], "qy": rec.charge[:, 1],
-            "x": rec.position[:, 0], "y": rec.position[:, 1]}  # fmt: skip
-    ph.write_table(data, cols, units={"time": "s", "vx": "V", "vy": "V", "qx": "C", "qy": "C",
-                                      "x": "m", "y": "m"})  # fmt: skip
-    for axis in ("x", "y"):
-        res = run("fit", data, "--input", f"v{axis}", "--output", f"q{axis}", "--model",
-                  "active-pi", "--input-dynamics", "first-order", "-o",
-                  tmp_path / f"a{axis}.json")  # fmt: skip
-        assert res.exit_code == 0, res.output
+    data = _charges_file(hosts.dynamic_record(), tmp_path / "fast.csv", "first-order")
     models = f"{tmp_path / 'ax.json'},{tmp_path / 'ay.json'}"
     widths = {}
     for mode in ("auto", "none"):

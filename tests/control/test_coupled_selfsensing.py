@@ -25,6 +25,7 @@ from piezohyst.simulation import (
 )
 
 from ..helpers import CC
+from . import hosts
 
 FS = 1000.0
 
@@ -224,8 +225,6 @@ def test_the_stage_loop_in_c_equals_python(rig: tuple, tmp_path: Path) -> None: 
     loadlibrary call it): each actuator's controller step behind the coupling's inverse,
     fed the charges a closed-loop run read, gives Python's commands and counts; a target
     out of reach is counted, a reset starts again (its FMU and MEX: test_fmu, test_mex)."""
-    import ctypes
-
     ctl = _controller(rig, slew_rate=2e4)
     d = _scans(ctl, 1500)["lissajous"]
     (_, x1), _ = ctl.reach
@@ -244,28 +243,8 @@ def test_the_stage_loop_in_c_equals_python(rig: tuple, tmp_path: Path) -> None: 
         py = ctl.process(d, measured)
     np.testing.assert_array_equal(py, rec.voltage)
     assert "const ph_xy_real *measured" in paths[1].read_text()
-    lib = ctypes.CDLL(str(lib_path))
-    lib.ph_xy_new.restype = ctypes.c_void_p
-    lib.ph_xy_process.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_long]
-    lib.ph_xy_counts.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
-    lib.ph_xy_reset.argtypes = lib.ph_xy_free.argtypes = [ctypes.c_void_p]
-    handle = lib.ph_xy_new()
-    target, q = np.ascontiguousarray(d), np.ascontiguousarray(measured)
-    volts = np.empty_like(py)
-    for _ in range(2):  # the second time after a reset: the same
-        assert lib.ph_xy_process(handle, target.ctypes.data, q.ctypes.data, volts.ctypes.data,
-                                 d.shape[0]) == 0  # fmt: skip
-        # tol: 1e-9 V over 1.5 s, as issue 41 states for the single loop (its integral carries
-        # the C's and numba's ulp apart, well under it)
-        np.testing.assert_allclose(volts, py, rtol=0, atol=1e-9)
-        counts = np.zeros(7, dtype=np.uint64)
-        assert lib.ph_xy_counts(handle, counts.ctypes.data) == 0
-        assert counts[0] == ctl.outside_count == 50
-        assert counts[[1, 4]].tolist() == ctl.nonfinite_count.tolist() == [1, 1]
-        assert counts[[2, 5]].tolist() == ctl.saturated_count.tolist()
-        lib.ph_xy_reset(handle)
-    assert lib.ph_xy_process(handle, target.ctypes.data, None, volts.ctypes.data, 1) == -1
-    lib.ph_xy_free(handle)
+    assert ctl.nonfinite_count.tolist() == [1, 1]
+    hosts.check_stage_loop_library(lib_path, ctl, d, measured, py, outside=50, runs=2)
 
 
 def test_a_third_sensor_is_a_least_squares(rig: tuple) -> None:  # type: ignore[type-arg]

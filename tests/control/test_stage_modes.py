@@ -205,8 +205,6 @@ def test_the_fast_stage_loop_in_c_equals_python(tmp_path: Path) -> None:
     """Each actuator's loop with its map's mode, as C and as a shared library (ctypes): fed
     the charges a closed-loop run read, and each row's next position (the block's own in the
     library), Python's commands and counts (the FMU and MEX: test_fmu, test_mex)."""
-    import ctypes
-
     ctl, d, measured = hosts.stage_loop(fast=True)
     assert ctl.previews == 1
     with warnings.catch_warnings():
@@ -216,19 +214,4 @@ def test_the_fast_stage_loop_in_c_equals_python(tmp_path: Path) -> None:
         py = ctl.process(d, measured)
     header = paths[1].read_text()
     assert "const ph_xy_real *measured" in header and "const ph_xy_real *next" in header
-    lib = hosts.stage_library(lib_path)
-    lib.ph_xy_process.argtypes = [ctypes.c_void_p] * 4 + [ctypes.c_long]
-    handle = lib.ph_xy_new()
-    target, q = np.ascontiguousarray(d), np.ascontiguousarray(measured)
-    volts = np.empty_like(py)
-    assert lib.ph_xy_process(handle, target.ctypes.data, q.ctypes.data, volts.ctypes.data,
-                             d.shape[0]) == 0  # fmt: skip
-    # tol: 1e-9 V over 1.2 s, as issue 41 states for the single loop (the C and numba round
-    # apart by an ulp, which the integral carries, well under it)
-    np.testing.assert_allclose(volts, py, rtol=0, atol=1e-9)
-    counts = np.zeros(7, dtype=np.uint64)
-    assert lib.ph_xy_counts(handle, counts.ctypes.data) == 0
-    assert counts[0] == ctl.outside_count == 40
-    assert counts[[1, 4]].tolist() == ctl.nonfinite_count.tolist()
-    assert counts[[2, 5]].tolist() == ctl.saturated_count.tolist()
-    lib.ph_xy_free(handle)
+    hosts.check_stage_loop_library(lib_path, ctl, d, measured, py, outside=40)
