@@ -133,16 +133,19 @@ class Charges:
         (float, ndarray or None)
         """
         ahead = None
+        if self._linear:  # floats: a loop calls this every sample, often with a preview
+            if preview is not None:
+                ahead = np.array([self._charge_linear(float(p)) for p in np.ravel(preview)])
+            return self._one_linear(float(desired)), ahead
         if preview is not None:
-            ahead = self.output_map.inverse(np.asarray(preview, dtype=np.float64), self.last)
-        elif self._linear:
-            return self._one_linear(float(desired)), None
+            with warnings.catch_warnings():  # each is said and counted when its sample comes
+                warnings.simplefilter("ignore", ExtrapolationWarning)
+                ahead = self.output_map.inverse(np.asarray(preview, dtype=np.float64), self.last)
         return float(self.block(np.array([float(desired)]))[0]), ahead
 
-    def _one_linear(self, s: float) -> float:
-        """:meth:`block` of one displacement on a linear monotone map, in floats: the same
-        operations in the same order as :func:`monotone_charges` (so a loop's ``step``
-        equals its ``process`` to the bit), the same count and warning."""
+    def _charge_linear(self, s: float) -> float:
+        """The charge for one displacement on a linear monotone map, in floats: the same
+        operations in the same order as :func:`monotone_charges`; nothing counted or said."""
         if not math.isfinite(s):
             return math.nan
         om = self.output_map
@@ -151,11 +154,19 @@ class Charges:
         rising = s_hi > s_lo
         low_end, high_end = (s_lo, s_hi) if rising else (s_hi, s_lo)
         if s < low_end:
-            q = lo + (s - s_lo) / d_lo if rising else hi + (s - s_hi) / d_hi
-        elif s > high_end:
-            q = hi + (s - s_hi) / d_hi if rising else lo + (s - s_lo) / d_lo
-        else:
-            q = om.center + om.scale * (s - c0) / c1
+            return lo + (s - s_lo) / d_lo if rising else hi + (s - s_hi) / d_hi
+        if s > high_end:
+            return hi + (s - s_hi) / d_hi if rising else lo + (s - s_lo) / d_lo
+        return om.center + om.scale * (s - c0) / c1
+
+    def _one_linear(self, s: float) -> float:
+        """:meth:`block` of one displacement on a linear monotone map, in floats: the same
+        operations in the same order as :func:`monotone_charges` (so a loop's ``step``
+        equals its ``process`` to the bit), the same count and warning."""
+        if not math.isfinite(s):
+            return math.nan
+        q = self._charge_linear(s)
+        om = self.output_map
         low, high = self._reach
         if s < low or s > high:
             self.outside += 1

@@ -289,6 +289,23 @@ class Compensator(Tallied):
         return _cycle_commands([start, high, low, start], samples, self._max_step, settle)
 
     # -------------------------------------------------------------- commands
+    def through_mode_one(self, desired: float, nxt: float) -> float:
+        """:meth:`through_mode` of one desired value in floats (the next one ``nxt``, NaN:
+        extrapolated), to the bit the block's arithmetic.
+
+        Parameters
+        ----------
+        desired, nxt : float
+
+        Returns
+        -------
+        float
+        """
+        e2, e1 = float(self._mode_history[0]), float(self._mode_history[1])
+        target = self.mode.invert_one(desired, e1, e2, nxt)
+        self._mode_history[0], self._mode_history[1] = e1, desired
+        return target
+
     def through_mode(self, desired: FloatArray, preview: ArrayLike | None) -> FloatArray:
         """The hysteresis output that makes the model's (or the output map's) mode follow
         ``desired``; the two desired values before the next are kept (:attr:`mode_history`).
@@ -386,7 +403,7 @@ class Compensator(Tallied):
         if self.mode.active and self.dynamic and self.delay_samples:
             return self._step_mode_delayed(float(desired), preview)
         if self.mode.active:
-            desired = float(self.through_mode(np.array([float(desired)]), preview)[0])
+            desired = self.through_mode_one(float(desired), first_of(preview))
         if self.dynamic:
             return self._inner_step(self.delay_target(float(desired), preview))
         return self._inner_step(float(desired))
@@ -603,3 +620,21 @@ class CompensatorSettings:
             allow_extrapolation=self.allow_extrapolation,
             output_map=self.output_map,
         )
+
+
+def first_of(preview: ArrayLike | None) -> float:
+    """The first of a preview's values (NaN without one): the next desired value a mode's
+    inverse takes.
+
+    Parameters
+    ----------
+    preview : array_like or None
+
+    Returns
+    -------
+    float
+    """
+    if preview is None:
+        return math.nan
+    ahead = np.ravel(np.asarray(preview, dtype=np.float64))
+    return float(ahead[0]) if ahead.size else math.nan

@@ -36,6 +36,7 @@ from .compensator import (
     Compensator,
     CompensatorSettings,
     CompensatorState,
+    first_of,
 )
 from .contract import reading
 
@@ -468,7 +469,7 @@ class SelfSensingController:
         if comp.charges is not None:  # metres through the output map, to the model's charge
             d, preview = comp.charges.one(d, preview)
             if comp.mode.active:  # and the map's mode inverted: the charge that rings there
-                d = float(comp.through_mode(np.array([d]), preview)[0])
+                d = comp.through_mode_one(d, first_of(preview))
         try:  # the common case inline (a step runs per sample); reading() names the rest
             m = math.nan if measured is None else float(measured)
         except (TypeError, ValueError):

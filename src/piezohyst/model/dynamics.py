@@ -536,6 +536,33 @@ class OutputDynamics:
         d2 = ((ahead - cur) - (b1 - b0)) / (2.0 * dt * dt)
         return np.asarray(mid + 2.0 * self.zeta / w * d1 + d2 / (w * w))
 
+    def invert_one(self, cur: float, e1: float, e2: float, nxt: float) -> float:
+        """:meth:`invert` of one value in floats: the same operations in the same order (a
+        loop's ``step`` equals its ``process`` to the bit), without arrays.
+
+        Parameters
+        ----------
+        cur : float
+            The desired value.
+        e1, e2 : float
+            The one before it and the one before that (NaN: not known).
+        nxt : float
+            The next one (NaN: extrapolated).
+
+        Returns
+        -------
+        float
+        """
+        b1 = e1 if math.isfinite(e1) else cur
+        b0 = e2 if math.isfinite(e2) else b1
+        ahead = nxt if math.isfinite(nxt) else 2.0 * cur - b1
+        dt = self.sample_interval
+        w = 2.0 * math.pi * self.f0
+        mid = 0.5 * (cur + b1)
+        d1 = (cur - b1) / dt
+        d2 = ((ahead - cur) - (b1 - b0)) / (2.0 * dt * dt)
+        return mid + 2.0 * self.zeta / w * d1 + d2 / (w * w)
+
     def _cached(self) -> tuple[FloatArray, FloatArray]:
         key = (self.f0, self.zeta, self.sample_interval)
         hit = _MATRICES.get(key)
