@@ -63,6 +63,23 @@ def test_the_mode_is_found_where_the_sensor_rings_and_nowhere_else() -> None:
         assert not plain.mode.active and "mode" not in plain.evidence
 
 
+@pytest.mark.parametrize("cutoff", [100.0, 200.0, 300.0])
+def test_a_sensors_low_pass_is_not_taken_for_a_mode(cutoff: float) -> None:
+    """A laser read through a second-order Butterworth low-pass (no resonance): no mode is
+    kept. At 300 Hz its delay is not a whole number of samples, and the best-fitting "mode"
+    sat at the searched band's top (400 Hz at 1 kHz), kept before the band's edges were
+    excluded."""
+    from scipy import signal
+
+    t, v = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=12.0)
+    rec = ph.simulate(v, t, preset="T226-H4-203X-amp4ms", seed=0)
+    model = ph.ActivePI(10, input_dynamics="first-order").fit(rec.voltage, rec.charge, t=rec.t)
+    b, a = signal.butter(2, cutoff, fs=FS)
+    seen = signal.lfilter(b, a, rec.displacement - rec.displacement[0]) + rec.displacement[0]
+    om = ph.calibrate_gain(model, rec.voltage, rec.charge, seen, rec.t)
+    assert not om.mode.active, om.summary()
+
+
 def test_a_map_with_a_mode_is_a_file_of_its_own_version(tmp_path: Path) -> None:
     _, om = _bench_map("T226-H4-203X-mode")
     path = tmp_path / "map.json"

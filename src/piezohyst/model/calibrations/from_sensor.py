@@ -64,6 +64,10 @@ MODE_ZETA_MAX = 0.3
 MODE_SHARE = 0.1
 #: The damping ratios the mode's search starts from
 MODE_ZETAS = (0.01, 0.02, 0.04, 0.08, 0.15, 0.3)
+#: A mode found within this factor of the searched band's ends is not kept: there the fit
+#: bends the filter to stand in for something else (a sensor's low-pass whose delay is not
+#: a whole number of samples comes out as a 400 Hz "mode" at 1 kHz, the band's top)
+EDGE = 1.05
 
 __all__ = ["calibrate_gain"]
 
@@ -266,8 +270,8 @@ def _find_mode(
     then refined), and how strong its evidence is (the likelihood ratio's square root,
     with as many independent samples as the residuals' correlation is worth, comparable
     with a coefficient's ``|c / stderr|``). Without ``always`` it is kept only where that is
-    at least ``evidence``, the damping at most :data:`MODE_ZETA_MAX` and the squared misfit
-    falls by :data:`MODE_SHARE`."""
+    at least ``evidence``, the damping at most :data:`MODE_ZETA_MAX`, the squared misfit
+    falls by :data:`MODE_SHARE` and the resonance lies inside the band (:data:`EDGE`)."""
     from scipy.optimize import minimize
 
     def sse(f0: float, zeta: float) -> float:
@@ -297,8 +301,9 @@ def _find_mode(
     rho = _lag1(r0)
     n_eff = y.size * (1 - rho) / (1 + rho) if rho > 0 else y.size
     strength = math.sqrt(max(n_eff * math.log(base / max(low, 1e-300)), 0.0))
-    kept = always or (
-        strength >= evidence and zeta <= MODE_ZETA_MAX and low <= (1 - MODE_SHARE) * base
+    inside = EDGE * f_lo < f0 < f_hi / EDGE  # at the band's edge it stands in for something
+    kept = always or (  # else (a sensor's fractional delay, at the top), not a resonance
+        strength >= evidence and zeta <= MODE_ZETA_MAX and low <= (1 - MODE_SHARE) * base and inside
     )
     return (OutputDynamics(f0, zeta, dt), strength) if kept else (OutputDynamics(), strength)
 
