@@ -232,3 +232,23 @@ def test_the_fast_stage_loop_in_c_equals_python(tmp_path: Path) -> None:
     header = paths[1].read_text()
     assert "const ph_xy_real *measured" in header and "const ph_xy_real *next" in header
     hosts.check_stage_loop_library(lib_path, ctl, d, measured, py, outside=40)
+
+
+@pytest.mark.filterwarnings("ignore::piezohyst.errors.ExtrapolationWarning")  # the rest's map
+def test_learning_through_a_maps_mode_learns_from_the_sensor_and_refuses_the_charge() -> None:
+    """A learner in metres through a map with a mode: its feedforward inverts the mode; from
+    the laser it learns; from the charge it would read the displacement through the map's
+    static part (the charge does not show the mode), so it refuses, saying why."""
+    ctl, d, _ = hosts.mode_loop()
+    model, om = ctl.model, ctl.compensator.output_map
+    ilc = ph.LearningCompensator(model, v_min=model.input_range_[0],
+                                 v_max=model.input_range_[1], sample_rate=FS, output_map=om,
+                                 slew_rate=None)  # fmt: skip
+    assert ilc.compensator.mode.active
+    scan = np.asarray(d[300:800])  # half a second of the 10 Hz triangle
+    volts = ilc.command(scan)
+    run = ph.simulate(volts, np.arange(volts.size) / FS, preset="T226-H4-203X-mode", seed=2)
+    with pytest.raises(ph.ParameterError, match="holds a mode .* learn from the sensor"):
+        ilc.learn(charge=run.charge)
+    ilc.learn(displacement=run.displacement)
+    assert ilc.trials == 1

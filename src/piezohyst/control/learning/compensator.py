@@ -704,6 +704,14 @@ class LearningCompensator(Saving, Stepping):
         u, d = self._pending, self._desired
         assert d is not None
         y, sensor = _readings(charge, displacement, u.size)
+        if not sensor and self.output_map is not None and self.output_map.mode.active:
+            msg = (
+                "learn() from the charge reads it through the output map as it stands, and this "
+                f"map holds a mode ({self.output_map.mode_f0:.4g} Hz) that the charge does not "
+                "show: learn from the sensor (displacement=), or calibrate the map without the "
+                "mode (output_dynamics='none')"
+            )
+            raise ParameterError(msg)
         ok = np.isfinite(y) & ~self._clamped
         measured, bound, self._leaked = _measured(y, u, sensor, d, self._leaked, self)
         e = d - measured
