@@ -257,15 +257,15 @@ def _in_metres(
     if isinstance(gain, OutputMap):
         lo, hi = gain.charge_range
         outside = int(np.count_nonzero((charge < lo) | (charge > hi)))
+        dt = float(np.median(np.diff(t))) if t.size > 1 else math.inf
         with warnings.catch_warnings():  # counted and reported below, not warned per call
             warnings.simplefilter("ignore", ExtrapolationWarning)
-            s = gain.predict(charge)
+            s = gain.respond(charge, dt) if t.size > 1 else gain.predict(charge)  # its mode too
         rep.add("map", "map from charge to displacement", gain.summary())
         rep.add("map_stderr_max", "the map's standard error, largest over this record",
                 float(np.max(gain.stderr(charge))), "m")  # fmt: skip
         rep.add("samples_outside_map_range", "samples whose charge lies outside the map's "
                 "calibrated range (extended linearly)", outside)  # fmt: skip
-        dt = float(np.median(np.diff(t))) if t.size > 1 else math.inf
         shift = min(round(gain.delay / dt), t.size // 2)
     else:
         s, shift = gain * (charge - charge[0]), 0  # a gain alone does not know the sensor's zero

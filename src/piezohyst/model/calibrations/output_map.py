@@ -225,16 +225,17 @@ class OutputMap(JsonFile):
             s = np.where(above, s_hi + d_hi * (q - hi), s)
         return np.asarray(s)
 
-    def respond(self, charge: ArrayLike) -> FloatArray:
-        """The displacement for a record of capacitor charges sampled every ``mode_dt``: the
-        charge through the map's mode (from rest at its first value), then the map
-        (:meth:`predict`, which is the quasi-static displacement). Without a mode, the same
-        as :meth:`predict`.
+    def respond(self, charge: ArrayLike, sample_interval: float | None = None) -> FloatArray:
+        """The displacement for a record of capacitor charges: the charge through the map's
+        mode (from rest at its first value), then the map (:meth:`predict`, which is the
+        quasi-static displacement). Without a mode, the same as :meth:`predict`.
 
         Parameters
         ----------
         charge : array_like, shape (N,)
-            C, one sample per ``mode_dt``.
+            C, one sample per ``sample_interval``.
+        sample_interval : float, optional
+            s; default the calibration's (``mode_dt``).
 
         Returns
         -------
@@ -243,12 +244,15 @@ class OutputMap(JsonFile):
         q = np.asarray(charge, dtype=np.float64)
         if not self.mode.active or q.ndim != 1 or q.size == 0:
             return self.predict(q)
+        mode = self.mode
+        if sample_interval is not None and sample_interval != self.mode_dt:
+            mode = OutputDynamics(self.mode_f0, self.mode_zeta, float(sample_interval))
         lo, hi = self.charge_range
         if np.nanmin(q) < lo or np.nanmax(q) > hi:  # said for the charges given, not for the
             self._warn_outside(f"charges down to {np.nanmin(q):.4g} / up to {np.nanmax(q):.4g}")
         with warnings.catch_warnings():  # mode's ringing a little past them
             warnings.simplefilter("ignore", ExtrapolationWarning)
-            return self.predict(self.mode.apply(q)[0])
+            return self.predict(mode.apply(q)[0])
 
     def stderr(self, charge: ArrayLike) -> FloatArray:
         """The map's standard error (output units) at ``charge``: how sure the displacement
