@@ -396,18 +396,27 @@ def test_compensation_through_the_mode(mode_models: tuple[ph.ClassicalPI, ph.Cla
 
 
 @pytest.mark.skipif(CC is None, reason="no C compiler")
-@pytest.mark.parametrize(("precision", "curved"), [("double", False), ("float", False),
-                                                   ("double", True)])  # fmt: skip
+@pytest.mark.parametrize(
+    ("precision", "curved"),
+    [("double", False), ("float", False), ("double", True), ("double", "map")],
+)
 @pytest.mark.filterwarnings("ignore::piezohyst.errors.ExtrapolationWarning")  # compared instead
 def test_exported_c_inverts_the_mode_like_python(
     mode_models: tuple[ph.ClassicalPI, ph.ClassicalPI], tmp_path: Path, precision: str,
-    curved: bool,
+    curved: bool | str,
 ) -> None:  # fmt: skip
-    full, _ = mode_models  # a lag and a mode
+    full, lag = mode_models  # a lag and a mode; a lag alone
     lo, hi = full.input_range_
     top, bottom = (float(q) for q in full.operator_.predict(np.array([140.0, 0.0])))
     om = None
-    if curved:  # targets through a curved map first, then the mode, as the compensator does
+    if curved == "map":  # the mode held by a linear output map instead of the model
+        c, h = 0.5 * (top + bottom), 0.5 * (top - bottom)
+        mode = full.output_dynamics_
+        om = ph.OutputMap((2.0 * c, 2.0 * h), c, h, ((0.0,) * 2,) * 2, (bottom, top),
+                          input_unit="m", output_unit="m", mode_f0=mode.f0,
+                          mode_zeta=mode.zeta, mode_dt=mode.sample_interval)  # fmt: skip
+        full = lag
+    elif curved:  # targets through a curved map first, then the mode, as the compensator does
         c, h = 0.5 * (top + bottom), 0.5 * (top - bottom)
         om = ph.OutputMap((2.0 * c, 2.0 * h, 0.3 * h), c, h, ((0.0,) * 3,) * 3,
                           (bottom, top), input_unit="m", output_unit="m")  # fmt: skip
@@ -450,6 +459,7 @@ def test_exported_c_inverts_the_mode_like_python(
         comp.extrapolated_count,
     )
     assert comp.extrapolated_count == (40 if curved else 0)  # beyond the map: each counted
+    assert comp.mode.active
 
 
 @pytest.mark.parametrize(
