@@ -502,3 +502,8 @@ def test_a_fast_stage_on_its_charges_from_the_shell(tmp_path: Path) -> None:
     # test's scan is 0.68-0.94 % over eight noise draws (tests/control/test_stage_modes.py), so
     # this draw and scan sit at the issue's 1 %: the bound here is the modes' effect
     assert widths["auto"] < 0.015 and widths["none"] > 4 * widths["auto"]
+    res = run("export-c", tmp_path / "map-auto.json", "--models", models, "--sample-rate",
+              "1000", "-o", tmp_path / "ph_xy.c")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    header = (tmp_path / "ph_xy.h").read_text()
+    assert "const ph_xy_real *measured" in header and "const ph_xy_real *next" in header
