@@ -307,6 +307,19 @@ def _consensus(run: Run, within: float) -> float:
     return run["test"][min(far, key=lambda n: far[n])]
 
 
+def _creep_where_undecided(run: Run) -> float:
+    """``select_model``'s choice; where its variant with creep operators is among the
+    candidates the record does not tell from the score's choice, that variant: a record that
+    cannot tell them apart cannot show the rates where creep matters, and a creep term the
+    actuator does not need fits small."""
+    name = run["selected"]
+    close = {run["chosen"], *run["undecided"]}
+    variant = name if name.endswith("+creep") else f"{name}+creep"
+    if variant != name and variant in close and math.isfinite(run["test"].get(variant, math.inf)):
+        return run["test"][variant]
+    return run["test"][name]
+
+
 RULES: dict[str, Callable[[Run], float]] = {
     "the mean of the two parts (select_model until this study)": lambda r: r["test"][r["chosen"]],
     "the latest part among those not told apart": _latest_of_undecided,
@@ -319,6 +332,7 @@ RULES: dict[str, Callable[[Run], float]] = {
     "select_model, no grid where an end is unseen": _no_grid_where_an_end_is_unseen,
     "select_model, the median's nearest where an end is unseen": lambda r: _consensus(r, math.inf),
     "... among those within 1.5x of the best score": lambda r: _consensus(r, 1.5),
+    "select_model, its creep variant where not told apart": _creep_where_undecided,
 }
 
 

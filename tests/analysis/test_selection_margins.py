@@ -19,9 +19,9 @@ from piezohyst.analysis.selection import (
     WEIGHTS,
     Part,
     SelectionRow,
-    _block_starts,
     _part,
     _turns,
+    block_starts,
     chosen,
     jackknife,
     latest_of_close,
@@ -114,11 +114,11 @@ def test_blocks_are_the_half_cycles_between_the_input_s_turns() -> None:
     t = np.arange(4000) / 1000.0
     x = 70.0 + 60.0 * np.sin(2 * np.pi * 2.0 * t)  # 2 Hz: a turn every 250 samples
     turns = _turns(x)
-    starts = _block_starts(turns, 1000, 3000)
+    starts = block_starts(turns, 1000, 3000)
     lengths = np.diff(np.append(starts, 2000))
     assert starts[0] == 0 and np.all(lengths[1:-1] == 250)  # whole half-cycles inside
     # a part with fewer than two turns inside: equal blocks
-    few = _block_starts(turns, 1000, 1300)
+    few = block_starts(turns, 1000, 1300)
     assert few.size == 8 and few[0] == 0
 
 
@@ -272,3 +272,19 @@ def test_compare_s_recommendation_says_what_its_training_part_cannot_test(  # ty
     )
     moved = wf.compare_file(tmp_path / "run.csv", models=["active-pi", "bouc-wen"])
     assert moved.recommended != got.recommended
+
+
+def test_the_creep_variant_is_taken_where_the_record_cannot_tell_them_apart() -> None:
+    """Where a candidate's variant with creep operators is among those the record does not
+    tell from the score's choice, the variant is taken and said (issue 55, item 5: chosen on
+    development plants drawn at random, docs/selection-study.md); nowhere else."""
+    from piezohyst.analysis.selection import CANDIDATES, creep_where_undecided
+
+    names = list(CANDIDATES)
+    got, said = creep_where_undecided("bouc-wen", ("bouc-wen", "bouc-wen+creep"), names)
+    assert got == "bouc-wen+creep" and "within the record's noise" in said[0]
+    # told apart, already with creep, or no such variant among the candidates: unchanged
+    assert creep_where_undecided("bouc-wen", ("bouc-wen",), names) == ("bouc-wen", ())
+    assert creep_where_undecided("bouc-wen+creep", ("bouc-wen+creep", "bouc-wen"), names) == (
+        "bouc-wen+creep", ())  # fmt: skip
+    assert creep_where_undecided("duhem", ("duhem", "duhem+creep"), names) == ("duhem", ())

@@ -8,6 +8,11 @@ said there (for :func:`~piezohyst.analysis.selection.select_model`).
   median (no truth read there: the candidates compared with one another), as
   ``select_model`` and ``compare``'s recommendation do. Chosen on plants drawn at random
   (``docs/selection-study.md``).
+* Where the chosen candidate's variant with creep operators is among the candidates the
+  record does not tell from the score's choice, :func:`creep_where_undecided` takes that
+  variant: a record that cannot tell them apart cannot show the rates where creep matters,
+  and a creep term the actuator does not need fits small. Chosen on plants drawn at random
+  (``docs/selection-study.md``).
 * Where a charge record's holds show the leak rising with the voltage and the chosen model
   holds no term for it, :func:`rise_not_held` says so.
 """
@@ -29,7 +34,14 @@ from ..model.model import HysteresisModel
 from ..units import is_length
 from .turns import _turns, unseen_ends
 
-__all__ = ["MEDIAN_WITHIN", "median_choice", "median_said", "probe_loops", "rise_not_held"]
+__all__ = [
+    "MEDIAN_WITHIN",
+    "creep_where_undecided",
+    "median_choice",
+    "median_said",
+    "probe_loops",
+    "rise_not_held",
+]
 
 #: Where a record never comes back to an end of its range, the candidates scoring within this
 #: factor of the best are compared on loops from that end (:func:`_nearest_median`)
@@ -140,6 +152,38 @@ def median_choice(
     far = {n: float(np.sqrt(np.mean((p - median) ** 2))) for n, p in preds.items()}
     name = min(far, key=lambda n: far[n])
     return next(r for r in rows if r.name == name), models[name]
+
+
+def creep_where_undecided(
+    name: str, close: Sequence[str], names: Sequence[str]
+) -> tuple[str, tuple[str, ...]]:
+    """The candidate to take instead of ``name`` where its variant with creep operators is
+    among ``close`` (the score's choice and what the record does not tell from it), and the
+    note that says so; ``name`` and no note elsewhere. Chosen on development plants drawn
+    at random (60: within 1.25x of the best default on 51 against 47, the worst unchanged)
+    and scored once on 30 fresh ones (23 against 22), ``docs/selection-study.md``.
+
+    Parameters
+    ----------
+    name : str
+        The candidate chosen so far.
+    close : sequence of str
+        The score's choice and the candidates the record does not tell from it.
+    names : sequence of str
+        The candidates scored.
+
+    Returns
+    -------
+    (str, tuple of str)
+    """
+    variant = f"{name}+creep"
+    if name.endswith("+creep") or variant not in close or variant not in names:
+        return name, ()
+    return variant, (
+        f"{name} and {variant} are within the record's noise of each other: {variant} "
+        "chosen (the record cannot show the rates where creep operators matter; where the "
+        "actuator has no creep they fit small).",
+    )
 
 
 def rise_not_held(

@@ -16,7 +16,9 @@ the record never comes back to an end of its range after its first turn (decayin
 that reach 0 V on their first rise only), the scores cannot rank how the candidates predict
 loops from there: among the candidates scoring within :data:`MEDIAN_WITHIN` of the best,
 the one whose loops from that end lie nearest the candidates' median is taken
-(:func:`median_choice`), and the notes say so.
+(:func:`median_choice`), and the notes say so; where the choice's variant with creep
+operators is among those the record does not tell apart, the variant
+(:func:`creep_where_undecided`).
 
 How sure the choice is: each scored part is cut into blocks at the input's turns (a
 half-cycle each), and every candidate's margin over the chosen one gets a paired
@@ -50,9 +52,17 @@ from ..model.fit_record import screened
 from ..model.model import HysteresisModel, InitialState
 from ..model.persistence import model_class, model_names
 from ..model.terms import creep_time_constants
-from .beyond import MEDIAN_WITHIN, median_choice, median_said, probe_loops, rise_not_held
+from .beyond import (
+    MEDIAN_WITHIN,
+    creep_where_undecided,
+    median_choice,
+    median_said,
+    probe_loops,
+    rise_not_held,
+)
 from .comparison import compare_models
 from .turns import (
+    EVEN_BLOCKS,
     MAJOR,
     MIN_TURNS,
     NOISE_REACH,
@@ -60,6 +70,7 @@ from .turns import (
     TURN_BAND,
     _record_notes,
     _turns,
+    block_starts,
     drive_rates,
     input_noise,
     record_notes,
@@ -88,6 +99,7 @@ __all__ = [
     "candidate_model",
     "chosen",
     "creep_constants",
+    "creep_where_undecided",
     "decide",
     "drive_rates",
     "fold_bounds",
@@ -138,8 +150,6 @@ FOLDS = ((0.5, 0.75), (0.75, 1.0))
 #: (``docs/validation.md``) and on units 7-9, never scored before: 9, 8, 7 and 7 of 10
 WEIGHTS = (0.5, 0.5)
 TIE = 0.02
-#: A scored part with fewer than two turns inside is cut into this many equal blocks
-EVEN_BLOCKS = 8
 #: A margin within this many of its standard errors is one the record does not decide
 SURE = 2.0
 
@@ -399,16 +409,6 @@ def _bounds(size: int, turns: np.ndarray) -> list[tuple[int, int]]:
     return bounds
 
 
-def _block_starts(turns: np.ndarray, a: int, b: int) -> np.ndarray:
-    """Where the blocks of part ``a:b`` start, relative to ``a``: after each turn inside it
-    (a half-cycle a block), or :data:`EVEN_BLOCKS` equal blocks with fewer than two turns."""
-    inside = turns[(turns > a) & (turns < b - 1)] + 1 - a
-    if inside.size >= 2:
-        return np.concatenate([[0], inside]).astype(np.int64)
-    k = max(1, min(EVEN_BLOCKS, (b - a) // 2))
-    return np.unique(np.linspace(0, b - a, k + 1)[:-1].astype(np.int64))
-
-
 def _part(residual: FloatArray, starts: np.ndarray, span: float) -> Part:
     squares = np.add.reduceat(residual * residual, starts)
     counts = np.diff(np.append(starts, residual.size)).astype(np.float64)
@@ -565,7 +565,7 @@ def _forward(
     parts: dict[str, list[Part]] = {n: [] for n in models}
     errors: dict[str, str] = {}
     for fit_stop, stop in _bounds(x.size, turns):
-        starts = _block_starts(turns, fit_stop, stop)
+        starts = block_starts(turns, fit_stop, stop)
         span = float(np.ptp(y[fit_stop:stop]))
         with warnings.catch_warnings():  # a scored part may leave the fitted region
             warnings.simplefilter("ignore", ExtrapolationWarning)
@@ -778,6 +778,13 @@ def select_model(
     near = median_choice(rows, xs, ts, fitted, turns)
     if near is not None and near[0].name != winner.name:
         notes = (median_said(near[0].name, winner.name, xs, turns), *notes)
+    close = (first.name, *undecided(with_margins(rows, first), first.name))
+    creep, creep_said = creep_where_undecided(
+        (near[0] if near is not None else winner).name, close, [r.name for r in rows]
+    )
+    if creep_said:  # the creep variant of what was chosen, which the record cannot tell from it
+        notes, near = (*creep_said, *notes), None
+        winner = next(r for r in rows if r.name == creep)
     if near is not None:
         winner, model = near
         for w in said.get(winner.name, []):  # what the chosen one's fit warned

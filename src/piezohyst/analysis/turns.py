@@ -15,9 +15,9 @@ from .._kernels import signal as S
 from .._validation import FloatArray, as_signal, same_length
 from ..io.screening import noise_level
 
-__all__ = ["MAJOR", "MIN_TURNS", "NOISE_REACH", "ONE_RATE", "SEVERAL_RATES", "SINE_RISE",
-           "TURN_BAND", "drive_rates", "input_noise", "record_notes", "several_rates",
-           "turn_band"]  # fmt: skip
+__all__ = ["EVEN_BLOCKS", "MAJOR", "MIN_TURNS", "NOISE_REACH", "ONE_RATE", "SEVERAL_RATES",
+           "SINE_RISE", "TURN_BAND", "block_starts", "drive_rates", "input_noise",
+           "record_notes", "several_rates", "turn_band"]  # fmt: skip
 
 #: A turn: the input back by this fraction of its span from its last extreme
 TURN_BAND = 0.01
@@ -33,8 +33,34 @@ MAJOR = 0.9
 #: its ends: the branches at that end are seen on the first move only
 UNSEEN_END = 0.05
 
+#: A scored part with fewer than two turns inside is cut into this many equal blocks
+EVEN_BLOCKS = 8
+
 #: the input's noise (RMS): one estimator with the record's check
 input_noise = noise_level
+
+
+def block_starts(turns: np.ndarray, a: int, b: int) -> np.ndarray:
+    """Where the blocks of part ``a:b`` start, relative to ``a``: after each turn inside it
+    (a half-cycle a block: a model selection's jackknife leaves each out in turn), or
+    :data:`EVEN_BLOCKS` equal blocks with fewer than two turns.
+
+    Parameters
+    ----------
+    turns : ndarray
+        The input's turns (sample indices).
+    a, b : int
+        The part.
+
+    Returns
+    -------
+    ndarray of int64
+    """
+    inside = turns[(turns > a) & (turns < b - 1)] + 1 - a
+    if inside.size >= 2:
+        return np.concatenate([[0], inside]).astype(np.int64)
+    k = max(1, min(EVEN_BLOCKS, (b - a) // 2))
+    return np.unique(np.linspace(0, b - a, k + 1)[:-1].astype(np.int64))
 
 
 def turn_band(x: FloatArray) -> float:

@@ -21,6 +21,7 @@ from ..analysis.selection import (
     CREEP,
     Selection,
     candidate_model,
+    creep_where_undecided,
     decide,
     forward_scores,
     is_candidate,
@@ -29,6 +30,7 @@ from ..analysis.selection import (
     record_notes,
     select_model,
     several_rates,
+    undecided,
     verdict,
     with_margins,
 )
@@ -496,7 +498,7 @@ def compare_file(
     a, b = result.train
     inner = forward_scores(estimators, rec.x[w][a:b], rec.y[w][a:b], rec.t[w][a:b], start)
     if any(math.isfinite(r.score) for r in inner):  # chosen inside the training part alone
-        _, winner = decide(inner)  # as select_model decides
+        first, winner = decide(inner)  # as select_model decides
         part = (rec.x[w][a:b], rec.y[w][a:b], rec.t[w][a:b])
         notes = record_notes(part[0])
 
@@ -512,6 +514,10 @@ def compare_file(
         if near is not None and near[0].name != winner.name:
             notes = (median_said(near[0].name, winner.name, part[0]), *notes)
             winner = near[0]
+        close = (first.name, *undecided(with_margins(inner, first), first.name))
+        creep, creep_said = creep_where_undecided(winner.name, close, [r.name for r in inner])
+        if creep_said:
+            notes, winner = (*creep_said, *notes), next(r for r in inner if r.name == creep)
         said = verdict(with_margins(inner, winner), winner.name, notes)
         result = dataclasses.replace(result, recommended=winner.name, recommendation_notes=said)
     if w.start:  # the samples scored, as rows of the record
