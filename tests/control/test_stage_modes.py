@@ -278,3 +278,22 @@ def test_a_report_in_metres_rings_as_the_map_says(tmp_path: Path) -> None:
                                displacement_column="displacement")  # fmt: skip
         got[name] = out.metrics["displacement_nrmse_offset_free_pct"]
     assert got["mode"] < 0.5 * got["flat"], got  # measured 0.33 % against 1.24 %
+
+
+def test_a_loop_refuses_a_model_with_a_mode_whatever_its_map() -> None:
+    """The charge has no mode: a model fitted with one (on a displacement) is refused by the
+    loop with or without a map, and beside a map with its own mode too."""
+    import dataclasses
+
+    model = hosts.mode_model()
+    assert model.output_dynamics_.active
+    ctl, _, _ = hosts.mode_loop()
+    om = ctl.compensator.output_map
+    assert om is not None
+    flat = dataclasses.replace(om, mode_f0=0.0, mode_zeta=0.0, mode_dt=0.0)
+    lo, hi = model.input_range_
+    for m, said in ((None, "the mode into the output map"), (flat, "the mode into the output map"),
+                    (om, "so does the output map")):  # fmt: skip
+        with pytest.raises(ph.ParameterError, match=said), warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # the map was calibrated through another
+            ph.SelfSensingController(model, v_min=lo, v_max=hi, sample_rate=FS, output_map=m)

@@ -245,7 +245,7 @@ class SelfSensingController:
                 "asymmetry or creep beside play operators, or its core has no compiled step"
             )
             raise ParameterError(msg)
-        if comp.mode.active and output_map is None:
+        if comp.spec.output_dynamics.active:  # the model's own: a map's mode is the map's
             msg = (
                 f"SelfSensingController closes its loop on the charge, which has no mode; this "
                 f"{type(model).__name__} holds one (fitted on a displacement): fit the model on "
