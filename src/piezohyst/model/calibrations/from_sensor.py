@@ -288,16 +288,15 @@ def _find_mode(
     f_lo, f_hi = max(2.0, 20.0 / (y.size * dt)), 0.4 / dt
     if not f_hi > f_lo or base == 0.0:
         return OutputDynamics(), 0.0
-    grid = [(f, z) for f in np.geomspace(f_lo, f_hi, 48) for z in MODE_ZETAS]
-    start = min(grid, key=lambda p: sse(*p))
+    grid = {(f, z): sse(f, z) for f in np.geomspace(f_lo, f_hi, 48) for z in MODE_ZETAS}
+    (f0, zeta), low = min(grid.items(), key=lambda item: item[1])
     best = minimize(
-        lambda p: sse(math.exp(p[0]), math.exp(p[1])), np.log(start), method="Nelder-Mead",
+        lambda p: sse(math.exp(p[0]), math.exp(p[1])), np.log((f0, zeta)), method="Nelder-Mead",
         options={"xatol": 1e-4, "fatol": 1e-9 * base, "maxiter": 400},
     )  # fmt: skip
-    f0, zeta = (float(math.exp(p)) for p in best.x)
-    low = min(float(best.fun), sse(*start))
-    if low == sse(*start):
-        f0, zeta = start
+    if float(best.fun) < low:  # refined; else the grid's point stands
+        f0, zeta = (float(math.exp(p)) for p in best.x)
+        low = float(best.fun)
     rho = _lag1(r0)
     n_eff = y.size * (1 - rho) / (1 + rho) if rho > 0 else y.size
     strength = math.sqrt(max(n_eff * math.log(base / max(low, 1e-300)), 0.0))
