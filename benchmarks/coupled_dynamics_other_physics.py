@@ -17,9 +17,11 @@ Per stage: a 10 Hz raster on x with y held, and a 10 : 7.5 Hz Lissajous; the fas
 tracking NRMSE and loop width, the held axis's motion, beside the static model fitted on
 the same record.
 
-Run: ``python benchmarks/coupled_dynamics_other_physics.py [--centred]`` (``--centred``:
-identified on a record that also holds loops decaying about the middle of the range, with
-the development stage first).
+Run: ``python benchmarks/coupled_dynamics_other_physics.py [--centred] [--relay-grid N]``
+(``--centred``: identified on a record that also holds loops decaying about the middle of
+the range, with the development stage first; ``--relay-grid N``: the bench's actuators
+with a Preisach plane of N relay fields instead of 120, the same density in finer steps,
+with the development stage first; docs/bench.md says why).
 """
 
 from __future__ import annotations
@@ -27,13 +29,21 @@ from __future__ import annotations
 import time
 import warnings
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
 import piezohyst as ph
 from piezohyst.metrics import hysteresis_width
 from piezohyst.model.dynamics import OutputDynamics
-from piezohyst.simulation import PLANTS, PRESETS, XY_COUPLING, make_signal, simulate_stage
+from piezohyst.simulation import (
+    PLANTS,
+    PRESETS,
+    XY_COUPLING,
+    XY_DYNAMIC,
+    make_signal,
+    simulate_stage,
+)
 
 FS = 1000.0
 KW = {"output_unit": "m", "input_dynamics": "first-order", "output_dynamics": "second-order"}
@@ -47,6 +57,16 @@ STAGES = {
     "the same, coupling 8 % / -6 %": ((LAGGED, LAGGED), np.array([[1.0, 0.08], [-0.06, 1.0]]),
                                       AFTER),
 }  # fmt: skip
+
+
+def with_grid(stages: dict[str, Any], n: int) -> dict[str, Any]:
+    """The stages with every actuator's Preisach plane at ``n`` relay fields (the development
+    stage first): the same plants but for the bench's discretisation."""
+    dev = {"development (XY_DYNAMIC)": (tuple(PRESETS[p] for p in XY_DYNAMIC), XY_COUPLING, None)}
+    return {
+        f"{name}, relay grid {n}": (tuple(replace(p, relay_grid=n) for p in presets), c, after)
+        for name, (presets, c, after) in {**dev, **stages}.items()
+    }
 
 
 def three_rates() -> tuple[np.ndarray, np.ndarray]:
@@ -88,6 +108,9 @@ def main() -> None:
     ap.add_argument("--centred", action="store_true",
                     help="identify on the record with centred loops too (and the development "
                          "stage first)")  # fmt: skip
+    ap.add_argument("--relay-grid", type=int, default=0,
+                    help="the bench's actuators with this many relay fields (default: as "
+                         "they are, 120)")  # fmt: skip
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     t, ident = with_centred_loops() if args.centred else three_rates()
@@ -96,6 +119,8 @@ def main() -> None:
         dev = (tuple(PRESETS[n] for n in ("T226-H4-203X-mode", "T226-H4-203X-mode-y")),
                XY_COUPLING, None)  # fmt: skip
         stages = {"development (XY_DYNAMIC)": dev, **STAGES}
+    if args.relay_grid:
+        stages = with_grid(stages, args.relay_grid)
     k = np.arange(3000)
     tri = np.abs((k / FS * 10.0) % 1.0 * 2 - 1)
     phase = 2 * np.pi * k / FS

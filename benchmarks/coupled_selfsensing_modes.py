@@ -18,7 +18,9 @@ Identified on 12 s of three-rate signals per axis; from rest a 10 Hz raster line
 held and a 10 : 7.5 Hz Lissajous, scored over their last 1.5 s (true positions, % of what
 each actuator alone moves), as ``coupled_selfsensing.py`` scores.
 
-Run: ``python benchmarks/coupled_selfsensing_modes.py``.
+Run: ``python benchmarks/coupled_selfsensing_modes.py [--relay-grid N]`` (``--relay-grid N``:
+every stage's Preisach actuators with N relay fields instead of 120, the same density in
+finer steps; docs/bench.md says why).
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from typing import Any
 
 import numpy as np
 from coupled_dynamics_other_physics import STAGES as OTHER
-from coupled_dynamics_other_physics import three_rates
+from coupled_dynamics_other_physics import three_rates, with_grid
 from coupled_selfsensing import scans, score
 
 import piezohyst as ph
@@ -59,11 +61,19 @@ def ring(positions: np.ndarray, after: Any) -> np.ndarray:
 
 
 def main() -> None:
+    import argparse
+
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--relay-grid", type=int, default=0,
+                    help="the bench's actuators with this many relay fields (default: as "
+                         "they are, 120)")  # fmt: skip
+    args = ap.parse_args()
     warnings.simplefilter("ignore")
+    stages = with_grid(OTHER, args.relay_grid) if args.relay_grid else STAGES
     t, ident = three_rates()
     print("| stage | models | map | raster NRMSE | width | held | Lissajous NRMSE x / y |")
     print("|---|---|---|---|---|---|---|")
-    for name, (presets, coupling, after) in STAGES.items():
+    for name, (presets, coupling, after) in stages.items():
         rec = simulate_stage(ident, t, presets=presets, coupling=coupling, seed=0)
         u, q, y = rec.voltage, rec.charge, ring(rec.position, after)
         start = time.perf_counter()

@@ -84,6 +84,10 @@ class BenchPreset:
         Debye relaxation branches: time constants (s) and capacitances (F).
     strain_curvature, strain_q_ref : float
         An electrostrictive part of the strain (``S = g (dQ + k dQ^2 / q_ref)``).
+    relay_grid : int
+        The Preisach plane's relays along the interaction field (half as many along the
+        coercive voltage): 120 gives 7200 relays, whose charge moves in bunches on a fast
+        ramp (see ``docs/bench.md``); a finer grid holds the same density in finer steps.
     """
 
     name: str
@@ -124,6 +128,9 @@ class BenchPreset:
     #: charge from its value at rest (k = ``strain_curvature``, 0: S = g dQ, eq. 6-7)
     strain_curvature: float = 0.0
     strain_q_ref: float = 1e-6  # C
+    #: the Preisach plane's relays along the interaction field (x half as many coercive
+    #: voltages): the bench's discretisation of a smooth density, not a physical value
+    relay_grid: int = 120
 
     def strain(self, dq: FloatArray) -> FloatArray:
         """The quasi-static displacement (m) for capacitor charges ``dq`` from rest (C).
@@ -423,12 +430,14 @@ def _preset(preset: str | BenchPreset) -> BenchPreset:
     return PRESETS[preset]
 
 
-def _preisach_plane(p: BenchPreset, n: int = 120) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Relays on an (interaction field h, coercive voltage c) grid, c > 0.
+def _preisach_plane(p: BenchPreset) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Relays on an (interaction field h, coercive voltage c) grid, c > 0: ``relay_grid``
+    fields x half as many coercive voltages.
 
     Weight ~ exp(-(h - h0)^2 / 2 sh^2) * c * exp(-c^2 / 2 sc^2): a density
     that varies along h, which no PI model (density a function of c alone) has.
     """
+    n = p.relay_grid
     span = p.v_max - min(p.v_min, 0.0)
     h = np.linspace(min(p.v_min, 0.0) - 0.5 * span, p.v_max + 0.5 * span, n)
     c = np.linspace(0.5, 4.0 * p.coercive_scale, n // 2)
@@ -473,6 +482,9 @@ class _Plant:
             raise ParameterError(msg)
         if p.dac not in DACS:
             msg = f"unknown DAC {p.dac!r}; one of {', '.join(DACS)}"
+            raise ParameterError(msg)
+        if not (isinstance(p.relay_grid, int) and 8 <= p.relay_grid <= 2000):
+            msg = f"'relay_grid' must be an integer in [8, 2000]. Got {p.relay_grid!r}."
             raise ParameterError(msg)
         self.law_state = np.zeros(2 + max(TWO_STATE_POPULATIONS, 1))
         self.relax_state = np.zeros(2 + len(p.relax_taus))
