@@ -369,6 +369,49 @@ def plants_table(runs: list[Run]) -> list[str]:
     return lines
 
 
+def limits(runs: list[Run]) -> list[str]:
+    """Where ``select_model`` misses, what the record held: was a candidate within 1.25x of
+    the test's best among those the record cannot tell from its choice (then no rule on the
+    record can tell which), or did the record score every such candidate worse beyond its
+    noise (then the record points away from it)? And how the record's scores rank the
+    candidates against the test's errors (Spearman, per plant, the median)."""
+    from scipy.stats import spearmanr
+
+    heads = (
+        "record | plants | within 1.25x | best within 1.25x among those not told apart | "
+        "misses: one was among them | misses: the record scored all of them worse "
+        "beyond its noise | record score against test error, rank correlation (median)"
+    )
+    lines = [f"| {heads} |", "|---|---|---|---|---|---|---|"]
+    kept = RULES["select_model as it is"]
+    for design in ("excite", "decaying"):
+        part = [r for r in runs if r["plant"]["design"] == design]
+        if not part:
+            continue
+        hit = among = tie = away = 0
+        rhos = []
+        for r in part:
+            best = min(r["test"].values())
+            good = {n for n, e in r["test"].items() if e <= 1.25 * best}
+            close = {r["chosen"], *r["undecided"]}
+            ok = kept(r) <= 1.25 * best
+            hit += ok
+            among += bool(good & close)
+            tie += (not ok) and bool(good & close)
+            away += (not ok) and not (good & close)
+            test = r["test"]
+            names = [n for n, (_, sc) in r["rows"].items()
+                     if math.isfinite(sc) and math.isfinite(test.get(n, math.inf))]  # fmt: skip
+            rho = spearmanr([r["rows"][n][1] for n in names], [r["test"][n] for n in names])[0]
+            if math.isfinite(rho):
+                rhos.append(rho)
+        lines.append(
+            f"| {design} | {len(part)} | {hit} | {among} | {tie} | {away} | "
+            f"{np.median(rhos):.2f} ({np.min(rhos):.2f} to {np.max(rhos):.2f}) |"
+        )
+    return lines
+
+
 BEGIN, END = (
     "<!-- random plants: benchmarks/selection_random.py -->",
     "<!-- end of random plants -->",
@@ -381,6 +424,8 @@ def main() -> None:
     ap.add_argument("--test", type=int, default=0, help="held-out plants (seeds 1000 ..)")
     ap.add_argument("--test-from", type=int, default=TEST_SEED, help="the first held-out seed")
     ap.add_argument("-o", "--out", type=Path, default=None, help="write the tables here (.md)")
+    ap.add_argument("--limits", action="store_true",
+                    help="also what the record held where the choice missed")  # fmt: skip
     args = ap.parse_args()
     seeds = [DEV_SEED + k for k in range(args.dev)]
     seeds += [args.test_from + k for k in range(args.test)]
@@ -394,6 +439,8 @@ def main() -> None:
             secs = [r["seconds"] for r in part]
             out += [f"### {label} ({len(part)}; `select_model` {min(secs):.0f}-{max(secs):.0f} s "
                     "each)", "", *table(part), "", *plants_table(part), ""]  # fmt: skip
+            if args.limits:
+                out += ["What the record held where it missed:", "", *limits(part), ""]
     text = "\n".join(out).rstrip()
     print(text)
     if args.out is not None:
