@@ -59,13 +59,19 @@ STAGES = {
 }  # fmt: skip
 
 
+#: The development stage (``simulation.XY_DYNAMIC``), put first by ``--centred`` and
+#: ``--relay-grid``
+DEVELOPMENT = {
+    "development (XY_DYNAMIC)": (tuple(PRESETS[p] for p in XY_DYNAMIC), XY_COUPLING, None)
+}
+
+
 def with_grid(stages: dict[str, Any], n: int) -> dict[str, Any]:
     """The stages with every actuator's Preisach plane at ``n`` relay fields (the development
     stage first): the same plants but for the bench's discretisation."""
-    dev = {"development (XY_DYNAMIC)": (tuple(PRESETS[p] for p in XY_DYNAMIC), XY_COUPLING, None)}
     return {
         f"{name}, relay grid {n}": (tuple(replace(p, relay_grid=n) for p in presets), c, after)
-        for name, (presets, c, after) in {**dev, **stages}.items()
+        for name, (presets, c, after) in {**DEVELOPMENT, **stages}.items()
     }
 
 
@@ -116,9 +122,7 @@ def main() -> None:
     t, ident = with_centred_loops() if args.centred else three_rates()
     stages = STAGES
     if args.centred:
-        dev = (tuple(PRESETS[n] for n in ("T226-H4-203X-mode", "T226-H4-203X-mode-y")),
-               XY_COUPLING, None)  # fmt: skip
-        stages = {"development (XY_DYNAMIC)": dev, **STAGES}
+        stages = {**DEVELOPMENT, **STAGES}
     if args.relay_grid:
         stages = with_grid(stages, args.relay_grid)
     k = np.arange(3000)

@@ -402,7 +402,7 @@ def limits(runs: list[Run]) -> list[str]:
             test = r["test"]
             names = [n for n, (_, sc) in r["rows"].items()
                      if math.isfinite(sc) and math.isfinite(test.get(n, math.inf))]  # fmt: skip
-            rho = spearmanr([r["rows"][n][1] for n in names], [r["test"][n] for n in names])[0]
+            rho = spearmanr([r["rows"][n][1] for n in names], [test[n] for n in names])[0]
             if math.isfinite(rho):
                 rhos.append(rho)
         lines.append(

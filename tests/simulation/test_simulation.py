@@ -117,8 +117,8 @@ def test_a_finer_relay_grid_holds_the_same_density_in_finer_steps() -> None:
     fine = dataclasses.replace(T226, relay_grid=360)
     coarse_q = simulate(tri, k / 1000.0).capacitor_charge
     fine_q = simulate(tri, k / 1000.0, preset=fine).capacitor_charge
-    # the steps: a relay bunch is a grid cell's weight, a third at 3x the grid (measured
-    # 0.16 % and 0.04 % of the scan's span per sample)
+    # the steps: relays on one lattice line switch together, their weight falling with the
+    # grid (measured 0.16 % and 0.04 % of the scan's span per sample)
     assert _increment_jitter(fine_q) < 0.5 * _increment_jitter(coarse_q)
     assert _increment_jitter(coarse_q) > 1e-3  # the coarse grid's bunches are there to see
     t, v = make_signal("multifreq", amplitude=140.0, frequency=2.5, duration=4.0)
