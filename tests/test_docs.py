@@ -12,8 +12,10 @@ A console line that is a plain ``piezohyst`` command (no pipe, redirection,
 variable or second command) runs in this process, through the CLI's own entry
 point (``click``'s runner, warnings shown as a user's process shows them): the
 same code path without starting Python and loading the compiled kernels again
-for each of the ~40 documented commands. Every other line runs in ``bash``; the
-installed console script itself is run as a subprocess in tests/cli.
+for each of the ~40 documented commands. So does a ``sh`` block made only of such
+commands and ``python -c "..."`` scripts (each script in a fresh namespace). Every
+other line runs in ``bash``; the installed console script itself is run as a
+subprocess in tests/cli.
 """
 
 from __future__ import annotations
@@ -126,7 +128,55 @@ def _run_console(block: Block, cwd: Path, where: str) -> None:
                 assert line.strip() in got, f"{where}: `{command}` did not print {line!r}:\n{got}"
 
 
+def _commands(text: str) -> list[list[str]] | None:
+    """A shell block's commands as argument lists (continuations joined, quoted strings over
+    several lines kept whole, comments dropped), or None where a line is anything but a
+    plain ``piezohyst`` command or ``python -c "..."``: then the block runs in ``bash``."""
+    out: list[list[str]] = []
+    current = ""
+    for line in text.splitlines():
+        current = f"{current}\n{line}" if current else line
+        if current.endswith("\\"):
+            continue  # a continuation line follows
+        joined = current.replace("\\\n", "")  # bash removes a backslash-newline
+        try:
+            args = shlex.split(joined, comments=True)
+        except ValueError:
+            continue  # a quoted string goes on over the next line
+        current = ""
+        if not args:
+            continue
+        python_c = (
+            len(args) == 3
+            and args[:2] == ["python", "-c"]
+            and joined.rstrip().endswith('"')
+            and not re.search(r"[$`\\]", joined)  # nothing bash would expand in the quotes
+        )
+        plain = args[0] == "piezohyst" and not SHELL_SYNTAX.search(shlex.join(args))
+        if not (python_c or plain):
+            return None
+        out.append(args)
+    return None if current.strip() else out
+
+
 def _run_shell(block: Block, cwd: Path, where: str) -> None:
+    """A block of plain ``piezohyst`` commands and ``python -c`` scripts runs in this process
+    (each script in a fresh namespace, warnings shown as a user's process shows them: the
+    docs' walkthroughs start some thirty such processes, each loading Python, NumPy and the
+    compiled kernels again); any other block runs in ``bash -euo pipefail``."""
+    commands = _commands(block.text)
+    if commands is not None:
+        for args in commands:
+            if args[0] == "python":
+                with warnings.catch_warnings():
+                    warnings.resetwarnings()
+                    exec(compile(args[2], where, "exec"), {"__name__": "__main__"})
+                continue
+            ran = _in_process(shlex.join(args))
+            assert ran is not None, f"{where}: `{shlex.join(args)}` needs a shell"
+            status, got = ran
+            assert status == 0, f"{where}: `{shlex.join(args)}` failed:\n{got}"
+        return
     res = subprocess.run(
         ["bash", "-euo", "pipefail", "-c", block.text],
         cwd=cwd,
@@ -169,3 +219,26 @@ def test_the_parser_sees_blocks_and_skips(tmp_path: Path) -> None:
     path.write_text(text)
     found = blocks(path)
     assert [(b.lang, b.skip) for b in found] == [("python", "needs a DAQ card"), ("sh", None)]
+
+
+def test_a_shell_block_of_plain_commands_runs_here_and_any_other_in_bash() -> None:
+    """Continuations joined, a script's quoted lines kept whole, comments dropped; a pipe,
+    a variable or a command other than ``piezohyst`` or ``python -c`` sends the block to
+    ``bash``."""
+    text = (
+        'python -c "\nimport numpy as np\nprint(np.pi)"\n'
+        "piezohyst fit run.csv \\\n    --model auto -o auto.json   # the choice\n"
+    )
+    assert _commands(text) == [
+        ["python", "-c", "\nimport numpy as np\nprint(np.pi)"],
+        ["piezohyst", "fit", "run.csv", "--model", "auto", "-o", "auto.json"],
+    ]
+    for other in (
+        "piezohyst fit run.csv | tee out.txt",
+        "piezohyst fit $RUN",
+        "mkdir -p lib\npiezohyst fit run.csv",
+        'python -c "print(\\"$HOME\\")"',
+        'python -c "print(1)" > out.txt',
+        'python -c "print(1)',
+    ):
+        assert _commands(other) is None, other

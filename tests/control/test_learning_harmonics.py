@@ -161,12 +161,18 @@ def _learn(model: ph.CoupledModel, trials: int, path: Path | None = None) -> tup
     return ilc, scan, moved, sent, said, (x1 - x0)
 
 
-def test_a_misplaced_mode_is_learned_on_the_coupled_stage(misplaced: ph.CoupledModel) -> None:
+@pytest.fixture(scope="module")
+def learned(misplaced: ph.CoupledModel) -> tuple:  # type: ignore[type-arg]
+    """Fourteen trials run through, once for the tests that read them."""
+    return _learn(misplaced, 14)
+
+
+def test_a_misplaced_mode_is_learned_on_the_coupled_stage(learned: tuple) -> None:  # type: ignore[type-arg]
     """Through the model alone x's learner stalls near the mode (measured here: 0.60 % NRMSE
     and a 1.08 % loop in the fourteenth trial); learning the harmonics near 180 Hz through
     their measured response takes the raster line under 0.5 % and its loop under 1 %
     (measured 0.18 % and 0.17 %), said once, named in ``describe``."""
-    ilc, scan, moved, _, said, span = _learn(misplaced, 14)
+    ilc, scan, moved, _, said, span = learned
     x = ilc.learners[0]
     assert x is not None
     bins = x._harmonics.steered() * FS / scan.shape[0]
@@ -181,11 +187,13 @@ def test_a_misplaced_mode_is_learned_on_the_coupled_stage(misplaced: ph.CoupledM
 
 
 def test_a_learner_resumed_mid_run_sends_the_same_commands(
-    misplaced: ph.CoupledModel, tmp_path: Path
+    misplaced: ph.CoupledModel,
+    learned: tuple,  # type: ignore[type-arg]
+    tmp_path: Path,
 ) -> None:
     """The measured responses, the harmonics taken and the last trial kept for the next
     pair are in the state: saved at trial 7 and loaded, the run goes on to the bit."""
-    *_, sent, _, _ = _learn(misplaced, 14)
+    *_, sent, _, _ = learned
     *_, resumed, _, _ = _learn(misplaced, 14, tmp_path / "s.json")
     for a, b in zip(sent, resumed, strict=True):
         np.testing.assert_array_equal(a, b)
