@@ -94,6 +94,11 @@ def _in_process(command: str) -> tuple[int, str] | None:
     args = shlex.split(command)
     if not args or args[0] != "piezohyst":
         return None
+    return _cli(args)
+
+
+def _cli(args: list[str]) -> tuple[int, str]:
+    """Exit status and output of ``piezohyst ARGS`` run through the CLI's entry point."""
     with warnings.catch_warnings():
         warnings.resetwarnings()  # as a user's process: the suite's warnings-as-errors off
         res = CliRunner().invoke(cli_main, args[1:], prog_name="piezohyst")
@@ -172,9 +177,7 @@ def _run_shell(block: Block, cwd: Path, where: str) -> None:
                     warnings.resetwarnings()
                     exec(compile(args[2], where, "exec"), {"__name__": "__main__"})
                 continue
-            ran = _in_process(shlex.join(args))
-            assert ran is not None, f"{where}: `{shlex.join(args)}` needs a shell"
-            status, got = ran
+            status, got = _cli(args)
             assert status == 0, f"{where}: `{shlex.join(args)}` failed:\n{got}"
         return
     res = subprocess.run(
